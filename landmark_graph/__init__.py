@@ -1,0 +1,1 @@
+"""landmark_graph: relations for landmark maps (Delaunay mesh, pose-landmark links)."""

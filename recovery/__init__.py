@@ -1,0 +1,1 @@
+"""recovery: trajectory recovery from an EKF-SLAM result (offline EKF localisation + smoothing)."""

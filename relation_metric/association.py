@@ -1,0 +1,197 @@
+"""Association of relation endpoints (timestamps or indices) with estimate poses.
+
+For a timestamp ``t`` the estimate pose is found as the Freiburg metricEvaluator does:
+
+1. the estimate pose nearest in time, ``x_k`` with ``k = argmin |t_k − t|``; accepted when
+   ``|t_k − t| ≤ max_time_diff`` (default 0.1 s);
+2. otherwise, with ``interpolate=True``, the SE(2) interpolation between the two estimate
+   poses around ``t``, ``x_a ∘ exp(s · log(x_a⁻¹ ∘ x_b))`` with ``s = (t − t_a)/(t_b − t_a)``,
+   when ``t_b − t_a ≤ max_interpolation_gap``;
+3. otherwise, when an odometry log is given, the nearest estimate pose corrected by the
+   odometry motion between the two odometry samples nearest to ``t_k`` and to ``t``:
+   ``x_k ∘ (o(t_k)⁻¹ ∘ o(t))``;
+4. otherwise the endpoint is unassociated, and so is its relation: it is counted, named
+   and left out of the statistics — never silently dropped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relation_metric import se2
+from relation_metric.relations import RelationSet
+from relation_metric.trajectory import Trajectory
+
+__all__ = ["Association", "associate", "nearest_index", "REASONS"]
+
+# Why an endpoint could not be associated (codes of Association.reason).
+OK, OUTSIDE_SPAN, TOO_FAR, BAD_INDEX = 0, 1, 2, 3
+REASONS = {
+    OK: "associated",
+    OUTSIDE_SPAN: "outside the estimate's time span",
+    TOO_FAR: "no estimate pose within the time tolerance",
+    BAD_INDEX: "pose index out of range",
+}
+
+
+@dataclass(frozen=True)
+class Association:
+    """Estimate poses for both ends of M relations.
+
+    Attributes
+    ----------
+    pose_first, pose_second : ndarray, shape (M, 3)
+        Estimate poses (NaN where unassociated).
+    index_first, index_second : ndarray of int64, shape (M,)
+        Nearest estimate pose of each end (−1 where there is none).
+    valid : ndarray of bool, shape (M,)
+        Both ends associated.
+    via_odometry : ndarray of bool, shape (M,)
+        At least one end was corrected with odometry.
+    interpolated : ndarray of bool, shape (M,)
+        At least one end was interpolated.
+    reason : ndarray of int8, shape (M,)
+        0 when valid, otherwise a key of :data:`REASONS` (the first failing end's).
+    """
+
+    pose_first: NDArray[np.float64]
+    pose_second: NDArray[np.float64]
+    index_first: NDArray[np.int64]
+    index_second: NDArray[np.int64]
+    valid: NDArray[np.bool_]
+    via_odometry: NDArray[np.bool_]
+    interpolated: NDArray[np.bool_]
+    reason: NDArray[np.int8]
+
+    @property
+    def estimated_delta(self) -> NDArray[np.float64]:
+        """``δ_ij = x_i⁻¹ ∘ x_j`` of the estimate, shape (M, 3) (NaN where invalid)."""
+        return se2.between(self.pose_first, self.pose_second)
+
+
+def nearest_index(times: NDArray[np.float64], query: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Index of the element of sorted ``times`` nearest to each ``query`` (ties: earlier)."""
+    n = times.shape[0]
+    k = np.searchsorted(times, query, side="left")
+    k = np.clip(k, 1, max(n - 1, 1))
+    if n == 1:
+        return np.zeros(query.shape, dtype=np.int64)
+    before = times[k - 1]
+    after = times[k]
+    pick_before = np.abs(query - before) <= np.abs(after - query)
+    return np.where(pick_before, k - 1, k).astype(np.int64)
+
+
+def _associate_times(
+    query: NDArray[np.float64],
+    estimate: Trajectory,
+    odometry: Trajectory | None,
+    max_time_diff: float,
+    interpolate: bool,
+    max_interpolation_gap: float,
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int8], NDArray[np.bool_], NDArray[np.bool_]]:
+    t = estimate.timestamps
+    p = estimate.poses
+    k = nearest_index(t, query)
+    gap = np.abs(t[k] - query)
+    poses = p[k].copy()
+    reason = np.full(query.shape, OK, dtype=np.int8)
+    far = gap > max_time_diff
+    interp = np.zeros(query.shape, dtype=bool)
+    odo = np.zeros(query.shape, dtype=bool)
+    if interpolate and far.any() and t.size > 1:
+        a = np.clip(np.searchsorted(t, query, side="right") - 1, 0, t.size - 2)
+        b = a + 1
+        inside = (query >= t[0]) & (query <= t[-1])
+        span = t[b] - t[a]
+        can = far & inside & (span <= max_interpolation_gap) & (span > 0)
+        if can.any():
+            s = (query[can] - t[a[can]]) / span[can]
+            rel = se2.log(se2.between(p[a[can]], p[b[can]]))
+            poses[can] = se2.compose(p[a[can]], se2.exp(rel * s[:, None]))
+            interp[can] = True
+            far = far & ~can
+    if odometry is not None and far.any():
+        to = odometry.timestamps
+        po = odometry.poses
+        q = query[far]
+        inside = (q >= to[0] - max_time_diff) & (q <= to[-1] + max_time_diff)
+        at_query = nearest_index(to, q)
+        at_pose = nearest_index(to, t[k[far]])
+        corrected = se2.compose(p[k[far]], se2.between(po[at_pose], po[at_query]))
+        idx = np.flatnonzero(far)
+        ok = idx[inside]
+        poses[ok] = corrected[inside]
+        odo[ok] = True
+        far[ok] = False
+    outside = (query < t[0] - max_time_diff) | (query > t[-1] + max_time_diff)
+    reason[far] = np.where(outside[far], OUTSIDE_SPAN, TOO_FAR)
+    poses[far] = np.nan
+    return poses, np.where(far, -1, k), reason, odo, interp
+
+
+def associate(
+    relations: RelationSet,
+    estimate: Trajectory,
+    *,
+    odometry: Trajectory | None = None,
+    max_time_diff: float = 0.1,
+    interpolate: bool = False,
+    max_interpolation_gap: float = 1.0,
+) -> Association:
+    """Find the estimate poses of both ends of every relation.
+
+    Parameters
+    ----------
+    relations : RelationSet
+        ``key="time"``: ends are timestamps; ``key="index"``: pose indices of ``estimate``.
+    estimate : Trajectory
+        The evaluated trajectory.
+    odometry : Trajectory, optional
+        Odometry log used to correct ends farther than ``max_time_diff`` from any pose.
+    max_time_diff : float
+        Seconds; the nearest-pose tolerance (0.1 s as in the metricEvaluator).
+    interpolate : bool
+        Interpolate on SE(2) between the poses around an end beyond the tolerance.
+    max_interpolation_gap : float
+        Seconds; longest gap between two estimate poses that is interpolated over.
+
+    Returns
+    -------
+    Association
+    """
+    m = len(relations)
+    if relations.key == "index":
+        n = len(estimate)
+        ends = np.concatenate((relations.first, relations.second)).astype(np.int64)
+        good = (ends >= 0) & (ends < n)
+        poses = np.full((2 * m, 3), np.nan)
+        poses[good] = estimate.poses[ends[good]]
+        idx = np.where(good, ends, -1)
+        reason = np.where(good, OK, BAD_INDEX).astype(np.int8)
+        odo = interp = np.zeros(2 * m, dtype=bool)
+    elif len(estimate) == 0:
+        poses = np.full((2 * m, 3), np.nan)
+        idx = np.full(2 * m, -1, dtype=np.int64)
+        reason = np.full(2 * m, OUTSIDE_SPAN, dtype=np.int8)
+        odo = interp = np.zeros(2 * m, dtype=bool)
+    else:
+        ends_t = np.concatenate((relations.first, relations.second))
+        poses, idx, reason, odo, interp = _associate_times(
+            ends_t, estimate, odometry, max_time_diff, interpolate, max_interpolation_gap
+        )
+    r1, r2 = reason[:m], reason[m:]
+    valid = (r1 == OK) & (r2 == OK)
+    return Association(
+        pose_first=poses[:m],
+        pose_second=poses[m:],
+        index_first=idx[:m],
+        index_second=idx[m:],
+        valid=valid,
+        via_odometry=(odo[:m] | odo[m:]) & valid,
+        interpolated=(interp[:m] | interp[m:]) & valid,
+        reason=np.where(r1 != OK, r1, r2).astype(np.int8),
+    )

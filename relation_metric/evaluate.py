@@ -1,0 +1,187 @@
+"""The relation metric as one run function: relations + estimate → :class:`Evaluation`.
+
+No I/O here (readers live in :mod:`relation_metric.formats` and
+:mod:`relation_metric.relations`, writers in :mod:`relation_metric.results`).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from relation_metric.association import REASONS, Association, associate
+from relation_metric.errors import AssociationError
+from relation_metric.metric import Mode, RelationErrors, relation_errors
+from relation_metric.relations import RelationSet
+from relation_metric.stats import Summary, summarize
+from relation_metric.trajectory import Trajectory
+
+__all__ = ["Evaluation", "evaluate", "UnassociatedRelationsWarning", "error_summaries"]
+
+
+class UnassociatedRelationsWarning(UserWarning):
+    """Some relations could not be associated and were left out of the statistics."""
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Result of :func:`evaluate`.
+
+    Attributes
+    ----------
+    relations : RelationSet
+        All reference relations given.
+    association : Association
+        Estimate poses of both ends of every relation.
+    errors : RelationErrors
+        Per-relation errors over all relations (NaN where unassociated).
+    translation, rotation, combined : dict of {"abs", "sqr"} → Summary
+        Statistics over the associated relations; rotation in radians.
+    """
+
+    relations: RelationSet
+    association: Association
+    errors: RelationErrors
+    translation: dict[str, Summary]
+    rotation: dict[str, Summary]
+    combined: dict[str, Summary]
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """Mask of the relations that were scored, shape (M,)."""
+        return self.association.valid
+
+    @property
+    def epsilon(self) -> float:
+        """Kümmerle et al. Eq. 2: ε = 1/N Σ trans(e)² + rot(e)² (m² + rad²)."""
+        return self.translation["sqr"].mean + self.rotation["sqr"].mean
+
+    def as_dict(self, *, degrees: bool = False) -> dict[str, Any]:
+        """The JSON structure of ``slamrel evaluate --json`` (NaN written as ``null``)."""
+        if degrees:
+            rot = error_summaries(np.degrees(self.errors.rotation[self.valid]))
+        else:
+            rot = self.rotation
+        return {
+            "relations": len(self.relations),
+            "associated_by_odometry": int(self.association.via_odometry.sum()),
+            "interpolated": int(self.association.interpolated.sum()),
+            "unassociated": int((~self.valid).sum()),
+            "rotation_unit": "deg" if degrees else "rad",
+            "mode": self.errors.mode,
+            "weights": list(self.errors.weights),
+            "translation": {k: v.as_dict() for k, v in self.translation.items()},
+            "rotation": {k: v.as_dict() for k, v in rot.items()},
+            "combined": {k: v.as_dict() for k, v in self.combined.items()},
+            "epsilon": _json_float(self.epsilon),
+        }
+
+
+def _json_float(x: float) -> float | None:
+    return x if math.isfinite(x) else None
+
+
+def error_summaries(values: ArrayLike) -> dict[str, Summary]:
+    """``{"abs": summarize(|e|), "sqr": summarize(e²)}`` of non-negative errors ``e``."""
+    v = np.asarray(values, dtype=np.float64)
+    return {"abs": summarize(v), "sqr": summarize(v * v)}
+
+
+def evaluate(
+    relations: RelationSet,
+    estimate: Trajectory,
+    *,
+    odometry: Trajectory | None = None,
+    mode: Mode = "paper",
+    weights: ArrayLike | str | None = None,
+    max_time_diff: float = 0.1,
+    interpolate: bool = False,
+    max_interpolation_gap: float = 1.0,
+    strict: bool = False,
+) -> Evaluation:
+    """Score an estimate with the relation metric (Kümmerle et al. 2009).
+
+    Parameters
+    ----------
+    relations : RelationSet
+        Reference relations ``(first, second, δ*)``.
+    estimate : Trajectory
+        The evaluated trajectory.
+    odometry, max_time_diff, interpolate, max_interpolation_gap :
+        Timestamp association, see :func:`relation_metric.association.associate`.
+    mode, weights :
+        Error definition, see :func:`relation_metric.metric.relation_errors`.
+    strict : bool
+        Raise :class:`AssociationError` when any relation is unassociated (otherwise they
+        are excluded, counted and named in an :class:`UnassociatedRelationsWarning`).
+
+    Returns
+    -------
+    Evaluation
+
+    Raises
+    ------
+    AssociationError
+        When no relation can be associated (the message shows both time spans), or with
+        ``strict`` when any cannot.
+    """
+    assoc = associate(
+        relations,
+        estimate,
+        odometry=odometry,
+        max_time_diff=max_time_diff,
+        interpolate=interpolate,
+        max_interpolation_gap=max_interpolation_gap,
+    )
+    valid = assoc.valid
+    n_bad = int((~valid).sum())
+    if len(relations) and n_bad == len(relations):
+        r0, r1 = relations.span()
+        e0, e1 = estimate.span()
+        unit = "s" if relations.key == "time" else "(pose index)"
+        raise AssociationError(
+            f"none of the {len(relations)} relations can be associated with the estimate: "
+            f"the relations span {r0:.6f} .. {r1:.6f} {unit}, the estimate "
+            f"{e0:.6f} .. {e1:.6f} s ({len(estimate)} poses); are they in the same time "
+            "base?"
+        )
+    if n_bad:
+        message = _describe_unassociated(relations, assoc, max_time_diff)
+        if strict:
+            raise AssociationError(message + " (--strict)")
+        warnings.warn(message, UnassociatedRelationsWarning, stacklevel=2)
+    errors = relation_errors(
+        assoc.estimated_delta,
+        relations.delta,
+        mode=mode,
+        weights=weights,
+        out_of_plane=relations.out_of_plane,
+    )
+    return Evaluation(
+        relations=relations,
+        association=assoc,
+        errors=errors,
+        translation=error_summaries(errors.translation[valid]),
+        rotation=error_summaries(errors.rotation[valid]),
+        combined=error_summaries(errors.combined[valid]),
+    )
+
+
+def _describe_unassociated(relations: RelationSet, assoc: Association, tol: float) -> str:
+    bad = np.flatnonzero(~assoc.valid)
+    parts = []
+    for k in bad[:5]:
+        parts.append(
+            f"#{k} ({relations.first[k]:.6f} -> {relations.second[k]:.6f}: "
+            f"{REASONS[int(assoc.reason[k])]})"
+        )
+    more = "" if bad.size <= 5 else f" and {bad.size - 5} more"
+    return (
+        f"{bad.size} of {len(relations)} relations could not be associated (tolerance {tol} s) "
+        f"and are left out of the statistics: {', '.join(parts)}{more}"
+    )

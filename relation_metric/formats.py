@@ -1,0 +1,481 @@
+"""Trajectory file formats: plain ``t x y θ``, TUM, CARMEN logs, g2o ``VERTEX_SE2``, CSV.
+
+Every reader is strict (see :mod:`relation_metric.textio`): a bad line raises
+:class:`~relation_metric.errors.InputError` with file and line; the one tolerated defect is a
+cut-off final line without newline, skipped with a warning.
+
+Formats
+-------
+``plain``  ``t x y θ`` per line.
+``tum``    ``t x y z qx qy qz qw`` (what evo reads); the 2-D slice keeps x, y and the yaw
+           ``atan2(2(qw qz + qx qy), 1 − 2(qy² + qz²))``; z, roll and pitch are dropped.
+``carmen`` CARMEN log. Pose records: ``FLASER n r1..rn x y θ odom_x odom_y odom_θ
+           ipc_timestamp hostname logger_timestamp``; ``ROBOTLASER1`` (laser pose and robot
+           pose after the range and remission blocks); ``ODOM x y θ tv rv accel ipc_timestamp
+           hostname logger_timestamp``. The time is the ipc timestamp. ``pose="laser"`` takes
+           the laser pose of FLASER/ROBOTLASER1 (what the Freiburg relations refer to),
+           ``pose="odometry"`` the odometry pose of FLASER and the robot pose of ROBOTLASER1.
+           Other record types are skipped and counted.
+``g2o``    ``VERTEX_SE2 id x y θ``; the vertex id becomes the timestamp. Other records are
+           skipped and counted.
+``csv``    comma separated with the header ``t,x,y,theta`` (the SLAM result bundle's
+           ``groundtruth.csv``); ``#`` comment lines allowed.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from collections import Counter
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Literal, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relation_metric import se2
+from relation_metric.errors import InputError
+from relation_metric.textio import (
+    PathLike,
+    SourceText,
+    parse_float,
+    read_numeric_table,
+    read_source,
+    write_text_atomic,
+)
+from relation_metric.trajectory import Trajectory
+
+__all__ = [
+    "TRAJECTORY_FORMATS",
+    "LoadedTrajectory",
+    "InvalidPoseWarning",
+    "detect_trajectory_format",
+    "read_trajectory",
+    "write_trajectory",
+    "yaw_from_quaternion",
+    "quaternion_from_yaw",
+]
+
+TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv")
+TrajectoryFormat = Literal["plain", "tum", "carmen", "g2o", "csv"]
+
+CARMEN_POSE_RECORDS = ("FLASER", "ROBOTLASER1", "ODOM")
+# Record names of CARMEN logs that carry no pose we use; seeing one identifies the format.
+_CARMEN_OTHER = (
+    "PARAM",
+    "SYNC",
+    "RLASER",
+    "RAWLASER1",
+    "RAWLASER2",
+    "RAWLASER3",
+    "RAWLASER4",
+    "TRUEPOS",
+    "NMEAGGA",
+    "NMEARMC",
+    "SONAR",
+    "BUMPER",
+    "SCANMARK",
+    "POSITIONLASER",
+    "ROBOTLASER2",
+    "RLASER",
+)
+
+
+class InvalidPoseWarning(UserWarning):
+    """Pose records with non-finite values were skipped (``skip_invalid=True``)."""
+
+
+class LoadedTrajectory(NamedTuple):
+    """A trajectory read from a file, with what the reader left out.
+
+    Attributes
+    ----------
+    trajectory : Trajectory
+    format : str
+        The format that was read.
+    skipped : Mapping[str, int]
+        Records not used, by kind (e.g. ``{"PARAM": 12, "invalid pose": 1}``).
+    """
+
+    trajectory: Trajectory
+    format: str
+    skipped: Mapping[str, int]
+
+
+def yaw_from_quaternion(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Yaw of quaternions ``[qx, qy, qz, qw]`` (shape ``(..., 4)``), ZYX convention."""
+    qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+
+
+def quaternion_from_yaw(yaw: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Quaternions ``[qx, qy, qz, qw]`` of rotations about z, shape ``(..., 4)``."""
+    yaw = np.asarray(yaw, dtype=np.float64)
+    out = np.zeros(yaw.shape + (4,))
+    out[..., 2] = np.sin(yaw / 2.0)
+    out[..., 3] = np.cos(yaw / 2.0)
+    return out
+
+
+def detect_trajectory_format(path: PathLike, source: SourceText | None = None) -> str:
+    """Recognise a trajectory format from the content, then from the extension.
+
+    Content wins: a CARMEN record name, ``VERTEX_SE2``, a ``t,x,y,theta`` header, or the
+    number of numeric columns of the first data line (8 → TUM, 4 → plain).
+    """
+    src = read_source(path) if source is None else source
+    for _, text in src.data_lines():
+        head = text.split(None, 1)[0].split(",")[0]
+        if head in CARMEN_POSE_RECORDS or head in _CARMEN_OTHER:
+            return "carmen"
+        if head.startswith("VERTEX") or head.startswith("EDGE") or head == "FIX":
+            return "g2o"
+        if "," in text and head.lower() in ("t", "time", "timestamp"):
+            return "csv"
+        fields = text.split()
+        if len(fields) == 8:
+            return "tum"
+        if len(fields) == 4:
+            return "plain"
+        break
+    ext = Path(os.fspath(path)).suffix.lower()
+    by_ext = {
+        ".log": "carmen",
+        ".clf": "carmen",
+        ".g2o": "g2o",
+        ".tum": "tum",
+        ".csv": "csv",
+    }
+    if ext in by_ext:
+        return by_ext[ext]
+    raise InputError(
+        "cannot recognise the trajectory format (expected CARMEN records, VERTEX_SE2 "
+        "lines, a t,x,y,theta CSV header, 8 columns (TUM) or 4 columns (t x y theta)); "
+        "pass --format",
+        path=src.path,
+    )
+
+
+def read_trajectory(
+    path: PathLike,
+    *,
+    format: str | None = None,
+    pose: Literal["laser", "odometry"] = "laser",
+    skip_invalid: bool = False,
+) -> LoadedTrajectory:
+    """Read a trajectory file.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    format : {"plain", "tum", "carmen", "g2o", "csv"}, optional
+        Recognised from the content when omitted (:func:`detect_trajectory_format`).
+    pose : {"laser", "odometry"}
+        Which pose of a CARMEN laser record to take (see the module docstring).
+    skip_invalid : bool
+        CARMEN only: skip pose records with non-finite values (counted under
+        ``"invalid pose"`` and warned about) instead of raising. The original Freiburg
+        metricEvaluator tolerates such records; real result logs contain them.
+
+    Returns
+    -------
+    LoadedTrajectory
+    """
+    src = read_source(path)
+    fmt = format or detect_trajectory_format(path, src)
+    if fmt not in TRAJECTORY_FORMATS:
+        raise InputError(
+            f"unknown trajectory format {fmt!r}; expected one of {', '.join(TRAJECTORY_FORMATS)}",
+            path=src.path,
+        )
+    skipped: Counter[str] = Counter()
+    if fmt == "plain":
+        values, lines = read_numeric_table(
+            path, columns=("t", "x", "y", "theta"), describe="a 't x y theta' trajectory",
+            source=src,
+        )
+        t, poses = values[:, 0], values[:, 1:4]
+    elif fmt == "tum":
+        values, lines = read_numeric_table(
+            path,
+            columns=("t", "x", "y", "z", "qx", "qy", "qz", "qw"),
+            describe="a TUM trajectory",
+            source=src,
+        )
+        norms = np.linalg.norm(values[:, 4:8], axis=1)
+        bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(
+                f"quaternion norm {norms[k]:.6g}, expected a unit quaternion",
+                path=src.path,
+                line=lines(k),
+            )
+        t = values[:, 0]
+        poses = np.column_stack((values[:, 1], values[:, 2], yaw_from_quaternion(values[:, 4:8])))
+    elif fmt == "csv":
+        t, poses, line_of = _read_csv_trajectory(src)
+        lines = line_of.__getitem__  # type: ignore[assignment]
+    elif fmt == "carmen":
+        t, poses, line_of = _read_carmen(src, pose=pose, skip_invalid=skip_invalid, skipped=skipped)
+        lines = line_of.__getitem__  # type: ignore[assignment]
+    else:
+        t, poses, line_of = _read_g2o(src, skipped=skipped)
+        lines = line_of.__getitem__  # type: ignore[assignment]
+    if t.shape[0] == 0:
+        raise InputError(f"no poses found (read as {fmt})", path=src.path)
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise InputError(
+            f"time goes backwards: {t[k]!r} after {t[k - 1]!r}; expected non-decreasing "
+            "timestamps",
+            path=src.path,
+            line=int(lines(k)),
+        )
+    return LoadedTrajectory(Trajectory(t, poses), fmt, dict(skipped))
+
+
+def _read_csv_trajectory(src: SourceText) -> tuple[NDArray, NDArray, NDArray]:
+    rows: list[tuple[float, float, float, float]] = []
+    numbers: list[int] = []
+    header: list[str] | None = None
+    for number, text in src.data_lines():
+        fields = [f.strip() for f in text.split(",")]
+        if header is None:
+            header = [f.lower() for f in fields]
+            missing = [c for c in ("t", "x", "y", "theta") if c not in header]
+            if missing:
+                raise InputError(
+                    f"CSV header lacks column(s) {', '.join(missing)}; expected t,x,y,theta",
+                    path=src.path,
+                    line=number,
+                )
+            idx = [header.index(c) for c in ("t", "x", "y", "theta")]
+            continue
+        if len(fields) != len(header):
+            if src.is_last_line(number):
+                src.warn_truncated(number, f"expected {len(header)} fields")
+                break
+            raise InputError(
+                f"expected {len(header)} comma-separated fields ({','.join(header)}), "
+                f"got {len(fields)}",
+                path=src.path,
+                line=number,
+            )
+        try:
+            vals = tuple(
+                parse_float(fields[i], source=src, line=number, what=f"column '{c}'")
+                for i, c in zip(idx, ("t", "x", "y", "theta"))
+            )
+        except InputError:
+            if src.is_last_line(number):
+                src.warn_truncated(number, "a field does not parse")
+                break
+            raise
+        rows.append(vals)  # type: ignore[arg-type]
+        numbers.append(number)
+    if header is None:
+        raise InputError("empty file: expected a t,x,y,theta header", path=src.path)
+    arr = np.asarray(rows, dtype=np.float64).reshape(-1, 4)
+    return arr[:, 0], arr[:, 1:], np.asarray(numbers)
+
+
+def _read_carmen(
+    src: SourceText, *, pose: str, skip_invalid: bool, skipped: Counter[str]
+) -> tuple[NDArray, NDArray, NDArray]:
+    times: list[float] = []
+    poses: list[tuple[float, float, float]] = []
+    numbers: list[int] = []
+    invalid_lines: list[int] = []
+    for number, text in src.data_lines():
+        fields = text.split()
+        kind = fields[0]
+        if kind not in CARMEN_POSE_RECORDS:
+            skipped[kind] += 1
+            continue
+        try:
+            t, p = _carmen_pose(fields, pose=pose, src=src, number=number)
+        except InputError:
+            if src.is_last_line(number):
+                src.warn_truncated(number, f"an incomplete {kind} record")
+                skipped["truncated last line"] += 1
+                break
+            raise
+        if not (math.isfinite(t) and all(math.isfinite(v) for v in p)):
+            if not skip_invalid:
+                raise InputError(
+                    f"{kind} record with a non-finite pose or time ({' '.join(map(str, p))} "
+                    f"at {t}); expected finite numbers (the metricevaluator mode, or "
+                    "--skip-invalid-poses, skips such records and counts them)",
+                    path=src.path,
+                    line=number,
+                )
+            skipped["invalid pose"] += 1
+            invalid_lines.append(number)
+            continue
+        times.append(t)
+        poses.append(p)
+        numbers.append(number)
+    if invalid_lines:
+        shown = ", ".join(str(n) for n in invalid_lines[:5])
+        more = "" if len(invalid_lines) <= 5 else f" and {len(invalid_lines) - 5} more"
+        warnings.warn(
+            f"{src.path}: skipped {len(invalid_lines)} pose record(s) with non-finite values "
+            f"(line {shown}{more})",
+            InvalidPoseWarning,
+            stacklevel=3,
+        )
+    arr = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    return np.asarray(times, dtype=np.float64), arr, np.asarray(numbers)
+
+
+def _carmen_float(fields: list[str], k: int, what: str, src: SourceText, number: int) -> float:
+    if k >= len(fields):
+        raise InputError(
+            f"{fields[0]} record too short: no field for {what} (has {len(fields)} fields)",
+            path=src.path,
+            line=number,
+        )
+    token = fields[k]
+    try:
+        return float(token)
+    except ValueError:
+        raise InputError(
+            f"{fields[0]} {what}: expected a number, got {token!r}", path=src.path, line=number
+        ) from None
+
+
+def _carmen_count(fields: list[str], k: int, what: str, src: SourceText, number: int) -> int:
+    value = _carmen_float(fields, k, what, src, number)
+    if value < 0 or value != int(value):
+        raise InputError(
+            f"{fields[0]} {what}: expected a non-negative count, got {fields[k]!r}",
+            path=src.path,
+            line=number,
+        )
+    return int(value)
+
+
+def _carmen_pose(
+    fields: list[str], *, pose: str, src: SourceText, number: int
+) -> tuple[float, tuple[float, float, float]]:
+    kind = fields[0]
+    if kind == "FLASER":
+        n = _carmen_count(fields, 1, "number of readings", src, number)
+        expected = n + 11
+        base = n + 2 if pose == "laser" else n + 5
+        t_index = n + 8
+    elif kind == "ROBOTLASER1":
+        n = _carmen_count(fields, 8, "number of readings", src, number)
+        m = _carmen_count(fields, 9 + n, "number of remissions", src, number)
+        expected = n + m + 24
+        base = 10 + n + m if pose == "laser" else 13 + n + m
+        t_index = 21 + n + m
+    else:  # ODOM
+        expected = 10
+        base = 1
+        t_index = 7
+    if len(fields) != expected:
+        raise InputError(
+            f"{kind} record: expected {expected} fields, got {len(fields)}",
+            path=src.path,
+            line=number,
+        )
+    p = tuple(_carmen_float(fields, base + k, c, src, number) for k, c in enumerate("xyθ"))
+    t = _carmen_float(fields, t_index, "ipc_timestamp", src, number)
+    return t, p  # type: ignore[return-value]
+
+
+def _read_g2o(src: SourceText, *, skipped: Counter[str]) -> tuple[NDArray, NDArray, NDArray]:
+    ids: list[float] = []
+    poses: list[tuple[float, float, float]] = []
+    numbers: list[int] = []
+    for number, text in src.data_lines():
+        fields = text.split()
+        if fields[0] != "VERTEX_SE2":
+            skipped[fields[0]] += 1
+            continue
+        if len(fields) != 5:
+            if src.is_last_line(number):
+                src.warn_truncated(number, "VERTEX_SE2 needs 5 fields")
+                break
+            raise InputError(
+                f"VERTEX_SE2: expected 5 fields (VERTEX_SE2 id x y theta), got {len(fields)}",
+                path=src.path,
+                line=number,
+            )
+        vals = [
+            parse_float(tok, source=src, line=number, what=f"VERTEX_SE2 {name}")
+            for tok, name in zip(fields[1:], ("id", "x", "y", "theta"))
+        ]
+        ids.append(vals[0])
+        poses.append((vals[1], vals[2], vals[3]))
+        numbers.append(number)
+    order = np.argsort(np.asarray(ids), kind="stable")
+    t = np.asarray(ids, dtype=np.float64)[order]
+    if t.size > 1 and (np.diff(t) == 0).any():
+        k = int(np.flatnonzero(np.diff(t) == 0)[0])
+        raise InputError(
+            f"duplicate VERTEX_SE2 id {int(t[k])}", path=src.path, line=int(np.asarray(numbers)[order][k + 1])
+        )
+    arr = np.asarray(poses, dtype=np.float64).reshape(-1, 3)[order]
+    return t, arr, np.asarray(numbers)[order]
+
+
+def write_trajectory(
+    path: PathLike,
+    trajectory: Trajectory,
+    *,
+    format: str = "plain",
+) -> None:
+    """Write a trajectory atomically in one of :data:`TRAJECTORY_FORMATS`.
+
+    ``carmen`` writes ``FLASER 0`` records (laser pose = odometry pose), which the original
+    metricEvaluator reads; ``g2o`` writes ``VERTEX_SE2`` lines with the pose index as id.
+    """
+    t = trajectory.timestamps
+    p = trajectory.poses
+    n = len(trajectory)
+    if format == "plain":
+        text = _rows(np.column_stack((t, p)), ("%.9f", "%.9f", "%.9f", "%.9f"))
+        text = "# t x y theta\n" + text
+    elif format == "tum":
+        q = quaternion_from_yaw(p[:, 2])
+        rows = np.column_stack((t, p[:, 0], p[:, 1], np.zeros(n), q))
+        text = "# t x y z qx qy qz qw\n" + _rows(rows, ["%.9f"] * 8)
+    elif format == "csv":
+        text = "t,x,y,theta\n" + _rows(np.column_stack((t, p)), ["%.9f"] * 4, ",")
+    elif format == "g2o":
+        body = _rows(np.column_stack((np.arange(n), p)), ("%d", "%.9f", "%.9f", "%.9f"))
+        text = "".join("VERTEX_SE2 " + line + "\n" for line in body.splitlines())
+    elif format == "carmen":
+        rows = np.column_stack((p, p, t, t))
+        body = _rows(rows, ["%.6f"] * 6 + ["%.6f", "%.6f"])
+        lines = []
+        for line in body.splitlines():
+            f = line.split(" ")
+            lines.append(f"FLASER 0 {' '.join(f[:7])} slamrel {f[7]}\n")
+        text = "".join(lines)
+    else:
+        raise InputError(
+            f"unknown trajectory format {format!r}; expected one of "
+            f"{', '.join(TRAJECTORY_FORMATS)}",
+            path=path,
+        )
+    write_text_atomic(path, text)
+
+
+def _rows(values: NDArray[np.float64], fmt: tuple[str, ...] | list[str], sep: str = " ") -> str:
+    if values.shape[0] == 0:
+        return ""
+    line = sep.join(fmt)
+    # One formatting pass over a flat tuple; much faster than np.savetxt for large arrays.
+    return (line + "\n") * values.shape[0] % tuple(values.ravel().tolist())
+
+
+def wrap_poses(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Wrap the angle column of ``p`` (kept for readers that build poses by hand)."""
+    return se2.wrap_last(p)

@@ -1,0 +1,153 @@
+"""Relation errors (Kümmerle et al. 2009) in two definitions.
+
+``paper`` (default) — the paper's Eq. 2: the error of a relation is the SE(2) difference
+``e_ij = δ_ij ⊖ δ*_ij = δ*_ij⁻¹ ∘ δ_ij`` (in the frame of the reference relation's end pose),
+with ``δ_ij = x_i⁻¹ ∘ x_j`` of the estimate; translational part ``trans(e) = ‖[e_x, e_y]‖``,
+rotational part ``rot(e) = |e_θ|``, ``e_θ`` wrapped to ``[−π, π)``. ε = 1/N Σ trans² + rot²
+is the sum of the two ``sqr`` means.
+
+``metricevaluator`` — the definition of the authors' C++ tool: the difference of the
+parameter vectors ``p(δ) − p(δ*)`` with ``p = [x, y, z, roll, pitch, yaw]`` (angles of the
+difference wrapped), weighted, ``sqrt(Σ_k w_k e_k²)`` (or its square). For a planar estimate
+``z = roll = pitch = 0``; the reference's out-of-plane parts enter as they are.
+
+How they differ: in SE(2) ``trans(δ ⊖ δ*) = ‖R*ᵀ (t − t*)‖ = ‖t − t*‖`` because rotation
+keeps lengths, and the angle difference is the same, so on planar data both definitions give
+the same translational and rotational errors. They differ (i) when weights mix translation and
+rotation into one number (the C++ tool's single weighted error), (ii) for relations with
+out-of-plane parts, where the parameter-vector difference is not a group error, and (iii) for
+per-axis weights (``wx ≠ wy``): the paper's components are in the reference frame, the C++
+tool's in the frame of the first pose of the estimate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from relation_metric import se2
+from relation_metric.errors import InputError
+
+__all__ = ["RelationErrors", "relation_errors", "MODES", "parse_weights"]
+
+MODES = ("paper", "metricevaluator")
+Mode = Literal["paper", "metricevaluator"]
+_UNIT_WEIGHTS = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class RelationErrors:
+    """Per-relation errors.
+
+    Attributes
+    ----------
+    translation : ndarray, shape (M,)
+        Absolute translational error, metres: ``sqrt(wx e_x² + wy e_y² + wz e_z²)``.
+    rotation : ndarray, shape (M,)
+        Absolute rotational error, radians: ``sqrt(w_roll e_r² + w_pitch e_p² + w_yaw e_θ²)``.
+    combined : ndarray, shape (M,)
+        ``sqrt(translation² + rotation²)``: the single weighted number the C++
+        metricEvaluator prints (with its ``-w`` weights).
+    vector : ndarray, shape (M, 6)
+        The unweighted error components ``[e_x, e_y, e_z, e_roll, e_pitch, e_yaw]``.
+    mode : str
+    weights : tuple of 6 floats
+    """
+
+    translation: NDArray[np.float64]
+    rotation: NDArray[np.float64]
+    combined: NDArray[np.float64]
+    vector: NDArray[np.float64]
+    mode: str
+    weights: tuple[float, ...]
+
+
+def parse_weights(text: str | ArrayLike | None) -> tuple[float, ...]:
+    """Weights ``{wx,wy,wz,wroll,wpitch,wyaw}`` from ``"1,1,0,0,0,0"`` (braces optional)."""
+    if text is None:
+        return _UNIT_WEIGHTS
+    if isinstance(text, str):
+        parts = [p for p in text.strip().strip("{}").replace(",", " ").split() if p]
+        try:
+            values = tuple(float(p) for p in parts)
+        except ValueError:
+            raise InputError(
+                f"weights {text!r}: expected six numbers wx,wy,wz,wroll,wpitch,wyaw"
+            ) from None
+    else:
+        values = tuple(float(v) for v in np.asarray(text, dtype=np.float64).ravel())
+    if len(values) != 6 or not all(np.isfinite(values)) or min(values) < 0:
+        raise InputError(
+            f"weights {text!r}: expected six finite non-negative numbers "
+            "wx,wy,wz,wroll,wpitch,wyaw"
+        )
+    return values
+
+
+def relation_errors(
+    estimated: ArrayLike,
+    reference: ArrayLike,
+    *,
+    mode: Mode = "paper",
+    weights: ArrayLike | str | None = None,
+    out_of_plane: ArrayLike | None = None,
+) -> RelationErrors:
+    """Errors of estimated relations against reference relations.
+
+    Parameters
+    ----------
+    estimated : array_like, shape (M, 3)
+        ``δ_ij = x_i⁻¹ ∘ x_j`` of the estimate.
+    reference : array_like, shape (M, 3)
+        ``δ*_ij``.
+    mode : {"paper", "metricevaluator"}
+        See the module docstring.
+    weights : six floats or str, optional
+        ``{wx, wy, wz, wroll, wpitch, wyaw}``; all ones by default.
+    out_of_plane : array_like, shape (M, 3), optional
+        ``[z, roll, pitch]`` of the reference relations (``metricevaluator`` mode only; in
+        ``paper`` mode they must be zero, since a planar group error cannot hold them).
+
+    Returns
+    -------
+    RelationErrors
+    """
+    d = np.asarray(estimated, dtype=np.float64)
+    r = np.asarray(reference, dtype=np.float64)
+    if d.shape != r.shape or d.shape[-1:] != (3,) or d.ndim != 2:
+        raise InputError(f"relation arrays must both be (M, 3); got {d.shape} and {r.shape}")
+    w = np.asarray(parse_weights(weights))
+    m = d.shape[0]
+    vec = np.zeros((m, 6))
+    oop = None if out_of_plane is None else np.asarray(out_of_plane, dtype=np.float64)
+    if mode == "paper":
+        if oop is not None and np.any(oop != 0.0):
+            raise InputError(
+                "relations with out-of-plane parts (z, roll, pitch) cannot be scored with "
+                "the planar paper definition; use mode 'metricevaluator'"
+            )
+        e = se2.ominus(d, r)
+        vec[:, 0:2] = e[:, 0:2]
+        vec[:, 5] = e[:, 2]
+    elif mode == "metricevaluator":
+        vec[:, 0:2] = d[:, 0:2] - r[:, 0:2]
+        vec[:, 5] = se2.wrap_angle(d[:, 2] - r[:, 2])
+        if oop is not None:
+            vec[:, 2] = -oop[:, 0]
+            vec[:, 3:5] = se2.wrap_angle(-oop[:, 1:3])
+    else:
+        raise InputError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
+    sq = vec * vec * w
+    trans2 = sq[:, 0:3].sum(axis=1)
+    rot2 = sq[:, 3:6].sum(axis=1)
+    return RelationErrors(
+        translation=np.sqrt(trans2),
+        rotation=np.sqrt(rot2),
+        combined=np.sqrt(trans2 + rot2),
+        vector=vec,
+        mode=mode,
+        weights=tuple(float(x) for x in w),
+    )

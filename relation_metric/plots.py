@@ -1,0 +1,103 @@
+"""Figures of relation errors: where along the trajectory the estimate is wrong.
+
+matplotlib is imported lazily with the non-interactive Agg backend; figures are written
+atomically. Statistics live in :mod:`relation_metric.stats`, not here.
+"""
+
+from __future__ import annotations
+
+import io
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from relation_metric.evaluate import Evaluation
+from relation_metric.textio import PathLike, write_bytes_atomic
+from relation_metric.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = ["evaluation_figure", "save_figure"]
+
+
+def _pyplot():  # type: ignore[no-untyped-def]
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def evaluation_figure(
+    evaluation: Evaluation,
+    estimate: Trajectory,
+    *,
+    degrees: bool = False,
+    title: str | None = None,
+) -> Figure:
+    """Errors over time (top) and the estimate with each relation coloured by its error.
+
+    Each relation is drawn as a segment between the two estimate poses it connects, coloured
+    by its translational error, so that large errors point at the part of the map that is
+    wrong. Unassociated relations are listed in the title, not drawn.
+    """
+    plt = _pyplot()
+    from matplotlib.collections import LineCollection
+
+    ev = evaluation
+    valid = ev.valid
+    a = ev.association
+    fig, (ax_t, ax_xy) = plt.subplots(
+        2, 1, figsize=(8.0, 10.0), gridspec_kw={"height_ratios": [1, 2]}, constrained_layout=True
+    )
+    t_mid = 0.5 * (ev.relations.first + ev.relations.second)[valid]
+    order = np.argsort(t_mid, kind="stable")
+    trans = ev.errors.translation[valid][order]
+    rot = ev.errors.rotation[valid][order]
+    if degrees:
+        rot = np.degrees(rot)
+    x_axis = t_mid[order] - (t_mid.min() if t_mid.size else 0.0)
+    ax_t.plot(x_axis, trans, ".", ms=3, color="tab:blue", label="translation [m]")
+    ax_t.set_xlabel("time of relation (mid-point) since start [s]")
+    ax_t.set_ylabel("translational error [m]", color="tab:blue")
+    ax_r = ax_t.twinx()
+    ax_r.plot(x_axis, rot, ".", ms=3, color="tab:red", alpha=0.6)
+    ax_r.set_ylabel(f"rotational error [{'deg' if degrees else 'rad'}]", color="tab:red")
+    s = ev.translation["abs"]
+    ax_t.set_title(
+        f"{s.count} relations scored, {int((~valid).sum())} unassociated; "
+        f"translation {s.mean:.4g} ± {s.std:.4g} m"
+    )
+    ax_xy.plot(estimate.poses[:, 0], estimate.poses[:, 1], "-", color="0.75", lw=1.0, zorder=1)
+    seg = np.stack((a.pose_first[valid, :2], a.pose_second[valid, :2]), axis=1)
+    err = ev.errors.translation[valid]
+    if seg.shape[0]:
+        hi = float(np.percentile(err, 99)) if err.size else 1.0
+        lc = LineCollection(seg, cmap="viridis", linewidths=1.5, zorder=2)
+        lc.set_array(err)
+        lc.set_clim(0.0, max(hi, 1e-12))
+        ax_xy.add_collection(lc)
+        worst = np.argsort(err)[-min(10, err.size):]
+        mid = seg[worst].mean(axis=1)
+        ax_xy.plot(mid[:, 0], mid[:, 1], "x", color="tab:red", ms=7, zorder=3, label="10 worst")
+        fig.colorbar(lc, ax=ax_xy, label="translational relation error [m] (clipped at p99)")
+        ax_xy.legend(loc="best")
+    ax_xy.set_aspect("equal", adjustable="datalim")
+    ax_xy.set_xlabel("x [m]")
+    ax_xy.set_ylabel("y [m]")
+    ax_xy.set_title(title or "estimate, relations coloured by translational error")
+    return fig
+
+
+def save_figure(fig: Figure, path: PathLike, *, dpi: int = 120) -> None:
+    """Save a figure atomically (PNG, SVG or PDF by the file extension) and close it."""
+    plt = _pyplot()
+    fmt = str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else "png"
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format=fmt, dpi=dpi)
+    finally:
+        plt.close(fig)
+    write_bytes_atomic(path, buf.getvalue())

@@ -1,0 +1,304 @@
+"""Reference relation sets, the Freiburg ``.relations`` format, and relation selection.
+
+A relation is a pair of poses and the reference relative motion between them,
+``δ*_ij = x*_i⁻¹ ∘ x*_j`` (Kümmerle et al. 2009, Eq. 1 and Sec. IV). A :class:`RelationSet`
+holds M of them as struct-of-arrays; the pair is named either by timestamps (``key="time"``,
+the Freiburg files) or by pose indices into the evaluated trajectory (``key="index"``).
+
+Selection strategies (:func:`generate_relations`) follow the relation selection discussed
+in Kümmerle et al. 2009 (Sec. V): local relations between nearby poses (every k poses, every
+d metres of travel), loop-closing relations between poses that are close in space but far
+apart along the path, global relations between far-apart poses, and a seeded random sample.
+Every generated set reproduces its reference trajectory exactly (``δ*`` are computed with
+:func:`relation_metric.se2.between` on the reference poses).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+
+from relation_metric import se2
+from relation_metric.errors import InputError
+from relation_metric.textio import PathLike, read_numeric_table, write_text_atomic
+from relation_metric.trajectory import Trajectory, readonly
+
+__all__ = [
+    "RelationSet",
+    "read_relations",
+    "write_relations",
+    "generate_relations",
+    "STRATEGIES",
+]
+
+STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs")
+
+
+@dataclass(frozen=True)
+class RelationSet:
+    """M reference relations ``(first_k, second_k, δ*_k)``.
+
+    Parameters
+    ----------
+    first, second : array_like, shape (M,)
+        Timestamps (``key="time"``) or pose indices (``key="index"``) of the two poses.
+        ``second < first`` is allowed (the Freiburg files contain such relations).
+    delta : array_like, shape (M, 3)
+        Reference motions ``δ*_k = x*_first⁻¹ ∘ x*_second`` as ``[x, y, θ]``.
+    key : {"time", "index"}
+    out_of_plane : array_like, shape (M, 3), optional
+        ``[z, roll, pitch]`` of the relations (Freiburg files carry them; zero for planar
+        data). Only the ``metricevaluator`` mode uses them.
+    information : array_like, shape (M, 3, 3), optional
+        Information matrices of the relations, where a source provides them.
+    """
+
+    first: NDArray[np.float64]
+    second: NDArray[np.float64]
+    delta: NDArray[np.float64]
+    key: Literal["time", "index"] = "time"
+    out_of_plane: NDArray[np.float64] | None = None
+    information: NDArray[np.float64] | None = None
+
+    def __post_init__(self) -> None:
+        a = np.asarray(self.first, dtype=np.float64)
+        b = np.asarray(self.second, dtype=np.float64)
+        d = np.asarray(self.delta, dtype=np.float64)
+        m = a.shape[0] if a.ndim == 1 else -1
+        if a.ndim != 1 or b.shape != (m,) or d.shape != (m, 3):
+            raise InputError(
+                f"relation arrays must have shapes (M,), (M,), (M, 3); got {a.shape}, "
+                f"{b.shape}, {d.shape}"
+            )
+        if self.key not in ("time", "index"):
+            raise InputError(f"relation key must be 'time' or 'index', got {self.key!r}")
+        if not (np.isfinite(a).all() and np.isfinite(b).all() and np.isfinite(d).all()):
+            raise InputError("relations contain non-finite values")
+        if self.key == "index" and (np.any(a != np.round(a)) or np.any(b != np.round(b))):
+            raise InputError("index relations need integer pose indices")
+        object.__setattr__(self, "first", readonly(a))
+        object.__setattr__(self, "second", readonly(b))
+        object.__setattr__(self, "delta", readonly(se2.wrap_last(d)))
+        for name, shape in (("out_of_plane", (m, 3)), ("information", (m, 3, 3))):
+            value = getattr(self, name)
+            if value is not None:
+                arr = np.asarray(value, dtype=np.float64)
+                if arr.shape != shape:
+                    raise InputError(f"{name} must have shape {shape}, got {arr.shape}")
+                object.__setattr__(self, name, readonly(arr))
+
+    def __len__(self) -> int:
+        return int(self.first.shape[0])
+
+    def subset(self, mask: ArrayLike) -> RelationSet:
+        """The relations selected by a boolean mask or index array."""
+        sel = np.asarray(mask)
+        return RelationSet(
+            self.first[sel],
+            self.second[sel],
+            self.delta[sel],
+            key=self.key,
+            out_of_plane=None if self.out_of_plane is None else self.out_of_plane[sel],
+            information=None if self.information is None else self.information[sel],
+        )
+
+    def span(self) -> tuple[float, float]:
+        """Smallest and largest timestamp (or index) the relations refer to."""
+        if len(self) == 0:
+            return (float("nan"), float("nan"))
+        both = np.concatenate((self.first, self.second))
+        return float(both.min()), float(both.max())
+
+    @classmethod
+    def from_trajectory_pairs(
+        cls, reference: Trajectory, i: ArrayLike, j: ArrayLike, *, key: str = "time"
+    ) -> RelationSet:
+        """Relations between poses ``i`` and ``j`` of ``reference`` (δ* from the poses)."""
+        i = np.asarray(i, dtype=np.int64)
+        j = np.asarray(j, dtype=np.int64)
+        delta = se2.between(reference.poses[i], reference.poses[j])
+        if key == "time":
+            return cls(reference.timestamps[i], reference.timestamps[j], delta, key="time")
+        return cls(i.astype(np.float64), j.astype(np.float64), delta, key="index")
+
+
+_REL_COLUMNS = ("t1", "t2", "x", "y", "z", "roll", "pitch", "yaw")
+
+
+def read_relations(path: PathLike) -> RelationSet:
+    """Read a Freiburg ``.relations`` file: ``t1 t2 x y z roll pitch yaw`` per line.
+
+    ``#`` lines are comments; runs of blanks separate fields; ``t2 < t1`` is allowed.
+    The planar part ``[x, y, yaw]`` becomes ``delta``; ``[z, roll, pitch]`` is kept in
+    ``out_of_plane``.
+    """
+    values, _ = read_numeric_table(
+        path, columns=_REL_COLUMNS, describe="a Freiburg .relations file"
+    )
+    return RelationSet(
+        values[:, 0],
+        values[:, 1],
+        values[:, [2, 3, 7]],
+        key="time",
+        out_of_plane=values[:, [4, 5, 6]],
+    )
+
+
+def write_relations(path: PathLike, relations: RelationSet) -> None:
+    """Write a Freiburg ``.relations`` file atomically (times with 6 decimals)."""
+    if relations.key != "time":
+        raise InputError("only time-stamped relations can be written as .relations", path=path)
+    oop = relations.out_of_plane
+    if oop is None:
+        oop = np.zeros((len(relations), 3))
+    rows = np.column_stack(
+        (relations.first, relations.second, relations.delta[:, :2], oop, relations.delta[:, 2])
+    )
+    fmt = "%.6f %.6f %.9f %.9f %.9f %.9f %.9f %.9f\n"
+    text = "# t1 t2 x y z roll pitch yaw\n"
+    if rows.shape[0]:
+        text += fmt * rows.shape[0] % tuple(rows.ravel().tolist())
+    write_text_atomic(path, text)
+
+
+def generate_relations(
+    reference: Trajectory,
+    strategy: str,
+    *,
+    step: int = 1,
+    distance: float = 1.0,
+    radius: float = 1.0,
+    min_separation_time: float | None = 30.0,
+    min_separation_distance: float | None = None,
+    count: int = 1000,
+    min_distance: float | None = None,
+    seed: int = 0,
+    key: Literal["time", "index"] = "time",
+) -> RelationSet:
+    """Select relations from a reference trajectory (Kümmerle et al. 2009, Sec. V).
+
+    Parameters
+    ----------
+    reference : Trajectory
+        Ground truth; ``δ*`` are its relative motions.
+    strategy : str
+        ``"consecutive"``: pose k with pose k + ``step``.
+        ``"distance"``: each pose with the first later pose at least ``distance`` metres
+        further along the path.
+        ``"loops"``: pairs within ``radius`` metres of each other that lie at least
+        ``min_separation_time`` seconds (or ``min_separation_distance`` metres of travel)
+        apart — the loop closures a SLAM system should have made.
+        ``"global"``: ``count`` seeded random pairs at least ``min_distance`` metres apart in
+        space (default: a quarter of the trajectory's extent) — far-apart relations that
+        reveal global breakage.
+        ``"random"``: ``count`` seeded random pairs, uniformly over all pairs i < j.
+        ``"all-pairs"``: every pair i < j (quadratic; for short trajectories only).
+    step, distance, radius, min_separation_time, min_separation_distance, count, \
+min_distance, seed :
+        Strategy parameters, see above.
+    key : {"time", "index"}
+        Name the pairs by timestamps or by pose indices.
+
+    Returns
+    -------
+    RelationSet
+        Pairs with ``first < second`` (in pose order), sorted by ``(first, second)``.
+    """
+    n = len(reference)
+    if n < 2:
+        raise InputError(f"a reference trajectory needs at least 2 poses, has {n}")
+    if strategy == "consecutive":
+        if step < 1:
+            raise InputError(f"step must be >= 1, got {step}")
+        i = np.arange(0, n - step)
+        j = i + step
+    elif strategy == "distance":
+        if not distance > 0:
+            raise InputError(f"distance must be > 0, got {distance}")
+        s = reference.path_length()
+        j = np.searchsorted(s, s + distance, side="left")
+        i = np.arange(n)
+        keep = j < n
+        i, j = i[keep], j[keep]
+    elif strategy == "loops":
+        i, j = _loop_pairs(reference, radius, min_separation_time, min_separation_distance)
+    elif strategy == "global":
+        xy = reference.xy
+        extent = float(np.hypot(*(xy.max(axis=0) - xy.min(axis=0))))
+        dmin = extent / 4.0 if min_distance is None else float(min_distance)
+        i, j = _random_pairs(n, count, seed, xy=xy, min_distance=dmin)
+    elif strategy == "random":
+        i, j = _random_pairs(n, count, seed)
+    elif strategy == "all-pairs":
+        i, j = np.triu_indices(n, k=1)
+    else:
+        raise InputError(f"unknown strategy {strategy!r}; expected one of {', '.join(STRATEGIES)}")
+    order = np.lexsort((j, i))
+    return RelationSet.from_trajectory_pairs(reference, i[order], j[order], key=key)
+
+
+def _loop_pairs(
+    reference: Trajectory,
+    radius: float,
+    min_time: float | None,
+    min_travel: float | None,
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    if not radius > 0:
+        raise InputError(f"radius must be > 0, got {radius}")
+    if min_time is None and min_travel is None:
+        raise InputError("loop relations need a minimum separation in time or distance")
+    pairs = cKDTree(reference.xy).query_pairs(radius, output_type="ndarray")
+    if pairs.size == 0:
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+    swap = i > j
+    i, j = np.where(swap, j, i), np.where(swap, i, j)
+    keep = np.zeros(i.shape, dtype=bool)
+    if min_time is not None:
+        t = reference.timestamps
+        keep |= (t[j] - t[i]) >= min_time
+    if min_travel is not None:
+        s = reference.path_length()
+        keep |= (s[j] - s[i]) >= min_travel
+    return i[keep], j[keep]
+
+
+def _random_pairs(
+    n: int,
+    count: int,
+    seed: int,
+    *,
+    xy: NDArray[np.float64] | None = None,
+    min_distance: float = 0.0,
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    if count < 1:
+        raise InputError(f"count must be >= 1, got {count}")
+    rng = np.random.default_rng(seed)
+    total = n * (n - 1) // 2
+    codes = np.empty(0, dtype=np.int64)
+    first = np.empty(0, dtype=np.int64)
+    # Draw batches of candidate pairs i < j (coded as i*n + j), keep the first occurrence of
+    # each pair that passes the distance filter, until ``count`` distinct pairs are found.
+    for _ in range(64):
+        batch = max(4 * (count - first.size), 1024)
+        a = rng.integers(0, n, size=batch)
+        b = rng.integers(0, n, size=batch)
+        i, j = np.minimum(a, b), np.maximum(a, b)
+        ok = i != j
+        if xy is not None:
+            ok &= np.hypot(*(xy[j] - xy[i]).T) >= min_distance
+        codes = np.concatenate((codes, i[ok] * n + j[ok]))
+        _, first = np.unique(codes, return_index=True)
+        if first.size >= min(count, total):
+            break
+    picked = codes[np.sort(first)][:count]
+    have = picked.size
+    if have == 0:
+        raise InputError(
+            f"no pose pairs at least {min_distance:.3g} m apart; lower min_distance"
+        )
+    return picked // n, picked % n

@@ -1,0 +1,307 @@
+"""Strict reading of whitespace-separated text tables, and atomic writing.
+
+Readers in slamrel share three rules:
+
+* a bad line raises :class:`~relation_metric.errors.InputError` with the file, the 1-based
+  line number and what was expected;
+* the only tolerated defect is a **final line cut off mid-record with no newline** (a log
+  whose writer was stopped): it is skipped with a :class:`TruncatedLineWarning`;
+* ``#`` starts a comment line; blank lines are ignored.
+
+Numeric tables take a fast path (numpy's C parser over the whole file); only when it fails,
+or finds a non-finite value, the file is re-read line by line to say exactly where and why.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import tempfile
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relation_metric.errors import InputError
+
+__all__ = [
+    "TruncatedLineWarning",
+    "SourceText",
+    "read_source",
+    "read_numeric_table",
+    "atomic_write",
+    "check_not_input",
+    "RowLines",
+    "parse_float",
+    "write_text_atomic",
+    "write_bytes_atomic",
+]
+
+PathLike = str | os.PathLike[str]
+
+
+class TruncatedLineWarning(UserWarning):
+    """A final line without newline that does not parse was skipped."""
+
+
+@dataclass(frozen=True)
+class SourceText:
+    """The lines of a text file, ready for parsing.
+
+    Attributes
+    ----------
+    path : str
+        The file name used in messages.
+    lines : list of str
+        All lines without their line ends (the possibly truncated last one included).
+    ends_with_newline : bool
+        False when the last line has no newline (it may be cut off).
+    """
+
+    path: str
+    lines: list[str]
+    ends_with_newline: bool
+
+    def data_lines(self, comment: str = "#") -> Iterator[tuple[int, str]]:
+        """Yield ``(line_number, stripped_text)`` for the non-blank, non-comment lines."""
+        for number, raw in enumerate(self.lines, start=1):
+            text = raw.strip()
+            if text and not text.startswith(comment):
+                yield number, text
+
+    def is_last_line(self, number: int) -> bool:
+        """True when ``number`` is the final line and it has no newline (may be cut off)."""
+        return (not self.ends_with_newline) and number == len(self.lines)
+
+    def warn_truncated(self, number: int, expected: str) -> None:
+        """Issue the warning for a skipped, cut-off final line."""
+        warnings.warn(
+            f"{self.path}:{number}: the last line is cut off (no newline, {expected}); "
+            "skipped",
+            TruncatedLineWarning,
+            stacklevel=3,
+        )
+
+
+def read_source(path: PathLike) -> SourceText:
+    """Read a text file, with a clear :class:`InputError` for missing or binary files."""
+    name = os.fspath(path)
+    try:
+        raw = Path(name).read_bytes()
+    except FileNotFoundError:
+        raise InputError("no such file", path=name) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a text file", path=name) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=name) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        raise InputError("not UTF-8 text", path=name, line=line) from None
+    if "\x00" in text:
+        line = text.count("\n", 0, text.index("\x00")) + 1
+        raise InputError("contains a NUL byte; expected a text file", path=name, line=line)
+    ends = text.endswith("\n") or text == ""
+    lines = text.splitlines()
+    return SourceText(path=name, lines=lines, ends_with_newline=ends)
+
+
+def parse_float(token: str, *, source: SourceText, line: int, what: str) -> float:
+    """Parse one finite float or raise :class:`InputError` naming ``what``."""
+    try:
+        value = float(token)
+    except ValueError:
+        raise InputError(
+            f"{what}: expected a number, got {token!r}", path=source.path, line=line
+        ) from None
+    if not math.isfinite(value):
+        raise InputError(
+            f"{what}: expected a finite number, got {token!r}", path=source.path, line=line
+        )
+    return value
+
+
+def read_numeric_table(
+    path: PathLike,
+    *,
+    columns: Sequence[str],
+    min_rows: int = 1,
+    comment: str = "#",
+    describe: str | None = None,
+    source: SourceText | None = None,
+) -> tuple[NDArray[np.float64], RowLines]:
+    """Read a whitespace-separated table of finite floats with a fixed number of columns.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The file.
+    columns : sequence of str
+        Column names; their count is the number of fields every data line must have.
+    min_rows : int
+        Fewer data rows raise :class:`InputError` (an empty file is an error by default).
+    comment : str
+        Lines starting with this (after leading blanks) are comments.
+    describe : str, optional
+        What the file is, for messages (e.g. ``"a Freiburg .relations file"``).
+    source : SourceText, optional
+        Already-read text of ``path``.
+
+    Returns
+    -------
+    values : ndarray, shape (N, len(columns))
+    line_numbers : RowLines
+        ``line_numbers(k)`` is the 1-based file line of row ``k`` (computed on first use,
+        for messages about a row).
+    """
+    src = read_source(path) if source is None else source
+    ncols = len(columns)
+    layout = " ".join(columns)
+    kind = f" ({describe})" if describe else ""
+    lines = src.lines
+    skip_last = False
+    if not src.ends_with_newline and lines:
+        last_fields = lines[-1].split()
+        if last_fields and not lines[-1].lstrip().startswith(comment):
+            if len(last_fields) != ncols or not _all_floats(last_fields):
+                src.warn_truncated(len(lines), f"expected {ncols} fields: {layout}")
+                skip_last = True
+    body = lines[:-1] if skip_last else lines
+    values: NDArray[np.float64] | None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # loadtxt warns on empty input
+            values = np.loadtxt(body, comments=comment, ndmin=2, dtype=np.float64)
+    except ValueError:
+        values = None
+    if values is not None and values.size and values.shape[1] != ncols:
+        values = None
+    if values is not None and not np.isfinite(values).all():
+        values = None
+    if values is None:
+        # Slow path: find the first bad line and say what is wrong with it.
+        _diagnose(src, body_len=len(body), ncols=ncols, layout=layout, kind=kind, comment=comment)
+        raise AssertionError("unreachable: the fast path failed but no line is bad")
+    numbers = RowLines(body, comment)
+    if values.size == 0:
+        values = np.empty((0, ncols))
+    if values.shape[0] < min_rows:
+        raise InputError(
+            f"no data{kind}: expected at least {min_rows} line(s) of {ncols} numbers "
+            f"({layout})",
+            path=src.path,
+        )
+    return values, numbers
+
+
+def _all_floats(fields: Sequence[str]) -> bool:
+    try:
+        return all(math.isfinite(float(f)) for f in fields)
+    except ValueError:
+        return False
+
+
+class RowLines:
+    """Maps a data-row index to its 1-based line in the file, computed on first use."""
+
+    def __init__(self, lines: Sequence[str], comment: str) -> None:
+        self._lines = lines
+        self._comment = comment
+        self._numbers: NDArray[np.int64] | None = None
+
+    def __call__(self, row: int) -> int:
+        if self._numbers is None:
+            self._numbers = np.asarray(
+                [
+                    i
+                    for i, raw in enumerate(self._lines, start=1)
+                    if (s := raw.strip()) and s[0] != self._comment
+                ],
+                dtype=np.int64,
+            )
+        return int(self._numbers[row])
+
+
+def _diagnose(
+    src: SourceText, *, body_len: int, ncols: int, layout: str, kind: str, comment: str
+) -> None:
+    for number, text in src.data_lines(comment):
+        if number > body_len:
+            break
+        fields = text.split()
+        if len(fields) != ncols:
+            raise InputError(
+                f"expected {ncols} fields ({layout}){kind}, got {len(fields)}",
+                path=src.path,
+                line=number,
+            )
+        for name, token in zip(layout.split(), fields):
+            parse_float(token, source=src, line=number, what=f"field '{name}'")
+
+
+def check_not_input(output: PathLike, inputs: Sequence[PathLike | None]) -> None:
+    """Refuse to write ``output`` over one of the ``inputs``."""
+    out = Path(output).resolve()
+    for item in inputs:
+        if item is None:
+            continue
+        if Path(item).resolve() == out:
+            raise InputError("refusing to overwrite an input file", path=output)
+
+
+@contextmanager
+def atomic_write(
+    path: PathLike, mode: str = "w", *, encoding: str | None = "utf-8"
+) -> Iterator[IO[str] | IO[bytes]]:
+    """Write to a temporary file beside ``path`` and rename it into place on success.
+
+    An exception (or an interrupt) inside the block leaves ``path`` untouched and removes
+    the temporary file.
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    binary = "b" in mode
+    try:
+        with os.fdopen(fd, mode, encoding=None if binary else encoding) as handle:
+            yield handle
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def write_bytes_atomic(path: PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically."""
+    with atomic_write(path, "wb") as handle:
+        handle.write(data)  # type: ignore[arg-type]
+
+
+def write_text_atomic(path: PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` atomically."""
+    with atomic_write(path, "w") as handle:
+        handle.write(text)  # type: ignore[arg-type]
+
+
+def format_table(rows: NDArray[np.float64], fmt: Sequence[str]) -> str:
+    """Format a 2-D array as whitespace-separated text, one row a line (vectorised)."""
+    if rows.shape[0] == 0:
+        return ""
+    buf = io.StringIO()
+    np.savetxt(buf, rows, fmt=list(fmt), delimiter=" ")
+    return buf.getvalue()
+
+
+ParseFn = Callable[[SourceText], object]

@@ -1,0 +1,3 @@
+"""slamrel: the front door — CLI, pipelines, reports, importers, simulated worlds."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,5 @@
+import sys
+
+from slamrel.cli import main
+
+sys.exit(main())

@@ -1,0 +1,42 @@
+"""``slamrel relations generate``: select reference relations from a trajectory."""
+
+from __future__ import annotations
+
+import argparse
+
+from relation_metric.formats import TRAJECTORY_FORMATS
+from relation_metric.relations import write_relations
+from slamrel.commands.common import (
+    add_strategy_arguments,
+    check_outputs,
+    load_trajectory_arg,
+    relations_from_args,
+)
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser("relations", help="work with relation sets")
+    rsub = p.add_subparsers(dest="relations_command", metavar="ACTION")
+    rsub.required = True
+    g = rsub.add_parser(
+        "generate",
+        help="generate reference relations from a reference trajectory",
+        description="Select relations from a reference trajectory (Kümmerle et al. 2009) "
+        "and write them as a Freiburg .relations file.",
+    )
+    g.add_argument("reference", metavar="REFERENCE", help="reference trajectory or bundle")
+    g.add_argument("--format", choices=TRAJECTORY_FORMATS, help="format of REFERENCE")
+    g.add_argument("-o", "--output", required=True, metavar="OUT", help="output .relations file")
+    g.add_argument("-q", "--quiet", action="store_true")
+    add_strategy_arguments(g, default="consecutive")
+    g.set_defaults(func=run_generate)
+
+
+def run_generate(args: argparse.Namespace) -> int:
+    check_outputs([args.output], [args.reference])
+    reference = load_trajectory_arg(args.reference, args.format).trajectory
+    rel = relations_from_args(reference, args)
+    write_relations(args.output, rel)
+    if not args.quiet:
+        print(f"{len(rel)} {args.strategy} relations from {len(reference)} poses -> {args.output}")
+    return 0
