@@ -1,0 +1,114 @@
+"""SE(2) algebra: identities, round trips at large angles, vectorised == looped."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from relation_metric import se2
+
+finite = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False, allow_infinity=False)
+angle = st.floats(min_value=-math.pi, max_value=math.pi, allow_nan=False, exclude_max=True)
+pose = st.tuples(finite, finite, angle).map(np.array)
+poses = arrays(np.float64, (7, 3), elements=st.floats(-50, 50)).map(se2.wrap_last)
+
+
+def mat(p: np.ndarray) -> np.ndarray:
+    c, s = math.cos(p[2]), math.sin(p[2])
+    return np.array([[c, -s, p[0]], [s, c, p[1]], [0.0, 0.0, 1.0]])
+
+
+def test_wrap_angle_range_and_identity():
+    a = np.array([-3 * np.pi, -np.pi, -1e-18, 0.0, np.pi - 1e-12, np.pi, 3 * np.pi, 1e6])
+    w = se2.wrap_angle(a)
+    assert np.all(w >= -np.pi) and np.all(w < np.pi)
+    assert w[1] == -np.pi and w[5] == -np.pi  # π maps to −π: the interval is [−π, π)
+    np.testing.assert_allclose(np.sin(w), np.sin(a), atol=1e-9)
+    np.testing.assert_allclose(np.cos(w), np.cos(a), atol=1e-9)
+
+
+@given(pose, pose)
+def test_compose_matches_matrix_product(a, b):
+    expected = se2.from_matrix(mat(a) @ mat(b))
+    got = se2.compose(a, b)
+    np.testing.assert_allclose(got[:2], expected[:2], atol=1e-8)
+    assert abs(se2.wrap_angle(got[2] - expected[2])) < 1e-9
+
+
+@given(pose, pose)
+def test_between_and_ominus(a, b):
+    d = se2.between(a, b)
+    back = se2.compose(a, d)
+    np.testing.assert_allclose(back[:2], b[:2], atol=1e-8)
+    assert abs(se2.wrap_angle(back[2] - b[2])) < 1e-9
+    np.testing.assert_allclose(se2.ominus(b, a), d, atol=1e-9)
+    np.testing.assert_allclose(se2.between(a, b), se2.compose(se2.inverse(a), b), atol=1e-8)
+
+
+@given(pose)
+def test_inverse(a):
+    e = se2.compose(a, se2.inverse(a))
+    np.testing.assert_allclose(e, np.zeros(3), atol=1e-8)
+
+
+@given(st.tuples(finite, finite, angle).map(np.array))
+def test_exp_log_round_trip_full_angle_range(xi):
+    np.testing.assert_allclose(se2.log(se2.exp(xi)), xi, rtol=1e-9, atol=1e-8)
+
+
+@given(pose)
+def test_log_exp_round_trip(p):
+    q = se2.exp(se2.log(p))
+    np.testing.assert_allclose(q[:2], p[:2], rtol=1e-9, atol=1e-8)
+    assert abs(se2.wrap_angle(q[2] - p[2])) < 1e-12
+
+
+def test_exp_near_pi_and_small_angles():
+    for phi in (np.pi - 1e-9, -np.pi, 1e-5, -1e-5, 1e-12, 0.0):
+        xi = np.array([1.5, -0.7, phi])
+        np.testing.assert_allclose(se2.log(se2.exp(xi)), se2.wrap_last(xi), atol=1e-9)
+    # exp of a pure rotation is a rotation about the origin; small-angle series is continuous
+    a, b = se2.exp([1.0, 0.0, 0.99e-4]), se2.exp([1.0, 0.0, 1.01e-4])
+    np.testing.assert_allclose(a[:2], b[:2], atol=1e-5)
+
+
+@given(poses, poses)
+@settings(max_examples=50)
+def test_vectorised_equals_looped(a, b):
+    for fn in (se2.compose, se2.between, se2.ominus):
+        vec = fn(a, b)
+        loop = np.array([fn(x, y) for x, y in zip(a, b)])
+        np.testing.assert_array_equal(vec, loop)
+    for fn1 in (se2.inverse, se2.exp, se2.log):
+        np.testing.assert_array_equal(fn1(a), np.array([fn1(x) for x in a]))
+
+
+def test_broadcasting_one_against_many(rng):
+    a = rng.normal(size=3)
+    b = se2.wrap_last(rng.normal(size=(5, 4, 3)))
+    out = se2.compose(a, b)
+    assert out.shape == (5, 4, 3)
+    np.testing.assert_allclose(out[2, 3], se2.compose(a, b[2, 3]))
+
+
+def test_points_round_trip(rng):
+    p = se2.wrap_last(rng.normal(size=(10, 3)) * 5)
+    q = rng.normal(size=(10, 2)) * 10
+    np.testing.assert_allclose(se2.inverse_transform_points(p, se2.transform_points(p, q)), q, atol=1e-12)
+    # transform_points is the matrix action on homogeneous points
+    h = np.einsum("nij,nj->ni", se2.to_matrix(p), np.column_stack((q, np.ones(10))))
+    np.testing.assert_allclose(se2.transform_points(p, q), h[:, :2], atol=1e-12)
+
+
+def test_cumulative_compose_equals_loop(rng):
+    u = rng.normal(size=(200, 3)) * [0.5, 0.1, 0.3]
+    x0 = np.array([1.0, -2.0, 3.0])
+    fast = se2.cumulative_compose(u, start=x0)
+    slow = [se2.wrap_last(x0)]
+    for step in u:
+        slow.append(se2.compose(slow[-1], step))
+    np.testing.assert_allclose(fast, np.array(slow), atol=1e-9)
