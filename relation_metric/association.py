@@ -92,7 +92,9 @@ def _associate_times(
     max_time_diff: float,
     interpolate: bool,
     max_interpolation_gap: float,
-) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int8], NDArray[np.bool_], NDArray[np.bool_]]:
+) -> tuple[
+    NDArray[np.float64], NDArray[np.int64], NDArray[np.int8], NDArray[np.bool_], NDArray[np.bool_]
+]:
     t = estimate.timestamps
     p = estimate.poses
     k = nearest_index(t, query)

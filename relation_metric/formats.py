@@ -193,7 +193,9 @@ def read_trajectory(
     skipped: Counter[str] = Counter()
     if fmt == "plain":
         values, lines = read_numeric_table(
-            path, columns=("t", "x", "y", "theta"), describe="a 't x y theta' trajectory",
+            path,
+            columns=("t", "x", "y", "theta"),
+            describe="a 't x y theta' trajectory",
             source=src,
         )
         t, poses = values[:, 0], values[:, 1:4]
@@ -230,8 +232,7 @@ def read_trajectory(
     if back.size:
         k = int(back[0]) + 1
         raise InputError(
-            f"time goes backwards: {t[k]!r} after {t[k - 1]!r}; expected non-decreasing "
-            "timestamps",
+            f"time goes backwards: {t[k]!r} after {t[k - 1]!r}; expected non-decreasing timestamps",
             path=src.path,
             line=int(lines(k)),
         )
@@ -419,7 +420,9 @@ def _read_g2o(src: SourceText, *, skipped: Counter[str]) -> tuple[NDArray, NDArr
     if t.size > 1 and (np.diff(t) == 0).any():
         k = int(np.flatnonzero(np.diff(t) == 0)[0])
         raise InputError(
-            f"duplicate VERTEX_SE2 id {int(t[k])}", path=src.path, line=int(np.asarray(numbers)[order][k + 1])
+            f"duplicate VERTEX_SE2 id {int(t[k])}",
+            path=src.path,
+            line=int(np.asarray(numbers)[order][k + 1]),
         )
     arr = np.asarray(poses, dtype=np.float64).reshape(-1, 3)[order]
     return t, arr, np.asarray(numbers)[order]

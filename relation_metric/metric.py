@@ -81,8 +81,7 @@ def parse_weights(text: str | ArrayLike | None) -> tuple[float, ...]:
         values = tuple(float(v) for v in np.asarray(text, dtype=np.float64).ravel())
     if len(values) != 6 or not all(np.isfinite(values)) or min(values) < 0:
         raise InputError(
-            f"weights {text!r}: expected six finite non-negative numbers "
-            "wx,wy,wz,wroll,wpitch,wyaw"
+            f"weights {text!r}: expected six finite non-negative numbers wx,wy,wz,wroll,wpitch,wyaw"
         )
     return values
 

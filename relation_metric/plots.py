@@ -79,7 +79,7 @@ def evaluation_figure(
         lc.set_array(err)
         lc.set_clim(0.0, max(hi, 1e-12))
         ax_xy.add_collection(lc)
-        worst = np.argsort(err)[-min(10, err.size):]
+        worst = np.argsort(err)[-min(10, err.size) :]
         mid = seg[worst].mean(axis=1)
         ax_xy.plot(mid[:, 0], mid[:, 1], "x", color="tab:red", ms=7, zorder=3, label="10 worst")
         fig.colorbar(lc, ax=ax_xy, label="translational relation error [m] (clipped at p99)")

@@ -298,7 +298,5 @@ def _random_pairs(
     picked = codes[np.sort(first)][:count]
     have = picked.size
     if have == 0:
-        raise InputError(
-            f"no pose pairs at least {min_distance:.3g} m apart; lower min_distance"
-        )
+        raise InputError(f"no pose pairs at least {min_distance:.3g} m apart; lower min_distance")
     return picked // n, picked % n

@@ -23,7 +23,9 @@ def write_json(path: PathLike, data: dict[str, Any]) -> None:
     write_text_atomic(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
 
 
-def write_per_relation_csv(path: PathLike, evaluation: Evaluation, *, degrees: bool = False) -> None:
+def write_per_relation_csv(
+    path: PathLike, evaluation: Evaluation, *, degrees: bool = False
+) -> None:
     """One row per relation: ``t1,t2,i,j,trans_error,rot_error,valid,via_odometry``.
 
     ``i``/``j`` are the estimate pose indices associated with the two ends (−1 when
@@ -110,7 +112,8 @@ def write_evo_zip(
     arrays = {
         "error_array": errors,
         "timestamps": ev.relations.second[valid],
-        "seconds_from_start": ev.relations.second[valid] - (ev.relations.second[valid].min() if valid.any() else 0.0),
+        "seconds_from_start": ev.relations.second[valid]
+        - (ev.relations.second[valid].min() if valid.any() else 0.0),
     }
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as archive:

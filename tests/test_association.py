@@ -17,7 +17,9 @@ from relation_metric.trajectory import Trajectory
 
 def test_nearest_index_ties_and_edges():
     t = np.array([0.0, 1.0, 2.0])
-    np.testing.assert_array_equal(nearest_index(t, np.array([-5, 0.4, 0.5, 0.6, 9])), [0, 0, 0, 1, 2])
+    np.testing.assert_array_equal(
+        nearest_index(t, np.array([-5, 0.4, 0.5, 0.6, 9])), [0, 0, 0, 1, 2]
+    )
 
 
 def test_tolerance_and_unassociated_are_counted():
@@ -26,7 +28,10 @@ def test_tolerance_and_unassociated_are_counted():
     a = associate(rel, est)
     np.testing.assert_array_equal(a.valid, [True, False, False])
     np.testing.assert_array_equal(a.index_first[:1], [0])
-    with pytest.warns(UnassociatedRelationsWarning, match=r"2 of 3 relations .*#1 .*within the time tolerance.*#2 .*outside"):
+    with pytest.warns(
+        UnassociatedRelationsWarning,
+        match=r"2 of 3 relations .*#1 .*within the time tolerance.*#2 .*outside",
+    ):
         ev = evaluate(rel, est)
     assert ev.translation["abs"].count == 1
     assert ev.as_dict()["unassociated"] == 2
@@ -37,14 +42,21 @@ def test_tolerance_and_unassociated_are_counted():
 def test_no_relation_associated_shows_both_spans():
     est = Trajectory([100.0, 101.0], np.zeros((2, 3)))
     rel = RelationSet([1.5e9], [1.5e9 + 1], np.zeros((1, 3)))
-    with pytest.raises(AssociationError, match=r"1500000000\.000000 \.\. 1500000001\.000000 s, the estimate 100\.000000 \.\. 101\.000000"):
+    with pytest.raises(
+        AssociationError,
+        match=r"1500000000\.000000 \.\. 1500000001\.000000 s, "
+        r"the estimate 100\.000000 \.\. 101\.000000",
+    ):
         evaluate(rel, est)
 
 
 def test_odometry_correction_matches_hand_composition():
     # SLAM poses every 1 s; a relation end at t = 1.4 lies 0.4 s from the nearest pose (t = 1)
     est = Trajectory([0.0, 1.0, 2.0], [[0, 0, 0], [1, 0, 0.5], [2, 1, 1.0]])
-    odo = Trajectory([0.0, 0.5, 1.0, 1.5, 2.0], [[0, 0, 0], [0.5, 0, 0], [1, 0, 0.1], [1.3, 0.2, 0.3], [2, 0, 0.4]])
+    odo = Trajectory(
+        [0.0, 0.5, 1.0, 1.5, 2.0],
+        [[0, 0, 0], [0.5, 0, 0], [1, 0, 0.1], [1.3, 0.2, 0.3], [2, 0, 0.4]],
+    )
     rel = RelationSet([0.0], [1.4], np.zeros((1, 3)))
     a = associate(rel, est, odometry=odo)
     assert a.valid[0] and a.via_odometry[0]

@@ -25,11 +25,28 @@ def example(tmp_path):
 def test_json_structure_and_consistency(example, tmp_path):
     out = tmp_path / "m.json"
     per = tmp_path / "per.csv"
-    code = main(["evaluate", str(example / "reference.relations"), str(example / "estimate.txt"),
-                 "--json", str(out), "--per-relation", str(per), "-q"])
+    code = main(
+        [
+            "evaluate",
+            str(example / "reference.relations"),
+            str(example / "estimate.txt"),
+            "--json",
+            str(out),
+            "--per-relation",
+            str(per),
+            "-q",
+        ]
+    )
     assert code == 0
     res = json.loads(out.read_text())
-    for key in ("relations", "associated_by_odometry", "unassociated", "rotation_unit", "translation", "rotation"):
+    for key in (
+        "relations",
+        "associated_by_odometry",
+        "unassociated",
+        "rotation_unit",
+        "translation",
+        "rotation",
+    ):
         assert key in res
     for part in ("translation", "rotation"):
         for kind in ("abs", "sqr"):
@@ -39,14 +56,37 @@ def test_json_structure_and_consistency(example, tmp_path):
     assert rows.shape[0] == res["relations"]
     # the per-relation CSV and the JSON agree: an independent recomputation of the statistics
     assert rows["trans_error"].mean() == pytest.approx(res["translation"]["abs"]["mean"], rel=1e-6)
-    assert (rows["trans_error"] ** 2).mean() == pytest.approx(res["translation"]["sqr"]["mean"], rel=1e-6)
-    assert rows["rot_error_rad"].std(ddof=1) == pytest.approx(res["rotation"]["abs"]["std"], rel=1e-6)
+    assert (rows["trans_error"] ** 2).mean() == pytest.approx(
+        res["translation"]["sqr"]["mean"], rel=1e-6
+    )
+    assert rows["rot_error_rad"].std(ddof=1) == pytest.approx(
+        res["rotation"]["abs"]["std"], rel=1e-6
+    )
 
 
 def test_degrees(example, tmp_path):
     a, b = tmp_path / "a.json", tmp_path / "b.json"
-    main(["evaluate", str(example / "reference.relations"), str(example / "estimate.txt"), "--json", str(a), "-q"])
-    main(["evaluate", str(example / "reference.relations"), str(example / "estimate.txt"), "--json", str(b), "--degrees", "-q"])
+    main(
+        [
+            "evaluate",
+            str(example / "reference.relations"),
+            str(example / "estimate.txt"),
+            "--json",
+            str(a),
+            "-q",
+        ]
+    )
+    main(
+        [
+            "evaluate",
+            str(example / "reference.relations"),
+            str(example / "estimate.txt"),
+            "--json",
+            str(b),
+            "--degrees",
+            "-q",
+        ]
+    )
     ra, rb = json.loads(a.read_text()), json.loads(b.read_text())
     assert rb["rotation_unit"] == "deg"
     assert rb["rotation"]["abs"]["mean"] == pytest.approx(np.degrees(ra["rotation"]["abs"]["mean"]))
@@ -55,8 +95,19 @@ def test_degrees(example, tmp_path):
 
 def test_evo_zip_layout(example, tmp_path):
     z = tmp_path / "res.zip"
-    assert main(["evaluate", str(example / "reference.relations"), str(example / "estimate.txt"),
-                 "--evo-zip", str(z), "-q"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(example / "reference.relations"),
+                str(example / "estimate.txt"),
+                "--evo-zip",
+                str(z),
+                "-q",
+            ]
+        )
+        == 0
+    )
     with zipfile.ZipFile(z) as archive:
         names = set(archive.namelist())
         assert {"info.json", "stats.json", "error_array.npy"} <= names
@@ -71,29 +122,76 @@ def test_evo_zip_layout(example, tmp_path):
 
 def test_plot_is_written(example, tmp_path):
     png = tmp_path / "p.png"
-    assert main(["evaluate", str(example / "reference.relations"), str(example / "estimate.txt"),
-                 "--plot", str(png), "-q"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(example / "reference.relations"),
+                str(example / "estimate.txt"),
+                "--plot",
+                str(png),
+                "-q",
+            ]
+        )
+        == 0
+    )
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000
 
 
 def test_reference_trajectory_with_strategy_and_ate(example, tmp_path):
     out = tmp_path / "g.json"
-    code = main(["evaluate", str(example / "reference.txt"), str(example / "estimate.txt"),
-                 "--strategy", "global", "--count", "300", "--ate", "--json", str(out), "-q"])
+    code = main(
+        [
+            "evaluate",
+            str(example / "reference.txt"),
+            str(example / "estimate.txt"),
+            "--strategy",
+            "global",
+            "--count",
+            "300",
+            "--ate",
+            "--json",
+            str(out),
+            "-q",
+        ]
+    )
     assert code == 0
     res = json.loads(out.read_text())
     assert res["relations"] == 300
-    assert res["ate"]["se2"]["translation"]["rmse"] <= res["ate"]["none"]["translation"]["rmse"] + 1e-12
-    assert res["ate"]["sim2"]["translation"]["rmse"] <= res["ate"]["se2"]["translation"]["rmse"] + 1e-12
+    assert (
+        res["ate"]["se2"]["translation"]["rmse"]
+        <= res["ate"]["none"]["translation"]["rmse"] + 1e-12
+    )
+    assert (
+        res["ate"]["sim2"]["translation"]["rmse"]
+        <= res["ate"]["se2"]["translation"]["rmse"] + 1e-12
+    )
 
 
 def test_relations_generate_round_trip(example, tmp_path):
     out = tmp_path / "gen.relations"
-    assert main(["relations", "generate", str(example / "reference.txt"), "--strategy", "distance",
-                 "--distance", "5", "-o", str(out), "-q"]) == 0
+    assert (
+        main(
+            [
+                "relations",
+                "generate",
+                str(example / "reference.txt"),
+                "--strategy",
+                "distance",
+                "--distance",
+                "5",
+                "-o",
+                str(out),
+                "-q",
+            ]
+        )
+        == 0
+    )
     res = tmp_path / "r.json"
     # scoring the reference against its own relations gives zero error
-    assert main(["evaluate", str(out), str(example / "reference.txt"), "--json", str(res), "-q"]) == 0
+    assert (
+        main(["evaluate", str(out), str(example / "reference.txt"), "--json", str(res), "-q"]) == 0
+    )
     assert json.loads(res.read_text())["translation"]["abs"]["max"] < 1e-6
 
 
@@ -113,13 +211,38 @@ GOOD_EST = "0 0 0 0\n1 1 0 0\n2 2 0 0\n"
 @pytest.mark.parametrize(
     "case,rel,est,where,what",
     [
-        ("truncated line before the last", GOOD_REL, "0 0 0 0\n1 1 0\n2 2 0 0\n", "e.txt:2", "expected 4 fields"),
+        (
+            "truncated line before the last",
+            GOOD_REL,
+            "0 0 0 0\n1 1 0\n2 2 0 0\n",
+            "e.txt:2",
+            "expected 4 fields",
+        ),
         ("letters in a number", GOOD_REL, "0 0 0 0\n1 1 0 0\n2 2o 0 0\n", "e.txt:3", "got '2o'"),
         ("NaN", "0 1 nan 0 0 0 0 0\n", GOOD_EST, "r.relations:1", "finite"),
         ("empty file", "", GOOD_EST, "r.relations", "no data"),
-        ("relations line with wrong field count", "0 1 1 0 0 0 0 0\n1 2 1 0 0 0 0 0 9\n", GOOD_EST, "r.relations:2", "expected 8 fields"),
-        ("time going backwards", GOOD_REL, "0 0 0 0\n2 1 0 0\n1 2 0 0\n", "e.txt:3", "time goes backwards"),
-        ("another time base", "1e9 1000000001 1 0 0 0 0 0\n", GOOD_EST, "", "relations span 1000000000.000000 .. 1000000001.000000 s, the estimate 0.000000 .. 2.000000 s"),
+        (
+            "relations line with wrong field count",
+            "0 1 1 0 0 0 0 0\n1 2 1 0 0 0 0 0 9\n",
+            GOOD_EST,
+            "r.relations:2",
+            "expected 8 fields",
+        ),
+        (
+            "time going backwards",
+            GOOD_REL,
+            "0 0 0 0\n2 1 0 0\n1 2 0 0\n",
+            "e.txt:3",
+            "time goes backwards",
+        ),
+        (
+            "another time base",
+            "1e9 1000000001 1 0 0 0 0 0\n",
+            GOOD_EST,
+            "",
+            "relations span 1000000000.000000 .. 1000000001.000000 s, "
+            "the estimate 0.000000 .. 2.000000 s",
+        ),
     ],
 )
 def test_bad_input_exit_code_3(tmp_path, capsys, case, rel, est, where, what):
@@ -132,7 +255,9 @@ def test_some_unassociated_warn_and_strict(tmp_path, capsys):
     rel = GOOD_REL + "5 6 1 0 0 0 0 0\n"
     code, err = _bad(tmp_path, capsys, rel, GOOD_EST)
     assert code == 0
-    assert re.search(r"warning: 1 of 3 relations could not be associated.*#2 \(5\.000000 -> 6\.000000", err)
+    assert re.search(
+        r"warning: 1 of 3 relations could not be associated.*#2 \(5\.000000 -> 6\.000000", err
+    )
     code, err = _bad(tmp_path, capsys, rel, GOOD_EST, "--strict")
     assert code == 3 and "--strict" in err
 

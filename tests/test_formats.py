@@ -73,14 +73,18 @@ def test_carmen_layouts(tmp_path):
     got = read_trajectory(p)
     assert got.format == "carmen"
     np.testing.assert_allclose(got.trajectory.timestamps, [100.5, 101.0, 102.0])
-    np.testing.assert_allclose(got.trajectory.poses, [[1.5, 2.5, 0.1], [3.0, 4.0, 0.2], [5.0, 6.0, 0.3]])
+    np.testing.assert_allclose(
+        got.trajectory.poses, [[1.5, 2.5, 0.1], [3.0, 4.0, 0.2], [5.0, 6.0, 0.3]]
+    )
     assert got.skipped == {"PARAM": 1}
     odo = read_trajectory(p, pose="odometry").trajectory
     np.testing.assert_allclose(odo.poses[:2], [[9, 9, 9 - 2 * np.pi], [7, 7, 7 - 2 * np.pi]])
 
 
 def test_cut_off_last_line_is_skipped_with_warning(tmp_path):
-    text = "FLASER 0 1 2 0.1 1 2 0.1 10.0 h 0\nFLASER 0 1.1 2 0.1 1.1 2 0.1 10.2 h 0\nFLASER 0 1.2 2"
+    text = (
+        "FLASER 0 1 2 0.1 1 2 0.1 10.0 h 0\nFLASER 0 1.1 2 0.1 1.1 2 0.1 10.2 h 0\nFLASER 0 1.2 2"
+    )
     p = write(tmp_path, "cut.log", text)
     with pytest.warns(TruncatedLineWarning, match=r"cut.log:3: the last line is cut off"):
         got = read_trajectory(p)
@@ -127,7 +131,13 @@ def test_empty_file(tmp_path):
 
 
 def test_carmen_errors_name_the_line(tmp_path):
-    p = write(tmp_path, "b.log", "FLASER 0 1 2 0.1 1 2 0.1 10.0 h 0\nFLASER 0 1 2 x 1 2 0.1 10.1 h 0\nODOM 1 2 3 0 0 0 11 h 0\n")
+    p = write(
+        tmp_path,
+        "b.log",
+        "FLASER 0 1 2 0.1 1 2 0.1 10.0 h 0\n"
+        "FLASER 0 1 2 x 1 2 0.1 10.1 h 0\n"
+        "ODOM 1 2 3 0 0 0 11 h 0\n",
+    )
     with pytest.raises(InputError, match=r"b.log:2: FLASER θ: expected a number, got 'x'"):
         read_trajectory(p)
     p = write(tmp_path, "c.log", "FLASER 3 1 2 0.1 1 2 0.1 10.0 h 0\nODOM 1 2 3 0 0 0 11 h 0\n")
@@ -161,7 +171,9 @@ def test_detection_by_content_and_extension(tmp_path):
     assert detect_trajectory_format(write(tmp_path, "y.dat", "1 2 3 4 0 0 0 1\n")) == "tum"
     assert detect_trajectory_format(write(tmp_path, "z.dat", "VERTEX_SE2 0 1 2 3\n")) == "g2o"
     assert detect_trajectory_format(write(tmp_path, "w.dat", "t,x,y,theta\n0,1,2,3\n")) == "csv"
-    assert detect_trajectory_format(write(tmp_path, "v.dat", "ODOM 1 2 3 0 0 0 1 h 0\n")) == "carmen"
+    assert (
+        detect_trajectory_format(write(tmp_path, "v.dat", "ODOM 1 2 3 0 0 0 1 h 0\n")) == "carmen"
+    )
     assert detect_trajectory_format(write(tmp_path, "u.clf", "")) == "carmen"
     with pytest.raises(InputError, match="cannot recognise"):
         detect_trajectory_format(write(tmp_path, "s.dat", "1 2 3\n"))

@@ -97,18 +97,36 @@ def test_run_08_uses_odometry_and_paper_mode_agrees():
 def test_cli_parity_run_08(tmp_path, capsys):
     d = require_data("freiburg")
     out = tmp_path / "trans.json"
-    code = main([
-        "evaluate", str(d / "mit-csail.relations"), str(d / "benchmarks/08/test.log"),
-        "--odometry", str(d / "mit-csail.clf"), "--mode", "metricevaluator",
-        "--weights", "1,1,0,0,0,0", "--json", str(out), "-q",
-    ])
+    code = main(
+        [
+            "evaluate",
+            str(d / "mit-csail.relations"),
+            str(d / "benchmarks/08/test.log"),
+            "--odometry",
+            str(d / "mit-csail.clf"),
+            "--mode",
+            "metricevaluator",
+            "--weights",
+            "1,1,0,0,0,0",
+            "--json",
+            str(out),
+            "-q",
+        ]
+    )
     assert code == 0
     res = json.loads(out.read_text())
     t = res["translation"]["abs"]
     assert res["relations"] == 1172 and res["unassociated"] == 0
-    assert [round(t[k], 6) for k in ("mean", "std", "min", "max")] == [0.030205, 0.029165, 0.000005, 0.314529]
+    assert [round(t[k], 6) for k in ("mean", "std", "min", "max")] == [
+        0.030205,
+        0.029165,
+        0.000005,
+        0.314529,
+    ]
     assert res["estimate_records_skipped"] == {"invalid pose": 1, "truncated last line": 1}
     # the strict default (paper mode) refuses the NaN record, naming file and line
-    code = main(["evaluate", str(d / "mit-csail.relations"), str(d / "benchmarks/08/test.log"), "-q"])
+    code = main(
+        ["evaluate", str(d / "mit-csail.relations"), str(d / "benchmarks/08/test.log"), "-q"]
+    )
     assert code == 3
     assert "test.log:1018" in capsys.readouterr().err

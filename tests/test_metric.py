@@ -20,7 +20,9 @@ from relation_metric.trajectory import Trajectory
 
 
 def random_walk(rng, n=300):
-    steps = np.column_stack((rng.uniform(0.1, 0.5, n - 1), rng.normal(0, 0.05, n - 1), rng.normal(0, 0.2, n - 1)))
+    steps = np.column_stack(
+        (rng.uniform(0.1, 0.5, n - 1), rng.normal(0, 0.05, n - 1), rng.normal(0, 0.2, n - 1))
+    )
     return Trajectory.from_poses(se2.cumulative_compose(steps), dt=0.1)
 
 
@@ -66,7 +68,9 @@ def test_hand_computed_relation_error():
     assert ev.errors.rotation[0] == pytest.approx(0.2)
     assert ev.epsilon == pytest.approx(0.01 + 0.04)
     # the same with the estimate's first pose rotated: δ is unchanged
-    est2 = Trajectory([0.0, 1.0], [[5.0, 5.0, 1.0], list(se2.compose([5.0, 5.0, 1.0], [1.0, 0.1, 0.2]))])
+    est2 = Trajectory(
+        [0.0, 1.0], [[5.0, 5.0, 1.0], list(se2.compose([5.0, 5.0, 1.0], [1.0, 0.1, 0.2]))]
+    )
     assert evaluate(rel, est2).errors.translation[0] == pytest.approx(0.1)
 
 
@@ -88,8 +92,9 @@ def test_weights_combine_like_metricevaluator():
     assert e.combined[0] == pytest.approx(math.sqrt(5.0))
     e = relation_errors(d, r, mode="metricevaluator", weights="0,0,0,0,0,1")
     assert e.combined[0] == pytest.approx(0.5)
-    e = relation_errors(d, r, mode="metricevaluator", weights=[1, 1, 1, 1, 1, 1],
-                        out_of_plane=[[0.3, 0.1, -0.2]])
+    e = relation_errors(
+        d, r, mode="metricevaluator", weights=[1, 1, 1, 1, 1, 1], out_of_plane=[[0.3, 0.1, -0.2]]
+    )
     assert e.combined[0] == pytest.approx(math.sqrt(5 + 0.25 + 0.09 + 0.01 + 0.04))
     with pytest.raises(InputError, match="out-of-plane"):
         relation_errors(d, r, mode="paper", out_of_plane=[[0.3, 0.0, 0.0]])
@@ -117,7 +122,9 @@ def test_seed_example_rotation_error_early_vs_late():
         ests.append(Trajectory.from_poses(se2.cumulative_compose(bad)))
     rel = generate_relations(ref, "consecutive")
     early, late = (evaluate(rel, e) for e in ests)
-    np.testing.assert_allclose(np.sort(early.errors.rotation), np.sort(late.errors.rotation), atol=1e-12)
+    np.testing.assert_allclose(
+        np.sort(early.errors.rotation), np.sort(late.errors.rotation), atol=1e-12
+    )
     assert early.rotation["abs"].mean == pytest.approx(late.rotation["abs"].mean)
     assert early.translation["abs"].mean == pytest.approx(late.translation["abs"].mean, abs=1e-12)
     ate_early, ate_late = (absolute_trajectory_error(e, ref, align="none") for e in ests)

@@ -28,8 +28,9 @@ def loop_traj(rng):
 
 @pytest.mark.parametrize("strategy", [s for s in STRATEGIES if s != "all-pairs"])
 def test_generated_deltas_reproduce_the_reference_exactly(loop_traj, strategy):
-    rel = generate_relations(loop_traj, strategy, key="index", count=300, radius=1.0,
-                             min_separation_time=100.0)
+    rel = generate_relations(
+        loop_traj, strategy, key="index", count=300, radius=1.0, min_separation_time=100.0
+    )
     assert len(rel) > 0
     i = rel.first.astype(int)
     j = rel.second.astype(int)
@@ -45,14 +46,19 @@ def test_strategy_selections(loop_traj):
     s = loop_traj.path_length()
     gi, gj = d.first.astype(int), d.second.astype(int)
     assert np.all(s[gj] - s[gi] >= 2.0) and np.all(s[gj - 1] - s[gi] < 2.0)
-    loops = generate_relations(loop_traj, "loops", radius=0.5, min_separation_time=150.0, key="index")
+    loops = generate_relations(
+        loop_traj, "loops", radius=0.5, min_separation_time=150.0, key="index"
+    )
     li, lj = loops.first.astype(int), loops.second.astype(int)
     assert len(loops) > 0
     assert np.all(np.hypot(*(loop_traj.xy[lj] - loop_traj.xy[li]).T) <= 0.5)
     assert np.all(lj - li >= 150)
     g = generate_relations(loop_traj, "global", count=200, min_distance=15.0, seed=3, key="index")
     assert len(g) == 200
-    assert np.all(np.hypot(*(loop_traj.xy[g.second.astype(int)] - loop_traj.xy[g.first.astype(int)]).T) >= 15.0)
+    assert np.all(
+        np.hypot(*(loop_traj.xy[g.second.astype(int)] - loop_traj.xy[g.first.astype(int)]).T)
+        >= 15.0
+    )
     pairs = set(zip(g.first.tolist(), g.second.tolist()))
     assert len(pairs) == 200  # no duplicates
     r1 = generate_relations(loop_traj, "random", count=50, seed=7)
@@ -62,7 +68,9 @@ def test_strategy_selections(loop_traj):
 
 
 def test_relations_file_round_trip(tmp_path, rng):
-    rel = RelationSet(rng.uniform(0, 100, 30), rng.uniform(0, 100, 30), se2.wrap_last(rng.normal(size=(30, 3))))
+    rel = RelationSet(
+        rng.uniform(0, 100, 30), rng.uniform(0, 100, 30), se2.wrap_last(rng.normal(size=(30, 3)))
+    )
     path = tmp_path / "r.relations"
     write_relations(path, rel)
     back = read_relations(path)

@@ -98,7 +98,9 @@ def test_broadcasting_one_against_many(rng):
 def test_points_round_trip(rng):
     p = se2.wrap_last(rng.normal(size=(10, 3)) * 5)
     q = rng.normal(size=(10, 2)) * 10
-    np.testing.assert_allclose(se2.inverse_transform_points(p, se2.transform_points(p, q)), q, atol=1e-12)
+    np.testing.assert_allclose(
+        se2.inverse_transform_points(p, se2.transform_points(p, q)), q, atol=1e-12
+    )
     # transform_points is the matrix action on homogeneous points
     h = np.einsum("nij,nj->ni", se2.to_matrix(p), np.column_stack((q, np.ones(10))))
     np.testing.assert_allclose(se2.transform_points(p, q), h[:, :2], atol=1e-12)

@@ -35,29 +35,61 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--strategy.",
     )
     p.add_argument("reference", metavar="REFERENCE", help=".relations file or reference trajectory")
-    p.add_argument("estimate", metavar="ESTIMATE", help="estimated trajectory (CARMEN, TUM, t x y θ, g2o, CSV)")
-    p.add_argument("--format", choices=TRAJECTORY_FORMATS, help="format of ESTIMATE (default: recognised)")
-    p.add_argument("--reference-format", choices=TRAJECTORY_FORMATS, help="format of a reference trajectory")
+    p.add_argument(
+        "estimate", metavar="ESTIMATE", help="estimated trajectory (CARMEN, TUM, t x y θ, g2o, CSV)"
+    )
+    p.add_argument(
+        "--format", choices=TRAJECTORY_FORMATS, help="format of ESTIMATE (default: recognised)"
+    )
+    p.add_argument(
+        "--reference-format", choices=TRAJECTORY_FORMATS, help="format of a reference trajectory"
+    )
     p.add_argument("--odometry", metavar="LOG", help="odometry log that corrects far timestamps")
     p.add_argument("--odometry-format", choices=TRAJECTORY_FORMATS)
-    p.add_argument("--max-time-diff", type=float, default=0.1, metavar="S", help="nearest-pose tolerance [s] (default 0.1)")
-    p.add_argument("--interpolate", action="store_true", help="interpolate on SE(2) beyond the tolerance")
-    p.add_argument("--max-interpolation-gap", type=float, default=1.0, metavar="S", help="longest gap interpolated over [s]")
-    p.add_argument("--mode", choices=MODES, default="paper", help="error definition (default: paper)")
+    p.add_argument(
+        "--max-time-diff",
+        type=float,
+        default=0.1,
+        metavar="S",
+        help="nearest-pose tolerance [s] (default 0.1)",
+    )
+    p.add_argument(
+        "--interpolate", action="store_true", help="interpolate on SE(2) beyond the tolerance"
+    )
+    p.add_argument(
+        "--max-interpolation-gap",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="longest gap interpolated over [s]",
+    )
+    p.add_argument(
+        "--mode", choices=MODES, default="paper", help="error definition (default: paper)"
+    )
     p.add_argument("--weights", metavar="W", help="wx,wy,wz,wroll,wpitch,wyaw (default all 1)")
     p.add_argument("--degrees", action="store_true", help="report rotation in degrees")
     p.add_argument("--strict", action="store_true", help="unassociated relations are an error")
     p.add_argument(
         "--skip-invalid-poses",
         action="store_true",
-        help="skip CARMEN pose records with non-finite values (counted; default in metricevaluator mode)",
+        help="skip CARMEN pose records with non-finite values "
+        "(counted; default in metricevaluator mode)",
     )
-    p.add_argument("--ate", action="store_true", help="also the aligned absolute trajectory error (needs a reference trajectory)")
+    p.add_argument(
+        "--ate",
+        action="store_true",
+        help="also the aligned absolute trajectory error (needs a reference trajectory)",
+    )
     p.add_argument("--json", metavar="FILE", help="write the results as JSON")
     p.add_argument("--per-relation", metavar="FILE", help="write per-relation errors as CSV")
     p.add_argument("--plot", metavar="FILE", help="write a figure (PNG/SVG/PDF)")
     p.add_argument("--evo-zip", metavar="FILE", help="write an evo result zip (for evo_res)")
-    p.add_argument("--evo-part", choices=("trans", "rot"), default="trans", help="which error the evo zip holds")
+    p.add_argument(
+        "--evo-part",
+        choices=("trans", "rot"),
+        default="trans",
+        help="which error the evo zip holds",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     add_strategy_arguments(p, default=None)
     p.set_defaults(func=run)
@@ -118,7 +150,9 @@ def run(args: argparse.Namespace) -> int:
         if reference is None:
             from relation_metric.errors import InputError
 
-            raise InputError("--ate needs a reference trajectory, not a .relations file", path=args.reference)
+            raise InputError(
+                "--ate needs a reference trajectory, not a .relations file", path=args.reference
+            )
         result["ate"] = _ate(estimate.trajectory, reference, args.max_time_diff)
     if args.json:
         write_json(args.json, result)
