@@ -75,7 +75,7 @@ def evaluation_figure(
     err = ev.errors.translation[valid]
     if seg.shape[0]:
         hi = float(np.percentile(err, 99)) if err.size else 1.0
-        lc = LineCollection(seg, cmap="viridis", linewidths=1.5, zorder=2)
+        lc = LineCollection(seg, cmap="viridis", linewidths=1.5, zorder=2)  # type: ignore[arg-type]
         lc.set_array(err)
         lc.set_clim(0.0, max(hi, 1e-12))
         ax_xy.add_collection(lc)

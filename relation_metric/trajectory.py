@@ -15,7 +15,7 @@ __all__ = ["Trajectory", "readonly"]
 
 def readonly(a: ArrayLike, dtype: type = np.float64) -> NDArray[np.float64]:
     """A C-contiguous copy of ``a`` that cannot be written to."""
-    out = np.array(a, dtype=dtype, copy=True, order="C")
+    out: NDArray[np.float64] = np.array(a, dtype=dtype, copy=True, order="C")
     out.flags.writeable = False
     return out
 
