@@ -39,9 +39,10 @@ def evaluation_figure(
 ) -> Figure:
     """Errors over time (top) and the estimate with each relation coloured by its error.
 
-    Each relation is drawn as a segment between the two estimate poses it connects, coloured
-    by its translational error, so that large errors point at the part of the map that is
-    wrong. Unassociated relations are listed in the title, not drawn.
+    The estimate is coloured pose by pose with the largest translational error of the
+    relations that touch each pose, and the ends of the ten worst relations are marked, so
+    that large errors point at the part of the map that is wrong. Unassociated relations are
+    counted in the title, not drawn.
     """
     plt = _pyplot()
     from matplotlib.collections import LineCollection
@@ -70,24 +71,48 @@ def evaluation_figure(
         f"{s.count} relations scored, {int((~valid).sum())} unassociated; "
         f"translation {s.mean:.4g} ± {s.std:.4g} m"
     )
-    ax_xy.plot(estimate.poses[:, 0], estimate.poses[:, 1], "-", color="0.75", lw=1.0, zorder=1)
-    seg = np.stack((a.pose_first[valid, :2], a.pose_second[valid, :2]), axis=1)
     err = ev.errors.translation[valid]
-    if seg.shape[0]:
-        hi = float(np.percentile(err, 99)) if err.size else 1.0
-        lc = LineCollection(seg, cmap="viridis", linewidths=1.5, zorder=2)  # type: ignore[arg-type]
-        lc.set_array(err)
-        lc.set_clim(0.0, max(hi, 1e-12))
+    # Colour the estimate itself: each pose takes the largest error of the relations that
+    # touch it, each segment the larger of its two poses — the wrong part of the map lights up.
+    pose_err = np.full(len(estimate), np.nan)
+    idx = np.concatenate((a.index_first[valid], a.index_second[valid]))
+    touched = np.zeros(len(estimate))
+    np.maximum.at(touched, idx, np.concatenate((err, err)))
+    hit = np.zeros(len(estimate), dtype=bool)
+    hit[idx] = True
+    pose_err[hit] = touched[hit]
+    xy = estimate.poses[:, :2]
+    ax_xy.plot(xy[:, 0], xy[:, 1], "-", color="0.8", lw=1.0, zorder=1)
+    if err.size and len(estimate) > 1:
+        seg_err = np.fmax(pose_err[:-1], pose_err[1:])
+        has = np.isfinite(seg_err)
+        segments = np.stack((xy[:-1], xy[1:]), axis=1)[has]
+        hi = max(float(np.percentile(err, 99)), 1e-12)
+        lc = LineCollection(segments, cmap="viridis", linewidths=2.0, zorder=2)  # type: ignore[arg-type]
+        lc.set_array(seg_err[has])
+        lc.set_clim(0.0, hi)
         ax_xy.add_collection(lc)
         worst = np.argsort(err)[-min(10, err.size) :]
-        mid = seg[worst].mean(axis=1)
-        ax_xy.plot(mid[:, 0], mid[:, 1], "x", color="tab:red", ms=7, zorder=3, label="10 worst")
-        fig.colorbar(lc, ax=ax_xy, label="translational relation error [m] (clipped at p99)")
+        ends = np.concatenate((a.pose_first[valid][worst, :2], a.pose_second[valid][worst, :2]))
+        ax_xy.plot(
+            ends[:, 0],
+            ends[:, 1],
+            "x",
+            color="tab:red",
+            ms=7,
+            zorder=3,
+            label="ends of the 10 worst relations",
+        )
+        fig.colorbar(
+            lc,
+            ax=ax_xy,
+            label="largest translational error of the relations at a pose [m] (clipped at p99)",
+        )
         ax_xy.legend(loc="best")
     ax_xy.set_aspect("equal", adjustable="datalim")
     ax_xy.set_xlabel("x [m]")
     ax_xy.set_ylabel("y [m]")
-    ax_xy.set_title(title or "estimate, relations coloured by translational error")
+    ax_xy.set_title(title or "estimate coloured by relation error")
     return fig
 
 
