@@ -1,0 +1,305 @@
+"""Simulated worlds after Hu, Huang & Dissanayake, "Evaluation of Pose Only SLAM".
+
+A robot moves 0.5 m a step and turns by predefined angles; a range-bearing sensor sees point
+features within 5 m and a 180° field of view; 225 features are normally distributed around
+the path. Four trajectories: two simple ones (about 82 poses, one loop, a single return to
+the start) and two complex ones (about 420 poses, several loop closures). Noise types follow
+their Table I (standard deviations):
+
+====  ===============================  ===========================
+type  odometry dx, dy, dθ per step      observation
+====  ===============================  ===========================
+a     0.1 m, 0.1 m, 0.05 rad            0.1 m
+b     0.2 m, 0.2 m, 0.2 rad             0.1 m
+c     0.1 m, 0.1 m, 0.05 rad            0.3 m
+====  ===============================  ===========================
+
+The paper's observations are relative positions with ``σ`` on dx and dy; slamrel's sensor is
+range-bearing (the SLAM result bundle's sensor model), so the observation noise is mapped to
+``σ_range = σ`` and ``σ_bearing = σ / r₀`` with ``r₀ = 2.5 m`` (the middle of the sensing
+range), which gives the same cross-range standard deviation at ``r₀``.
+
+A world and its noise realisation are fully determined by ``(trajectory, noise type, seed)``:
+the landmark layout draws from ``seed`` and the noise from an independent child stream, so
+changing the noise type keeps the same features.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relation_metric import se2
+from relation_metric.errors import InputError
+from relation_metric.trajectory import Trajectory, readonly
+
+__all__ = [
+    "WORLDS",
+    "NOISE_TYPES",
+    "NoiseType",
+    "Observations",
+    "World",
+    "make_world",
+    "path_of",
+]
+
+STEP = 0.5  # metres a step
+SENSOR_RANGE = 5.0
+SENSOR_FOV = np.pi  # 180°
+N_FEATURES = 225
+FEATURE_SPREAD = 2.0  # m, standard deviation of the features around the path
+NOMINAL_RANGE = 2.5  # m, maps Cartesian observation noise to bearing noise
+
+
+class NoiseType(NamedTuple):
+    """Standard deviations of one noise type (Hu et al., Table I)."""
+
+    sigma_dx: float
+    sigma_dy: float
+    sigma_dtheta: float
+    sigma_observation: float
+
+    @property
+    def sigma_range(self) -> float:
+        return self.sigma_observation
+
+    @property
+    def sigma_bearing(self) -> float:
+        return self.sigma_observation / NOMINAL_RANGE
+
+
+NOISE_TYPES: dict[str, NoiseType] = {
+    "a": NoiseType(0.1, 0.1, 0.05, 0.1),
+    "b": NoiseType(0.2, 0.2, 0.2, 0.1),
+    "c": NoiseType(0.1, 0.1, 0.05, 0.3),
+}
+
+_Q = np.pi / 2  # quarter turn
+
+
+def _segments(name: str) -> list[tuple[int, float]]:
+    """The drive as ``(steps, total turn over those steps)`` segments."""
+    if name == "simple1":  # a 10 m × 10 m square: 4 × 20 steps, 90° corners
+        return [(20, 0.0), (1, _Q)] * 4
+    if name == "simple2":  # a circle of 40 m circumference (one full turn in 80 steps)
+        return [(80, 2 * np.pi), (2, 0.0)]
+    if name == "complex1":  # a 3 × 3 block grid driven as a lawn-mower and back: many revisits
+        legs: list[tuple[int, float]] = []
+        for k in range(3):
+            turn = _Q if k % 2 == 0 else -_Q
+            legs += [(30, 0.0), (1, turn), (10, 0.0), (1, turn)]
+        legs += [(30, 0.0), (1, _Q), (30, 0.0), (1, _Q)]  # back along the outer edge
+        legs += [(30, 0.0), (1, _Q), (30, 0.0), (1, _Q)]  # and once more round the block
+        legs += [(15, 0.0), (1, _Q), (30, 0.0), (1, -_Q), (15, 0.0), (1, -_Q), (30, 0.0)]
+        legs += [(1, _Q), (15, 0.0), (1, _Q), (30, 0.0)]
+        return legs
+    if name == "complex2":  # a figure eight driven twice, then a loop round both lobes
+        lobe = 2 * np.pi
+        return (
+            [(50, lobe), (50, -lobe)] * 2
+            + [(40, 0.0), (1, _Q), (20, 0.0), (1, _Q)]
+            + [
+                (40, 0.0),
+                (1, _Q),
+                (20, 0.0),
+                (1, _Q),
+            ]
+            * 2
+            + [(55, 0.0)]
+        )
+    raise InputError(f"unknown world {name!r}; expected one of {', '.join(WORLDS)}")
+
+
+WORLDS = ("simple1", "simple2", "complex1", "complex2")
+
+
+def path_of(name: str) -> NDArray[np.float64]:
+    """The noise-free poses of a world's drive, shape (N, 3), starting at the origin."""
+    inc = []
+    for steps, turn in _segments(name):
+        per = turn / steps
+        for _ in range(steps):
+            # each step: rotate half the turn, move, rotate the other half (an arc chord)
+            inc.append(se2.compose(se2.compose([0, 0, per / 2], [STEP, 0, 0]), [0, 0, per / 2]))
+    return se2.cumulative_compose(np.asarray(inc))
+
+
+class Observations(NamedTuple):
+    """Range-bearing observations, one row each, in time order.
+
+    Attributes
+    ----------
+    pose : ndarray of int, shape (K,)
+        Index of the observing pose (or control step for velocity-driven worlds).
+    t : ndarray, shape (K,)
+    range, bearing : ndarray, shape (K,)
+        Noisy measurements; bearing wrapped to ``[−π, π)``.
+    landmark : ndarray of int, shape (K,)
+        True landmark id (the known data association).
+    """
+
+    pose: NDArray[np.int64]
+    t: NDArray[np.float64]
+    range: NDArray[np.float64]
+    bearing: NDArray[np.float64]
+    landmark: NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class World:
+    """A simulated world with one noise realisation.
+
+    Attributes
+    ----------
+    name, noise, seed :
+        What determines it.
+    truth : Trajectory
+        True poses ``w_T_k`` at the measurement times, shape (N, 3).
+    landmarks : ndarray, shape (L, 2)
+        True feature positions ``w_p_l``; landmark id = row index.
+    odometry : Trajectory
+        Noisy wheel odometry poses in the odometry frame (same times as ``truth``); the
+        motion between consecutive rows is the odometry-model input.
+    controls : ndarray, shape (K, 3) or None
+        ``[t, v, ω]`` rows for velocity-driven worlds (``rate > 0``); each held until the next.
+    observations : Observations
+    rate : int
+        Control steps per measurement step (0: odometry-driven).
+    """
+
+    name: str
+    noise: str
+    seed: int
+    truth: Trajectory
+    landmarks: NDArray[np.float64]
+    odometry: Trajectory
+    controls: NDArray[np.float64] | None
+    observations: Observations
+    rate: int
+
+    @property
+    def noise_params(self) -> NoiseType:
+        return NOISE_TYPES[self.noise]
+
+
+def _landmarks(path: NDArray[np.float64], rng: np.random.Generator) -> NDArray[np.float64]:
+    # Features scattered around points drawn uniformly along the path.
+    anchor = path[rng.integers(0, path.shape[0], N_FEATURES), :2]
+    return anchor + rng.normal(0.0, FEATURE_SPREAD, (N_FEATURES, 2))
+
+
+def _observe(
+    poses: NDArray[np.float64],
+    landmarks: NDArray[np.float64],
+    noise: NoiseType,
+    rng: np.random.Generator,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    # All pose × landmark pairs at once: (N, L, 2) landmark positions in each pose frame.
+    k_p_l = se2.inverse_transform_points(poses[:, None, :], landmarks[None, :, :])
+    r = np.hypot(k_p_l[..., 0], k_p_l[..., 1])
+    b = np.arctan2(k_p_l[..., 1], k_p_l[..., 0])
+    seen = (r <= SENSOR_RANGE) & (np.abs(b) <= SENSOR_FOV / 2) & (r > 1e-6)
+    k, lm = np.nonzero(seen)  # row-major: time order, then landmark id
+    z_r = r[k, lm] + rng.normal(0.0, noise.sigma_range, k.size)
+    z_b = se2.wrap_angle(b[k, lm] + rng.normal(0.0, noise.sigma_bearing, k.size))
+    return k.astype(np.int64), lm.astype(np.int64), z_r, z_b
+
+
+def make_world(
+    name: str = "simple1",
+    *,
+    noise: str = "a",
+    seed: int = 0,
+    rate: int = 0,
+    dt: float = 1.0,
+) -> World:
+    """Build a world and its noise realisation.
+
+    Parameters
+    ----------
+    name : {"simple1", "simple2", "complex1", "complex2"}
+    noise : {"a", "b", "c"}
+        Noise type of Hu et al., Table I.
+    seed : int
+        Determines the features and the noise.
+    rate : int
+        0: odometry-driven (one odometry increment per measurement step, noise on dx, dy, dθ).
+        k ≥ 1: velocity-driven with k control steps per measurement step (each step's v and ω
+        held for ``dt / k``), noise on v and ω chosen so that over one measurement step the
+        drift matches the odometry noise type (σ_v = σ_dx √k / dt, σ_ω = σ_dθ √k / dt).
+    dt : float
+        Seconds between measurement steps.
+    """
+    if noise not in NOISE_TYPES:
+        raise InputError(f"unknown noise type {noise!r}; expected one of a, b, c")
+    if rate < 0:
+        raise InputError(f"rate must be >= 0, got {rate}")
+    nt = NOISE_TYPES[noise]
+    layout_rng, noise_rng = (
+        np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2)
+    )
+    path = path_of(name)
+    landmarks = _landmarks(path, layout_rng)
+    n = path.shape[0]
+    t = dt * np.arange(n, dtype=np.float64)
+    controls = None
+    if rate == 0:
+        true_inc = se2.between(path[:-1], path[1:])
+        noisy_inc = true_inc + noise_rng.normal(
+            0.0, [nt.sigma_dx, nt.sigma_dy, nt.sigma_dtheta], true_inc.shape
+        )
+        odo = se2.cumulative_compose(noisy_inc)
+        truth = path
+    else:
+        # Velocity-driven: per measurement step, v and ω that take pose k to pose k+1 along an
+        # arc (exactly, for the chord-arc steps above), held over `rate` control steps.
+        inc = se2.between(path[:-1], path[1:])
+        omega = inc[:, 2] / dt
+        # arc length of a chord of length c subtending angle φ: c φ / (2 sin(φ/2))
+        chord = np.hypot(inc[:, 0], inc[:, 1])
+        half = inc[:, 2] / 2
+        arc = np.where(
+            np.abs(half) > 1e-12,
+            chord * half / np.where(np.abs(half) > 1e-12, np.sin(half), 1.0),
+            chord,
+        )
+        v = arc / dt
+        h = dt / rate
+        v_k = np.repeat(v, rate)
+        w_k = np.repeat(omega, rate)
+        sv = nt.sigma_dx * np.sqrt(rate) / dt
+        sw = nt.sigma_dtheta * np.sqrt(rate) / dt
+        v_meas = v_k + noise_rng.normal(0.0, sv, v_k.size)
+        w_meas = w_k + noise_rng.normal(0.0, sw, w_k.size)
+        t_ctrl = h * np.arange(v_k.size)
+        controls = np.column_stack((t_ctrl, v_meas, w_meas))
+        truth = path
+        odo = se2.cumulative_compose(_arc_increments(v_meas, w_meas, h))[::rate]
+    k, lm, z_r, z_b = _observe(truth, landmarks, nt, noise_rng)
+    obs = Observations(k, t[k], z_r, z_b, lm)
+    return World(
+        name=name,
+        noise=noise,
+        seed=seed,
+        truth=Trajectory(t, truth),
+        landmarks=readonly(landmarks),
+        odometry=Trajectory(t, odo),
+        controls=None if controls is None else readonly(controls),
+        observations=obs,
+        rate=rate,
+    )
+
+
+def _arc_increments(
+    v: NDArray[np.float64], w: NDArray[np.float64], h: float
+) -> NDArray[np.float64]:
+    """Exact unicycle increments for ``(v, ω)`` held over ``h`` (straight line when ω ≈ 0)."""
+    dth = w * h
+    small = np.abs(dth) < 1e-9
+    safe_w = np.where(small, 1.0, w)
+    dx = np.where(small, v * h, v / safe_w * np.sin(dth))
+    dy = np.where(small, 0.5 * v * h * dth, v / safe_w * (1.0 - np.cos(dth)))
+    return np.column_stack((dx, dy, dth))
