@@ -35,7 +35,6 @@ from typing import Literal, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from relation_metric import se2
 from relation_metric.errors import InputError
 from relation_metric.textio import (
     PathLike,
@@ -79,7 +78,6 @@ _CARMEN_OTHER = (
     "SCANMARK",
     "POSITIONLASER",
     "ROBOTLASER2",
-    "RLASER",
 )
 
 
@@ -477,8 +475,3 @@ def _rows(values: NDArray[np.float64], fmt: tuple[str, ...] | list[str], sep: st
     line = sep.join(fmt)
     # One formatting pass over a flat tuple; much faster than np.savetxt for large arrays.
     return (line + "\n") * values.shape[0] % tuple(values.ravel().tolist())
-
-
-def wrap_poses(p: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Wrap the angle column of ``p`` (kept for readers that build poses by hand)."""
-    return se2.wrap_last(p)
