@@ -1,0 +1,1 @@
+"""Reference SLAM back-ends (least squares on pose graphs, EKF-SLAM)."""
