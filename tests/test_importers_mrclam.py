@@ -1,0 +1,88 @@
+"""MRCLAM reader: barcode mapping, robot sightings and unknown barcodes counted, strict errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import require_data
+
+from relation_metric.errors import InputError
+from slamrel.importers.mrclam import read_mrclam_robot
+
+HEAD = "# UTIAS header\n# format line\n"
+
+
+def make_dataset(tmp_path, measurement_rows=None, odometry_rows=None):
+    d = tmp_path / "MRCLAM_Test"
+    d.mkdir()
+    (d / "Barcodes.dat").write_text(HEAD + "  1 \t 5\n  2 \t 14\n  6 \t 63\n  7 \t 81\n")
+    (d / "Robot1_Odometry.dat").write_text(
+        HEAD
+        + "".join(
+            odometry_rows
+            or ["10.0 \t 0.1 \t 0.0\n", "10.5 \t 0.1 \t 0.2\n", "11.0 \t 0.0 \t 0.0\n"]
+        )
+    )
+    rows = measurement_rows or [
+        "10.1 \t 63 \t 1.5 \t 0.1\n",  # landmark 6
+        "10.1 \t 14 \t 2.0 \t -0.3\n",  # robot 2: counted, left out
+        "10.6 \t 99 \t 1.0 \t 0.0\n",  # unknown barcode: counted, left out
+        "10.7 \t 81 \t 3.0 \t 0.5\n",  # landmark 7
+    ]
+    (d / "Robot1_Measurement.dat").write_text(HEAD + "".join(rows))
+    (d / "Robot1_Groundtruth.dat").write_text(
+        HEAD + "10.0 1 2 0.1\n10.5 1.05 2 0.1\n11.0 1.1 2 0.12\n"
+    )
+    return d
+
+
+def test_barcodes_mapped_and_everything_counted(tmp_path):
+    r = read_mrclam_robot(make_dataset(tmp_path), 1)
+    np.testing.assert_allclose(r.measurements, [[10.1, 1.5, 0.1, 6], [10.7, 3.0, 0.5, 7]])
+    assert r.robot_sightings == 1 and r.unknown_barcodes == {99: 1}
+    assert r.controls.shape == (3, 3) and len(r.groundtruth) == 3
+
+
+@pytest.mark.parametrize(
+    "rows,line,msg",
+    [
+        (["10.1 63 1.5 0.1\n", "10.2 63 1.5\n", "10.3 63 1.5 0.1\n"], 4, "expected 4 fields"),
+        (["10.1 63 1.5 0.1\n", "10.0 63 1.5 0.1\n"], 4, "time goes backwards"),
+        (["10.1 6x3 1.5 0.1\n"], 3, "got '6x3'"),
+    ],
+)
+def test_corrupted_measurement_file(tmp_path, rows, line, msg):
+    d = make_dataset(tmp_path, measurement_rows=rows)
+    with pytest.raises(InputError) as err:
+        read_mrclam_robot(d, 1)
+    assert f"Robot1_Measurement.dat:{line}:" in str(err.value) and msg in str(err.value)
+
+
+def test_truncated_last_line_is_skipped_with_warning(tmp_path):
+    d = make_dataset(tmp_path, odometry_rows=["10.0 0.1 0.0\n", "10.5 0.1 0.2\n", "11.0 0.0"])
+    with pytest.warns(UserWarning, match="cut off"):
+        r = read_mrclam_robot(d, 1)
+    assert r.controls.shape == (2, 3)
+
+
+def test_missing_robot_and_folder(tmp_path):
+    with pytest.raises(InputError, match="robot must be 1..5"):
+        read_mrclam_robot(make_dataset(tmp_path), 6)
+    with pytest.raises(InputError, match="not a directory"):
+        read_mrclam_robot(tmp_path / "nope", 1)
+
+
+@pytest.mark.realdata
+def test_dataset7_all_robots():
+    d = require_data("mrclam", "MRCLAM_Dataset7")
+    for robot in range(1, 6):
+        r = read_mrclam_robot(d, robot)
+        total = r.measurements.shape[0] + r.robot_sightings + sum(r.unknown_barcodes.values())
+        raw = sum(
+            1
+            for ln in (d / f"Robot{robot}_Measurement.dat").read_text().splitlines()
+            if ln.strip() and not ln.startswith("#")
+        )
+        assert total == raw  # nothing dropped without being counted
+        assert 0.10 < r.robot_sightings / raw < 0.30
+        assert set(np.unique(r.measurements[:, 3]).astype(int)) <= set(range(6, 21))
