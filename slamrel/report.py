@@ -1,0 +1,142 @@
+"""Self-contained HTML reports and atomic report directories.
+
+A report is a list of sections, each with a heading, prose, tables and figures. Figures are
+embedded as base64 PNG, styles are inline: the single ``report.html`` opens offline. Every
+number shown in a table comes from the same dictionaries that are written to
+``metrics.json``, so the two cannot disagree.
+
+:func:`report_directory` builds a report in a temporary folder beside the target and moves
+it into place only when everything is written, so an interrupted run (Ctrl-C) leaves no
+half-written report behind.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["Table", "Figure", "Section", "render_html", "report_directory", "figure_png"]
+
+
+@dataclass(frozen=True)
+class Table:
+    """A table: a caption, column names and rows of cells (numbers are formatted)."""
+
+    caption: str
+    columns: Sequence[str]
+    rows: Sequence[Sequence[Any]]
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A PNG image with a caption."""
+
+    caption: str
+    png: bytes
+
+
+@dataclass(frozen=True)
+class Section:
+    """A heading with paragraphs, tables and figures."""
+
+    title: str
+    paragraphs: Sequence[str] = field(default_factory=tuple)
+    tables: Sequence[Table] = field(default_factory=tuple)
+    figures: Sequence[Figure] = field(default_factory=tuple)
+
+
+def _cell(value: Any) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, int):
+        return f"{value:d}"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return html.escape(str(value))
+
+
+_STYLE = """
+body { font-family: system-ui, sans-serif; max-width: 60rem; margin: 2rem auto; color: #222; }
+h1 { font-size: 1.6rem; } h2 { font-size: 1.25rem; margin-top: 2rem; border-bottom: 1px solid #ccc; }
+table { border-collapse: collapse; margin: 1rem 0; font-variant-numeric: tabular-nums; }
+th, td { border: 1px solid #ccc; padding: 0.25rem 0.6rem; text-align: right; }
+th:first-child, td:first-child { text-align: left; }
+caption { caption-side: top; text-align: left; font-weight: 600; padding-bottom: 0.3rem; }
+figure { margin: 1rem 0; } figure img { max-width: 100%; border: 1px solid #eee; }
+figcaption { font-size: 0.9rem; color: #555; }
+"""
+
+
+def render_html(title: str, sections: Sequence[Section]) -> str:
+    """The whole report as one HTML string (no external resources)."""
+    out = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>{html.escape(title)}</title><style>{_STYLE}</style></head><body>",
+        f"<h1>{html.escape(title)}</h1>",
+    ]
+    for k, sec in enumerate(sections):
+        out.append(f'<section id="s{k}"><h2>{html.escape(sec.title)}</h2>')
+        out.extend(f"<p>{html.escape(p)}</p>" for p in sec.paragraphs)
+        for tab in sec.tables:
+            out.append(f"<table><caption>{html.escape(tab.caption)}</caption><thead><tr>")
+            out.extend(f"<th>{html.escape(str(c))}</th>" for c in tab.columns)
+            out.append("</tr></thead><tbody>")
+            for row in tab.rows:
+                out.append("<tr>" + "".join(f"<td>{_cell(v)}</td>" for v in row) + "</tr>")
+            out.append("</tbody></table>")
+        for fig in sec.figures:
+            data = base64.b64encode(fig.png).decode("ascii")
+            out.append(
+                f'<figure><img alt="{html.escape(fig.caption)}" src="data:image/png;base64,{data}">'
+                f"<figcaption>{html.escape(fig.caption)}</figcaption></figure>"
+            )
+        out.append("</section>")
+    out.append("</body></html>")
+    return "\n".join(out)
+
+
+def figure_png(fig: Any, *, dpi: int = 100) -> bytes:
+    """Render a matplotlib figure to PNG bytes and close it."""
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=dpi)
+    finally:
+        plt.close(fig)
+    return buf.getvalue()
+
+
+@contextmanager
+def report_directory(target: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary folder; on success it replaces ``target``, on any error it vanishes.
+
+    An existing ``target`` is kept until the new report is complete, then swapped out.
+    """
+    final = Path(target)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
+    try:
+        yield tmp
+        old = None
+        if final.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
+            os.replace(final, old / final.name)
+        os.replace(tmp, final)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
