@@ -153,3 +153,18 @@ def test_ate_zero_after_alignment_of_a_moved_copy(rng):
     res = absolute_trajectory_error(moved, ref, align="se2")
     assert res.translation_stats.max < 1e-9 and res.rotation_stats.max < 1e-9
     assert absolute_trajectory_error(moved, ref, align="none").translation_stats.min > 1.0
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from(["paper", "metricevaluator"]))
+def test_vectorised_equals_looped(seed, mode):
+    rng = np.random.default_rng(seed)
+    d = se2.wrap_last(rng.normal(size=(40, 3)) * [5, 5, 3])
+    r = se2.wrap_last(rng.normal(size=(40, 3)) * [5, 5, 3])
+    w = rng.uniform(0, 2, 6)
+    vec = relation_errors(d, r, mode=mode, weights=w)
+    for k in range(40):
+        one = relation_errors(d[k : k + 1], r[k : k + 1], mode=mode, weights=w)
+        assert one.translation[0] == vec.translation[k]
+        assert one.rotation[0] == vec.rotation[k]
+        assert one.combined[0] == vec.combined[k]
