@@ -20,6 +20,7 @@ from relation_metric.errors import SlamrelError
 COMMAND_MODULES = (
     "slamrel.commands.evaluate",
     "slamrel.commands.relations",
+    "slamrel.commands.compare",
     "slamrel.commands.example",
 )
 

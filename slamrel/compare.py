@@ -1,0 +1,267 @@
+"""Comparison tables over results (algorithms × datasets), with paired significance tests.
+
+Kümmerle et al. (2009, Sec. VI "Numerical Evaluation") tabulate the translational and
+rotational relation errors, absolute and squared, mean ± std, per dataset and algorithm.
+Their table cannot say whether two algorithms differ beyond chance; here every pair of
+algorithms on a dataset is compared on the *same relations* with the Wilcoxon signed-rank
+test on the paired per-relation errors (two-sided), and the p-values are Holm-adjusted over
+the pairs of that dataset.
+
+Inputs are the per-relation CSV files of ``slamrel evaluate --per-relation``; relations are
+paired by their ``(t1, t2)`` as written there.
+"""
+
+from __future__ import annotations
+
+import io
+import itertools
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import wilcoxon
+
+from relation_metric.errors import InputError
+from relation_metric.stats import Summary, summarize
+from relation_metric.textio import PathLike, read_source
+
+__all__ = [
+    "ResultErrors",
+    "read_per_relation",
+    "PairTest",
+    "Comparison",
+    "compare_results",
+    "holm",
+]
+
+
+@dataclass(frozen=True)
+class ResultErrors:
+    """Per-relation errors of one algorithm on one dataset.
+
+    Attributes
+    ----------
+    dataset, algorithm : str
+    keys : ndarray of str, shape (M,)
+        ``"t1 t2"`` of each scored relation (pairing key).
+    translation, rotation : ndarray, shape (M,)
+        Metres; radians (degrees when ``rotation_unit == "deg"``).
+    rotation_unit : str
+    """
+
+    dataset: str
+    algorithm: str
+    keys: NDArray[np.str_]
+    translation: NDArray[np.float64]
+    rotation: NDArray[np.float64]
+    rotation_unit: str
+
+
+def read_per_relation(path: PathLike, *, dataset: str, algorithm: str) -> ResultErrors:
+    """Read a per-relation CSV of ``slamrel evaluate`` (only valid relations are kept)."""
+    src = read_source(path)
+    rows = list(src.data_lines())
+    if not rows:
+        raise InputError(
+            "empty file: expected a per-relation CSV of slamrel evaluate", path=src.path
+        )
+    head_line, head = rows[0]
+    cols = head.split(",")
+    rot_col = next((c for c in cols if c.startswith("rot_error_")), None)
+    needed = ["t1", "t2", "trans_error", "valid"]
+    missing = [c for c in needed if c not in cols]
+    if missing or rot_col is None:
+        raise InputError(
+            f"header lacks {', '.join(missing + ([] if rot_col else ['rot_error_rad|deg']))}; "
+            "expected the per-relation CSV of slamrel evaluate",
+            path=src.path,
+            line=head_line,
+        )
+    idx = {c: cols.index(c) for c in needed + [rot_col]}
+    keys: list[str] = []
+    trans: list[float] = []
+    rot: list[float] = []
+    for number, text in rows[1:]:
+        f = text.split(",")
+        if len(f) != len(cols):
+            raise InputError(
+                f"expected {len(cols)} fields, got {len(f)}", path=src.path, line=number
+            )
+        if f[idx["valid"]] != "1":
+            continue
+        try:
+            trans.append(float(f[idx["trans_error"]]))
+            rot.append(float(f[idx[rot_col]]))
+        except ValueError:
+            raise InputError("an error value is not a number", path=src.path, line=number) from None
+        keys.append(f"{f[idx['t1']]} {f[idx['t2']]}")
+    k = np.asarray(keys)
+    if np.unique(k).size != k.size:
+        raise InputError("a relation (t1, t2) appears twice; cannot pair relations", path=src.path)
+    return ResultErrors(
+        dataset,
+        algorithm,
+        k,
+        np.asarray(trans),
+        np.asarray(rot),
+        rot_col.removeprefix("rot_error_"),
+    )
+
+
+@dataclass(frozen=True)
+class PairTest:
+    """Wilcoxon signed-rank test of two algorithms on the relations both scored."""
+
+    dataset: str
+    a: str
+    b: str
+    part: str
+    n: int
+    median_difference: float
+    p_value: float
+    p_holm: float
+    significant: bool
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Statistics per (dataset, algorithm) and pairwise tests per dataset."""
+
+    stats: dict[tuple[str, str], dict[str, dict[str, Summary]]]
+    tests: list[PairTest]
+    alpha: float
+    rotation_unit: str
+
+    def rows(self) -> list[list[Any]]:
+        """Table rows: dataset, algorithm, then mean and std of trans/rot abs/sqr, N."""
+        out = []
+        for (ds, alg), st in self.stats.items():
+            row: list[Any] = [ds, alg]
+            for part in ("translation", "rotation"):
+                for kind in ("abs", "sqr"):
+                    row += [st[part][kind].mean, st[part][kind].std]
+            row.append(st["translation"]["abs"].count)
+            out.append(row)
+        return out
+
+    def columns(self) -> list[str]:
+        u = self.rotation_unit
+        return [
+            "dataset", "algorithm",
+            "trans abs mean [m]", "trans abs std [m]", "trans sqr mean [m²]", "trans sqr std [m²]",
+            f"rot abs mean [{u}]", f"rot abs std [{u}]",
+            f"rot sqr mean [{u}²]", f"rot sqr std [{u}²]",
+            "relations",
+        ]  # fmt: skip
+
+    def markdown(self) -> str:
+        """The table and the tests as GitHub Markdown."""
+        lines = ["| " + " | ".join(self.columns()) + " |", "|" + "---|" * len(self.columns())]
+        for row in self.rows():
+            lines.append("| " + " | ".join(_fmt(v) for v in row) + " |")
+        lines += ["", f"Paired Wilcoxon signed-rank tests (Holm-adjusted, α = {self.alpha}):", ""]
+        lines += [
+            "| dataset | A | B | part | n | median(A − B) | p | p (Holm) | significant |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for t in self.tests:
+            lines.append(
+                f"| {t.dataset} | {t.a} | {t.b} | {t.part} | {t.n} | {t.median_difference:.4g} | "
+                f"{t.p_value:.3g} | {t.p_holm:.3g} | {'yes' if t.significant else 'no'} |"
+            )
+        return "\n".join(lines) + "\n"
+
+    def csv(self) -> str:
+        """The statistics table as CSV."""
+        buf = io.StringIO()
+        buf.write(",".join(c.replace(",", ";") for c in self.columns()) + "\n")
+        for row in self.rows():
+            buf.write(",".join(_fmt(v) for v in row) + "\n")
+        return buf.getvalue()
+
+    def latex(self) -> str:
+        """The table as a LaTeX tabular: mean ± std per part, like the paper's table."""
+        u = self.rotation_unit
+        head = (
+            "\\begin{tabular}{llrrrr}\n\\hline\n"
+            "dataset & algorithm & trans. abs [m] & trans. sqr [m$^2$] & "
+            f"rot. abs [{u}] & rot. sqr [{u}$^2$] \\\\\n\\hline\n"
+        )
+        body = []
+        for (ds, alg), st in self.stats.items():
+            cells = [
+                f"${st[p][k].mean:.4g} \\pm {st[p][k].std:.4g}$"
+                for p in ("translation", "rotation")
+                for k in ("abs", "sqr")
+            ]
+            body.append(f"{_tex(ds)} & {_tex(alg)} & " + " & ".join(cells) + " \\\\")
+        return head + "\n".join(body) + "\n\\hline\n\\end{tabular}\n"
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return "nan" if not np.isfinite(v) else f"{v:.6g}"
+    return str(v)
+
+
+def _tex(s: str) -> str:
+    return (
+        s.replace("\\", "\\textbackslash{}")
+        .replace("_", "\\_")
+        .replace("&", "\\&")
+        .replace("%", "\\%")
+    )
+
+
+def holm(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Holm–Bonferroni adjusted p-values (step-down, monotone, capped at 1)."""
+    p = np.asarray(p, dtype=np.float64)
+    m = p.size
+    if m == 0:
+        return p
+    order = np.argsort(p)
+    adj = np.maximum.accumulate((m - np.arange(m)) * p[order])
+    out = np.empty(m)
+    out[order] = np.minimum(adj, 1.0)
+    return out
+
+
+def compare_results(results: list[ResultErrors], *, alpha: float = 0.05) -> Comparison:
+    """Statistics per result and paired tests between the algorithms of each dataset."""
+    if not results:
+        raise InputError("nothing to compare: give at least one result")
+    units = {r.rotation_unit for r in results}
+    if len(units) != 1:
+        raise InputError(
+            f"results mix rotation units {sorted(units)}; evaluate all with or without --degrees"
+        )
+    seen: set[tuple[str, str]] = set()
+    stats: dict[tuple[str, str], dict[str, dict[str, Summary]]] = {}
+    for r in results:
+        key = (r.dataset, r.algorithm)
+        if key in seen:
+            raise InputError(f"{r.dataset}/{r.algorithm} is given twice")
+        seen.add(key)
+        stats[key] = {
+            "translation": {"abs": summarize(r.translation), "sqr": summarize(r.translation**2)},
+            "rotation": {"abs": summarize(r.rotation), "sqr": summarize(r.rotation**2)},
+        }
+    tests: list[PairTest] = []
+    for ds in dict.fromkeys(r.dataset for r in results):
+        group = [r for r in results if r.dataset == ds]
+        raw: list[tuple[str, str, str, int, float, float]] = []
+        for a, b in itertools.combinations(group, 2):
+            common, ia, ib = np.intersect1d(a.keys, b.keys, return_indices=True)
+            for part in ("translation", "rotation"):
+                da = getattr(a, part)[ia] - getattr(b, part)[ib]
+                if common.size < 2 or np.all(da == 0):
+                    p = 1.0
+                else:
+                    p = float(wilcoxon(getattr(a, part)[ia], getattr(b, part)[ib]).pvalue)
+                med = float(np.median(da)) if da.size else float("nan")
+                raw.append((a.algorithm, b.algorithm, part, int(common.size), med, p))
+        adj = holm(np.array([x[5] for x in raw]))
+        for (a_name, b_name, part, n, med, p), ph in zip(raw, adj):
+            tests.append(PairTest(ds, a_name, b_name, part, n, med, p, float(ph), bool(ph < alpha)))
+    return Comparison(stats, tests, alpha, units.pop())
