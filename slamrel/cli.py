@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "slamrel.commands.evaluate",
     "slamrel.commands.relations",
     "slamrel.commands.compare",
+    "slamrel.commands.graph",
     "slamrel.commands.example",
 )
 

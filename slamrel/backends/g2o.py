@@ -1,0 +1,155 @@
+"""g2o text files of planar graphs: ``VERTEX_SE2``, ``VERTEX_XY``, ``EDGE_SE2``, ``EDGE_SE2_XY``.
+
+``VERTEX_SE2 id x y θ``; ``VERTEX_XY id x y``;
+``EDGE_SE2 i j dx dy dθ I11 I12 I13 I22 I23 I33`` (measurement ``x_i⁻¹ ∘ x_j`` and the upper
+triangle of its information matrix, row-first); ``EDGE_SE2_XY i l x y I11 I12 I22`` (landmark
+``l`` in the frame of pose ``i``). Other records (``FIX``, 3-D types, …) are counted and
+reported, never silently used or dropped: an unknown record is an error.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relation_metric.errors import InputError
+from relation_metric.textio import PathLike, parse_float, read_source, write_text_atomic
+from slamrel.backends.graph import PoseGraph
+
+__all__ = ["read_g2o_graph", "write_g2o_graph"]
+
+_FIELDS = {"VERTEX_SE2": 5, "VERTEX_XY": 4, "EDGE_SE2": 12, "EDGE_SE2_XY": 8}
+
+
+def _upper_to_full(upper: NDArray[np.float64], size: int) -> NDArray[np.float64]:
+    iu = np.triu_indices(size)
+    m = np.zeros((upper.shape[0], size, size))
+    m[:, iu[0], iu[1]] = upper
+    return m + np.swapaxes(np.triu(m, 1), 1, 2)
+
+
+def read_g2o_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64], NDArray[np.int64]]:
+    """Read a planar g2o graph.
+
+    Returns
+    -------
+    graph : PoseGraph
+        Vertices as the initial guess; poses and landmarks in increasing id order.
+    pose_ids, landmark_ids : ndarray of int
+        The file's vertex ids of the graph's poses and landmarks.
+    """
+    src = read_source(path)
+    recs: dict[str, list[list[float]]] = {k: [] for k in _FIELDS}
+    lines: dict[str, list[int]] = {k: [] for k in _FIELDS}
+    for number, text in src.data_lines():
+        f = text.split()
+        kind = f[0]
+        if kind not in _FIELDS:
+            raise InputError(
+                f"unsupported record {kind!r}; expected one of {', '.join(_FIELDS)}",
+                path=src.path,
+                line=number,
+            )
+        if len(f) != _FIELDS[kind]:
+            if src.is_last_line(number):
+                src.warn_truncated(number, f"{kind} needs {_FIELDS[kind]} fields")
+                break
+            raise InputError(
+                f"{kind}: expected {_FIELDS[kind]} fields, got {len(f)}", path=src.path, line=number
+            )
+        recs[kind].append(
+            [
+                parse_float(t, source=src, line=number, what=f"{kind} field {k + 2}")
+                for k, t in enumerate(f[1:])
+            ]
+        )
+        lines[kind].append(number)
+    vse2 = np.asarray(recs["VERTEX_SE2"]).reshape(-1, 4)
+    vxy = np.asarray(recs["VERTEX_XY"]).reshape(-1, 3)
+    if vse2.shape[0] == 0:
+        raise InputError("no VERTEX_SE2 records", path=src.path)
+    pose_ids = vse2[:, 0].astype(np.int64)
+    lm_ids = vxy[:, 0].astype(np.int64)
+    all_ids = np.concatenate((pose_ids, lm_ids))
+    uniq, counts = np.unique(all_ids, return_counts=True)
+    if (counts > 1).any():
+        raise InputError(f"vertex id {int(uniq[counts > 1][0])} is defined twice", path=src.path)
+    po = np.argsort(pose_ids)
+    lo = np.argsort(lm_ids)
+    pose_ids, lm_ids = pose_ids[po], lm_ids[lo]
+
+    def index(
+        ids: NDArray[np.int64], wanted: NDArray[np.float64], kind: str, what: str
+    ) -> NDArray[np.int64]:
+        w = wanted.astype(np.int64)
+        if ids.size == 0:
+            pos, ok = np.zeros(w.shape, np.int64), np.zeros(w.shape, bool)
+        else:
+            pos = np.clip(np.searchsorted(ids, w), 0, ids.size - 1)
+            ok = ids[pos] == w
+        if not np.all(ok):
+            k = int(np.flatnonzero(~ok)[0])
+            raise InputError(
+                f"{kind} refers to unknown {what} vertex {int(w[k])}",
+                path=src.path,
+                line=lines[kind][k],
+            )
+        return pos.astype(np.int64)
+
+    e = np.asarray(recs["EDGE_SE2"]).reshape(-1, 11)
+    f2 = np.asarray(recs["EDGE_SE2_XY"]).reshape(-1, 7)
+    graph = PoseGraph(
+        poses=vse2[po, 1:4],
+        landmarks=vxy[lo, 1:3],
+        pp_i=index(pose_ids, e[:, 0], "EDGE_SE2", "pose"),
+        pp_j=index(pose_ids, e[:, 1], "EDGE_SE2", "pose"),
+        pp_z=e[:, 2:5],
+        pp_info=_upper_to_full(e[:, 5:11], 3),
+        pl_k=index(pose_ids, f2[:, 0], "EDGE_SE2_XY", "pose"),
+        pl_l=index(lm_ids, f2[:, 1], "EDGE_SE2_XY", "landmark"),
+        pl_z=f2[:, 2:4],
+        pl_info=_upper_to_full(f2[:, 4:7], 2),
+    )
+    return graph, pose_ids, lm_ids
+
+
+def write_g2o_graph(
+    path: PathLike,
+    graph: PoseGraph,
+    *,
+    poses: NDArray[np.float64] | None = None,
+    landmarks: NDArray[np.float64] | None = None,
+) -> None:
+    """Write ``graph`` (vertices: ``poses``/``landmarks`` if given, else its initial guess).
+
+    Poses get ids ``0..N−1``, landmarks ``N..N+L−1``.
+    """
+    p = graph.poses if poses is None else np.asarray(poses)
+    lm = graph.landmarks if landmarks is None else np.asarray(landmarks)
+    n = p.shape[0]
+    iu3 = np.triu_indices(3)
+    iu2 = np.triu_indices(2)
+    parts = []
+    if n:
+        rows = np.column_stack((np.arange(n), p))
+        parts.append(("VERTEX_SE2 %d %.9g %.9g %.9g\n" * n) % tuple(rows.ravel().tolist()))
+    if lm.shape[0]:
+        rows = np.column_stack((n + np.arange(lm.shape[0]), lm))
+        parts.append(("VERTEX_XY %d %.9g %.9g\n" * lm.shape[0]) % tuple(rows.ravel().tolist()))
+    if graph.pp_i.size:
+        rows = np.column_stack(
+            (graph.pp_i, graph.pp_j, graph.pp_z, graph.pp_info[:, iu3[0], iu3[1]])
+        )
+        parts.append(
+            ("EDGE_SE2 %d %d" + " %.9g" * 9 + "\n") * rows.shape[0] % tuple(rows.ravel().tolist())
+        )
+    if graph.pl_k.size:
+        rows = np.column_stack(
+            (graph.pl_k, n + graph.pl_l, graph.pl_z, graph.pl_info[:, iu2[0], iu2[1]])
+        )
+        parts.append(
+            ("EDGE_SE2_XY %d %d" + " %.9g" * 5 + "\n")
+            * rows.shape[0]
+            % tuple(rows.ravel().tolist())
+        )
+    write_text_atomic(path, "".join(parts))
