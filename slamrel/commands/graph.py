@@ -32,7 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--noise",
         choices=("covariance", "sqrt-information"),
         default="covariance",
-        help="what the noise numbers are (GTSAM's copy: covariance; original iSAM: sqrt-information)",
+        help="what the noise numbers are "
+        "(GTSAM's copy: covariance; original iSAM: sqrt-information)",
     )
     i.add_argument("-q", "--quiet", action="store_true")
     i.set_defaults(func=run_import_isam)
