@@ -86,3 +86,56 @@ def test_dataset7_all_robots():
         assert total == raw  # nothing dropped without being counted
         assert 0.10 < r.robot_sightings / raw < 0.30
         assert set(np.unique(r.measurements[:, 3]).astype(int)) <= set(range(6, 21))
+
+
+def test_fit_noise_recovers_simulated_noise(rng):
+    from relation_metric import se2
+    from relation_metric.trajectory import Trajectory
+    from slamrel.importers.mrclam import MrclamRobot, fit_noise
+
+    n, dt = 60000, 0.015
+    t = np.arange(n) * dt
+    v = 0.2 + 0.05 * np.sin(t / 7.0)
+    w = 0.3 * np.sin(t / 3.0)
+    sv, sw, sr, sb = 0.05, 0.2, 0.08, 0.02
+    th = np.concatenate(([0.0], np.cumsum(w * dt)))
+    xy = np.concatenate(
+        (
+            [[0.0, 0.0]],
+            np.cumsum(np.column_stack((v * np.cos(th[:-1]), v * np.sin(th[:-1]))) * dt, axis=0),
+        )
+    )
+    gt = Trajectory(np.append(t, n * dt), np.column_stack((xy, th)))
+    controls = np.column_stack((t, v + rng.normal(0, sv, n), w + rng.normal(0, sw, n)))
+    lms = np.column_stack((np.arange(6, 11), rng.uniform(-5, 5, (5, 2))))
+    k = rng.integers(0, n, 4000)
+    k.sort()
+    subj = rng.integers(0, 5, 4000)
+    rel = se2.inverse_transform_points(gt.poses[k], lms[subj, 1:])
+    meas = np.column_stack(
+        (
+            t[k],
+            np.hypot(rel[:, 0], rel[:, 1]) + rng.normal(0, sr, 4000),
+            se2.wrap_angle(np.arctan2(rel[:, 1], rel[:, 0]) + rng.normal(0, sb, 4000)),
+            lms[subj, 0],
+        )
+    )
+    robot = MrclamRobot(1, controls, meas, gt, 0, {})
+    fit = fit_noise(robot, lms, window=1.0)
+    assert fit.sigma_v == pytest.approx(sv, rel=0.1)
+    assert fit.sigma_omega == pytest.approx(sw, rel=0.1)
+    assert fit.sigma_range == pytest.approx(sr, rel=0.1)
+    assert fit.sigma_bearing == pytest.approx(sb, rel=0.1)
+    assert fit.outlier_fraction < 0.01
+
+
+@pytest.mark.realdata
+def test_fit_noise_dataset7_is_plausible():
+    from slamrel.importers.mrclam import fit_noise
+
+    d = require_data("mrclam", "MRCLAM_Dataset7")
+    lms = np.loadtxt(d / "Landmark_Groundtruth.dat")[:, :3]
+    for robot in range(1, 6):
+        f = fit_noise(read_mrclam_robot(d, robot), lms)
+        assert 0.01 < f.sigma_v < 0.2 and 0.05 < f.sigma_omega < 0.5
+        assert 0.02 < f.sigma_range < 0.3 and 0.002 < f.sigma_bearing < 0.05

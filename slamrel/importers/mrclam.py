@@ -20,11 +20,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from relation_metric import se2
 from relation_metric.errors import InputError
 from relation_metric.textio import PathLike, RowLines, read_numeric_table
 from relation_metric.trajectory import Trajectory, readonly
 
-__all__ = ["MrclamRobot", "read_mrclam_robot", "read_barcodes", "N_ROBOTS"]
+__all__ = ["MrclamRobot", "NoiseFit", "fit_noise", "read_mrclam_robot", "read_barcodes", "N_ROBOTS"]
 
 N_ROBOTS = 5
 
@@ -125,4 +126,113 @@ def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
         groundtruth=Trajectory(gt[:, 0], gt[:, 1:4]),
         robot_sightings=int(is_robot.sum()),
         unknown_barcodes=dict(zip(unknown_codes.tolist(), unknown_counts.tolist())),
+    )
+
+
+@dataclass(frozen=True)
+class NoiseFit:
+    """Noise parameters fitted from one robot's logs against its ground truth.
+
+    Attributes
+    ----------
+    sigma_v, sigma_omega : float
+        Per-row standard deviations of the velocity-model controls (BUNDLE.md ``velocity``
+        model), from odometry vs. ground-truth motion over ``window`` seconds.
+    bias_v, bias_omega : float
+        Mean control errors (reported, not modelled).
+    sigma_range, sigma_bearing : float
+        Robust (1.4826 · MAD) standard deviations of measurement residuals against the
+        ground truth; ``outlier_fraction`` of the residuals lie beyond 5 σ.
+    window : float
+    """
+
+    sigma_v: float
+    sigma_omega: float
+    bias_v: float
+    bias_omega: float
+    sigma_range: float
+    sigma_bearing: float
+    outlier_fraction: float
+    window: float
+
+
+def _interp_poses(gt: Trajectory, t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Ground-truth poses at times ``t`` (linear in x, y; shortest-arc in θ)."""
+    x = np.interp(t, gt.timestamps, gt.poses[:, 0])
+    y = np.interp(t, gt.timestamps, gt.poses[:, 1])
+    th = np.interp(t, gt.timestamps, np.unwrap(gt.poses[:, 2]))
+    return np.column_stack((x, y, se2.wrap_angle(th)))
+
+
+def fit_noise(
+    robot: MrclamRobot, landmarks: NDArray[np.float64], *, window: float = 1.0
+) -> NoiseFit:
+    """Fit velocity-model and range-bearing noise from data (how, in :class:`NoiseFit`).
+
+    Controls: over consecutive windows of ``window`` seconds inside the ground truth's time
+    span, the travelled distance ``Σ v_k dt_k`` and turn ``Σ ω_k dt_k`` of the odometry are
+    compared with the ground truth's path length and heading change. With independent
+    per-row errors held over ``dt_k``, ``Var(window error) = σ² Σ dt_k²``, so
+    ``σ² = Var / mean(Σ dt_k²)``.
+
+    Measurements: each landmark measurement against the range and bearing predicted from
+    the interpolated ground-truth pose and the surveyed landmark (``landmarks``: rows
+    ``[subject, x, y]``).
+    """
+    c = robot.controls
+    gt = robot.groundtruth
+    t = c[:, 0]
+    dt = np.diff(t, append=t[-1])
+    inside = (t >= gt.timestamps[0]) & (t + dt <= gt.timestamps[-1])
+    w_id = np.floor((t - t[0]) / window).astype(np.int64)
+    w_id = np.where(inside, w_id, -1)
+    keep = w_id >= 0
+    nw = int(w_id.max()) + 1 if keep.any() else 0
+    dist = np.bincount(w_id[keep], weights=(c[:, 1] * dt)[keep], minlength=nw)
+    turn = np.bincount(w_id[keep], weights=(c[:, 2] * dt)[keep], minlength=nw)
+    dt2 = np.bincount(w_id[keep], weights=(dt * dt)[keep], minlength=nw)
+    t0 = np.full(nw, np.inf)
+    t1 = np.full(nw, -np.inf)
+    np.minimum.at(t0, w_id[keep], t[keep])
+    np.maximum.at(t1, w_id[keep], (t + dt)[keep])
+    ok = np.isfinite(t0) & (dt2 > 0)
+    # ground-truth path length and heading change over [t0, t1] of each window, sampled
+    # at the ground truth's own rate
+    s_gt = gt.path_length()
+    th_gt = np.unwrap(gt.poses[:, 2])
+    true_dist = np.interp(t1[ok], gt.timestamps, s_gt) - np.interp(t0[ok], gt.timestamps, s_gt)
+    true_turn = np.interp(t1[ok], gt.timestamps, th_gt) - np.interp(t0[ok], gt.timestamps, th_gt)
+    e_d = np.abs(dist[ok]) - true_dist  # odometry speed is signed; path length is not
+    e_t = turn[ok] - true_turn
+    mdt2 = float(np.mean(dt2[ok]))
+    sigma_v = float(np.sqrt(np.var(e_d) / mdt2))
+    sigma_w = float(np.sqrt(np.var(e_t) / mdt2))
+    # measurements
+    m = robot.measurements
+    subj = landmarks[:, 0].astype(np.int64)
+    order = np.argsort(subj)
+    pos = np.clip(np.searchsorted(subj[order], m[:, 3].astype(np.int64)), 0, subj.size - 1)
+    known = subj[order][pos] == m[:, 3].astype(np.int64)
+    in_gt = (m[:, 0] >= gt.timestamps[0]) & (m[:, 0] <= gt.timestamps[-1])
+    use = known & in_gt
+    poses = _interp_poses(gt, m[use, 0])
+    lm_xy = landmarks[order][pos[use], 1:3]
+    k_p_l = se2.inverse_transform_points(poses, lm_xy)
+    r_res = m[use, 1] - np.hypot(k_p_l[:, 0], k_p_l[:, 1])
+    b_res = se2.wrap_angle(m[use, 2] - np.arctan2(k_p_l[:, 1], k_p_l[:, 0]))
+
+    def robust(x: NDArray[np.float64]) -> float:
+        return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+    sr, sb = robust(r_res), robust(b_res)
+    out = (np.abs(r_res - np.median(r_res)) > 5 * sr) | (np.abs(b_res - np.median(b_res)) > 5 * sb)
+    return NoiseFit(
+        sigma_v=sigma_v,
+        sigma_omega=sigma_w,
+        bias_v=float(np.mean(e_d) / np.mean(np.bincount(w_id[keep], weights=dt[keep])[ok])),
+        bias_omega=float(np.mean(e_t) / np.mean(np.bincount(w_id[keep], weights=dt[keep])[ok])),
+        sigma_range=sr,
+        sigma_bearing=sb,
+        outlier_fraction=float(out.mean()) if out.size else 0.0,
+        window=window,
     )
