@@ -153,3 +153,21 @@ def test_victoria_park_converges_from_odometry():
     sol = solve_graph(d.graph)
     assert sol.converged
     assert sol.cost[-1] < 0.01 * sol.cost[0]
+
+
+def test_pose_covariances_equal_dense_inverse(rng):
+    from slamrel.backends.graph import pose_covariances
+
+    g, _, _ = small_world(rng, n=10, m=3)
+    sol = solve_graph(g)
+    w_pp, w_pl = _upper_sqrt(g.pp_info), _upper_sqrt(g.pl_info)
+    prior = (g.poses[0].copy(), np.eye(3) / 1e-6)
+    _, jac = _residuals_and_jacobian(
+        g, np.array(sol.poses), np.array(sol.landmarks), w_pp, w_pl, prior
+    )
+    dense = np.linalg.inv((jac.T @ jac).toarray())
+    cov = pose_covariances(g, sol, [0, 4, 9])
+    for k, i in enumerate([0, 4, 9]):
+        np.testing.assert_allclose(
+            cov[k], dense[3 * i : 3 * i + 3, 3 * i : 3 * i + 3], rtol=1e-6, atol=1e-14
+        )
