@@ -47,8 +47,8 @@ Array = NDArray[np.float64]
 def wrap_angle(angle: ArrayLike) -> Array:
     """Wrap angles to ``[−π, π)``.
 
-    ``wrap(a) = a − 2π ⌊(a + π) / 2π⌋``; exact for the common case ``|a| ≤ π`` and stable for
-    large multiples of 2π.
+    ``wrap(a) = a − 2π ⌊(a + π) / 2π⌋``; angles already in ``[−π, π)`` are returned bit for
+    bit, others are reduced stably even for large multiples of 2π.
 
     Parameters
     ----------
@@ -63,7 +63,9 @@ def wrap_angle(angle: ArrayLike) -> Array:
     a = np.asarray(angle, dtype=np.float64)
     wrapped = np.mod(a + np.pi, _TWO_PI) - np.pi
     # np.mod can return exactly 2π for tiny negative inputs through rounding; fold it back.
-    return np.where(wrapped >= np.pi, wrapped - _TWO_PI, wrapped)
+    wrapped = np.where(wrapped >= np.pi, wrapped - _TWO_PI, wrapped)
+    # Angles already in range are returned unchanged (a + π would round π − 1 ulp to 2π).
+    return np.where((a >= -np.pi) & (a < np.pi), a, wrapped)
 
 
 def _as_poses(p: ArrayLike, name: str = "pose") -> Array:
