@@ -82,8 +82,7 @@ class SourceText:
     def warn_truncated(self, number: int, expected: str) -> None:
         """Issue the warning for a skipped, cut-off final line."""
         warnings.warn(
-            f"{self.path}:{number}: the last line is cut off (no newline, {expected}); "
-            "skipped",
+            f"{self.path}:{number}: the last line is cut off (no newline, {expected}); skipped",
             TruncatedLineWarning,
             stacklevel=3,
         )
@@ -161,8 +160,12 @@ def read_numeric_table(
         ``line_numbers(k)`` is the 1-based file line of row ``k`` (computed on first use,
         for messages about a row).
     """
-    src = read_source(path) if source is None else source
     ncols = len(columns)
+    if source is None:
+        fast = _fast_table(path, ncols, comment)
+        if fast is not None and fast[0].shape[0] >= min_rows:
+            return fast
+    src = read_source(path) if source is None else source
     layout = " ".join(columns)
     kind = f" ({describe})" if describe else ""
     lines = src.lines
@@ -194,8 +197,7 @@ def read_numeric_table(
         values = np.empty((0, ncols))
     if values.shape[0] < min_rows:
         raise InputError(
-            f"no data{kind}: expected at least {min_rows} line(s) of {ncols} numbers "
-            f"({layout})",
+            f"no data{kind}: expected at least {min_rows} line(s) of {ncols} numbers ({layout})",
             path=src.path,
         )
     return values, numbers
@@ -209,24 +211,72 @@ def _all_floats(fields: Sequence[str]) -> bool:
 
 
 class RowLines:
-    """Maps a data-row index to its 1-based line in the file, computed on first use."""
+    """Maps a data-row index to its 1-based line in the file, computed on first use.
 
-    def __init__(self, lines: Sequence[str], comment: str) -> None:
+    ``lines`` is the list of the file's lines, or a callable that produces it (so that a
+    fast reader need not split the file unless a message needs a line number).
+    """
+
+    def __init__(self, lines: Sequence[str] | Callable[[], Sequence[str]], comment: str) -> None:
         self._lines = lines
         self._comment = comment
         self._numbers: NDArray[np.int64] | None = None
 
     def __call__(self, row: int) -> int:
         if self._numbers is None:
+            lines = self._lines() if callable(self._lines) else self._lines
             self._numbers = np.asarray(
                 [
                     i
-                    for i, raw in enumerate(self._lines, start=1)
+                    for i, raw in enumerate(lines, start=1)
                     if (s := raw.strip()) and s[0] != self._comment
                 ],
                 dtype=np.int64,
             )
         return int(self._numbers[row])
+
+
+def _fast_table(
+    path: PathLike, ncols: int, comment: str
+) -> tuple[NDArray[np.float64], RowLines] | None:
+    """pandas' C parser over the whole file, or ``None`` to take the exact, diagnosing path.
+
+    Only a clean file takes this path: every data line with ``ncols`` finite numbers, a
+    final newline. Anything else (a cut-off last line, a bad token, NaN, a missing
+    file, no pandas) returns ``None`` and the line-by-line reader says what is wrong.
+    """
+    try:
+        import pandas as pd
+    except ImportError:  # pragma: no cover - pandas is a dependency; stay correct without it
+        return None
+    try:
+        raw = Path(path).read_bytes()
+    except OSError:
+        return None
+    if not raw.endswith(b"\n") or b"\x00" in raw:
+        return None
+    has_comment = comment.encode() in raw
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            frame = pd.read_csv(
+                os.fspath(path),
+                sep=r"\s+",
+                header=None,
+                comment=comment if has_comment else None,
+                dtype=np.float64,
+                engine="c",
+                na_filter=False,
+                skip_blank_lines=True,
+            )
+    except Exception:
+        return None
+    # Column-major (pandas' block layout): column slices are contiguous; no copy needed.
+    values = frame.to_numpy(dtype=np.float64)
+    if values.ndim != 2 or values.shape[1] != ncols or not np.isfinite(values).all():
+        return None
+    lines = lambda: raw.decode("utf-8", errors="replace").splitlines()  # noqa: E731
+    return values, RowLines(lines, comment)
 
 
 def _diagnose(
