@@ -14,7 +14,6 @@ or finds a non-finite value, the file is re-read line by line to say exactly whe
 
 from __future__ import annotations
 
-import io
 import math
 import os
 import tempfile
@@ -340,18 +339,5 @@ def write_bytes_atomic(path: PathLike, data: bytes) -> None:
 
 
 def write_text_atomic(path: PathLike, text: str) -> None:
-    """Write ``text`` to ``path`` atomically."""
-    with atomic_write(path, "w") as handle:
-        handle.write(text)  # type: ignore[arg-type]
-
-
-def format_table(rows: NDArray[np.float64], fmt: Sequence[str]) -> str:
-    """Format a 2-D array as whitespace-separated text, one row a line (vectorised)."""
-    if rows.shape[0] == 0:
-        return ""
-    buf = io.StringIO()
-    np.savetxt(buf, rows, fmt=list(fmt), delimiter=" ")
-    return buf.getvalue()
-
-
-ParseFn = Callable[[SourceText], object]
+    """Write ``text`` to ``path`` atomically (UTF-8)."""
+    write_bytes_atomic(path, text.encode("utf-8"))
