@@ -32,6 +32,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from recovery.models import velocity_increment
 from relation_metric import se2
 from relation_metric.errors import InputError
 from relation_metric.trajectory import Trajectory, readonly
@@ -277,7 +278,7 @@ def make_world(
         t_ctrl = h * np.arange(v_k.size)
         controls = np.column_stack((t_ctrl, v_meas, w_meas))
         truth = path
-        odo = se2.cumulative_compose(_arc_increments(v_meas, w_meas, h))[::rate]
+        odo = se2.cumulative_compose(velocity_increment(v_meas, w_meas, h)[0])[::rate]
     k, lm, z_r, z_b = _observe(truth, landmarks, nt, noise_rng)
     obs = Observations(k, t[k], z_r, z_b, lm)
     return World(
@@ -291,15 +292,3 @@ def make_world(
         observations=obs,
         rate=rate,
     )
-
-
-def _arc_increments(
-    v: NDArray[np.float64], w: NDArray[np.float64], h: float
-) -> NDArray[np.float64]:
-    """Exact unicycle increments for ``(v, ω)`` held over ``h`` (straight line when ω ≈ 0)."""
-    dth = w * h
-    small = np.abs(dth) < 1e-9
-    safe_w = np.where(small, 1.0, w)
-    dx = np.where(small, v * h, v / safe_w * np.sin(dth))
-    dy = np.where(small, 0.5 * v * h * dth, v / safe_w * (1.0 - np.cos(dth)))
-    return np.column_stack((dx, dy, dth))

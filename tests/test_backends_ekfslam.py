@@ -2,65 +2,23 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from recovery.models import SensorModel
+from recovery.steps import build_steps
 from relation_metric import se2
 from relation_metric.errors import DivergenceError, InputError
-from slamrel.backends.ekfslam import _observe, compose_jacobians, ekf_slam
+from slamrel.backends.ekfslam import ekf_slam
+from slamrel.simulate import slam_bundle, world_bundle
 from slamrel.worlds import make_world
 
 
 def run(world, **kw):
-    nt = world.noise_params
-    o = world.observations
-    meas = np.column_stack((o.t, o.range, o.bearing, o.landmark))
-    return ekf_slam(
-        world.odometry,
-        meas,
-        sigma_odometry=(nt.sigma_dx, nt.sigma_dy, nt.sigma_dtheta),
-        sigma_range=nt.sigma_range,
-        sigma_bearing=nt.sigma_bearing,
-        true_ids=o.landmark,
-        **kw,
-    )
-
-
-def numeric_jacobian(f, x, h=1e-7):
-    cols = []
-    for k in range(x.size):
-        d = np.zeros_like(x)
-        d[k] = h
-        diff = f(x + d) - f(x - d)
-        if diff.size == 3:
-            diff[2] = se2.wrap_angle(diff[2])
-        cols.append(diff / (2 * h))
-    return np.column_stack(cols)
-
-
-def test_compose_jacobians_finite_differences(rng):
-    for _ in range(10):
-        x = se2.wrap_last(rng.normal(size=3) * 3)
-        u = se2.wrap_last(rng.normal(size=3))
-        fx, fu = compose_jacobians(x, u)
-        np.testing.assert_allclose(
-            fx, numeric_jacobian(lambda v, u=u: se2.compose(v, u), x), atol=1e-6
-        )
-        np.testing.assert_allclose(
-            fu, numeric_jacobian(lambda v, x=x: se2.compose(x, v), u), atol=1e-6
-        )
-
-
-def test_sensor_jacobians_finite_differences(rng):
-    for _ in range(10):
-        x = se2.wrap_last(rng.normal(size=3) * 3)
-        lm = x[:2] + rng.uniform(1, 5, 2)
-        _, hx, hl = _observe(x, lm)
-        fx = numeric_jacobian(lambda v, lm=lm: _observe(v, lm)[0], x)
-        fl = numeric_jacobian(lambda v, x=x: _observe(x, v)[0], lm)
-        np.testing.assert_allclose(hx, fx, atol=1e-6)
-        np.testing.assert_allclose(hl, fl, atol=1e-6)
+    return slam_bundle(world_bundle(world), **kw)[1]
 
 
 def test_online_pose_is_consistent_over_monte_carlo_runs():
@@ -112,39 +70,53 @@ def test_corrupted_associations_are_recorded():
 def test_nearest_neighbour_with_well_separated_landmarks():
     # few, far-apart landmarks: nearest neighbour must find the true associations
     w = make_world("simple1", noise="a", seed=2)
+    b = world_bundle(w)
     keep = np.zeros(225, dtype=bool)
     keep[::15] = True
-    o = w.observations
-    sel = keep[o.landmark]
-    meas = np.column_stack((o.t[sel], o.range[sel], o.bearing[sel], np.full(sel.sum(), np.nan)))
-    nt = w.noise_params
-    r = ekf_slam(
-        w.odometry,
-        meas,
-        sigma_odometry=(nt.sigma_dx, nt.sigma_dy, nt.sigma_dtheta),
-        sigma_range=nt.sigma_range,
-        sigma_bearing=nt.sigma_bearing,
-        association="nn",
-        true_ids=o.landmark[sel],
+    sel = keep[b.measurement_landmarks]
+    b = replace(
+        b,
+        measurement_times=b.measurement_times[sel],
+        measurements=b.measurements[sel],
+        measurement_landmarks=b.measurement_landmarks[sel],
+        measurement_associated=b.measurement_associated[sel],
+        measurement_lines=None,
     )
+    out, r = slam_bundle(b, association="nn")
     assert r.wrong_association.mean() < 0.02
+    assert (r.association >= 0).mean() > 0.9
+
+
+def test_velocity_driven_world():
+    w = make_world("simple2", noise="a", seed=4, rate=10)
+    out, r = slam_bundle(world_bundle(w))
+    assert len(r.online) == 10 * (len(w.truth) - 1)  # one pose per control step
+    at = np.searchsorted(r.online.timestamps, w.truth.timestamps[:-1])
+    err = np.hypot(*(r.online.poses[at, :2] - w.truth.poses[:-1, :2]).T).mean()
+    dr = np.hypot(*(w.odometry.poses[:, :2] - w.truth.poses[:, :2]).T).mean()
+    assert err < 0.3 * dr
 
 
 def test_bad_input():
     w = make_world("simple1", seed=0)
-    o = w.observations
-    meas = np.column_stack((o.t + 0.5, o.range, o.bearing, o.landmark))
-    with pytest.raises(InputError, match="not at an odometry time"):
+    b = world_bundle(w)
+    steps = build_steps(b)
+    with pytest.raises(InputError, match="grid indices"):
         ekf_slam(
-            w.odometry, meas, sigma_odometry=(0.1, 0.1, 0.05), sigma_range=0.1, sigma_bearing=0.04
+            steps,
+            b.measurements[:-1],
+            b.measurement_landmarks[:-1],
+            sensor=b.sensor,
+            initial_pose=b.initial_pose,
+            initial_covariance=b.initial_covariance,
         )
     with pytest.raises(DivergenceError, match=r"t=.*measurement"):
-        meas = np.column_stack((o.t, o.range, o.bearing, o.landmark))
         ekf_slam(
-            w.odometry,
-            meas,
-            sigma_odometry=(0.1, 0.1, 0.05),
-            sigma_range=0.0,
-            sigma_bearing=0.0,
+            steps,
+            b.measurements,
+            b.measurement_landmarks,
+            sensor=SensorModel(0.0, 0.0),
+            initial_pose=b.initial_pose,
             initial_covariance=np.zeros((3, 3)),
+            noise_scale=0.0,
         )

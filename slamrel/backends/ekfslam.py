@@ -1,9 +1,13 @@
 """A reference EKF-SLAM for planar range-bearing landmark SLAM.
 
 State ``[x, y, θ, l_1x, l_1y, …]`` with a dense joint covariance (Smith, Self & Cheeseman;
-Dissanayake et al. 2001). Per odometry step the pose is predicted ``x ← x ∘ u`` with the
-Jacobians of SE(2) composition; per measurement a landmark is either initialised from the
-inverse sensor model or updated with the range-bearing model, bearing innovation wrapped.
+Dissanayake et al. 2001). The motion comes as increments on a time grid
+(:func:`recovery.steps.build_steps`: the bundle's velocity or odometry model, cut at the
+measurement times), so the filter and the offline recovery share one implementation of the
+motion and sensor models (:mod:`recovery.models`). Per step the pose is predicted
+``x ← x ∘ u`` (``F = ∂(x ∘ u)/∂x``, ``Q = Rot(θ) Σ Rot(θ)ᵀ``); per measurement a landmark is
+either initialised from the inverse sensor model or updated with the range-bearing model,
+bearing innovation wrapped.
 
 Data association is *known* (the landmark ids given with the measurements) or
 *nearest neighbour* with a χ² gate on the innovation; in the latter mode every decision is
@@ -24,28 +28,16 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
+from recovery.models import SensorModel, compose_jacobian, process_noise, range_bearing
+from recovery.steps import Steps
 from relation_metric import se2
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import Trajectory, readonly
 
-__all__ = ["EkfSlamResult", "ekf_slam", "compose_jacobians"]
+__all__ = ["EkfSlamResult", "ekf_slam"]
 
 Array = NDArray[np.float64]
 UNASSOCIATED = -1
-
-
-def compose_jacobians(x: Array, u: Array) -> tuple[Array, Array]:
-    """Jacobians of ``x ∘ u`` w.r.t. ``x`` and ``u`` (3 × 3 each).
-
-    ``∂/∂x = [[1, 0, −s u_x − c u_y], [0, 1, c u_x − s u_y], [0, 0, 1]]`` and
-    ``∂/∂u = [[c, −s, 0], [s, c, 0], [0, 0, 1]]`` with ``c, s`` of ``θ_x``.
-    """
-    c, s = np.cos(x[2]), np.sin(x[2])
-    fx = np.array(
-        [[1.0, 0.0, -s * u[0] - c * u[1]], [0.0, 1.0, c * u[0] - s * u[1]], [0.0, 0.0, 1.0]]
-    )
-    fu = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return fx, fu
 
 
 @dataclass(frozen=True)
@@ -79,26 +71,14 @@ class EkfSlamResult:
     online_covariance: Array
 
 
-def _observe(x: Array, lm: Array) -> tuple[Array, Array, Array]:
-    """``h = [r, b]`` and the Jacobians ``H_x`` (2×3), ``H_l`` (2×2)."""
-    dx, dy = lm[0] - x[0], lm[1] - x[1]
-    q = dx * dx + dy * dy
-    r = np.sqrt(q)
-    h = np.array([r, se2.wrap_angle(np.arctan2(dy, dx) - x[2])])
-    hl = np.array([[dx / r, dy / r], [-dy / q, dx / q]])
-    hx = np.column_stack((-hl, [0.0, -1.0]))
-    return h, hx, hl
-
-
 def ekf_slam(
-    odometry: Trajectory,
+    steps: Steps,
     measurements: Array,
+    landmarks: Array,
     *,
-    sigma_odometry: tuple[float, float, float],
-    sigma_range: float,
-    sigma_bearing: float,
-    initial_pose: Array | None = None,
-    initial_covariance: Array | None = None,
+    sensor: SensorModel,
+    initial_pose: Array,
+    initial_covariance: Array,
     association: Literal["known", "nn"] = "known",
     gate: float = 0.99,
     new_landmark_gate: float = 0.9999,
@@ -107,28 +87,27 @@ def ekf_slam(
     noise_scale: float = 1.0,
     seed: int = 0,
 ) -> EkfSlamResult:
-    """Run EKF-SLAM over an odometry-driven log.
+    """Run EKF-SLAM over a log.
 
     Parameters
     ----------
-    odometry : Trajectory
-        Odometry poses; the motion between consecutive poses is the input
-        ``u_k = o_k⁻¹ ∘ o_{k+1}`` with independent noise ``sigma_odometry`` on its
-        ``[dx, dy, dθ]`` (the bundle's ``odometry`` model with ``sigma_x, sigma_y, sigma_theta``).
-    measurements : ndarray, shape (K, 4)
-        ``[t, range, bearing, landmark]`` sorted by time; every ``t`` must be one of the
-        odometry times (the measurement is taken at that pose). ``landmark`` is used with
-        ``association="known"``; it may be NaN otherwise.
-    sigma_range, sigma_bearing : float
-        Sensor noise standard deviations.
-    initial_pose, initial_covariance :
-        Prior of the first pose (default: the first odometry pose with 1e-9 covariance).
+    steps : recovery.steps.Steps
+        The motion on the time grid (``build_steps(bundle)``): increments ``u_k`` and their
+        body-frame covariances ``Σ_k``, and the grid index of every measurement (−1: outside
+        the motion's time span, not used).
+    measurements : ndarray, shape (J, 2)
+        ``[range, bearing]``, in time order.
+    landmarks : ndarray, shape (J,)
+        Landmark id of each measurement for ``association="known"`` (ignored, may be NaN,
+        for ``"nn"``).
+    sensor : recovery.models.SensorModel
+    initial_pose, initial_covariance : ndarray, shapes (3,) and (3, 3)
     association : {"known", "nn"}
     gate, new_landmark_gate : float
         χ² probabilities (2 dof): with ``"nn"`` a measurement is associated with the nearest
         landmark (Mahalanobis) inside ``gate``, starts a new landmark outside
         ``new_landmark_gate`` and is rejected in between.
-    true_ids : ndarray of int, shape (K,), optional
+    true_ids : ndarray of int, shape (J,), optional
         True landmark of each measurement, to record wrong associations.
     corrupt_fraction : float
         Fraction of known associations replaced on purpose by another, seeded, landmark id.
@@ -147,26 +126,24 @@ def ekf_slam(
         On a non-finite state or an innovation covariance that is not positive definite;
         the message names the time and the measurement.
     """
-    z = np.asarray(measurements, dtype=np.float64).reshape(-1, 4)
-    t = odometry.timestamps
-    if z.shape[0] and (np.any(np.diff(z[:, 0]) < 0)):
+    z = np.asarray(measurements, dtype=np.float64).reshape(-1, 2)
+    grid = np.asarray(steps.measurement_grid, dtype=np.int64)
+    if grid.shape[0] != z.shape[0]:
+        raise InputError(f"{z.shape[0]} measurements but {grid.shape[0]} grid indices")
+    used = grid >= 0
+    if np.any(np.diff(grid[used]) < 0):
         raise InputError("measurements must be sorted by time")
-    step = np.searchsorted(t, z[:, 0])
-    ok = (step < t.size) & (t[np.minimum(step, t.size - 1)] == z[:, 0])
-    if not ok.all():
-        k = int(np.flatnonzero(~ok)[0])
-        raise InputError(f"measurement {k} at t={z[k, 0]!r} is not at an odometry time")
     if not (0.0 <= corrupt_fraction < 1.0):
         raise InputError(f"corrupt_fraction must be in [0, 1), got {corrupt_fraction}")
-    ids_in = z[:, 3].copy()
+    ids_in = np.asarray(landmarks, dtype=np.float64).copy()
     wrong = np.zeros(z.shape[0], dtype=bool)
     if association == "known":
-        if not np.isfinite(ids_in).all():
+        if not np.isfinite(ids_in[used]).all():
             raise InputError("known association needs a landmark id for every measurement")
         if corrupt_fraction > 0:
             rng = np.random.default_rng(seed)
-            pool = np.unique(ids_in)
-            pick = rng.random(z.shape[0]) < corrupt_fraction
+            pool = np.unique(ids_in[used])
+            pick = used & (rng.random(z.shape[0]) < corrupt_fraction)
             other = pool[rng.integers(0, pool.size, pick.sum())]
             same = other == ids_in[pick]
             other[same] = pool[(np.searchsorted(pool, other[same]) + 1) % pool.size]
@@ -174,45 +151,41 @@ def ekf_slam(
             wrong[pick] = pool.size > 1
     elif association != "nn":
         raise InputError(f"association must be 'known' or 'nn', got {association!r}")
-    sx, sy, sth = (noise_scale * s for s in sigma_odometry)
-    q = np.diag([sx * sx, sy * sy, sth * sth])
-    r_cov = np.diag([(noise_scale * sigma_range) ** 2, (noise_scale * sigma_bearing) ** 2])
+    sig_u = np.asarray(steps.sigma) * noise_scale**2
+    r_cov = sensor.covariance * noise_scale**2
     g_in = chi2.ppf(gate, 2)
     g_new = chi2.ppf(new_landmark_gate, 2)
 
+    t = steps.times
     n_poses = t.size
-    inc = se2.between(odometry.poses[:-1], odometry.poses[1:])
-    x0 = odometry.poses[0] if initial_pose is None else np.asarray(initial_pose, dtype=np.float64)
-    p0 = (
-        np.eye(3) * 1e-9
-        if initial_covariance is None
-        else np.asarray(initial_covariance, dtype=np.float64)
-    )
-    cap = 3 + 2 * (int(np.unique(ids_in).size) if association == "known" else z.shape[0])
+    inc = steps.u
+    cap = 3 + 2 * (int(np.unique(ids_in[used]).size) if association == "known" else int(used.sum()))
     mu = np.zeros(cap)
     cov = np.zeros((cap, cap))
-    mu[:3] = x0
-    cov[:3, :3] = p0
+    mu[:3] = np.asarray(initial_pose, dtype=np.float64)
+    cov[:3, :3] = np.asarray(initial_covariance, dtype=np.float64)
     n = 3  # used size of the state
     slot_of: dict[int, int] = {}  # landmark id -> state offset
     ids_out: list[int] = []
     assoc_out = np.full(z.shape[0], UNASSOCIATED, dtype=np.int64)
     online = np.empty((n_poses, 3))
     online_cov = np.empty((n_poses, 3, 3))
-    starts = np.searchsorted(step, np.arange(n_poses + 1))
+    order = np.flatnonzero(used)
+    starts = np.searchsorted(grid[order], np.arange(n_poses + 1))
     for k in range(n_poses):
         if k > 0:
             u = inc[k - 1]
-            fx, fu = compose_jacobians(mu[:3], u)
+            fx = compose_jacobian(mu[:3], u)
+            q = process_noise(mu[2], sig_u[k - 1])
             mu[:3] = se2.compose(mu[:3], u)
-            # P_xx ← F P_xx Fᵀ + G Q Gᵀ, P_xm ← F P_xm
+            # P_xx ← F P_xx Fᵀ + Q, P_xm ← F P_xm
             top = fx @ cov[:3, :n]
-            pxx = top[:, :3] @ fx.T + fu @ q @ fu.T
+            pxx = top[:, :3] @ fx.T + q
             cov[:3, :n] = top
             cov[:n, :3] = top.T
             cov[:3, :3] = pxx
-        for m in range(starts[k], starts[k + 1]):
-            meas = z[m, 1:3]
+        for m in order[starts[k] : starts[k + 1]]:
+            meas = z[m]
             if association == "known":
                 lid = int(ids_in[m])
                 slot = slot_of.get(lid)
@@ -227,7 +200,7 @@ def ekf_slam(
                 slot_of[lid] = slot
                 ids_out.append(lid)
             else:
-                _update(mu, cov, n, slot, meas, r_cov, t[k], m)
+                _update(mu, cov, n, slot, meas, r_cov, t[k], int(m))
             assoc_out[m] = lid
         online[k] = mu[:3]
         online_cov[k] = cov[:3, :3]
@@ -264,7 +237,7 @@ def _initialise(mu: Array, cov: Array, n: int, meas: Array, r_cov: Array) -> Non
 def _update(
     mu: Array, cov: Array, n: int, slot: int, meas: Array, r_cov: Array, t: float, m: int
 ) -> None:
-    h, hx, hl = _observe(mu[:3], mu[slot : slot + 2])
+    h, hx, hl = range_bearing(mu[:3], mu[slot : slot + 2])
     nu = meas - h
     nu[1] = se2.wrap_angle(nu[1])
     pht = cov[:n, :3] @ hx.T + cov[:n, slot : slot + 2] @ hl.T  # (n, 2)
