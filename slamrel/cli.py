@@ -20,6 +20,7 @@ from relation_metric.errors import SlamrelError
 COMMAND_MODULES = (
     "slamrel.commands.evaluate",
     "slamrel.commands.relations",
+    "slamrel.commands.simulate",
     "slamrel.commands.compare",
     "slamrel.commands.graph",
     "slamrel.commands.example",

@@ -1,7 +1,7 @@
 """Simulated worlds after Hu, Huang & Dissanayake, "Evaluation of Pose Only SLAM".
 
 A robot moves 0.5 m a step and turns by predefined angles; a range-bearing sensor sees point
-features within 5 m and a 180° field of view; 225 features are normally distributed around
+features between 0.5 m and 5 m and within a 180° field of view; 225 features are normally distributed around
 the path. Four trajectories: two simple ones (about 82 poses, one loop, a single return to
 the start) and two complex ones (about 420 poses, several loop closures). Noise types follow
 their Table I (standard deviations):
@@ -49,6 +49,7 @@ __all__ = [
 
 STEP = 0.5  # metres a step
 SENSOR_RANGE = 5.0
+SENSOR_MIN_RANGE = 0.5  # m; closer features are not detected
 SENSOR_FOV = np.pi  # 180°
 N_FEATURES = 225
 FEATURE_SPREAD = 2.0  # m, standard deviation of the features around the path
@@ -202,9 +203,10 @@ def _observe(
     k_p_l = se2.inverse_transform_points(poses[:, None, :], landmarks[None, :, :])
     r = np.hypot(k_p_l[..., 0], k_p_l[..., 1])
     b = np.arctan2(k_p_l[..., 1], k_p_l[..., 0])
-    seen = (r <= SENSOR_RANGE) & (np.abs(b) <= SENSOR_FOV / 2) & (r > 1e-6)
+    seen = (r <= SENSOR_RANGE) & (np.abs(b) <= SENSOR_FOV / 2) & (r >= SENSOR_MIN_RANGE)
     k, lm = np.nonzero(seen)  # row-major: time order, then landmark id
-    z_r = r[k, lm] + rng.normal(0.0, noise.sigma_range, k.size)
+    # a range is a distance: the rare noisy value below zero is reflected (|r + n|)
+    z_r = np.abs(r[k, lm] + rng.normal(0.0, noise.sigma_range, k.size))
     z_b = se2.wrap_angle(b[k, lm] + rng.normal(0.0, noise.sigma_bearing, k.size))
     return k.astype(np.int64), lm.astype(np.int64), z_r, z_b
 

@@ -7,7 +7,7 @@ import pytest
 
 from relation_metric import se2
 from relation_metric.errors import InputError
-from slamrel.worlds import NOISE_TYPES, SENSOR_RANGE, WORLDS, make_world, path_of
+from slamrel.worlds import NOISE_TYPES, SENSOR_MIN_RANGE, SENSOR_RANGE, WORLDS, make_world, path_of
 
 
 @pytest.mark.parametrize("name", WORLDS)
@@ -44,7 +44,8 @@ def test_observations_respect_the_sensor_and_the_noise():
     true = se2.inverse_transform_points(w.truth.poses[o.pose], w.landmarks[o.landmark])
     r = np.hypot(true[:, 0], true[:, 1])
     b = np.arctan2(true[:, 1], true[:, 0])
-    assert r.max() <= SENSOR_RANGE and np.abs(b).max() <= np.pi / 2
+    assert r.max() <= SENSOR_RANGE and r.min() >= SENSOR_MIN_RANGE and np.abs(b).max() <= np.pi / 2
+    assert o.range.min() >= 0.0
     nt = NOISE_TYPES["c"]
     assert np.std(o.range - r) == pytest.approx(nt.sigma_range, rel=0.05)
     assert np.std(se2.wrap_angle(o.bearing - b)) == pytest.approx(nt.sigma_bearing, rel=0.05)
@@ -52,7 +53,8 @@ def test_observations_respect_the_sensor_and_the_noise():
     k_p_l = se2.inverse_transform_points(w.truth.poses[:, None, :], w.landmarks[None])
     rr = np.hypot(k_p_l[..., 0], k_p_l[..., 1])
     bb = np.arctan2(k_p_l[..., 1], k_p_l[..., 0])
-    assert o.t.size == int(((rr <= SENSOR_RANGE) & (np.abs(bb) <= np.pi / 2)).sum())
+    visible = (rr <= SENSOR_RANGE) & (rr >= SENSOR_MIN_RANGE) & (np.abs(bb) <= np.pi / 2)
+    assert o.t.size == int(visible.sum())
 
 
 @pytest.mark.parametrize("noise", sorted(NOISE_TYPES))

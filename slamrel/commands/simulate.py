@@ -1,0 +1,89 @@
+"""``slamrel simulate`` and ``slamrel slam``: simulated worlds and the reference EKF-SLAM."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from recovery.bundle import read_bundle, write_bundle
+from relation_metric.formats import write_trajectory
+from relation_metric.textio import check_not_input
+from slamrel.simulate import slam_bundle, world_bundle
+from slamrel.worlds import NOISE_TYPES, WORLDS, make_world
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    s = sub.add_parser(
+        "simulate",
+        help="write a simulated world (Hu et al.) as a bundle: log, true map, ground truth",
+    )
+    s.add_argument("world", choices=WORLDS, metavar="WORLD", help=", ".join(WORLDS))
+    s.add_argument("--noise", choices=sorted(NOISE_TYPES), default="a")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument(
+        "--rate", type=int, default=0, help="control steps per measurement step (0: odometry)"
+    )
+    s.add_argument("-o", "--output", required=True, metavar="BUNDLE")
+    s.add_argument("-q", "--quiet", action="store_true")
+    s.set_defaults(func=run_simulate)
+
+    m = sub.add_parser(
+        "slam",
+        help="run the reference EKF-SLAM on a bundle's log and write the SLAM result bundle",
+    )
+    m.add_argument("bundle", metavar="LOG_BUNDLE")
+    m.add_argument("-o", "--output", required=True, metavar="BUNDLE")
+    m.add_argument("--association", choices=("known", "nn"), default="known")
+    m.add_argument(
+        "--corrupt",
+        type=float,
+        default=0.0,
+        metavar="F",
+        help="fraction of associations to corrupt on purpose",
+    )
+    m.add_argument(
+        "--noise-scale", type=float, default=1.0, help="factor on the noise the filter assumes"
+    )
+    m.add_argument("--seed", type=int, default=0)
+    m.add_argument(
+        "--store-online",
+        action="store_true",
+        help="also write online.csv, the filter's pose estimates (validation only)",
+    )
+    m.add_argument("-q", "--quiet", action="store_true")
+    m.set_defaults(func=run_slam)
+
+
+def run_simulate(args: argparse.Namespace) -> int:
+    world = make_world(args.world, noise=args.noise, seed=args.seed, rate=args.rate)
+    write_bundle(args.output, world_bundle(world))
+    if not args.quiet:
+        print(
+            f"{args.world}/{args.noise} seed {args.seed}: {len(world.truth)} poses, "
+            f"{world.observations.t.size} measurements, {world.landmarks.shape[0]} landmarks -> {args.output}"
+        )
+    return 0
+
+
+def run_slam(args: argparse.Namespace) -> int:
+    if Path(args.output).resolve() == Path(args.bundle).resolve():
+        check_not_input(args.output, [args.bundle])
+    bundle = read_bundle(args.bundle)
+    out, res = slam_bundle(
+        bundle,
+        association=args.association,
+        corrupt_fraction=args.corrupt,
+        noise_scale=args.noise_scale,
+        seed=args.seed,
+    )
+    write_bundle(args.output, out)
+    if args.store_online:
+        write_trajectory(Path(args.output) / "online.csv", res.online, format="csv")
+    if not args.quiet:
+        rejected = int((res.association < 0).sum())
+        print(
+            f"EKF-SLAM: {res.landmark_ids.size} landmarks, {res.association.size - rejected} "
+            f"measurements associated, {rejected} rejected, {int(res.wrong_association.sum())} "
+            f"known-wrong associations -> {args.output}"
+        )
+    return 0
