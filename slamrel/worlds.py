@@ -1,10 +1,10 @@
 """Simulated worlds after Hu, Huang & Dissanayake, "Evaluation of Pose Only SLAM".
 
 A robot moves 0.5 m a step and turns by predefined angles; a range-bearing sensor sees point
-features between 0.5 m and 5 m and within a 180° field of view; 225 features are normally distributed around
-the path. Four trajectories: two simple ones (about 82 poses, one loop, a single return to
-the start) and two complex ones (about 420 poses, several loop closures). Noise types follow
-their Table I (standard deviations):
+features between 0.5 m and 5 m and within a 180° field of view; 225 features are normally
+distributed around the path. Four trajectories: two simple ones (about 82 poses, one loop,
+a single return to the start) and two complex ones (about 420 poses, several loop
+closures). Noise types follow their Table I (standard deviations):
 
 ====  ===============================  ===========================
 type  odometry dx, dy, dθ per step      observation

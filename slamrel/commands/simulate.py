@@ -60,7 +60,8 @@ def run_simulate(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(
             f"{args.world}/{args.noise} seed {args.seed}: {len(world.truth)} poses, "
-            f"{world.observations.t.size} measurements, {world.landmarks.shape[0]} landmarks -> {args.output}"
+            f"{world.observations.t.size} measurements, {world.landmarks.shape[0]} landmarks "
+            f"-> {args.output}"
         )
     return 0
 
