@@ -18,6 +18,7 @@ from relation_metric.errors import SlamrelError
 
 # Sub-command modules, in the order ``slamrel --help`` lists them.
 COMMAND_MODULES = (
+    "slamrel.commands.run",
     "slamrel.commands.evaluate",
     "slamrel.commands.relations",
     "slamrel.commands.simulate",

@@ -1,0 +1,48 @@
+"""``slamrel run``: the report folder, its numbers, and interrupted runs."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+import slamrel.pipeline as pipeline
+from slamrel.cli import main
+
+
+def test_run_writes_a_consistent_report(tmp_path):
+    out = tmp_path / "rep"
+    assert main(["run", "simple2", "--noise", "b", "--seed", "1", "-o", str(out), "-q"]) == 0
+    names = {p.name for p in out.iterdir()}
+    assert {"report.html", "metrics.json", "figure_1.png", "bundle"} <= names
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["trajectory"]["translation"]["abs"]["count"] > 0
+    assert set(metrics["trajectory"]["by_relation_set"]) == {"consecutive", "loops", "global"}
+    assert "dead_reckoning" in metrics
+    html = (out / "report.html").read_text()
+    # every mean in the report's translation table equals metrics.json (6 significant digits)
+    trans_table = html.split("translation relation error")[1].split("</table>")[0]
+    cells = re.findall(r"<tr><td>(\w+)</td><td>(\w+)</td><td>([^<]+)</td>", trans_table)
+    shown = {(a, b): float(c) for a, b, c in cells}
+    source = metrics["trajectory_source"]
+    for name, key in ((source, "trajectory"), ("dead_reckoning", "dead_reckoning")):
+        assert shown[(name, "all")] == pytest.approx(
+            metrics[key]["translation"]["abs"]["mean"], rel=1e-5
+        )
+        for rs, ev in metrics[key]["by_relation_set"].items():
+            assert shown[(name, rs)] == pytest.approx(ev["translation"]["abs"]["mean"], rel=1e-5)
+    # SLAM beats dead reckoning on global relations
+    g = metrics["trajectory"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]
+    assert g < metrics["dead_reckoning"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]
+
+
+def test_interrupted_run_leaves_no_partial_report(tmp_path, monkeypatch):
+    out = tmp_path / "rep"
+
+    def boom(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline, "render_html", boom)
+    assert main(["run", "simple1", "-o", str(out), "-q"]) == 130
+    assert list(tmp_path.iterdir()) == []
