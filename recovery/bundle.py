@@ -1,0 +1,655 @@
+"""The SLAM result bundle (format ``slamrel-bundle/1``, see ``BUNDLE.md``): read and write.
+
+A bundle is a directory of comma-separated files (one header line, ``#`` comment lines) and a
+JSON manifest ``bundle.json``. The reader is strict: a missing required file or column, a
+non-finite number, times that go backwards, an unknown model type, a measurement whose landmark
+is not in ``map.csv`` (unless ``skip_unknown_landmarks``, which counts them), and a covariance
+that is not symmetric positive semi-definite each raise
+:class:`~relation_metric.errors.InputError` naming the file, the line and what was expected.
+
+Landmark ids are integers. Manifest defaults: ``initial_pose`` ``[0, 0, 0]``,
+``initial_covariance`` ``1e-9 I``, ``description`` empty.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from recovery.models import MOTION_TYPES, MotionModel, SensorModel
+from relation_metric.errors import InputError
+from relation_metric.formats import read_trajectory
+from relation_metric.textio import parse_float, read_source, write_bytes_atomic, write_text_atomic
+from relation_metric.trajectory import Trajectory, readonly
+
+__all__ = ["FORMAT", "Bundle", "read_bundle", "write_bundle"]
+
+FORMAT = "slamrel-bundle/1"
+Array = NDArray[np.float64]
+PathLike = str | os.PathLike[str]
+_PSD_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Bundle:
+    """What a filter-based SLAM run leaves behind (read-only arrays).
+
+    Attributes
+    ----------
+    motion : MotionModel
+    sensor : SensorModel
+    initial_pose : ndarray, shape (3,)
+    initial_covariance : ndarray, shape (3, 3)
+    controls : ndarray, shape (K, 3) or None
+        ``[t, v, ω]`` rows (velocity model).
+    odometry : Trajectory or None
+        Wheel-odometry poses (odometry model).
+    measurement_times : ndarray, shape (J,)
+    measurements : ndarray, shape (J, 2)
+        ``[range, bearing]``.
+    measurement_landmarks : ndarray of int, shape (J,)
+        Associated landmark id; meaningful only where ``measurement_associated``.
+    measurement_associated : ndarray of bool, shape (J,)
+    map_ids : ndarray of int, shape (M,)
+    map_xy : ndarray, shape (M, 2)
+    map_marginals : ndarray, shape (M, 2, 2)
+        Per-landmark covariances (zeros when ``map.csv`` gives none).
+    map_covariance : ndarray, shape (2M, 2M) or None
+        Joint map covariance, landmarks in ``map_ids`` order, ``[x, y]`` each.
+    groundtruth : Trajectory or None
+    landmarks_groundtruth : tuple (ids (L,), xy (L, 2)) or None
+    description : str
+    measurement_lines : ndarray of int, shape (J,)
+        Line of each measurement in ``measurements.csv`` (0 when built in memory).
+    skipped_unknown : int
+        Measurements dropped because their landmark is not in the map (only with
+        ``skip_unknown_landmarks``).
+    path : str or None
+    """
+
+    motion: MotionModel
+    sensor: SensorModel
+    measurement_times: Array
+    measurements: Array
+    measurement_landmarks: NDArray[np.int64]
+    measurement_associated: NDArray[np.bool_]
+    map_ids: NDArray[np.int64]
+    map_xy: Array
+    map_marginals: Array
+    initial_pose: Array = field(default_factory=lambda: np.zeros(3))
+    initial_covariance: Array = field(default_factory=lambda: 1e-9 * np.eye(3))
+    controls: Array | None = None
+    odometry: Trajectory | None = None
+    map_covariance: Array | None = None
+    groundtruth: Trajectory | None = None
+    landmarks_groundtruth: tuple[NDArray[np.int64], Array] | None = None
+    description: str = ""
+    measurement_lines: NDArray[np.int64] | None = None
+    skipped_unknown: int = 0
+    path: str | None = None
+
+    def __post_init__(self) -> None:
+        ro = object.__setattr__
+        for name in (
+            "measurement_times",
+            "measurements",
+            "map_xy",
+            "map_marginals",
+            "initial_pose",
+            "initial_covariance",
+        ):
+            ro(self, name, readonly(getattr(self, name)))
+        ro(self, "measurement_landmarks", readonly(self.measurement_landmarks, np.int64))
+        ro(self, "measurement_associated", readonly(self.measurement_associated, np.bool_))
+        ro(self, "map_ids", readonly(self.map_ids, np.int64))
+        for name in ("controls", "map_covariance"):
+            if getattr(self, name) is not None:
+                ro(self, name, readonly(getattr(self, name)))
+        lines = self.measurement_lines
+        ro(
+            self,
+            "measurement_lines",
+            readonly(
+                np.zeros(self.measurement_times.shape[0]) if lines is None else lines, np.int64
+            ),
+        )
+        if self.landmarks_groundtruth is not None:
+            ids, xy = self.landmarks_groundtruth
+            ro(self, "landmarks_groundtruth", (readonly(ids, np.int64), readonly(xy)))
+        if self.motion.type == "velocity" and self.controls is None:
+            raise InputError("the velocity model needs controls [t, v, omega]", path=self.path)
+        if self.motion.type == "odometry" and self.odometry is None:
+            raise InputError("the odometry model needs odometry poses", path=self.path)
+
+    def map_index(self) -> NDArray[np.int64]:
+        """Row of ``map_ids`` of each measurement's landmark, −1 when unassociated, (J,)."""
+        order = np.argsort(self.map_ids, kind="stable")
+        pos = np.searchsorted(self.map_ids[order], self.measurement_landmarks)
+        pos = np.clip(pos, 0, max(len(order) - 1, 0))
+        idx = order[pos] if len(order) else np.zeros_like(pos)
+        ok = self.measurement_associated & (len(order) > 0)
+        ok &= self.map_ids[idx] == self.measurement_landmarks if len(order) else ok
+        return np.where(ok, idx, -1).astype(np.int64)
+
+    def with_map(self, xy: Array, marginals: Array, covariance: Array | None) -> Bundle:
+        """The same bundle with another map (same ids and order)."""
+        return replace(self, map_xy=xy, map_marginals=marginals, map_covariance=covariance)
+
+
+# ----------------------------------------------------------------------------------- reading
+
+
+def _line_of_key(text: str, key: str) -> int | None:
+    needle = f'"{key}"'
+    pos = text.find(needle)
+    return None if pos < 0 else text.count("\n", 0, pos) + 1
+
+
+def _number(
+    value: Any, *, what: str, path: str, line: int | None, minimum: float | None = 0.0
+) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise InputError(f"{what}: expected a finite number, got {value!r}", path=path, line=line)
+    if minimum is not None and value < minimum:
+        raise InputError(
+            f"{what}: expected a number >= {minimum}, got {value!r}", path=path, line=line
+        )
+    return float(value)
+
+
+def _numbers(
+    value: Any, n: int, *, what: str, path: str, line: int | None, minimum: float | None
+) -> tuple[float, ...]:
+    if not isinstance(value, list) or len(value) != n:
+        raise InputError(
+            f"{what}: expected a list of {n} numbers, got {value!r}", path=path, line=line
+        )
+    return tuple(_number(v, what=what, path=path, line=line, minimum=minimum) for v in value)
+
+
+def _check_psd(cov: Array, *, what: str, path: str, line: int | None) -> None:
+    if not np.isfinite(cov).all():
+        raise InputError(f"{what}: expected finite values", path=path, line=line)
+    scale = max(float(np.abs(cov).max()), 1e-300) if cov.size else 1.0
+    if not np.allclose(cov, cov.T, rtol=0.0, atol=_PSD_TOL * scale):
+        raise InputError(f"{what}: expected a symmetric matrix", path=path, line=line)
+    if cov.size and float(np.linalg.eigvalsh(0.5 * (cov + cov.T)).min()) < -_PSD_TOL * scale:
+        raise InputError(f"{what}: expected a positive semi-definite matrix", path=path, line=line)
+
+
+def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
+    line = _line_of_key(text, "motion_model")
+    if not isinstance(spec, dict):
+        raise InputError("motion_model: expected an object", path=path, line=line)
+    kind = spec.get("type")
+    if kind not in MOTION_TYPES:
+        raise InputError(
+            f"motion_model: unknown type {kind!r}; expected one of {', '.join(MOTION_TYPES)}",
+            path=path,
+            line=_line_of_key(text, "type") if kind is not None else line,
+        )
+    names = (
+        ("sigma_v", "sigma_omega") if kind == "velocity" else ("sigma_x", "sigma_y", "sigma_theta")
+    )
+    if "alpha" in spec:
+        if any(n in spec for n in names):
+            raise InputError(
+                f"motion_model: give either alpha or {', '.join(names)}, not both",
+                path=path,
+                line=line,
+            )
+        alpha = _numbers(
+            spec["alpha"],
+            4,
+            what="motion_model.alpha",
+            path=path,
+            line=_line_of_key(text, "alpha"),
+            minimum=0.0,
+        )
+        return MotionModel(kind, alpha=alpha)
+    missing = [n for n in names if n not in spec]
+    if missing:
+        raise InputError(
+            f"motion_model ({kind}): missing {', '.join(missing)}; "
+            f"expected {', '.join(names)} or alpha",
+            path=path,
+            line=line,
+        )
+    sigma = tuple(
+        _number(spec[n], what=f"motion_model.{n}", path=path, line=_line_of_key(text, n))
+        for n in names
+    )
+    return MotionModel(kind, sigma=sigma)
+
+
+def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
+    line = _line_of_key(text, "sensor_model")
+    if not isinstance(spec, dict):
+        raise InputError("sensor_model: expected an object", path=path, line=line)
+    if spec.get("type") != "range_bearing":
+        raise InputError(
+            f"sensor_model: unknown type {spec.get('type')!r}; expected range_bearing",
+            path=path,
+            line=line,
+        )
+    vals = []
+    for n in ("sigma_range", "sigma_bearing"):
+        if n not in spec:
+            raise InputError(f"sensor_model: missing {n}", path=path, line=line)
+        v = _number(spec[n], what=f"sensor_model.{n}", path=path, line=_line_of_key(text, n))
+        if v <= 0:
+            raise InputError(
+                f"sensor_model.{n}: expected a positive number, got {v}",
+                path=path,
+                line=_line_of_key(text, n),
+            )
+        vals.append(v)
+    return SensorModel(*vals)
+
+
+def _read_manifest(path: Path) -> dict[str, Any]:
+    src = read_source(path)
+    text = "\n".join(src.lines)
+    name = src.path
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"not valid JSON: {exc.msg}", path=name, line=exc.lineno) from None
+    if not isinstance(doc, dict):
+        raise InputError("expected a JSON object", path=name, line=1)
+    if doc.get("format") != FORMAT:
+        raise InputError(
+            f"format: expected {FORMAT!r}, got {doc.get('format')!r}",
+            path=name,
+            line=_line_of_key(text, "format"),
+        )
+    for key in ("motion_model", "sensor_model"):
+        if key not in doc:
+            raise InputError(f"missing {key}", path=name)
+    out: dict[str, Any] = {
+        "motion": _parse_motion(doc["motion_model"], text, name),
+        "sensor": _parse_sensor(doc["sensor_model"], text, name),
+        "description": str(doc.get("description", "")),
+    }
+    pose = doc.get("initial_pose", [0.0, 0.0, 0.0])
+    out["initial_pose"] = np.array(
+        _numbers(
+            pose,
+            3,
+            what="initial_pose",
+            path=name,
+            line=_line_of_key(text, "initial_pose"),
+            minimum=None,
+        )
+    )
+    cov = doc.get("initial_covariance")
+    if cov is None:
+        out["initial_covariance"] = 1e-9 * np.eye(3)
+    else:
+        line = _line_of_key(text, "initial_covariance")
+        if not isinstance(cov, list) or len(cov) != 3:
+            raise InputError(
+                "initial_covariance: expected a 3 x 3 list of lists", path=name, line=line
+            )
+        rows = [
+            _numbers(r, 3, what="initial_covariance", path=name, line=line, minimum=None)
+            for r in cov
+        ]
+        mat = np.array(rows)
+        _check_psd(mat, what="initial_covariance", path=name, line=line)
+        out["initial_covariance"] = mat
+    return out
+
+
+def _read_csv(
+    path: Path,
+    *,
+    required: Sequence[str],
+    optional: Sequence[str] = (),
+    empty_ok: Sequence[str] = (),
+) -> tuple[dict[str, Array], NDArray[np.int64]]:
+    """Columns by name (empty cells of ``empty_ok`` columns are NaN) and each row's line."""
+    if not path.is_file():
+        raise InputError(f"missing required file; expected columns {','.join(required)}", path=path)
+    src = read_source(path)
+    name = src.path
+    data = [(n, t) for n, t in src.data_lines()]
+    if not data:
+        raise InputError(f"empty file: expected a header {','.join(required)}", path=name)
+    head_line, head_text = data[0]
+    header = [h.strip().lower() for h in head_text.split(",")]
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise InputError(
+            f"missing column(s) {', '.join(missing)}; expected header {','.join(required)}",
+            path=name,
+            line=head_line,
+        )
+    wanted = [c for c in (*required, *optional) if c in header]
+    cols = [header.index(c) for c in wanted]
+    numbers = np.array([n for n, _ in data[1:]], dtype=np.int64)
+    body = [t for _, t in data[1:]]
+    values: Array | None = None
+    if body:
+        nan = float("nan")
+        conv = {
+            header.index(c): (lambda s: float(s) if s.strip() else nan)
+            for c in empty_ok
+            if c in header
+        }
+        try:
+            values = np.loadtxt(
+                body,
+                delimiter=",",
+                usecols=cols,
+                ndmin=2,
+                dtype=np.float64,
+                converters=conv or None,
+            )
+        except ValueError:
+            values = None
+        if values is not None:
+            fields_ok = all(t.count(",") == len(header) - 1 for t in body)
+            strict = [i for i, c in enumerate(wanted) if c not in empty_ok]
+            finite_ok = np.isfinite(values[:, strict]).all()
+            opt = [i for i, c in enumerate(wanted) if c in empty_ok]
+            opt_ok = not opt or not np.isinf(values[:, opt]).any()
+            if not (fields_ok and finite_ok and opt_ok):
+                values = None
+        if values is None:
+            _diagnose_csv(src, data[1:], header, wanted, empty_ok)
+            raise AssertionError("unreachable: fast path failed without a bad line")
+    else:
+        values = np.empty((0, len(wanted)))
+    return {c: values[:, i] for i, c in enumerate(wanted)}, numbers
+
+
+def _diagnose_csv(
+    src: Any,
+    rows: list[tuple[int, str]],
+    header: list[str],
+    wanted: list[str],
+    empty_ok: Sequence[str],
+) -> None:
+    for number, text in rows:
+        fields = [f.strip() for f in text.split(",")]
+        if len(fields) != len(header):
+            raise InputError(
+                f"expected {len(header)} comma-separated fields ({','.join(header)}), "
+                f"got {len(fields)}",
+                path=src.path,
+                line=number,
+            )
+        for c in wanted:
+            tok = fields[header.index(c)]
+            if c in empty_ok and tok == "":
+                continue
+            parse_float(tok, source=src, line=number, what=f"column '{c}'")
+
+
+def _check_time(t: Array, lines: NDArray[np.int64], path: Path) -> None:
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise InputError(
+            f"time goes backwards: {t[k]!r} after {t[k - 1]!r}; expected non-decreasing times",
+            path=path,
+            line=int(lines[k]),
+        )
+
+
+def _integer_ids(v: Array, lines: NDArray[np.int64], path: Path, column: str) -> NDArray[np.int64]:
+    bad = np.flatnonzero(np.isfinite(v) & (v != np.round(v)))
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(
+            f"column '{column}': expected an integer landmark id, got {v[k]!r}",
+            path=path,
+            line=int(lines[k]),
+        )
+    return np.where(np.isfinite(v), v, 0).astype(np.int64)
+
+
+def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) -> Bundle:
+    """Read and validate a SLAM result bundle.
+
+    Parameters
+    ----------
+    directory : str or PathLike
+        The bundle directory.
+    skip_unknown_landmarks : bool
+        Drop (and count in ``Bundle.skipped_unknown``) measurements whose landmark is not in
+        ``map.csv`` instead of raising.
+
+    Returns
+    -------
+    Bundle
+
+    Raises
+    ------
+    InputError
+        For every defect listed in ``BUNDLE.md``, naming file, line and what was expected.
+    """
+    root = Path(directory)
+    if not root.is_dir():
+        raise InputError("not a directory; expected a SLAM result bundle", path=root)
+    manifest = root / "bundle.json"
+    if not manifest.is_file():
+        raise InputError("missing required file bundle.json", path=manifest)
+    meta = _read_manifest(manifest)
+    motion: MotionModel = meta["motion"]
+
+    controls = odometry = None
+    if motion.type == "velocity":
+        p = root / "controls.csv"
+        cols, lines = _read_csv(p, required=("t", "v", "omega"))
+        _check_time(cols["t"], lines, p)
+        controls = np.column_stack((cols["t"], cols["v"], cols["omega"]))
+        if controls.shape[0] < 2:
+            raise InputError(
+                "expected at least two control rows (the last one ends the run)", path=p
+            )
+    else:
+        p = root / "odometry.csv"
+        cols, lines = _read_csv(p, required=("t", "x", "y", "theta"))
+        _check_time(cols["t"], lines, p)
+        if cols["t"].shape[0] < 2:
+            raise InputError("expected at least two odometry rows", path=p)
+        odometry = Trajectory(cols["t"], np.column_stack((cols["x"], cols["y"], cols["theta"])))
+
+    p_map = root / "map.csv"
+    cols, map_lines = _read_csv(
+        p_map,
+        required=("landmark", "x", "y"),
+        optional=("cxx", "cxy", "cyy"),
+        empty_ok=("cxx", "cxy", "cyy"),
+    )
+    map_ids = _integer_ids(cols["landmark"], map_lines, p_map, "landmark")
+    order = np.argsort(map_ids, kind="stable")
+    dup = np.flatnonzero(np.diff(map_ids[order]) == 0)
+    if dup.size:
+        k = int(order[dup[0] + 1])
+        raise InputError(
+            f"landmark {map_ids[k]} appears twice; expected unique ids",
+            path=p_map,
+            line=int(map_lines[k]),
+        )
+    m = map_ids.shape[0]
+    marg = np.zeros((m, 2, 2))
+    if "cxx" in cols:
+        present = [c for c in ("cxx", "cxy", "cyy") if c in cols]
+        if len(present) != 3:
+            raise InputError("covariance columns: expected all of cxx,cxy,cyy or none", path=p_map)
+        cxx, cxy, cyy = (np.nan_to_num(cols[c], nan=0.0) for c in ("cxx", "cxy", "cyy"))
+        partial = np.isnan(cols["cxx"]) ^ np.isnan(cols["cyy"]) | np.isnan(cols["cxx"]) ^ np.isnan(
+            cols["cxy"]
+        )
+        det = cxx * cyy - cxy * cxy
+        scale = np.maximum(np.maximum(cxx, cyy), 1e-300)
+        bad = np.flatnonzero(partial | (cxx < 0) | (cyy < 0) | (det < -_PSD_TOL * scale * scale))
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(
+                f"landmark covariance [[{cxx[k]}, {cxy[k]}], [{cxy[k]}, {cyy[k]}]] is not positive "
+                "semi-definite (or only partly given); expected cxx >= 0, cyy >= 0, "
+                "cxx*cyy >= cxy^2",
+                path=p_map,
+                line=int(map_lines[k]),
+            )
+        marg[:, 0, 0], marg[:, 0, 1], marg[:, 1, 0], marg[:, 1, 1] = cxx, cxy, cxy, cyy
+    map_xy = np.column_stack((cols["x"], cols["y"]))
+
+    map_cov = None
+    p_cov = root / "map_covariance.npy"
+    if p_cov.exists():
+        try:
+            map_cov = np.load(p_cov, allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise InputError(f"cannot read as a .npy array: {exc}", path=p_cov) from None
+        if map_cov.shape != (2 * m, 2 * m) or map_cov.dtype.kind not in "fi":
+            raise InputError(
+                f"expected a float array of shape ({2 * m}, {2 * m}) for {m} landmarks, got "
+                f"{map_cov.dtype} {map_cov.shape}",
+                path=p_cov,
+            )
+        map_cov = map_cov.astype(np.float64)
+        _check_psd(map_cov, what="map covariance", path=str(p_cov), line=None)
+
+    p_meas = root / "measurements.csv"
+    cols, meas_lines = _read_csv(
+        p_meas, required=("t", "range", "bearing", "landmark"), empty_ok=("landmark",)
+    )
+    _check_time(cols["t"], meas_lines, p_meas)
+    bad = np.flatnonzero(cols["range"] <= 0)
+    if bad.size:
+        raise InputError(
+            f"range {cols['range'][bad[0]]!r}: expected a positive range",
+            path=p_meas,
+            line=int(meas_lines[bad[0]]),
+        )
+    assoc = ~np.isnan(cols["landmark"])
+    lm = _integer_ids(cols["landmark"], meas_lines, p_meas, "landmark")
+    known = np.isin(lm, map_ids)
+    unknown = np.flatnonzero(assoc & ~known)
+    keep = np.ones(lm.shape[0], dtype=bool)
+    if unknown.size:
+        if not skip_unknown_landmarks:
+            k = int(unknown[0])
+            raise InputError(
+                f"landmark {lm[k]} is not in map.csv ({unknown.size} such measurement(s)); "
+                "expected an id of the map or an empty field (unassociated)",
+                path=p_meas,
+                line=int(meas_lines[k]),
+            )
+        keep[unknown] = False
+
+    gt = None
+    if (root / "groundtruth.csv").exists():
+        gt = read_trajectory(root / "groundtruth.csv", format="csv").trajectory
+    lgt = None
+    p_lgt = root / "landmarks_groundtruth.csv"
+    if p_lgt.exists():
+        c, ln = _read_csv(p_lgt, required=("landmark", "x", "y"))
+        lgt = (
+            _integer_ids(c["landmark"], ln, p_lgt, "landmark"),
+            np.column_stack((c["x"], c["y"])),
+        )
+
+    return Bundle(
+        motion=motion,
+        sensor=meta["sensor"],
+        initial_pose=meta["initial_pose"],
+        initial_covariance=meta["initial_covariance"],
+        controls=controls,
+        odometry=odometry,
+        measurement_times=cols["t"][keep],
+        measurements=np.column_stack((cols["range"], cols["bearing"]))[keep],
+        measurement_landmarks=lm[keep],
+        measurement_associated=assoc[keep],
+        map_ids=map_ids,
+        map_xy=map_xy,
+        map_marginals=marg,
+        map_covariance=map_cov,
+        groundtruth=gt,
+        landmarks_groundtruth=lgt,
+        description=meta["description"],
+        measurement_lines=meas_lines[keep],
+        skipped_unknown=int(unknown.size) if skip_unknown_landmarks else 0,
+        path=str(root),
+    )
+
+
+# ----------------------------------------------------------------------------------- writing
+
+
+def _csv(header: str, columns: Sequence[Array], fmt: str = "%.17g") -> str:
+    if not columns or columns[0].shape[0] == 0:
+        return header + "\n"
+    buf = io.StringIO()
+    np.savetxt(buf, np.column_stack(columns), fmt=fmt, delimiter=",")
+    return header + "\n" + buf.getvalue()
+
+
+def write_bundle(directory: PathLike, bundle: Bundle) -> None:
+    """Write ``bundle`` as a bundle directory (each file atomically; round-trips exactly)."""
+    root = Path(directory)
+    root.mkdir(parents=True, exist_ok=True)
+    meta = {
+        "format": FORMAT,
+        "motion_model": bundle.motion.as_dict(),
+        "sensor_model": bundle.sensor.as_dict(),
+        "initial_pose": [float(v) for v in bundle.initial_pose],
+        "initial_covariance": [[float(v) for v in row] for row in bundle.initial_covariance],
+        "description": bundle.description,
+    }
+    write_text_atomic(root / "bundle.json", json.dumps(meta, indent=2) + "\n")
+    if bundle.controls is not None:
+        c = bundle.controls
+        write_text_atomic(root / "controls.csv", _csv("t,v,omega", [c[:, 0], c[:, 1], c[:, 2]]))
+    if bundle.odometry is not None:
+        o = bundle.odometry
+        write_text_atomic(root / "odometry.csv", _csv("t,x,y,theta", [o.timestamps, *o.poses.T]))
+    t = bundle.measurement_times
+    rows = _csv(
+        "t,range,bearing", [t, bundle.measurements[:, 0], bundle.measurements[:, 1]]
+    ).splitlines()
+    ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks.astype(str), "")
+    text = "t,range,bearing,landmark\n" + "".join(f"{r},{i}\n" for r, i in zip(rows[1:], ids))
+    write_text_atomic(root / "measurements.csv", text)
+    mg = bundle.map_marginals
+    write_text_atomic(
+        root / "map.csv",
+        _csv(
+            "landmark,x,y,cxx,cxy,cyy",
+            [
+                bundle.map_ids.astype(np.float64),
+                bundle.map_xy[:, 0],
+                bundle.map_xy[:, 1],
+                mg[:, 0, 0],
+                mg[:, 0, 1],
+                mg[:, 1, 1],
+            ],
+        ),
+    )
+    if bundle.map_covariance is not None:
+        buf = io.BytesIO()
+        np.save(buf, np.asarray(bundle.map_covariance), allow_pickle=False)
+        write_bytes_atomic(root / "map_covariance.npy", buf.getvalue())
+    if bundle.groundtruth is not None:
+        g = bundle.groundtruth
+        write_text_atomic(root / "groundtruth.csv", _csv("t,x,y,theta", [g.timestamps, *g.poses.T]))
+    if bundle.landmarks_groundtruth is not None:
+        ids_gt, xy = bundle.landmarks_groundtruth
+        write_text_atomic(
+            root / "landmarks_groundtruth.csv",
+            _csv("landmark,x,y", [ids_gt.astype(np.float64), xy[:, 0], xy[:, 1]]),
+        )
