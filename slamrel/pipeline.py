@@ -126,6 +126,7 @@ def run_pipeline(
     corrupt_fraction: float = 0.0,
     noise_scale: float = 1.0,
     method: str = "smoother",
+    max_outlier_run: int | None = 100,
 ) -> RunResult:
     """Run the whole chain on a built-in world (see module docstring)."""
     world = make_world(source, noise=noise, seed=seed, rate=rate)
@@ -138,7 +139,7 @@ def run_pipeline(
     # online estimate and dead reckoning at the ground-truth times
     at = np.searchsorted(slam.online.timestamps, truth.timestamps).clip(0, len(slam.online) - 1)
     online = Trajectory(truth.timestamps, slam.online.poses[at])
-    rec = recover(bundle, method=method)
+    rec = recover(bundle, method=method, max_outlier_run=max_outlier_run)
     rt = rec.trajectory
     k = np.searchsorted(rt.timestamps, truth.timestamps).clip(0, len(rt) - 1)
     covered = np.abs(rt.timestamps[k] - truth.timestamps) <= 1e-9
