@@ -117,7 +117,8 @@ class Segments:
     epochs : ndarray of int, shape (E,)
     base : ndarray of int, shape (N,)
     local : ndarray, shape (N, 3)
-    q : ndarray, shape (N, 3, 3)
+    q : ndarray, shape (6, N)
+        Unique entries ``(00, 01, 02, 11, 12, 22)`` of the accumulated process noise.
     """
 
     epochs: NDArray[np.int64]
@@ -126,12 +127,26 @@ class Segments:
     q: Array
 
 
-def _e(v: Array) -> Array:
-    """``e(d) = [−d_y, d_x, 0]``: the shear ``S(d) = I + e(d) e₃ᵀ``."""
-    out = np.zeros(v.shape[:-1] + (3,))
-    out[..., 0] = -v[..., 1]
-    out[..., 1] = v[..., 0]
-    return out
+def predict6(p: tuple, q: tuple, c, s, dx, dy) -> tuple:  # type: ignore[no-untyped-def]
+    """``S(Δ) P S(Δ)ᵀ + Rot(ψ) Q Rot(ψ)ᵀ`` on the 6 unique entries ``(00, 01, 02, 11, 12, 22)``.
+
+    ``S(Δ) = [[1, 0, −Δy], [0, 1, Δx], [0, 0, 1]]``, ``c, s = cos ψ, sin ψ``. Works on floats
+    (the filter loop) and on arrays (every grid pose at once) alike.
+    """
+    p00, p01, p02, p11, p12, p22 = p
+    q00, q01, q02, q11, q12, q22 = q
+    cc, ss, cs = c * c, s * s, c * s
+    return (
+        p00 - 2.0 * dy * p02 + dy * dy * p22 + cc * q00 - 2.0 * cs * q01 + ss * q11,
+        p01 + dx * p02 - dy * p12 - dx * dy * p22 + cs * (q00 - q11) + (cc - ss) * q01,
+        p02 - dy * p22 + c * q02 - s * q12,
+        p11 + 2.0 * dx * p12 + dx * dx * p22 + ss * q00 + 2.0 * cs * q01 + cc * q11,
+        p12 + dx * p22 + s * q02 + c * q12,
+        p22 + q22,
+    )
+
+
+SYM6 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
 def prepare_segments(
@@ -147,17 +162,18 @@ def prepare_segments(
         Reference headings (unwrapped) at which the steps are linearised, up to one rotation
         per segment (dead reckoning for the filter, the solution for the batch covariance).
     position : ndarray, shape (N, 2)
-        Reference positions, ``position[k+1] − position[k] = R(heading[k]) u_k`` (xy).
+        Reference positions (consecutive differences are the steps' displacements).
     epochs : ndarray of int, shape (E,)
         Sorted, starting with 0 and ending with N − 1.
 
     Returns
     -------
     Segments
-        With ``q[k] = Σ_{m=base}^{k−1} S(d_k − d_{m+1}) Q_m S(d_k − d_{m+1})ᵀ`` expanded into
-        the segmented sums of ``Q_m``, ``q_m = Q_m e₃``, ``f_m q_mᵀ``, ``w_m = Q_m[2,2]``,
-        ``w_m f_m`` and ``w_m f_m f_mᵀ`` (``f_m = e(d_{m+1})``, ``d`` positions in the epoch's
-        frame), so no loop runs over poses.
+        With ``q[k] = Σ_{m=base}^{k−1} S(d_k − d_{m+1}) Q_m S(d_k − d_{m+1})ᵀ``: writing
+        ``S(d) = I + e(d) e₃ᵀ``, ``e(d) = [−d_y, d_x, 0]``, the sum expands into segmented
+        cumulative sums of ``Q_m``, ``f_m Q_m e₃ᵀ`` and ``Q_m[2,2] f_m f_mᵀ``
+        (``f_m = e(d_{m+1})``, positions in the epoch's frame) — 15 scalar series, no loop
+        over poses.
     """
     n = heading.shape[0]
     base = np.zeros(n, dtype=np.int64)
@@ -166,52 +182,35 @@ def prepare_segments(
     c, s = np.cos(heading[base]), np.sin(heading[base])
     dp = position - position[base]
     local = np.column_stack((c * dp[:, 0] + s * dp[:, 1], -s * dp[:, 0] + c * dp[:, 1], dth))
+    q = np.zeros((6, n))
     if n < 2:
-        return Segments(epochs, base, local, np.zeros((n, 3, 3)))
-    # step m runs from pose m to m+1 and belongs to the segment of base[m+1]
-    from recovery.models import process_noise
-
-    a = base[1:]
-    qm = process_noise(heading[:-1] - heading[a], sigma)
-    f = _e(local[1:, :2])
-    qcol = qm[:, :, 2]
-    w = qm[:, 2, 2]
-    terms = np.concatenate(
-        (
-            qm.reshape(-1, 9),
-            qcol,
-            (f[:, :, None] * qcol[:, None, :]).reshape(-1, 9),
-            w[:, None],
-            w[:, None] * f,
-            (w[:, None, None] * f[:, :, None] * f[:, None, :]).reshape(-1, 9),
-        ),
-        axis=1,
-    )
-    cs = np.cumsum(terms, axis=0)
-    before = np.vstack((np.zeros((1, terms.shape[1])), cs))  # before[a] = sum over m < a
-    seg = cs - before[a]  # sum over m in [base, k-1] for pose k = m + 1
-    sa = seg[:, 0:9].reshape(-1, 3, 3)
-    sb = seg[:, 9:12]
-    sc = seg[:, 12:21].reshape(-1, 3, 3)
-    sw = seg[:, 21]
-    se = seg[:, 22:25]
-    sg = seg[:, 25:34].reshape(-1, 3, 3)
-    ek = _e(local[1:, :2])
-    outer = ek[:, :, None] * sb[:, None, :]
-    cross = ek[:, :, None] * se[:, None, :]
-    q = (
-        sa
-        + outer
-        + outer.transpose(0, 2, 1)
-        - sc
-        - sc.transpose(0, 2, 1)
-        + sw[:, None, None] * ek[:, :, None] * ek[:, None, :]
-        - cross
-        - cross.transpose(0, 2, 1)
-        + sg
-    )
-    q = 0.5 * (q + q.transpose(0, 2, 1))
-    return Segments(epochs, base, local, np.concatenate((np.zeros((1, 3, 3)), q)))
+        return Segments(epochs, base, local, q)
+    a = base[1:]  # step m (pose m -> m+1) belongs to the segment of pose m + 1
+    phi = heading[:-1] - heading[a]
+    c, s = np.cos(phi), np.sin(phi)
+    zero = np.zeros(n - 1)
+    qm = predict6((zero,) * 6, tuple(sigma[:, i, j] for i, j in SYM6), c, s, zero, zero)
+    f0, f1 = -local[1:, 1], local[1:, 0]
+    q02, q12, q22 = qm[2], qm[4], qm[5]
+    terms = np.empty((15, n - 1))
+    terms[:6] = qm
+    terms[6:9] = f0 * q02, f0 * q12, f0 * q22
+    terms[9:12] = f1 * q02, f1 * q12, f1 * q22
+    terms[12:15] = q22 * f0 * f0, q22 * f0 * f1, q22 * f1 * f1
+    cs_ = np.cumsum(terms, axis=1)
+    before = np.concatenate((np.zeros((15, 1)), cs_), axis=1)
+    seg = cs_ - before[:, a]  # sum over m in [base, k-1] for pose k = m + 1
+    a00, a01, a02, a11, a12, a22 = seg[:6]
+    c00, c01, c02, c10, c11, c12 = seg[6:12]
+    g00, g01, g11 = seg[12:15]
+    e0, e1 = f0, f1  # e(d_k) for pose k = m + 1
+    q[0, 1:] = a00 + 2 * e0 * a02 - 2 * c00 + a22 * e0 * e0 - 2 * e0 * c02 + g00
+    q[1, 1:] = a01 + e0 * a12 + a02 * e1 - c01 - c10 + a22 * e0 * e1 - e0 * c12 - c02 * e1 + g01
+    q[2, 1:] = a02 + e0 * a22 - c02
+    q[3, 1:] = a11 + 2 * e1 * a12 - 2 * c11 + a22 * e1 * e1 - 2 * e1 * c12 + g11
+    q[4, 1:] = a12 + e1 * a22 - c12
+    q[5, 1:] = a22
+    return Segments(epochs, base, local, q)
 
 
 @dataclass(frozen=True)
@@ -247,11 +246,6 @@ class FilterResult:
     status: NDArray[np.int64]
     nis: Array
     psi: Array
-
-
-def _sym(p6: list[float]) -> Array:
-    a, b, c, d, e, f = p6
-    return np.array([[a, b, c], [b, d, e], [c, e, f]])
 
 
 def _pd(p00: float, p01: float, p02: float, p11: float, p12: float, p22: float) -> bool:
@@ -348,7 +342,7 @@ def run_filter(
     zz = inp.meas_z.tolist()
     lmk = inp.meas_landmark.tolist()
     e_local = seg.local[epochs].tolist()
-    e_q = seg.q[epochs].reshape(-1, 9)[:, [0, 1, 2, 4, 5, 8]].tolist()
+    e_q = seg.q[:, epochs].T.tolist()
     grid_of_active = inp.meas_grid[active]
     bounds = np.searchsorted(grid_of_active, epochs, side="left").tolist() + [active.shape[0]]
     active_l = active.tolist()
@@ -378,7 +372,6 @@ def run_filter(
         k = int(epochs[e])
         if e > 0:
             ux, uy, uth = e_local[e]
-            q00, q01, q02, q11, q12, q22 = e_q[e]
             psi = lin_l[int(epochs[e - 1])][2] if fixed else th  # type: ignore[index]
             c = math.cos(psi)
             s = math.sin(psi)
@@ -387,14 +380,11 @@ def run_filter(
             x += dx
             y += dy
             th += uth
-            cc, ss, cs = c * c, s * s, c * s
-            n00 = p00 - 2.0 * dy * p02 + dy * dy * p22 + cc * q00 - 2.0 * cs * q01 + ss * q11
-            n01 = p01 + dx * p02 - dy * p12 - dx * dy * p22 + cs * (q00 - q11) + (cc - ss) * q01
-            n02 = p02 - dy * p22 + c * q02 - s * q12
-            n11 = p11 + 2.0 * dx * p12 + dx * dx * p22 + ss * q00 + 2.0 * cs * q01 + cc * q11
-            n12 = p12 + dx * p22 + s * q02 + c * q12
-            p22 = p22 + q22
-            p00, p01, p02, p11, p12 = n00, n01, n02, n11, n12
+            p00, p01, p02, p11, p12, p22 = predict6(
+                (p00, p01, p02, p11, p12, p22), e_q[e], c, s, dx, dy
+            )
+            if not -math.pi <= th < math.pi:  # keep prior and posterior on one branch
+                th = float(wrap(th))
             if pxm is not None:
                 pxm[0] -= dy * pxm[2]
                 pxm[1] += dx * pxm[2]
@@ -453,7 +443,9 @@ def run_filter(
             i00, i01, i11 = s11 / det, -s01 / det, s00 / det
             zr, zb = zz[j]
             y0 = zr - r
-            y1 = float(wrap(zb - math.atan2(ddy, ddx) + pth))
+            y1 = zb - math.atan2(ddy, ddx) + pth
+            if not -math.pi <= y1 < math.pi:
+                y1 = float(wrap(y1))
             v = y0 * y0 * i00 + 2.0 * y0 * y1 * i01 + y1 * y1 * i11
             nis_l[j] = v
             if not fixed:
@@ -576,15 +568,15 @@ def fill(seg: Segments, psi: Array, post_x: Array, post_p: Array) -> tuple[Array
     """Predicted poses and covariances of every grid pose from its base epoch's posterior.
 
     ``x_k = x⁺_b + [R(ψ_b) local_xy, local_θ]`` and
-    ``P_k = S(Δ_k) P⁺_b S(Δ_k)ᵀ + Rot(ψ_b) q_k Rot(ψ_b)ᵀ``, vectorised over k.
+    ``P_k = S(Δ_k) P⁺_b S(Δ_k)ᵀ + Rot(ψ_b) q_k Rot(ψ_b)ᵀ`` (:func:`predict6`), vectorised.
     """
     e_of = np.searchsorted(seg.epochs, seg.base)
     w = world_steps(seg, psi)
     poses = post_x[e_of] + w
-    sh = shear(w[:, :2])
-    rot = rotation_matrices(psi[e_of])
-    covs = sh @ post_p[e_of] @ sh.transpose(0, 2, 1) + rot @ seg.q @ rot.transpose(0, 2, 1)
-    return poses, covs
+    pb = tuple(post_p[:, i, j][e_of] for i, j in SYM6)
+    ps = psi[e_of]
+    p6 = predict6(pb, tuple(seg.q), np.cos(ps), np.sin(ps), w[:, 0], w[:, 1])
+    return poses, _full(np.column_stack(p6))
 
 
 def _diverged(inp: FilterInput, t: float, j: int, why: str) -> None:

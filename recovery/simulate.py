@@ -104,8 +104,7 @@ def simulate_bundle(
     lm_true = truth[idx, :2] + side
 
     meas_k = np.arange(measure_every, steps - 1, measure_every)
-    pose_k = np.repeat(meas_k, landmarks)
-    lm_k = np.tile(np.arange(landmarks), meas_k.shape[0])
+    pose_k, lm_k = _visible(truth, lm_true, meas_k, max_range)
     frac = measurement_offset
     if frac:
         pose_m = se2.compose(truth[pose_k], _partial(u_true[pose_k], frac, motion))
@@ -156,6 +155,19 @@ def simulate_bundle(
         landmarks_groundtruth=(ids, lm_true),
         description=f"recovery.simulate seed={seed}",
     )
+
+
+def _visible(truth: np.ndarray, lm: np.ndarray, meas_k: np.ndarray, max_range: float):  # type: ignore[no-untyped-def]
+    """(pose, landmark) pairs within ``max_range`` (+1 m margin), in chunks of poses."""
+    ks, ls = [], []
+    chunk = max(1, 2_000_000 // max(lm.shape[0], 1))
+    for start in range(0, meas_k.shape[0], chunk):
+        k = meas_k[start : start + chunk]
+        d = np.hypot(lm[None, :, 0] - truth[k, None, 0], lm[None, :, 1] - truth[k, None, 1])
+        i, j = np.nonzero(d < max_range + 1.0)
+        ks.append(k[i])
+        ls.append(j)
+    return np.concatenate(ks), np.concatenate(ls)
 
 
 def _partial(u: np.ndarray, frac: float, motion: str) -> np.ndarray:

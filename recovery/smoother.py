@@ -96,10 +96,14 @@ def smooth(fr: FilterResult) -> SmootherResult:
     is_epoch[ep] = True
     k = np.flatnonzero(~is_epoch)
     if k.size:
-        i = np.searchsorted(ep, seg.base[k])  # base epoch index; next epoch is i + 1
-        to_next = w[ep[i + 1], :2] - w[k, :2]
-        ck = fr.covariances[k] @ shear(to_next).transpose(0, 2, 1) @ inv_pri[i + 1]
-        poses[k] = fr.poses[k] + np.einsum("nij,nj->ni", ck, sm_x_e[i + 1] - pri_x[i + 1])
-        covs[k] = fr.covariances[k] + ck @ (sm_p_e[i + 1] - pri_p[i + 1]) @ ck.transpose(0, 2, 1)
-    covs = 0.5 * (covs + covs.transpose(0, 2, 1))
+        i = np.searchsorted(ep, seg.base[k]) + 1  # the next epoch
+        to_next = w[ep[i], :2] - w[k, :2]
+        pk = fr.covariances[k]
+        m = pk.copy()  # P_k S(Δ)ᵀ, with S(Δ)ᵀ = [[1, 0, 0], [0, 1, 0], [−Δy, Δx, 1]]
+        m[:, :, 0] -= to_next[:, 1, None] * pk[:, :, 2]
+        m[:, :, 1] += to_next[:, 0, None] * pk[:, :, 2]
+        ck = m @ inv_pri[i]
+        poses[k] = fr.poses[k] + (ck @ (sm_x_e[i] - pri_x[i])[:, :, None])[:, :, 0]
+        corr = ck @ (sm_p_e[i] - pri_p[i]) @ ck.transpose(0, 2, 1)
+        covs[k] = pk + 0.5 * (corr + corr.transpose(0, 2, 1))
     return SmootherResult(poses=poses, covariances=covs)

@@ -1,0 +1,124 @@
+"""Benchmark: EKF localisation + RTS smoother vs a per-step filterpy EKF loop.
+
+Run: ``python3 benchmarks/bench_recovery.py [--steps 100000] [--measurements 10000]``.
+
+Input: a simulated bundle about the size of one MRCLAM robot (100,000 velocity-control steps,
+10,000 range-bearing measurements, at times between control rows so the grid also splits
+rows). Measured in the same run:
+
+* baseline: :func:`recovery.baseline.filterpy_localisation` (filterpy ``ExtendedKalmanFilter``
+  predicted every step, updated with every measurement through ``update`` with a wrapping
+  residual);
+* ours: :func:`recovery.ekf.run_filter` + :func:`recovery.smoother.smooth`;
+* also: the batch refinement (not part of the target), and peak memory (tracemalloc) of ours.
+
+Target: ours ≤ 1/20 of the baseline's time. Prints the ratio and checks that both filters agree.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import tracemalloc
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from recovery.baseline import filterpy_localisation  # noqa: E402
+from recovery.batch import refine  # noqa: E402
+from recovery.ekf import USED, run_filter  # noqa: E402
+from recovery.recover import filter_input  # noqa: E402
+from recovery.simulate import simulate_bundle  # noqa: E402
+from recovery.smoother import smooth  # noqa: E402
+from relation_metric import se2  # noqa: E402
+
+
+def make_bundle(steps: int, measurements: int, seed: int = 7):  # type: ignore[no-untyped-def]
+    b = simulate_bundle(
+        seed,
+        steps=steps,
+        landmarks=steps // 50,
+        measure_every=10,
+        max_range=5.0,
+        measurement_offset=0.5,
+    )
+    rng = np.random.default_rng(seed)
+    n = b.measurement_times.shape[0]
+    keep = np.sort(rng.choice(n, size=min(measurements, n), replace=False))
+    return replace(
+        b,
+        measurement_times=b.measurement_times[keep],
+        measurements=b.measurements[keep],
+        measurement_landmarks=b.measurement_landmarks[keep],
+        measurement_associated=b.measurement_associated[keep],
+        measurement_lines=None,
+    )
+
+
+def best_of(fn, repeat: int) -> tuple[float, object]:  # type: ignore[no-untyped-def]
+    best, out = float("inf"), None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=100_000)
+    ap.add_argument("--measurements", type=int, default=10_000)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+
+    bundle = make_bundle(args.steps, args.measurements)
+    inp = filter_input(bundle, map_mode="marginal")
+    n, j = inp.times.shape[0], inp.meas_grid.shape[0]
+    print(f"grid poses {n}, control rows {args.steps}, measurements {j}")
+
+    t_ours, (fr, sm) = best_of(lambda: (lambda f: (f, smooth(f)))(run_filter(inp)), args.repeat)
+    t_filter, _ = best_of(lambda: run_filter(inp), args.repeat)
+    t0 = time.perf_counter()
+    base_poses, base_covs, _ = filterpy_localisation(inp)
+    t_base = time.perf_counter() - t0
+
+    d = fr.poses - base_poses
+    d[:, 2] = se2.wrap_angle(d[:, 2])
+    print(
+        f"max |pose - filterpy| {np.abs(d).max():.2e}, max |P - filterpy| "
+        f"{np.abs(fr.covariances - base_covs).max():.2e}"
+    )
+    print(f"filterpy per-step loop   {t_base:8.3f} s  ({1e6 * t_base / n:.1f} µs / grid step)")
+    print(f"ours: filter             {t_filter:8.3f} s")
+    print(f"ours: filter + smoother  {t_ours:8.3f} s")
+    ratio = t_ours / t_base
+    print(
+        f"ratio (filter + smoother) / filterpy = {ratio:.4f} = 1/{1 / ratio:.1f} "
+        f"(target <= 1/20: {'met' if ratio <= 1 / 20 else 'NOT met'})"
+    )
+
+    tracemalloc.start()
+    f = run_filter(inp)
+    smooth(f)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    print(f"peak memory (tracemalloc) filter + smoother: {peak / 2**20:.1f} MiB")
+
+    t0 = time.perf_counter()
+    br = refine(inp, sm.poses, used=fr.status == USED)
+    t_batch = time.perf_counter() - t0
+    print(f"batch refinement (LM, scipy.sparse): {t_batch:.3f} s, {br.iterations} iterations")
+    gt = bundle.groundtruth
+    idx = np.searchsorted(inp.times, gt.timestamps)
+    for name, p in (("filter", fr.poses), ("smoother", sm.poses), ("batch", br.poses)):
+        e = p[idx, :2] - gt.poses[:, :2]
+        print(f"  position RMSE {name:9s} {np.sqrt(np.mean(np.sum(e * e, axis=1))):.4f} m")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
