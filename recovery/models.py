@@ -7,7 +7,7 @@ increment; the EKF then needs only ``F = ∂(x ∘ u)/∂x`` (a shear) and ``Q =
 Velocity model (Thrun, Burgard & Fox, *Probabilistic Robotics*, Sec. 5.3, exact arc)
     ``u(v, ω, Δt) = exp([v Δt, 0, ω Δt]) = [v Δt A(φ), v Δt B(φ), φ]`` with ``φ = ω Δt``,
     ``A = sin φ / φ`` and ``B = (1 − cos φ) / φ`` (straight line ``[v Δt, 0, 0]`` as ω → 0, by
-    Taylor series below ``|φ| < 1e-4``). This equals the book's Eq. 5.9 arc. Control noise
+    Taylor series below ``|φ| < 1e-2``). This equals the book's Eq. 5.9 arc. Control noise
     ``M = diag(σ_v², σ_ω²)`` or (Table 5.3) ``diag(α1 v² + α2 ω², α3 v² + α4 ω²)``, held over
     Δt, gives ``Σ = J_u M J_uᵀ`` with ``J_u = ∂u/∂(v, ω)`` (rank 2).
 
@@ -49,7 +49,7 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-_SMALL = 1e-4
+_SMALL = 1e-2  # below: 3-term Taylor series (truncation < 2e-16)
 
 MOTION_TYPES = ("velocity", "odometry")
 
@@ -112,10 +112,11 @@ def _arc_coefficients(phi: Array) -> tuple[Array, Array, Array, Array]:
     p = np.where(small, 1.0, phi)
     s, c = np.sin(p), np.cos(p)
     phi2 = phi * phi
-    a = np.where(small, 1.0 - phi2 / 6.0, s / p)
-    b = np.where(small, phi / 2.0 - phi * phi2 / 24.0, (1.0 - c) / p)
-    da = np.where(small, -phi / 3.0 + phi * phi2 / 30.0, (p * c - s) / (p * p))
-    db = np.where(small, 0.5 - phi2 / 8.0, (p * s - (1.0 - c)) / (p * p))
+    phi4 = phi2 * phi2
+    a = np.where(small, 1.0 - phi2 / 6.0 + phi4 / 120.0, s / p)
+    b = np.where(small, phi * (0.5 - phi2 / 24.0 + phi4 / 720.0), (1.0 - c) / p)
+    da = np.where(small, phi * (-1.0 / 3.0 + phi2 / 30.0 - phi4 / 840.0), (p * c - s) / (p * p))
+    db = np.where(small, 0.5 - phi2 / 8.0 + phi4 / 144.0, (p * s - (1.0 - c)) / (p * p))
     return a, b, da, db
 
 

@@ -20,6 +20,7 @@ from relation_metric.errors import SlamrelError
 COMMAND_MODULES = (
     "slamrel.commands.run",
     "slamrel.commands.evaluate",
+    "slamrel.commands.recover",
     "slamrel.commands.relations",
     "slamrel.commands.simulate",
     "slamrel.commands.compare",
