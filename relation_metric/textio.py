@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric.errors import InputError
+from relation_metric.fastparse import read_decimal_table
 
 __all__ = [
     "TruncatedLineWarning",
@@ -238,12 +239,20 @@ class RowLines:
 def _fast_table(
     path: PathLike, ncols: int, comment: str
 ) -> tuple[NDArray[np.float64], RowLines] | None:
-    """pandas' C parser over the whole file, or ``None`` to take the exact, diagnosing path.
+    """A whole-file parser, or ``None`` to take the exact, diagnosing path.
 
-    Only a clean file takes this path: every data line with ``ncols`` finite numbers, a
-    final newline. Anything else (a cut-off last line, a bad token, NaN, a missing
-    file, no pandas) returns ``None`` and the line-by-line reader says what is wrong.
+    First :func:`relation_metric.fastparse.read_decimal_table` (vectorised numpy, plain
+    decimals only, bit for bit ``float()``), then pandas' C parser. Only a clean file takes
+    this path: every data line with ``ncols`` finite numbers, a final newline (the numpy
+    parser also takes a last line without one if it is a complete row). Anything else
+    (a cut-off last line, a bad token, NaN, a missing file, no pandas) returns ``None`` and
+    the line-by-line reader says what is wrong.
     """
+    plain = read_decimal_table(path, ncols, comment=comment)
+    if plain is not None:
+        values, text = plain
+        text_lines = lambda: bytes(text).decode("ascii").splitlines()  # noqa: E731
+        return values, RowLines(text_lines, comment)
     try:
         import pandas as pd
     except ImportError:  # pragma: no cover - pandas is a dependency; stay correct without it
