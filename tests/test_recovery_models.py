@@ -112,8 +112,8 @@ def test_range_bearing_jacobians(rng: np.random.Generator) -> None:
     for _ in range(10):
         x, lm = rng.normal(size=3), rng.normal(size=2) * 5
         z, hx, hl = range_bearing(x, lm)
-        np.testing.assert_allclose(hx, fd(lambda a: range_bearing(a, lm)[0], x), atol=1e-7)
-        np.testing.assert_allclose(hl, fd(lambda b: range_bearing(x, b)[0], lm), atol=1e-7)
+        np.testing.assert_allclose(hx, fd(lambda a, lm=lm: range_bearing(a, lm)[0], x), atol=1e-7)
+        np.testing.assert_allclose(hl, fd(lambda b, x=x: range_bearing(x, b)[0], lm), atol=1e-7)
         d = lm - x[:2]
         assert z[0] == pytest.approx(np.hypot(*d))
         assert -np.pi <= z[1] < np.pi
