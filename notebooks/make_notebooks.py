@@ -92,14 +92,109 @@ RELATION_METRIC = [
 ]
 
 
+RUN_WALKTHROUGH = [
+    new_markdown_cell(
+        "# `slamrel run`, step by step\n\n"
+        "A filter-based SLAM run keeps no trajectory. slamrel rebuilds it offline by EKF "
+        "localisation in the final map (same models, same data associations), smooths it, and "
+        "scores it with the relation metric. This notebook runs the chain on a simulated world "
+        "and shows why the recovery must not gate measurements away."
+    ),
+    new_code_cell(
+        "import numpy as np\n"
+        "from slamrel.worlds import make_world\n"
+        "from slamrel.simulate import world_bundle, slam_bundle\n"
+        "from recovery.recover import recover\n"
+        "from relation_metric.evaluate import evaluate\n"
+        "from relation_metric.relations import generate_relations\n"
+        "from relation_metric.trajectory import Trajectory\n"
+        "world = make_world('complex1', noise='a', seed=0)\n"
+        "log = world_bundle(world)            # odometry + measurements + true map\n"
+        "bundle, slam = slam_bundle(log)      # what an EKF-SLAM run leaves: map, covariance, associations\n"
+        "len(world.truth), bundle.map_ids.size, int(bundle.measurement_associated.sum())"
+    ),
+    new_code_cell(
+        "rec = recover(bundle, method='smoother')\n"
+        "truth = world.truth\n"
+        "k = np.searchsorted(rec.trajectory.timestamps, truth.timestamps)\n"
+        "recovered = Trajectory(truth.timestamps, rec.trajectory.poses[k])\n"
+        "rel = generate_relations(truth, 'global', count=2000, seed=0)\n"
+        "for name, est in [('recovered', recovered), ('dead reckoning', world.odometry)]:\n"
+        "    print(f\"{name:15s} {evaluate(rel, est).translation['abs'].mean:.4f} m\")\n"
+        "rec.report()['measurements']"
+    ),
+    new_markdown_cell(
+        "## Gating can hide a broken map\n\n"
+        "Corrupt 3% of the SLAM run's data associations: its map breaks. Localising in it with a "
+        "99.9% χ² innovation gate throws most disagreeing measurements away and scores almost "
+        "like a healthy run; without the gate the recovery is faithful to the broken map. The "
+        "gated fraction is part of the result."
+    ),
+    new_code_cell(
+        "broken, _ = slam_bundle(log, corrupt_fraction=0.03, seed=1)\n"
+        "for gate in (None, 0.999):\n"
+        "    r = recover(broken, method='smoother', gate=gate, max_outlier_run=None)\n"
+        "    k = np.searchsorted(r.trajectory.timestamps, truth.timestamps)\n"
+        "    e = evaluate(rel, Trajectory(truth.timestamps, r.trajectory.poses[k])).translation['abs'].mean\n"
+        "    print(f\"gate {gate}: global error {e:.3f} m, gated {100 * r.counts['gated_fraction']:.1f}% of the measurements\")"
+    ),
+    new_markdown_cell("The whole chain, with its report, is one call (`slamrel run` on the command line):"),
+    new_code_cell(
+        "import tempfile, json, pathlib\n"
+        "from slamrel.pipeline import run_pipeline, write_report\n"
+        "result = run_pipeline('simple1', noise='a', seed=0)\n"
+        "html = write_report(result, pathlib.Path(tempfile.mkdtemp()) / 'report')\n"
+        "m = json.loads((html.parent / 'metrics.json').read_text())\n"
+        "{k: m[k]['translation']['abs']['mean'] for k in ('trajectory', 'dead_reckoning', 'online')}"
+    ),
+]
+
+VALIDATION = [
+    new_markdown_cell(
+        "# Is the recovery faithful?\n\n"
+        "Over 24 seeded EKF-SLAM runs on `complex1` (noise types a, b, c × 0–4% corrupted data "
+        "associations × 2 seeds), compare the relation metric of the trajectory recovered from "
+        "each run's final map with that of the trajectory the filter estimated online. If the "
+        "recovery is faithful, both rank the runs alike (Kendall τ)."
+    ),
+    new_code_cell(
+        "import numpy as np\n"
+        "from slamrel.validation import faithfulness_study\n"
+        "study = faithfulness_study('complex1')\n"
+        "print('Kendall tau (global relations):', round(study.kendall_tau('global'), 3))\n"
+        "print('Kendall tau (consecutive):     ', round(study.kendall_tau('consecutive'), 3))\n"
+        "ratio = study.ratio('global')\n"
+        "print('recovered / online, global: min %.2f, median %.2f, max %.2f' % (ratio.min(), np.median(ratio), ratio.max()))\n"
+        "assert study.kendall_tau('global') >= 0.8"
+    ),
+    new_markdown_cell(
+        "The mean errors agree within a factor of about 0.6–1.05: the recovered trajectory is "
+        "never worse than the online one by more than a few percent, and up to ~1.6× better for "
+        "healthy runs. The reason is that the recovery localises in the *final* map, which is "
+        "better than the map the filter had early in the run; the recovered score measures the "
+        "final map, not the filter's online estimate (DESIGN.md)."
+    ),
+    new_code_cell(
+        "import matplotlib.pyplot as plt\n"
+        "fig, ax = plt.subplots(figsize=(5, 5))\n"
+        "c = [cfg['corrupt_fraction'] for cfg in study.configs]\n"
+        "sc = ax.scatter(study.online['global'], study.recovered['global'], c=c, cmap='viridis')\n"
+        "lim = [0, max(study.online['global'].max(), study.recovered['global'].max()) * 1.05]\n"
+        "ax.plot(lim, lim, 'k--', lw=0.8); ax.set_xlim(lim); ax.set_ylim(lim)\n"
+        "ax.set_xlabel('online: global relation error [m]'); ax.set_ylabel('recovered [m]')\n"
+        "fig.colorbar(sc, label='corrupted associations'); fig.tight_layout()"
+    ),
+]
+
+
 def main() -> None:
-    nb = new_notebook(
-        cells=RELATION_METRIC,
-        metadata={
-            "kernelspec": {"name": "python3", "display_name": "Python 3", "language": "python"}
-        },
-    )
-    nbformat.write(nb, HERE / "relation_metric.ipynb")
+    meta = {"kernelspec": {"name": "python3", "display_name": "Python 3", "language": "python"}}
+    for name, cells in (
+        ("relation_metric", RELATION_METRIC),
+        ("run_walkthrough", RUN_WALKTHROUGH),
+        ("validation", VALIDATION),
+    ):
+        nbformat.write(new_notebook(cells=cells, metadata=meta), HERE / f"{name}.ipynb")
 
 
 if __name__ == "__main__":
