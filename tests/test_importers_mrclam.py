@@ -139,3 +139,39 @@ def test_fit_noise_dataset7_is_plausible():
         f = fit_noise(read_mrclam_robot(d, robot), lms)
         assert 0.01 < f.sigma_v < 0.2 and 0.05 < f.sigma_omega < 0.5
         assert 0.02 < f.sigma_range < 0.3 and 0.002 < f.sigma_bearing < 0.05
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_dataset7_slam_and_recovery_beat_dead_reckoning_on_loops():
+    import warnings
+
+    from recovery.recover import recover
+    from recovery.steps import build_steps
+    from relation_metric import se2
+    from relation_metric.evaluate import evaluate
+    from relation_metric.relations import generate_relations
+    from relation_metric.trajectory import Trajectory
+    from slamrel.importers.mrclam import mrclam_bundle
+    from slamrel.simulate import slam_bundle
+
+    d = require_data("mrclam", "MRCLAM_Dataset7")
+    for robot in range(1, 6):
+        b = mrclam_bundle(d, robot)
+        s, _ = slam_bundle(b)
+        rec = recover(s, method="smoother", max_outlier_run=None)
+        gt = b.groundtruth
+        step = max(1, int(round(1 / np.median(np.diff(gt.timestamps)))))
+        loops = generate_relations(
+            Trajectory(gt.timestamps[::step], gt.poses[::step]),
+            "loops",
+            radius=0.5,
+            min_separation_time=30,
+        )
+        st = build_steps(b)
+        dead = Trajectory(st.times, se2.cumulative_compose(st.u, start=b.initial_pose))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # relations at the ends of the log are unassociated
+            e_rec = evaluate(loops, rec.trajectory, max_time_diff=0.05, interpolate=True)
+            e_dr = evaluate(loops, dead, max_time_diff=0.05, interpolate=True)
+        assert e_rec.translation["abs"].mean < 0.5 * e_dr.translation["abs"].mean, robot

@@ -37,6 +37,18 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     i.add_argument("-q", "--quiet", action="store_true")
     i.set_defaults(func=run_import_isam)
+    mr = isub.add_parser(
+        "mrclam",
+        help="UTIAS MRCLAM robot logs -> SLAM log bundle (velocity model, fitted noise)",
+        description="One bundle per robot (--robot N, or all five into OUT/robotN): controls, "
+        "landmark measurements with their subjects as known association, surveyed landmarks as "
+        "the map, Vicon ground truth; noise fitted from the data (see fit_noise).",
+    )
+    mr.add_argument("directory", metavar="DIR")
+    mr.add_argument("--robot", type=int, default=None, help="1..5 (default: all five)")
+    mr.add_argument("-o", "--output", required=True, metavar="BUNDLE")
+    mr.add_argument("-q", "--quiet", action="store_true")
+    mr.set_defaults(func=run_import_mrclam)
 
     s = sub.add_parser(
         "solve",
@@ -71,6 +83,23 @@ def run_import_isam(args: argparse.Namespace) -> int:
             f"{g.n_poses} poses, {g.n_landmarks} landmarks, {g.pp_i.size} pose-pose and "
             f"{g.pl_k.size} pose-landmark factors -> {args.output}"
         )
+    return 0
+
+
+def run_import_mrclam(args: argparse.Namespace) -> int:
+    from recovery.bundle import write_bundle
+    from slamrel.importers.mrclam import N_ROBOTS, mrclam_bundle
+
+    robots = [args.robot] if args.robot is not None else list(range(1, N_ROBOTS + 1))
+    for robot in robots:
+        out = Path(args.output) if args.robot is not None else Path(args.output) / f"robot{robot}"
+        bundle = mrclam_bundle(args.directory, robot)
+        write_bundle(out, bundle)
+        if not args.quiet:
+            print(
+                f"robot {robot}: {bundle.controls.shape[0]} controls, "
+                f"{bundle.measurements.shape[0]} landmark measurements -> {out}"
+            )
     return 0
 
 
