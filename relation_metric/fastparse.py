@@ -155,14 +155,16 @@ def _parse_padded(
     while cuts[-1] < b.size:
         cut = buf.find(b"\n", cuts[-1] + _BLOCK) + 1
         cuts.append(b.size if cut == 0 else cut)
-    blocks = []
+    # At most one row per line: blocks write their rows straight into ``values``.
+    values = np.empty((buf.count(b"\n"), ncols), dtype=np.float64)
+    nrows = 0
     for lo, hi in zip(cuts[:-1], cuts[1:]):
-        values = _parse_block(b, words, lo, hi, ncols, cbyte[0] if has_comment else None)
-        if values is None:
+        marked = has_comment and buf.find(cbyte, lo, hi) >= 0
+        rows = _parse_block(b, words, lo, hi, cbyte[0] if marked else None, values[nrows:])
+        if rows is None:
             return None
-        blocks.append(values)
-    values = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
-    return values if values.shape[0] else None
+        nrows += rows
+    return values[:nrows] if nrows else None
 
 
 def _parse_block(
@@ -170,11 +172,12 @@ def _parse_block(
     words: NDArray[np.uint64],
     lo: int,
     hi: int,
-    ncols: int,
     cbyte: int | None,
-) -> NDArray[np.float64] | None:
-    """Rows of the whole lines ``b[lo:hi]`` (``b[lo - 1]`` and ``b[hi - 1]`` are blanks).
+    out: NDArray[np.float64],
+) -> int | None:
+    """Parse the whole lines ``b[lo:hi]`` (``b[lo - 1]`` and ``b[hi - 1]`` are blanks).
 
+    Writes the rows to the top of ``out`` (shape (≥ rows, ncols)) and returns their number.
     Positions are local to the block (``lo - 1`` is local 0); ``words`` is indexed globally.
     """
     base = lo - 1
@@ -193,7 +196,7 @@ def _parse_block(
     if cbyte is not None:
         saved = _blank_comments(block, newlines, cbyte)
     try:
-        return _parse_fields(block, words, base, newlines, ncols)
+        return _parse_fields(block, words, base, newlines, out)
     finally:
         if saved is not None:
             block[saved[0]] = saved[1]
@@ -204,9 +207,10 @@ def _parse_fields(
     words: NDArray[np.uint64],
     base: int,
     newlines: NDArray[np.intp],
-    ncols: int,
-) -> NDArray[np.float64] | None:
-    """Tokens of a comment-free block → values, shape (rows, ncols), or ``None``."""
+    out: NDArray[np.float64],
+) -> int | None:
+    """Tokens of a comment-free block → rows at the top of ``out``; their number or ``None``."""
+    ncols = out.shape[1]
     sep = block <= 32
     edges = np.flatnonzero(sep[1:] != sep[:-1])
     edges += 1
@@ -228,21 +232,25 @@ def _parse_fields(
         has_point = np.zeros(ntok, dtype=bool)
         has_point[owner] = True
     nrows = ntok // ncols
-    out = np.empty((nrows, ncols), dtype=np.float64)
     if nrows == 0:
-        return out
+        return 0
+    out = out[:nrows]
     negative = block[starts] == 45
-    starts += base
+    width = ends - starts
+    width -= negative  # characters without the sign
+    frac_len = ends - point
+    frac_len -= has_point
+    if np.any(width - has_point < 1):
+        return None  # no digit: "-", ".", "-."
     ends += base
     point += base
     # Column by column: a column's tokens usually share one layout (all short or all
     # long), which saves splitting them.
-    table = [a.reshape(nrows, ncols) for a in (starts, ends, point, has_point, negative)]
+    table = [a.reshape(nrows, ncols) for a in (ends, point, width, frac_len, has_point, negative)]
     for col in range(ncols):
-        s, e, p, h, neg = (a[:, col] for a in table)
-        if not _parse_chunk(words, s, e, p, h, neg, out[:, col]):
+        if not _parse_chunk(words, *(a[:, col] for a in table), out=out[:, col]):
             return None
-    return out
+    return nrows
 
 
 def _blank_comments(
@@ -285,21 +293,24 @@ def _one_row_per_line(starts: NDArray[np.intp], newlines: NDArray[np.intp], ncol
 
 def _parse_chunk(
     words: NDArray[np.uint64],
-    starts: NDArray[np.intp],
     ends: NDArray[np.intp],
     point: NDArray[np.intp],
+    width: NDArray[np.intp],
+    frac_len: NDArray[np.intp],
     has_point: NDArray[np.bool_],
     negative: NDArray[np.bool_],
+    *,
     out: NDArray[np.float64],
 ) -> bool:
-    """Parse one chunk of tokens into ``out``; False when a token is outside the subset."""
-    width = ends - starts - negative  # characters without the sign
-    frac_len = ends - point - has_point
-    if np.any(width - has_point < 1):
-        return False  # no digit: "-", ".", "-."
+    """Parse one chunk of tokens into ``out``; False when a token is outside the subset.
+
+    ``width`` counts the characters without the sign, ``frac_len`` the fraction digits.
+    """
     short = width <= 8
     if short.all():
         mantissa = _short_mantissa(words, ends, width, frac_len, has_point)
+    elif not short.any():
+        mantissa = _long_mantissa(words, ends, point, width, frac_len)
     else:
         mantissa = np.empty(ends.size, dtype=np.uint64)
         pick = np.flatnonzero(short)
@@ -316,8 +327,8 @@ def _parse_chunk(
         return False
     values = mantissa.astype(np.float64)
     values /= _POW10_FLOAT[frac_len]
-    # On a contiguous array: numpy 2.4's masked in-place ufunc misreads a strided ``out``.
-    np.negative(values, out=values, where=negative)
+    # The sign last: the magnitude is >= 0, so this also gives -0.0 for "-0".
+    np.copysign(values, 0.5 - negative, out=values)
     out[...] = values
     return True
 
