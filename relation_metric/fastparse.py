@@ -33,8 +33,16 @@ Method
     view of the buffer), the bytes before the digits are replaced by ``'0'``, and eight ASCII
     digits are combined into their value with three multiply-shift steps (the SWAR method;
     the multiplications wrap modulo 2**64 by design). Digits are validated per word. A second
-    word is read only for the tokens with more than eight integer or fraction digits. Work is
-    done in chunks of tokens so that the intermediate arrays stay in cache.
+    word is read only for the tokens with more than eight integer or fraction digits; tokens
+    of at most eight characters are read as one word, the point squeezed out by a shift.
+    The file is processed in blocks of whole lines (2 MiB) so that the intermediate arrays
+    stay in the CPU cache, and column by column inside a block (a column usually has one
+    layout, so its tokens need not be split into short and long ones).
+
+Speed
+    A 10^6-line, 91 MB ``.relations`` file: about 0.5 s on the 2-core development machine
+    (``np.loadtxt``: 1.5 s; pandas' C reader: 0.4 s). This module needs numpy only, and its
+    exactness follows from the argument above. See ``benchmarks/bench_relation_metric.py``.
 """
 
 from __future__ import annotations
