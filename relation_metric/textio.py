@@ -350,3 +350,54 @@ def write_bytes_atomic(path: PathLike, data: bytes) -> None:
 def write_text_atomic(path: PathLike, text: str) -> None:
     """Write ``text`` to ``path`` atomically (UTF-8)."""
     write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def read_keyword_records(
+    path: PathLike, fields: dict[str, int]
+) -> dict[str, tuple[NDArray[np.float64], NDArray[np.int64]]]:
+    """Read a file of keyword records (``KIND v1 v2 …``, e.g. g2o or iSAM text).
+
+    Parameters
+    ----------
+    path : str or PathLike
+    fields : dict of record name → number of fields (the keyword included)
+        Every record must be one of these, with exactly that many numeric fields.
+
+    Returns
+    -------
+    dict of record name → (values (K, n − 1), line numbers (K,))
+        One entry per name in ``fields`` (empty arrays when absent).
+    """
+    src = read_source(path)
+    rows: dict[str, list[list[float]]] = {k: [] for k in fields}
+    lines: dict[str, list[int]] = {k: [] for k in fields}
+    for number, text in src.data_lines():
+        f = text.split()
+        kind = f[0]
+        if kind not in fields:
+            raise InputError(
+                f"unknown record {kind!r}; expected one of {', '.join(fields)}",
+                path=src.path,
+                line=number,
+            )
+        if len(f) != fields[kind]:
+            if src.is_last_line(number):
+                src.warn_truncated(number, f"{kind} needs {fields[kind]} fields")
+                break
+            raise InputError(
+                f"{kind}: expected {fields[kind]} fields, got {len(f)}", path=src.path, line=number
+            )
+        rows[kind].append(
+            [
+                parse_float(t, source=src, line=number, what=f"{kind} field {k + 2}")
+                for k, t in enumerate(f[1:])
+            ]
+        )
+        lines[kind].append(number)
+    return {
+        k: (
+            np.asarray(rows[k], dtype=np.float64).reshape(-1, n - 1),
+            np.asarray(lines[k], dtype=np.int64),
+        )
+        for k, n in fields.items()
+    }

@@ -48,7 +48,7 @@ def test_hand_written_file(tmp_path):
     "text,line,msg",
     [
         ("VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 5 1 0 0 1 0 0 1 0 1\n", 2, "unknown pose vertex 5"),
-        ("VERTEX_SE2 0 0 0 0\nVERTEX_SE3:QUAT 1 0 0 0 0 0 0 1\n", 2, "unsupported record"),
+        ("VERTEX_SE2 0 0 0 0\nVERTEX_SE3:QUAT 1 0 0 0 0 0 0 1\n", 2, "unknown record"),
         ("VERTEX_SE2 0 0 0\nVERTEX_SE2 1 0 0 0\n", 1, "expected 5 fields"),
     ],
 )

@@ -3,8 +3,8 @@
 ``VERTEX_SE2 id x y θ``; ``VERTEX_XY id x y``;
 ``EDGE_SE2 i j dx dy dθ I11 I12 I13 I22 I23 I33`` (measurement ``x_i⁻¹ ∘ x_j`` and the upper
 triangle of its information matrix, row-first); ``EDGE_SE2_XY i l x y I11 I12 I22`` (landmark
-``l`` in the frame of pose ``i``). Other records (``FIX``, 3-D types, …) are counted and
-reported, never silently used or dropped: an unknown record is an error.
+``l`` in the frame of pose ``i``). Any other record (``FIX``, 3-D types, …) is an error
+naming its line: nothing is silently used or dropped.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric.errors import InputError
-from relation_metric.textio import PathLike, parse_float, read_source, write_text_atomic
+from relation_metric.textio import PathLike, read_keyword_records, write_text_atomic
 from slamrel.backends.graph import PoseGraph
 
 __all__ = ["read_g2o_graph", "write_g2o_graph"]
@@ -38,42 +38,18 @@ def read_g2o_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64], NDArra
     pose_ids, landmark_ids : ndarray of int
         The file's vertex ids of the graph's poses and landmarks.
     """
-    src = read_source(path)
-    recs: dict[str, list[list[float]]] = {k: [] for k in _FIELDS}
-    lines: dict[str, list[int]] = {k: [] for k in _FIELDS}
-    for number, text in src.data_lines():
-        f = text.split()
-        kind = f[0]
-        if kind not in _FIELDS:
-            raise InputError(
-                f"unsupported record {kind!r}; expected one of {', '.join(_FIELDS)}",
-                path=src.path,
-                line=number,
-            )
-        if len(f) != _FIELDS[kind]:
-            if src.is_last_line(number):
-                src.warn_truncated(number, f"{kind} needs {_FIELDS[kind]} fields")
-                break
-            raise InputError(
-                f"{kind}: expected {_FIELDS[kind]} fields, got {len(f)}", path=src.path, line=number
-            )
-        recs[kind].append(
-            [
-                parse_float(t, source=src, line=number, what=f"{kind} field {k + 2}")
-                for k, t in enumerate(f[1:])
-            ]
-        )
-        lines[kind].append(number)
-    vse2 = np.asarray(recs["VERTEX_SE2"]).reshape(-1, 4)
-    vxy = np.asarray(recs["VERTEX_XY"]).reshape(-1, 3)
+    recs = read_keyword_records(path, _FIELDS)
+    lines = {k: v[1] for k, v in recs.items()}
+    vse2 = recs["VERTEX_SE2"][0]
+    vxy = recs["VERTEX_XY"][0]
     if vse2.shape[0] == 0:
-        raise InputError("no VERTEX_SE2 records", path=src.path)
+        raise InputError("no VERTEX_SE2 records", path=path)
     pose_ids = vse2[:, 0].astype(np.int64)
     lm_ids = vxy[:, 0].astype(np.int64)
     all_ids = np.concatenate((pose_ids, lm_ids))
     uniq, counts = np.unique(all_ids, return_counts=True)
     if (counts > 1).any():
-        raise InputError(f"vertex id {int(uniq[counts > 1][0])} is defined twice", path=src.path)
+        raise InputError(f"vertex id {int(uniq[counts > 1][0])} is defined twice", path=path)
     po = np.argsort(pose_ids)
     lo = np.argsort(lm_ids)
     pose_ids, lm_ids = pose_ids[po], lm_ids[lo]
@@ -91,13 +67,13 @@ def read_g2o_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64], NDArra
             k = int(np.flatnonzero(~ok)[0])
             raise InputError(
                 f"{kind} refers to unknown {what} vertex {int(w[k])}",
-                path=src.path,
-                line=lines[kind][k],
+                path=path,
+                line=int(lines[kind][k]),
             )
         return pos.astype(np.int64)
 
-    e = np.asarray(recs["EDGE_SE2"]).reshape(-1, 11)
-    f2 = np.asarray(recs["EDGE_SE2_XY"]).reshape(-1, 7)
+    e = recs["EDGE_SE2"][0]
+    f2 = recs["EDGE_SE2_XY"][0]
     graph = PoseGraph(
         poses=vse2[po, 1:4],
         landmarks=vxy[lo, 1:3],

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from relation_metric import se2
 from relation_metric.errors import InputError
-from relation_metric.textio import PathLike, parse_float, read_source
+from relation_metric.textio import PathLike, read_keyword_records
 from slamrel.backends.graph import PoseGraph, initial_landmarks
 
 __all__ = ["IsamData", "read_isam"]
@@ -62,47 +62,27 @@ def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamD
     """Read an iSAM/GTSAM text file (see the module docstring)."""
     if noise not in ("covariance", "sqrt-information"):
         raise InputError(f"noise must be 'covariance' or 'sqrt-information', got {noise!r}")
-    src = read_source(path)
-    odo: list[list[float]] = []
-    obs: list[list[float]] = []
-    expected = {"ODOMETRY": 12, "LANDMARK": 8}
-    for number, text in src.data_lines():
-        fields = text.split()
-        kind = fields[0]
-        if kind not in expected:
-            raise InputError(
-                f"unknown record {kind!r}; expected ODOMETRY or LANDMARK",
-                path=src.path,
-                line=number,
-            )
-        if len(fields) != expected[kind]:
-            if src.is_last_line(number):
-                src.warn_truncated(number, f"{kind} needs {expected[kind]} fields")
-                break
-            raise InputError(
-                f"{kind}: expected {expected[kind]} fields, got {len(fields)}",
-                path=src.path,
-                line=number,
-            )
-        vals = [
-            parse_float(tok, source=src, line=number, what=f"{kind} field {k + 2}")
-            for k, tok in enumerate(fields[1:])
-        ]
-        if vals[0] != int(vals[0]) or vals[1] != int(vals[1]):
-            raise InputError(f"{kind}: ids must be integers", path=src.path, line=number)
-        (odo if kind == "ODOMETRY" else obs).append(vals + [number])
-    if not odo:
-        raise InputError("no ODOMETRY lines", path=src.path)
-    o = np.asarray(odo)
-    z = np.asarray(obs).reshape(-1, 8)
+    recs = read_keyword_records(path, {"ODOMETRY": 12, "LANDMARK": 8})
+    o_vals, o_lines = recs["ODOMETRY"]
+    z_vals, z_lines = recs["LANDMARK"]
+    ids = np.concatenate((o_vals[:, :2].ravel(), z_vals[:, :2].ravel()))
+    if np.any(ids != np.round(ids)):
+        k = int(np.flatnonzero(ids != np.round(ids))[0])
+        line = (
+            o_lines[k // 2] if k < 2 * o_vals.shape[0] else z_lines[(k - 2 * o_vals.shape[0]) // 2]
+        )
+        raise InputError("ids must be integers", path=path, line=int(line))
+    odo = o_vals
+    if odo.shape[0] == 0:
+        raise InputError("no ODOMETRY lines", path=path)
+    o = odo
+    z = z_vals
     pose_ids = np.unique(o[:, :2].astype(np.int64))
     landmark_ids = np.unique(z[:, 1].astype(np.int64)) if z.size else np.empty(0, np.int64)
     clash = np.intersect1d(pose_ids, landmark_ids)
     if clash.size:
-        line = int(z[np.flatnonzero(z[:, 1] == clash[0])[0], 7])
-        raise InputError(
-            f"id {clash[0]} is used for a pose and a landmark", path=src.path, line=line
-        )
+        line = int(z_lines[np.flatnonzero(z[:, 1] == clash[0])[0]])
+        raise InputError(f"id {clash[0]} is used for a pose and a landmark", path=path, line=line)
     pi = np.searchsorted(pose_ids, o[:, 0].astype(np.int64))
     pj = np.searchsorted(pose_ids, o[:, 1].astype(np.int64))
     info_pp = _information(o[:, 5:11], 3, noise)
@@ -115,7 +95,7 @@ def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamD
         raise InputError(
             f"pose {pose_ids[gap[0] + 1]} has no ODOMETRY from pose {pose_ids[gap[0]]}; "
             "cannot chain an initial guess",
-            path=src.path,
+            path=path,
         )
     poses = se2.cumulative_compose(step)
     if z.size:
@@ -124,8 +104,8 @@ def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamD
             bad = int(np.flatnonzero(~known)[0])
             raise InputError(
                 f"LANDMARK seen from unknown pose {int(z[bad, 0])}",
-                path=src.path,
-                line=int(z[bad, 7]),
+                path=path,
+                line=int(z_lines[bad]),
             )
         pk = np.searchsorted(pose_ids, z[:, 0].astype(np.int64))
         pl = np.searchsorted(landmark_ids, z[:, 1].astype(np.int64))
