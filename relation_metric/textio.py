@@ -239,52 +239,20 @@ class RowLines:
 def _fast_table(
     path: PathLike, ncols: int, comment: str
 ) -> tuple[NDArray[np.float64], RowLines] | None:
-    """A whole-file parser, or ``None`` to take the exact, diagnosing path.
+    """The whole-file parser, or ``None`` to take the exact, diagnosing path.
 
-    First :func:`relation_metric.fastparse.read_decimal_table` (vectorised numpy, plain
-    decimals only, bit for bit ``float()``), then pandas' C parser. Only a clean file takes
-    this path: every data line with ``ncols`` finite numbers, a final newline (the numpy
-    parser also takes a last line without one if it is a complete row). Anything else
-    (a cut-off last line, a bad token, NaN, a missing file, no pandas) returns ``None`` and
-    the line-by-line reader says what is wrong.
+    :func:`relation_metric.fastparse.read_decimal_table` (vectorised numpy, plain decimals
+    only, bit for bit ``float()``). Only a clean file takes this path: every data line with
+    ``ncols`` finite plain decimals. Anything else (a cut-off last line, a bad token, NaN,
+    exponents, a missing file) returns ``None``; ``np.loadtxt`` then reads it, or the
+    line-by-line reader says what is wrong.
     """
     plain = read_decimal_table(path, ncols, comment=comment)
-    if plain is not None:
-        values, text = plain
-        text_lines = lambda: bytes(text).decode("ascii").splitlines()  # noqa: E731
-        return values, RowLines(text_lines, comment)
-    try:
-        import pandas as pd
-    except ImportError:  # pragma: no cover - pandas is a dependency; stay correct without it
+    if plain is None:
         return None
-    try:
-        raw = Path(path).read_bytes()
-    except OSError:
-        return None
-    if not raw.endswith(b"\n") or b"\x00" in raw:
-        return None
-    has_comment = comment.encode() in raw
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            frame = pd.read_csv(
-                os.fspath(path),
-                sep=r"\s+",
-                header=None,
-                comment=comment if has_comment else None,
-                dtype=np.float64,
-                engine="c",
-                na_filter=False,
-                skip_blank_lines=True,
-            )
-    except Exception:
-        return None
-    # Column-major (pandas' block layout): column slices are contiguous; no copy needed.
-    values = frame.to_numpy(dtype=np.float64)
-    if values.ndim != 2 or values.shape[1] != ncols or not np.isfinite(values).all():
-        return None
-    lines = lambda: raw.decode("utf-8", errors="replace").splitlines()  # noqa: E731
-    return values, RowLines(lines, comment)
+    values, text = plain
+    text_lines = lambda: bytes(text).decode("ascii").splitlines()  # noqa: E731
+    return values, RowLines(text_lines, comment)
 
 
 def _diagnose(

@@ -20,11 +20,11 @@ decimal = st.decimals(
 @given(st.lists(st.tuples(decimal, decimal, decimal, decimal), min_size=1, max_size=30))
 def test_fast_path_equals_python_float(tmp_path_factory, rows):
     path = tmp_path_factory.mktemp("t") / "a.txt"
-    text = "".join(" ".join(str(v) for v in row) + "\n" for row in rows)
+    text = "".join(" ".join(f"{v:f}" for v in row) + "\n" for row in rows)  # plain decimals
     path.write_text(text)
     fast = _fast_table(path, 4, "#")
     assert fast is not None
-    expected = np.array([[float(str(v)) for v in row] for row in rows])
+    expected = np.array([[float(f"{v:f}") for v in row] for row in rows])
     np.testing.assert_array_equal(fast[0], expected)  # bit for bit
     values, _ = read_numeric_table(path, columns=("a", "b", "c", "d"))
     np.testing.assert_array_equal(values, expected)
