@@ -187,12 +187,95 @@ VALIDATION = [
 ]
 
 
+MRCLAM = [
+    new_markdown_cell(
+        "# MRCLAM dataset 7, robot 1\n\n"
+        "Leung, Halpern, Barfoot, Liu, *The UTIAS Multi-Robot Cooperative Localization and "
+        "Mapping Dataset*, IJRR 2011. The robot's odometry `(t, v, ω)` drives the velocity "
+        "model; measurements of the 15 landmarks (barcodes mapped to subjects, sightings of the "
+        "other robots left out and counted) are the known data association. Noise is fitted from "
+        "the data against the Vicon ground truth. The data is read from `../shared/data` "
+        "(`SLAMREL_DATA`); it is not part of this repository."
+    ),
+    new_code_cell(
+        "import os, warnings\n"
+        "from pathlib import Path\n"
+        "import numpy as np\n"
+        "from slamrel.importers.mrclam import mrclam_bundle, read_mrclam_robot, fit_noise\n"
+        "data = Path(os.environ.get('SLAMREL_DATA', Path.cwd().parent.parent / 'shared' / 'data')) / 'mrclam' / 'MRCLAM_Dataset7'\n"
+        "HAVE_DATA = data.exists()\n"
+        "print('data:', data, 'found' if HAVE_DATA else 'NOT found: the cells below do nothing')"
+    ),
+    new_code_cell(
+        "if HAVE_DATA:\n"
+        "    robot = read_mrclam_robot(data, 1)\n"
+        "    print(robot.controls.shape[0], 'controls;', robot.measurements.shape[0], 'landmark measurements;',\n"
+        "          robot.robot_sightings, 'robot sightings left out;', robot.unknown_barcodes, 'unknown barcodes')\n"
+        "    lm = np.loadtxt(data / 'Landmark_Groundtruth.dat')[:, :3]\n"
+        "    for window in (0.5, 1.0, 2.0):\n"
+        "        print(window, 's windows:', fit_noise(robot, lm, window=window))"
+    ),
+    new_markdown_cell(
+        "The fitted control noise depends on the window: odometry errors are correlated in time "
+        "(σ_v grows with the window) and short windows see the ground truth's own differentiation "
+        "noise (σ_ω shrinks with the window). The bundle uses 1 s windows."
+    ),
+    new_code_cell(
+        "if HAVE_DATA:\n"
+        "    from slamrel.simulate import slam_bundle\n"
+        "    from recovery.recover import recover\n"
+        "    from recovery.steps import build_steps\n"
+        "    from relation_metric import se2\n"
+        "    from relation_metric.evaluate import evaluate\n"
+        "    from relation_metric.relations import generate_relations\n"
+        "    from relation_metric.trajectory import Trajectory\n"
+        "    bundle = mrclam_bundle(data, 1)\n"
+        "    slam, online = slam_bundle(bundle)\n"
+        "    rec = recover(slam, method='smoother', max_outlier_run=None)\n"
+        "    gt = bundle.groundtruth\n"
+        "    step = int(round(1 / np.median(np.diff(gt.timestamps))))\n"
+        "    ref = Trajectory(gt.timestamps[::step], gt.poses[::step])\n"
+        "    sets = {'consecutive 1 s': generate_relations(ref, 'consecutive'),\n"
+        "            'loops': generate_relations(ref, 'loops', radius=0.5, min_separation_time=30)}\n"
+        "    st = build_steps(bundle)\n"
+        "    dead = Trajectory(st.times, se2.cumulative_compose(st.u, start=bundle.initial_pose))\n"
+        "    with warnings.catch_warnings():\n"
+        "        warnings.simplefilter('ignore')\n"
+        "        for name, est in (('recovered', rec.trajectory), ('dead reckoning', dead)):\n"
+        "            for rs, rel in sets.items():\n"
+        "                ev = evaluate(rel, est, max_time_diff=0.05, interpolate=True)\n"
+        "                t = ev.translation['abs']\n"
+        "                print(f'{name:15s} {rs:16s} {t.mean:.4f} ± {t.std:.4f} m over {t.count} relations')\n"
+        "    print(rec.report()['measurements'])"
+    ),
+    new_markdown_cell(
+        "Loop relations separate the SLAM result from dead reckoning by an order of magnitude. "
+        "On 1 s consecutive relations the recovered trajectory is *not* better than dead "
+        "reckoning: over one second the odometry is already good, and every landmark update "
+        "(with the ~4% of MRCLAM measurements beyond 5σ of the fitted noise, not gated) moves "
+        "the pose. Local relations alone cannot show what SLAM buys."
+    ),
+    new_code_cell(
+        "if HAVE_DATA:\n"
+        "    import matplotlib.pyplot as plt\n"
+        "    fig, ax = plt.subplots(figsize=(6, 6))\n"
+        "    ax.plot(gt.poses[:, 0], gt.poses[:, 1], 'k-', lw=1, label='Vicon')\n"
+        "    ax.plot(rec.trajectory.poses[:, 0], rec.trajectory.poses[:, 1], lw=0.8, label='recovered')\n"
+        "    ax.plot(dead.poses[:, 0], dead.poses[:, 1], lw=0.8, label='dead reckoning')\n"
+        "    ax.plot(bundle.map_xy[:, 0], bundle.map_xy[:, 1], 'k+', ms=8, label='surveyed landmarks')\n"
+        "    ax.plot(slam.map_xy[:, 0], slam.map_xy[:, 1], 'ro', mfc='none', label='EKF-SLAM map')\n"
+        "    ax.set_aspect('equal'); ax.legend(fontsize=8)"
+    ),
+]
+
+
 def main() -> None:
     meta = {"kernelspec": {"name": "python3", "display_name": "Python 3", "language": "python"}}
     for name, cells in (
         ("relation_metric", RELATION_METRIC),
         ("run_walkthrough", RUN_WALKTHROUGH),
         ("validation", VALIDATION),
+        ("mrclam", MRCLAM),
     ):
         nbformat.write(new_notebook(cells=cells, metadata=meta), HERE / f"{name}.ipynb")
 
