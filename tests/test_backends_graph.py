@@ -171,3 +171,18 @@ def test_pose_covariances_equal_dense_inverse(rng):
         np.testing.assert_allclose(
             cov[k], dense[3 * i : 3 * i + 3, 3 * i : 3 * i + 3], rtol=1e-6, atol=1e-14
         )
+
+
+@pytest.mark.realdata
+def test_victoria_park_ekf_slam_and_recovery_run(tmp_path):
+    from recovery.recover import recover
+    from slamrel.importers.isam import isam_log_bundle
+    from slamrel.simulate import slam_bundle
+
+    d = read_isam(require_data("victoria_park", "victoria_park.txt"))
+    b = isam_log_bundle(d)
+    assert b.measurements.shape[0] == 3640 and len(b.odometry) == 6969
+    slam, res = slam_bundle(b)
+    assert slam.map_ids.size == 151 and np.isfinite(slam.map_xy).all()
+    rec = recover(slam, method="smoother", max_outlier_run=None)
+    assert len(rec.trajectory) == 6969 and rec.counts["used"] == 3640

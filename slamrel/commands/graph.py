@@ -35,6 +35,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="what the noise numbers are "
         "(GTSAM's copy: covariance; original iSAM: sqrt-information)",
     )
+    i.add_argument(
+        "--bundle",
+        metavar="DIR",
+        help="also write the problem as an EKF-SLAM log bundle (for slamrel slam / recover)",
+    )
     i.add_argument("-q", "--quiet", action="store_true")
     i.set_defaults(func=run_import_isam)
     mr = isub.add_parser(
@@ -77,6 +82,12 @@ def run_import_isam(args: argparse.Namespace) -> int:
     check_not_input(args.output, [args.file])
     data = read_isam(args.file, noise=args.noise)
     write_g2o_graph(args.output, data.graph)
+    if args.bundle:
+        from recovery.bundle import write_bundle
+        from slamrel.importers.isam import isam_log_bundle
+
+        check_not_input(args.bundle, [args.file])
+        write_bundle(args.bundle, isam_log_bundle(data))
     g = data.graph
     if not args.quiet:
         print(
