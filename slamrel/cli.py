@@ -22,6 +22,7 @@ COMMAND_MODULES = (
     "slamrel.commands.evaluate",
     "slamrel.commands.recover",
     "slamrel.commands.relations",
+    "slamrel.commands.map_compare",
     "slamrel.commands.simulate",
     "slamrel.commands.compare",
     "slamrel.commands.graph",

@@ -1,0 +1,41 @@
+"""Figures of map comparisons: both maps, the reference mesh, edges coloured by error."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from landmark_graph.compare import MapComparison
+from relation_metric.plots import _pyplot
+
+__all__ = ["map_figure"]
+
+
+def map_figure(res: MapComparison) -> Any:
+    """Reference and estimated landmarks with the mesh edges coloured by length error."""
+    plt = _pyplot()
+    from matplotlib.collections import LineCollection
+
+    a = res.association
+    ref = res.reference.xy[a.reference_rows]
+    fig, ax = plt.subplots(figsize=(7, 7), constrained_layout=True)
+    segs = np.stack((ref[res.mesh.edges[:, 0]], ref[res.mesh.edges[:, 1]]), axis=1)
+    err = res.errors.edge_length
+    lc = LineCollection(list(segs), cmap="viridis", linewidths=2)
+    lc.set_array(err)
+    if err.size:
+        lc.set_clim(0, max(float(np.percentile(err, 99)), 1e-12))
+    ax.add_collection(lc)
+    fig.colorbar(lc, ax=ax, label="edge length error [m] (clipped at p99)")
+    ax.plot(res.reference.xy[:, 0], res.reference.xy[:, 1], "k+", ms=8, label="reference")
+    est = res.estimate.xy
+    if a.alignment is not None:
+        est = a.alignment.apply(np.column_stack((est, np.zeros(len(est)))))[:, :2]
+    ax.plot(est[:, 0], est[:, 1], "o", mfc="none", color="tab:red", label="estimate")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(loc="best")
+    ax.set_title(
+        f"{a.estimate_rows.size} matched, {a.missed.size} missed, {a.spurious.size} spurious"
+    )
+    return fig

@@ -1,0 +1,89 @@
+"""``slamrel map-compare``: score a landmark map against a reference with mesh relations."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from landmark_graph.association import read_association_csv
+from landmark_graph.compare import compare_maps
+from landmark_graph.maps import read_map
+from relation_metric.textio import write_text_atomic
+from slamrel.commands.common import check_outputs, stats_table
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(
+        "map-compare",
+        help="compare an estimated landmark map with a reference (Delaunay-mesh relations)",
+    )
+    p.add_argument("estimate", metavar="ESTIMATE_MAP")
+    p.add_argument("reference", metavar="REFERENCE_MAP")
+    p.add_argument(
+        "--associate", default="id", metavar="id|auto|FILE", help="association (default: id)"
+    )
+    p.add_argument(
+        "--cutoff", type=float, default=1.0, help="OSPA/GOSPA and auto-association cut-off c [m]"
+    )
+    p.add_argument("--order", type=float, default=2.0, help="OSPA/GOSPA order p")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", metavar="F")
+    p.add_argument("--per-edge", metavar="F.csv")
+    p.add_argument("--plot", metavar="F.png")
+    p.add_argument("-q", "--quiet", action="store_true")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    check_outputs([args.json, args.per_edge, args.plot], [args.estimate, args.reference])
+    est = read_map(args.estimate)
+    ref = read_map(args.reference)
+    assoc = args.associate
+    if assoc not in ("id", "auto"):
+        assoc = read_association_csv(assoc, est, ref)
+    res = compare_maps(
+        est, ref, associate=assoc, cutoff=args.cutoff, order=args.order, seed=args.seed
+    )
+    out = res.as_dict()
+    if args.json:
+        write_text_atomic(args.json, json.dumps(out, indent=2, allow_nan=False) + "\n")
+    if args.per_edge:
+        ids = ref.ids[res.association.reference_rows]
+        e = res.mesh.edges
+        rows = np.column_stack(
+            (
+                ids[e[:, 0]],
+                ids[e[:, 1]],
+                res.errors.edge_length,
+                res.errors.edge_displacement_triangle,
+                res.errors.edge_displacement_aligned,
+            )
+        )
+        text = (
+            "landmark_i,landmark_j,length_error,displacement_triangle_frame,displacement_aligned\n"
+        )
+        text += ("%d,%d,%.9g,%.9g,%.9g\n" * rows.shape[0]) % tuple(rows.ravel().tolist())
+        write_text_atomic(args.per_edge, text)
+    if args.plot:
+        from landmark_graph.plots import map_figure
+        from relation_metric.plots import save_figure
+
+        save_figure(map_figure(res), Path(args.plot))
+    if not args.quiet:
+        a = out["association"]
+        print(
+            f"matched {a['matched']}, missed {a['missed']}, spurious {a['spurious']}; "
+            f"mesh {out['mesh']['edges']} edges, {out['mesh']['triangles']} triangles"
+        )
+        from relation_metric.evaluate import error_summaries
+
+        rows = [
+            ("edge length abs [m]", error_summaries(res.errors.edge_length)["abs"]),
+            ("corner angle abs [rad]", error_summaries(res.errors.corner_angle.ravel())["abs"]),
+        ]
+        print(stats_table(rows))
+        print(f"OSPA {res.ospa:.4f} m, GOSPA {res.gospa:.4f} m (c = {res.cutoff}, p = {res.order})")
+    return 0

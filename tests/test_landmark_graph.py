@@ -1,0 +1,189 @@
+"""Landmark graph: mesh relations, degenerate meshes, association, OSPA/GOSPA, CLI."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+from conftest import require_data
+
+from landmark_graph.association import associate_auto, gospa, ospa
+from landmark_graph.compare import compare_maps
+from landmark_graph.maps import LandmarkMap, read_map
+from landmark_graph.mesh import delaunay_mesh
+from landmark_graph.relations import mesh_errors
+from relation_metric import se2
+from relation_metric.errors import InputError
+from slamrel.cli import main
+
+
+def rigid(xy, pose):
+    return se2.transform_points(np.asarray(pose, float), xy)
+
+
+def test_errors_vanish_for_a_rigid_copy(rng):
+    ref = rng.uniform(-20, 20, (60, 2))
+    mesh = delaunay_mesh(ref)
+    e = mesh_errors(rigid(ref, [3.0, -7.0, 2.2]), ref, mesh)
+    for arr in (
+        e.edge_length,
+        e.corner_angle,
+        e.edge_displacement_triangle,
+        e.edge_displacement_aligned,
+    ):
+        assert np.nanmax(arr) < 1e-9
+
+
+def test_one_displaced_landmark_changes_only_what_touches_it(rng):
+    ref = rng.uniform(-20, 20, (60, 2))
+    mesh = delaunay_mesh(ref)
+    est = ref.copy()
+    k = 17
+    est[k] += [0.4, -0.3]
+    e = mesh_errors(est, ref, mesh)
+    touches_edge = (mesh.edges == k).any(axis=1)
+    assert np.all(e.edge_length[~touches_edge] < 1e-12) and np.all(e.edge_length[touches_edge] > 0)
+    touches_tri = (mesh.triangles == k).any(axis=1)
+    assert np.all(e.corner_angle[~touches_tri] < 1e-12) and np.all(
+        e.corner_angle[touches_tri].max(axis=1) > 0
+    )
+
+
+def test_results_do_not_depend_on_landmark_order(rng):
+    ref_xy = rng.uniform(-20, 20, (40, 2))
+    ids = np.arange(100, 140)
+    est_xy = ref_xy + rng.normal(0, 0.1, ref_xy.shape)
+    a = compare_maps(LandmarkMap(ids, est_xy), LandmarkMap(ids, ref_xy)).as_dict()
+    p, q = rng.permutation(40), rng.permutation(40)
+    b = compare_maps(LandmarkMap(ids[p], est_xy[p]), LandmarkMap(ids[q], ref_xy[q])).as_dict()
+    for part in ("translation", "rotation"):
+        for stat in ("mean", "std", "max", "rmse", "count"):
+            assert a[part]["abs"][stat] == pytest.approx(b[part]["abs"][stat], rel=1e-9)
+    assert a["ospa"]["value"] == pytest.approx(b["ospa"]["value"])
+    assert a["gospa"]["value"] == pytest.approx(b["gospa"]["value"])
+
+
+def test_degenerate_meshes():
+    assert delaunay_mesh(np.zeros((0, 2))).edges.shape == (0, 2)
+    assert delaunay_mesh([[0, 0]]).edges.shape == (0, 2)
+    np.testing.assert_array_equal(delaunay_mesh([[0, 0], [1, 1]]).edges, [[0, 1]])
+    line = delaunay_mesh([[0, 0], [2, 2], [1, 1], [3, 3]])  # collinear: chain along the line
+    assert line.collinear and line.triangles.shape == (0, 3)
+    np.testing.assert_array_equal(line.edges, [[0, 2], [1, 2], [1, 3]])
+    dup = delaunay_mesh([[0, 0], [1, 0], [0, 1], [1, 0], [1, 1]])  # point 3 duplicates point 1
+    np.testing.assert_array_equal(dup.duplicates, [[1, 3]])
+    assert not (dup.edges == 3).any()
+    thin = delaunay_mesh([[0, 0], [10, 0], [5, 0.05], [5, 8]])
+    assert thin.thin.any()
+
+
+def test_ospa_gospa_equal_brute_force_for_every_p(rng):
+    for _ in range(20):
+        x = rng.uniform(0, 3, (rng.integers(0, 5), 2))
+        y = rng.uniform(0, 3, (rng.integers(1, 6), 2))
+        c = 1.0
+        for p in (1.0, 2.0, 3.5):
+            small, large = (x, y) if len(x) <= len(y) else (y, x)
+            m, n = len(small), len(large)
+            best = min(
+                (
+                    sum(min(np.hypot(*(small[i] - large[perm[i]])), c) ** p for i in range(m))
+                    for perm in itertools.permutations(range(n), m)
+                ),
+                default=0.0,
+            )
+            assert ospa(x, y, c=c, p=p) == pytest.approx(((best + c**p * (n - m)) / n) ** (1 / p))
+            assert gospa(x, y, c=c, p=p) == pytest.approx((best + c**p / 2 * (n - m)) ** (1 / p))
+
+
+@pytest.mark.realdata
+def test_mrclam_landmarks_perturbed_and_auto_associated(rng):
+    ref = read_map(require_data("mrclam", "MRCLAM_Dataset7", "Landmark_Groundtruth.dat"))
+    assert len(ref) == 15
+    # a perturbed copy: the per-edge length errors are what the displacement implies
+    est_xy = ref.xy.copy()
+    est_xy[4] += [0.05, 0.0]
+    res = compare_maps(LandmarkMap(ref.ids, est_xy), ref)
+    e = res.mesh.edges
+    ids = ref.ids[res.association.reference_rows]
+    pos = {int(i): k for k, i in enumerate(ref.ids)}
+    expected = np.abs(
+        np.hypot(
+            *(
+                est_xy[[pos[int(i)] for i in ids[e[:, 1]]]]
+                - est_xy[[pos[int(i)] for i in ids[e[:, 0]]]]
+            ).T
+        )
+        - np.hypot(
+            *(
+                ref.xy[[pos[int(i)] for i in ids[e[:, 1]]]]
+                - ref.xy[[pos[int(i)] for i in ids[e[:, 0]]]]
+            ).T
+        )
+    )
+    np.testing.assert_allclose(res.errors.edge_length, expected, atol=1e-12)
+    # automatic association after a rigid transform with 10% of the landmarks removed
+    keep = np.sort(rng.permutation(15)[:13])
+    moved = LandmarkMap(ref.ids[keep] + 1000, rigid(ref.xy[keep], [5.0, -3.0, 1.0]))
+    a = associate_auto(moved, ref, cutoff=0.1, seed=1)
+    np.testing.assert_array_equal(moved.ids[a.estimate_rows] - 1000, ref.ids[a.reference_rows])
+    assert a.estimate_rows.size == 13 and a.missed.size == 2
+
+
+@pytest.mark.parametrize(
+    "est_text,msg",
+    [
+        ("landmark,x,y\n1,0,0\n2,nan,1\n3,1,1\n", "finite"),
+        ("landmark,x,y\n1,0,0\n1,1,1\n3,1,0\n", "duplicate landmark id 1"),
+        ("landmark,x,y\n", "empty map"),
+    ],
+)
+def test_bad_maps_exit_3(tmp_path, capsys, est_text, msg):
+    est = tmp_path / "est.csv"
+    ref = tmp_path / "ref.csv"
+    est.write_text(est_text)
+    ref.write_text("landmark,x,y\n1,0,0\n2,1,1\n3,1,0\n")
+    assert main(["map-compare", str(est), str(ref), "-q"]) == 3
+    assert msg in capsys.readouterr().err
+
+
+def test_association_file_unknown_id_exit_3(tmp_path, capsys):
+    m = tmp_path / "m.csv"
+    m.write_text("landmark,x,y\n1,0,0\n2,1,1\n3,1,0\n")
+    f = tmp_path / "a.csv"
+    f.write_text("estimate,reference\n1,1\n9,2\n")
+    assert main(["map-compare", str(m), str(m), "--associate", str(f), "-q"]) == 3
+    assert "a.csv:3: unknown estimated landmark id 9" in capsys.readouterr().err
+
+
+def test_cli_outputs(tmp_path):
+    m = tmp_path / "m.csv"
+    m.write_text(
+        "landmark,x,y\n" + "".join(f"{k},{np.cos(k) * k},{np.sin(k) * k}\n" for k in range(1, 12))
+    )
+    out, per, png = tmp_path / "o.json", tmp_path / "e.csv", tmp_path / "p.png"
+    assert (
+        main(
+            [
+                "map-compare",
+                str(m),
+                str(m),
+                "--json",
+                str(out),
+                "--per-edge",
+                str(per),
+                "--plot",
+                str(png),
+                "-q",
+            ]
+        )
+        == 0
+    )
+    res = json.loads(out.read_text())
+    assert res["translation"]["abs"]["max"] < 1e-9 and res["association"]["matched"] == 11
+    assert per.read_text().count("\n") == res["relations"] + 1
+    assert png.stat().st_size > 5000
+    with pytest.raises(InputError):
+        LandmarkMap([1, 2], [[0, 0]])
