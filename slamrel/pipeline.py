@@ -20,6 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from landmark_graph.compare import MapComparison, compare_maps
+from landmark_graph.maps import LandmarkMap
+from landmark_graph.plots import map_figure
 from recovery.bundle import Bundle, write_bundle
 from recovery.recover import recover
 from relation_metric.consistency import NeesSummary, pose_nees, summarize_nees
@@ -93,6 +96,7 @@ class RunResult:
     recovery: dict[str, Any]
     map: dict[str, Any] | None
     notes: list[str] = field(default_factory=list)
+    map_comparison: MapComparison | None = None
 
     def metrics(self) -> dict[str, Any]:
         """The ``metrics.json`` structure."""
@@ -159,6 +163,8 @@ def run_pipeline(
         "online": (summarize_nees(nees_online, dof=3), nees_online),
     }
     counts = dict(rec.counts)
+    gt_ids, gt_xy = log.landmarks_groundtruth  # type: ignore[misc]
+    map_cmp = compare_maps(LandmarkMap(bundle.map_ids, bundle.map_xy), LandmarkMap(gt_ids, gt_xy))
     notes = [
         f"The recovered trajectory is EKF localisation in the SLAM run's final map with its "
         f"data associations and models, then smoothed ({method}); it scores the final map, "
@@ -177,8 +183,9 @@ def run_pipeline(
         evaluations=evaluations,
         nees=nees,
         recovery=rec.report(),
-        map=None,
+        map=map_cmp.as_dict(),
         notes=notes,
+        map_comparison=map_cmp,
     )
 
 
@@ -243,6 +250,16 @@ def write_report(result: RunResult, directory: str | Path) -> Path:
                 figure_png(nees_figure(truth.timestamps[1:], nees_curves, nees_sum)),
             )
         )
+        map_figs = []
+        if result.map_comparison is not None:
+            map_figs.append(
+                Figure(
+                    "The SLAM map against the true landmarks: the Delaunay mesh of the true "
+                    "landmarks, each edge coloured by its length error",
+                    figure_png(map_figure(result.map_comparison)),
+                )
+            )
+        figs += map_figs
         for k, fig in enumerate(figs):
             (tmp / f"figure_{k + 1}.png").write_bytes(fig.png)
         sections = [
@@ -265,9 +282,63 @@ def write_report(result: RunResult, directory: str | Path) -> Path:
                         [[k, v.mean, v.band[0], v.band[1], v.inside] for k, v in nees_sum.items()],
                     )
                 ],
-                figures=figs[2:],
+                figures=figs[2:3],
             ),
         ]
+        if result.map is not None:
+            mp = result.map
+            sections.append(
+                Section(
+                    "Map",
+                    paragraphs=[
+                        "Relations of the landmark map: the Delaunay mesh over the true "
+                        "landmarks; per edge the length error, per triangle corner the angle "
+                        "error — local and independent of the map's frame.",
+                    ],
+                    tables=[
+                        Table(
+                            "landmark-map relation errors",
+                            ["relation", "abs mean", "abs std", "abs max", "count"],
+                            [
+                                ["edge length [m]"]
+                                + [
+                                    mp["translation"]["abs"][k]
+                                    for k in ("mean", "std", "max", "count")
+                                ],
+                                ["corner angle [rad]"]
+                                + [
+                                    mp["rotation"]["abs"][k]
+                                    for k in ("mean", "std", "max", "count")
+                                ],
+                            ],
+                        ),
+                        Table(
+                            "association and set distances",
+                            [
+                                "matched",
+                                "missed",
+                                "spurious",
+                                "OSPA [m]",
+                                "GOSPA [m]",
+                                "c [m]",
+                                "p",
+                            ],
+                            [
+                                [
+                                    mp["association"]["matched"],
+                                    mp["association"]["missed"],
+                                    mp["association"]["spurious"],
+                                    mp["ospa"]["value"],
+                                    mp["gospa"]["value"],
+                                    mp["ospa"]["c"],
+                                    mp["ospa"]["p"],
+                                ]
+                            ],
+                        ),
+                    ],
+                    figures=figs[3:],
+                )
+            )
         write_text_atomic(
             tmp / "report.html", render_html(f"slamrel report — {result.name}", sections)
         )
