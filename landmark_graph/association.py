@@ -135,26 +135,29 @@ def associate_auto(
         raise InputError("automatic association needs at least 2 landmarks in each map")
     rng = np.random.default_rng(seed)
     tree = cKDTree(r)
+    # Candidate correspondences from a rotation-invariant local descriptor: the sorted
+    # distances to the k nearest neighbours (robust to a few missing landmarks nearby).
+    k = int(min(4, len(est) - 1, len(ref) - 1))
+    de_all, _ = cKDTree(e).query(e, k + 1)
+    dr_all, _ = tree.query(r, k + 1)
+    cand_i = rng.choice(len(est), size=min(len(est), 400), replace=False)
+    _, cand_j = cKDTree(dr_all[:, 1:]).query(de_all[cand_i, 1:])
+    # hypotheses from two candidate correspondences whose distances agree
+    a = rng.integers(0, cand_i.size, iterations)
+    b = rng.integers(0, cand_i.size, iterations)
+    i1, i2, j1, j2 = cand_i[a], cand_i[b], cand_j[a], cand_j[b]
+    de = np.hypot(*(e[i2] - e[i1]).T)
+    dr = np.hypot(*(r[j2] - r[j1]).T)
+    ok = (i1 != i2) & (j1 != j2) & (np.abs(de - dr) < cutoff) & (de > cutoff)
     best, best_al = -1, None
-    i = rng.integers(0, len(est), (iterations, 2))
-    j = rng.integers(0, len(ref), (iterations, 2))
-    de = np.hypot(*(e[i[:, 1]] - e[i[:, 0]]).T)
-    dr = np.hypot(*(r[j[:, 1]] - r[j[:, 0]]).T)
-    ok = (i[:, 0] != i[:, 1]) & (j[:, 0] != j[:, 1]) & (np.abs(de - dr) < cutoff)
-    for k in np.flatnonzero(ok):
-        al = umeyama(e[i[k]], r[j[k]])
+    for h in np.flatnonzero(ok):
+        al = umeyama(e[[i1[h], i2[h]]], r[[j1[h], j2[h]]])
         moved = _apply(al, e)
         score = int(np.sum(tree.query(moved, distance_upper_bound=cutoff)[0] < cutoff))
         if score > best:
             best, best_al = score, al
     if best_al is None:
-        best_al = (
-            umeyama(e[: min(len(e), len(r))], r[: min(len(e), len(r))])
-            if len(e) == len(r)
-            else None
-        )
-        if best_al is None:
-            raise InputError("automatic association found no consistent pair of landmarks")
+        raise InputError("automatic association found no consistent pair of landmarks")
     # refine on the inliers, then assign optimally
     for _ in range(3):
         moved = _apply(best_al, e)
@@ -163,11 +166,35 @@ def associate_auto(
         if inl.sum() >= 2:
             best_al = umeyama(e[inl], r[nn[inl]])
     moved = _apply(best_al, e)
-    d = np.hypot(moved[:, None, 0] - r[None, :, 0], moved[:, None, 1] - r[None, :, 1])
-    cost = np.where(d < cutoff, d, 1e6)
-    er, rr = linear_sum_assignment(cost)
-    good = cost[er, rr] < cutoff
-    return _finish(est, ref, er[good], rr[good], best_al)
+    er, rr = _sparse_assignment(moved, r, cutoff)
+    return _finish(est, ref, er, rr, best_al)
+
+
+def _sparse_assignment(
+    x: NDArray[np.float64], y: NDArray[np.float64], cutoff: float
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Optimal assignment of ``x`` to ``y`` on distances below ``cutoff`` (sparse).
+
+    Leaving a point unmatched costs ``cutoff``; the problem is the min-weight full matching of
+    the usual square augmentation ``[[D, c I], [c I, Dᵀ-pattern at ~0]]`` (every candidate
+    pair below the cut-off is an edge), solved by
+    ``scipy.sparse.csgraph.min_weight_full_bipartite_matching``.
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import min_weight_full_bipartite_matching
+
+    m, n = x.shape[0], y.shape[0]
+    d = cKDTree(x).sparse_distance_matrix(cKDTree(y), cutoff, output_type="coo_matrix")
+    keep = d.data < cutoff
+    i, j, w = d.row[keep], d.col[keep], d.data[keep]
+    eps = 1e-9 * max(cutoff, 1e-12)
+    rows = np.concatenate((i, np.arange(m), m + np.arange(n), m + j))
+    cols = np.concatenate((j, n + np.arange(m), np.arange(n), n + i))
+    vals = np.concatenate((w + eps, np.full(m, cutoff), np.full(n, cutoff), np.full(i.size, eps)))
+    g = sp.csr_matrix((vals, (rows, cols)), shape=(m + n, m + n))
+    left, right = min_weight_full_bipartite_matching(g)
+    real = (left < m) & (right < n)
+    return left[real].astype(np.int64), right[real].astype(np.int64)
 
 
 def _apply(al: Alignment, xy: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -187,3 +187,34 @@ def test_cli_outputs(tmp_path):
     assert png.stat().st_size > 5000
     with pytest.raises(InputError):
         LandmarkMap([1, 2], [[0, 0]])
+
+
+def test_sparse_assignment_equals_dense_padded_assignment(rng):
+    from scipy.optimize import linear_sum_assignment
+
+    from landmark_graph.association import _sparse_assignment
+
+    c = 0.5
+    for _ in range(5):
+        x = rng.uniform(0, 10, (40, 2))
+        y = np.concatenate((x[:30] + rng.normal(0, 0.2, (30, 2)), rng.uniform(0, 10, (12, 2))))
+        er, rr = _sparse_assignment(x, y, c)
+        d = np.hypot(x[:, None, 0] - y[None, :, 0], x[:, None, 1] - y[None, :, 1])
+        big = np.full((82, 82), 1e6)
+        big[:40, :42] = np.where(d < c, d, 1e6)
+        big[:40, 42:] = np.where(np.eye(40) > 0, c, 1e6)
+        big[40:, :42] = np.where(np.eye(42) > 0, c, 1e6)
+        big[40:, 42:] = np.where((d < c).T, 0.0, 1e6)
+        a, b = linear_sum_assignment(big)
+        sparse_cost = d[er, rr].sum() + c * (40 - er.size) + c * (42 - er.size)
+        assert sparse_cost == pytest.approx(big[a, b].sum(), rel=1e-9)
+
+
+def test_auto_association_large_map(rng):
+    n = 3000
+    ref = rng.uniform(0, 500, (n, 2))
+    keep = np.sort(rng.permutation(n)[: int(0.9 * n)])
+    est = rigid(ref[keep] + rng.normal(0, 0.05, (keep.size, 2)), [5.0, 3.0, 0.7])
+    a = associate_auto(LandmarkMap(keep, est), LandmarkMap(np.arange(n), ref), cutoff=1.0)
+    assert a.estimate_rows.size == keep.size
+    np.testing.assert_array_equal(keep[a.estimate_rows], a.reference_rows)
