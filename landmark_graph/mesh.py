@@ -68,11 +68,15 @@ def delaunay_mesh(xy: ArrayLike, *, thin_angle: float = np.deg2rad(5.0)) -> Mesh
     p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     n = p.shape[0]
     # duplicates: identical positions (Qhull would drop them without a word)
-    _, first, inverse = np.unique(p, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.ravel()
-    keep = np.zeros(n, dtype=bool)
-    keep[first] = True
-    dup = np.column_stack((first[inverse][~keep], np.flatnonzero(~keep))).astype(np.int64)
+    # (lexsort on the coordinates: np.unique(axis=0) is several times slower)
+    order = np.lexsort((np.arange(n), p[:, 1], p[:, 0]))
+    same = np.zeros(n, dtype=bool)
+    same[1:] = np.all(p[order[1:]] == p[order[:-1]], axis=1)
+    group_first = order[np.maximum.accumulate(np.where(~same, np.arange(n), 0))] if n else order
+    keep = np.ones(n, dtype=bool)
+    keep[order[same]] = False
+    dup = np.column_stack((group_first[same], order[same])).astype(np.int64)
+    dup = dup[np.argsort(dup[:, 1], kind="stable")]
     idx = np.flatnonzero(keep)
     q = p[idx]
     empty_t = np.empty((0, 3), dtype=np.int64)

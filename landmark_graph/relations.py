@@ -53,8 +53,13 @@ class MeshErrors:
     edge_displacement_aligned: NDArray[np.float64]
 
 
-def mesh_errors(estimate: ArrayLike, reference: ArrayLike, mesh: Mesh) -> MeshErrors:
-    """Errors of ``estimate`` (N, 2) against ``reference`` (N, 2), rows associated, on ``mesh``."""
+def mesh_errors(
+    estimate: ArrayLike, reference: ArrayLike, mesh: Mesh, *, displacement: bool = True
+) -> MeshErrors:
+    """Errors of ``estimate`` (N, 2) against ``reference`` (N, 2), rows associated, on ``mesh``.
+
+    ``displacement=False`` skips the two (optional) displacement errors, which are then NaN.
+    """
     est = np.asarray(estimate, dtype=np.float64)
     ref = np.asarray(reference, dtype=np.float64)
     i, j = mesh.edges[:, 0], mesh.edges[:, 1]
@@ -66,6 +71,8 @@ def mesh_errors(estimate: ArrayLike, reference: ArrayLike, mesh: Mesh) -> MeshEr
     )
     # frame of the first triangle holding each edge (direction of its edge a -> b)
     disp_tri = np.full(length.shape, np.nan)
+    if not displacement:
+        return MeshErrors(length, angle, disp_tri, np.full(length.shape, np.nan))
     if mesh.triangles.shape[0]:
         t = mesh.triangles
         tri_edges = np.sort(
