@@ -218,3 +218,29 @@ def test_auto_association_large_map(rng):
     a = associate_auto(LandmarkMap(keep, est), LandmarkMap(np.arange(n), ref), cutoff=1.0)
     assert a.estimate_rows.size == keep.size
     np.testing.assert_array_equal(keep[a.estimate_rows], a.reference_rows)
+
+
+def test_pose_landmark_errors_invariance_and_hand_value(rng):
+    from landmark_graph.pose_landmark import pose_landmark_errors
+
+    poses = se2.wrap_last(rng.normal(size=(20, 3)) * [5, 5, 2])
+    lms = rng.uniform(-10, 10, (20, 2))
+    # a rigid transform of the whole solution (poses and landmarks) changes nothing
+    g = np.array([3.0, -1.0, 0.8])
+    moved = se2.compose(g, poses)
+    np.testing.assert_allclose(pose_landmark_errors(moved, rigid(lms, g), poses, lms), 0, atol=1e-9)
+    # hand value: pose at the origin, landmark 0.3 m off along x
+    e = pose_landmark_errors([[0, 0, 0]], [[1.3, 2.0]], [[0, 0, 0]], [[1.0, 2.0]])
+    assert e[0] == pytest.approx(0.3)
+
+
+def test_shared_landmark_relations():
+    from landmark_graph.pose_landmark import shared_landmark_relations
+    from relation_metric.trajectory import Trajectory
+
+    ref = Trajectory.from_poses(np.column_stack((np.arange(5.0), np.zeros(5), np.zeros(5))))
+    pose = [0, 0, 0, 1, 1, 2, 2, 2, 4, 4, 4]
+    lm = [1, 2, 3, 1, 2, 1, 2, 3, 1, 2, 3]
+    rel = shared_landmark_relations(ref, pose, lm, min_common=3)
+    assert list(zip(rel.first.astype(int), rel.second.astype(int))) == [(0, 2), (0, 4), (2, 4)]
+    np.testing.assert_allclose(rel.delta[0], [2.0, 0.0, 0.0])
