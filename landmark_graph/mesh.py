@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import Delaunay
+from scipy.spatial import Delaunay, QhullError
 
 from relation_metric.trajectory import readonly
 
@@ -31,7 +31,7 @@ class Mesh:
     Attributes
     ----------
     edges : ndarray of int, shape (E, 2)
-        Unique edges ``(i, j)``, ``i < j``, sorted.
+        Unique edges ``(i, j)``, ``i < j``, grouped by ``i``.
     triangles : ndarray of int, shape (T, 3)
         Counter-clockwise vertex triples.
     duplicates : ndarray of int, shape (D, 2)
@@ -55,39 +55,46 @@ def corner_angles(xy: ArrayLike, triangles: ArrayLike) -> NDArray[np.float64]:
     counter-clockwise triangle; a flipped triangle changes its sign)."""
     p = np.asarray(xy, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
-    out = np.empty(t.shape)
-    for k in range(3):
-        a, b, c = p[t[:, k]], p[t[:, (k + 1) % 3]], p[t[:, (k + 2) % 3]]
-        u, v = b - a, c - a
-        out[:, k] = np.arctan2(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0], np.einsum("ij,ij->i", u, v))
-    return out
+    c = p[t]  # (T, 3, 2) corners
+    u = np.roll(c, -1, axis=1) - c  # b − a for every corner a
+    v = np.roll(c, -2, axis=1) - c  # c − a
+    cross = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    dot = u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1]
+    return np.arctan2(cross, dot)
 
 
 def delaunay_mesh(xy: ArrayLike, *, thin_angle: float = np.deg2rad(5.0)) -> Mesh:
-    """The Delaunay mesh of ``xy`` (shape (N, 2)); see the module docstring for degeneracies."""
+    """The Delaunay mesh of ``xy`` (shape (N, 2)); see the module docstring for degeneracies.
+
+    Duplicates are the points Qhull leaves out as "coplanar" (``Delaunay.coplanar``), each
+    reported with the vertex it coincides with; no extra pass over the points is needed.
+    Edges are unique ``(i, j)`` with ``i < j``, grouped by ``i``.
+    """
     p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     n = p.shape[0]
-    # duplicates: identical positions (Qhull would drop them without a word)
-    # (lexsort on the coordinates: np.unique(axis=0) is several times slower)
-    order = np.lexsort((np.arange(n), p[:, 1], p[:, 0]))
-    same = np.zeros(n, dtype=bool)
-    same[1:] = np.all(p[order[1:]] == p[order[:-1]], axis=1)
-    group_first = order[np.maximum.accumulate(np.where(~same, np.arange(n), 0))] if n else order
-    keep = np.ones(n, dtype=bool)
-    keep[order[same]] = False
-    dup = np.column_stack((group_first[same], order[same])).astype(np.int64)
-    dup = dup[np.argsort(dup[:, 1], kind="stable")]
-    idx = np.flatnonzero(keep)
-    q = p[idx]
     empty_t = np.empty((0, 3), dtype=np.int64)
-    if q.shape[0] < 3 or _collinear(q):
+    tri = None
+    if n >= 3:
+        try:
+            tri = Delaunay(p)
+        except QhullError:
+            tri = None  # collinear (or all points coincide): the chain below
+    if tri is None:
+        uniq, first = np.unique(p, axis=0, return_index=True)  # small or degenerate input only
+        idx = np.sort(first)
+        keep = np.zeros(n, dtype=bool)
+        keep[idx] = True
+        owner = {tuple(v): k for k, v in zip(idx.tolist(), p[idx].tolist())}
+        dup = np.array(
+            [[owner[tuple(p[k])], k] for k in np.flatnonzero(~keep)], dtype=np.int64
+        ).reshape(-1, 2)
+        q = p[idx]
         order = _along_line(q)
         edges = (
-            np.column_stack((idx[order[:-1]], idx[order[1:]]))
+            np.sort(np.column_stack((idx[order[:-1]], idx[order[1:]])), axis=1)
             if order.size > 1
             else np.empty((0, 2), np.int64)
         )
-        edges = np.sort(edges, axis=1)
         edges = edges[np.lexsort((edges[:, 1], edges[:, 0]))]
         return Mesh(
             readonly(edges, np.int64),
@@ -96,25 +103,27 @@ def delaunay_mesh(xy: ArrayLike, *, thin_angle: float = np.deg2rad(5.0)) -> Mesh
             q.shape[0] >= 3,
             readonly(np.zeros(0, bool), np.bool_),
         )
-    tri = Delaunay(q)
+    dup = (
+        tri.coplanar[:, [2, 0]].astype(np.int64)
+        if tri.coplanar.size
+        else np.empty((0, 2), np.int64)
+    )
+    dup = dup[np.argsort(dup[:, 1], kind="stable")]
     indptr, nbr = tri.vertex_neighbor_vertices
-    src = np.repeat(np.arange(q.shape[0]), np.diff(indptr))
+    src = np.repeat(np.arange(n), np.diff(indptr))
     sel = src < nbr
-    edges = np.column_stack((idx[src[sel]], idx[nbr[sel]]))
-    edges = np.sort(edges, axis=1)
-    edges = edges[np.lexsort((edges[:, 1], edges[:, 0]))]
+    edges = np.column_stack((src[sel], nbr[sel])).astype(np.int64)
     simp = tri.simplices.astype(np.int64)
-    ang = corner_angles(q, simp)
-    ccw = ang[:, 0] > 0
-    simp[~ccw] = simp[~ccw][:, [0, 2, 1]]
-    ang = np.abs(ang)
-    triangles = idx[simp]
+    ang = corner_angles(p, simp)
+    cw = ang[:, 0] < 0
+    if cw.any():
+        simp[cw] = simp[cw][:, [0, 2, 1]]
     return Mesh(
         edges=readonly(edges, np.int64),
-        triangles=readonly(triangles, np.int64),
+        triangles=readonly(simp, np.int64),
         duplicates=readonly(dup, np.int64),
         collinear=False,
-        thin=readonly(ang.min(axis=1) < thin_angle, np.bool_),
+        thin=readonly(np.abs(ang).min(axis=1) < thin_angle, np.bool_),
     )
 
 
