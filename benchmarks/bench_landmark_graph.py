@@ -46,7 +46,7 @@ def main() -> None:
     for n in (10**5,) if args.small else (10**5, 10**6):
         ref = rng.uniform(0, 1000, (n, 2))
         est = ref + rng.normal(0, 0.01, ref.shape)
-        repeat = 3 if n <= 10**5 else 1
+        repeat = 5 if n <= 10**5 else 1
 
         def full(ref=ref, est=est) -> object:  # type: ignore[no-untyped-def]
             mesh = delaunay_mesh(ref)
