@@ -21,21 +21,14 @@ from scipy.spatial import Delaunay
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from timing import best_of  # noqa: E402
+
 from landmark_graph.association import associate_auto  # noqa: E402
 from landmark_graph.maps import LandmarkMap  # noqa: E402
 from landmark_graph.mesh import delaunay_mesh  # noqa: E402
 from landmark_graph.relations import mesh_errors  # noqa: E402
 from relation_metric import se2  # noqa: E402
 from relation_metric.evaluate import error_summaries  # noqa: E402
-
-
-def best_of(fn, repeat: int) -> float:  # type: ignore[no-untyped-def]
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
 
 
 def main() -> None:

@@ -28,6 +28,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
+from timing import best_of  # noqa: E402
+
 from relation_metric import se2  # noqa: E402
 from relation_metric.evaluate import evaluate  # noqa: E402
 from relation_metric.fastparse import read_decimal_table  # noqa: E402
@@ -37,18 +39,12 @@ from relation_metric.trajectory import Trajectory  # noqa: E402
 EVO_VENV = HERE / ".venv-evo"
 
 
-def best_of(fn, repeat: int = 3) -> float:  # type: ignore[no-untyped-def]
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
-
 
 def random_trajectory(n: int, seed: int = 0) -> Trajectory:
     rng = np.random.default_rng(seed)
-    steps = np.column_stack((rng.uniform(0.1, 0.5, n - 1), rng.normal(0, 0.02, n - 1), rng.normal(0, 0.1, n - 1)))
+    steps = np.column_stack(
+        (rng.uniform(0.1, 0.5, n - 1), rng.normal(0, 0.02, n - 1), rng.normal(0, 0.1, n - 1))
+    )
     return Trajectory.from_poses(se2.cumulative_compose(steps), dt=0.1)
 
 
@@ -100,11 +96,15 @@ def ensure_evo() -> Path | None:
         if ok.returncode == 0:
             return python
     print(f"creating {EVO_VENV} with evo (once) ...", flush=True)
-    r = subprocess.run([sys.executable, "-m", "venv", str(EVO_VENV)], capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "venv", str(EVO_VENV)], capture_output=True, text=True
+    )
     if r.returncode:
         print("cannot create the venv:", r.stderr.strip())
         return None
-    r = subprocess.run([str(python), "-m", "pip", "install", "-q", "evo", "numpy"], capture_output=True, text=True)
+    r = subprocess.run(
+        [str(python), "-m", "pip", "install", "-q", "evo", "numpy"], capture_output=True, text=True
+    )
     if r.returncode:
         print("cannot install evo:", r.stderr.strip()[-500:])
         return None
@@ -127,7 +127,13 @@ def bench_evo(n: int = 100_000) -> dict[str, float] | None:
         script = Path(tmp) / "evo_rpe.py"
         script.write_text(EVO_SCRIPT)
         r = subprocess.run(
-            [str(python), str(script), str(Path(tmp) / "ref.npy"), str(Path(tmp) / "est.npy"), str(Path(tmp) / "err")],
+            [
+                str(python),
+                str(script),
+                str(Path(tmp) / "ref.npy"),
+                str(Path(tmp) / "est.npy"),
+                str(Path(tmp) / "err"),
+            ],
             capture_output=True,
             text=True,
         )
@@ -194,40 +200,90 @@ def main() -> None:
     args = parser.parse_args()
     table: list[Row] = []
     thr = bench_throughput()
-    table.append(("[1] evaluate 10^6 index relations (assoc + errors + all stats)",
-                  f"{thr['index_relations_s']:.3f} s", "-", "-",
-                  f"< 0.5 s: {'met' if thr['index_relations_s'] < 0.5 else 'MISSED'}"))
-    table.append(("    same, timestamp relations (nearest-pose association)",
-                  f"{thr['time_relations_s']:.3f} s", "-", "-", "(no target)"))
+    table.append(
+        (
+            "[1] evaluate 10^6 index relations (assoc + errors + all stats)",
+            f"{thr['index_relations_s']:.3f} s",
+            "-",
+            "-",
+            f"< 0.5 s: {'met' if thr['index_relations_s'] < 0.5 else 'MISSED'}",
+        )
+    )
+    table.append(
+        (
+            "    same, timestamp relations (nearest-pose association)",
+            f"{thr['time_relations_s']:.3f} s",
+            "-",
+            "-",
+            "(no target)",
+        )
+    )
     if not args.no_evo:
         evo = bench_evo()
         if evo is None:
-            table.append(("[2] RPE delta 1 frame, 10^5 poses", "-", "evo unavailable", "-", "not measured"))
+            table.append(
+                ("[2] RPE delta 1 frame, 10^5 poses", "-", "evo unavailable", "-", "not measured")
+            )
         else:
             agree = max(evo["max_abs_diff_trans"], evo["max_abs_diff_rot"]) < 1e-9
             evo_total = evo["evo_trans_s"] + evo["evo_rot_s"]
-            table.append(("[2] RPE delta 1 frame, 10^5 poses (trans + rot)",
-                          f"{evo['slamrel_s']:.4f} s", f"evo RPE {evo_total:.2f} s",
-                          f"{evo['ratio']:.0f}x",
-                          f">= 100x: {'met' if evo['ratio'] >= 100 else 'MISSED'}"))
-            table.append(("    max |slamrel - evo| (m, rad)",
-                          f"{evo['max_abs_diff_trans']:.1e}, {evo['max_abs_diff_rot']:.1e}", "", "",
-                          "agree" if agree else "DISAGREE"))
+            table.append(
+                (
+                    "[2] RPE delta 1 frame, 10^5 poses (trans + rot)",
+                    f"{evo['slamrel_s']:.4f} s",
+                    f"evo RPE {evo_total:.2f} s",
+                    f"{evo['ratio']:.0f}x",
+                    f">= 100x: {'met' if evo['ratio'] >= 100 else 'MISSED'}",
+                )
+            )
+            table.append(
+                (
+                    "    max |slamrel - evo| (m, rad)",
+                    f"{evo['max_abs_diff_trans']:.1e}, {evo['max_abs_diff_rot']:.1e}",
+                    "",
+                    "",
+                    "agree" if agree else "DISAGREE",
+                )
+            )
     rd = bench_read()
     warm = rd["read_relations_warm_s"]
-    table.append((f"[3] read_relations, 10^6 lines ({rd['megabytes']:.0f} MB), warm",
-                  f"{warm:.3f} s", f"np.loadtxt {rd['np_loadtxt_s']:.3f} s",
-                  f"{rd['np_loadtxt_s'] / warm:.1f}x", f"< 1 s: {'met' if warm < 1 else 'MISSED'}"))
-    table.append(("    read_relations, first call in the process",
-                  f"{rd['read_relations_cold_s']:.3f} s", "", "",
-                  f"< 1 s: {'met' if rd['read_relations_cold_s'] < 1 else 'MISSED'}"))
-    table.append(("    fastparse.read_decimal_table alone",
-                  f"{rd['fastparse_s']:.3f} s", f"np.loadtxt {rd['np_loadtxt_s']:.3f} s",
-                  f"{rd['np_loadtxt_s'] / rd['fastparse_s']:.1f}x",
-                  "bit-identical to loadtxt" if rd["bit_identical_to_loadtxt"] else "DIFFERS"))
+    table.append(
+        (
+            f"[3] read_relations, 10^6 lines ({rd['megabytes']:.0f} MB), warm",
+            f"{warm:.3f} s",
+            f"np.loadtxt {rd['np_loadtxt_s']:.3f} s",
+            f"{rd['np_loadtxt_s'] / warm:.1f}x",
+            f"< 1 s: {'met' if warm < 1 else 'MISSED'}",
+        )
+    )
+    table.append(
+        (
+            "    read_relations, first call in the process",
+            f"{rd['read_relations_cold_s']:.3f} s",
+            "",
+            "",
+            f"< 1 s: {'met' if rd['read_relations_cold_s'] < 1 else 'MISSED'}",
+        )
+    )
+    table.append(
+        (
+            "    fastparse.read_decimal_table alone",
+            f"{rd['fastparse_s']:.3f} s",
+            f"np.loadtxt {rd['np_loadtxt_s']:.3f} s",
+            f"{rd['np_loadtxt_s'] / rd['fastparse_s']:.1f}x",
+            "bit-identical to loadtxt" if rd["bit_identical_to_loadtxt"] else "DIFFERS",
+        )
+    )
     if "pandas_read_csv_s" in rd:
-        table.append(("    (for reference) pandas.read_csv, C engine",
-                      f"{rd['pandas_read_csv_s']:.3f} s", "", "", ""))
+        table.append(
+            (
+                "    (for reference) pandas.read_csv, C engine",
+                f"{rd['pandas_read_csv_s']:.3f} s",
+                "",
+                "",
+                "",
+            )
+        )
     head = ("benchmark", "slamrel", "baseline", "ratio", "target")
     widths = [max(len(r[k]) for r in [head, *table]) for k in range(5)]
     for r in [head, tuple("-" * w for w in widths), *table]:
