@@ -7,14 +7,14 @@ from typing import Any
 import numpy as np
 
 from landmark_graph.compare import MapComparison
-from relation_metric.plots import _pyplot
+from relation_metric.plots import pyplot
 
 __all__ = ["map_figure"]
 
 
 def map_figure(res: MapComparison) -> Any:
     """Reference and estimated landmarks with the mesh edges coloured by length error."""
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib.collections import LineCollection
 
     a = res.association

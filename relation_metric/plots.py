@@ -18,10 +18,10 @@ from relation_metric.trajectory import Trajectory
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["evaluation_figure", "save_figure"]
+__all__ = ["evaluation_figure", "save_figure", "pyplot"]
 
 
-def _pyplot():  # type: ignore[no-untyped-def]
+def pyplot():  # type: ignore[no-untyped-def]
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -44,7 +44,7 @@ def evaluation_figure(
     that large errors point at the part of the map that is wrong. Unassociated relations are
     counted in the title, not drawn.
     """
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib.collections import LineCollection
 
     ev = evaluation
@@ -118,7 +118,7 @@ def evaluation_figure(
 
 def save_figure(fig: Figure, path: PathLike, *, dpi: int = 120) -> None:
     """Save a figure atomically (PNG, SVG or PDF by the file extension) and close it."""
-    plt = _pyplot()
+    plt = pyplot()
     fmt = str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else "png"
     buf = io.BytesIO()
     try:

@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric.consistency import NeesSummary
-from relation_metric.plots import _pyplot
+from relation_metric.plots import pyplot
 from relation_metric.trajectory import Trajectory
 
 __all__ = ["trajectories_figure", "nees_figure"]
@@ -22,7 +22,7 @@ def trajectories_figure(
     mapped: NDArray[np.float64] | None = None,
 ) -> Any:
     """Reference and estimated trajectories (and true / mapped landmarks) in one plot."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 7), constrained_layout=True)
     ax.plot(reference.poses[:, 0], reference.poses[:, 1], "k-", lw=2, label="reference", zorder=3)
     for name, est in estimates.items():
@@ -44,7 +44,7 @@ def nees_figure(
     summaries: dict[str, NeesSummary],
 ) -> Any:
     """NEES over time for each estimate, with the 95% χ² band of a single run."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 3.5), constrained_layout=True)
     band = None
     for name, v in curves.items():

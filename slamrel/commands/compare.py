@@ -49,9 +49,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _figure(comp, path: Path) -> None:  # type: ignore[no-untyped-def]
-    from relation_metric.plots import _pyplot, save_figure
+    from relation_metric.plots import pyplot, save_figure
 
-    plt = _pyplot()
+    plt = pyplot()
     datasets = list(dict.fromkeys(ds for ds, _ in comp.stats))
     algorithms = list(dict.fromkeys(alg for _, alg in comp.stats))
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)

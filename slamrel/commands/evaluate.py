@@ -7,6 +7,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from relation_metric.alignment import absolute_trajectory_error
 from relation_metric.evaluate import Evaluation, evaluate
 from relation_metric.formats import TRAJECTORY_FORMATS
@@ -194,7 +196,8 @@ def summary_text(ev: Evaluation, result: dict[str, Any], *, degrees: bool) -> st
     from relation_metric.evaluate import error_summaries
 
     unit = "deg" if degrees else "rad"
-    rot = error_summaries(ev.errors.rotation[ev.valid] * (57.29577951308232 if degrees else 1.0))
+    rot_values = ev.errors.rotation[ev.valid]
+    rot = error_summaries(np.degrees(rot_values) if degrees else rot_values)
     rows = [
         ("translation abs [m]", ev.translation["abs"]),
         ("translation sqr [m²]", ev.translation["sqr"]),
