@@ -22,6 +22,7 @@ __all__ = ["evaluation_figure", "save_figure", "pyplot"]
 
 
 def pyplot():  # type: ignore[no-untyped-def]
+    """``matplotlib.pyplot``, imported lazily with the non-interactive Agg backend."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
