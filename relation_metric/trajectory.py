@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -13,9 +14,9 @@ from relation_metric.errors import InputError
 __all__ = ["Trajectory", "readonly"]
 
 
-def readonly(a: ArrayLike, dtype: type = np.float64) -> NDArray[np.float64]:
-    """A C-contiguous copy of ``a`` that cannot be written to."""
-    out: NDArray[np.float64] = np.array(a, dtype=dtype, copy=True, order="C")
+def readonly(a: ArrayLike, dtype: type = np.float64) -> NDArray[Any]:
+    """A C-contiguous copy of ``a`` (as ``dtype``) that cannot be written to."""
+    out: NDArray[Any] = np.array(a, dtype=dtype, copy=True, order="C")
     out.flags.writeable = False
     return out
 

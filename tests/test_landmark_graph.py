@@ -244,3 +244,11 @@ def test_shared_landmark_relations():
     rel = shared_landmark_relations(ref, pose, lm, min_common=3)
     assert list(zip(rel.first.astype(int), rel.second.astype(int))) == [(0, 2), (0, 4), (2, 4)]
     np.testing.assert_allclose(rel.delta[0], [2.0, 0.0, 0.0])
+
+
+def test_cli_console_summary(tmp_path, capsys):
+    m = tmp_path / "m.csv"
+    m.write_text("landmark,x,y\n1,0,0\n2,1,0\n3,0,1\n4,1,1.2\n")
+    assert main(["map-compare", str(m), str(m)]) == 0
+    out = capsys.readouterr().out
+    assert "matched 4, missed 0, spurious 0" in out and "edge length abs [m]" in out and "OSPA 0.0000" in out

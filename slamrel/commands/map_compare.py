@@ -80,10 +80,10 @@ def run(args: argparse.Namespace) -> int:
         )
         from relation_metric.evaluate import error_summaries
 
-        rows = [
+        table = [
             ("edge length abs [m]", error_summaries(res.errors.edge_length)["abs"]),
             ("corner angle abs [rad]", error_summaries(res.errors.corner_angle.ravel())["abs"]),
         ]
-        print(stats_table(rows))
+        print(stats_table(table))
         print(f"OSPA {res.ospa:.4f} m, GOSPA {res.gospa:.4f} m (c = {res.cutoff}, p = {res.order})")
     return 0
