@@ -46,3 +46,19 @@ def test_interrupted_run_leaves_no_partial_report(tmp_path, monkeypatch):
     monkeypatch.setattr(pipeline, "render_html", boom)
     assert main(["run", "simple1", "-o", str(out), "-q"]) == 130
     assert list(tmp_path.iterdir()) == []
+
+
+def test_run_on_a_bundle_directory(tmp_path):
+    sim, slam, rep = tmp_path / "sim", tmp_path / "slam", tmp_path / "rep"
+    assert main(["simulate", "simple2", "--seed", "3", "-o", str(sim), "-q"]) == 0
+    assert main(["slam", str(sim), "-o", str(slam), "--store-online", "-q"]) == 0
+    assert main(["run", str(slam), "-o", str(rep), "-q"]) == 0
+    m = json.loads((rep / "metrics.json").read_text())
+    assert m["trajectory_source"] == "recovered" and "online" in m and "dead_reckoning" in m
+    assert m["map"]["association"]["matched"] > 100
+    assert m["trajectory"]["by_relation_set"]["global"]["translation"]["abs"]["mean"] < (
+        m["dead_reckoning"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]
+    )
+    # a bundle without ground truth cannot be scored: a clear error
+    (slam / "groundtruth.csv").unlink()
+    assert main(["run", str(slam), "-o", str(tmp_path / "rep2"), "-q"]) == 3

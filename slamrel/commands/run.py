@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 from relation_metric.errors import InputError
 from slamrel.pipeline import run_pipeline, write_report
@@ -14,7 +15,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(
         "run",
         help="simulate, run EKF-SLAM, recover and score the trajectory, write a report",
-        description="SOURCE is a built-in world (" + ", ".join(WORLDS) + "); default simple1.",
+        description="SOURCE is a SLAM result bundle directory (scored against its "
+        "groundtruth.csv) or a built-in world (" + ", ".join(WORLDS) + "); default simple1.",
     )
     p.add_argument("source", nargs="?", default="simple1", metavar="SOURCE")
     p.add_argument("-o", "--output", default="slamrel-report", metavar="DIR")
@@ -28,8 +30,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.source not in WORLDS:
-        raise InputError(f"unknown SOURCE {args.source!r}; expected one of {', '.join(WORLDS)}")
+    if args.source not in WORLDS and not Path(args.source).is_dir():
+        raise InputError(
+            f"unknown SOURCE {args.source!r}; expected a SLAM result bundle directory or one of "
+            f"{', '.join(WORLDS)}"
+        )
     start = time.perf_counter()
     result = run_pipeline(
         args.source, noise=args.noise, seed=args.seed, rate=args.rate,
