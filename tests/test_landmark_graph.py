@@ -124,12 +124,22 @@ def test_mrclam_landmarks_perturbed_and_auto_associated(rng):
         )
     )
     np.testing.assert_allclose(res.errors.edge_length, expected, atol=1e-12)
-    # automatic association after a rigid transform with 10% of the landmarks removed
-    keep = np.sort(rng.permutation(15)[:13])
-    moved = LandmarkMap(ref.ids[keep] + 1000, rigid(ref.xy[keep], [5.0, -3.0, 1.0]))
-    a = associate_auto(moved, ref, cutoff=0.1, seed=1)
-    np.testing.assert_array_equal(moved.ids[a.estimate_rows] - 1000, ref.ids[a.reference_rows])
-    assert a.estimate_rows.size == 13 and a.missed.size == 2
+    # automatic association after a random rigid transform with 10% (2 of 15) removed, exact
+    # and with 1 cm noise (the closest landmarks are 0.19 m apart), at two cut-offs
+    for trial in range(30):
+        keep = np.sort(rng.permutation(15)[:13])
+        g = [*rng.uniform(-50, 50, 2), rng.uniform(-np.pi, np.pi)]
+        noise = rng.normal(0, 0.01 * (trial % 2), (13, 2))
+        moved = LandmarkMap(ref.ids[keep] + 1000, rigid(ref.xy[keep] + noise, g))
+        a = associate_auto(moved, ref, cutoff=(0.3, 1.0)[trial % 3 == 0], seed=trial)
+        np.testing.assert_array_equal(moved.ids[a.estimate_rows] - 1000, ref.ids[keep])
+        np.testing.assert_array_equal(ref.ids[a.reference_rows], ref.ids[keep])
+        np.testing.assert_array_equal(
+            np.sort(ref.ids[a.missed]), np.setdiff1d(ref.ids, ref.ids[keep])
+        )
+        assert a.spurious.size == 0
+        # the recovered alignment is the inverse of the transform applied
+        assert se2.wrap_angle(a.alignment.angle + g[2]) == pytest.approx(0, abs=0.02)
 
 
 @pytest.mark.parametrize(
@@ -189,7 +199,8 @@ def test_cli_outputs(tmp_path):
         LandmarkMap([1, 2], [[0, 0]])
 
 
-def test_sparse_assignment_equals_dense_padded_assignment(rng):
+@pytest.mark.parametrize("power", [1.0, 2.0])
+def test_sparse_assignment_equals_dense_padded_assignment(rng, power):
     from scipy.optimize import linear_sum_assignment
 
     from landmark_graph.association import _sparse_assignment
@@ -197,16 +208,20 @@ def test_sparse_assignment_equals_dense_padded_assignment(rng):
     c = 0.5
     for _ in range(5):
         x = rng.uniform(0, 10, (40, 2))
-        y = np.concatenate((x[:30] + rng.normal(0, 0.2, (30, 2)), rng.uniform(0, 10, (12, 2))))
-        er, rr = _sparse_assignment(x, y, c)
+        # dense clutter near the matches so that the optimal choice is not the obvious one
+        y = np.concatenate((x[:30] + rng.normal(0, 0.25, (30, 2)), rng.uniform(0, 10, (12, 2))))
+        er, rr = _sparse_assignment(x, y, c, power=power)
         d = np.hypot(x[:, None, 0] - y[None, :, 0], x[:, None, 1] - y[None, :, 1])
+        w = d**power
+        cp = c**power
         big = np.full((82, 82), 1e6)
-        big[:40, :42] = np.where(d < c, d, 1e6)
-        big[:40, 42:] = np.where(np.eye(40) > 0, c, 1e6)
-        big[40:, :42] = np.where(np.eye(42) > 0, c, 1e6)
+        big[:40, :42] = np.where(d < c, w, 1e6)
+        big[:40, 42:] = np.where(np.eye(40) > 0, cp, 1e6)
+        big[40:, :42] = np.where(np.eye(42) > 0, cp, 1e6)
         big[40:, 42:] = np.where((d < c).T, 0.0, 1e6)
         a, b = linear_sum_assignment(big)
-        sparse_cost = d[er, rr].sum() + c * (40 - er.size) + c * (42 - er.size)
+        assert np.all(d[er, rr] < c) and np.unique(er).size == er.size
+        sparse_cost = w[er, rr].sum() + cp * (40 - er.size) + cp * (42 - er.size)
         assert sparse_cost == pytest.approx(big[a, b].sum(), rel=1e-9)
 
 
