@@ -3,8 +3,10 @@
 Formats: the SLAM result bundle's ``map.csv`` (``landmark,x,y[,cxx,cxy,cyy]``) and
 ``landmarks_groundtruth.csv`` (``landmark,x,y``); MRCLAM ``Landmark_Groundtruth.dat``
 (``subject x y σx σy``, ``#`` headers, tabs and spaces); g2o ``VERTEX_XY id x y`` (other g2o
-records are skipped and counted). Readers are strict: NaN coordinates, duplicate ids and an
-empty map are errors naming the file (and line).
+records are skipped). Readers are strict: NaN coordinates, duplicate ids, a covariance that is
+not symmetric positive semi-definite and an empty map are errors naming the file (and line).
+Writers (:func:`write_map`) speak the same formats, with 17 significant digits, so that a
+written map reads back bit for bit.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from relation_metric.textio import (
 )
 from relation_metric.trajectory import readonly
 
-__all__ = ["LandmarkMap", "read_map", "write_map"]
+__all__ = ["LandmarkMap", "MAP_FORMATS", "read_map", "write_map"]
 
 
 @dataclass(frozen=True)
@@ -39,6 +41,8 @@ class LandmarkMap:
     xy : array_like, shape (M, 2)
         Finite positions.
     cov : array_like, shape (M, 2, 2), optional
+        Symmetric positive semi-definite; a landmark whose file left its covariance empty
+        has NaN in all four entries.
     """
 
     ids: NDArray[np.int64]
@@ -64,6 +68,13 @@ class LandmarkMap:
             cov = np.asarray(self.cov, dtype=np.float64)
             if cov.shape != (xy.shape[0], 2, 2):
                 raise InputError(f"cov must have shape ({xy.shape[0]}, 2, 2), got {cov.shape}")
+            bad = _bad_covariances(cov)
+            if bad.size:
+                k = int(bad[0])
+                raise InputError(
+                    f"landmark {int(ids[k])}: covariance {cov[k].tolist()} is not symmetric "
+                    "positive semi-definite"
+                )
             object.__setattr__(self, "cov", readonly(cov))
 
     def __len__(self) -> int:
@@ -73,6 +84,22 @@ class LandmarkMap:
         """The landmarks at ``index`` (rows)."""
         k = np.asarray(index)
         return LandmarkMap(self.ids[k], self.xy[k], None if self.cov is None else self.cov[k])
+
+
+def _bad_covariances(cov: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Rows of ``cov`` (M, 2, 2) that are not symmetric PSD; all-NaN rows (unknown) pass."""
+    unknown = np.isnan(cov).all(axis=(1, 2))
+    a, b, c, d = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 0], cov[:, 1, 1]
+    scale = np.maximum(np.abs(a) + np.abs(d), 1e-300)
+    tol = 1e-12 * scale
+    ok = (
+        np.isfinite(cov).all(axis=(1, 2))
+        & (np.abs(b - c) <= tol)
+        & (a >= -tol)
+        & (d >= -tol)
+        & (a * d - b * c >= -1e-12 * scale * scale)
+    )
+    return np.flatnonzero(~(ok | unknown)).astype(np.int64)
 
 
 def _check_nonempty(m: LandmarkMap, path: PathLike) -> LandmarkMap:
@@ -120,7 +147,22 @@ def _build(ids, xy, cov, path, line_of) -> LandmarkMap:  # type: ignore[no-untyp
     if (counts > 1).any():
         dup = uniq[counts > 1][0]
         k = int(np.flatnonzero(ids == dup)[1])
-        raise InputError(f"duplicate landmark id {int(dup)}", path=path, line=int(line_of(k)))
+        before = int(line_of(int(first[uniq == dup][0])))
+        raise InputError(
+            f"duplicate landmark id {int(dup)} (first on line {before})",
+            path=path,
+            line=int(line_of(k)),
+        )
+    if cov is not None:
+        bad = _bad_covariances(cov)
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(
+                f"landmark {int(ids[k])}: covariance {cov[k].tolist()} is not symmetric "
+                "positive semi-definite",
+                path=path,
+                line=int(line_of(k)),
+            )
     return LandmarkMap(ids.astype(np.int64), xy, cov)
 
 
@@ -153,6 +195,10 @@ def _read_csv_map(src) -> LandmarkMap:  # type: ignore[no-untyped-def]
         if has_cov:
             if all(f[i] == "" for i in cidx):
                 cov.append([np.nan] * 3)
+            elif any(f[i] == "" for i in cidx):
+                raise InputError(
+                    "cxx, cxy, cyy: expected all three or none", path=src.path, line=number
+                )
             else:
                 cov.append(
                     [
@@ -162,8 +208,8 @@ def _read_csv_map(src) -> LandmarkMap:  # type: ignore[no-untyped-def]
                 )
         lines.append(number)
     c = None
-    if has_cov and cov and np.isfinite(np.asarray(cov)).all():
-        a = np.asarray(cov)
+    if has_cov and cov and not np.isnan(np.asarray(cov)).all():
+        a = np.asarray(cov)  # rows whose covariance was left empty stay NaN
         c = np.stack(
             (np.column_stack((a[:, 0], a[:, 1])), np.column_stack((a[:, 1], a[:, 2]))), axis=1
         )
@@ -191,14 +237,45 @@ def _read_g2o_map(src) -> LandmarkMap:  # type: ignore[no-untyped-def]
     )
 
 
-def write_map(path: PathLike, m: LandmarkMap) -> None:
-    """Write ``landmark,x,y[,cxx,cxy,cyy]`` CSV atomically."""
-    if m.cov is None:
-        rows = np.column_stack((m.ids, m.xy))
-        text = "landmark,x,y\n" + ("%d,%.9f,%.9f\n" * len(m)) % tuple(rows.ravel().tolist())
+MAP_FORMATS = ("csv", "g2o", "mrclam")
+
+
+def write_map(path: PathLike, m: LandmarkMap, *, format: str = "csv") -> None:
+    """Write ``m`` atomically in one of :data:`MAP_FORMATS`.
+
+    * ``csv``: ``landmark,x,y[,cxx,cxy,cyy]`` (the bundle's ``map.csv``; without covariances
+      also its ``landmarks_groundtruth.csv``); unknown (NaN) covariances are left empty;
+    * ``g2o``: ``VERTEX_XY id x y`` lines (covariances are not part of the record);
+    * ``mrclam``: ``subject x y σx σy`` with a ``#`` header; needs diagonal covariances (or
+      none: σ written as 0).
+
+    Numbers are written with 17 significant digits (exact round trip).
+    """
+    n = len(m)
+    if format == "csv":
+        if m.cov is None:
+            text = "landmark,x,y\n" + ("%d,%.17g,%.17g\n" * n) % _flat(m.ids, m.xy)
+        else:
+            c = m.cov.reshape(-1, 4)[:, [0, 1, 3]]
+            body = ("%d" + ",%.17g" * 5 + "\n") * n % _flat(m.ids, m.xy, c)
+            text = "landmark,x,y,cxx,cxy,cyy\n" + body.replace(",nan,nan,nan\n", ",,,\n")
+    elif format == "g2o":
+        text = ("VERTEX_XY %d %.17g %.17g\n" * n) % _flat(m.ids, m.xy)
+    elif format == "mrclam":
+        sd = np.zeros((n, 2))
+        if m.cov is not None:
+            if np.any(m.cov[:, 0, 1] != 0) or np.any(m.cov[:, 1, 0] != 0):
+                raise InputError("the MRCLAM format holds only diagonal covariances", path=path)
+            sd = np.sqrt(np.column_stack((m.cov[:, 0, 0], m.cov[:, 1, 1])))
+        text = "# Subject #    x [m]    y [m]    x std-dev [m]    y std-dev [m]\n" + (
+            "%d\t%.17g\t%.17g\t%.17g\t%.17g\n" * n
+        ) % _flat(m.ids, m.xy, sd)
     else:
-        rows = np.column_stack((m.ids, m.xy, m.cov[:, 0, 0], m.cov[:, 0, 1], m.cov[:, 1, 1]))
-        text = "landmark,x,y,cxx,cxy,cyy\n" + ("%d" + ",%.9g" * 5 + "\n") * len(m) % tuple(
-            rows.ravel().tolist()
-        )
+        raise InputError(f"unknown map format {format!r}, expected one of {MAP_FORMATS}")
     write_text_atomic(Path(path), text)
+
+
+def _flat(ids: NDArray[np.int64], *cols: NDArray[np.float64]) -> tuple[object, ...]:
+    """Row-major values of ``ids`` and ``cols`` for %-formatting (ids stay Python ints)."""
+    rows = np.column_stack((ids.astype(object), *(np.asarray(c, dtype=object) for c in cols)))
+    return tuple(rows.ravel().tolist())
