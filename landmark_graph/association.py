@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 from landmark_graph.maps import LandmarkMap
 from relation_metric.alignment import Alignment, umeyama
 from relation_metric.errors import InputError
-from relation_metric.textio import PathLike, read_source
+from relation_metric.textio import PathLike, read_source, write_text_atomic
 
 _MAX_SMALL_HYPOTHESES = 20_000
 
@@ -38,6 +38,7 @@ __all__ = [
     "associate_by_id",
     "associate_auto",
     "read_association_csv",
+    "write_association_csv",
     "ospa",
     "gospa",
 ]
@@ -107,6 +108,8 @@ def read_association_csv(path: PathLike, est: LandmarkMap, ref: LandmarkMap) -> 
     e_pos = {int(i): k for k, i in enumerate(est.ids.tolist())}
     r_pos = {int(i): k for k, i in enumerate(ref.ids.tolist())}
     er, rr = [], []
+    used_e: dict[int, int] = {}
+    used_r: dict[int, int] = {}
     for number, text in rows[1:]:
         f = [v.strip() for v in text.split(",")]
         if len(f) != 2:
@@ -121,11 +124,36 @@ def read_association_csv(path: PathLike, est: LandmarkMap, ref: LandmarkMap) -> 
             raise InputError(f"unknown estimated landmark id {a}", path=src.path, line=number)
         if b not in r_pos:
             raise InputError(f"unknown reference landmark id {b}", path=src.path, line=number)
-        if e_pos[a] in er or r_pos[b] in rr:
-            raise InputError(f"landmark {a} or {b} is associated twice", path=src.path, line=number)
+        if a in used_e:
+            raise InputError(
+                f"estimated landmark {a} is associated twice (first on line {used_e[a]})",
+                path=src.path,
+                line=number,
+            )
+        if b in used_r:
+            raise InputError(
+                f"reference landmark {b} is associated twice (first on line {used_r[b]})",
+                path=src.path,
+                line=number,
+            )
+        used_e[a] = used_r[b] = number
         er.append(e_pos[a])
         rr.append(r_pos[b])
     return _finish(est, ref, er, rr)
+
+
+def write_association_csv(
+    path: PathLike, assoc: Association, est: LandmarkMap, ref: LandmarkMap
+) -> None:
+    """Write the matched pairs as ``estimate,reference`` ids (what
+    :func:`read_association_csv` reads), atomically; missed and spurious landmarks are listed
+    in ``#`` comment lines so that a user can edit them into pairs."""
+    missed = " ".join(map(str, ref.ids[assoc.missed].tolist()))
+    spurious = " ".join(map(str, est.ids[assoc.spurious].tolist()))
+    head = f"# missed reference ids: {missed}\n# spurious estimate ids: {spurious}\n"
+    head += "estimate,reference\n"
+    pairs = np.column_stack((est.ids[assoc.estimate_rows], ref.ids[assoc.reference_rows]))
+    write_text_atomic(path, head + ("%d,%d\n" * pairs.shape[0]) % tuple(pairs.ravel().tolist()))
 
 
 def associate_auto(
@@ -172,8 +200,8 @@ def associate_auto(
     e, r = est.xy, ref.xy
     if len(est) < 2 or len(ref) < 2:
         raise InputError("automatic association needs at least 2 landmarks in each map")
-    if not cutoff > 0:
-        raise InputError(f"the association cut-off must be positive, got {cutoff}")
+    if not (np.isfinite(cutoff) and cutoff > 0):
+        raise InputError(f"the association cut-off must be a positive number, got {cutoff}")
     rng = np.random.default_rng(seed)
     tree = cKDTree(r)
     i1, j1, i2, j2 = _hypothesis_pairs(e, r, tree, cutoff, iterations, rng)
@@ -272,6 +300,10 @@ def _optimal_cost(
     x: NDArray[np.float64], y: NDArray[np.float64], c: float, p: float
 ) -> tuple[float, int, int]:
     """``min_π Σ min(d, c)^p`` with ``|x| = m ≤ n = |y|``, and ``m``, ``n``."""
+    if not (np.isfinite(c) and c > 0):
+        raise InputError(f"the OSPA/GOSPA cut-off c must be a positive number, got {c}")
+    if not (np.isfinite(p) and p >= 1):
+        raise InputError(f"the OSPA/GOSPA order p must be a number ≥ 1, got {p}")
     if x.shape[0] > y.shape[0]:
         x, y = y, x
     m, n = x.shape[0], y.shape[0]

@@ -4,8 +4,9 @@ Edges come from ``scipy.spatial.Delaunay.vertex_neighbor_vertices`` (each unique
 ``i < j``), triangles from its simplices. Degenerate inputs:
 
 * fewer than 3 landmarks: 2 give one edge, 1 or 0 none (no triangles);
-* duplicate positions: Qhull drops them silently, so they are detected first, reported in
-  :attr:`Mesh.duplicates` and left out of the mesh (each duplicate joins no edge);
+* duplicate positions (equal to Qhull's precision, about 1e-12 relative): Qhull drops them
+  silently; they are read from its "coplanar" points, reported in :attr:`Mesh.duplicates` as
+  ``(kept, dropped)`` pairs and join no edge (which of the two is dropped is Qhull's choice);
 * collinear landmarks (Qhull cannot triangulate): the chain of neighbours along the line;
 * near-collinear thin triangles: kept, and flagged in :attr:`Mesh.thin` (smallest interior
   angle below ``thin_angle``) since their angles are ill-conditioned.
@@ -35,7 +36,7 @@ class Mesh:
     triangles : ndarray of int, shape (T, 3)
         Counter-clockwise vertex triples.
     duplicates : ndarray of int, shape (D, 2)
-        ``(kept, dropped)`` pairs of points at the same position.
+        ``(kept, dropped)`` pairs of points at the same position, sorted by ``dropped``.
     collinear : bool
         True when the points lie on a line and the mesh is the chain along it.
     thin : ndarray of bool, shape (T,)
@@ -80,14 +81,12 @@ def delaunay_mesh(xy: ArrayLike, *, thin_angle: float = np.deg2rad(5.0)) -> Mesh
         except QhullError:
             tri = None  # collinear (or all points coincide): the chain below
     if tri is None:
-        uniq, first = np.unique(p, axis=0, return_index=True)  # small or degenerate input only
+        _, first, inv = np.unique(p, axis=0, return_index=True, return_inverse=True)
         idx = np.sort(first)
         keep = np.zeros(n, dtype=bool)
         keep[idx] = True
-        owner = {tuple(v): k for k, v in zip(idx.tolist(), p[idx].tolist())}
-        dup = np.array(
-            [[owner[tuple(p[k])], k] for k in np.flatnonzero(~keep)], dtype=np.int64
-        ).reshape(-1, 2)
+        dropped = np.flatnonzero(~keep)
+        dup = np.column_stack((first[inv.ravel()[dropped]], dropped)).astype(np.int64)
         q = p[idx]
         order = _along_line(q)
         edges = (
@@ -125,12 +124,6 @@ def delaunay_mesh(xy: ArrayLike, *, thin_angle: float = np.deg2rad(5.0)) -> Mesh
         collinear=False,
         thin=readonly(np.abs(ang).min(axis=1) < thin_angle, np.bool_),
     )
-
-
-def _collinear(q: NDArray[np.float64]) -> bool:
-    c = q - q.mean(axis=0)
-    s = np.linalg.svd(c, compute_uv=False)
-    return bool(s[-1] <= 1e-12 * max(s[0], 1e-300))
 
 
 def _along_line(q: NDArray[np.float64]) -> NDArray[np.int64]:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from landmark_graph.association import read_association_csv
+from landmark_graph.association import read_association_csv, write_association_csv
 from landmark_graph.compare import compare_maps
 from landmark_graph.maps import read_map
 from relation_metric.textio import write_text_atomic
@@ -29,23 +29,46 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--cutoff", type=float, default=1.0, help="OSPA/GOSPA and auto-association cut-off c [m]"
     )
     p.add_argument("--order", type=float, default=2.0, help="OSPA/GOSPA order p")
+    p.add_argument(
+        "--thin-angle",
+        type=float,
+        default=5.0,
+        metavar="DEG",
+        help="flag triangles whose smallest angle is below DEG degrees (default: 5)",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", metavar="F")
     p.add_argument("--per-edge", metavar="F.csv")
     p.add_argument("--plot", metavar="F.png")
+    p.add_argument(
+        "--write-association",
+        metavar="F.csv",
+        help="write the association used as 'estimate,reference' id pairs (edit it and pass "
+        "it back with --associate F.csv to override the automatic result)",
+    )
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    check_outputs([args.json, args.per_edge, args.plot], [args.estimate, args.reference])
+    assoc_file = None if args.associate in ("id", "auto") else args.associate
+    check_outputs(
+        [args.json, args.per_edge, args.plot, args.write_association],
+        [args.estimate, args.reference, assoc_file],
+    )
     est = read_map(args.estimate)
     ref = read_map(args.reference)
     assoc = args.associate
     if assoc not in ("id", "auto"):
         assoc = read_association_csv(assoc, est, ref)
     res = compare_maps(
-        est, ref, associate=assoc, cutoff=args.cutoff, order=args.order, seed=args.seed
+        est,
+        ref,
+        associate=assoc,
+        cutoff=args.cutoff,
+        order=args.order,
+        seed=args.seed,
+        thin_angle=np.deg2rad(args.thin_angle),
     )
     out = res.as_dict()
     if args.json:
@@ -67,6 +90,8 @@ def run(args: argparse.Namespace) -> int:
         )
         text += ("%d,%d,%.9g,%.9g,%.9g\n" * rows.shape[0]) % tuple(rows.ravel().tolist())
         write_text_atomic(args.per_edge, text)
+    if args.write_association:
+        write_association_csv(args.write_association, res.association, est, ref)
     if args.plot:
         from landmark_graph.plots import map_figure
         from relation_metric.plots import save_figure
@@ -83,7 +108,21 @@ def run(args: argparse.Namespace) -> int:
         table = [
             ("edge length abs [m]", error_summaries(res.errors.edge_length)["abs"]),
             ("corner angle abs [rad]", error_summaries(res.errors.corner_angle.ravel())["abs"]),
+            (
+                "  excluding thin triangles",
+                error_summaries(res.errors.corner_angle[~res.mesh.thin].ravel())["abs"],
+            ),
         ]
         print(stats_table(table))
-        print(f"OSPA {res.ospa:.4f} m, GOSPA {res.gospa:.4f} m (c = {res.cutoff}, p = {res.order})")
+        m = out["mesh"]
+        if m["thin_triangles"] or m["duplicates"] or m["collinear"]:
+            print(
+                f"mesh: {m['thin_triangles']} thin triangles (< {args.thin_angle:g} deg), "
+                f"{m['duplicates']} duplicate reference positions {m['duplicate_ids']}, "
+                f"collinear: {m['collinear']}"
+            )
+        print(
+            f"OSPA {res.ospa:.4f} m, GOSPA {res.gospa:.4f} m "
+            f"(c = {res.cutoff}, p = {res.order}; {out['ospa']['frame']})"
+        )
     return 0
