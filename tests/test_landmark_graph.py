@@ -11,7 +11,7 @@ from conftest import require_data
 
 from landmark_graph.association import associate_auto, gospa, ospa
 from landmark_graph.compare import compare_maps
-from landmark_graph.maps import LandmarkMap, read_map
+from landmark_graph.maps import LandmarkMap, read_map, write_map
 from landmark_graph.mesh import delaunay_mesh
 from landmark_graph.relations import mesh_errors
 from relation_metric import se2
@@ -268,3 +268,68 @@ def test_cli_console_summary(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "matched 4, missed 0, spurious 0" in out
     assert "edge length abs [m]" in out and "OSPA 0.0000" in out
+
+
+def test_cli_written_association_reads_back_and_overrides(tmp_path, rng):
+    ref_xy = rng.uniform(0, 30, (30, 2))
+    ref = tmp_path / "ref.csv"
+    est = tmp_path / "est.csv"
+    write_map(ref, LandmarkMap(np.arange(30), ref_xy))
+    moved = rigid(ref_xy[:27], [3.0, 1.0, 2.0])  # the last three are missing in the estimate
+    write_map(est, LandmarkMap(np.arange(27) + 500, moved))
+    a_csv, j1, j2 = tmp_path / "assoc.csv", tmp_path / "1.json", tmp_path / "2.json"
+    args = ["map-compare", str(est), str(ref), "-q"]
+    assert (
+        main([*args, "--associate", "auto", "--write-association", str(a_csv), "--json", str(j1)])
+        == 0
+    )
+    text = a_csv.read_text()
+    assert "# missed reference ids: 27 28 29\n" in text and "500,0\n" in text
+    assert main([*args, "--associate", str(a_csv), "--json", str(j2)]) == 0
+    r1, r2 = json.loads(j1.read_text()), json.loads(j2.read_text())
+    assert r1["translation"] == r2["translation"] and r1["association"] == r2["association"]
+    assert r1["association"]["missed_ids"] == [27, 28, 29]
+    assert r1["ospa"]["frame"].startswith("estimate moved") and r2["ospa"]["frame"].startswith(
+        "as given"
+    )
+    # the user edits one pair: the file overrides the automatic result
+    a_csv.write_text(text.replace("500,0\n", "500,28\n"))
+    assert main([*args, "--associate", str(a_csv), "--json", str(j2)]) == 0
+    r3 = json.loads(j2.read_text())
+    assert r3["association"]["missed_ids"] == [0, 27, 29]
+    assert r3["translation"]["abs"]["max"] > 1.0  # the wrong pair shows in the edge errors
+    # the association file is an input: not to be overwritten
+    assert main([*args, "--associate", str(a_csv), "--json", str(a_csv)]) == 3
+
+
+@pytest.mark.parametrize(
+    "assoc_text,extra,msg",
+    [
+        ("estimate,reference\n1,1\n1,2\n", [], "a.csv:3: estimated landmark 1 is associated twice"),
+        ("estimate,reference\n1,1\n2,1\n", [], "a.csv:3: reference landmark 1 is associated twice"),
+        ("est,ref\n1,1\n", [], "a.csv:1: expected the header"),
+        ("estimate,reference\n1,x\n", [], "a.csv:2: expected two integer ids"),
+        (None, ["--cutoff", "-1"], "cut-off"),
+        (None, ["--order", "0.5"], "order p"),
+        (None, ["--associate", "auto", "--cutoff", "nan"], "cut-off"),
+    ],
+)
+def test_cli_bad_association_and_options_exit_3(tmp_path, capsys, assoc_text, extra, msg):
+    m = tmp_path / "m.csv"
+    m.write_text("landmark,x,y\n1,0,0\n2,1,1\n3,1,0\n")
+    args = ["map-compare", str(m), str(m), "-q", *extra]
+    if assoc_text is not None:
+        (tmp_path / "a.csv").write_text(assoc_text)
+        args += ["--associate", str(tmp_path / "a.csv")]
+    assert main(args) == 3
+    assert msg in capsys.readouterr().err
+
+
+def test_cli_reports_duplicate_reference_positions(tmp_path, capsys):
+    ref = tmp_path / "ref.csv"
+    ref.write_text("landmark,x,y\n1,0,0\n2,4,0\n3,0,4\n4,4,0\n5,4,4\n")
+    out = tmp_path / "o.json"
+    assert main(["map-compare", str(ref), str(ref), "--json", str(out)]) == 0
+    res = json.loads(out.read_text())
+    assert res["mesh"]["duplicates"] == 1 and sorted(res["mesh"]["duplicate_ids"][0]) == [2, 4]
+    assert "1 duplicate reference positions" in capsys.readouterr().out
