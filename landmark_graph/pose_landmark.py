@@ -13,15 +13,26 @@ on exactly the pairs the map connects.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from landmark_graph.association import Association
+from landmark_graph.maps import LandmarkMap
 from relation_metric import se2
 from relation_metric.errors import InputError
+from relation_metric.evaluate import error_summaries
 from relation_metric.relations import RelationSet
-from relation_metric.trajectory import Trajectory
+from relation_metric.trajectory import Trajectory, readonly
 
-__all__ = ["pose_landmark_errors", "shared_landmark_relations"]
+__all__ = [
+    "pose_landmark_errors",
+    "PoseLandmarkErrors",
+    "pose_landmark_relations",
+    "shared_landmark_relations",
+]
 
 
 def pose_landmark_errors(
@@ -49,6 +60,98 @@ def pose_landmark_errors(
     return np.hypot(d[:, 0], d[:, 1])
 
 
+@dataclass(frozen=True)
+class PoseLandmarkErrors:
+    """Pose–landmark relation errors of the observations whose landmark is associated.
+
+    Attributes
+    ----------
+    pose : ndarray of int, shape (K,)
+        Pose index of each scored observation.
+    landmark : ndarray of int, shape (K,)
+        Its landmark id in the estimated map.
+    error : ndarray, shape (K,)
+        ``‖x_t⁻¹ · l − x*_t⁻¹ · l*‖`` [m].
+    unassociated : int
+        Observations left out because their landmark has no reference counterpart.
+    """
+
+    pose: NDArray[np.int64]
+    landmark: NDArray[np.int64]
+    error: NDArray[np.float64]
+    unassociated: int
+
+    def as_dict(self) -> dict[str, Any]:
+        """``relations``, ``unassociated`` and ``translation`` → ``abs``/``sqr`` → statistics."""
+        return {
+            "relations": int(self.error.size),
+            "unassociated": self.unassociated,
+            "translation": {k: v.as_dict() for k, v in error_summaries(self.error).items()},
+        }
+
+
+def pose_landmark_relations(
+    poses: ArrayLike,
+    reference_poses: ArrayLike,
+    pose: ArrayLike,
+    landmark: ArrayLike,
+    estimate: LandmarkMap,
+    reference: LandmarkMap,
+    association: Association,
+) -> PoseLandmarkErrors:
+    """Pose–landmark relation errors from a SLAM run's data associations.
+
+    Parameters
+    ----------
+    poses, reference_poses : array_like, shape (N, 3)
+        The estimated (e.g. recovered) trajectory and the reference at the same N instants.
+    pose : array_like of int, shape (K,)
+        The pose index of each observation.
+    landmark : array_like of int, shape (K,)
+        The estimated-map landmark id the SLAM run associated each observation with.
+    estimate, reference : LandmarkMap
+    association : Association
+        Between ``estimate`` and ``reference`` (``landmark_graph.association``).
+
+    Returns
+    -------
+    PoseLandmarkErrors
+        Observations of landmarks without a reference counterpart are counted, not scored.
+
+    Raises
+    ------
+    InputError
+        A pose index out of range or a landmark id that is not in ``estimate``.
+    """
+    x = np.asarray(poses, dtype=np.float64)
+    xr = np.asarray(reference_poses, dtype=np.float64)
+    k = np.asarray(pose, dtype=np.int64)
+    lid = np.asarray(landmark, dtype=np.int64)
+    if x.shape != xr.shape or x.ndim != 2 or x.shape[1] != 3 or k.shape != lid.shape:
+        raise InputError(
+            f"expected (N, 3) poses twice and K observations, got {x.shape}, {xr.shape}, "
+            f"{k.shape}, {lid.shape}"
+        )
+    if k.size and (k.min() < 0 or k.max() >= x.shape[0]):
+        bad = int(np.flatnonzero((k < 0) | (k >= x.shape[0]))[0])
+        raise InputError(f"observation {bad}: pose index {int(k[bad])} outside 0..{x.shape[0] - 1}")
+    order = np.argsort(estimate.ids)
+    pos = np.clip(np.searchsorted(estimate.ids, lid, sorter=order), 0, max(len(estimate) - 1, 0))
+    row = order[pos] if len(estimate) else pos
+    known = (estimate.ids[row] == lid) if len(estimate) else np.zeros(lid.shape, bool)
+    if not known.all():
+        bad = int(np.flatnonzero(~known)[0])
+        raise InputError(f"observation {bad}: landmark id {int(lid[bad])} is not in the map")
+    ref_row = np.full(len(estimate), -1, dtype=np.int64)
+    ref_row[association.estimate_rows] = association.reference_rows
+    r = ref_row[row]
+    ok = r >= 0
+    err = pose_landmark_errors(x[k[ok]], estimate.xy[row[ok]], xr[k[ok]], reference.xy[r[ok]])
+    return PoseLandmarkErrors(
+        readonly(k[ok], np.int64), readonly(lid[ok], np.int64), readonly(err), int((~ok).sum())
+    )
+
+
 def shared_landmark_relations(
     reference: Trajectory,
     pose: ArrayLike,
@@ -56,6 +159,7 @@ def shared_landmark_relations(
     *,
     min_common: int = 3,
     min_gap: int = 1,
+    max_pairs: float = 2e7,
 ) -> RelationSet:
     """Index relations between poses that observed ≥ ``min_common`` common landmarks.
 
@@ -67,6 +171,10 @@ def shared_landmark_relations(
         The observing pose index and the landmark id of each observation.
     min_gap : int
         Only pairs ``i < j`` with ``j − i ≥ min_gap``.
+    max_pairs : float
+        Refuse (with :class:`InputError`) when ``Σ_l C(n_l, 2)`` — ``n_l`` the poses that
+        observed landmark ``l``, a bound on the pose pairs to examine — exceeds this: the
+        sparse product ``S Sᵀ`` of the pose × landmark incidence matrix would not fit.
     """
     k = np.asarray(pose, dtype=np.int64)
     ids, lm = np.unique(np.asarray(landmark, dtype=np.int64), return_inverse=True)
@@ -77,6 +185,13 @@ def shared_landmark_relations(
 
     seen = sp.csr_matrix((np.ones(k.size), (k, lm.ravel())), shape=(n, ids.size))
     seen.data[:] = 1.0  # an observation repeated at one pose counts once
+    per_landmark = np.diff(seen.tocsc().indptr).astype(np.float64)
+    bound = float((per_landmark * (per_landmark - 1) / 2).sum())  # ≥ candidate pairs
+    if bound > max_pairs:
+        raise InputError(
+            f"up to {bound:.3g} pose pairs share a landmark (limit max_pairs = {max_pairs:.3g}); "
+            "pass fewer poses (e.g. every k-th) or raise max_pairs"
+        )
     common = (seen @ seen.T).tocoo()
     keep = (common.col - common.row >= max(min_gap, 1)) & (common.data >= min_common)
     i, j = common.row[keep], common.col[keep]
