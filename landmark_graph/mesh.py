@@ -1,7 +1,8 @@
 """The Delaunay triangle mesh over landmarks, with its degenerate cases handled explicitly.
 
-Edges come from ``scipy.spatial.Delaunay.vertex_neighbor_vertices`` (each unique edge once,
-``i < j``), triangles from its simplices. Degenerate inputs:
+Triangles are the simplices of ``scipy.spatial.Delaunay`` (made counter-clockwise), edges come
+from its neighbour table (each unique edge once, ``(i, j)`` with ``i < j``, taken from the
+triangle with the smaller index or the only one on the hull). Degenerate inputs:
 
 * fewer than 3 landmarks: 2 give one edge, 1 or 0 none (no triangles);
 * duplicate positions (equal to Qhull's precision, about 1e-12 relative): Qhull drops them
@@ -32,7 +33,8 @@ class Mesh:
     Attributes
     ----------
     edges : ndarray of int, shape (E, 2)
-        Unique edges ``(i, j)``, ``i < j``, grouped by ``i``.
+        Unique edges ``(i, j)``, ``i < j``, in triangle order (sorted when there are no
+        triangles).
     triangles : ndarray of int, shape (T, 3)
         Counter-clockwise vertex triples.
     duplicates : ndarray of int, shape (D, 2)
@@ -54,13 +56,9 @@ def corner_angles(xy: ArrayLike, triangles: ArrayLike) -> NDArray[np.float64]:
     """Signed interior angle at each corner, shape (T, 3): at vertex ``a`` of ``(a, b, c)``
     the angle ``atan2(u × v, u · v)`` from ``u = b − a`` to ``v = c − a`` (positive for a
     counter-clockwise triangle; a flipped triangle changes its sign)."""
-    p = np.asarray(xy, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    c = p[t]  # (T, 3, 2) corners
-    u = np.roll(c, -1, axis=1) - c  # b − a for every corner a
-    v = np.roll(c, -2, axis=1) - c  # c − a
-    cross = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-    dot = u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1]
+    cross, dot = _corner_products(
+        np.asarray(xy, dtype=np.float64), np.asarray(triangles, dtype=np.int64)
+    )
     return np.arctan2(cross, dot)
 
 
@@ -69,7 +67,7 @@ def delaunay_mesh(xy: ArrayLike, *, thin_angle: float = np.deg2rad(5.0)) -> Mesh
 
     Duplicates are the points Qhull leaves out as "coplanar" (``Delaunay.coplanar``), each
     reported with the vertex it coincides with; no extra pass over the points is needed.
-    Edges are unique ``(i, j)`` with ``i < j``, grouped by ``i``.
+    Edges are unique ``(i, j)`` with ``i < j``.
     """
     p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     n = p.shape[0]
@@ -108,13 +106,15 @@ def delaunay_mesh(xy: ArrayLike, *, thin_angle: float = np.deg2rad(5.0)) -> Mesh
         else np.empty((0, 2), np.int64)
     )
     dup = dup[np.argsort(dup[:, 1], kind="stable")]
-    indptr, nbr = tri.vertex_neighbor_vertices
-    src = np.repeat(np.arange(n), np.diff(indptr))
-    sel = src < nbr
-    edges = np.column_stack((src[sel], nbr[sel])).astype(np.int64)
     simp = tri.simplices.astype(np.int64)
-    ang = corner_angles(p, simp)
-    cw = ang[:, 0] < 0
+    # each edge once: from the triangle with the smaller index, or from its only triangle on
+    # the hull (Qhull's neighbour table; 3x faster than vertex_neighbor_vertices)
+    nb = tri.neighbors
+    keep = (nb > np.arange(simp.shape[0])[:, None]) | (nb < 0)  # edge opposite corner k
+    a, b = simp[:, [1, 2, 0]][keep], simp[:, [2, 0, 1]][keep]
+    edges = np.column_stack((np.minimum(a, b), np.maximum(a, b)))
+    cross, dot = _corner_products(p, simp)
+    cw = cross[:, 0] < 0  # reordering a triangle leaves its set of corner angles unchanged
     if cw.any():
         simp[cw] = simp[cw][:, [0, 2, 1]]
     return Mesh(
@@ -122,8 +122,35 @@ def delaunay_mesh(xy: ArrayLike, *, thin_angle: float = np.deg2rad(5.0)) -> Mesh
         triangles=readonly(simp, np.int64),
         duplicates=readonly(dup, np.int64),
         collinear=False,
-        thin=readonly(np.abs(ang).min(axis=1) < thin_angle, np.bool_),
+        thin=readonly(_thin(cross, dot, thin_angle), np.bool_),
     )
+
+
+def _corner_products(
+    p: NDArray[np.float64], t: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``u × v`` (T, 1) and ``u · v`` (T, 3) at the corners, ``u = b − a``, ``v = c − a``.
+
+    With the edge vectors ``e_0 = b − a``, ``e_1 = c − b``, ``e_2 = a − c`` the corner ``k``
+    has ``u = e_k``, ``v = −e_{k−1}``; the cross product is twice the signed area, the same at
+    every corner, so it is computed once.
+    """
+    x = p[:, 0][t]
+    y = p[:, 1][t]
+    ex = x[:, [1, 2, 0]] - x
+    ey = y[:, [1, 2, 0]] - y
+    cross = ex[:, 2:3] * ey[:, 0:1] - ex[:, 0:1] * ey[:, 2:3]
+    dot = -(ex * ex[:, [2, 0, 1]] + ey * ey[:, [2, 0, 1]])
+    return cross, dot
+
+
+def _thin(cross: NDArray[np.float64], dot: NDArray[np.float64], angle: float) -> NDArray[np.bool_]:
+    """Smallest interior angle below ``angle``, without arctan: a corner's angle
+    ``atan2(|u × v|, u · v)`` is below ``angle < π/2`` iff ``u · v > 0`` and
+    ``|u × v| < tan(angle) (u · v)``; the smallest angle of a triangle is at most π/3."""
+    if angle > np.pi / 3:
+        return np.ones(cross.shape[0], dtype=bool)
+    return ((dot > 0) & (np.abs(cross) < np.tan(angle) * dot)).any(axis=1)
 
 
 def _along_line(q: NDArray[np.float64]) -> NDArray[np.int64]:

@@ -162,3 +162,32 @@ def test_mrclam_scaled_and_displaced():
     assert edge.size == 1 and e.edge_length[edge[0]] == pytest.approx(0.02, abs=1e-12)
     touching = (mesh.edges == k13).any(axis=1)
     assert np.all(e.edge_length[~touching] == 0) and np.all(e.edge_length[touching] > 0)
+
+
+def test_mesh_edges_equal_the_edges_of_the_triangles_and_qhull_neighbours(rng):
+    from scipy.spatial import Delaunay
+
+    p = np.round(rng.uniform(0, 20, (300, 2)), 1)  # a coarse grid: duplicates, cocircular sets
+    mesh = delaunay_mesh(p)
+    got = [tuple(e) for e in mesh.edges.tolist()]
+    assert len(got) == len(set(got)) and all(i < j for i, j in got)
+    from_triangles = {
+        tuple(sorted(e))
+        for t in mesh.triangles.tolist()
+        for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))
+    }
+    indptr, nbr = Delaunay(p).vertex_neighbor_vertices
+    from_vnv = {(i, int(j)) for i in range(len(p)) for j in nbr[indptr[i] : indptr[i + 1]] if i < j}
+    assert set(got) == from_triangles == from_vnv
+    # every dropped duplicate sits exactly on its kept twin and joins no edge
+    assert mesh.duplicates.shape[0] > 0
+    for kept, dropped in mesh.duplicates.tolist():
+        np.testing.assert_array_equal(p[kept], p[dropped])
+        assert not (mesh.edges == dropped).any()
+    # and no position occurs twice among the vertices used
+    used = np.unique(mesh.edges)
+    assert np.unique(p[used], axis=0).shape[0] == used.size
+    # Euler: E = 3V − 3 − h and T = 2V − 2 − h for a triangulation with h hull vertices
+    h = np.unique(Delaunay(p[used]).convex_hull).size
+    assert mesh.edges.shape[0] == 3 * used.size - 3 - h
+    assert mesh.triangles.shape[0] == 2 * used.size - 2 - h
