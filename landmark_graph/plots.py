@@ -13,7 +13,9 @@ __all__ = ["map_figure"]
 
 
 def map_figure(res: MapComparison) -> Any:
-    """Reference and estimated landmarks with the mesh edges coloured by length error."""
+    """Reference and estimated landmarks (the estimate moved by the automatic alignment, when
+    one was made), the reference mesh with each edge coloured by its length error, thin
+    triangles dotted, missed and spurious landmarks marked."""
     plt = pyplot()
     from matplotlib.collections import LineCollection
 
@@ -33,9 +35,25 @@ def map_figure(res: MapComparison) -> Any:
     if a.alignment is not None:
         est = a.alignment.apply(np.column_stack((est, np.zeros(len(est)))))[:, :2]
     ax.plot(est[:, 0], est[:, 1], "o", mfc="none", color="tab:red", label="estimate")
+    if a.missed.size:
+        m = res.reference.xy[a.missed]
+        ax.plot(m[:, 0], m[:, 1], "x", ms=9, color="tab:gray", label="missed (reference)")
+    if a.spurious.size:
+        s = est[a.spurious]
+        ax.plot(s[:, 0], s[:, 1], "s", mfc="none", color="tab:orange", label="spurious (estimate)")
+    if res.mesh.thin.any():
+        t = res.mesh.triangles[res.mesh.thin]
+        ring = ref[np.concatenate((t, t[:, :1]), axis=1)]  # (K, 4, 2) closed outlines
+        thin = LineCollection(list(ring), colors="tab:gray", linewidths=0.6, linestyles=":")
+        ax.add_collection(thin)
+        ax.plot([], [], ":", color="tab:gray", lw=0.6, label="thin triangle")
     ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
     ax.legend(loc="best")
+    frame = "aligned" if a.alignment is not None else "as given"
     ax.set_title(
-        f"{a.estimate_rows.size} matched, {a.missed.size} missed, {a.spurious.size} spurious"
+        f"{a.estimate_rows.size} matched, {a.missed.size} missed, {a.spurious.size} spurious; "
+        f"OSPA {res.ospa:.3g} m (c = {res.cutoff:g}, p = {res.order:g}, {frame})"
     )
     return fig
