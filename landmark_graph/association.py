@@ -169,7 +169,7 @@ def associate_auto(
     1. Candidate correspondences: for up to 400 randomly chosen estimated landmarks, the
        reference landmark with the most similar rotation-invariant descriptor (sorted
        distances to the ``k ≤ 4`` nearest neighbours), and ``iterations`` random hypotheses
-       from two of them. Maps of at most 60 landmarks instead try every pair of estimated
+       from two of them. Maps of at most 40 landmarks instead try every pair of estimated
        landmarks against every ordered pair of reference landmarks (at most 20,000 of them,
        sampled): tight clusters make descriptors ambiguous.
     2. Each hypothesis is the exact rigid transform of its two correspondences, kept when
@@ -236,7 +236,7 @@ def associate_auto(
 def _hypothesis_pairs(e, r, tree, cutoff, iterations, rng):  # type: ignore[no-untyped-def]
     """Index arrays ``(i1, j1, i2, j2)`` of two-correspondence hypotheses (see above)."""
     m, n = e.shape[0], r.shape[0]
-    if m <= 60 and n <= 60:
+    if m <= 40 and n <= 40:
         # every pair of estimated landmarks against every pair of reference landmarks
         a1, a2 = np.triu_indices(m, 1)
         b1, b2 = np.nonzero(~np.eye(n, dtype=bool))  # both orientations of a reference pair
@@ -252,13 +252,24 @@ def _hypothesis_pairs(e, r, tree, cutoff, iterations, rng):  # type: ignore[no-u
     de_all, _ = cKDTree(e).query(e, k + 1)
     dr_all, _ = tree.query(r, k + 1)
     cand_i = rng.choice(m, size=min(m, 400), replace=False)
-    _, cand_j = cKDTree(dr_all[:, 1:]).query(de_all[cand_i, 1:])
-    a = rng.integers(0, cand_i.size, iterations)
-    b = rng.integers(0, cand_i.size, iterations)
+    top = int(min(3, n))  # the three most similar descriptors: clusters make them ambiguous
+    _, cj = cKDTree(dr_all[:, 1:]).query(de_all[cand_i, 1:], top)
+    cand_j = cj.reshape(cand_i.size, top)
+    cand_i = np.repeat(cand_i, top)
+    cand_j = cand_j.ravel()
+    # draw 8x more pairs than needed and keep the longest baselines (a short one gives a
+    # poorly defined rotation)
+    a = rng.integers(0, cand_i.size, 8 * iterations)
+    b = rng.integers(0, cand_i.size, 8 * iterations)
     i1, i2, j1, j2 = cand_i[a], cand_i[b], cand_j[a], cand_j[b]
     de = np.hypot(*(e[i2] - e[i1]).T)
     dr = np.hypot(*(r[j2] - r[j1]).T)
     ok = (i1 != i2) & (j1 != j2) & (np.abs(de - dr) < cutoff) & (de > cutoff)
+    ok_idx = np.flatnonzero(ok)
+    if ok_idx.size > iterations:
+        ok_idx = np.sort(ok_idx[np.argsort(-de[ok_idx], kind="stable")[:iterations]])
+    ok = np.zeros(de.shape, dtype=bool)
+    ok[ok_idx] = True
     return i1[ok], j1[ok], i2[ok], j2[ok]
 
 

@@ -333,3 +333,24 @@ def test_cli_reports_duplicate_reference_positions(tmp_path, capsys):
     res = json.loads(out.read_text())
     assert res["mesh"]["duplicates"] == 1 and sorted(res["mesh"]["duplicate_ids"][0]) == [2, 4]
     assert "1 duplicate reference positions" in capsys.readouterr().out
+
+
+def test_auto_association_of_clustered_maps_equals_the_least_squares_oracle(rng):
+    """Clusters of 3 landmarks within 0.3 m (as MRCLAM) above the exhaustive-search size:
+    the result must equal the optimal assignment after the least-squares alignment on the
+    true correspondences (which itself may swap landmarks a few mm apart)."""
+    from landmark_graph.association import _apply, _sparse_assignment
+    from relation_metric.alignment import umeyama
+
+    for trial in range(10):
+        centres = rng.uniform(0, 20, (30, 2))
+        ref = (centres[:, None, :] + rng.uniform(-0.15, 0.15, (30, 3, 2))).reshape(-1, 2)
+        keep = np.sort(rng.permutation(90)[:81])
+        g = [*rng.uniform(-50, 50, 2), rng.uniform(-np.pi, np.pi)]
+        est = rigid(ref[keep] + rng.normal(0, 0.01, (81, 2)), g)
+        a = associate_auto(
+            LandmarkMap(keep, est), LandmarkMap(np.arange(90), ref), cutoff=0.1, seed=trial
+        )
+        er, rr = _sparse_assignment(_apply(umeyama(est, ref[keep]), est), ref, 0.1)
+        np.testing.assert_array_equal(a.reference_rows, np.sort(rr))
+        np.testing.assert_array_equal(a.estimate_rows, er[np.argsort(rr)])
