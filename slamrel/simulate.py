@@ -72,6 +72,7 @@ def slam_bundle(
     association: Literal["known", "nn"] = "known",
     corrupt_fraction: float = 0.0,
     noise_scale: float = 1.0,
+    outlier_gate: float | None = None,
     seed: int = 0,
 ) -> tuple[Bundle, EkfSlamResult]:
     """Run the reference EKF-SLAM on ``bundle``'s log; return the SLAM result bundle.
@@ -80,7 +81,9 @@ def slam_bundle(
     final map with its marginals and joint covariance, and the measurements' landmark ids by
     the associations the filter made (empty where it rejected a measurement). The filter's
     assumed noise is the bundle's models scaled by ``noise_scale``; the bundle records the
-    models it used.
+    models it used. ``outlier_gate`` is the χ² validation gate on known-association updates
+    (:func:`slamrel.backends.ekfslam.ekf_slam`); rejected measurements are left
+    unassociated in the result bundle and counted in its description.
     """
     steps = build_steps(bundle)
     true_ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks, -1)
@@ -95,6 +98,7 @@ def slam_bundle(
         true_ids=true_ids,
         corrupt_fraction=corrupt_fraction,
         noise_scale=noise_scale,
+        outlier_gate=outlier_gate,
         seed=seed,
     )
     m = res.landmark_ids.size
@@ -124,7 +128,14 @@ def slam_bundle(
         map_covariance=res.map_covariance,
         description=(bundle.description + "; " if bundle.description else "")
         + f"EKF-SLAM ({association} association, corrupted {corrupt_fraction:g}, "
-        f"noise scale {noise_scale:g})",
+        f"noise scale {noise_scale:g}"
+        + (
+            ""
+            if outlier_gate is None
+            else f", outlier gate {outlier_gate:g}: "
+            f"{int(((res.association < 0) & bundle.measurement_associated).sum())} rejected"
+        )
+        + ")",
         path=None,
     )
     return out, res

@@ -69,6 +69,35 @@ def test_corrupted_associations_are_recorded():
     )
 
 
+def test_outlier_gate_rejects_gross_outliers_and_keeps_good_data():
+    """Injected 3 m range outliers are rejected; good data is rejected at about 1 − p."""
+    w = make_world("complex1", noise="a", seed=4)
+    b = world_bundle(w)
+    rng = np.random.default_rng(11)
+    z = b.measurements.copy()
+    bad = rng.random(z.shape[0]) < 0.03
+    z[bad, 0] += 3.0
+    b = replace(b, measurements=z)
+    plain = slam_bundle(b)[1]
+    gated = slam_bundle(b, outlier_gate=0.999)[1]
+    rejected = gated.association < 0
+    first = np.zeros(z.shape[0], dtype=bool)  # a landmark's first sighting initialises it
+    first[np.unique(b.measurement_landmarks, return_index=True)[1]] = True
+    # landmarks initialised from an outlier are wrong from the start; judge the others
+    clean = ~np.isin(b.measurement_landmarks, b.measurement_landmarks[first & bad])
+    assert rejected[bad & ~first & clean].all()
+    assert rejected[~bad & clean].mean() < 0.01  # 1 − p = 0.001 if consistent, plus margin
+    assert not rejected[~bad & first].any()
+    truth = w.landmarks[gated.landmark_ids]
+    err_gated = np.hypot(*(gated.map_xy - truth).T).mean()
+    err_plain = np.hypot(*(plain.map_xy - w.landmarks[plain.landmark_ids]).T).mean()
+    assert err_gated < 0.5 * err_plain
+    # no gate: every measurement is used, as before
+    assert (plain.association >= 0).all()
+    with pytest.raises(InputError, match="outlier_gate"):
+        slam_bundle(b, outlier_gate=1.0)
+
+
 def test_nearest_neighbour_with_well_separated_landmarks():
     # few, far-apart landmarks: nearest neighbour must find the true associations
     w = make_world("simple1", noise="a", seed=2)

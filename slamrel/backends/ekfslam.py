@@ -82,6 +82,7 @@ def ekf_slam(
     association: Literal["known", "nn"] = "known",
     gate: float = 0.99,
     new_landmark_gate: float = 0.9999,
+    outlier_gate: float | None = None,
     true_ids: NDArray[np.int64] | None = None,
     corrupt_fraction: float = 0.0,
     noise_scale: float = 1.0,
@@ -107,6 +108,14 @@ def ekf_slam(
         χ² probabilities (2 dof): with ``"nn"`` a measurement is associated with the nearest
         landmark (Mahalanobis) inside ``gate``, starts a new landmark outside
         ``new_landmark_gate`` and is rejected in between.
+    outlier_gate : float, optional
+        χ² probability (2 dof) of a validation gate on the updates of *known* associations:
+        a measurement of a mapped landmark whose normalised innovation squared exceeds it is
+        rejected (association −1 in the result, so recovery does not use it either).
+        ``None`` (default) uses every measurement. Real sensors have outliers that a
+        Gaussian filter cannot absorb (MRCLAM: a few per cent beyond 5 σ); a gate trades
+        them for the risk of rejecting good data when the filter is overconfident, so the
+        rejected count is always reported.
     true_ids : ndarray of int, shape (J,), optional
         True landmark of each measurement, to record wrong associations.
     corrupt_fraction : float
@@ -155,6 +164,9 @@ def ekf_slam(
     r_cov = sensor.covariance * noise_scale**2
     g_in = chi2.ppf(gate, 2)
     g_new = chi2.ppf(new_landmark_gate, 2)
+    if outlier_gate is not None and not 0.0 < outlier_gate < 1.0:
+        raise InputError(f"outlier_gate must be in (0, 1), got {outlier_gate}")
+    g_out = np.inf if outlier_gate is None else float(chi2.ppf(outlier_gate, 2))
 
     t = steps.times
     n_poses = t.size
@@ -199,8 +211,8 @@ def ekf_slam(
                 n += 2
                 slot_of[lid] = slot
                 ids_out.append(lid)
-            else:
-                _update(mu, cov, n, slot, meas, r_cov, t[k], int(m))
+            elif not _update(mu, cov, n, slot, meas, r_cov, t[k], int(m), g_out):
+                continue  # outside the validation gate: rejected
             assoc_out[m] = lid
         online[k] = mu[:3]
         online_cov[k] = cov[:3, :3]
@@ -235,8 +247,17 @@ def _initialise(mu: Array, cov: Array, n: int, meas: Array, r_cov: Array) -> Non
 
 
 def _update(
-    mu: Array, cov: Array, n: int, slot: int, meas: Array, r_cov: Array, t: float, m: int
-) -> None:
+    mu: Array,
+    cov: Array,
+    n: int,
+    slot: int,
+    meas: Array,
+    r_cov: Array,
+    t: float,
+    m: int,
+    gate: float = np.inf,
+) -> bool:
+    """EKF update with one range-bearing measurement; False (no update) when ``νᵀS⁻¹ν > gate``."""
     h, hx, hl = range_bearing(mu[:3], mu[slot : slot + 2])
     nu = meas - h
     nu[1] = se2.wrap_angle(nu[1])
@@ -249,11 +270,14 @@ def _update(
         raise DivergenceError(
             f"innovation covariance not positive definite at t={t!r} (measurement {m})"
         ) from None
+    if gate < np.inf and float(nu @ s_inv @ nu) > gate:
+        return False
     gain = pht @ s_inv
     mu[:n] += gain @ nu
     mu[2] = se2.wrap_angle(mu[2])
     cov[:n, :n] -= gain @ pht.T
     cov[:n, :n] = 0.5 * (cov[:n, :n] + cov[:n, :n].T)
+    return True
 
 
 def _nearest(

@@ -44,6 +44,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     m.add_argument(
         "--noise-scale", type=float, default=1.0, help="factor on the noise the filter assumes"
     )
+    m.add_argument(
+        "--outlier-gate",
+        type=float,
+        default=None,
+        metavar="P",
+        help="χ² probability of a validation gate on known-association updates "
+        "(default: no gate); rejected measurements are counted",
+    )
     m.add_argument("--seed", type=int, default=0)
     m.add_argument(
         "--store-online",
@@ -75,6 +83,7 @@ def run_slam(args: argparse.Namespace) -> int:
         association=args.association,
         corrupt_fraction=args.corrupt,
         noise_scale=args.noise_scale,
+        outlier_gate=args.outlier_gate,
         seed=args.seed,
     )
     write_bundle(args.output, out)
