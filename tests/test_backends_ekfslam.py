@@ -98,6 +98,42 @@ def test_outlier_gate_rejects_gross_outliers_and_keeps_good_data():
         slam_bundle(b, outlier_gate=1.0)
 
 
+def test_gated_filter_recovers_from_an_unmodelled_turn():
+    """A 1 rad bump the odometry never saw: without the rejected-run rule the gated filter
+    rejects the measurements that would correct it and stays lost."""
+    w = make_world("complex1", noise="a", seed=2)
+    b = world_bundle(w)
+    steps = build_steps(b)
+    u = steps.u.copy()
+    k_bump = u.shape[0] // 2
+    u[k_bump, 2] += 1.0  # the estimate turns, the robot did not
+    bumped = replace(steps, u=u)
+    ids = b.measurement_landmarks.astype(float)
+
+    def final_error(max_run, steps=bumped):
+        r = ekf_slam(
+            steps,
+            b.measurements,
+            ids,
+            sensor=b.sensor,
+            initial_pose=b.initial_pose,
+            initial_covariance=b.initial_covariance,
+            outlier_gate=0.999,
+            max_rejected_run=max_run,
+        )
+        e = r.online.poses[-1] - w.truth.poses[-1]
+        return np.hypot(e[0], e[1]), abs(se2.wrap_angle(e[2])), (r.association < 0).mean()
+
+    pos_ok, th_ok, _ = final_error(10, steps)  # the same filter without the bump
+    pos_rule, th_rule, rej_rule = final_error(10)
+    pos_none, th_none, rej_none = final_error(10**9)
+    assert th_rule < th_ok + 0.05 and pos_rule < pos_ok + 0.2
+    assert th_none > 0.3  # lost: the correcting measurements were all rejected
+    assert rej_none > 0.3 > 0.05 > rej_rule
+    with pytest.raises(InputError, match="max_rejected_run"):
+        final_error(0)
+
+
 def test_nearest_neighbour_with_well_separated_landmarks():
     # few, far-apart landmarks: nearest neighbour must find the true associations
     w = make_world("simple1", noise="a", seed=2)
