@@ -143,8 +143,18 @@ def test_fit_noise_dataset7_is_plausible():
 
 @pytest.mark.realdata
 @pytest.mark.slow
-def test_dataset7_slam_and_recovery_beat_dead_reckoning_on_loops():
+def test_dataset7_slam_and_recovery_beat_dead_reckoning():
+    """The documented MRCLAM chain on all five robots of dataset 7 (calibrated odometry, gated
+    EKF-SLAM, recovery with its associations), against dead reckoning on the same controls.
+
+    Loops: recovered below half of dead reckoning's mean error on every robot. Consecutive 1 s
+    relations: a paired Wilcoxon test says recovered < dead reckoning on robots 1, 2, 3, 5;
+    robot 4 (2 measurements/s, per-landmark range biases of −0.14 to −0.39 m) is at par —
+    measured, and asserted as such so that a change either way is noticed.
+    """
     import warnings
+
+    from scipy.stats import wilcoxon
 
     from recovery.recover import recover
     from recovery.steps import build_steps
@@ -158,20 +168,75 @@ def test_dataset7_slam_and_recovery_beat_dead_reckoning_on_loops():
     d = require_data("mrclam", "MRCLAM_Dataset7")
     for robot in range(1, 6):
         b = mrclam_bundle(d, robot)
-        s, _ = slam_bundle(b)
+        s, _ = slam_bundle(b, outlier_gate=0.999)
         rec = recover(s, method="smoother", max_outlier_run=None)
         gt = b.groundtruth
         step = max(1, int(round(1 / np.median(np.diff(gt.timestamps)))))
-        loops = generate_relations(
-            Trajectory(gt.timestamps[::step], gt.poses[::step]),
-            "loops",
-            radius=0.5,
-            min_separation_time=30,
-        )
+        ref = Trajectory(gt.timestamps[::step], gt.poses[::step])
+        loops = generate_relations(ref, "loops", radius=0.5, min_separation_time=30)
+        cons = generate_relations(ref, "consecutive")
         st = build_steps(b)
         dead = Trajectory(st.times, se2.cumulative_compose(st.u, start=b.initial_pose))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # relations at the ends of the log are unassociated
-            e_rec = evaluate(loops, rec.trajectory, max_time_diff=0.05, interpolate=True)
-            e_dr = evaluate(loops, dead, max_time_diff=0.05, interpolate=True)
-        assert e_rec.translation["abs"].mean < 0.5 * e_dr.translation["abs"].mean, robot
+            e = {
+                (name, kind): evaluate(rel, est, max_time_diff=0.05, interpolate=True)
+                for name, est in (("rec", rec.trajectory), ("dr", dead))
+                for kind, rel in (("loops", loops), ("cons", cons))
+            }
+        mean = {k: v.translation["abs"].mean for k, v in e.items()}
+        assert mean["rec", "loops"] < 0.5 * mean["dr", "loops"], robot
+        ok = e["rec", "cons"].valid & e["dr", "cons"].valid
+        a = e["rec", "cons"].errors.translation[ok]
+        c = e["dr", "cons"].errors.translation[ok]
+        p_less = wilcoxon(a, c, alternative="less").pvalue
+        if robot == 4:
+            assert p_less > 0.01 and mean["rec", "cons"] < 1.05 * mean["dr", "cons"]
+        else:
+            assert p_less < 1e-3 and mean["rec", "cons"] < mean["dr", "cons"], robot
+
+
+def test_calibrate_odometry_recovers_a_known_delay_and_scale(rng):
+    """Commands leading the motion by 0.25 s and 10% too fast: both are found on the grid."""
+    from relation_metric.trajectory import Trajectory
+    from slamrel.importers.mrclam import MrclamRobot, calibrate_odometry
+
+    dt = 0.01
+    t = np.arange(0, 600, dt)
+    v = np.clip(0.15 * np.sin(t / 5.0) + 0.05 * np.sign(np.sin(t / 1.7)), 0, None)
+    w = 0.4 * np.sin(t / 2.3)
+    th = np.concatenate(([0.0], np.cumsum(w[:-1] * dt)))
+    step = np.column_stack((v[:-1] * np.cos(th[:-1]), v[:-1] * np.sin(th[:-1]))) * dt
+    xy = np.concatenate(([[0.0, 0.0]], np.cumsum(step, axis=0)))
+    gt = Trajectory(t, np.column_stack((xy, th)))
+    delay, kv, kw = 0.25, 0.9, 0.95
+    # the command at time t - delay is what the robot does at t, scaled
+    controls = np.column_stack((t - delay, v / kv, w / kw + rng.normal(0, 0.01, t.size)))
+    cal = calibrate_odometry(MrclamRobot(1, controls, np.zeros((0, 4)), gt, 0, {}))
+    assert cal.delay == pytest.approx(delay, abs=0.013)
+    assert cal.scale_v == pytest.approx(kv, rel=0.01)
+    assert cal.scale_omega == pytest.approx(kw, rel=0.01)
+    assert cal.rms_after < 0.2 * cal.rms_before
+    fixed = cal.apply(controls)
+    np.testing.assert_allclose(fixed[:, 0], controls[:, 0] + cal.delay)
+    np.testing.assert_allclose(controls[:, 0], t - delay)  # input untouched
+
+
+def test_resample_controls_keeps_the_motion_and_splits_gaps():
+    from recovery.models import velocity_increment
+    from relation_metric import se2
+    from slamrel.importers.mrclam import resample_controls
+
+    c = np.array([[0.0, 0.1, 0.2], [0.01, 0.2, 0.0], [0.02, 0.1, -0.3], [0.52, 0.0, 0.1],
+                  [0.53, 0.1, 0.0], [0.54, 0.0, 0.0]])  # fmt: skip
+    r = resample_controls(c)
+    assert r.shape[0] == c.shape[0] + 49  # the 0.5 s row became 50 rows of 0.01 s
+    assert np.diff(r[:, 0]).max() < 0.015
+    np.testing.assert_array_equal(r[-1], c[-1])
+
+    def motion(rows):
+        u, _ = velocity_increment(rows[:-1, 1], rows[:-1, 2], np.diff(rows[:, 0]))
+        return se2.cumulative_compose(u)[-1]
+
+    np.testing.assert_allclose(motion(r), motion(c), atol=1e-12)  # held v, ω: same arc
+    np.testing.assert_array_equal(resample_controls(c[:3]), c[:3])  # nothing to split
