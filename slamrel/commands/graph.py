@@ -52,6 +52,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     mr.add_argument("directory", metavar="DIR")
     mr.add_argument("--robot", type=int, default=None, help="1..5 (default: all five)")
     mr.add_argument("-o", "--output", required=True, metavar="BUNDLE")
+    mr.add_argument(
+        "--no-calibrate",
+        action="store_true",
+        help="keep the raw odometry commands (default: delay and scales fitted against Vicon)",
+    )
     mr.add_argument("-q", "--quiet", action="store_true")
     mr.set_defaults(func=run_import_mrclam)
 
@@ -104,12 +109,13 @@ def run_import_mrclam(args: argparse.Namespace) -> int:
     robots = [args.robot] if args.robot is not None else list(range(1, N_ROBOTS + 1))
     for robot in robots:
         out = Path(args.output) if args.robot is not None else Path(args.output) / f"robot{robot}"
-        bundle = mrclam_bundle(args.directory, robot)
+        bundle = mrclam_bundle(args.directory, robot, calibrate=not args.no_calibrate)
         write_bundle(out, bundle)
         if not args.quiet:
             print(
                 f"robot {robot}: {bundle.controls.shape[0]} controls, "
-                f"{bundle.measurements.shape[0]} landmark measurements -> {out}"
+                f"{bundle.measurements.shape[0]} landmark measurements -> {out}\n  "
+                f"{bundle.description}"
             )
     return 0
 
