@@ -218,7 +218,13 @@ MRCLAM = [
     new_markdown_cell(
         "The fitted control noise depends on the window: odometry errors are correlated in time "
         "(σ_v grows with the window) and short windows see the ground truth's own differentiation "
-        "noise (σ_ω shrinks with the window). The bundle uses 1 s windows."
+        "noise (σ_ω shrinks with the window). The bundle uses 1 s windows.\n\n"
+        "MRCLAM's odometry rows are velocity *commands*. Against Vicon they lead the motion by "
+        "about a quarter of a second and are ~10% too fast; the importer fits that delay and the "
+        "two scales (`calibrate_odometry`), splits rows held over logging gaps (a 0.5 s gap "
+        "would otherwise carry the noise of 2500 rows), and fits the noise on the result. Dead "
+        "reckoning below uses the same corrected controls as the SLAM; the raw commands are "
+        "shown too."
     ),
     new_code_cell(
         "if HAVE_DATA:\n"
@@ -229,8 +235,14 @@ MRCLAM = [
         "    from relation_metric.evaluate import evaluate\n"
         "    from relation_metric.relations import generate_relations\n"
         "    from relation_metric.trajectory import Trajectory\n"
+        "    from slamrel.importers.mrclam import calibrate_odometry\n"
+        "    print(calibrate_odometry(robot))\n"
         "    bundle = mrclam_bundle(data, 1)\n"
-        "    slam, online = slam_bundle(bundle)\n"
+        "    raw = mrclam_bundle(data, 1, calibrate=False)\n"
+        "    # EKF-SLAM with a 99.9% validation gate (10 rejections in a row: take the next one)\n"
+        "    slam, online = slam_bundle(bundle, outlier_gate=0.999)\n"
+        "    print((online.association < 0).sum(), 'of', online.association.size, 'measurements rejected by the gate')\n"
+        "    # recovery uses the SLAM run's associations (rejected ones stay out), no gate of its own\n"
         "    rec = recover(slam, method='smoother', max_outlier_run=None)\n"
         "    gt = bundle.groundtruth\n"
         "    step = int(round(1 / np.median(np.diff(gt.timestamps))))\n"
@@ -239,9 +251,11 @@ MRCLAM = [
         "            'loops': generate_relations(ref, 'loops', radius=0.5, min_separation_time=30)}\n"
         "    st = build_steps(bundle)\n"
         "    dead = Trajectory(st.times, se2.cumulative_compose(st.u, start=bundle.initial_pose))\n"
+        "    st_raw = build_steps(raw)\n"
+        "    dead_raw = Trajectory(st_raw.times, se2.cumulative_compose(st_raw.u, start=raw.initial_pose))\n"
         "    with warnings.catch_warnings():\n"
         "        warnings.simplefilter('ignore')\n"
-        "        for name, est in (('recovered', rec.trajectory), ('dead reckoning', dead)):\n"
+        "        for name, est in (('recovered', rec.trajectory), ('dead reckoning', dead), ('raw odometry', dead_raw)):\n"
         "            for rs, rel in sets.items():\n"
         "                ev = evaluate(rel, est, max_time_diff=0.05, interpolate=True)\n"
         "                t = ev.translation['abs']\n"
@@ -250,10 +264,13 @@ MRCLAM = [
     ),
     new_markdown_cell(
         "Loop relations separate the SLAM result from dead reckoning by an order of magnitude. "
-        "On 1 s consecutive relations the recovered trajectory is *not* better than dead "
-        "reckoning: over one second the odometry is already good, and every landmark update "
-        "(with the ~4% of MRCLAM measurements beyond 5σ of the fitted noise, not gated) moves "
-        "the pose. Local relations alone cannot show what SLAM buys."
+        "On 1 s consecutive relations the difference is small (over one second the corrected "
+        "odometry is already good) but consistent: a paired Wilcoxon test on the per-relation "
+        "errors says the recovered trajectory is better (`tests/test_importers_mrclam.py` runs "
+        "all five robots; robot 4 is at par). Before the odometry calibration, the gap "
+        "splitting and the gate, the recovered trajectory was *worse* than dead reckoning on "
+        "1 s relations: the smoother put its corrections into the logging gaps, and "
+        "measurement outliers moved the pose."
     ),
     new_code_cell(
         "if HAVE_DATA:\n"
@@ -277,6 +294,8 @@ def main() -> None:
         ("validation", VALIDATION),
         ("mrclam", MRCLAM),
     ):
+        for i, cell in enumerate(cells):
+            cell.id = f"{name}-{i:02d}"  # stable ids: regenerating gives no diff
         nbformat.write(new_notebook(cells=cells, metadata=meta), HERE / f"{name}.ipynb")
 
 
