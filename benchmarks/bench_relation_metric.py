@@ -39,7 +39,6 @@ from relation_metric.trajectory import Trajectory  # noqa: E402
 EVO_VENV = HERE / ".venv-evo"
 
 
-
 def random_trajectory(n: int, seed: int = 0) -> Trajectory:
     rng = np.random.default_rng(seed)
     steps = np.column_stack(

@@ -138,7 +138,9 @@ RUN_WALKTHROUGH = [
         "    e = evaluate(rel, Trajectory(truth.timestamps, r.trajectory.poses[k])).translation['abs'].mean\n"
         "    print(f\"gate {gate}: global error {e:.3f} m, gated {100 * r.counts['gated_fraction']:.1f}% of the measurements\")"
     ),
-    new_markdown_cell("The whole chain, with its report, is one call (`slamrel run` on the command line):"),
+    new_markdown_cell(
+        "The whole chain, with its report, is one call (`slamrel run` on the command line):"
+    ),
     new_code_cell(
         "import tempfile, json, pathlib\n"
         "from slamrel.pipeline import run_pipeline, write_report\n"

@@ -33,6 +33,23 @@ def test_round_trip_through_g2o(tmp_path):
     assert solve_graph(back).cost[-1] == pytest.approx(solve_graph(g).cost[-1], rel=1e-6)
 
 
+def test_round_trip_keeps_given_ids(tmp_path):
+    p = tmp_path / "a.txt"
+    p.write_text(ISAM)
+    d = read_isam(p)
+    out = tmp_path / "a.g2o"
+    write_g2o_graph(out, d.graph, pose_ids=d.pose_ids, landmark_ids=d.landmark_ids)
+    back, pose_ids, lm_ids = read_g2o_graph(out)
+    np.testing.assert_array_equal(pose_ids, [0, 1, 3])  # the iSAM file's own ids
+    np.testing.assert_array_equal(lm_ids, [2])
+    for name in ("pp_i", "pp_j", "pl_k", "pl_l"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(d.graph, name))
+    with pytest.raises(InputError, match="distinct"):
+        write_g2o_graph(out, d.graph, pose_ids=[0, 1, 2], landmark_ids=[2])
+    with pytest.raises(InputError, match="need 3 pose ids"):
+        write_g2o_graph(out, d.graph, pose_ids=[0, 1], landmark_ids=[2])
+
+
 def test_hand_written_file(tmp_path):
     p = tmp_path / "b.g2o"
     p.write_text(
@@ -73,5 +90,10 @@ def test_cli_import_and_solve(tmp_path):
     assert float(lms["x"]) == pytest.approx(2.0, abs=1e-6) and float(lms["y"]) == pytest.approx(
         1.0, abs=1e-6
     )
+    assert int(lms["landmark"]) == 2  # the iSAM id survives the g2o file
     assert main(["solve", str(p), "-o", str(tmp_path / "sol2"), "-q"]) == 0  # iSAM text directly
+    assert main(["solve", str(p), "-o", str(tmp_path / "sol3"), "-q", "--batch", "0"]) == 0
+    one = np.genfromtxt(tmp_path / "sol3" / "landmarks.csv", delimiter=",", names=True)
+    assert float(one["x"]) == pytest.approx(2.0, abs=1e-6)
+    assert main(["solve", str(p), "-o", str(tmp_path / "sol4"), "--batch", "-1"]) == 3
     assert main(["import", "isam", str(p), "-o", str(p)]) == 3  # never over an input

@@ -56,8 +56,9 @@ def test_run_on_a_bundle_directory(tmp_path):
     m = json.loads((rep / "metrics.json").read_text())
     assert m["trajectory_source"] == "recovered" and "online" in m and "dead_reckoning" in m
     assert m["map"]["association"]["matched"] > 100
-    assert m["trajectory"]["by_relation_set"]["global"]["translation"]["abs"]["mean"] < (
-        m["dead_reckoning"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]
+    assert (
+        m["trajectory"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]
+        < (m["dead_reckoning"]["by_relation_set"]["global"]["translation"]["abs"]["mean"])
     )
     # a bundle without ground truth cannot be scored: a clear error
     (slam / "groundtruth.csv").unlink()

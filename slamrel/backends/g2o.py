@@ -10,7 +10,7 @@ naming its line: nothing is silently used or dropped.
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.errors import InputError
 from relation_metric.textio import PathLike, read_keyword_records, write_text_atomic
@@ -95,33 +95,46 @@ def write_g2o_graph(
     *,
     poses: NDArray[np.float64] | None = None,
     landmarks: NDArray[np.float64] | None = None,
+    pose_ids: ArrayLike | None = None,
+    landmark_ids: ArrayLike | None = None,
 ) -> None:
     """Write ``graph`` (vertices: ``poses``/``landmarks`` if given, else its initial guess).
 
-    Poses get ids ``0..N−1``, landmarks ``N..N+L−1``.
+    Vertex ids are ``pose_ids`` and ``landmark_ids`` when given (e.g. the ids of the file the
+    graph came from, so that maps written from it keep the landmark names); otherwise poses
+    get ``0..N−1`` and landmarks ``N..N+L−1``. The ids must be distinct integers.
     """
     p = graph.poses if poses is None else np.asarray(poses)
     lm = graph.landmarks if landmarks is None else np.asarray(landmarks)
     n = p.shape[0]
+    pid = np.arange(n) if pose_ids is None else np.asarray(pose_ids, dtype=np.int64)
+    lid = n + np.arange(lm.shape[0]) if landmark_ids is None else np.asarray(landmark_ids, np.int64)
+    if pid.shape != (n,) or lid.shape != (lm.shape[0],):
+        raise InputError(
+            f"need {n} pose ids and {lm.shape[0]} landmark ids, got {pid.shape} and {lid.shape}"
+        )
+    every = np.concatenate((pid, lid))
+    if np.unique(every).size != every.size:
+        raise InputError("vertex ids must be distinct (poses and landmarks share one id space)")
     iu3 = np.triu_indices(3)
     iu2 = np.triu_indices(2)
     parts = []
     if n:
-        rows = np.column_stack((np.arange(n), p))
+        rows = np.column_stack((pid, p))
         parts.append(("VERTEX_SE2 %d %.9g %.9g %.9g\n" * n) % tuple(rows.ravel().tolist()))
     if lm.shape[0]:
-        rows = np.column_stack((n + np.arange(lm.shape[0]), lm))
+        rows = np.column_stack((lid, lm))
         parts.append(("VERTEX_XY %d %.9g %.9g\n" * lm.shape[0]) % tuple(rows.ravel().tolist()))
     if graph.pp_i.size:
         rows = np.column_stack(
-            (graph.pp_i, graph.pp_j, graph.pp_z, graph.pp_info[:, iu3[0], iu3[1]])
+            (pid[graph.pp_i], pid[graph.pp_j], graph.pp_z, graph.pp_info[:, iu3[0], iu3[1]])
         )
         parts.append(
             ("EDGE_SE2 %d %d" + " %.9g" * 9 + "\n") * rows.shape[0] % tuple(rows.ravel().tolist())
         )
     if graph.pl_k.size:
         rows = np.column_stack(
-            (graph.pl_k, n + graph.pl_l, graph.pl_z, graph.pl_info[:, iu2[0], iu2[1]])
+            (pid[graph.pl_k], lid[graph.pl_l], graph.pl_z, graph.pl_info[:, iu2[0], iu2[1]])
         )
         parts.append(
             ("EDGE_SE2_XY %d %d" + " %.9g" * 5 + "\n")

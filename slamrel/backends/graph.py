@@ -26,7 +26,14 @@ from relation_metric import se2
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import readonly
 
-__all__ = ["PoseGraph", "GraphSolution", "solve_graph", "initial_landmarks", "pose_covariances"]
+__all__ = [
+    "PoseGraph",
+    "GraphSolution",
+    "solve_graph",
+    "solve_graph_incremental",
+    "initial_landmarks",
+    "pose_covariances",
+]
 
 Array = NDArray[np.float64]
 
@@ -328,6 +335,115 @@ def solve_graph(
         cost=readonly(np.asarray(costs)),
         iterations=it,
         converged=converged,
+    )
+
+
+def solve_graph_incremental(
+    graph: PoseGraph,
+    *,
+    batch: int = 200,
+    max_iterations: int = 100,
+    tolerance: float = 1e-9,
+    prior_sigma: float = 1e-6,
+) -> GraphSolution:
+    """Levenberg–Marquardt on a problem grown ``batch`` poses at a time, in pose order.
+
+    Batch least squares started from chained odometry can stop in a poor local minimum on
+    long runs: on Victoria Park the accumulated heading error makes revisited landmarks pull
+    the wrong way (measured: cost 2.5e5 from odometry against 3.1e3 from a good start). An
+    incremental smoother (iSAM) never sees that guess, because each new pose is linearised
+    next to already-optimised ones. This driver does the same in batches:
+
+    1. poses ``0 .. end-1`` with every factor among them and their landmarks form the
+       sub-problem;
+    2. poses not yet solved keep the initial guess's motion relative to the last solved pose
+       (``x_k ← x_{s-1} ∘ (x⁰_{s-1}⁻¹ ∘ x⁰_k)``), landmarks seen for the first time keep
+       their initial guess relative to their earliest observing pose ``k``
+       (``l ← x_k · (x⁰_k⁻¹ · l⁰)``: the first sighting, for a first-sighting guess);
+    3. :func:`solve_graph` solves the sub-problem warm-started; ``end`` grows by ``batch``
+       until the whole graph is solved.
+
+    Poses must be indexed in time order (as :func:`~slamrel.importers.isam.read_isam` and
+    the g2o reader give them). Landmarks that no pose observes keep their initial guess out
+    of the sub-problems and enter with the last one.
+
+    Parameters
+    ----------
+    graph : PoseGraph
+    batch : int
+        Poses added per step (``≥ N`` is one batch solve).
+    max_iterations, tolerance, prior_sigma :
+        As :func:`solve_graph`, for each sub-problem.
+
+    Returns
+    -------
+    GraphSolution
+        ``cost[0]`` is the cost of the graph's own initial guess, the rest the last (full)
+        solve's accepted steps; ``iterations`` counts all sub-problems; ``converged`` is the
+        last solve's.
+    """
+    if batch < 1:
+        raise InputError(f"batch must be >= 1, got {batch}")
+    n = graph.n_poses
+    w_pp = _upper_sqrt(graph.pp_info)
+    w_pl = _upper_sqrt(graph.pl_info) if graph.pl_k.size else np.empty((0, 2, 2))
+    prior = (graph.poses[0].copy(), np.eye(3) / prior_sigma)
+    r0, _ = _residuals_and_jacobian(graph, graph.poses, graph.landmarks, w_pp, w_pl, prior)
+    x0 = np.asarray(graph.poses)
+    x = np.array(x0, dtype=np.float64)
+    lm = np.array(graph.landmarks, dtype=np.float64)
+    placed = np.zeros(graph.n_landmarks, dtype=bool)
+    iterations = 0
+    sol: GraphSolution | None = None
+    start = 0
+    while start < n:
+        end = min(start + batch, n)
+        if start > 0:
+            # step 2: carry the unsolved poses along with the last solved one
+            x[start:] = se2.compose(x[start - 1], se2.between(x0[start - 1], x0[start:]))
+        pp = (graph.pp_i < end) & (graph.pp_j < end)
+        pl = graph.pl_k < end
+        if end == n:  # the whole graph, landmarks without observations too
+            used, pl_l = np.arange(graph.n_landmarks), graph.pl_l
+        else:
+            used, pl_l = np.unique(graph.pl_l[pl], return_inverse=True)
+        fresh = np.flatnonzero(pl & ~placed[graph.pl_l])  # sightings of unplaced landmarks
+        if fresh.size:
+            # keep the initial guess's landmark relative to its earliest observing pose
+            k, l_ = graph.pl_k[fresh], graph.pl_l[fresh]
+            order = np.lexsort((k, l_))
+            first = order[np.concatenate(([True], np.diff(l_[order]) != 0))]
+            k, l_ = k[first], l_[first]
+            lm[l_] = se2.transform_points(
+                x[k], se2.inverse_transform_points(x0[k], graph.landmarks[l_])
+            )
+        sub = PoseGraph(
+            poses=x[:end],
+            landmarks=lm[used],
+            pp_i=graph.pp_i[pp],
+            pp_j=graph.pp_j[pp],
+            pp_z=graph.pp_z[pp],
+            pp_info=graph.pp_info[pp],
+            pl_k=graph.pl_k[pl],
+            pl_l=pl_l,
+            pl_z=graph.pl_z[pl],
+            pl_info=graph.pl_info[pl],
+        )
+        sol = solve_graph(
+            sub, max_iterations=max_iterations, tolerance=tolerance, prior_sigma=prior_sigma
+        )
+        x[:end] = sol.poses
+        lm[used] = sol.landmarks
+        placed[used] = True
+        iterations += sol.iterations
+        start = end
+    assert sol is not None
+    return GraphSolution(
+        poses=readonly(x),
+        landmarks=readonly(lm),
+        cost=readonly(np.concatenate(([0.5 * float(r0 @ r0)], sol.cost[1:]))),
+        iterations=iterations,
+        converged=sol.converged,
     )
 
 

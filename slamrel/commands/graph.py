@@ -12,7 +12,7 @@ from relation_metric.formats import write_trajectory
 from relation_metric.textio import check_not_input, write_text_atomic
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.g2o import read_g2o_graph, write_g2o_graph
-from slamrel.backends.graph import PoseGraph, solve_graph
+from slamrel.backends.graph import PoseGraph, solve_graph, solve_graph_incremental
 from slamrel.importers.isam import read_isam
 
 
@@ -63,30 +63,40 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     s = sub.add_parser(
         "solve",
         help="full least squares on a pose graph with landmarks (g2o or iSAM text)",
-        description="Levenberg-Marquardt from the file's initial guess; writes trajectory.txt "
-        "(t = pose index), landmarks.csv and solved.g2o into -o DIR.",
+        description="Levenberg-Marquardt from the file's initial guess, grown --batch poses "
+        "at a time in pose order (an incremental smoother's way to avoid the local minima a "
+        "single batch solve from chained odometry falls into on long runs such as Victoria "
+        "Park); writes trajectory.txt (t = pose index), landmarks.csv and solved.g2o into -o DIR.",
     )
     s.add_argument("graph", metavar="GRAPH")
     s.add_argument("-o", "--output", required=True, metavar="DIR")
-    s.add_argument("--max-iterations", type=int, default=100)
+    s.add_argument("--max-iterations", type=int, default=100, help="per sub-problem")
+    s.add_argument(
+        "--batch",
+        type=int,
+        default=500,
+        metavar="N",
+        help="poses added per sub-problem (default 500; 0: one batch solve of the whole graph)",
+    )
     s.add_argument("--noise", choices=("covariance", "sqrt-information"), default="covariance")
     s.add_argument("-q", "--quiet", action="store_true")
     s.set_defaults(func=run_solve)
 
 
-def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray]:
+def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
+    """The graph and its file's pose and landmark ids."""
     head = Path(path).read_text(errors="replace")[:4096].split()
     if head and head[0] in ("ODOMETRY", "LANDMARK"):
         data = read_isam(path, noise=noise)  # type: ignore[arg-type]
-        return data.graph, data.landmark_ids
-    graph, _, lm_ids = read_g2o_graph(path)
-    return graph, lm_ids
+        return data.graph, data.pose_ids, data.landmark_ids
+    return read_g2o_graph(path)
 
 
 def run_import_isam(args: argparse.Namespace) -> int:
     check_not_input(args.output, [args.file])
     data = read_isam(args.file, noise=args.noise)
-    write_g2o_graph(args.output, data.graph)
+    # the file's ids are kept: landmark names then agree with the --bundle log's map.csv
+    write_g2o_graph(args.output, data.graph, pose_ids=data.pose_ids, landmark_ids=data.landmark_ids)
     if args.bundle:
         from recovery.bundle import write_bundle
         from slamrel.importers.isam import isam_log_bundle
@@ -123,15 +133,27 @@ def run_import_mrclam(args: argparse.Namespace) -> int:
 def run_solve(args: argparse.Namespace) -> int:
     if not Path(args.graph).is_file():
         raise InputError("no such file", path=args.graph)
-    graph, lm_ids = _load(args.graph, args.noise)
-    sol = solve_graph(graph, max_iterations=args.max_iterations)
+    graph, pose_ids, lm_ids = _load(args.graph, args.noise)
+    if args.batch < 0:
+        raise InputError(f"--batch must be >= 0, got {args.batch}")
+    if args.batch == 0:
+        sol = solve_graph(graph, max_iterations=args.max_iterations)
+    else:
+        sol = solve_graph_incremental(graph, batch=args.batch, max_iterations=args.max_iterations)
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
     write_trajectory(out / "trajectory.txt", Trajectory.from_poses(sol.poses), format="plain")
     rows = np.column_stack((lm_ids, sol.landmarks))
     body = ("%d,%.9f,%.9f\n" * rows.shape[0]) % tuple(rows.ravel().tolist()) if rows.size else ""
     write_text_atomic(out / "landmarks.csv", "landmark,x,y\n" + body)
-    write_g2o_graph(out / "solved.g2o", graph, poses=sol.poses, landmarks=sol.landmarks)
+    write_g2o_graph(
+        out / "solved.g2o",
+        graph,
+        poses=sol.poses,
+        landmarks=sol.landmarks,
+        pose_ids=pose_ids,
+        landmark_ids=lm_ids,
+    )
     if not args.quiet:
         print(
             f"{'converged' if sol.converged else 'NOT converged'} after {sol.iterations} "

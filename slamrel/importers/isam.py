@@ -171,7 +171,6 @@ def isam_log_bundle(data: IsamData, *, sigma_scale: float = 1.0) -> Any:
         initial_covariance=1e-9 * np.eye(3),
         odometry=Trajectory(t, g.poses),
         description=(
-            "iSAM/GTSAM text file as an EKF-SLAM log (t = pose index); "
-            "map = first-sighting guess"
+            "iSAM/GTSAM text file as an EKF-SLAM log (t = pose index); map = first-sighting guess"
         ),
     )
