@@ -57,6 +57,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         action="store_true",
         help="keep the raw odometry commands (default: delay and scales fitted against Vicon)",
     )
+    mr.add_argument(
+        "--motion-noise",
+        choices=("speed", "constant"),
+        default="speed",
+        help="velocity-model noise growing with the commanded speeds (fitted alpha, zero at "
+        "rest; default) or constant per control row (fitted sigma_v, sigma_omega)",
+    )
     mr.add_argument("-q", "--quiet", action="store_true")
     mr.set_defaults(func=run_import_mrclam)
 
@@ -119,7 +126,12 @@ def run_import_mrclam(args: argparse.Namespace) -> int:
     robots = [args.robot] if args.robot is not None else list(range(1, N_ROBOTS + 1))
     for robot in robots:
         out = Path(args.output) if args.robot is not None else Path(args.output) / f"robot{robot}"
-        bundle = mrclam_bundle(args.directory, robot, calibrate=not args.no_calibrate)
+        bundle = mrclam_bundle(
+            args.directory,
+            robot,
+            calibrate=not args.no_calibrate,
+            motion_noise=args.motion_noise,
+        )
         write_bundle(out, bundle)
         if not args.quiet:
             print(
