@@ -1,7 +1,8 @@
 """Figures of relation errors: where along the trajectory the estimate is wrong.
 
-matplotlib is imported lazily with the non-interactive Agg backend; figures are written
-atomically. Statistics live in :mod:`relation_metric.stats`, not here.
+matplotlib is imported lazily (Agg unless the user or Jupyter chose a backend, see
+:func:`pyplot`); figures are written atomically. Statistics live in
+:mod:`relation_metric.stats`, not here.
 """
 
 from __future__ import annotations
@@ -22,10 +23,20 @@ __all__ = ["evaluation_figure", "save_figure", "pyplot"]
 
 
 def pyplot():  # type: ignore[no-untyped-def]
-    """``matplotlib.pyplot``, imported lazily with the non-interactive Agg backend."""
+    """``matplotlib.pyplot``, imported lazily.
+
+    The non-interactive Agg backend is chosen only when nobody chose before: not when pyplot
+    is already imported, not inside IPython/Jupyter (whose inline backend shows the
+    figures), not when ``MPLBACKEND`` is set. A library must not take the user's backend.
+    """
+    import os
+    import sys
+
     import matplotlib
 
-    matplotlib.use("Agg", force=False)
+    chosen = "matplotlib.pyplot" in sys.modules or "MPLBACKEND" in os.environ
+    if not chosen and "IPython" not in sys.modules:
+        matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
     return plt
