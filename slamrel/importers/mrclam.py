@@ -160,8 +160,8 @@ class NoiseFit:
     alpha : tuple of float
         ``(α1, α2, α3, α4)`` of the speed-proportional velocity model (Probabilistic Robotics
         Table 5.3: ``σ_v² = α1 v² + α2 ω²``, ``σ_ω² = α3 v² + α4 ω²`` per row), fitted by
-        non-negative least squares of the squared window errors on
-        ``[Σ v_k² dt_k², Σ ω_k² dt_k²]`` (windows beyond 5 robust σ left out). Zero commands
+        iteratively reweighted non-negative least squares of the squared window errors on
+        ``[Σ v_k² dt_k², Σ ω_k² dt_k²]`` (see :func:`_fit_variance`). Zero commands
         then move nothing, as the robots do: they stand still for up to a third of a run
         (Vicon: median 1 s displacement 0.1 mm there).
     window : float
@@ -175,7 +175,7 @@ class NoiseFit:
     sigma_bearing: float
     outlier_fraction: float
     window: float
-    alpha: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    alpha: tuple[float, float, float, float]
 
 
 def _interp_poses(gt: Trajectory, t: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -449,7 +449,7 @@ def mrclam_bundle(
     Measured on dataset 7 (gated EKF-SLAM + recovery, 1 s relations, mean [m]): with
     ``"constant"`` robot 4, at rest 37% of the time, wanders under its biased measurements
     while standing (recovered 0.0070 = dead reckoning 0.0070; loop median 0.17 against 0.026);
-    with ``"speed"`` it is 0.0063 (loop median 0.010), and the other four robots stay below
+    with ``"speed"`` it is 0.0063 (loop median 0.0075), and the other four robots stay below
     dead reckoning too. The bundle's description records all fitted values.
     """
     from recovery.bundle import Bundle
