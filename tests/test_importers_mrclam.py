@@ -307,3 +307,29 @@ def test_cli_chain_on_another_dataset_directory(tmp_path):
     dr = m["dead_reckoning"]["by_relation_set"]["loops"]["translation"]["abs"]["mean"]
     assert rec < 0.5 * dr
     assert m["map"]["association"]["matched"] == 15
+
+
+@pytest.mark.realdata
+def test_measurements_outside_the_odometry_span_are_counted(tmp_path):
+    """Odometry that stops early: the later measurements are left out, and said so."""
+    import re
+    import shutil
+
+    from slamrel.importers.mrclam import mrclam_bundle
+
+    src = require_data("mrclam", "MRCLAM_Dataset7")
+    d = tmp_path / "MRCLAM_Short"
+    shutil.copytree(src, d)
+    lines = (src / "Robot3_Odometry.dat").read_text().splitlines(keepends=True)
+    (d / "Robot3_Odometry.dat").write_text("".join(lines[:3000]))
+    b = mrclam_bundle(d, 3)
+    full = read_mrclam_robot(src, 3)
+    last = float(lines[2999].split()[0])
+    subjects = np.loadtxt(src / "Landmark_Groundtruth.dat")[:, 0]
+    m = full.measurements[np.isin(full.measurements[:, 3], subjects)]
+    after = int((m[:, 0] > last).sum())
+    assert after > 3000 and b.measurements.shape[0] == m.shape[0] - after - int(
+        (m[:, 0] < b.controls[0, 0]).sum()
+    )
+    said = re.search(r"(\d+) controls and (\d+) measurements outside", b.description)
+    assert said and int(said[2]) == m.shape[0] - b.measurements.shape[0]

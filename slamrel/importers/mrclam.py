@@ -499,7 +499,9 @@ def mrclam_bundle(
         description=(
             f"MRCLAM {d.name} robot {robot}: {r.robot_sightings} robot sightings and "
             f"{sum(r.unknown_barcodes.values())} unknown barcodes left out, "
-            f"{int((~known).sum())} sightings of unsurveyed subjects left out; noise fitted "
+            f"{int((~known).sum())} sightings of unsurveyed subjects left out; "
+            f"{int((~keep_c).sum())} controls and {int((~keep_m).sum())} measurements outside "
+            "the time span covered by both odometry and ground truth left out; noise fitted "
             f"over {fit.window} s windows ("
             + (
                 "alpha " + " ".join(f"{a:.4g}" for a in fit.alpha)
