@@ -153,13 +153,18 @@ def initial_landmarks(
     k = np.asarray(pl_k, dtype=np.int64)
     lm = np.asarray(pl_l, dtype=np.int64)
     out = np.full((n_landmarks, 2), np.nan)
-    order = np.lexsort((np.arange(lm.size), lm))
-    first = order[np.concatenate(([True], np.diff(lm[order]) != 0))] if lm.size else order
+    first = _first_of_each(lm, np.arange(lm.size))
     out[lm[first]] = se2.transform_points(np.asarray(poses)[k[first]], np.asarray(pl_z)[first])
     missing = np.flatnonzero(~np.isfinite(out[:, 0]))
     if missing.size:
         raise InputError(f"landmark {int(missing[0])} is never observed; cannot initialise it")
     return out
+
+
+def _first_of_each(group: NDArray[np.int64], rank: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Index of the lowest-``rank`` element of each distinct ``group`` (ties: first index)."""
+    order = np.lexsort((np.arange(group.size), rank, group))
+    return order[np.concatenate(([True], np.diff(group[order]) != 0))] if group.size else order
 
 
 def _upper_sqrt(info: Array) -> Array:
@@ -410,10 +415,8 @@ def solve_graph_incremental(
         fresh = np.flatnonzero(pl & ~placed[graph.pl_l])  # sightings of unplaced landmarks
         if fresh.size:
             # keep the initial guess's landmark relative to its earliest observing pose
-            k, l_ = graph.pl_k[fresh], graph.pl_l[fresh]
-            order = np.lexsort((k, l_))
-            first = order[np.concatenate(([True], np.diff(l_[order]) != 0))]
-            k, l_ = k[first], l_[first]
+            first = fresh[_first_of_each(graph.pl_l[fresh], graph.pl_k[fresh])]
+            k, l_ = graph.pl_k[first], graph.pl_l[first]
             lm[l_] = se2.transform_points(
                 x[k], se2.inverse_transform_points(x0[k], graph.landmarks[l_])
             )

@@ -341,9 +341,14 @@ def fit_noise(
     w_id = np.where(inside, w_id, -1)
     keep = w_id >= 0
     nw = int(w_id.max()) + 1 if keep.any() else 0
-    dist = np.bincount(w_id[keep], weights=(c[:, 1] * dt)[keep], minlength=nw)
-    turn = np.bincount(w_id[keep], weights=(c[:, 2] * dt)[keep], minlength=nw)
-    dt2 = np.bincount(w_id[keep], weights=(dt * dt)[keep], minlength=nw)
+
+    def per_window(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Sums of ``x`` over each window's rows, shape (nw,)."""
+        return np.bincount(w_id[keep], weights=x[keep], minlength=nw)
+
+    dist = per_window(c[:, 1] * dt)
+    turn = per_window(c[:, 2] * dt)
+    dt2 = per_window(dt * dt)
     t0 = np.full(nw, np.inf)
     t1 = np.full(nw, -np.inf)
     np.minimum.at(t0, w_id[keep], t[keep])
@@ -361,12 +366,8 @@ def fit_noise(
     sigma_v = float(np.sqrt(np.var(e_d) / mdt2))
     sigma_w = float(np.sqrt(np.var(e_t) / mdt2))
     # speed-proportional model: E[e²] = Σ_k (α_a v_k² + α_b ω_k²) dt_k² per window
-    design = np.column_stack(
-        (
-            np.bincount(w_id[keep], weights=(c[:, 1] ** 2 * dt**2)[keep], minlength=nw)[ok],
-            np.bincount(w_id[keep], weights=(c[:, 2] ** 2 * dt**2)[keep], minlength=nw)[ok],
-        )
-    )
+    v2, w2 = c[:, 1] ** 2 * dt**2, c[:, 2] ** 2 * dt**2
+    design = np.column_stack((per_window(v2), per_window(w2)))[ok]
     alpha_v = _fit_variance(design, e_d)
     alpha_w = _fit_variance(design, e_t)
     # measurements
@@ -386,11 +387,12 @@ def fit_noise(
     out = _beyond(r_res) | _beyond(b_res)
     sr = float(np.std(r_res[~out], ddof=1)) if (~out).sum() > 1 else float("nan")
     sb = float(np.std(b_res[~out], ddof=1)) if (~out).sum() > 1 else float("nan")
+    duration = float(np.mean(per_window(dt)[ok]))
     return NoiseFit(
         sigma_v=sigma_v,
         sigma_omega=sigma_w,
-        bias_v=float(np.mean(e_d) / np.mean(np.bincount(w_id[keep], weights=dt[keep])[ok])),
-        bias_omega=float(np.mean(e_t) / np.mean(np.bincount(w_id[keep], weights=dt[keep])[ok])),
+        bias_v=float(np.mean(e_d) / duration),
+        bias_omega=float(np.mean(e_t) / duration),
         sigma_range=sr,
         sigma_bearing=sb,
         outlier_fraction=float(out.mean()) if out.size else 0.0,
