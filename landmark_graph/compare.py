@@ -130,7 +130,12 @@ def compare_maps(
             f"associate must be 'id', 'auto' or an association file, got {associate!r}"
         )
     if assoc.estimate_rows.size == 0:
-        raise InputError("no landmark of the estimate matches the reference")
+        how = (
+            " by id; --associate auto matches them by position, an association file by hand"
+            if associate == "id"
+            else "; check the association or the cut-off"
+        )
+        raise InputError(f"no landmark of the estimate matches the reference{how}")
     est_xy = estimate.xy[assoc.estimate_rows]
     ref_xy = reference.xy[assoc.reference_rows]
     mesh = delaunay_mesh(ref_xy, thin_angle=thin_angle)

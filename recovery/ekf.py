@@ -493,7 +493,7 @@ def run_filter(
                 _diverged(inp, times[k], j, "pose covariance is not finite positive definite")
         if bounds[e + 1] == bounds[e] and not _pd(p00, p01, p02, p11, p12, p22):
             raise DivergenceError(
-                f"filter diverged at t={times[k]!r}: predicted covariance is not finite "
+                f"filter diverged at t={float(times[k]):.6f} s: predicted covariance is not finite "
                 "positive definite"
             )
         post_x.append((x, y, th))
@@ -580,4 +580,4 @@ def fill(seg: Segments, psi: Array, post_x: Array, post_p: Array) -> tuple[Array
 
 
 def _diverged(inp: FilterInput, t: float, j: int, why: str) -> None:
-    raise DivergenceError(f"filter diverged at t={t!r} ({inp.label(j)}): {why}")
+    raise DivergenceError(f"filter diverged at t={float(t):.6f} s ({inp.label(j)}): {why}")

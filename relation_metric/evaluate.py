@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.association import REASONS, Association, associate
-from relation_metric.errors import AssociationError
+from relation_metric.errors import AssociationError, InputError
 from relation_metric.metric import Mode, RelationErrors, relation_errors
 from relation_metric.relations import RelationSet
 from relation_metric.stats import Summary, summarize
@@ -103,6 +103,8 @@ def evaluate(
     interpolate: bool = False,
     max_interpolation_gap: float = 1.0,
     strict: bool = False,
+    estimate_name: str | None = None,
+    relations_name: str | None = None,
 ) -> Evaluation:
     """Score an estimate with the relation metric (Kümmerle et al. 2009).
 
@@ -119,6 +121,8 @@ def evaluate(
     strict : bool
         Raise :class:`AssociationError` when any relation is unassociated (otherwise they
         are excluded, counted and named in an :class:`UnassociatedRelationsWarning`).
+    estimate_name, relations_name : str, optional
+        Where the estimate and the relations come from (file names), for messages.
 
     Returns
     -------
@@ -129,15 +133,20 @@ def evaluate(
     AssociationError
         When no relation can be associated (the message shows both time spans), or with
         ``strict`` when any cannot.
+    InputError
+        When the errors overflow float64 (coordinates near 1e150 and beyond): such poses
+        cannot be scored, and statistics of ``inf`` would be no score either.
     """
-    assoc = associate(
-        relations,
-        estimate,
-        odometry=odometry,
-        max_time_diff=max_time_diff,
-        interpolate=interpolate,
-        max_interpolation_gap=max_interpolation_gap,
-    )
+    of_relations = f" of {relations_name}" if relations_name else ""
+    with np.errstate(over="ignore", invalid="ignore"):
+        assoc = associate(
+            relations,
+            estimate,
+            odometry=odometry,
+            max_time_diff=max_time_diff,
+            interpolate=interpolate,
+            max_interpolation_gap=max_interpolation_gap,
+        )
     valid = assoc.valid
     n_bad = int((~valid).sum())
     if len(relations) and n_bad == len(relations):
@@ -145,23 +154,27 @@ def evaluate(
         e0, e1 = estimate.span()
         unit = "s" if relations.key == "time" else "(pose index)"
         raise AssociationError(
-            f"none of the {len(relations)} relations can be associated with the estimate: "
-            f"the relations span {r0:.6f} .. {r1:.6f} {unit}, the estimate "
+            f"none of the {len(relations)} relations{of_relations} can be associated with the "
+            f"estimate: the relations span {r0:.6f} .. {r1:.6f} {unit}, the estimate "
             f"{e0:.6f} .. {e1:.6f} s ({len(estimate)} poses); are they in the same time "
-            "base?"
+            "base?",
+            path=estimate_name,
         )
     if n_bad:
-        message = _describe_unassociated(relations, assoc, max_time_diff)
+        message = _describe_unassociated(relations, assoc, max_time_diff, of_relations)
         if strict:
-            raise AssociationError(message + " (--strict)")
-        warnings.warn(message, UnassociatedRelationsWarning, stacklevel=2)
-    errors = relation_errors(
-        assoc.estimated_delta,
-        relations.delta,
-        mode=mode,
-        weights=weights,
-        out_of_plane=relations.out_of_plane,
-    )
+            raise AssociationError(message + " (--strict)", path=estimate_name)
+        where = f"{estimate_name}: " if estimate_name else ""
+        warnings.warn(where + message, UnassociatedRelationsWarning, stacklevel=2)
+    with np.errstate(over="ignore", invalid="ignore"):
+        errors = relation_errors(
+            assoc.estimated_delta,
+            relations.delta,
+            mode=mode,
+            weights=weights,
+            out_of_plane=relations.out_of_plane,
+        )
+    _check_representable(errors, valid, relations, estimate_name)
     return Evaluation(
         relations=relations,
         association=assoc,
@@ -172,7 +185,28 @@ def evaluate(
     )
 
 
-def _describe_unassociated(relations: RelationSet, assoc: Association, tol: float) -> str:
+def _check_representable(
+    errors: RelationErrors, valid: NDArray[np.bool_], relations: RelationSet, name: str | None
+) -> None:
+    """Refuse errors whose squares (hence ε and the rmse) overflow float64."""
+    limit = 1e150  # (1e150)² · 1e6 relations stays below float64's 1.8e308
+    for part in (errors.translation, errors.rotation, errors.combined):
+        v = part[valid]
+        bad = np.flatnonzero(~(np.abs(v) < limit))
+        if bad.size:
+            k = int(np.flatnonzero(valid)[bad[0]])
+            raise InputError(
+                f"relation #{k} ({float(relations.first[k]):.6f} -> "
+                f"{float(relations.second[k]):.6f}) has an error of {float(part[k]):.3g}, "
+                f"beyond what float64 statistics can hold (|error| < {limit:.0e}); "
+                "are the coordinates in metres?",
+                path=name,
+            )
+
+
+def _describe_unassociated(
+    relations: RelationSet, assoc: Association, tol: float, of_relations: str = ""
+) -> str:
     bad = np.flatnonzero(~assoc.valid)
     parts = []
     for k in bad[:5]:
@@ -182,6 +216,7 @@ def _describe_unassociated(relations: RelationSet, assoc: Association, tol: floa
         )
     more = "" if bad.size <= 5 else f" and {bad.size - 5} more"
     return (
-        f"{bad.size} of {len(relations)} relations could not be associated (tolerance {tol} s) "
+        f"{bad.size} of {len(relations)} relations{of_relations} could not be associated "
+        f"(tolerance {tol:g} s) "
         f"and are left out of the statistics: {', '.join(parts)}{more}"
     )

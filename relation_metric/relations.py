@@ -15,6 +15,7 @@ Every generated set reproduces its reference trajectory exactly (``δ*`` are com
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Literal
 
@@ -267,6 +268,10 @@ def _loop_pairs(
     return i[keep], j[keep]
 
 
+MAX_SAMPLED_RELATIONS = 10_000_000
+"""The most relations ``global``/``random`` draw (memory ~ 100 bytes per candidate pair)."""
+
+
 def _random_pairs(
     n: int,
     count: int,
@@ -275,28 +280,58 @@ def _random_pairs(
     xy: NDArray[np.float64] | None = None,
     min_distance: float = 0.0,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """``count`` distinct seeded pairs ``i < j`` (at least ``min_distance`` apart with ``xy``).
+
+    Candidates are drawn in batches; the result is the first ``count`` distinct pairs in the
+    order drawn. The work is bounded: when every pair is wanted (``random``) all are taken;
+    batches are capped, and the search stops when a batch finds no new pair or after 64
+    batches. Fewer pairs than asked are returned with a warning that says how many.
+    """
     if count < 1:
         raise InputError(f"count must be >= 1, got {count}")
-    rng = np.random.default_rng(seed)
+    if count > MAX_SAMPLED_RELATIONS:
+        raise InputError(
+            f"count {count} is more than the {MAX_SAMPLED_RELATIONS} relations slamrel draws; "
+            "use --strategy all-pairs on a short trajectory, or a smaller count"
+        )
     total = n * (n - 1) // 2
-    codes = np.empty(0, dtype=np.int64)
-    first = np.empty(0, dtype=np.int64)
-    # Draw batches of candidate pairs i < j (coded as i*n + j), keep the first occurrence of
-    # each pair that passes the distance filter, until ``count`` distinct pairs are found.
+    if xy is None and count >= total:
+        if count > total:
+            warnings.warn(
+                f"{count} random relations asked, but {n} poses have only {total} pairs; "
+                "all of them are used",
+                UserWarning,
+                stacklevel=4,
+            )
+        i, j = np.triu_indices(n, k=1)
+        return i.astype(np.int64), j.astype(np.int64)
+    rng = np.random.default_rng(seed)
+    picked = np.empty(0, dtype=np.int64)  # distinct codes i*n + j, in the order drawn
     for _ in range(64):
-        batch = max(4 * (count - first.size), 1024)
+        batch = min(max(4 * (count - picked.size), 1024), 4 * 1024 * 1024)
         a = rng.integers(0, n, size=batch)
         b = rng.integers(0, n, size=batch)
         i, j = np.minimum(a, b), np.maximum(a, b)
         ok = i != j
         if xy is not None:
             ok &= np.hypot(*(xy[j] - xy[i]).T) >= min_distance
-        codes = np.concatenate((codes, i[ok] * n + j[ok]))
+        codes = i[ok] * n + j[ok]
+        codes = codes[~np.isin(codes, picked)]
         _, first = np.unique(codes, return_index=True)
-        if first.size >= min(count, total):
+        if first.size == 0 and picked.size:
+            break  # saturated: this batch found no new pair
+        picked = np.concatenate((picked, codes[np.sort(first)]))
+        if picked.size >= min(count, total):
             break
-    picked = codes[np.sort(first)][:count]
-    have = picked.size
-    if have == 0:
+    picked = picked[:count]
+    if picked.size == 0:
         raise InputError(f"no pose pairs at least {min_distance:.3g} m apart; lower min_distance")
+    if picked.size < count:
+        what = f"at least {min_distance:.3g} m apart " if xy is not None else ""
+        warnings.warn(
+            f"only {picked.size} distinct pose pairs {what}were found of the {count} asked; "
+            f"{picked.size} relations are used",
+            UserWarning,
+            stacklevel=4,
+        )
     return picked // n, picked % n

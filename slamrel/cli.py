@@ -1,7 +1,9 @@
 """The ``slamrel`` command line.
 
-Exit codes: 0 success, 2 usage error (argparse), 3 bad input (any
-:class:`relation_metric.errors.SlamrelError`, printed with file and line), 130 interrupted.
+Exit codes: 0 success, 2 usage error (argparse, option values), 3 bad input (any
+:class:`relation_metric.errors.SlamrelError`, printed with file and line, or a file that
+cannot be read or written), 130 interrupted, 1 a bug in slamrel (one line, no traceback
+unless ``SLAMREL_DEBUG=1``).
 Each sub-command lives in its own module under :mod:`slamrel.commands` and exposes
 ``register(subparsers)``, which sets ``func(args) -> int`` on its parser.
 """
@@ -10,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 import warnings
 from collections.abc import Sequence
@@ -29,7 +32,7 @@ COMMAND_MODULES = (
     "slamrel.commands.example",
 )
 
-EXIT_OK, EXIT_USAGE, EXIT_INPUT, EXIT_INTERRUPTED = 0, 2, 3, 130
+EXIT_OK, EXIT_BUG, EXIT_USAGE, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -53,21 +56,55 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):  #
     print(f"warning: {message}", file=sys.stderr)
 
 
+def _os_error_text(exc: OSError) -> str:
+    """``FILE: reason`` for an operating-system error (permissions, disk full, …)."""
+    reason = exc.strerror or type(exc).__name__
+    name = exc.filename if exc.filename is not None else None
+    return f"{name}: {reason.lower()}" if name is not None else reason.lower()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI; returns the exit code (also used by the console script)."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    with warnings.catch_warnings():
-        warnings.simplefilter("always", UserWarning)
-        warnings.showwarning = _show_warning
-        try:
+    """Run the CLI; returns the exit code (also used by the console script).
+
+    No input or option ends in a traceback: option mistakes exit 2 (argparse), bad input
+    and failed reads/writes exit 3 with the file named, Ctrl-C exits 130 (also during
+    start-up). Anything else is a bug in slamrel: one line saying so, exit 1; set
+    ``SLAMREL_DEBUG=1`` to see the traceback.
+    """
+    command = "slamrel"
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        command = f"slamrel {args.command}"
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", UserWarning)
+            warnings.showwarning = _show_warning
             return int(args.func(args) or EXIT_OK)
-        except SlamrelError as exc:
-            print(f"slamrel {args.command}: error: {exc}", file=sys.stderr)
-            return EXIT_INPUT
-        except KeyboardInterrupt:
-            print(f"slamrel {args.command}: interrupted", file=sys.stderr)
-            return EXIT_INTERRUPTED
+    except SlamrelError as exc:
+        print(f"{command}: error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        print(f"{command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:  # e.g. `slamrel evaluate ... | head`
+        sys.stderr.close()
+        return EXIT_OK
+    except OSError as exc:
+        print(f"{command}: error: {_os_error_text(exc)}", file=sys.stderr)
+        return EXIT_INPUT
+    except MemoryError:
+        print(f"{command}: error: out of memory", file=sys.stderr)
+        return EXIT_INPUT
+    except Exception as exc:
+        if os.environ.get("SLAMREL_DEBUG"):
+            raise
+        print(
+            f"{command}: internal error ({type(exc).__name__}: {exc}); this is a bug in "
+            "slamrel, please report it with the command line (SLAMREL_DEBUG=1 shows the "
+            "traceback)",
+            file=sys.stderr,
+        )
+        return EXIT_BUG
 
 
 if __name__ == "__main__":  # pragma: no cover

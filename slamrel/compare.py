@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import io
 import itertools
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -48,6 +49,8 @@ class ResultErrors:
     translation, rotation : ndarray, shape (M,)
         Metres; radians (degrees when ``rotation_unit == "deg"``).
     rotation_unit : str
+    source : str, optional
+        The file the errors were read from (for messages).
     """
 
     dataset: str
@@ -56,6 +59,24 @@ class ResultErrors:
     translation: NDArray[np.float64]
     rotation: NDArray[np.float64]
     rotation_unit: str
+    source: str | None = None
+
+    @property
+    def name(self) -> str:
+        """``dataset:algorithm (file)`` for messages."""
+        where = f" ({self.source})" if self.source else ""
+        return f"{self.dataset}:{self.algorithm}{where}"
+
+    def restricted(self, keys: NDArray[np.str_]) -> ResultErrors:
+        """The same result on the relations ``keys`` only (all of them must be present)."""
+        _, idx, _ = np.intersect1d(self.keys, keys, assume_unique=True, return_indices=True)
+        idx = np.sort(idx)
+        return replace(
+            self,
+            keys=self.keys[idx],
+            translation=self.translation[idx],
+            rotation=self.rotation[idx],
+        )
 
 
 def read_per_relation(path: PathLike, *, dataset: str, algorithm: str) -> ResultErrors:
@@ -132,6 +153,7 @@ class Comparison:
     tests: list[PairTest]
     alpha: float
     rotation_unit: str
+    left_out: dict[tuple[str, str], int] = field(default_factory=dict)
 
     def rows(self) -> list[list[Any]]:
         """Table rows: dataset, algorithm, then mean and std of trans/rot abs/sqr, N."""
@@ -160,6 +182,15 @@ class Comparison:
         lines = ["| " + " | ".join(self.columns()) + " |", "|" + "---|" * len(self.columns())]
         for row in self.rows():
             lines.append("| " + " | ".join(_fmt(v) for v in row) + " |")
+        dropped = {k: n for k, n in self.left_out.items() if n}
+        if dropped:
+            lines += [
+                "",
+                "Relations not scored by every algorithm of a dataset are left out of its "
+                "statistics and tests: "
+                + ", ".join(f"{ds}:{alg} {n}" for (ds, alg), n in dropped.items())
+                + ".",
+            ]
         lines += ["", f"Paired Wilcoxon signed-rank tests (Holm-adjusted, α = {self.alpha}):", ""]
         lines += [
             "| dataset | A | B | part | n | median(A − B) | p | p (Holm) | significant |",
@@ -228,22 +259,41 @@ def holm(p: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def compare_results(results: list[ResultErrors], *, alpha: float = 0.05) -> Comparison:
-    """Statistics per result and paired tests between the algorithms of each dataset."""
+    """Statistics per result and paired tests between the algorithms of each dataset.
+
+    Within a dataset every algorithm is scored on the *same* relations: those that all of
+    its results contain (matched by ``(t1, t2)``). Relations that some result lacks (e.g.
+    left unassociated there) are left out of every statistic and test of that dataset,
+    counted in :attr:`Comparison.left_out` and named in a warning, so that means side by
+    side are over one set.
+
+    Raises
+    ------
+    InputError
+        No results; ``alpha`` outside (0, 1); a result with no relations or a non-finite
+        error; a (dataset, algorithm) given twice; rotation units mixed; a dataset whose
+        results share no relation.
+    """
     if not results:
         raise InputError("nothing to compare: give at least one result")
+    if not (0.0 < alpha < 1.0):
+        raise InputError(f"alpha must be a probability in (0, 1), got {float(alpha):g}")
     units = {r.rotation_unit for r in results}
     if len(units) != 1:
         raise InputError(
             f"results mix rotation units {sorted(units)}; evaluate all with or without --degrees"
         )
     seen: set[tuple[str, str]] = set()
-    stats: dict[tuple[str, str], dict[str, dict[str, Summary]]] = {}
     for r in results:
         key = (r.dataset, r.algorithm)
         if key in seen:
             raise InputError(f"{r.dataset}/{r.algorithm} is given twice")
         seen.add(key)
-        stats[key] = {
+        _check_errors(r)
+    results, left_out = _common_relations(results)
+    stats: dict[tuple[str, str], dict[str, dict[str, Summary]]] = {}
+    for r in results:
+        stats[(r.dataset, r.algorithm)] = {
             "translation": {"abs": summarize(r.translation), "sqr": summarize(r.translation**2)},
             "rotation": {"abs": summarize(r.rotation), "sqr": summarize(r.rotation**2)},
         }
@@ -264,4 +314,54 @@ def compare_results(results: list[ResultErrors], *, alpha: float = 0.05) -> Comp
         adj = holm(np.array([x[5] for x in raw]))
         for (a_name, b_name, part, n, med, p), ph in zip(raw, adj):
             tests.append(PairTest(ds, a_name, b_name, part, n, med, p, float(ph), bool(ph < alpha)))
-    return Comparison(stats, tests, alpha, units.pop())
+    return Comparison(stats, tests, alpha, units.pop(), left_out)
+
+
+def _check_errors(r: ResultErrors) -> None:
+    if r.keys.size == 0:
+        raise InputError(
+            f"{r.dataset}:{r.algorithm}: no scored relations (all invalid or none); nothing to "
+            "compare",
+            path=r.source,
+        )
+    for part in ("translation", "rotation"):
+        v = getattr(r, part)
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            raise InputError(
+                f"{r.dataset}:{r.algorithm}: {part} error of relation (t1 t2) {r.keys[bad[0]]} is "
+                f"{float(v[bad[0]])}; expected finite errors",
+                path=r.source,
+            )
+
+
+def _common_relations(
+    results: list[ResultErrors],
+) -> tuple[list[ResultErrors], dict[tuple[str, str], int]]:
+    """Each result restricted to the relations every result of its dataset has."""
+    out: list[ResultErrors] = []
+    left_out: dict[tuple[str, str], int] = {}
+    for ds in dict.fromkeys(r.dataset for r in results):
+        group = [r for r in results if r.dataset == ds]
+        common = group[0].keys
+        for r in group[1:]:
+            common = np.intersect1d(common, r.keys, assume_unique=True)
+        if common.size == 0:
+            raise InputError(
+                f"dataset {ds}: the results share no relation (t1, t2) ("
+                + ", ".join(r.name for r in group)
+                + "); were they evaluated on the same relations?"
+            )
+        for r in group:
+            left_out[(r.dataset, r.algorithm)] = int(r.keys.size - common.size)
+        if any(r.keys.size != common.size for r in group):
+            warnings.warn(
+                f"dataset {ds}: the results score different relation sets ("
+                + ", ".join(f"{r.name}: {r.keys.size}" for r in group)
+                + f"); statistics and tests use the {common.size} relations common to all",
+                UserWarning,
+                stacklevel=3,
+            )
+            group = [r.restricted(common) for r in group]
+        out.extend(group)
+    return out, left_out

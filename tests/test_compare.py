@@ -41,8 +41,45 @@ def test_clearly_different_algorithms_are_significant(rng):
 def test_pairs_only_common_relations():
     a = result("d", "a", ["1 2", "2 3", "3 4"], [0.1, 0.2, 0.3], [0, 0, 0])
     b = result("d", "b", ["2 3", "3 4", "4 5"], [0.2, 0.1, 0.9], [0, 0, 0])
-    t = [x for x in compare_results([a, b]).tests if x.part == "translation"][0]
+    with pytest.warns(UserWarning, match="different relation sets.*2 relations common"):
+        comp = compare_results([a, b])
+    t = [x for x in comp.tests if x.part == "translation"][0]
     assert t.n == 2 and t.median_difference == pytest.approx(0.1)
+    # means side by side are over the same two relations (hand: a 0.25, b 0.15), counted
+    assert comp.stats[("d", "a")]["translation"]["abs"].mean == pytest.approx(0.25)
+    assert comp.stats[("d", "b")]["translation"]["abs"].mean == pytest.approx(0.15)
+    assert comp.left_out == {("d", "a"): 1, ("d", "b"): 1}
+    assert "left out" in comp.markdown()
+
+
+def test_results_sharing_no_relation_are_refused():
+    a = result("d", "a", ["1 2"], [0.1], [0.0])
+    b = result("d", "b", ["2 3"], [0.2], [0.0])
+    with pytest.raises(InputError, match="share no relation"):
+        compare_results([a, b])
+
+
+@pytest.mark.parametrize(
+    ("trans", "keys", "match"),
+    [([np.nan, 0.1], ["1 2", "2 3"], "expected finite errors"),
+     ([np.inf, 0.1], ["1 2", "2 3"], "expected finite errors"),
+     ([], [], "no scored relations")],
+)  # fmt: skip
+def test_bad_errors_are_refused_with_the_file(trans, keys, match):
+    r = ResultErrors(
+        "d", "a", np.asarray(keys, dtype=str), np.asarray(trans, float),
+        np.zeros(len(trans)), "rad", source="a.csv",
+    )  # fmt: skip
+    with pytest.raises(InputError, match=match) as err:
+        compare_results([r])
+    assert str(err.value).startswith("a.csv: ")
+
+
+@pytest.mark.parametrize("alpha", [0.0, 1.0, 2.0, -0.1, float("nan")])
+def test_alpha_must_be_a_probability(alpha):
+    r = result("d", "a", ["1 2", "2 3"], [0.1, 0.2], [0, 0])
+    with pytest.raises(InputError, match="alpha"):
+        compare_results([r], alpha=alpha)
 
 
 def test_cli_end_to_end(tmp_path):

@@ -231,7 +231,7 @@ def ekf_slam(
         online[k] = mu[:3]
         online_cov[k] = cov[:3, :3]
         if not np.isfinite(mu[:n]).all():
-            raise DivergenceError(f"non-finite state at t={t[k]!r} (step {k})")
+            raise DivergenceError(f"non-finite state at t={float(t[k]):.6f} s (step {k})")
     m_count = len(ids_out)
     ids_arr = np.asarray(ids_out, dtype=np.int64)
     if association == "nn" and true_ids is not None:
@@ -282,7 +282,7 @@ def _update(
         np.linalg.cholesky(s)
     except np.linalg.LinAlgError:
         raise DivergenceError(
-            f"innovation covariance not positive definite at t={t!r} (measurement {m})"
+            f"innovation covariance not positive definite at t={float(t):.6f} s (measurement {m})"
         ) from None
     if gate < np.inf and float(nu @ s_inv @ nu) > gate:
         return False

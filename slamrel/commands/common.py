@@ -4,23 +4,45 @@ from __future__ import annotations
 
 import argparse
 import os
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
-from relation_metric.errors import InputError
+from relation_metric.errors import InputError, SlamrelError
 from relation_metric.formats import TRAJECTORY_FORMATS, LoadedTrajectory, read_trajectory
 from relation_metric.relations import STRATEGIES, RelationSet, generate_relations
 from relation_metric.stats import Summary
 from relation_metric.textio import check_not_input
 from relation_metric.trajectory import Trajectory
+from slamrel.commands import options as opt
 
 __all__ = [
+    "errors_about",
     "add_strategy_arguments",
     "relations_from_args",
     "stats_table",
     "check_outputs",
     "load_trajectory_arg",
 ]
+
+
+@contextmanager
+def errors_about(path: str | os.PathLike[str]) -> Iterator[None]:
+    """Name ``path`` in errors raised inside the block that name no file themselves.
+
+    Library code that works on arrays (a solver, a filter, a map comparison) cannot know
+    which file its input came from; the command does. Errors that already carry a path are
+    passed on unchanged; :class:`~relation_metric.errors.DivergenceError` and other
+    :class:`SlamrelError` become an :class:`InputError` about ``path`` (exit 3 either way).
+    """
+    try:
+        yield
+    except InputError as exc:
+        if exc.path is not None:
+            raise
+        raise type(exc)(exc.message, path=path, line=exc.line) from None
+    except SlamrelError as exc:
+        raise InputError(str(exc), path=path) from None
 
 
 def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | None) -> None:
@@ -32,29 +54,33 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         default=default,
         help="how to select relations (default: %(default)s)",
     )
-    g.add_argument("--step", type=int, default=1, help="consecutive: pose k with k+STEP")
-    g.add_argument("--distance", type=float, default=1.0, help="distance: metres of travel")
-    g.add_argument("--radius", type=float, default=1.0, help="loops: max distance [m]")
+    g.add_argument(
+        "--step", type=opt.positive_int, default=1, help="consecutive: pose k with k+STEP"
+    )
+    g.add_argument(
+        "--distance", type=opt.positive_float, default=1.0, help="distance: metres of travel"
+    )
+    g.add_argument("--radius", type=opt.positive_float, default=1.0, help="loops: max distance [m]")
     g.add_argument(
         "--min-separation-time",
-        type=float,
+        type=opt.nonnegative_float,
         default=30.0,
         help="loops: min time between the two poses [s]",
     )
     g.add_argument(
         "--min-separation-distance",
-        type=float,
+        type=opt.nonnegative_float,
         default=None,
         help="loops: or min travel between the two poses [m]",
     )
-    g.add_argument("--count", type=int, default=1000, help="global/random: number of pairs")
+    g.add_argument("--count", type=opt.count, default=1000, help="global/random: number of pairs")
     g.add_argument(
         "--min-distance",
-        type=float,
+        type=opt.nonnegative_float,
         default=None,
         help="global: min distance between the poses [m] (default: extent/4)",
     )
-    g.add_argument("--seed", type=int, default=0, help="global/random: seed")
+    g.add_argument("--seed", type=opt.seed, default=0, help="global/random: seed")
 
 
 def relations_from_args(reference: Trajectory, args: argparse.Namespace) -> RelationSet:

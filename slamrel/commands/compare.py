@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from relation_metric.errors import InputError
 from relation_metric.textio import write_text_atomic
+from slamrel.commands import options as opt
 from slamrel.compare import compare_results, read_per_relation
 
 _SPEC = re.compile(r"^(?P<dataset>[^:=]+):(?P<algorithm>[^=]+)=(?P<path>.+)$")
@@ -24,7 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("results", nargs="+", metavar="RESULT")
     p.add_argument("-o", "--output", required=True, metavar="DIR")
-    p.add_argument("--alpha", type=float, default=0.05, help="significance level (Holm-adjusted)")
+    p.add_argument(
+        "--alpha", type=opt.probability, default=0.05, help="significance level (Holm-adjusted)"
+    )
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=run)
 
@@ -35,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
         m = _SPEC.match(spec)
         if not m:
             raise InputError(f"result {spec!r}: expected DATASET:ALGORITHM=PER_RELATION.csv")
-        results.append(read_per_relation(m["path"], dataset=m["dataset"], algorithm=m["algorithm"]))
+        res = read_per_relation(m["path"], dataset=m["dataset"], algorithm=m["algorithm"])
+        results.append(replace(res, source=m["path"]))
     comp = compare_results(results, alpha=args.alpha)
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)

@@ -16,6 +16,7 @@ from relation_metric.metric import MODES
 from relation_metric.relations import RelationSet, read_relations
 from relation_metric.results import write_evo_zip, write_json, write_per_relation_csv
 from relation_metric.trajectory import Trajectory
+from slamrel.commands import options as opt
 from slamrel.commands.common import (
     add_strategy_arguments,
     check_outputs,
@@ -50,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--odometry-format", choices=TRAJECTORY_FORMATS)
     p.add_argument(
         "--max-time-diff",
-        type=float,
+        type=opt.nonnegative_float,
         default=0.1,
         metavar="S",
         help="nearest-pose tolerance [s] (default 0.1)",
@@ -60,7 +61,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument(
         "--max-interpolation-gap",
-        type=float,
+        type=opt.positive_float,
         default=1.0,
         metavar="S",
         help="longest gap interpolated over [s]",
@@ -68,7 +69,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "--mode", choices=MODES, default="paper", help="error definition (default: paper)"
     )
-    p.add_argument("--weights", metavar="W", help="wx,wy,wz,wroll,wpitch,wyaw (default all 1)")
+    p.add_argument(
+        "--weights",
+        type=opt.weights,
+        metavar="W",
+        help="wx,wy,wz,wroll,wpitch,wyaw (default all 1)",
+    )
     p.add_argument("--degrees", action="store_true", help="report rotation in degrees")
     p.add_argument("--strict", action="store_true", help="unassociated relations are an error")
     p.add_argument(
@@ -144,6 +150,8 @@ def run(args: argparse.Namespace) -> int:
         interpolate=args.interpolate,
         max_interpolation_gap=args.max_interpolation_gap,
         strict=args.strict,
+        estimate_name=args.estimate,
+        relations_name=args.reference,
     )
     result = ev.as_dict(degrees=args.degrees)
     if estimate.skipped:

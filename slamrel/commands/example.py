@@ -11,6 +11,7 @@ from relation_metric import se2
 from relation_metric.formats import write_trajectory
 from relation_metric.relations import RelationSet, generate_relations, write_relations
 from relation_metric.trajectory import Trajectory
+from slamrel.commands import options as opt
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -19,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="write a seeded example (reference, estimate, relations) to try evaluate on",
     )
     p.add_argument("-o", "--output", default="slamrel-example", metavar="DIR")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=opt.seed, default=0)
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=run)
 

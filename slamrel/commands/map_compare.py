@@ -12,7 +12,8 @@ from landmark_graph.association import read_association_csv, write_association_c
 from landmark_graph.compare import compare_maps
 from landmark_graph.maps import read_map
 from relation_metric.textio import write_text_atomic
-from slamrel.commands.common import check_outputs, stats_table
+from slamrel.commands import options as opt
+from slamrel.commands.common import check_outputs, errors_about, stats_table
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -26,17 +27,20 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--associate", default="id", metavar="id|auto|FILE", help="association (default: id)"
     )
     p.add_argument(
-        "--cutoff", type=float, default=1.0, help="OSPA/GOSPA and auto-association cut-off c [m]"
+        "--cutoff",
+        type=opt.positive_float,
+        default=1.0,
+        help="OSPA/GOSPA and auto-association cut-off c [m]",
     )
-    p.add_argument("--order", type=float, default=2.0, help="OSPA/GOSPA order p")
+    p.add_argument("--order", type=opt.float_at_least(1.0), default=2.0, help="OSPA/GOSPA order p")
     p.add_argument(
         "--thin-angle",
-        type=float,
+        type=opt.triangle_angle,
         default=5.0,
         metavar="DEG",
         help="flag triangles whose smallest angle is below DEG degrees (default: 5)",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=opt.seed, default=0)
     p.add_argument("--json", metavar="F")
     p.add_argument("--per-edge", metavar="F.csv")
     p.add_argument("--plot", metavar="F.png")
@@ -61,15 +65,16 @@ def run(args: argparse.Namespace) -> int:
     assoc = args.associate
     if assoc not in ("id", "auto"):
         assoc = read_association_csv(assoc, est, ref)
-    res = compare_maps(
-        est,
-        ref,
-        associate=assoc,
-        cutoff=args.cutoff,
-        order=args.order,
-        seed=args.seed,
-        thin_angle=np.deg2rad(args.thin_angle),
-    )
+    with errors_about(args.estimate):
+        res = compare_maps(
+            est,
+            ref,
+            associate=assoc,
+            cutoff=args.cutoff,
+            order=args.order,
+            seed=args.seed,
+            thin_angle=np.deg2rad(args.thin_angle),
+        )
     out = res.as_dict()
     if args.json:
         write_text_atomic(args.json, json.dumps(out, indent=2, allow_nan=False) + "\n")

@@ -15,7 +15,8 @@ from relation_metric.errors import InputError
 from relation_metric.formats import write_trajectory
 from relation_metric.results import write_json
 from relation_metric.textio import write_bytes_atomic
-from slamrel.commands.common import check_outputs
+from slamrel.commands import options as opt
+from slamrel.commands.common import check_outputs, errors_about
 
 HELP = "recover the trajectory of an EKF-SLAM run by localisation in its final map"
 
@@ -39,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--report", metavar="F", help="write counts, NEES and settings as JSON")
     p.add_argument(
         "--gate",
-        type=float,
+        type=opt.probability,
         metavar="P",
         help="χ² probability of the innovation gate (default: no gate; gated measurements "
         "are counted and reported)",
@@ -58,7 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument(
         "--max-outlier-run",
-        type=int,
+        type=opt.nonnegative_int,
         default=100,
         metavar="N",
         help="stop as diverged after N consecutive outlying innovations (0: never)",
@@ -75,14 +76,15 @@ def run(args: argparse.Namespace) -> int:
     if args.gate is not None and not 0.0 < args.gate < 1.0:
         raise InputError(f"--gate must be a probability in (0, 1), got {args.gate}")
     bundle = read_bundle(args.bundle, skip_unknown_landmarks=args.skip_unknown_landmarks)
-    result = recover(
-        bundle,
-        method=args.method,
-        gate=args.gate,
-        map_mode=args.map_uncertainty,
-        max_outlier_run=args.max_outlier_run or None,
-        progress=not args.quiet and sys.stderr.isatty(),
-    )
+    with errors_about(args.bundle):
+        result = recover(
+            bundle,
+            method=args.method,
+            gate=args.gate,
+            map_mode=args.map_uncertainty,
+            max_outlier_run=args.max_outlier_run or None,
+            progress=not args.quiet and sys.stderr.isatty(),
+        )
     write_trajectory(args.output, result.trajectory, format=fmt)
     if args.covariances:
         buf = io.BytesIO()

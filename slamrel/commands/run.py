@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 from relation_metric.errors import InputError
+from slamrel.commands import options as opt
 from slamrel.pipeline import run_pipeline, write_report
 from slamrel.worlds import NOISE_TYPES, WORLDS
 
@@ -21,10 +22,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("source", nargs="?", default="simple1", metavar="SOURCE")
     p.add_argument("-o", "--output", default="slamrel-report", metavar="DIR")
     p.add_argument("--noise", choices=sorted(NOISE_TYPES), default="a")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--rate", type=int, default=0, help="control steps per measurement step")
-    p.add_argument("--corrupt", type=float, default=0.0, help="fraction of associations corrupted")
-    p.add_argument("--noise-scale", type=float, default=1.0)
+    p.add_argument("--seed", type=opt.seed, default=0)
+    p.add_argument(
+        "--rate", type=opt.nonnegative_int, default=0, help="control steps per measurement step"
+    )
+    p.add_argument(
+        "--corrupt", type=opt.fraction, default=0.0, help="fraction of associations corrupted"
+    )
+    p.add_argument("--noise-scale", type=opt.positive_float, default=1.0)
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=run)
 

@@ -8,6 +8,8 @@ from pathlib import Path
 from recovery.bundle import read_bundle, write_bundle
 from relation_metric.formats import write_trajectory
 from relation_metric.textio import check_not_input
+from slamrel.commands import options as opt
+from slamrel.commands.common import errors_about
 from slamrel.simulate import slam_bundle, world_bundle
 from slamrel.worlds import NOISE_TYPES, WORLDS, make_world
 
@@ -19,9 +21,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     s.add_argument("world", choices=WORLDS, metavar="WORLD", help=", ".join(WORLDS))
     s.add_argument("--noise", choices=sorted(NOISE_TYPES), default="a")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=opt.seed, default=0)
     s.add_argument(
-        "--rate", type=int, default=0, help="control steps per measurement step (0: odometry)"
+        "--rate",
+        type=opt.nonnegative_int,
+        default=0,
+        help="control steps per measurement step (0: odometry)",
     )
     s.add_argument("-o", "--output", required=True, metavar="BUNDLE")
     s.add_argument("-q", "--quiet", action="store_true")
@@ -36,23 +41,26 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     m.add_argument("--association", choices=("known", "nn"), default="known")
     m.add_argument(
         "--corrupt",
-        type=float,
+        type=opt.fraction,
         default=0.0,
         metavar="F",
         help="fraction of associations to corrupt on purpose",
     )
     m.add_argument(
-        "--noise-scale", type=float, default=1.0, help="factor on the noise the filter assumes"
+        "--noise-scale",
+        type=opt.positive_float,
+        default=1.0,
+        help="factor on the noise the filter assumes",
     )
     m.add_argument(
         "--outlier-gate",
-        type=float,
+        type=opt.probability,
         default=None,
         metavar="P",
         help="χ² probability of a validation gate on known-association updates "
         "(default: no gate); rejected measurements are counted",
     )
-    m.add_argument("--seed", type=int, default=0)
+    m.add_argument("--seed", type=opt.seed, default=0)
     m.add_argument(
         "--store-online",
         action="store_true",
@@ -78,14 +86,15 @@ def run_slam(args: argparse.Namespace) -> int:
     if Path(args.output).resolve() == Path(args.bundle).resolve():
         check_not_input(args.output, [args.bundle])
     bundle = read_bundle(args.bundle)
-    out, res = slam_bundle(
-        bundle,
-        association=args.association,
-        corrupt_fraction=args.corrupt,
-        noise_scale=args.noise_scale,
-        outlier_gate=args.outlier_gate,
-        seed=args.seed,
-    )
+    with errors_about(args.bundle):
+        out, res = slam_bundle(
+            bundle,
+            association=args.association,
+            corrupt_fraction=args.corrupt,
+            noise_scale=args.noise_scale,
+            outlier_gate=args.outlier_gate,
+            seed=args.seed,
+        )
     write_bundle(args.output, out)
     if args.store_online:
         write_trajectory(Path(args.output) / "online.csv", res.online, format="csv")
