@@ -255,11 +255,14 @@ def test_some_unassociated_warn_and_strict(tmp_path, capsys):
     rel = GOOD_REL + "5 6 1 0 0 0 0 0\n"
     code, err = _bad(tmp_path, capsys, rel, GOOD_EST)
     assert code == 0
+    # the warning names the estimate and the relations file
     assert re.search(
-        r"warning: 1 of 3 relations could not be associated.*#2 \(5\.000000 -> 6\.000000", err
-    )
+        r"warning: \S*e\.txt: 1 of 3 relations of \S*r\.relations could not be associated"
+        r".*#2 \(5\.000000 -> 6\.000000",
+        err,
+    ), err
     code, err = _bad(tmp_path, capsys, rel, GOOD_EST, "--strict")
-    assert code == 3 and "--strict" in err
+    assert code == 3 and "--strict" in err and "e.txt: " in err
 
 
 def test_usage_error_exit_2(tmp_path):

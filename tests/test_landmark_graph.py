@@ -309,12 +309,9 @@ def test_cli_written_association_reads_back_and_overrides(tmp_path, rng):
         ("estimate,reference\n1,1\n2,1\n", [], "a.csv:3: reference landmark 1 is associated twice"),
         ("est,ref\n1,1\n", [], "a.csv:1: expected the header"),
         ("estimate,reference\n1,x\n", [], "a.csv:2: expected two integer ids"),
-        (None, ["--cutoff", "-1"], "cut-off"),
-        (None, ["--order", "0.5"], "order p"),
-        (None, ["--associate", "auto", "--cutoff", "nan"], "cut-off"),
     ],
 )
-def test_cli_bad_association_and_options_exit_3(tmp_path, capsys, assoc_text, extra, msg):
+def test_cli_bad_association_file_exit_3(tmp_path, capsys, assoc_text, extra, msg):
     m = tmp_path / "m.csv"
     m.write_text("landmark,x,y\n1,0,0\n2,1,1\n3,1,0\n")
     args = ["map-compare", str(m), str(m), "-q", *extra]
@@ -322,6 +319,24 @@ def test_cli_bad_association_and_options_exit_3(tmp_path, capsys, assoc_text, ex
         (tmp_path / "a.csv").write_text(assoc_text)
         args += ["--associate", str(tmp_path / "a.csv")]
     assert main(args) == 3
+    assert msg in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "extra,msg",
+    [
+        (["--cutoff", "-1"], "argument --cutoff: expected a finite positive number"),
+        (["--order", "0.5"], "argument --order: expected a finite number >= 1"),
+        (["--associate", "auto", "--cutoff", "nan"], "argument --cutoff"),
+        (["--thin-angle", "200"], "argument --thin-angle: expected an angle in degrees in (0, 60]"),
+    ],
+)
+def test_cli_bad_options_exit_2(tmp_path, capsys, extra, msg):
+    m = tmp_path / "m.csv"
+    m.write_text("landmark,x,y\n1,0,0\n2,1,1\n3,1,0\n")
+    with pytest.raises(SystemExit) as e:
+        main(["map-compare", str(m), str(m), "-q", *extra])
+    assert e.value.code == 2
     assert msg in capsys.readouterr().err
 
 
