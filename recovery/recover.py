@@ -232,5 +232,6 @@ def _check_finite(poses: Array, covs: Array, times: Array) -> None:
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise DivergenceError(
-            f"recovery diverged at t={float(times[k]):.6f} s (pose {k}): non-finite or non-PSD covariance"
+            f"recovery diverged at t={float(times[k]):.6f} s (pose {k}): non-finite or non-PSD "
+            "covariance"
         )

@@ -75,7 +75,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
-        command = f"slamrel {args.command}"
+        sub = [
+            getattr(args, k) for k in ("import_command", "relations_command") if hasattr(args, k)
+        ]
+        command = " ".join(["slamrel", args.command, *sub])
         with warnings.catch_warnings():
             warnings.simplefilter("always", UserWarning)
             warnings.showwarning = _show_warning
