@@ -25,7 +25,7 @@ from relation_metric.textio import (
     read_source,
     write_text_atomic,
 )
-from relation_metric.trajectory import readonly
+from relation_metric.trajectory import check_coordinates, readonly
 
 __all__ = ["LandmarkMap", "MAP_FORMATS", "read_map", "write_map"]
 
@@ -59,6 +59,7 @@ class LandmarkMap:
         if not np.isfinite(xy).all():
             k = int(np.flatnonzero(~np.isfinite(xy).all(axis=1))[0])
             raise InputError(f"landmark {int(ids[k])} has a non-finite position {xy[k].tolist()}")
+        check_coordinates(xy, what="landmark row")
         uniq, counts = np.unique(ids, return_counts=True)
         if (counts > 1).any():
             raise InputError(f"duplicate landmark id {int(uniq[counts > 1][0])}")
@@ -138,6 +139,7 @@ def read_map(path: PathLike) -> LandmarkMap:
 
 def _build(ids, xy, cov, path, line_of) -> LandmarkMap:  # type: ignore[no-untyped-def]
     ids = np.asarray(ids)
+    check_coordinates(np.asarray(xy), what="landmark", path=path, line_of=line_of)
     bad = np.flatnonzero(ids != np.round(ids))
     if bad.size:
         raise InputError(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -11,7 +12,13 @@ from numpy.typing import ArrayLike, NDArray
 from relation_metric import se2
 from relation_metric.errors import InputError
 
-__all__ = ["Trajectory", "readonly"]
+__all__ = ["Trajectory", "readonly", "MAX_COORDINATE", "check_coordinates"]
+
+MAX_COORDINATE = 1e30
+"""Largest position magnitude accepted [m] (10³ × the observable universe).
+
+Beyond it, squared distances and their sums leave float64 (1e300 squared is ``inf``), so a
+score would be ``inf``/``nan``; such a file is an input error, not a score."""
 
 
 def readonly(a: ArrayLike, dtype: type = np.float64) -> NDArray[Any]:
@@ -19,6 +26,30 @@ def readonly(a: ArrayLike, dtype: type = np.float64) -> NDArray[Any]:
     out: NDArray[Any] = np.array(a, dtype=dtype, copy=True, order="C")
     out.flags.writeable = False
     return out
+
+
+def check_coordinates(
+    xy: NDArray[np.float64],
+    *,
+    what: str,
+    path: str | None = None,
+    line_of: Callable[[int], int] | None = None,
+) -> None:
+    """Refuse positions (shape (N, 2)) with a coordinate beyond :data:`MAX_COORDINATE`.
+
+    ``path`` and ``line_of`` (row → 1-based file line) name where the row came from.
+    """
+    big = np.flatnonzero((np.abs(xy) > MAX_COORDINATE).any(axis=-1))
+    if big.size:
+        k = int(big[0])
+        line = int(line_of(k)) if line_of is not None else None
+        name = f"{what} {k}: " if line is None else f"{what}: "
+        raise InputError(
+            f"{name}position ({float(xy[k, 0]):.6g}, {float(xy[k, 1]):.6g}) is beyond "
+            f"{MAX_COORDINATE:.0e} m; expected coordinates in metres",
+            path=path,
+            line=line,
+        )
 
 
 @dataclass(frozen=True)
@@ -48,13 +79,17 @@ class Trajectory:
             raise InputError(f"poses must have shape ({t.shape[0]}, 3), got {p.shape}")
         if not (np.isfinite(t).all() and np.isfinite(p).all()):
             bad = int(np.flatnonzero(~(np.isfinite(t) & np.isfinite(p).all(axis=1)))[0])
-            raise InputError(f"pose {bad} is not finite: t={t[bad]}, pose={p[bad]}")
+            raise InputError(
+                f"pose {bad} is not finite: t={float(t[bad])}, pose={p[bad].tolist()}"
+            )
+        check_coordinates(p[:, :2], what="pose")
         if t.size > 1:
             back = np.flatnonzero(np.diff(t) < 0)
             if back.size:
                 k = int(back[0])
                 raise InputError(
-                    f"time goes backwards at pose {k + 1}: {t[k + 1]!r} after {t[k]!r}"
+                    f"time goes backwards at pose {k + 1}: {float(t[k + 1]):.6f} after "
+                    f"{float(t[k]):.6f}"
                 )
         object.__setattr__(self, "timestamps", readonly(t))
         object.__setattr__(self, "poses", readonly(se2.wrap_last(p)))

@@ -187,3 +187,22 @@ def test_the_console_script_prints_no_traceback(tmp_path):
     assert proc.returncode == 3, proc.stderr
     assert "nope.relations" in proc.stderr
     _clean_message(proc.stderr)
+
+
+# ------------------------------------------------------------------------------ huge values
+
+
+@pytest.mark.parametrize("value", ["1e300", "1e308", "-1e31"])
+def test_coordinates_beyond_float64_statistics_are_input_errors(tmp_path, capsys, value):
+    """1e300 m squared is inf: refused with file and line instead of inf/nan statistics."""
+    good = tmp_path / "good.csv"
+    good.write_text("landmark,x,y\n1,0,0\n2,1,1\n3,1,0\n4,2,2\n")
+    huge = tmp_path / "huge.csv"
+    huge.write_text(f"landmark,x,y\n1,0,0\n2,{value},1\n3,1,0\n4,2,2\n")
+    for argv in (["map-compare", str(huge), str(good)], ["map-compare", str(good), str(huge)]):
+        for assoc in ("id", "auto"):
+            assert main([*argv, "--associate", assoc, "-q"]) == 3
+            err = capsys.readouterr().err
+            assert f"{huge}:3: " in err and "beyond 1e+30 m" in err, err
+            assert "warning" not in err
+            _clean_message(err)
