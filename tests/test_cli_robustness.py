@@ -59,6 +59,8 @@ BAD_OPTIONS = [
     (["solve", "g", "-o", "o"], "--max-iterations", "0"),
     (["import", "mrclam", "d", "-o", "o"], "--robot", "6"),
     (["example", "-o", "o"], "--seed", "1.5"),
+    (["evaluate", "r", "e"], "--plot", "x.xyz"),
+    (["map-compare", "a", "b"], "--plot", "figure"),
 ]
 
 

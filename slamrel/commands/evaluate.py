@@ -90,7 +90,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("--json", metavar="FILE", help="write the results as JSON")
     p.add_argument("--per-relation", metavar="FILE", help="write per-relation errors as CSV")
-    p.add_argument("--plot", metavar="FILE", help="write a figure (PNG/SVG/PDF)")
+    p.add_argument(
+        "--plot", type=opt.figure_file, metavar="FILE", help="write a figure (.png/.svg/.pdf)"
+    )
     p.add_argument("--evo-zip", metavar="FILE", help="write an evo result zip (for evo_res)")
     p.add_argument(
         "--evo-part",

@@ -43,7 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--seed", type=opt.seed, default=0)
     p.add_argument("--json", metavar="F")
     p.add_argument("--per-edge", metavar="F.csv")
-    p.add_argument("--plot", metavar="F.png")
+    p.add_argument(
+        "--plot", type=opt.figure_file, metavar="F.png", help="write a figure (.png/.svg/.pdf)"
+    )
     p.add_argument(
         "--write-association",
         metavar="F.csv",

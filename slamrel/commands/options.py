@@ -27,6 +27,7 @@ __all__ = [
     "int_range",
     "float_at_least",
     "weights",
+    "figure_file",
 ]
 
 _MAX_SEED = 2**63 - 1
@@ -108,3 +109,18 @@ def weights(text: str) -> tuple[float, ...]:
         return parse_weights(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+FIGURE_FORMATS = (".png", ".svg", ".pdf")
+
+
+def figure_file(text: str) -> str:
+    """A figure's file name; its extension picks the format: .png, .svg or .pdf."""
+    import os
+
+    ext = os.path.splitext(text)[1].lower()
+    if ext not in FIGURE_FORMATS:
+        raise argparse.ArgumentTypeError(
+            f"expected a file name ending in {', '.join(FIGURE_FORMATS)} (the format), got {text!r}"
+        )
+    return text
