@@ -16,12 +16,14 @@ For a timestamp ``t`` the estimate pose is found as the Freiburg metricEvaluator
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric import se2
+from relation_metric.errors import InputError
 from relation_metric.relations import RelationSet
 from relation_metric.trajectory import Trajectory
 
@@ -165,6 +167,12 @@ def associate(
     -------
     Association
     """
+    for name, value in (
+        ("max_time_diff", max_time_diff),
+        ("max_interpolation_gap", max_interpolation_gap),
+    ):
+        if not (math.isfinite(value) and value >= 0.0):
+            raise InputError(f"{name} must be a finite number of seconds >= 0, got {value}")
     m = len(relations)
     if relations.key == "index":
         n = len(estimate)
