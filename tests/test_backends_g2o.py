@@ -95,5 +95,7 @@ def test_cli_import_and_solve(tmp_path):
     assert main(["solve", str(p), "-o", str(tmp_path / "sol3"), "-q", "--batch", "0"]) == 0
     one = np.genfromtxt(tmp_path / "sol3" / "landmarks.csv", delimiter=",", names=True)
     assert float(one["x"]) == pytest.approx(2.0, abs=1e-6)
-    assert main(["solve", str(p), "-o", str(tmp_path / "sol4"), "--batch", "-1"]) == 3
+    with pytest.raises(SystemExit) as usage:  # an option mistake: exit 2, before any work
+        main(["solve", str(p), "-o", str(tmp_path / "sol4"), "--batch", "-1"])
+    assert usage.value.code == 2 and not (tmp_path / "sol4").exists()
     assert main(["import", "isam", str(p), "-o", str(p)]) == 3  # never over an input
