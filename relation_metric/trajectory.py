@@ -10,6 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se2
 from relation_metric.errors import InputError
+from relation_metric.timeorder import check_in_order
 
 __all__ = ["Trajectory", "readonly"]
 
@@ -49,13 +50,7 @@ class Trajectory:
         if not (np.isfinite(t).all() and np.isfinite(p).all()):
             bad = int(np.flatnonzero(~(np.isfinite(t) & np.isfinite(p).all(axis=1)))[0])
             raise InputError(f"pose {bad} is not finite: t={t[bad]}, pose={p[bad]}")
-        if t.size > 1:
-            back = np.flatnonzero(np.diff(t) < 0)
-            if back.size:
-                k = int(back[0])
-                raise InputError(
-                    f"time goes backwards at pose {k + 1}: {t[k + 1]!r} after {t[k]!r}"
-                )
+        check_in_order(t)
         object.__setattr__(self, "timestamps", readonly(t))
         object.__setattr__(self, "poses", readonly(se2.wrap_last(p)))
 
