@@ -417,7 +417,9 @@ def _time_ordered(
     )
     if not report.out_of_order:
         return cols, lines, 0
-    warnings.warn(f"{path}: {report.describe(what)}; put in time order", TimeOrderWarning)
+    warnings.warn(
+        f"{path}: {report.describe(what)}; put in time order", TimeOrderWarning, stacklevel=3
+    )
     return {k: v[order] for k, v in cols.items()}, lines[order], report.out_of_order
 
 

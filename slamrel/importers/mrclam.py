@@ -88,7 +88,9 @@ def _time_ordered(
     )
     if not report.out_of_order:
         return rows, 0
-    warnings.warn(f"{path}: {report.describe(what)}; put in time order", TimeOrderWarning)
+    warnings.warn(
+        f"{path}: {report.describe(what)}; put in time order", TimeOrderWarning, stacklevel=3
+    )
     return rows[order], report.out_of_order
 
 
@@ -550,7 +552,6 @@ def _reordered_text(reordered: dict[str, int]) -> str:
     moved = {name: n for name, n in reordered.items() if n}
     if not moved:
         return ""
-    return (
-        f"; put in time order (steps back of at most {FILTER_TIME_TOLERANCE:g} s): "
-        + ", ".join(f"{n} row(s) of {name}" for name, n in moved.items())
+    return f"; put in time order (steps back of at most {FILTER_TIME_TOLERANCE:g} s): " + ", ".join(
+        f"{n} row(s) of {name}" for name, n in moved.items()
     )
