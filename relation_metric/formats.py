@@ -274,7 +274,8 @@ def read_trajectory(
         t, poses, line_of = _read_g2o(src, skipped=skipped)
         lines = line_of.__getitem__  # type: ignore[assignment]
     if t.shape[0] == 0:
-        raise InputError(f"no poses found (read as {fmt})", path=src.path)
+        hint = "" if format else "; pass --format if that is not its format"
+        raise InputError(f"no poses found (read as {fmt}){hint}", path=src.path)
     order, report = sort_by_time(
         t, tolerance=max_step_back, lines=lines, path=src.path, what="pose"
     )

@@ -240,13 +240,14 @@ def test_bundle_step_back_beyond_tolerance_is_refused(tmp_path, capsys, bundle_s
     assert f"(line {k + 2})" in err and "np." not in err
 
 
-def test_bundle_groundtruth_follows_the_filter_rule(tmp_path, bundle_source):
+def test_bundle_groundtruth_follows_the_filter_rule(tmp_path, capsys, bundle_source):
     shutil.copytree(bundle_source, tmp_path / "b")
     p = tmp_path / "b" / "groundtruth.csv"
     lines = p.read_text().splitlines()
     lines[3], lines[4] = lines[4], lines[3]  # 0.1 s apart: refused
     p.write_text("\n".join(lines) + "\n")
     assert main(["recover", str(tmp_path / "b"), "-o", str(tmp_path / "o.txt"), "-q"]) == 3
+    assert f"{p}:5: time goes backwards by 0.100000 s" in capsys.readouterr().err
 
 
 def test_mrclam_step_back_within_tolerance_is_sorted_and_counted(tmp_path):
