@@ -299,9 +299,7 @@ def test_repeated_reference_times_are_dropped_and_the_mean_is_not_halved(tmp_pat
 
 
 def test_zero_length_relations_are_dropped_and_counted(tmp_path, capsys):
-    (tmp_path / "r.relations").write_text(
-        "0 1 1 0 0 0 0 0\n1 1 0 0 0 0 0 0\n1 2 1 0 0 0 0 0\n"
-    )
+    (tmp_path / "r.relations").write_text("0 1 1 0 0 0 0 0\n1 1 0 0 0 0 0 0\n1 2 1 0 0 0 0 0\n")
     _plain(tmp_path / "e.txt", [0, 1, 2], [[0, 0, 0], [1.2, 0, 0], [2.4, 0, 0]])
     js = tmp_path / "r.json"
     code, out, err = _evaluate(capsys, tmp_path / "r.relations", tmp_path / "e.txt", "--json", js)
