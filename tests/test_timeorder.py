@@ -134,6 +134,11 @@ def test_strict_refuses_an_out_of_order_estimate(tmp_path, capsys):
     assert "--strict refuses" in err
     code, out, _ = _evaluate(capsys, *args)
     assert code == 0 and "0 unassociated" in out
+    # a reference trajectory follows the same rule
+    args = (tmp_path / "e.txt", tmp_path / "ref.txt", "--strategy", "consecutive")
+    code, _, err = _evaluate(capsys, *args, "--strict")
+    assert code == 3 and f"{tmp_path / 'e.txt'}:4: 1 pose out of time order" in err
+    assert "np." not in err
 
 
 def _swap_flaser_lines(text: str, rng, keep: set[int]) -> tuple[str, list[int]]:

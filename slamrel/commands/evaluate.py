@@ -180,7 +180,8 @@ def load_reference(
             relations = relations.subset(~zero)
         return relations, None
     loaded = load_trajectory_arg(args.reference, args.reference_format, role="reference")
-    _refuse_if_strict(args, loaded, args.reference)
+    ref = Path(args.reference)
+    _refuse_if_strict(args, loaded, str(ref / "groundtruth.csv" if ref.is_dir() else ref))
     notes["reference_out_of_order"] = loaded.time_order.as_dict()
     notes["reference_repeated_times_dropped"] = loaded.repeated_dropped
     if args.strategy is None:
