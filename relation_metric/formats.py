@@ -2,7 +2,9 @@
 
 Every reader is strict (see :mod:`relation_metric.textio`): a bad line raises
 :class:`~relation_metric.errors.InputError` with file and line; the one tolerated defect is a
-cut-off final line without newline, skipped with a warning.
+cut-off final line without newline, skipped with a warning. The format comes from the
+extension first (:func:`detect_trajectory_format`), and the poses come back in time order
+whatever the file order, counted (:mod:`relation_metric.timeorder`).
 
 Formats
 -------
