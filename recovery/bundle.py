@@ -2,9 +2,10 @@
 
 A bundle is a directory of comma-separated files (one header line, ``#`` comment lines) and a
 JSON manifest ``bundle.json``. The reader is strict: a missing required file or column, a
-non-finite number, times that go backwards, an unknown model type, a measurement whose landmark
-is not in ``map.csv`` (unless ``skip_unknown_landmarks``, which counts them), and a covariance
-that is not symmetric positive semi-definite each raise
+non-finite number, times that go back more than ``FILTER_TIME_TOLERANCE`` (0.05 s; smaller
+steps back are put in time order and counted in ``Bundle.reordered``), an unknown model type,
+a measurement whose landmark is not in ``map.csv`` (unless ``skip_unknown_landmarks``, which
+counts them), and a covariance that is not symmetric positive semi-definite each raise
 :class:`~relation_metric.errors.InputError` naming the file, the line and what was expected.
 
 Landmark ids are integers. Manifest defaults: ``initial_pose`` ``[0, 0, 0]``,
@@ -17,7 +18,8 @@ import io
 import json
 import math
 import os
-from collections.abc import Sequence
+import warnings
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -29,6 +31,7 @@ from recovery.models import MOTION_TYPES, MotionModel, SensorModel
 from relation_metric.errors import InputError
 from relation_metric.formats import read_trajectory
 from relation_metric.textio import parse_float, read_source, write_bytes_atomic, write_text_atomic
+from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, readonly
 
 __all__ = ["FORMAT", "Bundle", "read_bundle", "write_bundle"]
@@ -74,6 +77,10 @@ class Bundle:
         Measurements dropped because their landmark is not in the map (only with
         ``skip_unknown_landmarks``).
     path : str or None
+    reordered : Mapping[str, int]
+        Rows of each time-stamped file (``controls.csv`` or ``odometry.csv``,
+        ``measurements.csv``, ``groundtruth.csv``) that were out of time order by at most
+        :data:`~relation_metric.timeorder.FILTER_TIME_TOLERANCE` and were put in order.
     """
 
     motion: MotionModel
@@ -96,6 +103,7 @@ class Bundle:
     measurement_lines: NDArray[np.int64] | None = None
     skipped_unknown: int = 0
     path: str | None = None
+    reordered: Mapping[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         ro = object.__setattr__
@@ -396,15 +404,23 @@ def _diagnose_csv(
             parse_float(tok, source=src, line=number, what=f"column '{c}'")
 
 
-def _check_time(t: Array, lines: NDArray[np.int64], path: Path) -> None:
-    back = np.flatnonzero(np.diff(t) < 0)
-    if back.size:
-        k = int(back[0]) + 1
-        raise InputError(
-            f"time goes backwards: {t[k]!r} after {t[k - 1]!r}; expected non-decreasing times",
-            path=path,
-            line=int(lines[k]),
-        )
+def _time_ordered(
+    cols: dict[str, Array], lines: NDArray[np.int64], path: Path, what: str
+) -> tuple[dict[str, Array], NDArray[np.int64], int]:
+    """The rows of a log in time order under the filter-log rule (``relation_metric.timeorder``).
+
+    Steps back of at most ``FILTER_TIME_TOLERANCE`` are stable-sorted, counted (returned)
+    and warned about; a larger one raises :class:`InputError` with the line and both times.
+    """
+    order, report = sort_by_time(
+        cols["t"], tolerance=FILTER_TIME_TOLERANCE, lines=lines, path=path, what=what
+    )
+    if not report.out_of_order:
+        return cols, lines, 0
+    warnings.warn(
+        f"{path}: {report.describe(what)}; put in time order", TimeOrderWarning, stacklevel=3
+    )
+    return {k: v[order] for k, v in cols.items()}, lines[order], report.out_of_order
 
 
 def _integer_ids(v: Array, lines: NDArray[np.int64], path: Path, column: str) -> NDArray[np.int64]:
@@ -449,10 +465,11 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     motion: MotionModel = meta["motion"]
 
     controls = odometry = None
+    reordered: dict[str, int] = {}
     if motion.type == "velocity":
         p = root / "controls.csv"
         cols, lines = _read_csv(p, required=("t", "v", "omega"))
-        _check_time(cols["t"], lines, p)
+        cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "control")
         controls = np.column_stack((cols["t"], cols["v"], cols["omega"]))
         if controls.shape[0] < 2:
             raise InputError(
@@ -461,7 +478,7 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     else:
         p = root / "odometry.csv"
         cols, lines = _read_csv(p, required=("t", "x", "y", "theta"))
-        _check_time(cols["t"], lines, p)
+        cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "odometry pose")
         if cols["t"].shape[0] < 2:
             raise InputError("expected at least two odometry rows", path=p)
         odometry = Trajectory(cols["t"], np.column_stack((cols["x"], cols["y"], cols["theta"])))
@@ -528,7 +545,9 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     cols, meas_lines = _read_csv(
         p_meas, required=("t", "range", "bearing", "landmark"), empty_ok=("landmark",)
     )
-    _check_time(cols["t"], meas_lines, p_meas)
+    cols, meas_lines, reordered[p_meas.name] = _time_ordered(
+        cols, meas_lines, p_meas, "measurement"
+    )
     bad = np.flatnonzero(cols["range"] <= 0)
     if bad.size:
         raise InputError(
@@ -554,7 +573,11 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
 
     gt = None
     if (root / "groundtruth.csv").exists():
-        gt = read_trajectory(root / "groundtruth.csv", format="csv").trajectory
+        loaded = read_trajectory(
+            root / "groundtruth.csv", format="csv", max_step_back=FILTER_TIME_TOLERANCE
+        )
+        gt = loaded.trajectory
+        reordered["groundtruth.csv"] = loaded.out_of_order
     lgt = None
     p_lgt = root / "landmarks_groundtruth.csv"
     if p_lgt.exists():
@@ -585,6 +608,7 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
         measurement_lines=meas_lines[keep],
         skipped_unknown=int(unknown.size) if skip_unknown_landmarks else 0,
         path=str(root),
+        reordered=reordered,
     )
 
 

@@ -2,7 +2,9 @@
 
 Every reader is strict (see :mod:`relation_metric.textio`): a bad line raises
 :class:`~relation_metric.errors.InputError` with file and line; the one tolerated defect is a
-cut-off final line without newline, skipped with a warning.
+cut-off final line without newline, skipped with a warning. The format comes from the
+extension first (:func:`detect_trajectory_format`), and the poses come back in time order
+whatever the file order, counted (:mod:`relation_metric.timeorder`).
 
 Formats
 -------
@@ -44,13 +46,17 @@ from relation_metric.textio import (
     read_source,
     write_text_atomic,
 )
-from relation_metric.trajectory import Trajectory
+from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
+from relation_metric.trajectory import Trajectory, check_coordinates
 
 __all__ = [
     "TRAJECTORY_FORMATS",
+    "TRAJECTORY_EXTENSIONS",
     "LoadedTrajectory",
     "InvalidPoseWarning",
     "detect_trajectory_format",
+    "sniff_trajectory_format",
+    "without_repeated_times",
     "read_trajectory",
     "write_trajectory",
     "yaw_from_quaternion",
@@ -59,6 +65,17 @@ __all__ = [
 
 TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv")
 TrajectoryFormat = Literal["plain", "tum", "carmen", "g2o", "csv"]
+
+# File extensions that name a trajectory format: they decide, the content is not sniffed.
+TRAJECTORY_EXTENSIONS = {
+    ".tum": "tum",
+    ".csv": "csv",
+    ".g2o": "g2o",
+    ".log": "carmen",
+    ".clf": "carmen",
+}
+# Extensions of Freiburg relation files (relations between poses, not a trajectory).
+RELATIONS_EXTENSIONS = (".relations", ".rel")
 
 CARMEN_POSE_RECORDS = ("FLASER", "ROBOTLASER1", "ODOM")
 # Record names of CARMEN logs that carry no pose we use; seeing one identifies the format.
@@ -95,11 +112,24 @@ class LoadedTrajectory(NamedTuple):
         The format that was read.
     skipped : Mapping[str, int]
         Records not used, by kind (e.g. ``{"PARAM": 12, "invalid pose": 1}``).
+    time_order : TimeOrder
+        Poses that were out of time order in the file (they are sorted; see
+        :mod:`relation_metric.timeorder`).
+    repeated_dropped : int
+        Poses dropped because they repeat an earlier pose's timestamp (references only,
+        :func:`without_repeated_times`).
     """
 
     trajectory: Trajectory
     format: str
     skipped: Mapping[str, int]
+    time_order: TimeOrder = TimeOrder()
+    repeated_dropped: int = 0
+
+    @property
+    def out_of_order(self) -> int:
+        """Number of poses that were out of time order in the file."""
+        return self.time_order.out_of_order
 
 
 def yaw_from_quaternion(q: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -118,13 +148,42 @@ def quaternion_from_yaw(yaw: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def detect_trajectory_format(path: PathLike, source: SourceText | None = None) -> str:
-    """Recognise a trajectory format from the content, then from the extension.
+    """The trajectory format of a file: from its extension first, else from its content.
 
-    Content wins: a CARMEN record name, ``VERTEX_SE2``, a ``t,x,y,theta`` header, or the
-    number of numeric columns of the first data line (8 → TUM, 4 → plain).
+    An extension that names a format decides (:data:`TRAJECTORY_EXTENSIONS`: ``.tum``,
+    ``.csv``, ``.g2o``, ``.log``/``.clf`` → carmen); a ``.relations``/``.rel`` file is not a
+    trajectory. Only other extensions (``.txt``, ``.dat``, none, ...) are sniffed
+    (:func:`sniff_trajectory_format`).
     """
+    ext = Path(os.fspath(path)).suffix.lower()
+    if ext in TRAJECTORY_EXTENSIONS:
+        return TRAJECTORY_EXTENSIONS[ext]
+    if ext in RELATIONS_EXTENSIONS:
+        raise InputError(
+            f"a {ext} file holds relations between poses, not a trajectory; pass --format "
+            "to read it as a trajectory anyway",
+            path=path,
+        )
     src = read_source(path) if source is None else source
-    for _, text in src.data_lines():
+    fmt = sniff_trajectory_format(src)
+    if fmt is None:
+        raise InputError(
+            "cannot recognise the trajectory format (expected CARMEN records, VERTEX_SE2 "
+            "lines, a t,x,y,theta CSV header, 8 columns (TUM) or 4 columns (t x y theta)); "
+            "pass --format",
+            path=src.path,
+        )
+    return fmt
+
+
+def sniff_trajectory_format(source: SourceText) -> str | None:
+    """The format the first data line suggests, or None.
+
+    A CARMEN record name → carmen, ``VERTEX``/``EDGE``/``FIX`` → g2o, a ``t,...`` header →
+    csv, 8 whitespace-separated fields → tum, 4 → plain. Note that 8 numeric columns are
+    also what a Freiburg ``.relations`` file looks like.
+    """
+    for _, text in source.data_lines():
         head = text.split(None, 1)[0].split(",")[0]
         if head in CARMEN_POSE_RECORDS or head in _CARMEN_OTHER:
             return "carmen"
@@ -137,23 +196,8 @@ def detect_trajectory_format(path: PathLike, source: SourceText | None = None) -
             return "tum"
         if len(fields) == 4:
             return "plain"
-        break
-    ext = Path(os.fspath(path)).suffix.lower()
-    by_ext = {
-        ".log": "carmen",
-        ".clf": "carmen",
-        ".g2o": "g2o",
-        ".tum": "tum",
-        ".csv": "csv",
-    }
-    if ext in by_ext:
-        return by_ext[ext]
-    raise InputError(
-        "cannot recognise the trajectory format (expected CARMEN records, VERTEX_SE2 "
-        "lines, a t,x,y,theta CSV header, 8 columns (TUM) or 4 columns (t x y theta)); "
-        "pass --format",
-        path=src.path,
-    )
+        return None
+    return None
 
 
 def read_trajectory(
@@ -162,8 +206,9 @@ def read_trajectory(
     format: str | None = None,
     pose: Literal["laser", "odometry"] = "laser",
     skip_invalid: bool = False,
+    max_step_back: float | None = None,
 ) -> LoadedTrajectory:
-    """Read a trajectory file.
+    """Read a trajectory file; its poses come back in time order.
 
     Parameters
     ----------
@@ -176,6 +221,12 @@ def read_trajectory(
         CARMEN only: skip pose records with non-finite values (counted under
         ``"invalid pose"`` and warned about) instead of raising. The original Freiburg
         metricEvaluator tolerates such records; real result logs contain them.
+    max_step_back : float, optional
+        The time-order rule (:mod:`relation_metric.timeorder`). ``None`` (timed poses:
+        estimates, references): poses are stable-sorted by time whatever the file order,
+        counted in ``LoadedTrajectory.time_order`` and warned about (``TimeOrderWarning``).
+        A number of seconds (a log that drives a filter, e.g. a bundle's ground truth): a
+        larger step back raises :class:`InputError`.
 
     Returns
     -------
@@ -225,16 +276,47 @@ def read_trajectory(
         t, poses, line_of = _read_g2o(src, skipped=skipped)
         lines = line_of.__getitem__  # type: ignore[assignment]
     if t.shape[0] == 0:
-        raise InputError(f"no poses found (read as {fmt})", path=src.path)
-    back = np.flatnonzero(np.diff(t) < 0)
-    if back.size:
-        k = int(back[0]) + 1
-        raise InputError(
-            f"time goes backwards: {t[k]!r} after {t[k - 1]!r}; expected non-decreasing timestamps",
-            path=src.path,
-            line=int(lines(k)),
+        hint = "" if format else "; pass --format if that is not its format"
+        raise InputError(f"no poses found (read as {fmt}){hint}", path=src.path)
+    check_coordinates(poses[:, :2], what="pose", path=src.path, line_of=lines)
+    order, report = sort_by_time(
+        t, tolerance=max_step_back, lines=lines, path=src.path, what="pose"
+    )
+    if report.out_of_order:
+        t, poses = t[order], poses[order]
+        warnings.warn(
+            f"{src.path}: {report.describe('pose')}; put in time order",
+            TimeOrderWarning,
+            stacklevel=2,
         )
-    return LoadedTrajectory(Trajectory(t, poses), fmt, dict(skipped))
+    return LoadedTrajectory(Trajectory(t, poses), fmt, dict(skipped), report)
+
+
+def without_repeated_times(loaded: LoadedTrajectory, path: PathLike) -> LoadedTrajectory:
+    """A reference without the poses that repeat an earlier pose's timestamp.
+
+    Two reference poses with one timestamp give a zero-length relation that every estimate
+    matches perfectly, pulling the mean down silently. The first pose of each timestamp (in
+    file order) is kept; the others are dropped, counted in ``repeated_dropped`` and warned
+    about (``RepeatedTimeWarning``, naming ``path``).
+    """
+    from relation_metric.timeorder import RepeatedTimeWarning, first_of_each_time
+
+    traj = loaded.trajectory
+    keep = first_of_each_time(traj.timestamps)
+    dropped = int(keep.size - np.count_nonzero(keep))
+    if not dropped:
+        return loaded
+    warnings.warn(
+        f"{os.fspath(path)}: dropped {dropped} reference pose(s) that repeat an earlier "
+        "pose's timestamp (the first of each is kept; zero-length relations would score 0)",
+        RepeatedTimeWarning,
+        stacklevel=2,
+    )
+    return loaded._replace(
+        trajectory=Trajectory(traj.timestamps[keep], traj.poses[keep]),
+        repeated_dropped=loaded.repeated_dropped + dropped,
+    )
 
 
 def _read_csv_trajectory(src: SourceText) -> tuple[NDArray, NDArray, NDArray]:

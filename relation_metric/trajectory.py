@@ -11,6 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se2
 from relation_metric.errors import InputError
+from relation_metric.timeorder import check_in_order
 
 __all__ = ["Trajectory", "readonly", "MAX_COORDINATE", "check_coordinates"]
 
@@ -79,18 +80,9 @@ class Trajectory:
             raise InputError(f"poses must have shape ({t.shape[0]}, 3), got {p.shape}")
         if not (np.isfinite(t).all() and np.isfinite(p).all()):
             bad = int(np.flatnonzero(~(np.isfinite(t) & np.isfinite(p).all(axis=1)))[0])
-            raise InputError(
-                f"pose {bad} is not finite: t={float(t[bad])}, pose={p[bad].tolist()}"
-            )
+            raise InputError(f"pose {bad} is not finite: t={float(t[bad])}, pose={p[bad].tolist()}")
         check_coordinates(p[:, :2], what="pose")
-        if t.size > 1:
-            back = np.flatnonzero(np.diff(t) < 0)
-            if back.size:
-                k = int(back[0])
-                raise InputError(
-                    f"time goes backwards at pose {k + 1}: {float(t[k + 1]):.6f} after "
-                    f"{float(t[k]):.6f}"
-                )
+        check_in_order(t)
         object.__setattr__(self, "timestamps", readonly(t))
         object.__setattr__(self, "poses", readonly(se2.wrap_last(p)))
 

@@ -229,13 +229,6 @@ GOOD_EST = "0 0 0 0\n1 1 0 0\n2 2 0 0\n"
             "expected 8 fields",
         ),
         (
-            "time going backwards",
-            GOOD_REL,
-            "0 0 0 0\n2 1 0 0\n1 2 0 0\n",
-            "e.txt:3",
-            "time goes backwards",
-        ),
-        (
             "another time base",
             "1e9 1000000001 1 0 0 0 0 0\n",
             GOOD_EST,

@@ -208,3 +208,15 @@ def test_coordinates_beyond_float64_statistics_are_input_errors(tmp_path, capsys
             assert f"{huge}:3: " in err and "beyond 1e+30 m" in err, err
             assert "warning" not in err
             _clean_message(err)
+
+
+def test_trajectory_coordinates_beyond_float64_statistics_are_input_errors(tmp_path, capsys):
+    ref = tmp_path / "ref.txt"
+    ref.write_text("".join(f"{k} {k} 0 0\n" for k in range(10)))
+    est = tmp_path / "est.txt"
+    est.write_text("".join(f"{k} {1e300 if k == 4 else k} 0 0\n" for k in range(10)))
+    for argv in (["evaluate", str(ref), str(est)], ["evaluate", str(est), str(ref)]):
+        assert main([*argv, "--strategy", "global", "--count", "20", "-q"]) == 3
+        err = capsys.readouterr().err
+        assert f"{est}:5: " in err and "beyond 1e+30 m" in err, err
+        _clean_message(err)

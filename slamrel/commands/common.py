@@ -9,10 +9,16 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from relation_metric.errors import InputError, SlamrelError
-from relation_metric.formats import TRAJECTORY_FORMATS, LoadedTrajectory, read_trajectory
+from relation_metric.formats import (
+    TRAJECTORY_FORMATS,
+    LoadedTrajectory,
+    read_trajectory,
+    without_repeated_times,
+)
 from relation_metric.relations import STRATEGIES, RelationSet, generate_relations
 from relation_metric.stats import Summary
 from relation_metric.textio import check_not_input
+from relation_metric.timeorder import FILTER_TIME_TOLERANCE
 from relation_metric.trajectory import Trajectory
 from slamrel.commands import options as opt
 
@@ -100,11 +106,36 @@ def relations_from_args(reference: Trajectory, args: argparse.Namespace) -> Rela
 
 
 def load_trajectory_arg(
-    path: str, fmt: str | None, *, pose: str = "laser", skip_invalid: bool = False
+    path: str,
+    fmt: str | None,
+    *,
+    pose: str = "laser",
+    skip_invalid: bool = False,
+    role: str = "reference",
 ) -> LoadedTrajectory:
-    """Read a trajectory given on the command line; a bundle directory means its ground truth."""
+    """Read a trajectory given on the command line.
+
+    ``role`` is what the trajectory is for:
+
+    - ``"reference"``: a bundle directory means its ``groundtruth.csv`` (read under the
+      filter-log time rule, as ``recover`` reads it); poses that repeat an earlier pose's
+      timestamp are dropped, counted and warned about (:func:`without_repeated_times`).
+    - ``"estimate"`` / ``"odometry"``: a bundle directory is refused (a bundle holds no
+      estimated trajectory; its ground truth would be scored against itself).
+
+    Poses out of time order are sorted and counted (``LoadedTrajectory.time_order``).
+    """
     p = Path(path)
     if p.is_dir():
+        if role != "reference":
+            online = p / "online.csv"
+            also = f", or pass {online} (the filter's online estimate)" if online.is_file() else ""
+            raise InputError(
+                f"is a directory (a SLAM result bundle?), given as the {role.upper()}; a bundle "
+                "holds no estimated trajectory, only the ground truth: recover one with "
+                f"'slamrel recover {path} -o est.tum' and pass est.tum{also}",
+                path=path,
+            )
         gt = p / "groundtruth.csv"
         if not gt.is_file():
             raise InputError(
@@ -112,10 +143,14 @@ def load_trajectory_arg(
                 "SLAM result bundle with ground truth",
                 path=path,
             )
-        return read_trajectory(gt, format="csv")
+        loaded = read_trajectory(gt, format="csv", max_step_back=FILTER_TIME_TOLERANCE)
+        return without_repeated_times(loaded, gt)
     if fmt is not None and fmt not in TRAJECTORY_FORMATS:
         raise InputError(f"unknown format {fmt!r}", path=path)
-    return read_trajectory(path, format=fmt, pose=pose, skip_invalid=skip_invalid)  # type: ignore[arg-type]
+    loaded = read_trajectory(path, format=fmt, pose=pose, skip_invalid=skip_invalid)  # type: ignore[arg-type]
+    if role == "reference":
+        loaded = without_repeated_times(loaded, path)
+    return loaded
 
 
 def check_outputs(outputs: Sequence[str | None], inputs: Sequence[str | None]) -> None:

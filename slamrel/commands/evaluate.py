@@ -4,17 +4,27 @@ from __future__ import annotations
 
 import argparse
 import os
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from relation_metric.alignment import absolute_trajectory_error
+from relation_metric.errors import InputError
 from relation_metric.evaluate import Evaluation, evaluate
-from relation_metric.formats import TRAJECTORY_FORMATS
+from relation_metric.formats import (
+    RELATIONS_EXTENSIONS,
+    TRAJECTORY_EXTENSIONS,
+    TRAJECTORY_FORMATS,
+    LoadedTrajectory,
+    sniff_trajectory_format,
+)
 from relation_metric.metric import MODES
 from relation_metric.relations import RelationSet, read_relations
 from relation_metric.results import write_evo_zip, write_json, write_per_relation_csv
+from relation_metric.textio import read_source
+from relation_metric.timeorder import RepeatedTimeWarning, zero_length
 from relation_metric.trajectory import Trajectory
 from slamrel.commands import options as opt
 from slamrel.commands.common import (
@@ -76,7 +86,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="wx,wy,wz,wroll,wpitch,wyaw (default all 1)",
     )
     p.add_argument("--degrees", action="store_true", help="report rotation in degrees")
-    p.add_argument("--strict", action="store_true", help="unassociated relations are an error")
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="unassociated relations, and trajectories not in time order, are an error",
+    )
     p.add_argument(
         "--skip-invalid-poses",
         action="store_true",
@@ -106,42 +120,125 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def _is_relations_file(path: str, args: argparse.Namespace) -> bool:
-    if args.strategy is not None or args.reference_format is not None or Path(path).is_dir():
+    """Whether REFERENCE is read as a Freiburg .relations file: the extension decides first.
+
+    ``.relations``/``.rel`` → relations; an extension that names a trajectory format
+    (``.tum``, ``.csv``, ``.g2o``, ``.log``, ``.clf``), ``--reference-format``, ``--strategy``
+    or a directory → a reference trajectory. Other files are sniffed; 8 numeric columns fit
+    both readings and are refused with a message that names both and how to choose.
+    """
+    p = Path(path)
+    if p.is_dir() or args.reference_format is not None:
         return False
-    return Path(path).suffix.lower() in (".relations", ".rel") or _looks_like_relations(path)
+    ext = p.suffix.lower()
+    if ext in RELATIONS_EXTENSIONS:
+        if args.strategy is not None:
+            raise InputError(
+                f"a {ext} file holds relations, but --strategy generates relations from a "
+                "reference trajectory; drop --strategy, or pass --reference-format to read "
+                "the file as a trajectory",
+                path=path,
+            )
+        return True
+    if ext in TRAJECTORY_EXTENSIONS or args.strategy is not None:
+        return False
+    fmt = sniff_trajectory_format(read_source(path))
+    if fmt == "tum":
+        raise InputError(
+            "ambiguous reference: 8 numeric columns read either as a Freiburg .relations "
+            "file (t1 t2 x y z roll pitch yaw) or as a TUM trajectory (t x y z qx qy qz qw); "
+            "say which: rename it to *.relations (or *.rel) to read relations, or pass "
+            "--reference-format tum (or a --strategy) to generate relations from a TUM "
+            "reference trajectory",
+            path=path,
+        )
+    if fmt is None:
+        raise InputError(
+            "cannot recognise the reference: expected a Freiburg .relations file (8 columns "
+            "t1 t2 x y z roll pitch yaw; name it *.relations) or a reference trajectory "
+            "(CARMEN records, VERTEX_SE2 lines, a t,x,y,theta CSV header, 8 columns (TUM) or "
+            "4 columns (t x y theta)); pass --reference-format or rename the file",
+            path=path,
+        )
+    return False
 
 
-def _looks_like_relations(path: str) -> bool:
-    from relation_metric.formats import detect_trajectory_format
+def load_reference(
+    args: argparse.Namespace, notes: dict[str, Any] | None = None
+) -> tuple[RelationSet, Trajectory | None]:
+    """Relations from a .relations file, or generated from a reference trajectory.
 
-    try:
-        fmt = detect_trajectory_format(path)
-    except Exception:
-        return True  # let the relations reader produce the precise error
-    return fmt == "tum"  # 8 numeric columns: a .relations file unless --strategy says otherwise
-
-
-def load_reference(args: argparse.Namespace) -> tuple[RelationSet, Trajectory | None]:
-    """Relations from a .relations file, or generated from a reference trajectory."""
+    What was dropped or reordered on the way is added to ``notes`` (JSON-ready):
+    ``relations_zero_length_dropped`` for a .relations file; ``reference_out_of_order`` and
+    ``reference_repeated_times_dropped`` for a reference trajectory.
+    """
+    notes = {} if notes is None else notes
     if _is_relations_file(args.reference, args):
-        return read_relations(args.reference), None
-    reference = load_trajectory_arg(args.reference, args.reference_format).trajectory
+        relations = read_relations(args.reference)
+        zero = zero_length(relations.first, relations.second)
+        dropped = int(np.count_nonzero(zero))
+        notes["relations_zero_length_dropped"] = dropped
+        if dropped:
+            warnings.warn(
+                f"{args.reference}: dropped {dropped} relation(s) with t1 == t2 (zero-length "
+                "relations would score 0 and pull the mean down)",
+                RepeatedTimeWarning,
+                stacklevel=2,
+            )
+            relations = relations.subset(~zero)
+        return relations, None
+    loaded = load_trajectory_arg(args.reference, args.reference_format, role="reference")
+    ref = Path(args.reference)
+    _refuse_if_strict(args, loaded, str(ref / "groundtruth.csv" if ref.is_dir() else ref))
+    notes["reference_out_of_order"] = loaded.time_order.as_dict()
+    notes["reference_repeated_times_dropped"] = loaded.repeated_dropped
     if args.strategy is None:
         args.strategy = "consecutive"
-    return relations_from_args(reference, args), reference
+    return relations_from_args(loaded.trajectory, args), loaded.trajectory
+
+
+def _refuse_if_strict(args: argparse.Namespace, loaded: LoadedTrajectory, path: str) -> None:
+    """``--strict``: a trajectory that was not in time order is an error (file:line)."""
+    if args.strict and loaded.out_of_order:
+        raise InputError(
+            f"{loaded.time_order.describe('pose')}; --strict refuses a trajectory that is not "
+            "in time order (without --strict its poses are put in time order and counted)",
+            path=path,
+            line=loaded.time_order.first_line,
+        )
+
+
+def _warn_same_file(args: argparse.Namespace) -> None:
+    """The same file as REFERENCE and ESTIMATE scores every relation 0: say so."""
+    ref = Path(args.reference)
+    ref_file = ref / "groundtruth.csv" if ref.is_dir() else ref
+    if os.path.realpath(ref_file) == os.path.realpath(args.estimate):
+        warnings.warn(
+            f"{args.estimate}: given as both REFERENCE and ESTIMATE; the estimate is scored "
+            "against itself (every error 0)",
+            UserWarning,
+            stacklevel=2,
+        )
 
 
 def run(args: argparse.Namespace) -> int:
     outputs = [args.json, args.per_relation, args.plot, args.evo_zip]
     check_outputs(outputs, [args.reference, args.estimate, args.odometry])
-    relations, reference = load_reference(args)
+    _warn_same_file(args)
+    notes: dict[str, Any] = {}
+    relations, reference = load_reference(args, notes)
     skip = args.skip_invalid_poses or args.mode == "metricevaluator"
-    estimate = load_trajectory_arg(args.estimate, args.format, skip_invalid=skip)
+    estimate = load_trajectory_arg(args.estimate, args.format, skip_invalid=skip, role="estimate")
+    _refuse_if_strict(args, estimate, args.estimate)
+    notes["estimate_out_of_order"] = estimate.time_order.as_dict()
     odometry = None
     if args.odometry:
-        odometry = load_trajectory_arg(
-            args.odometry, args.odometry_format, pose="odometry", skip_invalid=skip
-        ).trajectory
+        loaded_odometry = load_trajectory_arg(
+            args.odometry, args.odometry_format, pose="odometry", skip_invalid=skip, role="odometry"
+        )
+        _refuse_if_strict(args, loaded_odometry, args.odometry)
+        notes["odometry_out_of_order"] = loaded_odometry.time_order.as_dict()
+        odometry = loaded_odometry.trajectory
     ev = evaluate(
         relations,
         estimate.trajectory,
@@ -158,10 +255,9 @@ def run(args: argparse.Namespace) -> int:
     result = ev.as_dict(degrees=args.degrees)
     if estimate.skipped:
         result["estimate_records_skipped"] = dict(estimate.skipped)
+    result.update(notes)
     if args.ate:
         if reference is None:
-            from relation_metric.errors import InputError
-
             raise InputError(
                 "--ate needs a reference trajectory, not a .relations file", path=args.reference
             )
@@ -222,6 +318,23 @@ def summary_text(ev: Evaluation, result: dict[str, Any], *, degrees: bool) -> st
         f"mode: {ev.errors.mode}"
     )
     text = head + "\n" + stats_table(rows)
+    for name in ("estimate", "odometry", "reference"):
+        order = result.get(f"{name}_out_of_order")
+        if order and order["count"]:
+            text += (
+                f"\n{name}: {order['count']} pose(s) out of time order (largest step back "
+                f"{order['max_step_back_s']:.6f} s, first at line {order['first_line']}); "
+                "put in time order"
+            )
+    if result.get("reference_repeated_times_dropped"):
+        text += (
+            f"\nreference: {result['reference_repeated_times_dropped']} pose(s) repeating an "
+            "earlier timestamp dropped"
+        )
+    if result.get("relations_zero_length_dropped"):
+        text += (
+            f"\nrelations: {result['relations_zero_length_dropped']} zero-length (t1 == t2) dropped"
+        )
     if "ate" in result:
         a = result["ate"]
         text += "\nATE translation rmse [m]: " + ", ".join(

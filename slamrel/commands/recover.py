@@ -15,6 +15,7 @@ from relation_metric.errors import InputError
 from relation_metric.formats import write_trajectory
 from relation_metric.results import write_json
 from relation_metric.textio import write_bytes_atomic
+from relation_metric.timeorder import FILTER_TIME_TOLERANCE
 from slamrel.commands import options as opt
 from slamrel.commands.common import check_outputs, errors_about
 
@@ -92,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
         write_bytes_atomic(args.covariances, buf.getvalue())
     report = result.report()
     report["gate"] = args.gate
+    # rows put in time order under the filter-log rule (relation_metric.timeorder)
+    report["reordered"] = dict(bundle.reordered)
     if args.report:
         write_json(args.report, report)
     if not args.quiet:
@@ -103,6 +106,13 @@ def run(args: argparse.Namespace) -> int:
             f"{c['unassociated']}, outside the log {c['outside']}, unknown landmark "
             f"{c['skipped_unknown']}; map uncertainty: {result.map_mode}"
         )
+        moved = {name: n for name, n in bundle.reordered.items() if n}
+        if moved:
+            print(
+                "put in time order (steps back of at most "
+                f"{FILTER_TIME_TOLERANCE:g} s): "
+                + ", ".join(f"{n} row(s) of {name}" for name, n in moved.items())
+            )
         if c["gated_fraction"] > 0.05:
             print(
                 "note: a large gated fraction is a finding about the map (wrong associations "

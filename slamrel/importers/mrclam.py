@@ -14,7 +14,8 @@ dropped without being counted in :class:`MrclamRobot`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import warnings
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,7 @@ from scipy.optimize import nnls
 from relation_metric import se2
 from relation_metric.errors import InputError
 from relation_metric.textio import PathLike, RowLines, read_numeric_table
+from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, readonly
 
 __all__ = [
@@ -58,6 +60,9 @@ class MrclamRobot:
         Measurements of other robots (subjects 1–5), left out.
     unknown_barcodes : dict of int → int
         Barcodes in no table, with their counts, left out.
+    reordered : dict of str → int
+        Rows of each ``.dat`` file that went back in time by at most
+        :data:`~relation_metric.timeorder.FILTER_TIME_TOLERANCE` and were put in time order.
     """
 
     robot: int
@@ -66,15 +71,27 @@ class MrclamRobot:
     groundtruth: Trajectory
     robot_sightings: int
     unknown_barcodes: dict[int, int]
+    reordered: dict[str, int] = field(default_factory=dict)
 
 
-def _check_times(path: Path, t: NDArray[np.float64], lines: RowLines) -> None:
-    back = np.flatnonzero(np.diff(t) < 0)
-    if back.size:
-        k = int(back[0]) + 1
-        raise InputError(
-            f"time goes backwards: {t[k]!r} after {t[k - 1]!r}", path=path, line=lines(k)
-        )
+def _time_ordered(
+    path: Path, rows: NDArray[np.float64], lines: RowLines, what: str
+) -> tuple[NDArray[np.float64], int]:
+    """``rows`` (time in column 0) under the filter-log rule of ``relation_metric.timeorder``.
+
+    Steps back of at most ``FILTER_TIME_TOLERANCE`` (0.05 s) are stable-sorted, counted
+    (returned) and warned about; a larger one raises :class:`InputError` with file:line and
+    both times.
+    """
+    order, report = sort_by_time(
+        rows[:, 0], tolerance=FILTER_TIME_TOLERANCE, lines=lines, path=path, what=what
+    )
+    if not report.out_of_order:
+        return rows, 0
+    warnings.warn(
+        f"{path}: {report.describe(what)}; put in time order", TimeOrderWarning, stacklevel=3
+    )
+    return rows[order], report.out_of_order
 
 
 def read_barcodes(directory: PathLike) -> dict[int, int]:
@@ -104,21 +121,23 @@ def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
     odo, odo_lines = read_numeric_table(
         odo_path, columns=("time", "v", "omega"), describe="MRCLAM odometry"
     )
-    _check_times(odo_path, odo[:, 0], odo_lines)
+    reordered: dict[str, int] = {}
+    odo, reordered[odo_path.name] = _time_ordered(odo_path, odo, odo_lines, "odometry row")
     meas_path = d / f"Robot{robot}_Measurement.dat"
     meas, meas_lines = read_numeric_table(
         meas_path, columns=("time", "barcode", "range", "bearing"), describe="MRCLAM measurements"
     )
-    _check_times(meas_path, meas[:, 0], meas_lines)
+    bad_code = np.flatnonzero(meas[:, 1] != np.round(meas[:, 1]))
+    if bad_code.size:
+        k = int(bad_code[0])
+        raise InputError("barcode must be an integer", path=meas_path, line=meas_lines(k))
+    meas, reordered[meas_path.name] = _time_ordered(meas_path, meas, meas_lines, "measurement")
     gt_path = d / f"Robot{robot}_Groundtruth.dat"
     gt, gt_lines = read_numeric_table(
         gt_path, columns=("time", "x", "y", "theta"), describe="MRCLAM ground truth"
     )
-    _check_times(gt_path, gt[:, 0], gt_lines)
+    gt, reordered[gt_path.name] = _time_ordered(gt_path, gt, gt_lines, "ground-truth pose")
     code = meas[:, 1].astype(np.int64)
-    if np.any(meas[:, 1] != code):
-        k = int(np.flatnonzero(meas[:, 1] != code)[0])
-        raise InputError("barcode must be an integer", path=meas_path, line=meas_lines(k))
     table_codes = np.fromiter(barcodes.keys(), dtype=np.int64)
     table_subjects = np.fromiter(barcodes.values(), dtype=np.int64)
     order = np.argsort(table_codes)
@@ -138,6 +157,7 @@ def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
         groundtruth=Trajectory(gt[:, 0], gt[:, 1:4]),
         robot_sightings=int(is_robot.sum()),
         unknown_barcodes=dict(zip(unknown_codes.tolist(), unknown_counts.tolist())),
+        reordered=reordered,
     )
 
 
@@ -521,5 +541,17 @@ def mrclam_bundle(
                 f"{cal.rms_before:.4f} -> {cal.rms_after:.4f} m)"
             )
             + "; controls split at gaps; map = surveyed landmarks"
+            + _reordered_text(r.reordered)
         ),
+        reordered=dict(r.reordered),
+    )
+
+
+def _reordered_text(reordered: dict[str, int]) -> str:
+    """The description's note on rows put in time order (empty when none were)."""
+    moved = {name: n for name, n in reordered.items() if n}
+    if not moved:
+        return ""
+    return f"; put in time order (steps back of at most {FILTER_TIME_TOLERANCE:g} s): " + ", ".join(
+        f"{n} row(s) of {name}" for name, n in moved.items()
     )
