@@ -243,9 +243,7 @@ def check_output_file(
     out = _real(path)
     for item in _inputs(inputs):
         if _same(path, item):
-            raise InputError(
-                f"is also an input; refusing to overwrite it with the {what}", path=path
-            )
+            raise InputError(f"refusing to overwrite an input file with the {what}", path=path)
         if os.path.isdir(item) and _inside(out, _real(item)):
             raise InputError(
                 f"lies inside the input folder {os.fspath(item)}; refusing to write the {what} "

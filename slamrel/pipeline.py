@@ -299,13 +299,16 @@ def _stats_table(result: RunResult, part: str) -> Table:
     )
 
 
-def write_report(result: RunResult, directory: str | Path) -> Path:
-    """Write the report folder atomically; returns the path of ``report.html``."""
+def write_report(result: RunResult, directory: str | Path, *, force: bool = True) -> Path:
+    """Write the report folder, swapped in whole; returns the path of ``report.html``.
+
+    ``force``: may an existing report folder (one slamrel wrote) be replaced?
+    """
     target = Path(directory)
     metrics = result.metrics()
     truth = result.bundle.groundtruth
     assert truth is not None
-    with report_directory(target) as tmp:
+    with report_directory(target, force=force) as tmp:
         write_bundle(tmp / "bundle", result.bundle)
         write_text_atomic(
             tmp / "metrics.json", json.dumps(metrics, indent=2, allow_nan=False) + "\n"
