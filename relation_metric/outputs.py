@@ -274,7 +274,9 @@ def _check_replaceable(path: PathLike, *, force: bool, what: str) -> None:
     if not os.path.lexists(path):
         return
     if not os.path.isdir(path):
-        raise InputError(f"exists and is not a folder; expected a folder for the {what}", path=path)
+        raise InputError(
+            f"exists and is not a folder; refusing to replace it with the {what}", path=path
+        )
     try:
         empty = not any(os.scandir(path))
     except OSError as exc:
@@ -329,10 +331,14 @@ def check_output_dir(
     out = _real(path)
     for item in _inputs(inputs):
         inp = _real(item)
-        if _same(path, item) or (os.path.isdir(item) and _inside(out, inp)):
+        if _same(path, item):
             raise InputError(
-                f"is an input or lies inside the input folder {os.fspath(item)}; refusing to "
-                f"write the {what} there",
+                f"is also an input; refusing to replace an input with the {what}", path=path
+            )
+        if os.path.isdir(item) and _inside(out, inp):
+            raise InputError(
+                f"lies inside the input folder {os.fspath(item)}; refusing to write the {what} "
+                "into an input",
                 path=path,
             )
         if _inside(inp, out):
@@ -440,9 +446,20 @@ def staged_directory(target: PathLike, *, kind: str, force: bool = True) -> Iter
             _swap(tmp, final)
         except OSError as exc:
             raise _os_error(exc, target, "cannot replace the folder") from None
+    except InputError as exc:
+        _remove(tmp)
+        raise _renamed(exc, tmp, Path(target)) from None
     except BaseException:
         _remove(tmp)
         raise
+
+
+def _renamed(exc: InputError, tmp: Path, target: Path) -> InputError:
+    """``exc`` naming the file in ``target`` instead of its hidden staging folder ``tmp``."""
+    if exc.path is None or not _inside(_real(exc.path), _real(tmp)):
+        return exc
+    relative = os.path.relpath(_real(exc.path), _real(tmp))
+    return type(exc)(exc.message, path=target / relative, line=exc.line)
 
 
 def _swap(new: Path, final: Path) -> None:
