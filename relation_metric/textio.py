@@ -26,7 +26,12 @@ from numpy.typing import NDArray
 
 from relation_metric.errors import InputError
 from relation_metric.fastparse import read_decimal_table
-from relation_metric.outputs import atomic_write, write_bytes_atomic, write_text_atomic
+from relation_metric.outputs import (
+    atomic_write,
+    check_output_file,
+    write_bytes_atomic,
+    write_text_atomic,
+)
 
 __all__ = [
     "TruncatedLineWarning",
@@ -271,13 +276,9 @@ def _diagnose(
 
 
 def check_not_input(output: PathLike, inputs: Sequence[PathLike | None]) -> None:
-    """Refuse to write ``output`` over one of the ``inputs``."""
-    out = Path(output).resolve()
-    for item in inputs:
-        if item is None:
-            continue
-        if Path(item).resolve() == out:
-            raise InputError("refusing to overwrite an input file", path=output)
+    """Refuse to write ``output`` over one of the ``inputs`` (see
+    :func:`relation_metric.outputs.check_output_file`, which this calls)."""
+    check_output_file(output, inputs=inputs)
 
 
 def read_keyword_records(
