@@ -150,8 +150,8 @@ def atomic_write(
         raise _os_error(exc, path) from None
     binary = "b" in mode
     try:
-        os.fchmod(fd, file_mode())
         with os.fdopen(fd, mode, encoding=None if binary else encoding) as handle:
+            os.fchmod(handle.fileno(), file_mode())  # mkstemp gives 0600
             yield handle
             handle.flush()
             os.fsync(handle.fileno())

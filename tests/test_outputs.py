@@ -427,3 +427,17 @@ def test_outputs_are_checked_before_any_work(
         assert tree(root.parent) == before
     finally:
         ro.chmod(0o755)
+
+
+@pytest.mark.parametrize("where", ["a folder", "under a file"])
+@pytest.mark.parametrize("command", FILE)
+def test_a_file_output_onto_a_folder_or_under_a_file_is_refused(
+    command: str, where: str, root: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (root / "d").mkdir()
+    (root / "d" / "keep.txt").write_text("mine\n")
+    out = root / "d" if where == "a folder" else root / "d" / "keep.txt" / "out.txt"
+    before = tree(root.parent)
+    err = refused(FILE[command](root, str(out)) + ["-q"], capsys, str(out))
+    assert ("is a folder" if where == "a folder" else "is not a folder") in err
+    assert tree(root.parent) == before
