@@ -19,7 +19,7 @@ import json
 import math
 import os
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from recovery.models import MOTION_TYPES, MotionModel, SensorModel
 from relation_metric.errors import InputError
 from relation_metric.formats import read_trajectory
+from relation_metric.outputs import staged_directory
 from relation_metric.textio import parse_float, read_source, write_bytes_atomic, write_text_atomic
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, readonly
@@ -623,10 +624,38 @@ def _csv(header: str, columns: Sequence[Array], fmt: str = "%.17g") -> str:
     return header + "\n" + buf.getvalue()
 
 
-def write_bundle(directory: PathLike, bundle: Bundle) -> None:
-    """Write ``bundle`` as a bundle directory (each file atomically; round-trips exactly)."""
-    root = Path(directory)
-    root.mkdir(parents=True, exist_ok=True)
+def write_bundle(
+    directory: PathLike,
+    bundle: Bundle,
+    *,
+    force: bool = True,
+    extra: Callable[[Path], None] | None = None,
+) -> None:
+    """Write ``bundle`` as a bundle directory, replaced as a whole (round-trips exactly).
+
+    The files are written into a hidden folder beside ``directory`` that is swapped in only
+    when complete (:func:`relation_metric.outputs.staged_directory`): no file of an earlier
+    bundle survives (a stale ``groundtruth.csv`` or ``map_covariance.npy``), and an error or
+    Ctrl-C leaves the previous folder exactly as it was.
+
+    Parameters
+    ----------
+    directory : str or PathLike
+    bundle : Bundle
+    force : bool
+        May an existing non-empty folder that slamrel wrote be replaced (default yes)? A
+        folder slamrel did not write is never replaced (:class:`InputError`).
+    extra : callable, optional
+        Called with the staged folder to add more files (e.g. ``online.csv``) before the swap.
+    """
+    with staged_directory(directory, kind="bundle", force=force) as root:
+        _write_bundle_files(root, bundle)
+        if extra is not None:
+            extra(root)
+
+
+def _write_bundle_files(root: Path, bundle: Bundle) -> None:
+    """Write the files of ``bundle`` into the (new, empty) folder ``root``."""
     meta = {
         "format": FORMAT,
         "motion_model": bundle.motion.as_dict(),

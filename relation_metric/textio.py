@@ -16,19 +16,22 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
 
 import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric.errors import InputError
 from relation_metric.fastparse import read_decimal_table
+from relation_metric.outputs import (
+    atomic_write,
+    check_output_file,
+    write_bytes_atomic,
+    write_text_atomic,
+)
 
 __all__ = [
     "TruncatedLineWarning",
@@ -273,51 +276,9 @@ def _diagnose(
 
 
 def check_not_input(output: PathLike, inputs: Sequence[PathLike | None]) -> None:
-    """Refuse to write ``output`` over one of the ``inputs``."""
-    out = Path(output).resolve()
-    for item in inputs:
-        if item is None:
-            continue
-        if Path(item).resolve() == out:
-            raise InputError("refusing to overwrite an input file", path=output)
-
-
-@contextmanager
-def atomic_write(
-    path: PathLike, mode: str = "w", *, encoding: str | None = "utf-8"
-) -> Iterator[IO[str] | IO[bytes]]:
-    """Write to a temporary file beside ``path`` and rename it into place on success.
-
-    An exception (or an interrupt) inside the block leaves ``path`` untouched and removes
-    the temporary file.
-    """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    binary = "b" in mode
-    try:
-        with os.fdopen(fd, mode, encoding=None if binary else encoding) as handle:
-            yield handle
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-
-
-def write_bytes_atomic(path: PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically."""
-    with atomic_write(path, "wb") as handle:
-        handle.write(data)  # type: ignore[arg-type]
-
-
-def write_text_atomic(path: PathLike, text: str) -> None:
-    """Write ``text`` to ``path`` atomically (UTF-8)."""
-    write_bytes_atomic(path, text.encode("utf-8"))
+    """Refuse to write ``output`` over one of the ``inputs`` (see
+    :func:`relation_metric.outputs.check_output_file`, which this calls)."""
+    check_output_file(output, inputs=inputs)
 
 
 def read_keyword_records(

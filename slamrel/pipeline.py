@@ -33,13 +33,13 @@ from relation_metric.consistency import NeesSummary, pose_nees, summarize_nees
 from relation_metric.errors import InputError
 from relation_metric.evaluate import Evaluation, UnassociatedRelationsWarning, evaluate
 from relation_metric.formats import read_trajectory
+from relation_metric.outputs import staged_directory, write_text_atomic
 from relation_metric.plots import evaluation_figure
 from relation_metric.relations import RelationSet, generate_relations
 from relation_metric.results import write_per_relation_csv
-from relation_metric.textio import write_text_atomic
 from relation_metric.trajectory import Trajectory
 from slamrel.figures import nees_figure, trajectories_figure
-from slamrel.report import Figure, Section, Table, figure_png, render_html, report_directory
+from slamrel.report import Figure, Section, Table, figure_png, render_html
 from slamrel.simulate import slam_bundle, world_bundle
 from slamrel.worlds import make_world
 
@@ -299,13 +299,16 @@ def _stats_table(result: RunResult, part: str) -> Table:
     )
 
 
-def write_report(result: RunResult, directory: str | Path) -> Path:
-    """Write the report folder atomically; returns the path of ``report.html``."""
+def write_report(result: RunResult, directory: str | Path, *, force: bool = True) -> Path:
+    """Write the report folder, swapped in whole; returns the path of ``report.html``.
+
+    ``force``: may an existing report folder (one slamrel wrote) be replaced?
+    """
     target = Path(directory)
     metrics = result.metrics()
     truth = result.bundle.groundtruth
     assert truth is not None
-    with report_directory(target) as tmp:
+    with staged_directory(target, kind="report", force=force) as tmp:
         write_bundle(tmp / "bundle", result.bundle)
         write_text_atomic(
             tmp / "metrics.json", json.dumps(metrics, indent=2, allow_nan=False) + "\n"

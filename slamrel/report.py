@@ -5,9 +5,9 @@ embedded as base64 PNG, styles are inline: the single ``report.html`` opens offl
 number shown in a table comes from the same dictionaries that are written to
 ``metrics.json``, so the two cannot disagree.
 
-:func:`report_directory` builds a report in a temporary folder beside the target and moves
-it into place only when everything is written, so an interrupted run (Ctrl-C) leaves no
-half-written report behind.
+:func:`report_directory` (an alias of :func:`relation_metric.outputs.staged_directory`)
+builds a report in a temporary folder beside the target and swaps it in only when everything
+is written, so an interrupted run (Ctrl-C) leaves no half-written report behind.
 """
 
 from __future__ import annotations
@@ -16,13 +16,13 @@ import base64
 import html
 import io
 import os
-import shutil
-import tempfile
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from relation_metric.outputs import staged_directory
 
 __all__ = ["Table", "Figure", "Section", "render_html", "report_directory", "figure_png"]
 
@@ -120,24 +120,9 @@ def figure_png(fig: Any, *, dpi: int = 100) -> bytes:
     return buf.getvalue()
 
 
-@contextmanager
-def report_directory(target: str | os.PathLike[str]) -> Iterator[Path]:
-    """Yield a temporary folder; on success it replaces ``target``, on any error it vanishes.
-
-    An existing ``target`` is kept until the new report is complete, then swapped out.
-    """
-    final = Path(target)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
-    try:
-        yield tmp
-        old = None
-        if final.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
-            os.replace(final, old / final.name)
-        os.replace(tmp, final)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+def report_directory(
+    target: str | os.PathLike[str], *, force: bool = True
+) -> AbstractContextManager[Path]:
+    """A report folder built beside ``target`` and swapped in whole (thin alias of
+    :func:`relation_metric.outputs.staged_directory` with ``kind="report"``)."""
+    return staged_directory(target, kind="report", force=force)

@@ -297,7 +297,7 @@ def test_cli_chain_on_another_dataset_directory(tmp_path):
     assert main(["import", "mrclam", str(other), "-o", str(tmp_path / "logs"), "-q"]) == 0
     assert sorted(p.name for p in (tmp_path / "logs").iterdir()) == [
         f"robot{k}" for k in range(1, 6)
-    ]
+    ] + ["slamrel-output.json"]
     slam = tmp_path / "slam3"
     assert main(["slam", str(tmp_path / "logs" / "robot3"), "-o", str(slam), "--outlier-gate",
                  "0.999", "-q"]) == 0  # fmt: skip

@@ -6,6 +6,7 @@ import html.parser
 
 import pytest
 
+from relation_metric.outputs import MANIFEST
 from slamrel.report import Figure, Section, Table, render_html, report_directory
 
 PNG = b"\x89PNG\r\n\x1a\n" + b"\x00" * 16
@@ -63,5 +64,5 @@ def test_report_directory_replaces_only_when_complete(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]  # nothing half-written left
     with report_directory(target) as d:
         (d / "b.txt").write_text("2")
-    assert sorted(p.name for p in target.iterdir()) == ["b.txt"]
+    assert sorted(p.name for p in target.iterdir()) == ["b.txt", MANIFEST]  # a.txt is gone
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]

@@ -15,9 +15,9 @@ from relation_metric.formats import (
     read_trajectory,
     without_repeated_times,
 )
+from relation_metric.outputs import check_outputs as _check_outputs
 from relation_metric.relations import STRATEGIES, RelationSet, generate_relations
 from relation_metric.stats import Summary
-from relation_metric.textio import check_not_input
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE
 from relation_metric.trajectory import Trajectory
 from slamrel.commands import options as opt
@@ -28,6 +28,7 @@ __all__ = [
     "relations_from_args",
     "stats_table",
     "check_outputs",
+    "add_force_argument",
     "load_trajectory_arg",
 ]
 
@@ -153,17 +154,30 @@ def load_trajectory_arg(
     return loaded
 
 
-def check_outputs(outputs: Sequence[str | None], inputs: Sequence[str | None]) -> None:
-    """Refuse outputs that would overwrite an input, or two outputs on one path."""
-    seen: set[str] = set()
-    for out in outputs:
-        if out is None:
-            continue
-        check_not_input(out, inputs)
-        key = os.path.realpath(out)
-        if key in seen:
-            raise InputError("given twice as an output", path=out)
-        seen.add(key)
+def check_outputs(
+    outputs: Sequence[str | None],
+    inputs: Sequence[str | None],
+    *,
+    dirs: Sequence[str | None] = (),
+    force: bool = False,
+) -> None:
+    """Check a command's file ``outputs`` and folder outputs ``dirs`` before any work.
+
+    See :func:`relation_metric.outputs.check_outputs`: no output is an input, lies inside an
+    input folder or (for a folder) contains an input; parents are writable; no two outputs
+    share a path; an existing non-empty folder is replaced only with ``force`` and only when
+    slamrel wrote it.
+    """
+    _check_outputs(outputs, dirs=dirs, inputs=inputs, force=force)
+
+
+def add_force_argument(parser: argparse.ArgumentParser) -> None:
+    """``--force``: replace an existing output folder that slamrel wrote."""
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing output folder (only one slamrel wrote; it is replaced whole)",
+    )
 
 
 def stats_table(rows: Sequence[tuple[str, Summary]]) -> str:

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from relation_metric.errors import InputError
-from relation_metric.textio import write_text_atomic
+from relation_metric.outputs import staged_directory, write_text_atomic
 from slamrel.commands import options as opt
+from slamrel.commands.common import add_force_argument, check_outputs
 from slamrel.compare import compare_results, read_per_relation
 
 _SPEC = re.compile(r"^(?P<dataset>[^:=]+):(?P<algorithm>[^=]+)=(?P<path>.+)$")
@@ -29,25 +30,32 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "--alpha", type=opt.probability, default=0.05, help="significance level (Holm-adjusted)"
     )
+    add_force_argument(p)
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    results = []
+    specs = []
     for spec in args.results:
         m = _SPEC.match(spec)
         if not m:
             raise InputError(f"result {spec!r}: expected DATASET:ALGORITHM=PER_RELATION.csv")
-        res = read_per_relation(m["path"], dataset=m["dataset"], algorithm=m["algorithm"])
-        results.append(replace(res, source=m["path"]))
+        specs.append(m)
+    check_outputs([], [m["path"] for m in specs], dirs=[args.output], force=args.force)
+    results = [
+        replace(
+            read_per_relation(m["path"], dataset=m["dataset"], algorithm=m["algorithm"]),
+            source=m["path"],
+        )
+        for m in specs
+    ]
     comp = compare_results(results, alpha=args.alpha)
-    out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(out / "table.md", comp.markdown())
-    write_text_atomic(out / "table.csv", comp.csv())
-    write_text_atomic(out / "table.tex", comp.latex())
-    _figure(comp, out / "errors.png")
+    with staged_directory(Path(args.output), kind="compare", force=args.force) as out:
+        write_text_atomic(out / "table.md", comp.markdown())
+        write_text_atomic(out / "table.csv", comp.csv())
+        write_text_atomic(out / "table.tex", comp.latex())
+        _figure(comp, out / "errors.png")
     if not args.quiet:
         print(comp.markdown(), end="")
     return 0

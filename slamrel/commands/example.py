@@ -9,9 +9,11 @@ import numpy as np
 
 from relation_metric import se2
 from relation_metric.formats import write_trajectory
+from relation_metric.outputs import staged_directory
 from relation_metric.relations import RelationSet, generate_relations, write_relations
 from relation_metric.trajectory import Trajectory
 from slamrel.commands import options as opt
+from slamrel.commands.common import add_force_argument, check_outputs
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -21,6 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("-o", "--output", default="slamrel-example", metavar="DIR")
     p.add_argument("--seed", type=opt.seed, default=0)
+    add_force_argument(p)
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=run)
 
@@ -45,11 +48,9 @@ def example_world(seed: int = 0, n: int = 600, dt: float = 0.5) -> tuple[Traject
 
 
 def run(args: argparse.Namespace) -> int:
+    check_outputs([], [], dirs=[args.output], force=args.force)
     out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
     reference, estimate = example_world(args.seed)
-    write_trajectory(out / "reference.txt", reference, format="plain")
-    write_trajectory(out / "estimate.txt", estimate, format="plain")
     local = generate_relations(reference, "consecutive")
     loops = generate_relations(reference, "loops", radius=2.0, min_separation_time=60.0)
     both = RelationSet(
@@ -57,7 +58,10 @@ def run(args: argparse.Namespace) -> int:
         np.concatenate((local.second, loops.second)),
         np.concatenate((local.delta, loops.delta)),
     )
-    write_relations(out / "reference.relations", both)
+    with staged_directory(out, kind="example", force=args.force) as tmp:
+        write_trajectory(tmp / "reference.txt", reference, format="plain")
+        write_trajectory(tmp / "estimate.txt", estimate, format="plain")
+        write_relations(tmp / "reference.relations", both)
     if not args.quiet:
         print(
             f"wrote {out}/reference.txt, {out}/estimate.txt ({len(reference)} poses) and "

@@ -10,12 +10,12 @@ import numpy as np
 
 from relation_metric.errors import InputError
 from relation_metric.formats import write_trajectory
-from relation_metric.textio import check_not_input, write_text_atomic
+from relation_metric.outputs import staged_directory, write_text_atomic
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.g2o import read_g2o_graph, write_g2o_graph
 from slamrel.backends.graph import PoseGraph, solve_graph, solve_graph_incremental
 from slamrel.commands import options as opt
-from slamrel.commands.common import errors_about
+from slamrel.commands.common import add_force_argument, check_outputs, errors_about
 from slamrel.importers.isam import read_isam
 
 
@@ -43,6 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="DIR",
         help="also write the problem as an EKF-SLAM log bundle (for slamrel slam / recover)",
     )
+    add_force_argument(i)
     i.add_argument("-q", "--quiet", action="store_true")
     i.set_defaults(func=run_import_isam)
     mr = isub.add_parser(
@@ -69,6 +70,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="velocity-model noise growing with the commanded speeds (fitted alpha, zero at "
         "rest; default) or constant per control row (fitted sigma_v, sigma_omega)",
     )
+    add_force_argument(mr)
     mr.add_argument("-q", "--quiet", action="store_true")
     mr.set_defaults(func=run_import_mrclam)
 
@@ -91,6 +93,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="poses added per sub-problem (default 500; 0: one batch solve of the whole graph)",
     )
     s.add_argument("--noise", choices=("covariance", "sqrt-information"), default="covariance")
+    add_force_argument(s)
     s.add_argument("-q", "--quiet", action="store_true")
     s.set_defaults(func=run_solve)
 
@@ -105,7 +108,7 @@ def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
 
 
 def run_import_isam(args: argparse.Namespace) -> int:
-    check_not_input(args.output, [args.file])
+    check_outputs([args.output], [args.file], dirs=[args.bundle], force=args.force)
     data = read_isam(args.file, noise=args.noise)
     # the file's ids are kept: landmark names then agree with the --bundle log's map.csv
     write_g2o_graph(args.output, data.graph, pose_ids=data.pose_ids, landmark_ids=data.landmark_ids)
@@ -113,8 +116,7 @@ def run_import_isam(args: argparse.Namespace) -> int:
         from recovery.bundle import write_bundle
         from slamrel.importers.isam import isam_log_bundle
 
-        check_not_input(args.bundle, [args.file])
-        write_bundle(args.bundle, isam_log_bundle(data))
+        write_bundle(args.bundle, isam_log_bundle(data), force=args.force)
     g = data.graph
     if not args.quiet:
         print(
@@ -126,34 +128,46 @@ def run_import_isam(args: argparse.Namespace) -> int:
 
 def run_import_mrclam(args: argparse.Namespace) -> int:
     from recovery.bundle import write_bundle
-    from slamrel.importers.mrclam import N_ROBOTS, mrclam_bundle
+    from slamrel.importers.mrclam import N_ROBOTS
 
-    robots = [args.robot] if args.robot is not None else list(range(1, N_ROBOTS + 1))
-    for robot in robots:
-        out = Path(args.output) if args.robot is not None else Path(args.output) / f"robot{robot}"
-        with errors_about(args.directory):
-            bundle = mrclam_bundle(
-                args.directory,
-                robot,
-                calibrate=not args.no_calibrate,
-                motion_noise=args.motion_noise,
-            )
-        write_bundle(out, bundle)
-        if not args.quiet:
-            print(
-                f"robot {robot}: {bundle.controls.shape[0]} controls, "
-                f"{bundle.measurements.shape[0]} landmark measurements -> {out}\n  "
-                f"{bundle.description}"
-            )
+    check_outputs([], [args.directory], dirs=[args.output], force=args.force)
+    if args.robot is not None:
+        bundle = _mrclam_robot(args, args.robot, Path(args.output))
+        write_bundle(args.output, bundle, force=args.force)
+        return 0
+    # all five robots: OUT/robot1..robot5 built together and swapped in as one folder
+    with staged_directory(args.output, kind="mrclam-import", force=args.force) as tmp:
+        for robot in range(1, N_ROBOTS + 1):
+            bundle = _mrclam_robot(args, robot, Path(args.output) / f"robot{robot}")
+            write_bundle(tmp / f"robot{robot}", bundle)
     return 0
 
 
+def _mrclam_robot(args: argparse.Namespace, robot: int, out: Path):  # type: ignore[no-untyped-def]
+    """The bundle of one MRCLAM robot (printing its summary unless ``--quiet``)."""
+    from slamrel.importers.mrclam import mrclam_bundle
+
+    with errors_about(args.directory):
+        bundle = mrclam_bundle(
+            args.directory,
+            robot,
+            calibrate=not args.no_calibrate,
+            motion_noise=args.motion_noise,
+        )
+    if not args.quiet:
+        print(
+            f"robot {robot}: {bundle.controls.shape[0]} controls, "
+            f"{bundle.measurements.shape[0]} landmark measurements -> {out}\n  "
+            f"{bundle.description}"
+        )
+    return bundle
+
+
 def run_solve(args: argparse.Namespace) -> int:
+    check_outputs([], [args.graph], dirs=[args.output], force=args.force)
     if not Path(args.graph).is_file():
         raise InputError("no such file", path=args.graph)
     graph, pose_ids, lm_ids = _load(args.graph, args.noise)
-    if args.batch < 0:
-        raise InputError(f"--batch must be >= 0, got {args.batch}")
     with errors_about(args.graph):
         if args.batch == 0:
             sol = solve_graph(graph, max_iterations=args.max_iterations)
@@ -162,19 +176,19 @@ def run_solve(args: argparse.Namespace) -> int:
                 graph, batch=args.batch, max_iterations=args.max_iterations
             )
     out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
-    write_trajectory(out / "trajectory.txt", Trajectory.from_poses(sol.poses), format="plain")
     rows = np.column_stack((lm_ids, sol.landmarks))
     body = ("%d,%.9f,%.9f\n" * rows.shape[0]) % tuple(rows.ravel().tolist()) if rows.size else ""
-    write_text_atomic(out / "landmarks.csv", "landmark,x,y\n" + body)
-    write_g2o_graph(
-        out / "solved.g2o",
-        graph,
-        poses=sol.poses,
-        landmarks=sol.landmarks,
-        pose_ids=pose_ids,
-        landmark_ids=lm_ids,
-    )
+    with staged_directory(out, kind="solve", force=args.force) as tmp:
+        write_trajectory(tmp / "trajectory.txt", Trajectory.from_poses(sol.poses), format="plain")
+        write_text_atomic(tmp / "landmarks.csv", "landmark,x,y\n" + body)
+        write_g2o_graph(
+            tmp / "solved.g2o",
+            graph,
+            poses=sol.poses,
+            landmarks=sol.landmarks,
+            pose_ids=pose_ids,
+            landmark_ids=lm_ids,
+        )
     if not sol.converged:
         # a result all the same (the last iterate is written), said even with -q
         warnings.warn(

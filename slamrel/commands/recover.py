@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import io
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -70,9 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
-    root = Path(args.bundle)
-    inputs = [str(f) for f in root.iterdir()] if root.is_dir() else [args.bundle]
-    check_outputs([args.output, args.covariances, args.report], inputs)
+    check_outputs([args.output, args.covariances, args.report], [args.bundle])
     fmt = args.format or ("tum" if args.output.lower().endswith(".tum") else "plain")
     if args.gate is not None and not 0.0 < args.gate < 1.0:
         raise InputError(f"--gate must be a probability in (0, 1), got {args.gate}")

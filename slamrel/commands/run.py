@@ -8,6 +8,7 @@ from pathlib import Path
 
 from relation_metric.errors import InputError
 from slamrel.commands import options as opt
+from slamrel.commands.common import add_force_argument, check_outputs
 from slamrel.pipeline import run_pipeline, write_report
 from slamrel.worlds import NOISE_TYPES, WORLDS
 
@@ -30,6 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--corrupt", type=opt.fraction, default=0.0, help="fraction of associations corrupted"
     )
     p.add_argument("--noise-scale", type=opt.positive_float, default=1.0)
+    add_force_argument(p)
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=run)
 
@@ -40,12 +42,14 @@ def run(args: argparse.Namespace) -> int:
             f"unknown SOURCE {args.source!r}; expected a SLAM result bundle directory or one of "
             f"{', '.join(WORLDS)}"
         )
+    source = args.source if Path(args.source).is_dir() else None
+    check_outputs([], [source], dirs=[args.output], force=args.force)
     start = time.perf_counter()
     result = run_pipeline(
         args.source, noise=args.noise, seed=args.seed, rate=args.rate,
         corrupt_fraction=args.corrupt, noise_scale=args.noise_scale,
     )  # fmt: skip
-    html = write_report(result, args.output)
+    html = write_report(result, args.output, force=args.force)
     if not args.quiet:
         print(f"slamrel run {result.name} ({time.perf_counter() - start:.1f} s)")
         print(f"{'estimate':16s}{'relations':>13s}{'trans mean [m]':>16s}{'rot mean [rad]':>16s}")

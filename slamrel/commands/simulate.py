@@ -7,9 +7,8 @@ from pathlib import Path
 
 from recovery.bundle import read_bundle, write_bundle
 from relation_metric.formats import write_trajectory
-from relation_metric.textio import check_not_input
 from slamrel.commands import options as opt
-from slamrel.commands.common import errors_about
+from slamrel.commands.common import add_force_argument, check_outputs, errors_about
 from slamrel.simulate import slam_bundle, world_bundle
 from slamrel.worlds import NOISE_TYPES, WORLDS, make_world
 
@@ -29,6 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="control steps per measurement step (0: odometry)",
     )
     s.add_argument("-o", "--output", required=True, metavar="BUNDLE")
+    add_force_argument(s)
     s.add_argument("-q", "--quiet", action="store_true")
     s.set_defaults(func=run_simulate)
 
@@ -66,13 +66,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         action="store_true",
         help="also write online.csv, the filter's pose estimates (validation only)",
     )
+    add_force_argument(m)
     m.add_argument("-q", "--quiet", action="store_true")
     m.set_defaults(func=run_slam)
 
 
 def run_simulate(args: argparse.Namespace) -> int:
+    check_outputs([], [], dirs=[args.output], force=args.force)
     world = make_world(args.world, noise=args.noise, seed=args.seed, rate=args.rate)
-    write_bundle(args.output, world_bundle(world))
+    write_bundle(args.output, world_bundle(world), force=args.force)
     if not args.quiet:
         print(
             f"{args.world}/{args.noise} seed {args.seed}: {len(world.truth)} poses, "
@@ -83,8 +85,7 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 
 def run_slam(args: argparse.Namespace) -> int:
-    if Path(args.output).resolve() == Path(args.bundle).resolve():
-        check_not_input(args.output, [args.bundle])
+    check_outputs([], [args.bundle], dirs=[args.output], force=args.force)
     bundle = read_bundle(args.bundle)
     with errors_about(args.bundle):
         out, res = slam_bundle(
@@ -95,9 +96,11 @@ def run_slam(args: argparse.Namespace) -> int:
             outlier_gate=args.outlier_gate,
             seed=args.seed,
         )
-    write_bundle(args.output, out)
-    if args.store_online:
-        write_trajectory(Path(args.output) / "online.csv", res.online, format="csv")
+
+    def online(folder: Path) -> None:
+        write_trajectory(folder / "online.csv", res.online, format="csv")
+
+    write_bundle(args.output, out, force=args.force, extra=online if args.store_online else None)
     if not args.quiet:
         rejected = int((res.association < 0).sum())
         print(
