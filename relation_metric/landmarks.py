@@ -108,7 +108,7 @@ def read_landmark_csv(
     if dup.size:
         first, k = int(order[dup[0]]), int(order[dup[0] + 1])
         raise InputError(
-            f"landmark {int(ids[k])} appears twice (first on line {int(lines[first])}); "
+            f"duplicate landmark id {int(ids[k])} (first on line {int(lines[first])}); "
             "expected unique ids",
             path=name,
             line=int(lines[k]),
@@ -123,6 +123,14 @@ def read_landmark_csv(
         )
     if present:
         cxx, cxy, cyy = (cols[c] for c in _COV)
+        given = ~np.isnan(np.column_stack((cxx, cxy, cyy)))
+        partial = np.flatnonzero(given.any(axis=1) & ~given.all(axis=1))
+        if partial.size:
+            raise InputError(
+                "cxx, cxy, cyy: expected all three or none (an unknown covariance)",
+                path=name,
+                line=int(lines[partial[0]]),
+            )
         cov = np.empty((ids.size, 2, 2))
         cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 0], cov[:, 1, 1] = cxx, cxy, cxy, cyy
         check_covariances(
