@@ -9,7 +9,8 @@ import numpy as np
 
 from relation_metric.errors import InputError
 from relation_metric.formats import write_trajectory
-from relation_metric.textio import check_not_input, write_text_atomic
+from relation_metric.landmarks import write_landmark_csv
+from relation_metric.textio import check_not_input
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.g2o import read_g2o_graph, write_g2o_graph
 from slamrel.backends.graph import PoseGraph, solve_graph, solve_graph_incremental
@@ -155,9 +156,7 @@ def run_solve(args: argparse.Namespace) -> int:
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
     write_trajectory(out / "trajectory.txt", Trajectory.from_poses(sol.poses), format="plain")
-    rows = np.column_stack((lm_ids, sol.landmarks))
-    body = ("%d,%.9f,%.9f\n" * rows.shape[0]) % tuple(rows.ravel().tolist()) if rows.size else ""
-    write_text_atomic(out / "landmarks.csv", "landmark,x,y\n" + body)
+    write_landmark_csv(out / "landmarks.csv", lm_ids, sol.landmarks)
     write_g2o_graph(
         out / "solved.g2o",
         graph,
