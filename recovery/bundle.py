@@ -327,7 +327,8 @@ def _check_time(t: Array, lines: NDArray[np.int64], path: Path) -> None:
     if back.size:
         k = int(back[0]) + 1
         raise InputError(
-            f"time goes backwards: {t[k]!r} after {t[k - 1]!r}; expected non-decreasing times",
+            f"time goes backwards: {float(t[k])} after {float(t[k - 1])}; "
+            "expected non-decreasing times",
             path=path,
             line=int(lines[k]),
         )

@@ -233,7 +233,8 @@ def read_trajectory(
     if back.size:
         k = int(back[0]) + 1
         raise InputError(
-            f"time goes backwards: {t[k]!r} after {t[k - 1]!r}; expected non-decreasing timestamps",
+            f"time goes backwards: {float(t[k])} after {float(t[k - 1])}; "
+            "expected non-decreasing timestamps",
             path=src.path,
             line=int(lines(k)),
         )

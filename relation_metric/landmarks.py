@@ -15,6 +15,7 @@ The writer uses ``%d`` for ids and ``%.17g`` for numbers (an exact round trip); 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -49,11 +50,15 @@ class LandmarkTable(NamedTuple):
 
 
 def integer_ids(
-    values: NDArray[np.float64], lines: NDArray[np.int64], path: PathLike, column: str
+    values: NDArray[np.float64],
+    lines: NDArray[np.int64] | Callable[[int], int],
+    path: PathLike,
+    column: str,
 ) -> NDArray[np.int64]:
     """``values`` as int64 ids; a non-integer (or out-of-range) value raises at its line.
 
-    NaN entries (empty ``empty_ok`` cells) become 0 (the caller masks them).
+    ``lines[k]`` (or ``lines(k)``) is the line of value ``k``. NaN entries (empty
+    ``empty_ok`` cells) become 0 (the caller masks them).
     """
     v = np.asarray(values, dtype=np.float64)
     finite = np.isfinite(v)
@@ -63,7 +68,7 @@ def integer_ids(
         raise InputError(
             f"column '{column}': expected an integer id, got {float(v[k]):.17g}",
             path=path,
-            line=int(lines[k]),
+            line=int(lines(k) if callable(lines) else lines[k]),
         )
     return np.where(finite, v, 0).astype(np.int64)
 

@@ -193,8 +193,9 @@ def parse_float(token: str, *, source: SourceText, line: int, what: str) -> floa
 
 
 def _shown(token: str, limit: int = 40) -> str:
-    """``token`` quoted for a message (shortened when long)."""
-    return repr(token if len(token) <= limit else token[:limit] + "...")
+    """``token`` quoted for a message (shortened when long; odd characters as ``<U+XXXX>``)."""
+    short = token if len(token) <= limit else token[:limit] + "..."
+    return "'" + "".join(c if c.isprintable() else f"<U+{ord(c):04X}>" for c in short) + "'"
 
 
 def read_numeric_table(

@@ -54,7 +54,7 @@ class Trajectory:
             if back.size:
                 k = int(back[0])
                 raise InputError(
-                    f"time goes backwards at pose {k + 1}: {t[k + 1]!r} after {t[k]!r}"
+                    f"time goes backwards at pose {k + 1}: {float(t[k + 1])} after {float(t[k])}"
                 )
         object.__setattr__(self, "timestamps", readonly(t))
         object.__setattr__(self, "poses", readonly(se2.wrap_last(p)))

@@ -357,7 +357,9 @@ def test_bom_and_crlf_fast_path_bit_exact(tmp_path):
 
 def test_bom_error_names_the_real_line(tmp_path):
     path = write(tmp_path, "\ufeff1 2 3 4 5 6 7 x\n")
-    with pytest.raises(InputError, match=r"t\.relations:1: field 'yaw': expected a number, got 'x'"):
+    with pytest.raises(
+        InputError, match=r"t\.relations:1: field 'yaw': expected a number, got 'x'"
+    ):
         read_relations(path)
 
 

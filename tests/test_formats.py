@@ -86,7 +86,9 @@ def test_cut_off_last_line_is_skipped_with_warning(tmp_path):
         "FLASER 0 1 2 0.1 1 2 0.1 10.0 h 0\nFLASER 0 1.1 2 0.1 1.1 2 0.1 10.2 h 0\nFLASER 0 1.2 2"
     )
     p = write(tmp_path, "cut.log", text)
-    with pytest.warns(TruncatedLineWarning, match=r"cut.log:3: no newline at the end: the last line"):
+    with pytest.warns(
+        TruncatedLineWarning, match=r"cut.log:3: no newline at the end: the last line"
+    ):
         got = read_trajectory(p)
     assert len(got.trajectory) == 2
     assert got.skipped == {"truncated last line": 1}

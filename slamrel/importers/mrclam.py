@@ -24,6 +24,7 @@ from scipy.optimize import nnls
 
 from relation_metric import se2
 from relation_metric.errors import InputError
+from relation_metric.landmarks import integer_ids
 from relation_metric.textio import PathLike, RowLines, read_numeric_table
 from relation_metric.trajectory import Trajectory, readonly
 
@@ -73,7 +74,9 @@ def _check_times(path: Path, t: NDArray[np.float64], lines: RowLines) -> None:
     if back.size:
         k = int(back[0]) + 1
         raise InputError(
-            f"time goes backwards: {t[k]!r} after {t[k - 1]!r}", path=path, line=lines(k)
+            f"time goes backwards: {float(t[k])} after {float(t[k - 1])}",
+            path=path,
+            line=lines(k),
         )
 
 
@@ -83,13 +86,14 @@ def read_barcodes(directory: PathLike) -> dict[int, int]:
     values, lines = read_numeric_table(
         path, columns=("subject", "barcode"), describe="Barcodes.dat"
     )
-    codes = values[:, 1].astype(np.int64)
+    codes = integer_ids(values[:, 1], lines, path, "barcode")
+    subjects = integer_ids(values[:, 0], lines, path, "subject")
     uniq, counts = np.unique(codes, return_counts=True)
     if (counts > 1).any():
         dup = int(uniq[counts > 1][0])
         k = int(np.flatnonzero(codes == dup)[1])
         raise InputError(f"barcode {dup} is given twice", path=path, line=lines(k))
-    return dict(zip(codes.tolist(), values[:, 0].astype(np.int64).tolist()))
+    return dict(zip(codes.tolist(), subjects.tolist()))
 
 
 def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
@@ -115,10 +119,7 @@ def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
         gt_path, columns=("time", "x", "y", "theta"), describe="MRCLAM ground truth"
     )
     _check_times(gt_path, gt[:, 0], gt_lines)
-    code = meas[:, 1].astype(np.int64)
-    if np.any(meas[:, 1] != code):
-        k = int(np.flatnonzero(meas[:, 1] != code)[0])
-        raise InputError("barcode must be an integer", path=meas_path, line=meas_lines(k))
+    code = integer_ids(meas[:, 1], meas_lines, meas_path, "barcode")
     table_codes = np.fromiter(barcodes.keys(), dtype=np.int64)
     table_subjects = np.fromiter(barcodes.values(), dtype=np.int64)
     order = np.argsort(table_codes)
