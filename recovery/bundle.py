@@ -154,6 +154,13 @@ class Bundle:
 # ----------------------------------------------------------------------------------- reading
 
 
+def _shown(value: Any) -> str:
+    """A JSON value for a message (as JSON, shortened; odd characters as ``<U+XXXX>``)."""
+    text = f"'{value}'" if isinstance(value, str) else json.dumps(value, ensure_ascii=False)
+    text = text if len(text) <= 60 else text[:60] + "..."
+    return "".join(c if c.isprintable() else f"<U+{ord(c):04X}>" for c in text)
+
+
 def _line_of_key(text: str, key: str) -> int | None:
     needle = f'"{key}"'
     pos = text.find(needle)
@@ -164,10 +171,12 @@ def _number(
     value: Any, *, what: str, path: str, line: int | None, minimum: float | None = 0.0
 ) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise InputError(f"{what}: expected a finite number, got {value!r}", path=path, line=line)
+        raise InputError(
+            f"{what}: expected a finite number, got {_shown(value)}", path=path, line=line
+        )
     if minimum is not None and value < minimum:
         raise InputError(
-            f"{what}: expected a number >= {minimum}, got {value!r}", path=path, line=line
+            f"{what}: expected a number >= {minimum}, got {_shown(value)}", path=path, line=line
         )
     return float(value)
 
@@ -177,7 +186,7 @@ def _numbers(
 ) -> tuple[float, ...]:
     if not isinstance(value, list) or len(value) != n:
         raise InputError(
-            f"{what}: expected a list of {n} numbers, got {value!r}", path=path, line=line
+            f"{what}: expected a list of {n} numbers, got {_shown(value)}", path=path, line=line
         )
     return tuple(_number(v, what=what, path=path, line=line, minimum=minimum) for v in value)
 
@@ -193,7 +202,7 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
     kind = spec.get("type")
     if kind not in MOTION_TYPES:
         raise InputError(
-            f"motion_model: unknown type {kind!r}; expected one of {', '.join(MOTION_TYPES)}",
+            f"motion_model: unknown type {_shown(kind)}; expected one of {', '.join(MOTION_TYPES)}",
             path=path,
             line=_line_of_key(text, "type") if kind is not None else line,
         )
@@ -237,7 +246,7 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
         raise InputError("sensor_model: expected an object", path=path, line=line)
     if spec.get("type") != "range_bearing":
         raise InputError(
-            f"sensor_model: unknown type {spec.get('type')!r}; expected range_bearing",
+            f"sensor_model: unknown type {_shown(spec.get('type'))}; expected range_bearing",
             path=path,
             line=line,
         )
@@ -267,7 +276,7 @@ def _read_manifest(path: Path) -> dict[str, Any]:
         raise InputError("expected a JSON object", path=name, line=1)
     if doc.get("format") != FORMAT:
         raise InputError(
-            f"format: expected {FORMAT!r}, got {doc.get('format')!r}",
+            f"format: expected {FORMAT!r}, got {_shown(doc.get('format'))}",
             path=name,
             line=_line_of_key(text, "format"),
         )
@@ -439,7 +448,7 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     bad = np.flatnonzero(cols["range"] <= 0)
     if bad.size:
         raise InputError(
-            f"range {cols['range'][bad[0]]!r}: expected a positive range",
+            f"range {float(cols['range'][bad[0]])}: expected a positive range",
             path=p_meas,
             line=int(meas_lines[bad[0]]),
         )

@@ -73,28 +73,32 @@ def bad_covariances(
         idx = np.flatnonzero(ok)
         m = c[idx]
         scale = np.abs(m).reshape(idx.size, -1).max(axis=1)
-        tol = COV_RTOL * scale
-        asym = np.abs(m - np.swapaxes(m, 1, 2)).reshape(idx.size, -1).max(axis=1)
-        sym = 0.5 * (m + np.swapaxes(m, 1, 2))
-        low = np.linalg.eigvalsh(sym)[:, 0]
+        # Each block relative to its own scale (no overflow near the largest doubles); the
+        # numbers in the messages are scaled back.
+        unit = m / np.where(scale > 0, scale, 1.0)[:, None, None]
+        tol = np.full(idx.size, COV_RTOL)
+        asym = np.abs(unit - np.swapaxes(unit, 1, 2)).reshape(idx.size, -1).max(axis=1)
+        low = np.linalg.eigvalsh(0.5 * (unit + np.swapaxes(unit, 1, 2)))[:, 0]
+        with np.errstate(over="ignore"):
+            asym_abs, low_abs, tol_abs = asym * scale, low * scale, tol * scale
         for j in np.flatnonzero(asym > tol).tolist():
             reasons[int(idx[j])] = (
-                f"expected a symmetric matrix (entries differ by {float(asym[j]):.6g}, "
-                f"tolerance {float(tol[j]):.3g})"
+                f"expected a symmetric matrix (entries differ by {float(asym_abs[j]):.6g}, "
+                f"tolerance {float(tol_abs[j]):.3g})"
             )
         if definite:
             bad = np.flatnonzero((low <= tol) & (asym <= tol))
             for j in bad.tolist():
                 reasons[int(idx[j])] = (
                     "expected a positive definite (invertible) matrix (smallest eigenvalue "
-                    f"{float(low[j]):.6g})"
+                    f"{float(low_abs[j]):.6g})"
                 )
         else:
             bad = np.flatnonzero((low < -tol) & (asym <= tol))
             for j in bad.tolist():
                 reasons[int(idx[j])] = (
                     "expected a positive semi-definite matrix (smallest eigenvalue "
-                    f"{float(low[j]):.6g}, tolerance {float(tol[j]):.3g})"
+                    f"{float(low_abs[j]):.6g}, tolerance {float(tol_abs[j]):.3g})"
                 )
     rows = np.array(sorted(reasons), dtype=np.int64)
     return rows, [reasons[int(k)] for k in rows]
@@ -156,19 +160,20 @@ def check_joint_covariance(
         i, j = np.argwhere(~np.isfinite(c))[0].tolist()
         raise InputError(f"{what}: expected finite values (entry [{i}, {j}])", path=path)
     scale = float(np.abs(c).max())
+    if scale == 0.0:
+        return
     tol = COV_RTOL * scale
-    asym = np.abs(c - c.T)
-    if float(asym.max()) > tol:
+    unit = c / scale  # relative to its scale: no overflow near the largest doubles
+    asym = np.abs(unit - unit.T)
+    if float(asym.max()) > COV_RTOL:
         i, j = np.unravel_index(int(np.argmax(asym)), asym.shape)
         raise InputError(
             f"{what}: expected a symmetric matrix (entries [{i}, {j}] and [{j}, {i}] differ by "
-            f"{float(asym[i, j]):.6g}, tolerance {tol:.3g})",
+            f"{float(asym[i, j]) * scale:.6g}, tolerance {tol:.3g})",
             path=path,
         )
-    if scale == 0.0:
-        return
-    shifted = 0.5 * (c + c.T)
-    shifted[np.diag_indices_from(shifted)] += tol
+    shifted = 0.5 * (unit + unit.T)
+    shifted[np.diag_indices_from(shifted)] += COV_RTOL
     try:
         np.linalg.cholesky(shifted)
     except np.linalg.LinAlgError:

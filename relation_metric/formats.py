@@ -40,6 +40,7 @@ from relation_metric.textio import (
     PathLike,
     SourceText,
     parse_float,
+    quote_token,
     read_csv_table,
     read_numeric_table,
     read_source,
@@ -205,7 +206,8 @@ def read_trajectory(
             describe="a TUM trajectory",
             source=src,
         )
-        norms = np.linalg.norm(values[:, 4:8], axis=1)
+        with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
+            norms = np.linalg.norm(values[:, 4:8], axis=1)
         bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
         if bad.size:
             k = int(bad[0])
@@ -305,7 +307,9 @@ def _carmen_float(fields: list[str], k: int, what: str, src: SourceText, number:
         return float(token)
     except ValueError:
         raise InputError(
-            f"{fields[0]} {what}: expected a number, got {token!r}", path=src.path, line=number
+            f"{fields[0]} {what}: expected a number, got {quote_token(token)}",
+            path=src.path,
+            line=number,
         ) from None
 
 
@@ -313,7 +317,7 @@ def _carmen_count(fields: list[str], k: int, what: str, src: SourceText, number:
     value = _carmen_float(fields, k, what, src, number)
     if not (math.isfinite(value) and value >= 0 and value == int(value) and value < 2**31):
         raise InputError(
-            f"{fields[0]} {what}: expected a non-negative count, got {fields[k]!r}",
+            f"{fields[0]} {what}: expected a non-negative count, got {quote_token(fields[k])}",
             path=src.path,
             line=number,
         )

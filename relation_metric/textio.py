@@ -51,6 +51,7 @@ __all__ = [
     "format_csv_table",
     "write_csv_table",
     "parse_float",
+    "quote_token",
     "write_text_atomic",
     "write_bytes_atomic",
 ]
@@ -183,16 +184,18 @@ def parse_float(token: str, *, source: SourceText, line: int, what: str) -> floa
         value = float(token)
     except ValueError:
         raise InputError(
-            f"{what}: expected a number, got {_shown(token)}", path=source.path, line=line
+            f"{what}: expected a number, got {quote_token(token)}", path=source.path, line=line
         ) from None
     if not math.isfinite(value):
         raise InputError(
-            f"{what}: expected a finite number, got {_shown(token)}", path=source.path, line=line
+            f"{what}: expected a finite number, got {quote_token(token)}",
+            path=source.path,
+            line=line,
         )
     return value
 
 
-def _shown(token: str, limit: int = 40) -> str:
+def quote_token(token: str, limit: int = 40) -> str:
     """``token`` quoted for a message (shortened when long; odd characters as ``<U+XXXX>``)."""
     short = token if len(token) <= limit else token[:limit] + "..."
     return "'" + "".join(c if c.isprintable() else f"<U+{ord(c):04X}>" for c in short) + "'"
@@ -644,7 +647,7 @@ def read_keyword_records(
         kind = f[0]
         if kind not in fields:
             raise InputError(
-                f"unknown record {kind!r}; expected one of {', '.join(fields)}",
+                f"unknown record {quote_token(kind)}; expected one of {', '.join(fields)}",
                 path=src.path,
                 line=number,
             )

@@ -80,7 +80,17 @@ def _information(
         return np.swapaxes(m, 1, 2) @ m  # Rᵀ R
     sym = m + np.swapaxes(np.triu(m, 1), 1, 2)
     check_covariances(sym, path=path, lines=lines, what=f"{kind} covariance", definite=True)
-    return np.linalg.inv(sym)
+    with np.errstate(all="ignore"):
+        info = np.linalg.inv(sym)
+    bad = np.flatnonzero(~np.isfinite(info).all(axis=(1, 2)))
+    if bad.size:
+        raise InputError(
+            f"{kind} covariance: too small to invert in double precision; expected variances "
+            "above about 1e-300",
+            path=path,
+            line=int(lines[bad[0]]),
+        )
+    return info
 
 
 def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamData:
