@@ -441,7 +441,7 @@ CASES = [(name, target) for name, r in sorted(READERS.items()) for target in r.m
 
 @pytest.mark.parametrize("name,target", CASES, ids=[f"{n}:{t}" for n, t in CASES])
 @settings(
-    max_examples=80,
+    max_examples=150,
     deadline=None,
     derandomize=True,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
