@@ -463,12 +463,7 @@ def read_csv_table(
                 t.count(",") == len(header) - 1 for t in body
             )
             strict = [i for i, c in enumerate(wanted) if c not in maybe_empty]
-            opt = [i for i, c in enumerate(wanted) if c in maybe_empty]
-            if not (
-                fields_ok
-                and np.isfinite(values[:, strict]).all()
-                and not np.isinf(values[:, opt]).any()
-            ):
+            if not (fields_ok and np.isfinite(values[:, strict]).all()):
                 values = None
         if values is None:
             values = _parse_csv_lines(src, rows, header, wanted, maybe_empty, kind)
@@ -495,7 +490,10 @@ def _float_or_nan(cell: str) -> float:
         return math.nan
     if not cell.isascii() or "_" in cell:
         raise ValueError(cell)
-    return float(cell)
+    value = float(cell)
+    if not math.isfinite(value):
+        raise ValueError(cell)  # the exact path says which line
+    return value
 
 
 def _parse_csv_lines(
