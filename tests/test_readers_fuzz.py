@@ -300,11 +300,12 @@ def test_bom_cli_map_compare_same_numbers(tmp_path, capsys):
     (tmp_path / "ref.csv").write_text("landmark,x,y\n1,0.1,0\n2,1,1.1\n3,1,0.1\n")
     (tmp_path / "odd.csv").write_bytes(("\ufeff" + MAP_CSV.replace("\n", "\r\n")).encode())
     ref = str(tmp_path / "ref.csv")
-    assert main(["map-compare", str(tmp_path / "est.csv"), ref, "--json", "a.json", "-q"]) == 0
-    assert main(["map-compare", str(tmp_path / "odd.csv"), ref, "--json", "b.json", "-q"]) == 0
+    ja, jb = str(tmp_path / "a.json"), str(tmp_path / "b.json")
+    assert main(["map-compare", str(tmp_path / "est.csv"), ref, "--json", ja, "-q"]) == 0
+    assert main(["map-compare", str(tmp_path / "odd.csv"), ref, "--json", jb, "-q"]) == 0
     capsys.readouterr()
-    a = json.loads(Path("a.json").read_text())
-    b = json.loads(Path("b.json").read_text())
+    a = json.loads(Path(ja).read_text())
+    b = json.loads(Path(jb).read_text())
     a.pop("inputs", None), b.pop("inputs", None)
     assert json.dumps(a, sort_keys=True).replace("est.csv", "odd.csv") == json.dumps(
         b, sort_keys=True
