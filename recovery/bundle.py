@@ -272,6 +272,8 @@ def _read_manifest(path: Path) -> dict[str, Any]:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputError(f"not valid JSON: {exc.msg}", path=name, line=exc.lineno) from None
+    except RecursionError:
+        raise InputError("JSON nested too deeply; expected a bundle manifest", path=name) from None
     if not isinstance(doc, dict):
         raise InputError("expected a JSON object", path=name, line=1)
     if doc.get("format") != FORMAT:
