@@ -117,6 +117,15 @@ class SourceText:
                     return
                 yield number, text
 
+    def is_last_line(self, number: int) -> bool:
+        """True when ``number`` is the cut-off last line (kept for older callers;
+        :meth:`data_lines` never yields it)."""
+        return number == self.cut_off_line()
+
+    def warn_truncated(self, number: int, expected: str = "") -> None:
+        """Alias of :meth:`warn_cut_off` (kept for older callers)."""
+        self.warn_cut_off(number)
+
     def warn_cut_off(self, number: int) -> None:
         """Issue the warning for the skipped, cut-off last line (once)."""
         if self._warned:

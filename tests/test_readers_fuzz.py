@@ -312,6 +312,29 @@ def test_bom_cli_map_compare_same_numbers(tmp_path, capsys):
     )
 
 
+def test_bom_crlf_cli_evaluate_same_numbers(tmp_path, capsys):
+    from slamrel.cli import main
+
+    odd = {
+        n: ("\ufeff" + t.replace("\n", "\r\n")).encode()
+        for n, t in (("r.relations", RELATIONS), ("e.txt", PLAIN))
+    }
+    (tmp_path / "r.relations").write_text(RELATIONS)
+    (tmp_path / "e.txt").write_text(PLAIN)
+    for name, data in odd.items():
+        (tmp_path / f"odd-{name}").write_bytes(data)
+    runs = []
+    for prefix in ("", "odd-"):
+        out = tmp_path / f"{prefix}out.json"
+        args = [str(tmp_path / f"{prefix}r.relations"), str(tmp_path / f"{prefix}e.txt")]
+        assert main(["evaluate", *args, "--json", str(out), "-q"]) == 0
+        runs.append({k: v for k, v in json.loads(out.read_text()).items() if k != "inputs"})
+    capsys.readouterr()
+    assert json.dumps(runs[0], sort_keys=True) == json.dumps(runs[1], sort_keys=True).replace(
+        "odd-", ""
+    )
+
+
 # ----------------------------------------------------------------------------- the fuzz
 
 ODD_TOKENS = [
