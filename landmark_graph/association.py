@@ -19,6 +19,7 @@ problem for ``p = 1``.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +30,8 @@ from scipy.spatial import cKDTree
 from landmark_graph.maps import LandmarkMap
 from relation_metric.alignment import Alignment, umeyama
 from relation_metric.errors import InputError
-from relation_metric.textio import PathLike, read_source, write_text_atomic
+from relation_metric.landmarks import integer_ids
+from relation_metric.textio import PathLike, read_csv_table, write_text_atomic
 
 _MAX_SMALL_HYPOTHESES = 20_000
 
@@ -97,49 +99,46 @@ def associate_by_id(
 
 def read_association_csv(path: PathLike, est: LandmarkMap, ref: LandmarkMap) -> Association:
     """``estimate,reference`` id pairs (header line required); unknown ids are errors."""
-    src = read_source(path)
-    rows = list(src.data_lines())
-    if not rows or [h.strip().lower() for h in rows[0][1].split(",")] != ["estimate", "reference"]:
-        raise InputError(
-            "expected the header 'estimate,reference'",
-            path=src.path,
-            line=rows[0][0] if rows else None,
-        )
-    e_pos = {int(i): k for k, i in enumerate(est.ids.tolist())}
-    r_pos = {int(i): k for k, i in enumerate(ref.ids.tolist())}
-    er, rr = [], []
-    used_e: dict[int, int] = {}
-    used_r: dict[int, int] = {}
-    for number, text in rows[1:]:
-        f = [v.strip() for v in text.split(",")]
-        if len(f) != 2:
-            raise InputError(f"expected 2 fields, got {len(f)}", path=src.path, line=number)
-        try:
-            a, b = int(f[0]), int(f[1])
-        except ValueError:
+    table = read_csv_table(
+        path, required=("estimate", "reference"), describe="a landmark association"
+    )
+    name = os.fspath(path)
+    lines = table.lines
+    a = integer_ids(table.columns["estimate"], lines, name, "estimate")
+    b = integer_ids(table.columns["reference"], lines, name, "reference")
+    er = _rows_of(est.ids, a, lines, name, "estimated")
+    rr = _rows_of(ref.ids, b, lines, name, "reference")
+    for rows, ids, what in ((er, a, "estimated"), (rr, b, "reference")):
+        order = np.argsort(rows, kind="stable")
+        dup = np.flatnonzero(np.diff(rows[order]) == 0)
+        if dup.size:
+            first, k = int(order[dup[0]]), int(order[dup[0] + 1])
             raise InputError(
-                f"expected two integer ids, got {text!r}", path=src.path, line=number
-            ) from None
-        if a not in e_pos:
-            raise InputError(f"unknown estimated landmark id {a}", path=src.path, line=number)
-        if b not in r_pos:
-            raise InputError(f"unknown reference landmark id {b}", path=src.path, line=number)
-        if a in used_e:
-            raise InputError(
-                f"estimated landmark {a} is associated twice (first on line {used_e[a]})",
-                path=src.path,
-                line=number,
+                f"{what} landmark {int(ids[k])} is associated twice (first on line "
+                f"{int(lines[first])})",
+                path=name,
+                line=int(lines[k]),
             )
-        if b in used_r:
-            raise InputError(
-                f"reference landmark {b} is associated twice (first on line {used_r[b]})",
-                path=src.path,
-                line=number,
-            )
-        used_e[a] = used_r[b] = number
-        er.append(e_pos[a])
-        rr.append(r_pos[b])
     return _finish(est, ref, er, rr)
+
+
+def _rows_of(
+    ids: NDArray[np.int64],
+    wanted: NDArray[np.int64],
+    lines: NDArray[np.int64],
+    path: str,
+    what: str,
+) -> NDArray[np.int64]:
+    """Rows of ``ids`` holding each of ``wanted``; an unknown id raises at its line."""
+    order = np.argsort(ids, kind="stable")
+    pos = np.clip(np.searchsorted(ids[order], wanted), 0, max(ids.size - 1, 0))
+    ok = ids[order][pos] == wanted if ids.size else np.zeros(wanted.shape, dtype=bool)
+    if not ok.all():
+        k = int(np.flatnonzero(~ok)[0])
+        raise InputError(
+            f"unknown {what} landmark id {int(wanted[k])}", path=path, line=int(lines[k])
+        )
+    return order[pos].astype(np.int64)
 
 
 def write_association_csv(

@@ -17,7 +17,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
+from relation_metric.landmarks import read_landmark_csv, write_landmark_csv
 from relation_metric.textio import (
     PathLike,
     parse_float,
@@ -69,13 +71,9 @@ class LandmarkMap:
             cov = np.asarray(self.cov, dtype=np.float64)
             if cov.shape != (xy.shape[0], 2, 2):
                 raise InputError(f"cov must have shape ({xy.shape[0]}, 2, 2), got {cov.shape}")
-            bad = _bad_covariances(cov)
-            if bad.size:
-                k = int(bad[0])
-                raise InputError(
-                    f"landmark {int(ids[k])}: covariance {cov[k].tolist()} is not symmetric "
-                    "positive semi-definite"
-                )
+            check_covariances(
+                cov, what=lambda k: f"landmark {int(ids[k])}: covariance", allow_unknown=True
+            )
             object.__setattr__(self, "cov", readonly(cov))
 
     def __len__(self) -> int:
@@ -85,22 +83,6 @@ class LandmarkMap:
         """The landmarks at ``index`` (rows)."""
         k = np.asarray(index)
         return LandmarkMap(self.ids[k], self.xy[k], None if self.cov is None else self.cov[k])
-
-
-def _bad_covariances(cov: NDArray[np.float64]) -> NDArray[np.int64]:
-    """Rows of ``cov`` (M, 2, 2) that are not symmetric PSD; all-NaN rows (unknown) pass."""
-    unknown = np.isnan(cov).all(axis=(1, 2))
-    a, b, c, d = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 0], cov[:, 1, 1]
-    scale = np.maximum(np.abs(a) + np.abs(d), 1e-300)
-    tol = 1e-12 * scale
-    ok = (
-        np.isfinite(cov).all(axis=(1, 2))
-        & (np.abs(b - c) <= tol)
-        & (a >= -tol)
-        & (d >= -tol)
-        & (a * d - b * c >= -1e-12 * scale * scale)
-    )
-    return np.flatnonzero(~(ok | unknown)).astype(np.int64)
 
 
 def _check_nonempty(m: LandmarkMap, path: PathLike) -> LandmarkMap:
@@ -131,16 +113,26 @@ def read_map(path: PathLike) -> LandmarkMap:
     values, lines = read_numeric_table(path, columns=cols, describe="a landmark map", source=src)
     cov = None
     if ncol == 5:
+        sd = values[:, 3:5]
+        bad = np.flatnonzero((sd < 0).any(axis=1) | (sd > 1e150).any(axis=1))
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(
+                f"standard deviations {float(sd[k, 0]):g}, {float(sd[k, 1]):g}: expected "
+                "non-negative numbers (metres)",
+                path=src.path,
+                line=int(lines(k)),
+            )
         cov = np.zeros((values.shape[0], 2, 2))
-        cov[:, 0, 0] = values[:, 3] ** 2
-        cov[:, 1, 1] = values[:, 4] ** 2
+        cov[:, 0, 0] = sd[:, 0] ** 2
+        cov[:, 1, 1] = sd[:, 1] ** 2
     return _build(values[:, 0], values[:, 1:3], cov, src.path, lines)
 
 
 def _build(ids, xy, cov, path, line_of) -> LandmarkMap:  # type: ignore[no-untyped-def]
     ids = np.asarray(ids)
     check_coordinates(np.asarray(xy), what="landmark", path=path, line_of=line_of)
-    bad = np.flatnonzero(ids != np.round(ids))
+    bad = np.flatnonzero((ids != np.round(ids)) | (np.abs(ids) > 2.0**53))
     if bad.size:
         raise InputError(
             "landmark id must be an integer", path=path, line=int(line_of(int(bad[0])))
@@ -156,66 +148,24 @@ def _build(ids, xy, cov, path, line_of) -> LandmarkMap:  # type: ignore[no-untyp
             line=int(line_of(k)),
         )
     if cov is not None:
-        bad = _bad_covariances(cov)
-        if bad.size:
-            k = int(bad[0])
-            raise InputError(
-                f"landmark {int(ids[k])}: covariance {cov[k].tolist()} is not symmetric "
-                "positive semi-definite",
-                path=path,
-                line=int(line_of(k)),
-            )
+        check_covariances(
+            cov,
+            path=path,
+            lines=line_of,
+            what=lambda k: f"landmark {int(ids[k])}: covariance",
+            allow_unknown=True,
+        )
     return LandmarkMap(ids.astype(np.int64), xy, cov)
 
 
 def _read_csv_map(src) -> LandmarkMap:  # type: ignore[no-untyped-def]
-    rows = list(src.data_lines())
-    header = [h.strip().lower() for h in rows[0][1].split(",")]
-    name = header[0]
-    for need in (name, "x", "y"):
-        if need not in header:
-            raise InputError(f"CSV header lacks '{need}'", path=src.path, line=rows[0][0])
-    has_cov = all(c in header for c in ("cxx", "cxy", "cyy"))
-    idx = [header.index(c) for c in (name, "x", "y")]
-    cidx = [header.index(c) for c in ("cxx", "cxy", "cyy")] if has_cov else []
-    ids, xy, cov, lines = [], [], [], []
-    for number, text in rows[1:]:
-        f = [v.strip() for v in text.split(",")]
-        if len(f) != len(header):
-            if src.is_last_line(number):
-                src.warn_truncated(number, f"expected {len(header)} fields")
-                break
-            raise InputError(
-                f"expected {len(header)} fields, got {len(f)}", path=src.path, line=number
-            )
-        vals = [
-            parse_float(f[i], source=src, line=number, what=c)
-            for i, c in zip(idx, (name, "x", "y"))
-        ]
-        ids.append(vals[0])
-        xy.append(vals[1:])
-        if has_cov:
-            if all(f[i] == "" for i in cidx):
-                cov.append([np.nan] * 3)
-            elif any(f[i] == "" for i in cidx):
-                raise InputError(
-                    "cxx, cxy, cyy: expected all three or none", path=src.path, line=number
-                )
-            else:
-                cov.append(
-                    [
-                        parse_float(f[i], source=src, line=number, what=c)
-                        for i, c in zip(cidx, ("cxx", "cxy", "cyy"))
-                    ]
-                )
-        lines.append(number)
-    c = None
-    if has_cov and cov and not np.isnan(np.asarray(cov)).all():
-        a = np.asarray(cov)  # rows whose covariance was left empty stay NaN
-        c = np.stack(
-            (np.column_stack((a[:, 0], a[:, 1])), np.column_stack((a[:, 1], a[:, 2]))), axis=1
-        )
-    return _build(np.asarray(ids), np.asarray(xy).reshape(-1, 2), c, src.path, lambda k: lines[k])
+    t = read_landmark_csv(
+        src.path, id_columns=("landmark", "id", "subject"), source=src, describe="a landmark map"
+    )
+    cov = t.cov
+    if cov is not None and np.isnan(cov).all():
+        cov = None  # no landmark has a covariance
+    return LandmarkMap(t.ids, t.xy, cov)
 
 
 def _read_g2o_map(src) -> LandmarkMap:  # type: ignore[no-untyped-def]
@@ -255,13 +205,9 @@ def write_map(path: PathLike, m: LandmarkMap, *, format: str = "csv") -> None:
     """
     n = len(m)
     if format == "csv":
-        if m.cov is None:
-            text = "landmark,x,y\n" + ("%d,%.17g,%.17g\n" * n) % _flat(m.ids, m.xy)
-        else:
-            c = m.cov.reshape(-1, 4)[:, [0, 1, 3]]
-            body = ("%d" + ",%.17g" * 5 + "\n") * n % _flat(m.ids, m.xy, c)
-            text = "landmark,x,y,cxx,cxy,cyy\n" + body.replace(",nan,nan,nan\n", ",,,\n")
-    elif format == "g2o":
+        write_landmark_csv(path, m.ids, m.xy, m.cov)
+        return
+    if format == "g2o":
         text = ("VERTEX_XY %d %.17g %.17g\n" * n) % _flat(m.ids, m.xy)
     elif format == "mrclam":
         sd = np.zeros((n, 2))

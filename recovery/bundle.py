@@ -28,10 +28,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recovery.models import MOTION_TYPES, MotionModel, SensorModel
+from relation_metric.checks import check_covariances, check_joint_covariance
 from relation_metric.errors import InputError
 from relation_metric.formats import read_trajectory
+from relation_metric.landmarks import integer_ids, read_landmark_csv, write_landmark_csv
 from relation_metric.outputs import staged_directory
-from relation_metric.textio import parse_float, read_source, write_bytes_atomic, write_text_atomic
+from relation_metric.textio import (
+    read_csv_table,
+    read_text,
+    write_bytes_atomic,
+    write_text_atomic,
+)
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, readonly
 
@@ -40,7 +47,6 @@ __all__ = ["FORMAT", "Bundle", "read_bundle", "write_bundle"]
 FORMAT = "slamrel-bundle/1"
 Array = NDArray[np.float64]
 PathLike = str | os.PathLike[str]
-_PSD_TOL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -157,6 +163,13 @@ class Bundle:
 # ----------------------------------------------------------------------------------- reading
 
 
+def _shown(value: Any) -> str:
+    """A JSON value for a message (as JSON, shortened; odd characters as ``<U+XXXX>``)."""
+    text = f"'{value}'" if isinstance(value, str) else json.dumps(value, ensure_ascii=False)
+    text = text if len(text) <= 60 else text[:60] + "..."
+    return "".join(c if c.isprintable() else f"<U+{ord(c):04X}>" for c in text)
+
+
 def _line_of_key(text: str, key: str) -> int | None:
     needle = f'"{key}"'
     pos = text.find(needle)
@@ -167,10 +180,12 @@ def _number(
     value: Any, *, what: str, path: str, line: int | None, minimum: float | None = 0.0
 ) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise InputError(f"{what}: expected a finite number, got {value!r}", path=path, line=line)
+        raise InputError(
+            f"{what}: expected a finite number, got {_shown(value)}", path=path, line=line
+        )
     if minimum is not None and value < minimum:
         raise InputError(
-            f"{what}: expected a number >= {minimum}, got {value!r}", path=path, line=line
+            f"{what}: expected a number >= {minimum}, got {_shown(value)}", path=path, line=line
         )
     return float(value)
 
@@ -180,19 +195,13 @@ def _numbers(
 ) -> tuple[float, ...]:
     if not isinstance(value, list) or len(value) != n:
         raise InputError(
-            f"{what}: expected a list of {n} numbers, got {value!r}", path=path, line=line
+            f"{what}: expected a list of {n} numbers, got {_shown(value)}", path=path, line=line
         )
     return tuple(_number(v, what=what, path=path, line=line, minimum=minimum) for v in value)
 
 
 def _check_psd(cov: Array, *, what: str, path: str, line: int | None) -> None:
-    if not np.isfinite(cov).all():
-        raise InputError(f"{what}: expected finite values", path=path, line=line)
-    scale = max(float(np.abs(cov).max()), 1e-300) if cov.size else 1.0
-    if not np.allclose(cov, cov.T, rtol=0.0, atol=_PSD_TOL * scale):
-        raise InputError(f"{what}: expected a symmetric matrix", path=path, line=line)
-    if cov.size and float(np.linalg.eigvalsh(0.5 * (cov + cov.T)).min()) < -_PSD_TOL * scale:
-        raise InputError(f"{what}: expected a positive semi-definite matrix", path=path, line=line)
+    check_covariances(cov[None], path=path, lines=None if line is None else [line], what=what)
 
 
 def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
@@ -202,7 +211,7 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
     kind = spec.get("type")
     if kind not in MOTION_TYPES:
         raise InputError(
-            f"motion_model: unknown type {kind!r}; expected one of {', '.join(MOTION_TYPES)}",
+            f"motion_model: unknown type {_shown(kind)}; expected one of {', '.join(MOTION_TYPES)}",
             path=path,
             line=_line_of_key(text, "type") if kind is not None else line,
         )
@@ -246,7 +255,7 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
         raise InputError("sensor_model: expected an object", path=path, line=line)
     if spec.get("type") != "range_bearing":
         raise InputError(
-            f"sensor_model: unknown type {spec.get('type')!r}; expected range_bearing",
+            f"sensor_model: unknown type {_shown(spec.get('type'))}; expected range_bearing",
             path=path,
             line=line,
         )
@@ -266,18 +275,19 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:
-    src = read_source(path)
-    text = "\n".join(src.lines)
-    name = src.path
+    name = str(path)
+    text = read_text(path)
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputError(f"not valid JSON: {exc.msg}", path=name, line=exc.lineno) from None
+    except RecursionError:
+        raise InputError("JSON nested too deeply; expected a bundle manifest", path=name) from None
     if not isinstance(doc, dict):
         raise InputError("expected a JSON object", path=name, line=1)
     if doc.get("format") != FORMAT:
         raise InputError(
-            f"format: expected {FORMAT!r}, got {doc.get('format')!r}",
+            f"format: expected {FORMAT!r}, got {_shown(doc.get('format'))}",
             path=name,
             line=_line_of_key(text, "format"),
         )
@@ -329,80 +339,7 @@ def _read_csv(
     """Columns by name (empty cells of ``empty_ok`` columns are NaN) and each row's line."""
     if not path.is_file():
         raise InputError(f"missing required file; expected columns {','.join(required)}", path=path)
-    src = read_source(path)
-    name = src.path
-    data = [(n, t) for n, t in src.data_lines()]
-    if not data:
-        raise InputError(f"empty file: expected a header {','.join(required)}", path=name)
-    head_line, head_text = data[0]
-    header = [h.strip().lower() for h in head_text.split(",")]
-    missing = [c for c in required if c not in header]
-    if missing:
-        raise InputError(
-            f"missing column(s) {', '.join(missing)}; expected header {','.join(required)}",
-            path=name,
-            line=head_line,
-        )
-    wanted = [c for c in (*required, *optional) if c in header]
-    cols = [header.index(c) for c in wanted]
-    numbers = np.array([n for n, _ in data[1:]], dtype=np.int64)
-    body = [t for _, t in data[1:]]
-    values: Array | None = None
-    if body:
-        nan = float("nan")
-        conv = {
-            header.index(c): (lambda s: float(s) if s.strip() else nan)
-            for c in empty_ok
-            if c in header
-        }
-        try:
-            values = np.loadtxt(
-                body,
-                delimiter=",",
-                usecols=cols,
-                ndmin=2,
-                dtype=np.float64,
-                converters=conv or None,
-            )
-        except ValueError:
-            values = None
-        if values is not None:
-            fields_ok = all(t.count(",") == len(header) - 1 for t in body)
-            strict = [i for i, c in enumerate(wanted) if c not in empty_ok]
-            finite_ok = np.isfinite(values[:, strict]).all()
-            opt = [i for i, c in enumerate(wanted) if c in empty_ok]
-            opt_ok = not opt or not np.isinf(values[:, opt]).any()
-            if not (fields_ok and finite_ok and opt_ok):
-                values = None
-        if values is None:
-            _diagnose_csv(src, data[1:], header, wanted, empty_ok)
-            raise AssertionError("unreachable: fast path failed without a bad line")
-    else:
-        values = np.empty((0, len(wanted)))
-    return {c: values[:, i] for i, c in enumerate(wanted)}, numbers
-
-
-def _diagnose_csv(
-    src: Any,
-    rows: list[tuple[int, str]],
-    header: list[str],
-    wanted: list[str],
-    empty_ok: Sequence[str],
-) -> None:
-    for number, text in rows:
-        fields = [f.strip() for f in text.split(",")]
-        if len(fields) != len(header):
-            raise InputError(
-                f"expected {len(header)} comma-separated fields ({','.join(header)}), "
-                f"got {len(fields)}",
-                path=src.path,
-                line=number,
-            )
-        for c in wanted:
-            tok = fields[header.index(c)]
-            if c in empty_ok and tok == "":
-                continue
-            parse_float(tok, source=src, line=number, what=f"column '{c}'")
+    return read_csv_table(path, required=required, optional=optional, empty_ok=empty_ok)
 
 
 def _time_ordered(
@@ -425,15 +362,38 @@ def _time_ordered(
 
 
 def _integer_ids(v: Array, lines: NDArray[np.int64], path: Path, column: str) -> NDArray[np.int64]:
-    bad = np.flatnonzero(np.isfinite(v) & (v != np.round(v)))
-    if bad.size:
-        k = int(bad[0])
+    return integer_ids(v, lines, path, column)
+
+
+def _load_matrix(path: Path, n: int, *, what: str) -> Array:
+    """A float ``.npy`` matrix of shape (n, n), with a clear :class:`InputError` otherwise.
+
+    The header is checked before the data is read; pickled objects are never loaded.
+    """
+    expected = f"expected a NumPy .npy file with a float array of shape ({n}, {n}) {what}"
+    fmt = np.lib.format
+    try:
+        with open(path, "rb") as handle:
+            version = fmt.read_magic(handle)
+            if version == (1, 0):
+                shape, _, dtype = fmt.read_array_header_1_0(handle)
+            else:
+                shape, _, dtype = fmt.read_array_header_2_0(handle)
+    except Exception:  # noqa: BLE001 - any malformed header: say what was expected
+        raise InputError(f"not a readable .npy file; {expected}", path=path) from None
+    if dtype.hasobject or dtype.kind not in "fi" or dtype.fields is not None:
         raise InputError(
-            f"column '{column}': expected an integer landmark id, got {v[k]!r}",
+            f"holds a {dtype.name} array (pickled objects are never loaded); {expected}",
             path=path,
-            line=int(lines[k]),
         )
-    return np.where(np.isfinite(v), v, 0).astype(np.int64)
+    if tuple(shape) != (n, n):
+        shown = " x ".join(str(d) for d in shape) or "a scalar"
+        raise InputError(f"holds an array of shape {shown}; {expected}", path=path)
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except Exception:  # noqa: BLE001 - a cut-off or corrupt body
+        raise InputError(f"cannot read the array (cut off?); {expected}", path=path) from None
+    return np.asarray(arr, dtype=np.float64)
 
 
 def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) -> Bundle:
@@ -485,62 +445,19 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
         odometry = Trajectory(cols["t"], np.column_stack((cols["x"], cols["y"], cols["theta"])))
 
     p_map = root / "map.csv"
-    cols, map_lines = _read_csv(
-        p_map,
-        required=("landmark", "x", "y"),
-        optional=("cxx", "cxy", "cyy"),
-        empty_ok=("cxx", "cxy", "cyy"),
-    )
-    map_ids = _integer_ids(cols["landmark"], map_lines, p_map, "landmark")
-    order = np.argsort(map_ids, kind="stable")
-    dup = np.flatnonzero(np.diff(map_ids[order]) == 0)
-    if dup.size:
-        k = int(order[dup[0] + 1])
-        raise InputError(
-            f"landmark {map_ids[k]} appears twice; expected unique ids",
-            path=p_map,
-            line=int(map_lines[k]),
-        )
+    if not p_map.is_file():
+        raise InputError("missing required file; expected columns landmark,x,y", path=p_map)
+    lm_table = read_landmark_csv(p_map, describe="the bundle's map")
+    map_ids = lm_table.ids
     m = map_ids.shape[0]
-    marg = np.zeros((m, 2, 2))
-    if "cxx" in cols:
-        present = [c for c in ("cxx", "cxy", "cyy") if c in cols]
-        if len(present) != 3:
-            raise InputError("covariance columns: expected all of cxx,cxy,cyy or none", path=p_map)
-        cxx, cxy, cyy = (np.nan_to_num(cols[c], nan=0.0) for c in ("cxx", "cxy", "cyy"))
-        partial = np.isnan(cols["cxx"]) ^ np.isnan(cols["cyy"]) | np.isnan(cols["cxx"]) ^ np.isnan(
-            cols["cxy"]
-        )
-        det = cxx * cyy - cxy * cxy
-        scale = np.maximum(np.maximum(cxx, cyy), 1e-300)
-        bad = np.flatnonzero(partial | (cxx < 0) | (cyy < 0) | (det < -_PSD_TOL * scale * scale))
-        if bad.size:
-            k = int(bad[0])
-            raise InputError(
-                f"landmark covariance [[{cxx[k]}, {cxy[k]}], [{cxy[k]}, {cyy[k]}]] is not positive "
-                "semi-definite (or only partly given); expected cxx >= 0, cyy >= 0, "
-                "cxx*cyy >= cxy^2",
-                path=p_map,
-                line=int(map_lines[k]),
-            )
-        marg[:, 0, 0], marg[:, 0, 1], marg[:, 1, 0], marg[:, 1, 1] = cxx, cxy, cxy, cyy
-    map_xy = np.column_stack((cols["x"], cols["y"]))
+    marg = np.zeros((m, 2, 2)) if lm_table.cov is None else np.nan_to_num(lm_table.cov, nan=0.0)
+    map_xy = lm_table.xy
 
     map_cov = None
     p_cov = root / "map_covariance.npy"
     if p_cov.exists():
-        try:
-            map_cov = np.load(p_cov, allow_pickle=False)
-        except (ValueError, OSError) as exc:
-            raise InputError(f"cannot read as a .npy array: {exc}", path=p_cov) from None
-        if map_cov.shape != (2 * m, 2 * m) or map_cov.dtype.kind not in "fi":
-            raise InputError(
-                f"expected a float array of shape ({2 * m}, {2 * m}) for {m} landmarks, got "
-                f"{map_cov.dtype} {map_cov.shape}",
-                path=p_cov,
-            )
-        map_cov = map_cov.astype(np.float64)
-        _check_psd(map_cov, what="map covariance", path=str(p_cov), line=None)
+        map_cov = _load_matrix(p_cov, 2 * m, what=f"for {m} landmarks")
+        check_joint_covariance(map_cov, path=p_cov, what="map covariance")
 
     p_meas = root / "measurements.csv"
     cols, meas_lines = _read_csv(
@@ -552,7 +469,7 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     bad = np.flatnonzero(cols["range"] <= 0)
     if bad.size:
         raise InputError(
-            f"range {cols['range'][bad[0]]!r}: expected a positive range",
+            f"range {float(cols['range'][bad[0]])}: expected a positive range",
             path=p_meas,
             line=int(meas_lines[bad[0]]),
         )
@@ -582,11 +499,8 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     lgt = None
     p_lgt = root / "landmarks_groundtruth.csv"
     if p_lgt.exists():
-        c, ln = _read_csv(p_lgt, required=("landmark", "x", "y"))
-        lgt = (
-            _integer_ids(c["landmark"], ln, p_lgt, "landmark"),
-            np.column_stack((c["x"], c["y"])),
-        )
+        gt_table = read_landmark_csv(p_lgt, covariance=False, describe="landmark ground truth")
+        lgt = (gt_table.ids, gt_table.xy)
 
     return Bundle(
         motion=motion,
@@ -678,21 +592,7 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
     ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks.astype(str), "")
     text = "t,range,bearing,landmark\n" + "".join(f"{r},{i}\n" for r, i in zip(rows[1:], ids))
     write_text_atomic(root / "measurements.csv", text)
-    mg = bundle.map_marginals
-    write_text_atomic(
-        root / "map.csv",
-        _csv(
-            "landmark,x,y,cxx,cxy,cyy",
-            [
-                bundle.map_ids.astype(np.float64),
-                bundle.map_xy[:, 0],
-                bundle.map_xy[:, 1],
-                mg[:, 0, 0],
-                mg[:, 0, 1],
-                mg[:, 1, 1],
-            ],
-        ),
-    )
+    write_landmark_csv(root / "map.csv", bundle.map_ids, bundle.map_xy, bundle.map_marginals)
     if bundle.map_covariance is not None:
         buf = io.BytesIO()
         np.save(buf, np.asarray(bundle.map_covariance), allow_pickle=False)
@@ -701,8 +601,4 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
         g = bundle.groundtruth
         write_text_atomic(root / "groundtruth.csv", _csv("t,x,y,theta", [g.timestamps, *g.poses.T]))
     if bundle.landmarks_groundtruth is not None:
-        ids_gt, xy = bundle.landmarks_groundtruth
-        write_text_atomic(
-            root / "landmarks_groundtruth.csv",
-            _csv("landmark,x,y", [ids_gt.astype(np.float64), xy[:, 0], xy[:, 1]]),
-        )
+        write_landmark_csv(root / "landmarks_groundtruth.csv", *bundle.landmarks_groundtruth)

@@ -48,15 +48,20 @@ Speed
 from __future__ import annotations
 
 import os
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["parse_decimal_table", "read_decimal_table", "MAX_DIGITS"]
+__all__ = ["parse_decimal_table", "read_decimal_table", "DecimalFile", "MAX_DIGITS", "UTF8_BOM"]
+
+UTF8_BOM = b"\xef\xbb\xbf"
+"""The UTF-8 byte order mark, ignored at the start of a file."""
 
 MAX_DIGITS = 18
 """Most digits (integer and fraction together) a token may have on the fast path."""
 
+_PRINTABLE = b"\t\r" + bytes(range(32, 128))
 _PAD = 16  # blanks before the data so that 16-byte look-behinds stay inside the buffer
 _BLOCK = 1 << 21  # bytes per block of whole lines: a block's arrays stay in the CPU cache
 
@@ -105,16 +110,33 @@ def parse_decimal_table(
     return _parse_padded(buf, len(raw), ncols, comment)
 
 
+class DecimalFile(NamedTuple):
+    """What :func:`read_decimal_table` read.
+
+    Attributes
+    ----------
+    values : ndarray, shape (N, ncols)
+        The rows of the complete lines.
+    text : memoryview
+        The file's bytes (a leading byte order mark replaced by blanks), for line numbers.
+    cut_off_line : int or None
+        1-based number of the last line when it has no final newline and holds data: it
+        was not parsed (the caller warns that it is cut off); ``None`` otherwise.
+    """
+
+    values: NDArray[np.float64]
+    text: memoryview
+    cut_off_line: int | None
+
+
 def read_decimal_table(
     path: str | os.PathLike[str], ncols: int, *, comment: str = "#"
-) -> tuple[NDArray[np.float64], memoryview] | None:
+) -> DecimalFile | None:
     """:func:`parse_decimal_table` on a file, read straight into the parser's buffer.
 
-    Returns
-    -------
-    values : ndarray, shape (N, ncols)
-    text : memoryview
-        The file's bytes (for line numbers in later messages).
+    The file rules of :mod:`relation_metric.textio` apply at the byte level: a leading
+    UTF-8 byte order mark is ignored, and a last line without final newline is not parsed
+    (it is cut off; a blank or comment one is just ignored) — see ``cut_off_line``.
 
     ``None`` when the file cannot be read (the exact path then says why) or is outside the
     accepted subset.
@@ -128,10 +150,28 @@ def read_decimal_table(
                 return None  # the file changed while being read
     except OSError:
         return None
-    values = _parse_padded(buf, size, ncols, comment)
+    end = _PAD + size
+    if buf.startswith(UTF8_BOM, _PAD, end):
+        buf[_PAD : _PAD + len(UTF8_BOM)] = b"   "
+    cut_off = None
+    tail = b""
+    start = end
+    if size and buf[end - 1] != 10:
+        start = max(buf.rfind(b"\n", _PAD, end) + 1, _PAD)
+        tail = bytes(buf[start:end])
+        if not tail.isascii() or tail.translate(None, _PRINTABLE):
+            return None  # non-ASCII or control characters: the exact path checks them
+        text = tail.strip()
+        if text and not text.startswith(comment.encode("ascii", "replace")):
+            cut_off = buf.count(b"\n", _PAD, end) + 1
+        buf[start:end] = b" " * len(tail)  # not parsed: cut off, blank or a comment
+    try:
+        values = _parse_padded(buf, size, ncols, comment)
+    finally:
+        buf[start:end] = tail
     if values is None:
         return None
-    return values, view[_PAD : _PAD + size]
+    return DecimalFile(values, view[_PAD:end], cut_off)
 
 
 def _parse_padded(

@@ -42,6 +42,8 @@ from relation_metric.textio import (
     PathLike,
     SourceText,
     parse_float,
+    quote_token,
+    read_csv_table,
     read_numeric_table,
     read_source,
     write_text_atomic,
@@ -255,7 +257,8 @@ def read_trajectory(
             describe="a TUM trajectory",
             source=src,
         )
-        norms = np.linalg.norm(values[:, 4:8], axis=1)
+        with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
+            norms = np.linalg.norm(values[:, 4:8], axis=1)
         bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
         if bad.size:
             k = int(bad[0])
@@ -275,6 +278,8 @@ def read_trajectory(
     else:
         t, poses, line_of = _read_g2o(src, skipped=skipped)
         lines = line_of.__getitem__  # type: ignore[assignment]
+    if src.cut_off_line() is not None:
+        skipped["truncated last line"] += 1
     if t.shape[0] == 0:
         hint = "" if format else "; pass --format if that is not its format"
         raise InputError(f"no poses found (read as {fmt}){hint}", path=src.path)
@@ -320,48 +325,11 @@ def without_repeated_times(loaded: LoadedTrajectory, path: PathLike) -> LoadedTr
 
 
 def _read_csv_trajectory(src: SourceText) -> tuple[NDArray, NDArray, NDArray]:
-    rows: list[tuple[float, float, float, float]] = []
-    numbers: list[int] = []
-    header: list[str] | None = None
-    for number, text in src.data_lines():
-        fields = [f.strip() for f in text.split(",")]
-        if header is None:
-            header = [f.lower() for f in fields]
-            missing = [c for c in ("t", "x", "y", "theta") if c not in header]
-            if missing:
-                raise InputError(
-                    f"CSV header lacks column(s) {', '.join(missing)}; expected t,x,y,theta",
-                    path=src.path,
-                    line=number,
-                )
-            idx = [header.index(c) for c in ("t", "x", "y", "theta")]
-            continue
-        if len(fields) != len(header):
-            if src.is_last_line(number):
-                src.warn_truncated(number, f"expected {len(header)} fields")
-                break
-            raise InputError(
-                f"expected {len(header)} comma-separated fields ({','.join(header)}), "
-                f"got {len(fields)}",
-                path=src.path,
-                line=number,
-            )
-        try:
-            vals = tuple(
-                parse_float(fields[i], source=src, line=number, what=f"column '{c}'")
-                for i, c in zip(idx, ("t", "x", "y", "theta"))
-            )
-        except InputError:
-            if src.is_last_line(number):
-                src.warn_truncated(number, "a field does not parse")
-                break
-            raise
-        rows.append(vals)  # type: ignore[arg-type]
-        numbers.append(number)
-    if header is None:
-        raise InputError("empty file: expected a t,x,y,theta header", path=src.path)
-    arr = np.asarray(rows, dtype=np.float64).reshape(-1, 4)
-    return arr[:, 0], arr[:, 1:], np.asarray(numbers)
+    table = read_csv_table(
+        src.path, required=("t", "x", "y", "theta"), describe="a t,x,y,theta trajectory", source=src
+    )
+    c = table.columns
+    return c["t"], np.column_stack((c["x"], c["y"], c["theta"])), table.lines
 
 
 def _read_carmen(
@@ -377,14 +345,7 @@ def _read_carmen(
         if kind not in CARMEN_POSE_RECORDS:
             skipped[kind] += 1
             continue
-        try:
-            t, p = _carmen_pose(fields, pose=pose, src=src, number=number)
-        except InputError:
-            if src.is_last_line(number):
-                src.warn_truncated(number, f"an incomplete {kind} record")
-                skipped["truncated last line"] += 1
-                break
-            raise
+        t, p = _carmen_pose(fields, pose=pose, src=src, number=number)
         if not (math.isfinite(t) and all(math.isfinite(v) for v in p)):
             if not skip_invalid:
                 raise InputError(
@@ -422,18 +383,22 @@ def _carmen_float(fields: list[str], k: int, what: str, src: SourceText, number:
         )
     token = fields[k]
     try:
+        if not token.isascii() or "_" in token:
+            raise ValueError
         return float(token)
     except ValueError:
         raise InputError(
-            f"{fields[0]} {what}: expected a number, got {token!r}", path=src.path, line=number
+            f"{fields[0]} {what}: expected a number, got {quote_token(token)}",
+            path=src.path,
+            line=number,
         ) from None
 
 
 def _carmen_count(fields: list[str], k: int, what: str, src: SourceText, number: int) -> int:
     value = _carmen_float(fields, k, what, src, number)
-    if value < 0 or value != int(value):
+    if not (math.isfinite(value) and value >= 0 and value == int(value) and value < 2**31):
         raise InputError(
-            f"{fields[0]} {what}: expected a non-negative count, got {fields[k]!r}",
+            f"{fields[0]} {what}: expected a non-negative count, got {quote_token(fields[k])}",
             path=src.path,
             line=number,
         )
@@ -480,9 +445,6 @@ def _read_g2o(src: SourceText, *, skipped: Counter[str]) -> tuple[NDArray, NDArr
             skipped[fields[0]] += 1
             continue
         if len(fields) != 5:
-            if src.is_last_line(number):
-                src.warn_truncated(number, "VERTEX_SE2 needs 5 fields")
-                break
             raise InputError(
                 f"VERTEX_SE2: expected 5 fields (VERTEX_SE2 id x y theta), got {len(fields)}",
                 path=src.path,

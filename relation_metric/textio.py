@@ -4,28 +4,37 @@ Readers in slamrel share three rules:
 
 * a bad line raises :class:`~relation_metric.errors.InputError` with the file, the 1-based
   line number and what was expected;
-* the only tolerated defect is a **final line cut off mid-record with no newline** (a log
-  whose writer was stopped): it is skipped with a :class:`TruncatedLineWarning`;
+* the only tolerated defect is a **cut-off last line**: a file whose last line has no final
+  newline was cut off (a log whose writer was stopped), so that line is skipped with a
+  :class:`TruncatedLineWarning` naming ``file:line`` even when it parses (``-2.`` may be
+  what is left of ``-2.575``). A blank or comment last line without newline is just ignored.
+  JSON documents are exempt (a JSON parser sees a cut-off document);
+* a leading UTF-8 byte order mark is ignored and lines may end with ``\r\n``;
 * ``#`` starts a comment line; blank lines are ignored.
 
-Numeric tables take a fast path (numpy's C parser over the whole file); only when it fails,
-or finds a non-finite value, the file is re-read line by line to say exactly where and why.
+The rule lives in one place, :class:`SourceText` (and the byte-level fast path of
+:func:`read_numeric_table`), so that no reader can differ. Numeric tables take a fast path
+(:mod:`relation_metric.fastparse`, then numpy's C parser); only when it fails, or finds a
+non-finite value, the file is re-read line by line to say exactly where and why. Header CSV
+tables are read by :func:`read_csv_table` and written by :func:`write_csv_table`.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import re
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.errors import InputError
-from relation_metric.fastparse import read_decimal_table
+from relation_metric.fastparse import UTF8_BOM, read_decimal_table
 from relation_metric.outputs import (
     atomic_write,
     check_output_file,
@@ -41,7 +50,12 @@ __all__ = [
     "atomic_write",
     "check_not_input",
     "RowLines",
+    "CsvTable",
+    "read_csv_table",
+    "format_csv_table",
+    "write_csv_table",
     "parse_float",
+    "quote_token",
     "write_text_atomic",
     "write_bytes_atomic",
 ]
@@ -50,7 +64,12 @@ PathLike = str | os.PathLike[str]
 
 
 class TruncatedLineWarning(UserWarning):
-    """A final line without newline that does not parse was skipped."""
+    """A last line without final newline (cut off) was skipped."""
+
+
+def cut_off_message(path: str, line: int) -> str:
+    """The text of the :class:`TruncatedLineWarning` for ``path:line``."""
+    return f"{path}:{line}: no newline at the end: the last line looks cut off; skipped"
 
 
 @dataclass(frozen=True)
@@ -62,46 +81,66 @@ class SourceText:
     path : str
         The file name used in messages.
     lines : list of str
-        All lines without their line ends (the possibly truncated last one included).
+        All lines without their line ends (the possibly cut-off last one included; a
+        leading byte order mark removed).
     ends_with_newline : bool
-        False when the last line has no newline (it may be cut off).
+        False when the last line has no newline: it is then cut off (see the module
+        docstring) and :meth:`data_lines` skips it with a warning.
     """
 
     path: str
     lines: list[str]
     ends_with_newline: bool
+    _warned: list[bool] = field(default_factory=list, repr=False, compare=False)
+
+    def cut_off_line(self, comment: str = "#") -> int | None:
+        """The 1-based number of the cut-off last line, or ``None``.
+
+        A last line without newline is cut off when it holds data (it is neither blank nor
+        a ``comment`` line).
+        """
+        if self.ends_with_newline or not self.lines:
+            return None
+        text = self.lines[-1].strip()
+        if not text or text.startswith(comment):
+            return None
+        return len(self.lines)
 
     def data_lines(self, comment: str = "#") -> Iterator[tuple[int, str]]:
-        """Yield ``(line_number, stripped_text)`` for the non-blank, non-comment lines."""
+        """Yield ``(line_number, stripped_text)`` for the non-blank, non-comment lines.
+
+        The cut-off last line is not yielded: reaching it issues the
+        :class:`TruncatedLineWarning` (once per :class:`SourceText`).
+        """
+        cut = self.cut_off_line(comment)
         for number, raw in enumerate(self.lines, start=1):
             text = raw.strip()
             if text and not text.startswith(comment):
+                if number == cut:
+                    self.warn_cut_off(number)
+                    return
                 yield number, text
 
     def is_last_line(self, number: int) -> bool:
-        """True when ``number`` is the final line and it has no newline (may be cut off)."""
-        return (not self.ends_with_newline) and number == len(self.lines)
+        """True when ``number`` is the cut-off last line (kept for older callers;
+        :meth:`data_lines` never yields it)."""
+        return number == self.cut_off_line()
 
-    def warn_truncated(self, number: int, expected: str) -> None:
-        """Issue the warning for a skipped, cut-off final line."""
-        warnings.warn(
-            f"{self.path}:{number}: the last line is cut off (no newline, {expected}); skipped",
-            TruncatedLineWarning,
-            stacklevel=3,
-        )
+    def warn_truncated(self, number: int, expected: str = "") -> None:
+        """Alias of :meth:`warn_cut_off` (kept for older callers)."""
+        self.warn_cut_off(number)
+
+    def warn_cut_off(self, number: int) -> None:
+        """Issue the warning for the skipped, cut-off last line (once)."""
+        if self._warned:
+            return
+        self._warned.append(True)
+        warnings.warn(cut_off_message(self.path, number), TruncatedLineWarning, stacklevel=3)
 
 
-def read_source(path: PathLike) -> SourceText:
-    """Read a text file, with a clear :class:`InputError` for missing or binary files."""
-    name = os.fspath(path)
-    try:
-        raw = Path(name).read_bytes()
-    except FileNotFoundError:
-        raise InputError("no such file", path=name) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a text file", path=name) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=name) from None
+def _decode(raw: bytes, name: str) -> str:
+    if raw.startswith(UTF8_BOM):
+        raw = raw[len(UTF8_BOM) :]
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -110,24 +149,69 @@ def read_source(path: PathLike) -> SourceText:
     if "\x00" in text:
         line = text.count("\n", 0, text.index("\x00")) + 1
         raise InputError("contains a NUL byte; expected a text file", path=name, line=line)
-    ends = text.endswith("\n") or text == ""
+    return text
+
+
+def read_bytes(path: PathLike) -> bytes:
+    """The bytes of a file, with a clear :class:`InputError` for a missing or odd path."""
+    name = os.fspath(path)
+    try:
+        return Path(name).read_bytes()
+    except FileNotFoundError:
+        raise InputError("no such file", path=name) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a text file", path=name) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=name) from None
+
+
+def read_text(path: PathLike) -> str:
+    """A whole UTF-8 text file (a byte order mark removed) for a document parser (JSON).
+
+    No cut-off rule: the document parser sees a cut-off document.
+    """
+    name = os.fspath(path)
+    return _decode(read_bytes(name), name)
+
+
+def read_source(path: PathLike) -> SourceText:
+    """Read a text file, with a clear :class:`InputError` for missing or binary files.
+
+    A leading UTF-8 byte order mark is dropped; ``\\n``, ``\\r\\n`` and ``\\r`` end lines.
+    """
+    name = os.fspath(path)
+    text = _decode(read_bytes(name), name)
+    ends = text == "" or text[-1] in "\n\r"
     lines = text.splitlines()
     return SourceText(path=name, lines=lines, ends_with_newline=ends)
 
 
 def parse_float(token: str, *, source: SourceText, line: int, what: str) -> float:
-    """Parse one finite float or raise :class:`InputError` naming ``what``."""
+    """Parse one finite float or raise :class:`InputError` naming ``what``.
+
+    Accepts what ``np.loadtxt`` accepts (no ``_`` digit separators, ASCII digits only).
+    """
     try:
+        if not token.isascii() or "_" in token:
+            raise ValueError
         value = float(token)
     except ValueError:
         raise InputError(
-            f"{what}: expected a number, got {token!r}", path=source.path, line=line
+            f"{what}: expected a number, got {quote_token(token)}", path=source.path, line=line
         ) from None
     if not math.isfinite(value):
         raise InputError(
-            f"{what}: expected a finite number, got {token!r}", path=source.path, line=line
+            f"{what}: expected a finite number, got {quote_token(token)}",
+            path=source.path,
+            line=line,
         )
     return value
+
+
+def quote_token(token: str, limit: int = 40) -> str:
+    """``token`` quoted for a message (shortened when long; odd characters as ``<U+XXXX>``)."""
+    short = token if len(token) <= limit else token[:limit] + "..."
+    return "'" + "".join(c if c.isprintable() else f"<U+{ord(c):04X}>" for c in short) + "'"
 
 
 def read_numeric_table(
@@ -150,7 +234,8 @@ def read_numeric_table(
     min_rows : int
         Fewer data rows raise :class:`InputError` (an empty file is an error by default).
     comment : str
-        Lines starting with this (after leading blanks) are comments.
+        Lines starting with this (after leading blanks) are comments; on a data line it
+        starts a trailing comment.
     describe : str, optional
         What the file is, for messages (e.g. ``"a Freiburg .relations file"``).
     source : SourceText, optional
@@ -162,6 +247,8 @@ def read_numeric_table(
     line_numbers : RowLines
         ``line_numbers(k)`` is the 1-based file line of row ``k`` (computed on first use,
         for messages about a row).
+
+    A cut-off last line (no final newline) is skipped with a :class:`TruncatedLineWarning`.
     """
     ncols = len(columns)
     if source is None:
@@ -172,14 +259,8 @@ def read_numeric_table(
     layout = " ".join(columns)
     kind = f" ({describe})" if describe else ""
     lines = src.lines
-    skip_last = False
-    if not src.ends_with_newline and lines:
-        last_fields = lines[-1].split()
-        if last_fields and not lines[-1].lstrip().startswith(comment):
-            if len(last_fields) != ncols or not _all_floats(last_fields):
-                src.warn_truncated(len(lines), f"expected {ncols} fields: {layout}")
-                skip_last = True
-    body = lines[:-1] if skip_last else lines
+    cut = src.cut_off_line(comment)
+    body = lines[: cut - 1] if cut is not None else lines
     values: NDArray[np.float64] | None
     try:
         with warnings.catch_warnings():
@@ -192,9 +273,13 @@ def read_numeric_table(
     if values is not None and not np.isfinite(values).all():
         values = None
     if values is None:
-        # Slow path: find the first bad line and say what is wrong with it.
-        _diagnose(src, body_len=len(body), ncols=ncols, layout=layout, kind=kind, comment=comment)
-        raise AssertionError("unreachable: the fast path failed but no line is bad")
+        # Slow path: find the first bad line and say what is wrong with it (or read the
+        # table line by line where numpy refused a line that float() reads).
+        values = _parse_lines(
+            src, body_len=len(body), ncols=ncols, layout=layout, kind=kind, comment=comment
+        )
+    if cut is not None:
+        src.warn_cut_off(cut)
     numbers = RowLines(body, comment)
     if values.size == 0:
         values = np.empty((0, ncols))
@@ -204,13 +289,6 @@ def read_numeric_table(
             path=src.path,
         )
     return values, numbers
-
-
-def _all_floats(fields: Sequence[str]) -> bool:
-    try:
-        return all(math.isfinite(float(f)) for f in fields)
-    except ValueError:
-        return False
 
 
 class RowLines:
@@ -245,34 +323,267 @@ def _fast_table(
     """The whole-file parser, or ``None`` to take the exact, diagnosing path.
 
     :func:`relation_metric.fastparse.read_decimal_table` (vectorised numpy, plain decimals
-    only, bit for bit ``float()``). Only a clean file takes this path: every data line with
-    ``ncols`` finite plain decimals. Anything else (a cut-off last line, a bad token, NaN,
+    only, bit for bit ``float()``; a byte order mark and ``\r\n`` line ends accepted; a
+    cut-off last line not parsed, warned about here). Only a clean file takes this path:
+    every data line with ``ncols`` finite plain decimals. Anything else (a bad token, NaN,
     exponents, a missing file) returns ``None``; ``np.loadtxt`` then reads it, or the
     line-by-line reader says what is wrong.
     """
     plain = read_decimal_table(path, ncols, comment=comment)
     if plain is None:
         return None
-    values, text = plain
+    values, text, cut = plain
+    if cut is not None:
+        warnings.warn(cut_off_message(os.fspath(path), cut), TruncatedLineWarning, stacklevel=4)
     text_lines = lambda: bytes(text).decode("ascii").splitlines()  # noqa: E731
     return values, RowLines(text_lines, comment)
 
 
-def _diagnose(
+def _parse_lines(
     src: SourceText, *, body_len: int, ncols: int, layout: str, kind: str, comment: str
-) -> None:
+) -> NDArray[np.float64]:
+    """The table line by line: the first bad line raises, else the values (N, ncols)."""
+    rows: list[list[float]] = []
+    names = layout.split()
     for number, text in src.data_lines(comment):
         if number > body_len:
             break
-        fields = text.split()
+        fields = text.split(comment, 1)[0].split()
         if len(fields) != ncols:
             raise InputError(
                 f"expected {ncols} fields ({layout}){kind}, got {len(fields)}",
                 path=src.path,
                 line=number,
             )
-        for name, token in zip(layout.split(), fields):
-            parse_float(token, source=src, line=number, what=f"field '{name}'")
+        rows.append(
+            [
+                parse_float(token, source=src, line=number, what=f"field '{name}'")
+                for name, token in zip(names, fields)
+            ]
+        )
+    return np.asarray(rows, dtype=np.float64).reshape(-1, ncols)
+
+
+# ------------------------------------------------------------------ header CSV tables
+
+
+class CsvTable(NamedTuple):
+    """Columns of a header CSV file (see :func:`read_csv_table`).
+
+    Attributes
+    ----------
+    columns : dict of str → ndarray, shape (N,)
+        By the name the file gives (lower case), for the required and present optional
+        columns; empty cells of ``empty_ok`` columns are NaN.
+    lines : ndarray of int, shape (N,)
+        The 1-based file line of each row.
+    """
+
+    columns: dict[str, NDArray[np.float64]]
+    lines: NDArray[np.int64]
+
+
+Column = str | tuple[str, ...]
+
+
+def read_csv_table(
+    path: PathLike,
+    *,
+    required: Sequence[Column],
+    optional: Sequence[Column] = (),
+    empty_ok: Sequence[str] = (),
+    describe: str | None = None,
+    source: SourceText | None = None,
+) -> CsvTable:
+    """Read a comma-separated table of finite numbers with a header line.
+
+    The first data line is the header; names are matched case-insensitively (and without
+    surrounding blanks). Every row must have as many fields as the header; the wanted
+    columns must hold finite numbers (an empty cell of an ``empty_ok`` column is NaN);
+    the other columns are not read. ``#`` comment lines and blank lines are ignored; a
+    byte order mark, ``\r\n`` line ends and a cut-off last line follow the module's rules.
+
+    Parameters
+    ----------
+    path : str or PathLike
+    required : sequence of str or tuple of str
+        Column names (lower case) that must be present; a tuple gives alternatives (the
+        first present one is read, under its own name).
+    optional : sequence of str or tuple of str
+        Columns read when present.
+    empty_ok : sequence of str
+        Columns whose cells may be empty (NaN).
+    describe : str, optional
+        What the file is, for messages (e.g. ``"a landmark map"``).
+    source : SourceText, optional
+        Already-read text of ``path``.
+
+    Returns
+    -------
+    CsvTable
+        ``(columns, lines)``.
+
+    Raises
+    ------
+    InputError
+        An empty file, a missing required column (at the header line), a row with another
+        number of fields or a cell that is not a finite number (at its line).
+    """
+    src = read_source(path) if source is None else source
+    name = src.path
+    kind = f" ({describe})" if describe else ""
+    expected = ",".join(_column_name(c) for c in required)
+    data = list(src.data_lines())
+    if not data:
+        raise InputError(f"empty file{kind}: expected a header {expected}", path=name)
+    head_line, head_text = data[0]
+    header = [h.strip().lower() for h in head_text.split(",")]
+    missing = [c for c in required if _find(header, c) is None]
+    if missing:
+        raise InputError(
+            f"missing column(s) {', '.join(_column_name(c) for c in missing)}{kind}; "
+            f"expected a header {expected}",
+            path=name,
+            line=head_line,
+        )
+    wanted = [h for c in (*required, *optional) if (h := _find(header, c)) is not None]
+    wanted = list(dict.fromkeys(wanted))
+    cols = [header.index(c) for c in wanted]
+    rows = data[1:]
+    numbers = np.array([n for n, _ in rows], dtype=np.int64)
+    body = [t for _, t in rows]
+    maybe_empty = [c for c in wanted if c in empty_ok]
+    values: NDArray[np.float64] | None = None
+    if body:
+        conv = {header.index(c): _float_or_nan for c in maybe_empty}
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                values = np.loadtxt(
+                    body,
+                    delimiter=",",
+                    usecols=cols,
+                    ndmin=2,
+                    dtype=np.float64,
+                    converters=conv or None,
+                    comments=None,
+                    quotechar=None,
+                )
+        except (ValueError, TypeError):
+            values = None
+        if values is not None:
+            fields_ok = values.shape == (len(body), len(wanted)) and all(
+                t.count(",") == len(header) - 1 for t in body
+            )
+            strict = [i for i, c in enumerate(wanted) if c not in maybe_empty]
+            if not (fields_ok and np.isfinite(values[:, strict]).all()):
+                values = None
+        if values is None:
+            values = _parse_csv_lines(src, rows, header, wanted, maybe_empty, kind)
+    else:
+        values = np.empty((0, len(wanted)))
+    return CsvTable({c: values[:, i] for i, c in enumerate(wanted)}, numbers)
+
+
+def _column_name(c: Column) -> str:
+    return c if isinstance(c, str) else "|".join(c)
+
+
+def _find(header: list[str], c: Column) -> str | None:
+    for alt in (c,) if isinstance(c, str) else c:
+        if alt in header:
+            return alt
+    return None
+
+
+def _float_or_nan(cell: str) -> float:
+    """An ``empty_ok`` cell for ``np.loadtxt``: NaN when empty, else as :func:`parse_float`."""
+    cell = cell.strip()
+    if not cell:
+        return math.nan
+    if not cell.isascii() or "_" in cell:
+        raise ValueError(cell)
+    value = float(cell)
+    if not math.isfinite(value):
+        raise ValueError(cell)  # the exact path says which line
+    return value
+
+
+def _parse_csv_lines(
+    src: SourceText,
+    rows: list[tuple[int, str]],
+    header: list[str],
+    wanted: list[str],
+    maybe_empty: list[str],
+    kind: str,
+) -> NDArray[np.float64]:
+    """The table line by line: the first bad line raises, else the values (N, len(wanted))."""
+    out: list[list[float]] = []
+    where = [header.index(c) for c in wanted]
+    for number, text in rows:
+        fields = [f.strip() for f in text.split(",")]
+        if len(fields) != len(header):
+            raise InputError(
+                f"expected {len(header)} comma-separated fields ({','.join(header)}){kind}, "
+                f"got {len(fields)}",
+                path=src.path,
+                line=number,
+            )
+        row = []
+        for c, i in zip(wanted, where):
+            tok = fields[i]
+            if c in maybe_empty and tok == "":
+                row.append(float("nan"))
+            else:
+                row.append(parse_float(tok, source=src, line=number, what=f"column '{c}'"))
+        out.append(row)
+    return np.asarray(out, dtype=np.float64).reshape(-1, len(wanted))
+
+
+def format_csv_table(
+    header: Sequence[str],
+    columns: Sequence[ArrayLike],
+    fmt: str | Sequence[str] = "%.17g",
+) -> str:
+    """A header CSV table as text; NaN cells are left empty.
+
+    Parameters
+    ----------
+    header : sequence of str
+        Column names.
+    columns : sequence of array_like, each shape (N,)
+    fmt : str or sequence of str
+        ``%`` formats, one for all or one per column. ``%.17g`` (the default) writes every
+        double so that :func:`read_csv_table` reads it back bit for bit; ``%d`` for ids.
+    """
+    fmts = [fmt] * len(header) if isinstance(fmt, str) else list(fmt)
+    if len(fmts) != len(header) or len(columns) != len(header):
+        raise ValueError("one column and one format per header name expected")
+    head = ",".join(header) + "\n"
+    cols = [np.asarray(c) for c in columns]
+    n = cols[0].shape[0] if cols else 0
+    if n == 0:
+        return head
+    flat = np.empty((n, len(cols)), dtype=object)
+    for k, (c, f) in enumerate(zip(cols, fmts)):
+        flat[:, k] = c.astype(np.int64 if f == "%d" else np.float64).tolist()
+    body = ((",".join(fmts) + "\n") * n) % tuple(flat.ravel().tolist())
+    if "nan" in body:
+        body = _NAN_CELL.sub("", body)
+    return head + body
+
+
+_NAN_CELL = re.compile(r"(?<![^,\n])nan(?=[,\n])")
+
+
+def write_csv_table(
+    path: PathLike,
+    header: Sequence[str],
+    columns: Sequence[ArrayLike],
+    fmt: str | Sequence[str] = "%.17g",
+) -> None:
+    """Write :func:`format_csv_table` to ``path`` atomically."""
+    write_text_atomic(path, format_csv_table(header, columns, fmt))
 
 
 def check_not_input(output: PathLike, inputs: Sequence[PathLike | None]) -> None:
@@ -305,14 +616,11 @@ def read_keyword_records(
         kind = f[0]
         if kind not in fields:
             raise InputError(
-                f"unknown record {kind!r}; expected one of {', '.join(fields)}",
+                f"unknown record {quote_token(kind)}; expected one of {', '.join(fields)}",
                 path=src.path,
                 line=number,
             )
         if len(f) != fields[kind]:
-            if src.is_last_line(number):
-                src.warn_truncated(number, f"{kind} needs {fields[kind]} fields")
-                break
             raise InputError(
                 f"{kind}: expected {fields[kind]} fields, got {len(f)}", path=src.path, line=number
             )

@@ -25,7 +25,7 @@ from scipy.stats import wilcoxon
 
 from relation_metric.errors import InputError
 from relation_metric.stats import Summary, summarize
-from relation_metric.textio import PathLike, read_source
+from relation_metric.textio import PathLike, read_csv_table
 
 __all__ = [
     "ResultErrors",
@@ -80,54 +80,49 @@ class ResultErrors:
 
 
 def read_per_relation(path: PathLike, *, dataset: str, algorithm: str) -> ResultErrors:
-    """Read a per-relation CSV of ``slamrel evaluate`` (only valid relations are kept)."""
-    src = read_source(path)
-    rows = list(src.data_lines())
-    if not rows:
-        raise InputError(
-            "empty file: expected a per-relation CSV of slamrel evaluate", path=src.path
-        )
-    head_line, head = rows[0]
-    cols = head.split(",")
-    rot_col = next((c for c in cols if c.startswith("rot_error_")), None)
-    needed = ["t1", "t2", "trans_error", "valid"]
-    missing = [c for c in needed if c not in cols]
-    if missing or rot_col is None:
-        raise InputError(
-            f"header lacks {', '.join(missing + ([] if rot_col else ['rot_error_rad|deg']))}; "
-            "expected the per-relation CSV of slamrel evaluate",
-            path=src.path,
-            line=head_line,
-        )
-    idx = {c: cols.index(c) for c in needed + [rot_col]}
-    keys: list[str] = []
-    trans: list[float] = []
-    rot: list[float] = []
-    for number, text in rows[1:]:
-        f = text.split(",")
-        if len(f) != len(cols):
-            raise InputError(
-                f"expected {len(cols)} fields, got {len(f)}", path=src.path, line=number
-            )
-        if f[idx["valid"]] != "1":
-            continue
-        try:
-            trans.append(float(f[idx["trans_error"]]))
-            rot.append(float(f[idx[rot_col]]))
-        except ValueError:
-            raise InputError("an error value is not a number", path=src.path, line=number) from None
-        keys.append(f"{f[idx['t1']]} {f[idx['t2']]}")
-    k = np.asarray(keys)
-    if np.unique(k).size != k.size:
-        raise InputError("a relation (t1, t2) appears twice; cannot pair relations", path=src.path)
-    return ResultErrors(
-        dataset,
-        algorithm,
-        k,
-        np.asarray(trans),
-        np.asarray(rot),
-        rot_col.removeprefix("rot_error_"),
+    """Read a per-relation CSV of ``slamrel evaluate`` (only valid relations are kept).
+
+    Relations are keyed by their times ``t1 t2`` (as numbers, so that ``1.50`` and ``1.5``
+    pair); the errors of invalid relations may be empty.
+    """
+    rot_names = ("rot_error_rad", "rot_error_deg")
+    table = read_csv_table(
+        path,
+        required=("t1", "t2", "trans_error", rot_names, "valid"),
+        empty_ok=("trans_error", *rot_names),
+        describe="the per-relation CSV of slamrel evaluate",
     )
+    c, lines = table
+    rot_col = next(n for n in rot_names if n in c)
+    valid = c["valid"]
+    bad = np.flatnonzero((valid != 0) & (valid != 1))
+    if bad.size:
+        raise InputError(
+            f"column 'valid': expected 0 or 1, got {float(valid[bad[0]]):g}",
+            path=path,
+            line=int(lines[bad[0]]),
+        )
+    keep = valid == 1
+    trans, rot = c["trans_error"][keep], c[rot_col][keep]
+    empty = np.flatnonzero(np.isnan(trans) | np.isnan(rot))
+    if empty.size:
+        raise InputError(
+            "a valid relation without an error value; expected numbers in trans_error and "
+            f"{rot_col}",
+            path=path,
+            line=int(lines[keep][empty[0]]),
+        )
+    t1, t2 = c["t1"][keep], c["t2"][keep]
+    k = np.char.add(np.char.add(t1.astype(str), " "), t2.astype(str))
+    uniq, first, counts = np.unique(k, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        dup = int(np.flatnonzero(k == uniq[counts > 1][0])[1])
+        raise InputError(
+            "a relation (t1, t2) appears twice; cannot pair relations",
+            path=path,
+            line=int(lines[keep][dup]),
+        )
+    return ResultErrors(dataset, algorithm, k, trans, rot, rot_col.removeprefix("rot_error_"))
 
 
 @dataclass(frozen=True)

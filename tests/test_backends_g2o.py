@@ -67,6 +67,22 @@ def test_hand_written_file(tmp_path):
         ("VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 5 1 0 0 1 0 0 1 0 1\n", 2, "unknown pose vertex 5"),
         ("VERTEX_SE2 0 0 0 0\nVERTEX_SE3:QUAT 1 0 0 0 0 0 0 1\n", 2, "unknown record"),
         ("VERTEX_SE2 0 0 0\nVERTEX_SE2 1 0 0 0\n", 1, "expected 5 fields"),
+        (
+            "VERTEX_SE2 0 0 0 0\nVERTEX_XY 0 1 1\n",
+            2,
+            "vertex id 0 is defined twice (first on line 1",
+        ),
+        ("VERTEX_SE2 0.5 0 0 0\n", 1, "expected an integer id"),
+        (
+            "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0 0\nEDGE_SE2 0 1 1 0 0 -1 0 0 1 0 1\n",
+            3,
+            "EDGE_SE2 information matrix: expected a positive semi-definite matrix",
+        ),
+        (
+            "VERTEX_SE2 0 0 0 0\nVERTEX_XY 1 0 0\nEDGE_SE2_XY 0 1 1 0 1 2 1\n",
+            3,
+            "EDGE_SE2_XY information matrix: expected a positive semi-definite",
+        ),
     ],
 )
 def test_errors(tmp_path, text, line, msg):

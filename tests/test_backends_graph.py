@@ -15,6 +15,7 @@ from slamrel.backends.graph import (
     solve_graph,
     solve_graph_incremental,
 )
+from slamrel.cli import main
 from slamrel.importers.isam import read_isam
 
 
@@ -208,6 +209,12 @@ def test_isam_reader_hand_example(tmp_path):
         ("ODOMETRY 0 1 1 0 x 1 0 0 1 0 1\n", 1, "expected a number"),
         ("POINT 0 1\n", 1, "unknown record"),
         ("ODOMETRY 0 1 1 0 0 1 0 0 1 0 1\nLANDMARK 7 2 1 1 1 0 1\n", 2, "unknown pose 7"),
+        ("ODOMETRY 0 1 1 0 0 -1 0 0 1 0 1\n", 1, "ODOMETRY covariance: expected a positive def"),
+        ("ODOMETRY 0 1 1 0 0 0 0 0 0 0 0\n", 1, "expected a positive definite (invertible)"),
+        ("ODOMETRY 0 1 1 0 0 1 1 0 1 0 1\n", 1, "smallest eigenvalue 0"),  # singular
+        ("ODOMETRY 0 1 1 0 0 1 0 0 1 0 1\nLANDMARK 1 5 1 1 1 2 1\n", 2, "LANDMARK covariance"),
+        ("ODOMETRY 0 1.5 1 0 0 1 0 0 1 0 1\n", 1, "expected an integer id"),
+        ("ODOMETRY 0 1e300 1 0 0 1 0 0 1 0 1\n", 1, "expected an integer id"),
     ],
 )
 def test_isam_bad_input(tmp_path, text, line, msg):
@@ -215,7 +222,16 @@ def test_isam_bad_input(tmp_path, text, line, msg):
     p.write_text(text)
     with pytest.raises(InputError) as err:
         read_isam(p)
-    assert f"b.txt:{line}:" in str(err.value) and msg in str(err.value)
+    assert f"b.txt:{line}:" in str(err.value) and msg in str(err.value), str(err.value)
+
+
+def test_cli_solve_zero_isam_covariance_exit_3(tmp_path, capsys):
+    p = tmp_path / "z.txt"
+    p.write_text("ODOMETRY 0 1 1 0 0 1e-4 0 0 1e-4 0 4e-6\nODOMETRY 1 2 1 0 0 0 0 0 0 0 0\n")
+    assert main(["solve", str(p), "-o", str(tmp_path / "out"), "-q"]) == 3
+    err = capsys.readouterr().err
+    assert f"{p}:2: ODOMETRY covariance: expected a positive definite" in err
+    assert "Traceback" not in err and "np." not in err
 
 
 def test_pose_covariances_equal_dense_inverse(rng):

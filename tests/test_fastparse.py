@@ -169,8 +169,8 @@ def test_real_relations_files(name):
     raw = path.read_bytes()
     fast = read_decimal_table(path, 8)
     assert fast is not None
-    values, text = fast
-    assert bytes(text) == raw
+    values, text, cut_off = fast
+    assert bytes(text) == raw and cut_off is None
     assert same_bits(values, python_table(raw.decode()))
     exact, _ = read_numeric_table(path, columns=REL_COLUMNS, source=read_source(path))
     assert same_bits(values, exact)
@@ -244,7 +244,7 @@ GOOD = (
     "\n"
     "90.719599\t91.321399  0.213430 -0.014750 0.000000  0.000000 0.000000 -0.405780 # c\n"
     "  # an indented comment\n"
-    "94.399600 94.759600 0.277100 0.063830 0.000000 0.000000 0.000000 0.097740"
+    "94.399600 94.759600 0.277100 0.063830 0.000000 0.000000 0.000000 0.097740\r\n"
 )
 
 
@@ -308,19 +308,59 @@ def test_empty_file_message_unchanged(tmp_path):
         )
 
 
+CUT = r"t\.relations:3: no newline at the end: the last line looks cut off; skipped"
+
+
 def test_truncated_last_line_still_warned_and_skipped(tmp_path):
     path = write(tmp_path, "1 2 3 4 5 6 7 8\n1 2 3 4 5 6 7 8\n1 2 3 4.")
-    with pytest.warns(TruncatedLineWarning, match=r"t\.relations:3: the last line is cut off"):
+    with pytest.warns(TruncatedLineWarning, match=CUT):
         rel = read_relations(path)
     assert len(rel) == 2
 
 
-def test_complete_last_line_without_newline_kept_without_warning(tmp_path):
-    path = write(tmp_path, "1 2 3 4 5 6 7 8\n1 2 3 4 5 6 7 0.5")
+@pytest.mark.parametrize("exact", [False, True])
+def test_parsing_last_line_without_newline_is_cut_off(tmp_path, exact):
+    """``... -2.`` may be what is left of ``-2.575``: skipped with a warning, fast or exact."""
+    path = write(tmp_path, "1 2 3 4 5 6 7 8\n1 2 3 4 5 6 7 8\n1 2 3 4 5 6 7 -2.")
+    fast = read_decimal_table(path, 8)
+    assert fast is not None and fast.values.shape == (2, 8) and fast.cut_off_line == 3
+    source = read_source(path) if exact else None
+    with pytest.warns(TruncatedLineWarning, match=CUT) as caught:
+        values, lines = read_numeric_table(path, columns=REL_COLUMNS, source=source)
+    assert len(caught) == 1
+    assert values.shape == (2, 8) and lines(1) == 2
+
+
+@pytest.mark.parametrize("tail", ["", "  ", "# a comment", "\t# c 1 2"])
+def test_blank_or_comment_last_line_without_newline_is_ignored(tmp_path, tail):
+    path = write(tmp_path, "1 2 3 4 5 6 7 8\n" + tail)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        rel = read_relations(path)
-    assert len(rel) == 2 and rel.delta[1, 2] == 0.5
+        values, _ = read_numeric_table(path, columns=REL_COLUMNS)
+        exact, _ = read_numeric_table(path, columns=REL_COLUMNS, source=read_source(path))
+    assert values.shape == exact.shape == (1, 8)
+
+
+def test_bom_and_crlf_fast_path_bit_exact(tmp_path):
+    clean = write(tmp_path, GOOD, "clean.relations")
+    crlf = GOOD.replace("\r\n", "\n").replace("\n", "\r\n")
+    odd = write(tmp_path, "\ufeff" + crlf, "odd.relations")
+    fast = read_decimal_table(odd, 8)
+    assert fast is not None  # the fast path takes it
+    ref, ref_lines = read_numeric_table(clean, columns=REL_COLUMNS)
+    values, lines = read_numeric_table(odd, columns=REL_COLUMNS)
+    exact, exact_lines = read_numeric_table(odd, columns=REL_COLUMNS, source=read_source(odd))
+    assert same_bits(values, ref) and same_bits(exact, ref) and same_bits(fast.values, ref)
+    assert [lines(k) for k in range(3)] == [exact_lines(k) for k in range(3)] == [2, 4, 6]
+    assert [ref_lines(k) for k in range(3)] == [2, 4, 6]
+
+
+def test_bom_error_names_the_real_line(tmp_path):
+    path = write(tmp_path, "\ufeff1 2 3 4 5 6 7 x\n")
+    with pytest.raises(
+        InputError, match=r"t\.relations:1: field 'yaw': expected a number, got 'x'"
+    ):
+        read_relations(path)
 
 
 def test_fallback_still_reads_what_the_fast_path_refuses(tmp_path):

@@ -86,7 +86,9 @@ def test_cut_off_last_line_is_skipped_with_warning(tmp_path):
         "FLASER 0 1 2 0.1 1 2 0.1 10.0 h 0\nFLASER 0 1.1 2 0.1 1.1 2 0.1 10.2 h 0\nFLASER 0 1.2 2"
     )
     p = write(tmp_path, "cut.log", text)
-    with pytest.warns(TruncatedLineWarning, match=r"cut.log:3: the last line is cut off"):
+    with pytest.warns(
+        TruncatedLineWarning, match=r"cut.log:3: no newline at the end: the last line"
+    ):
         got = read_trajectory(p)
     assert len(got.trajectory) == 2
     assert got.skipped == {"truncated last line": 1}
@@ -99,11 +101,20 @@ def test_plain_cut_off_last_line(tmp_path):
     assert len(got.trajectory) == 2
 
 
-def test_complete_last_line_without_newline_is_kept(tmp_path):
-    p = write(tmp_path, "t.txt", "0 0 0 0\n1 1 0 0\n2 2 0 0")
+def test_parsing_last_line_without_newline_is_cut_off(tmp_path):
+    """``2 2 0 -2.`` may be what is left of ``2 2 0 -2.575``: skipped with a warning."""
+    p = write(tmp_path, "t.txt", "0 0 0 0\n1 1 0 0\n2 2 0 -2.")
+    with pytest.warns(TruncatedLineWarning, match=r"t.txt:3: no newline at the end"):
+        got = read_trajectory(p)
+    assert len(got.trajectory) == 2 and got.skipped == {"truncated last line": 1}
+
+
+def test_comment_last_line_without_newline_is_ignored(tmp_path):
+    p = write(tmp_path, "t.txt", "0 0 0 0\n1 1 0 0\n# end")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert len(read_trajectory(p).trajectory) == 3
+        got = read_trajectory(p)
+    assert len(got.trajectory) == 2 and got.skipped == {}
 
 
 BAD_PLAIN = {

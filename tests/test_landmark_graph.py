@@ -307,8 +307,9 @@ def test_cli_written_association_reads_back_and_overrides(tmp_path, rng):
     [
         ("estimate,reference\n1,1\n1,2\n", [], "a.csv:3: estimated landmark 1 is associated twice"),
         ("estimate,reference\n1,1\n2,1\n", [], "a.csv:3: reference landmark 1 is associated twice"),
-        ("est,ref\n1,1\n", [], "a.csv:1: expected the header"),
-        ("estimate,reference\n1,x\n", [], "a.csv:2: expected two integer ids"),
+        ("est,ref\n1,1\n", [], "a.csv:1: missing column(s) estimate, reference"),
+        ("estimate,reference\n1,x\n", [], "a.csv:2: column 'reference': expected a number"),
+        ("estimate,reference\n1,1.5\n", [], "a.csv:2: column 'reference': expected an integer"),
     ],
 )
 def test_cli_bad_association_file_exit_3(tmp_path, capsys, assoc_text, extra, msg):

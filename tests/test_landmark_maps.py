@@ -95,7 +95,12 @@ def test_csv_with_empty_covariances_and_g2o_with_other_records(tmp_path):
             "positive semi-definite",
         ),
         ("a.csv", "landmark,x,y,cxx,cxy,cyy\n1,0,0,1,,1\n", "a.csv:2", "all three or none"),
-        ("a.csv", "landmark,x,y\n1,0,0\n2,1\n3,0,0\n", "a.csv:3", "expected 3 fields"),
+        (
+            "a.csv",
+            "landmark,x,y\n1,0,0\n2,1\n3,0,0\n",
+            "a.csv:3",
+            "expected 3 comma-separated fields",
+        ),
         ("a.csv", "landmark,x,y\n", "a.csv", "empty map"),
         ("a.dat", "# only a header\n", "a.dat", "empty map"),
         ("a.dat", "6 0.5 1.0 0.1 0.1\n7 inf 1.0 0.1 0.1\n", "a.dat:2", "finite"),

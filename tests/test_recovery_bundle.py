@@ -133,7 +133,7 @@ def test_unknown_landmark_and_skip(bundle_dir: Path) -> None:
 
 def test_non_psd_covariances(bundle_dir: Path) -> None:
     _edit(bundle_dir / "map.csv", 2, "100,1.0,2.0,0.01,0.5,0.01")
-    _expect(bundle_dir, "map.csv", 2, "not positive semi-definite")
+    _expect(bundle_dir, "map.csv", 2, "expected a positive semi-definite matrix")
 
 
 def test_non_psd_joint_map_covariance(bundle_dir: Path) -> None:

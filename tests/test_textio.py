@@ -61,3 +61,104 @@ def test_fast_path_refuses_what_the_strict_reader_rejects(tmp_path, text, line, 
     with pytest.raises(InputError) as err:
         read_numeric_table(p, columns=("a", "b"))
     assert f"b.txt:{line}:" in str(err.value) and msg in str(err.value)
+
+
+# --- the one header-CSV table reader --------------------------------------------------
+
+from relation_metric.textio import (  # noqa: E402
+    SourceText,
+    format_csv_table,
+    read_csv_table,
+    read_source,
+)
+
+
+def test_csv_table_header_case_blanks_alternatives_and_empty_cells(tmp_path):
+    p = tmp_path / "a.csv"
+    p.write_text("# c\n T , X,Rot_Error_Deg,extra,W\n1, 2.5,3,word,\n\n4,5,6,x,7\n")
+    cols, lines = read_csv_table(
+        p,
+        required=("t", "x", ("rot_error_rad", "rot_error_deg")),
+        optional=("w", "q"),
+        empty_ok=("w",),
+    )
+    assert sorted(cols) == ["rot_error_deg", "t", "w", "x"]
+    assert cols["x"].tolist() == [2.5, 5.0] and lines.tolist() == [3, 5]
+    assert np.isnan(cols["w"][0]) and cols["w"][1] == 7.0
+
+
+@pytest.mark.parametrize(
+    "text,line,msg",
+    [
+        ("", None, "empty file (a test table): expected a header t,x"),
+        ("t,y\n1,2\n", 1, "missing column(s) x (a test table); expected a header t,x"),
+        ("t,x\n1,2\n1,2,3\n", 3, "expected 2 comma-separated fields (t,x) (a test table), got 3"),
+        ("t,x\n1,2\n1,\n", 3, "column 'x': expected a number, got ''"),
+        ("t,x\n1,inf\n", 2, "column 'x': expected a finite number, got 'inf'"),
+        ("t,x\n1,1_0\n", 2, "column 'x': expected a number, got '1_0'"),
+        ("t,x\n1,\ufeff2\n", 2, "column 'x': expected a number, got '<U+FEFF>2'"),
+    ],
+)
+def test_csv_table_errors_name_file_and_line(tmp_path, text, line, msg):
+    p = tmp_path / "a.csv"
+    p.write_text(text)
+    with pytest.raises(InputError) as err:
+        read_csv_table(p, required=("t", "x"), describe="a test table")
+    where = f"{p}:{line}: " if line else f"{p}: "
+    assert str(err.value) == where + msg
+
+
+cells = st.one_of(
+    st.floats(allow_nan=False, allow_infinity=False).map(repr),
+    st.integers(-(10**6), 10**6).map(str),
+    st.sampled_from(["", " 1.5 ", "nan", "-inf", "x", "1e5", "+2", "1_0", ".5", "5."]),
+)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(cells, cells), min_size=1, max_size=8))
+def test_csv_table_numpy_path_equals_line_by_line(tmp_path_factory, rows):
+    """Whatever numpy's parser accepts, the exact line-by-line reader gives the same."""
+    from relation_metric.textio import _parse_csv_lines
+
+    p = tmp_path_factory.mktemp("c") / "a.csv"
+    text = "a,b\n" + "".join(f"{x},{y}\n" for x, y in rows)
+    p.write_text(text)
+    src = read_source(p)
+    data = list(src.data_lines())
+    try:
+        exact = _parse_csv_lines(src, data[1:], ["a", "b"], ["a", "b"], ["b"], "")
+    except InputError as err:
+        with pytest.raises(InputError) as got:
+            read_csv_table(p, required=("a", "b"), empty_ok=("b",))
+        assert str(got.value) == str(err)
+        return
+    cols, _ = read_csv_table(p, required=("a", "b"), empty_ok=("b",))
+    got = np.column_stack((cols["a"], cols["b"]))
+    assert np.array_equal(got.view(np.int64), exact.view(np.int64))  # bit for bit
+
+
+def test_csv_table_bom_crlf_and_cut_off_line(tmp_path):
+    from relation_metric.textio import TruncatedLineWarning
+
+    p = tmp_path / "a.csv"
+    p.write_bytes(b"\xef\xbb\xbft,x\r\n1,2\r\n3,4")
+    with pytest.warns(TruncatedLineWarning, match=r"a\.csv:3: no newline at the end"):
+        cols, lines = read_csv_table(p, required=("t", "x"))
+    assert cols["x"].tolist() == [2.0] and lines.tolist() == [2]
+
+
+def test_format_csv_table_exact_and_empty_nan():
+    text = format_csv_table(
+        ["id", "v", "w"], [[3, 4], [0.1, 1 / 3], [np.nan, 2.0]], ["%d", "%.17g", "%.17g"]
+    )
+    assert text == "id,v,w\n3,0.10000000000000001,\n4,0.33333333333333331,2\n"
+    assert float(text.splitlines()[2].split(",")[1]) == 1 / 3
+
+
+def test_source_text_cut_off_line_rules():
+    s = SourceText("f", ["1 2", "3 4"], ends_with_newline=False)
+    assert s.cut_off_line() == 2
+    assert SourceText("f", ["1 2", "# c"], ends_with_newline=False).cut_off_line() is None
+    assert SourceText("f", ["1 2", "  "], ends_with_newline=False).cut_off_line() is None
+    assert SourceText("f", ["1 2", "3 4"], ends_with_newline=True).cut_off_line() is None

@@ -12,7 +12,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
+from relation_metric.landmarks import integer_ids
 from relation_metric.textio import PathLike, read_keyword_records, write_text_atomic
 from slamrel.backends.graph import PoseGraph
 
@@ -44,12 +46,29 @@ def read_g2o_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64], NDArra
     vxy = recs["VERTEX_XY"][0]
     if vse2.shape[0] == 0:
         raise InputError("no VERTEX_SE2 records", path=path)
-    pose_ids = vse2[:, 0].astype(np.int64)
-    lm_ids = vxy[:, 0].astype(np.int64)
+    pose_ids = integer_ids(vse2[:, 0], lines["VERTEX_SE2"], path, "VERTEX_SE2 id")
+    lm_ids = integer_ids(vxy[:, 0], lines["VERTEX_XY"], path, "VERTEX_XY id")
     all_ids = np.concatenate((pose_ids, lm_ids))
-    uniq, counts = np.unique(all_ids, return_counts=True)
-    if (counts > 1).any():
-        raise InputError(f"vertex id {int(uniq[counts > 1][0])} is defined twice", path=path)
+    all_lines = np.concatenate((lines["VERTEX_SE2"], lines["VERTEX_XY"]))
+    order = np.lexsort((all_lines, all_ids))
+    dup = np.flatnonzero(np.diff(all_ids[order]) == 0)
+    if dup.size:
+        first, k = int(order[dup[0]]), int(order[dup[0] + 1])
+        raise InputError(
+            f"vertex id {int(all_ids[k])} is defined twice (first on line {int(all_lines[first])})",
+            path=path,
+            line=int(all_lines[k]),
+        )
+    for kind, size, start in (("EDGE_SE2", 3, 5), ("EDGE_SE2_XY", 2, 4)):
+        vals, ln = recs[kind]
+        for col in (0, 1):
+            integer_ids(vals[:, col], ln, path, f"{kind} vertex {col + 1}")
+        check_covariances(
+            _upper_to_full(vals[:, start:], size),
+            path=path,
+            lines=ln,
+            what=f"{kind} information matrix",
+        )
     po = np.argsort(pose_ids)
     lo = np.argsort(lm_ids)
     pose_ids, lm_ids = pose_ids[po], lm_ids[lo]

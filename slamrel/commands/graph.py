@@ -10,7 +10,8 @@ import numpy as np
 
 from relation_metric.errors import InputError
 from relation_metric.formats import write_trajectory
-from relation_metric.outputs import staged_directory, write_text_atomic
+from relation_metric.landmarks import write_landmark_csv
+from relation_metric.outputs import staged_directory
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.g2o import read_g2o_graph, write_g2o_graph
 from slamrel.backends.graph import PoseGraph, solve_graph, solve_graph_incremental
@@ -176,11 +177,9 @@ def run_solve(args: argparse.Namespace) -> int:
                 graph, batch=args.batch, max_iterations=args.max_iterations
             )
     out = Path(args.output)
-    rows = np.column_stack((lm_ids, sol.landmarks))
-    body = ("%d,%.9f,%.9f\n" * rows.shape[0]) % tuple(rows.ravel().tolist()) if rows.size else ""
     with staged_directory(out, kind="solve", force=args.force) as tmp:
         write_trajectory(tmp / "trajectory.txt", Trajectory.from_poses(sol.poses), format="plain")
-        write_text_atomic(tmp / "landmarks.csv", "landmark,x,y\n" + body)
+        write_landmark_csv(tmp / "landmarks.csv", lm_ids, sol.landmarks)
         write_g2o_graph(
             tmp / "solved.g2o",
             graph,

@@ -21,7 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric import se2
+from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
+from relation_metric.landmarks import integer_ids
 from relation_metric.textio import PathLike, read_keyword_records
 from slamrel.backends.graph import PoseGraph, initial_landmarks
 
@@ -47,15 +49,48 @@ class IsamData:
     landmark_ids: NDArray[np.int64]
 
 
-def _information(upper: NDArray[np.float64], size: int, convention: str) -> NDArray[np.float64]:
-    """Information matrices from upper-triangle rows ``(K, size (size+1)/2)``."""
+def _information(
+    upper: NDArray[np.float64],
+    size: int,
+    convention: str,
+    *,
+    path: PathLike,
+    lines: NDArray[np.int64],
+    kind: str,
+) -> NDArray[np.float64]:
+    """Information matrices from upper-triangle rows ``(K, size (size+1)/2)``.
+
+    A covariance must be symmetric positive definite (it is inverted; negative variances and
+    zero or singular covariances raise :class:`InputError` at their line); a square-root
+    information matrix ``R`` must have a non-zero diagonal (``Rᵀ R`` invertible).
+    """
     iu = np.triu_indices(size)
     m = np.zeros((upper.shape[0], size, size))
     m[:, iu[0], iu[1]] = upper
     if convention == "sqrt-information":
+        diag = np.diagonal(m, axis1=1, axis2=2)
+        bad = np.flatnonzero((diag == 0).any(axis=1))
+        if bad.size:
+            raise InputError(
+                f"{kind}: square-root information with a zero on its diagonal (singular); "
+                "expected an invertible upper-triangular R",
+                path=path,
+                line=int(lines[bad[0]]),
+            )
         return np.swapaxes(m, 1, 2) @ m  # Rᵀ R
     sym = m + np.swapaxes(np.triu(m, 1), 1, 2)
-    return np.linalg.inv(sym)
+    check_covariances(sym, path=path, lines=lines, what=f"{kind} covariance", definite=True)
+    with np.errstate(all="ignore"):
+        info = np.linalg.inv(sym)
+    bad = np.flatnonzero(~np.isfinite(info).all(axis=(1, 2)))
+    if bad.size:
+        raise InputError(
+            f"{kind} covariance: too small to invert in double precision; expected variances "
+            "above about 1e-300",
+            path=path,
+            line=int(lines[bad[0]]),
+        )
+    return info
 
 
 def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamData:
@@ -65,13 +100,9 @@ def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamD
     recs = read_keyword_records(path, {"ODOMETRY": 12, "LANDMARK": 8})
     o_vals, o_lines = recs["ODOMETRY"]
     z_vals, z_lines = recs["LANDMARK"]
-    ids = np.concatenate((o_vals[:, :2].ravel(), z_vals[:, :2].ravel()))
-    if np.any(ids != np.round(ids)):
-        k = int(np.flatnonzero(ids != np.round(ids))[0])
-        line = (
-            o_lines[k // 2] if k < 2 * o_vals.shape[0] else z_lines[(k - 2 * o_vals.shape[0]) // 2]
-        )
-        raise InputError("ids must be integers", path=path, line=int(line))
+    for vals, lines, kind in ((o_vals, o_lines, "ODOMETRY"), (z_vals, z_lines, "LANDMARK")):
+        for col in (0, 1):
+            integer_ids(vals[:, col], lines, path, f"{kind} id {col + 1}")
     odo = o_vals
     if odo.shape[0] == 0:
         raise InputError("no ODOMETRY lines", path=path)
@@ -85,7 +116,7 @@ def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamD
         raise InputError(f"id {clash[0]} is used for a pose and a landmark", path=path, line=line)
     pi = np.searchsorted(pose_ids, o[:, 0].astype(np.int64))
     pj = np.searchsorted(pose_ids, o[:, 1].astype(np.int64))
-    info_pp = _information(o[:, 5:11], 3, noise)
+    info_pp = _information(o[:, 5:11], 3, noise, path=path, lines=o_lines, kind="ODOMETRY")
     # initial guess: chain the odometry edges k -> k+1 (in id order)
     chain = pj == pi + 1
     step = np.full((pose_ids.size - 1, 3), np.nan)
@@ -109,7 +140,7 @@ def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamD
             )
         pk = np.searchsorted(pose_ids, z[:, 0].astype(np.int64))
         pl = np.searchsorted(landmark_ids, z[:, 1].astype(np.int64))
-        info_pl = _information(z[:, 4:7], 2, noise)
+        info_pl = _information(z[:, 4:7], 2, noise, path=path, lines=z_lines, kind="LANDMARK")
         lm0 = initial_landmarks(poses, pk, pl, z[:, 2:4], landmark_ids.size)
     else:
         pk = pl = np.empty(0, np.int64)

@@ -25,6 +25,7 @@ from scipy.optimize import nnls
 
 from relation_metric import se2
 from relation_metric.errors import InputError
+from relation_metric.landmarks import integer_ids
 from relation_metric.textio import PathLike, RowLines, read_numeric_table
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, readonly
@@ -100,13 +101,14 @@ def read_barcodes(directory: PathLike) -> dict[int, int]:
     values, lines = read_numeric_table(
         path, columns=("subject", "barcode"), describe="Barcodes.dat"
     )
-    codes = values[:, 1].astype(np.int64)
+    codes = integer_ids(values[:, 1], lines, path, "barcode")
+    subjects = integer_ids(values[:, 0], lines, path, "subject")
     uniq, counts = np.unique(codes, return_counts=True)
     if (counts > 1).any():
         dup = int(uniq[counts > 1][0])
         k = int(np.flatnonzero(codes == dup)[1])
         raise InputError(f"barcode {dup} is given twice", path=path, line=lines(k))
-    return dict(zip(codes.tolist(), values[:, 0].astype(np.int64).tolist()))
+    return dict(zip(codes.tolist(), subjects.tolist()))
 
 
 def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
@@ -127,10 +129,7 @@ def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
     meas, meas_lines = read_numeric_table(
         meas_path, columns=("time", "barcode", "range", "bearing"), describe="MRCLAM measurements"
     )
-    bad_code = np.flatnonzero(meas[:, 1] != np.round(meas[:, 1]))
-    if bad_code.size:
-        k = int(bad_code[0])
-        raise InputError("barcode must be an integer", path=meas_path, line=meas_lines(k))
+    integer_ids(meas[:, 1], meas_lines, meas_path, "barcode")  # at its line, before sorting
     meas, reordered[meas_path.name] = _time_ordered(meas_path, meas, meas_lines, "measurement")
     gt_path = d / f"Robot{robot}_Groundtruth.dat"
     gt, gt_lines = read_numeric_table(
