@@ -360,6 +360,22 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
         figs += map_figs
         for k, fig in enumerate(figs):
             (tmp / f"figure_{k + 1}.png").write_bytes(fig.png)
+        review_links = []
+        if result.map_comparison is not None:
+            from landmark_graph.review import write_review
+
+            mc = result.map_comparison
+            write_review(
+                tmp / "review.html", mc.estimate, mc.reference, mc.association, cutoff=mc.cutoff,
+                names=("SLAM map", "true landmarks"), title=f"slamrel review — {result.name}",
+            )  # fmt: skip
+            review_links.append(
+                (
+                    "review.html",
+                    "Review the landmark association in a browser (accept, reject or draw "
+                    "pairs; save the CSV for slamrel map-compare --associate FILE)",
+                )
+            )
         sections = [
             Section(
                 f"slamrel run: {result.name}",
@@ -435,6 +451,7 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
                         ),
                     ],
                     figures=figs[3:],
+                    links=review_links,
                 )
             )
         write_text_atomic(

@@ -52,6 +52,8 @@ class Section:
     paragraphs: Sequence[str] = field(default_factory=tuple)
     tables: Sequence[Table] = field(default_factory=tuple)
     figures: Sequence[Figure] = field(default_factory=tuple)
+    #: ``(href, text)`` links shown after the paragraphs (files beside report.html)
+    links: Sequence[tuple[str, str]] = field(default_factory=tuple)
 
 
 def _cell(value: Any) -> str:
@@ -90,6 +92,10 @@ def render_html(title: str, sections: Sequence[Section]) -> str:
     for k, sec in enumerate(sections):
         out.append(f'<section id="s{k}"><h2>{html.escape(sec.title)}</h2>')
         out.extend(f"<p>{html.escape(p)}</p>" for p in sec.paragraphs)
+        out.extend(
+            f'<p><a href="{html.escape(href)}">{html.escape(text)}</a></p>'
+            for href, text in sec.links
+        )
         for tab in sec.tables:
             out.append(f"<table><caption>{html.escape(tab.caption)}</caption><thead><tr>")
             out.extend(f"<th>{html.escape(str(c))}</th>" for c in tab.columns)
