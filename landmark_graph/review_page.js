@@ -62,7 +62,8 @@
     if (!act) { say("nothing to undo"); return; }
     for (const [k, before] of act.changes) pairs[k].status = before;
     pairs.length -= act.appended;
-    if (selected >= pairs.length) selected = -1;
+    // show what was undone: the first pair it changed (if it still exists)
+    selected = act.changes.length && act.changes[0][0] < pairs.length ? act.changes[0][0] : -1;
     say("undone");
     refresh();
   }
@@ -409,7 +410,7 @@
     if (tr) select(Number(tr.dataset.k), true);
   });
   document.addEventListener("keydown", (ev) => {
-    if (ev.target.closest("input, textarea")) return;
+    if (ev.target instanceof Element && ev.target.closest("input, textarea")) return;
     if ((ev.ctrlKey || ev.metaKey) && ev.key === "z") { ev.preventDefault(); undo(); return; }
     if (ev.ctrlKey || ev.metaKey || ev.altKey) return;
     const keys = {
@@ -421,7 +422,8 @@
     };
     if (keys[ev.key]) { ev.preventDefault(); keys[ev.key](); }
   });
-  window.addEventListener("resize", () => { resize(); render(); });
+  // the canvas follows its box (window resized, header text wrapped): keep the view centre
+  new ResizeObserver(() => { resize(); render(); }).observe(canvas);
 
   // --------------------------------------------------------------------------------- start
   const maxRes = Math.max(C, ...DATA.pairs.residual.filter(Number.isFinite));
