@@ -41,6 +41,7 @@ from relation_metric.trajectory import Trajectory
 from slamrel.figures import nees_figure, trajectories_figure
 from slamrel.report import Figure, Section, Table, figure_png, render_html
 from slamrel.simulate import slam_bundle, world_bundle
+from slamrel.verdict import run_verdict
 from slamrel.worlds import make_world
 
 __all__ = ["RunResult", "default_relations", "run_pipeline", "write_report"]
@@ -294,7 +295,15 @@ def _stats_table(result: RunResult, part: str) -> Table:
     unit = "m" if part == "translation" else "rad"
     return Table(
         f"{part} relation error [{unit}]",
-        ["estimate", "relations", "abs mean", "abs std", "sqr mean", "abs max", "count"],
+        [
+            "estimate",
+            "relations",
+            f"abs mean [{unit}]",
+            f"abs std [{unit}]",
+            f"sqr mean [{unit}²]",
+            f"abs max [{unit}]",
+            "count",
+        ],
         rows,
     )
 
@@ -455,6 +464,11 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
                 )
             )
         write_text_atomic(
-            tmp / "report.html", render_html(f"slamrel report — {result.name}", sections)
+            tmp / "report.html",
+            render_html(
+                f"slamrel report — {result.name}",
+                sections,
+                verdict=run_verdict(metrics, {k: v[1] for k, v in result.nees.items()}),
+            ),
         )
     return target / "report.html"

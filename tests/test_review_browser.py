@@ -53,11 +53,15 @@ def browser():
     d.quit()
 
 
-def _shot(d, path: Path) -> Path:
-    """A screenshot of the page, checked non-blank, also copied to $SLAMREL_ARTIFACTS."""
+def _shot(d, path: Path, element=None) -> Path:
+    """A screenshot of the page (or of one element), checked non-blank, also copied to
+    $SLAMREL_ARTIFACTS."""
     import matplotlib.image as mpimg
 
-    d.save_screenshot(str(path))
+    if element is None:
+        d.save_screenshot(str(path))
+    else:
+        element.screenshot(str(path))
     img = mpimg.imread(path)[..., :3]
     ink = np.mean(np.any(img < 0.85, axis=-1))  # anything not (nearly) white
     colour = np.mean(img.max(axis=-1) - img.min(axis=-1) > 0.2)  # coloured pixels
@@ -216,3 +220,29 @@ def test_two_thousand_landmarks_paint_and_filter_within_a_second(browser, tmp_pa
         f"frame {t['firstFrame']:.0f} ms, render {t['lastRender']:.1f} ms; filter change "
         f"{filter_ms:.0f} ms; next+reject {nav_ms:.0f} ms"
     )
+
+
+def test_report_opens_with_its_verdict_and_links_the_review(browser, tmp_path):
+    from slamrel.pipeline import run_pipeline, write_report
+
+    d = browser
+    html = write_report(run_pipeline("simple1", noise="a", seed=0), tmp_path / "report")
+    d.get(html.as_uri())
+    verdict = d.find_element("id", "verdict")
+    # the verdict is the first thing under the title, inside the first screen
+    assert verdict.location["y"] < 200, verdict.location
+    levels = [e.text for e in verdict.find_elements("css selector", "td .lamp")]
+    assert levels and set(levels) <= {"green", "amber", "red"}, levels
+    # each judgement is shown in its own colour (Chrome reports rgba)
+    rgb = {"green": (26, 127, 55), "amber": (183, 121, 31), "red": (180, 35, 24)}
+    for lamp in verdict.find_elements("css selector", ".lamp"):
+        r, g, b = rgb[lamp.text]
+        assert lamp.value_of_css_property("background-color") == f"rgba({r}, {g}, {b}, 1)"
+    _shot(d, tmp_path / "report_verdict.png", verdict)
+    toc = [a.get_attribute("href").rsplit("#", 1)[1] for a in d.find_elements(
+        "css selector", "nav a")]  # fmt: skip
+    assert toc and all(d.find_elements("id", t) for t in toc), toc
+    link = d.find_element("css selector", 'a[href="review.html"]')
+    link.click()
+    assert d.execute_script("return !!window.slamrelReview"), d.current_url
+    assert d.execute_script("return slamrelReview.pairs().length") > 0
