@@ -13,7 +13,8 @@
   // status: "proposed" (undecided), "accepted", "rejected", "added" (drawn by hand)
   const pairs = DATA.pairs.estimate.map((e, k) => ({
     e, r: DATA.pairs.reference[k], residual: DATA.pairs.residual[k],
-    margin: DATA.pairs.margin[k], suspicion: DATA.pairs.suspicion[k],
+    // null in the JSON: no second candidate (margin) / a second one at distance 0 (suspicion)
+    margin: DATA.pairs.margin[k], suspicion: DATA.pairs.suspicion[k] ?? Infinity,
     status: "proposed", proposed: true,
   }));
   const estIndex = new Map(EST.ids.map((id, k) => [id, k]));
@@ -271,7 +272,7 @@
   }
   // Read a CSV written by this page or by `map-compare --write-association`; resume from it.
   function loadCsv(text) {
-    const open = new Set(), want = new Map();
+    const open = new Set(), want = new Map(), seenE = new Set(), seenR = new Set();
     let header = false;
     const lines = text.split(/\r?\n/);
     for (let n = 0; n < lines.length; n++) {
@@ -293,10 +294,9 @@
       const e = estIndex.get(Number(f[0])), r = refIndex.get(Number(f[1]));
       if (e === undefined) throw new Error(`${where}: unknown estimated landmark id ${f[0]}`);
       if (r === undefined) throw new Error(`${where}: unknown reference landmark id ${f[1]}`);
-      for (const [key, v] of want) {
-        if (v[0] === e) throw new Error(`${where}: estimated landmark ${f[0]} is associated twice`);
-        if (v[1] === r) throw new Error(`${where}: reference landmark ${f[1]} is associated twice`);
-      }
+      if (seenE.has(e)) throw new Error(`${where}: estimated landmark ${f[0]} is associated twice`);
+      if (seenR.has(r)) throw new Error(`${where}: reference landmark ${f[1]} is associated twice`);
+      seenE.add(e); seenR.add(r);
       want.set(`${f[0]}:${f[1]}`, [e, r]);
     }
     if (!header) throw new Error("expected the header 'estimate,reference'");
@@ -426,7 +426,7 @@
   new ResizeObserver(() => { resize(); render(); }).observe(canvas);
 
   // --------------------------------------------------------------------------------- start
-  const maxRes = Math.max(C, ...DATA.pairs.residual.filter(Number.isFinite));
+  const maxRes = DATA.pairs.residual.reduce((a, b) => Math.max(a, b), C);
   $("min-residual").max = String(maxRes);
   $("legend").innerHTML = BINS.map((c, k) =>
     `<span class="swatch" style="background:${c}"></span>`).join("") +

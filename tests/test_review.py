@@ -190,3 +190,31 @@ def test_run_report_links_the_review(tmp_path):
     assert '<a href="review.html">' in html.read_text()
     blob = page_data((html.parent / "review.html").read_text())
     assert blob["pairs"]["estimate"]  # the SLAM map against the true landmarks
+
+
+@pytest.mark.parametrize("kind", ["missing", "empty", "binary", "words", "nan", "folder"])
+def test_hostile_inputs_give_one_clean_error(tmp_path, rng, capsys, kind):
+    est, ref = _write_maps(tmp_path, rng)
+    bad = {
+        "missing": tmp_path / "missing.csv",
+        "empty": tmp_path / "empty.csv",
+        "binary": tmp_path / "binary.csv",
+        "words": tmp_path / "words.csv",
+        "nan": tmp_path / "nan.csv",
+        "folder": tmp_path,
+    }[kind]
+    (tmp_path / "empty.csv").write_bytes(b"")
+    (tmp_path / "binary.csv").write_bytes(bytes(range(256)))
+    (tmp_path / "words.csv").write_text("hello world\n")
+    (tmp_path / "nan.csv").write_text("landmark,x,y\n1,nan,0\n")
+    out = tmp_path / "out" / "r.html"
+    for argv in (
+        [str(bad), str(ref)],
+        [str(est), str(bad)],
+        [str(est), str(ref), "--associate", str(bad)],
+    ):
+        code = main(["review", *argv, "-o", str(out), "-q"])
+        err = capsys.readouterr().err
+        assert code == 3 and err.startswith("slamrel review: error: "), (argv, err)
+        assert len(err.strip().splitlines()) == 1 and "np.float64" not in err, err
+        assert not out.exists()

@@ -34,9 +34,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument(
         "--associate",
-        default="auto",
+        default="id",
         metavar="id|auto|FILE",
-        help="the proposal to review, as in map-compare (default: auto)",
+        help="the proposal to review, as in map-compare: by id, automatic (alignment and "
+        "optimal assignment within --cutoff) or an association CSV (default: id)",
     )
     p.add_argument(
         "--cutoff",
