@@ -229,6 +229,7 @@
     $("list-note").textContent = order.length > LIST_MAX
       ? `the ${LIST_MAX} most suspicious of ${order.length} pairs in the filter`
       : `${order.length} pairs in the filter`;
+    listUnmatched(estUsed, refUsed);
     if (selected >= 0) {
       const p = pairs[selected];
       $("pair-info").textContent = `estimate ${EST.ids[p.e]} ↔ reference ${REF.ids[p.r]}: ` +
@@ -239,6 +240,26 @@
     }
     $("draw").classList.toggle("on", drawing);
     canvas.classList.toggle("drawing", drawing);
+  }
+  // Spurious estimates with the nearest missed reference landmark: the usual correction is to
+  // pair the two (click a row, then the reference landmark).
+  function listUnmatched(estUsed, refUsed) {
+    const est = [], ref = [];
+    estUsed.forEach((u, k) => { if (!u) est.push(k); });
+    refUsed.forEach((u, k) => { if (!u) ref.push(k); });
+    const rows = est.slice(0, LIST_MAX).map((e) => {
+      let best = -1, bestD = Infinity;
+      for (const r of ref) {
+        const d = Math.hypot(EST.x[e] - REF.x[r], EST.y[e] - REF.y[r]);
+        if (d < bestD) { bestD = d; best = r; }
+      }
+      return [e, best, bestD];
+    }).sort((a, b) => a[2] - b[2]);
+    $("unmatched").tBodies[0].innerHTML = rows.map(([e, r, d]) =>
+      `<tr data-e="${e}"><td>${EST.ids[e]}</td><td>${r < 0 ? "–" : REF.ids[r]}</td>` +
+      `<td>${fmt(d)}</td></tr>`).join("");
+    $("unmatched-note").textContent = `${est.length} estimated and ${ref.length} reference ` +
+      "landmarks without a pair; click a row, then a reference landmark, to pair them";
   }
   function say(text) { $("status").textContent = text; }
 
@@ -404,6 +425,16 @@
     file.text().then((text) => {
       try { loadCsv(text); say(`loaded ${file.name}`); } catch (err) { say(`${file.name}: ${err.message}`); }
     });
+  });
+  $("unmatched").addEventListener("click", (ev) => {
+    const tr = ev.target.closest("tr[data-e]");
+    if (!tr) return;
+    const e = Number(tr.dataset.e);
+    view.cx = EST.x[e]; view.cy = EST.y[e];
+    view.scale = Math.max(view.scale, Math.min(view.w, view.h) / (10 * C));
+    drawing = true; picked = { side: "e", row: e }; selected = -1;
+    say(`estimate ${EST.ids[e]} picked: now click a reference landmark (Esc cancels)`);
+    refresh();
   });
   $("pairs").addEventListener("click", (ev) => {
     const tr = ev.target.closest("tr[data-k]");

@@ -140,6 +140,9 @@ def test_reject_draw_save_and_map_compare_reads_it(browser, tmp_path, rng, capsy
     assert "rejected" not in _status(d).values()
     _keys(d, "r")  # undo selected the pair it restored
     assert [k for k, s in _status(d).items() if s == "rejected"] == rejected
+    # the unmatched list proposes the correction: estimate 100 is 0.4 m from reference 28
+    rows = [r.text.split() for r in d.find_elements("css selector", "#unmatched tbody tr")]
+    assert rows[0][:2] == ["100", "28"] and abs(float(rows[0][2]) - 0.4) < 0.15, rows
     # mouse: draw the pair estimate 100 - reference 28 by clicking the two landmarks
     d.find_element("id", "fit").click()
     d.find_element("id", "draw").click()
