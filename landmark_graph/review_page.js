@@ -271,7 +271,8 @@
     const spurious = EST.ids.filter((_, k) => !usedE.has(k));
     const open = act.filter((p) => p.status === "proposed").map((p) => `${EST.ids[p.e]}:${REF.ids[p.r]}`);
     const lines = [
-      `# slamrel association review: estimate ${DATA.names.estimate}, reference ${DATA.names.reference}`,
+      `# slamrel association review: estimate ${oneLine(DATA.names.estimate)}, ` +
+        `reference ${oneLine(DATA.names.reference)}`,
       `# missed reference ids: ${missed.join(" ")}`,
       `# spurious estimate ids: ${spurious.join(" ")}`,
       `# unreviewed: ${open.join(" ")}`,
@@ -280,6 +281,7 @@
     ];
     return lines.join("\n") + "\n";
   }
+  const oneLine = (text) => String(text).replace(/\s+/g, " ");  // a comment stays one line
   let downloadUrl = null;
   function save() {
     const text = csv();

@@ -73,6 +73,12 @@ def _shot(d, path: Path, element=None) -> Path:
     return path
 
 
+def _no_errors(d) -> None:
+    """The page logged no error (an exception in a handler would show here)."""
+    severe = [e["message"] for e in d.get_log("browser") if e["level"] == "SEVERE"]
+    assert not severe, severe
+
+
 def _open(d, page: Path) -> None:
     d.get(page.resolve().as_uri())
     assert d.execute_script("return !!window.slamrelReview"), d.get_log("browser")
@@ -174,6 +180,7 @@ def test_reject_draw_save_and_map_compare_reads_it(browser, tmp_path, rng, capsy
     d.execute_script("return new Promise(r => setTimeout(r, 200))")
     assert _status(d) == status
     assert d.execute_script("return slamrelReview.csv()") == text
+    _no_errors(d)
 
 
 def test_two_thousand_landmarks_paint_and_filter_within_a_second(browser, tmp_path, rng):
@@ -218,6 +225,7 @@ def test_two_thousand_landmarks_paint_and_filter_within_a_second(browser, tmp_pa
         "rejected"
     ) == 1
     _shot(d, tmp_path / "review_2000.png")
+    _no_errors(d)
     print(
         f"review page, {n} landmarks per map: first paint {t['firstPaint']:.0f} ms, first "
         f"frame {t['firstFrame']:.0f} ms, render {t['lastRender']:.1f} ms; filter change "
