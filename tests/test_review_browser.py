@@ -183,6 +183,56 @@ def test_reject_draw_save_and_map_compare_reads_it(browser, tmp_path, rng, capsy
     _no_errors(d)
 
 
+def test_pan_zoom_and_shift_click(browser, tmp_path, rng):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.keys import Keys
+
+    d = browser
+    est, ref = _maps(tmp_path, rng)
+    page = tmp_path / "review.html"
+    assert main(["review", str(est), str(ref), "-o", str(page), "-q"]) == 0
+    _open(d, page)
+    canvas = d.find_element("id", "map")
+
+    def at(landmark):
+        return np.array(d.execute_script(f"return slamrelReview.screenOf('reference', {landmark})"))
+
+    a0, b0 = at(0), at(29)
+    # drag: everything moves with the mouse
+    ActionChains(d).move_to_element(canvas).click_and_hold().move_by_offset(60, 0).move_by_offset(
+        0, 40
+    ).release().perform()
+    np.testing.assert_allclose(at(0) - a0, [60, 40], atol=1.5)
+    # "+" zooms by 1.5 about the centre: distances on screen grow by 1.5
+    d.find_element("tag name", "body").send_keys("+")
+    assert np.linalg.norm(at(29) - at(0)) == pytest.approx(1.5 * np.linalg.norm(b0 - a0), rel=1e-6)
+    # the wheel zooms about the cursor: the landmark under it stays put
+    w, h = d.execute_script("return slamrelReview.canvasSize()")
+    k = min(range(30), key=lambda k: np.linalg.norm(at(k) - [w / 2, h / 2]))  # on screen
+    x, y = at(k)
+    from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
+
+    origin = ScrollOrigin.from_element(canvas, int(round(x - w / 2)), int(round(y - h / 2)))
+    ActionChains(d).scroll_from_origin(origin, 0, -100).perform()
+    d.execute_script("return new Promise(r => requestAnimationFrame(() => r()))")
+    np.testing.assert_allclose(at(k), [x, y], atol=1.5)
+    assert np.linalg.norm(at(29) - at(0)) > 1.5 * np.linalg.norm(b0 - a0) * 1.1
+    # Shift+click twice pairs without the draw button; Esc cancels a half-drawn pair
+    d.find_element("id", "fit").click()
+    for side, landmark in (("estimate", 100), ("reference", 28)):
+        x, y = d.execute_script(f"return slamrelReview.screenOf('{side}', {landmark})")
+        ActionChains(d).key_down(Keys.SHIFT).move_to_element_with_offset(
+            canvas, int(round(x - w / 2)), int(round(y - h / 2))
+        ).click().key_up(Keys.SHIFT).perform()
+    assert _status(d).get((100, 28)) == "added"
+    _keys(d, "d")
+    _click_landmark(d, "estimate", 0)
+    _keys(d, Keys.ESCAPE)
+    _click_landmark(d, "reference", 29)  # a plain click now: selects, pairs nothing
+    assert sum(s == "added" for s in _status(d).values()) == 1
+    _no_errors(d)
+
+
 def test_two_thousand_landmarks_paint_and_filter_within_a_second(browser, tmp_path, rng):
     d = browser
     n = 2000
