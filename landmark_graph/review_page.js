@@ -118,8 +118,8 @@
       const p = pairs[k];
       view.cx = (EST.x[p.e] + REF.x[p.r]) / 2;
       view.cy = (EST.y[p.e] + REF.y[p.r]) / 2;
-      const span = Math.max(4 * p.residual, 6 * C);
-      view.scale = Math.max(view.scale, Math.min(view.w, view.h) / span);
+      // frame the pair with its neighbourhood: 4 residuals, at least 6 c across
+      view.scale = Math.min(view.w, view.h) / Math.max(4 * p.residual, 6 * C);
     }
     refresh();
   }
