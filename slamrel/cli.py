@@ -26,6 +26,7 @@ COMMAND_MODULES = (
     "slamrel.commands.recover",
     "slamrel.commands.relations",
     "slamrel.commands.map_compare",
+    "slamrel.commands.review",
     "slamrel.commands.simulate",
     "slamrel.commands.compare",
     "slamrel.commands.graph",

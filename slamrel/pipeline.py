@@ -41,6 +41,7 @@ from relation_metric.trajectory import Trajectory
 from slamrel.figures import nees_figure, trajectories_figure
 from slamrel.report import Figure, Section, Table, figure_png, render_html
 from slamrel.simulate import slam_bundle, world_bundle
+from slamrel.verdict import run_verdict
 from slamrel.worlds import make_world
 
 __all__ = ["RunResult", "default_relations", "run_pipeline", "write_report"]
@@ -294,7 +295,15 @@ def _stats_table(result: RunResult, part: str) -> Table:
     unit = "m" if part == "translation" else "rad"
     return Table(
         f"{part} relation error [{unit}]",
-        ["estimate", "relations", "abs mean", "abs std", "sqr mean", "abs max", "count"],
+        [
+            "estimate",
+            "relations",
+            f"abs mean [{unit}]",
+            f"abs std [{unit}]",
+            f"sqr mean [{unit}²]",
+            f"abs max [{unit}]",
+            "count",
+        ],
         rows,
     )
 
@@ -360,6 +369,22 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
         figs += map_figs
         for k, fig in enumerate(figs):
             (tmp / f"figure_{k + 1}.png").write_bytes(fig.png)
+        review_links = []
+        if result.map_comparison is not None:
+            from landmark_graph.review import write_review
+
+            mc = result.map_comparison
+            write_review(
+                tmp / "review.html", mc.estimate, mc.reference, mc.association, cutoff=mc.cutoff,
+                names=("SLAM map", "true landmarks"), title=f"slamrel review — {result.name}",
+            )  # fmt: skip
+            review_links.append(
+                (
+                    "review.html",
+                    "Review the landmark association in a browser (accept, reject or draw "
+                    "pairs; save the CSV for slamrel map-compare --associate FILE)",
+                )
+            )
         sections = [
             Section(
                 f"slamrel run: {result.name}",
@@ -435,9 +460,15 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
                         ),
                     ],
                     figures=figs[3:],
+                    links=review_links,
                 )
             )
         write_text_atomic(
-            tmp / "report.html", render_html(f"slamrel report — {result.name}", sections)
+            tmp / "report.html",
+            render_html(
+                f"slamrel report — {result.name}",
+                sections,
+                verdict=run_verdict(metrics, {k: v[1] for k, v in result.nees.items()}),
+            ),
         )
     return target / "report.html"

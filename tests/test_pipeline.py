@@ -21,17 +21,17 @@ def test_run_writes_a_consistent_report(tmp_path):
     assert set(metrics["trajectory"]["by_relation_set"]) == {"consecutive", "loops", "global"}
     assert "dead_reckoning" in metrics
     html = (out / "report.html").read_text()
-    # every mean in the report's translation table equals metrics.json (6 significant digits)
+    # every mean in the report's translation table equals metrics.json (3 significant digits)
     trans_table = html.split("translation relation error")[1].split("</table>")[0]
     cells = re.findall(r"<tr><td>(\w+)</td><td>(\w+)</td><td>([^<]+)</td>", trans_table)
     shown = {(a, b): float(c) for a, b, c in cells}
     source = metrics["trajectory_source"]
     for name, key in ((source, "trajectory"), ("dead_reckoning", "dead_reckoning")):
         assert shown[(name, "all")] == pytest.approx(
-            metrics[key]["translation"]["abs"]["mean"], rel=1e-5
+            metrics[key]["translation"]["abs"]["mean"], rel=5e-3
         )
         for rs, ev in metrics[key]["by_relation_set"].items():
-            assert shown[(name, rs)] == pytest.approx(ev["translation"]["abs"]["mean"], rel=1e-5)
+            assert shown[(name, rs)] == pytest.approx(ev["translation"]["abs"]["mean"], rel=5e-3)
     # SLAM beats dead reckoning on global relations
     g = metrics["trajectory"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]
     assert g < metrics["dead_reckoning"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]

@@ -46,7 +46,7 @@ def test_render_html_tables_and_figures_are_embedded():
     text = render_html("report", [sec])
     parser = _Collect()
     parser.feed(text)
-    assert parser.cells == ["translation", "0.0123457", "5", "rot", "–", "0"]
+    assert parser.cells == ["translation", "0.0123", "5", "rot", "–", "0"]  # 3 significant digits
     assert "&lt;recovered&gt;" in text and "a &amp; b" in text
     assert "data:image/png;base64," in text and "http" not in text  # self-contained
 

@@ -44,7 +44,17 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--json", metavar="F")
     p.add_argument("--per-edge", metavar="F.csv")
     p.add_argument(
-        "--plot", type=opt.figure_file, metavar="F.png", help="write a figure (.png/.svg/.pdf)"
+        "--plot",
+        type=opt.figure_file,
+        metavar="F.png",
+        help="write a figure (.png/.svg/.pdf); --review F.html writes an interactive page to "
+        "check and correct the association",
+    )
+    p.add_argument(
+        "--review",
+        metavar="F.html",
+        help="write the association review page (see 'slamrel review'): accept, reject or draw "
+        "pairs in a browser, save the CSV, pass it back with --associate F.csv",
     )
     p.add_argument(
         "--write-association",
@@ -59,7 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def run(args: argparse.Namespace) -> int:
     assoc_file = None if args.associate in ("id", "auto") else args.associate
     check_outputs(
-        [args.json, args.per_edge, args.plot, args.write_association],
+        [args.json, args.per_edge, args.plot, args.write_association, args.review],
         [args.estimate, args.reference, assoc_file],
     )
     est = read_map(args.estimate)
@@ -104,6 +114,14 @@ def run(args: argparse.Namespace) -> int:
         from relation_metric.plots import save_figure
 
         save_figure(map_figure(res), Path(args.plot))
+    if args.review:
+        from landmark_graph.review import write_review
+
+        names = (Path(args.estimate).name, Path(args.reference).name)
+        write_review(
+            args.review, est, ref, res.association, cutoff=args.cutoff, names=names,
+            title=f"slamrel review — {names[0]} against {names[1]}",
+        )  # fmt: skip
     if not args.quiet:
         a = out["association"]
         print(
@@ -132,4 +150,8 @@ def run(args: argparse.Namespace) -> int:
             f"OSPA {res.ospa:.4f} m, GOSPA {res.gospa:.4f} m "
             f"(c = {res.cutoff}, p = {res.order}; {out['ospa']['frame']})"
         )
+        if args.review:
+            print(f"review the association: {args.review} (open it in a browser)")
+        elif args.plot:
+            print("to check and correct the association in a browser: --review F.html")
     return 0

@@ -1,0 +1,119 @@
+"""The report's verdict block: each rule against hand-made metrics, and how it is rendered."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slamrel.report import Section, _number, render_html
+from slamrel.verdict import run_verdict, stretches
+
+
+def _ev(mean: float, relations: int = 100) -> dict:
+    return {"relations": relations, "translation": {"abs": {"mean": mean}}}
+
+
+def _metrics(*, ours=0.1, dr=1.0, online=0.12, inside=0.95, edge=0.05, ospa=0.1, gated=0.0):
+    return {
+        "trajectory_source": "recovered",
+        "trajectory": _ev(ours),
+        "dead_reckoning": _ev(dr),
+        "online": _ev(online),
+        "nees": {"recovered": {"mean": 3.1, "band": [0.2, 9.3], "inside": inside, "dof": 3}},
+        "map": {
+            "translation": {"abs": {"mean": edge}},
+            "ospa": {"value": ospa, "c": 1.0},
+            "association": {"matched": 10, "missed": 1, "spurious": 0},
+        },
+        "recovery": {"poses": 50, "measurements": {"gated_fraction": gated}},
+    }
+
+
+def _levels(v) -> dict[str, str]:
+    return {j.what: j.level for j in v.lines}
+
+
+def test_all_green_and_the_evidence():
+    v = run_verdict(_metrics(), {"recovered": np.ones(50)})
+    assert set(_levels(v).values()) == {"green"} and v.level == "green"
+    assert len(v.lines) == 7
+    assert (
+        v.evidence
+        == "Based on 100 relations, 50 poses, 10 matched landmarks (1 missed, 0 spurious)."
+    )
+
+
+@pytest.mark.parametrize(
+    ("change", "what", "level"),
+    [
+        ({"ours": 0.5}, "recovered vs dead reckoning", "green"),  # ratio 0.5: boundary
+        ({"ours": 0.51}, "recovered vs dead reckoning", "amber"),
+        ({"ours": 1.2, "online": 1.2}, "recovered vs dead reckoning", "red"),
+        ({"online": 0.2}, "online vs recovered", "green"),  # factor 2
+        ({"online": 0.3}, "online vs recovered", "amber"),
+        ({"online": 0.02}, "online vs recovered", "red"),  # factor 5 the other way
+        ({"inside": 0.8}, "consistency (recovered)", "amber"),
+        ({"inside": 0.5}, "consistency (recovered)", "red"),
+        ({"edge": 0.2}, "map edge error", "amber"),
+        ({"edge": 0.31}, "map edge error", "red"),
+        ({"ospa": 0.4}, "map OSPA", "amber"),
+        ({"ospa": 0.6}, "map OSPA", "red"),
+        ({"gated": 0.03}, "gated measurements", "amber"),
+        ({"gated": 0.2}, "gated measurements", "red"),
+    ],
+)
+def test_each_rule_and_the_worst_line_wins(change, what, level):
+    v = run_verdict(_metrics(**change), {"recovered": np.ones(50)})
+    assert _levels(v)[what] == level
+    order = ("green", "amber", "red")
+    assert v.level == max(_levels(v).values(), key=order.index)
+
+
+def test_stretches_are_runs_above_the_band():
+    nees = np.array([1, 20, 20, 20, 1, 20, 20, 1, 20, 20, 20, 20, 1.0])
+    assert stretches(nees, 9.3) == [3, 4]  # the run of 2 is too short
+    assert stretches(np.full(5, 20.0), 9.3) == [5]
+    assert stretches(np.empty(0), 9.3) == []
+    curve = np.ones(100)
+    curve[10:15] = 50  # 5 % of the steps
+    assert _levels(run_verdict(_metrics(), {"recovered": curve}))["inconsistent stretches"] == (
+        "amber"
+    )
+    curve[40:60] = 50  # 25 %
+    v = run_verdict(_metrics(), {"recovered": curve})
+    assert _levels(v)["inconsistent stretches"] == "red"
+    assert "longest 20 steps" in next(j.value for j in v.lines if j.what.startswith("incons"))
+
+
+def test_missing_parts_are_left_out():
+    m = _metrics()
+    del m["online"], m["map"], m["dead_reckoning"]
+    v = run_verdict(m)
+    assert list(_levels(v)) == ["consistency (recovered)", "gated measurements"]
+
+
+@pytest.mark.parametrize(
+    ("value", "text"),
+    [
+        (0.0565346, "0.0565"),
+        (0.00182431, "0.00182"),
+        (2089.4, "2089"),
+        (12345.6, "12346"),
+        (1.0, "1"),
+        (0.0, "0"),
+        (-0.123456, "-0.123"),
+        (float("nan"), "–"),
+        (float("inf"), "∞"),
+    ],
+)
+def test_numbers_in_tables_have_three_significant_digits(value, text):
+    assert _number(value) == text
+
+
+def test_verdict_comes_first_then_the_contents():
+    v = run_verdict(_metrics(gated=0.2), {"recovered": np.ones(50)})
+    text = render_html("r", [Section("One <a>"), Section("Two")], verdict=v)
+    assert text.index('id="verdict"') < text.index("Contents") < text.index('id="s0"')
+    assert '<a href="#s0">One &lt;a&gt;</a>' in text and '<a href="#s1">Two</a>' in text
+    assert 'class="verdict red"' in text
+    assert "green ≤ 1 %, amber ≤ 5 %, red above" in text  # the rule is written next to it
