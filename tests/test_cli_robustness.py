@@ -61,6 +61,8 @@ BAD_OPTIONS = [
     (["example", "-o", "o"], "--seed", "1.5"),
     (["evaluate", "r", "e"], "--plot", "x.xyz"),
     (["map-compare", "a", "b"], "--plot", "figure"),
+    (["review", "a", "b", "-o", "r.html"], "--cutoff", "-1"),
+    (["review", "a", "b", "-o", "r.html"], "--seed", "-5"),
 ]
 
 
@@ -109,6 +111,7 @@ def _commands(f, out):
         "relations": ["relations", "generate", good, "--strategy", "consecutive", "-o", out],
         "recover": ["recover", good, "-o", out],
         "map-compare": ["map-compare", good, good],
+        "review": ["review", good, good, "-o", out + ".html"],
         "slam": ["slam", good, "-o", out],
         "run": ["run", good, "-o", out],
         "compare": ["compare", f"d:a={good}", "-o", out],
