@@ -60,6 +60,9 @@ __all__ = [
 Array = NDArray[np.float64]
 USED, GATED, UNASSOCIATED, OUTSIDE = 0, 1, 2, 3
 ROBUST = (None, "huber", "cauchy")
+#: Consecutive outlying innovations after which the filter is re-entered (and a stretch of
+#: disagreement between map and log is reported).
+DEFAULT_MAX_OUTLIER_RUN = 10
 #: Kinds of :attr:`FilterResult.events`.
 REENTRY, SKIPPED_S, SKIPPED_P = 0, 1, 2
 EVENT_KINDS = {
@@ -309,7 +312,7 @@ def run_filter(
     inp: FilterInput,
     *,
     gate: float | None = None,
-    max_outlier_run: int | None = 100,
+    max_outlier_run: int | None = DEFAULT_MAX_OUTLIER_RUN,
     on_divergence: str = "reenter",
     robust: str | None = None,
     robust_threshold: float | None = None,
@@ -744,21 +747,41 @@ def _robust_weight(  # type: ignore[no-untyped-def]
 ) -> float:
     """Fixed point ``w = w(d(w))``, ``d(w)² = yᵀ (S + (1/w − 1) R_eff)⁻¹ y``, on scalars.
 
-    Damped in the log domain (``w ← √(w · w(d(w)))``) so that the Cauchy-type weight, whose
-    plain iteration has slope −1 when the sensor noise dominates ``S``, converges too.
+    ``g(u) = u − log w(d(eᵘ))`` is increasing in ``u = log w`` (``d`` grows with ``w``);
+    ``g(0) > 0`` and ``g(log w(d(1))) ≤ 0`` bracket the root, found by the Illinois variant of
+    regula falsi to ``1e-12`` in ``u``.
     """
-    w = 1.0
-    for _ in range(8):
-        f = 1.0 / w - 1.0
+
+    def g(u: float) -> float:
+        f = math.exp(-u) - 1.0
         w00, w01, w11 = s00 + f * re00, s01 + f * re01, s11 + f * re11
-        det = w00 * w11 - w01 * w01
-        d2 = (y0 * y0 * w11 - 2.0 * y0 * y1 * w01 + y1 * y1 * w00) / det
-        target = robust_weight_of_distance(cauchy, c, math.sqrt(max(d2, 0.0)))
-        new = math.sqrt(w * target)
-        if abs(new - w) <= 1e-9 * w:
-            return new
-        w = new
-    return w
+        d2 = (y0 * y0 * w11 - 2.0 * y0 * y1 * w01 + y1 * y1 * w00) / (w00 * w11 - w01 * w01)
+        return u - math.log(robust_weight_of_distance(cauchy, c, math.sqrt(max(d2, 1e-300))))
+
+    hi, g_hi = 0.0, g(0.0)
+    if g_hi <= 0.0:
+        return 1.0
+    lo = hi - g_hi  # log w(d(1))
+    g_lo = g(lo)
+    side = 0
+    for _ in range(100):
+        if g_lo >= 0.0 or hi - lo <= 1e-12:
+            break
+        u = (lo * g_hi - hi * g_lo) / (g_hi - g_lo)
+        gu = g(u)
+        if gu > 0.0:
+            hi, g_hi = u, gu
+            if side == -1:
+                g_lo *= 0.5
+            side = -1
+        elif gu < 0.0:
+            lo, g_lo = u, gu
+            if side == 1:
+                g_hi *= 0.5
+            side = 1
+        else:
+            return math.exp(u)
+    return math.exp(lo if g_lo >= 0.0 else 0.5 * (lo + hi))
 
 
 def _diverged(inp: FilterInput, t: float, j: int, why: str) -> None:

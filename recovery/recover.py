@@ -25,6 +25,7 @@ from scipy.stats import chi2
 
 from recovery.bundle import Bundle
 from recovery.ekf import (
+    DEFAULT_MAX_OUTLIER_RUN,
     EVENT_KINDS,
     GATED,
     OUTSIDE,
@@ -55,9 +56,6 @@ __all__ = [
 Array = NDArray[np.float64]
 METHODS = ("filter", "smoother", "batch")
 MAP_MODES = ("joint", "marginal", "ignore")
-#: Consecutive outlying innovations after which the filter is re-entered (and a stretch of
-#: disagreement between map and log is reported).
-DEFAULT_MAX_OUTLIER_RUN = 10
 
 
 @dataclass(frozen=True)
@@ -450,7 +448,8 @@ def divergence_summary(
             "a stretch is a run of at least max_outlier_run consecutive measurements with NIS "
             "beyond the outlier bound (runs fewer than max_outlier_run measurements apart "
             "merged); the filter is re-entered after each such run by inflating the pose "
-            "covariance by max(1, median NIS of the run / outlier bound) around its current estimate"
+            "covariance by max(1, median NIS of the run / outlier bound) around its current "
+            "estimate"
             if max_outlier_run
             else "stretches reported with runs of "
             f"{DEFAULT_MAX_OUTLIER_RUN} outliers; the filter is never re-entered"
