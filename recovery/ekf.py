@@ -337,8 +337,9 @@ def run_filter(
         ``"reenter"`` (default): the re-entry rule — right after the run's last measurement,
         the pose covariance (and the Schmidt cross-covariance, by the square root) is inflated
         by ``α = max(1, median NIS of the run / outlier bound)``, the factor that would have
-        brought the run's median innovation back to the bound, around the current mean; the
-        run counter restarts, so a lasting
+        brought the run's median innovation back to the bound, around the current mean
+        (capped so that the position variance stays below the map's extent squared and the
+        heading variance below π²); the run counter restarts, so a lasting
         disagreement inflates again every ``max_outlier_run`` outliers. A measurement whose
         innovation covariance or posterior covariance is not positive definite is skipped
         (counted as gated) and recorded. Every event is returned in :attr:`FilterResult.events`.
@@ -422,6 +423,9 @@ def run_filter(
         blocks = inp.map_marginals
         pxm = None
     lm_xy = inp.map_xy.tolist()
+    # re-entry never inflates the position variance beyond the map's extent squared, nor the
+    # heading variance beyond π² (a pose that uncertain is not localised at all)
+    ext2 = max(float(np.ptp(inp.map_xy, axis=0).max()) if m else 0.0, 1.0) ** 2
     lm_c = blocks.reshape(-1, 4)[:, [0, 1, 3]].tolist()
     rr, rb = float(inp.r[0, 0]), float(inp.r[1, 1])
     zz = inp.meas_z.tolist()
@@ -577,7 +581,12 @@ def run_filter(
                                 f"{div_thr:.2f} (since {inp.label(run_start)})",
                             )
                         run_nis.sort()
-                        pending = max(1.0, run_nis[len(run_nis) // 2] / div_thr)
+                        pending = min(
+                            run_nis[len(run_nis) // 2] / div_thr,
+                            ext2 / max(p00, p11, 1e-300),
+                            math.pi * math.pi / max(p22, 1e-300),
+                        )
+                        pending = max(1.0, pending)
                         ev_k.append(k), ev_j.append(j), ev_kind.append(REENTRY)
                         ev_a.append(pending)
                         outlier_run = 0

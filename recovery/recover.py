@@ -402,7 +402,7 @@ def recover(
             br = refine(inp, poses, used=fr.status == USED, weights=weights)
             poses, covs, iterations = br.poses, br.covariances, br.iterations
             extra["batch"] = {"cost_initial": br.cost_initial, "cost_final": br.cost_final}
-    _check_finite(poses, covs, inp.times)
+    covs, n_repaired = _check_finite(poses, covs, inp.times, repair=on_divergence != "raise")
     traj = Trajectory(inp.times, poses)
     nees = None
     if bundle.groundtruth is not None:
@@ -411,6 +411,7 @@ def recover(
     min_run = max_outlier_run if max_outlier_run else DEFAULT_MAX_OUTLIER_RUN
     stretches = disagreement_stretches(fr, inp, min_run=min_run)
     divergence = divergence_summary(fr, inp, stretches, max_outlier_run=max_outlier_run)
+    divergence["covariances_repaired"] = n_repaired
     return Recovery(
         method=method,
         trajectory=traj,
@@ -468,17 +469,36 @@ def divergence_summary(
     }
 
 
-def _check_finite(poses: Array, covs: Array, times: Array) -> None:
+def _check_finite(
+    poses: Array, covs: Array, times: Array, *, repair: bool = False
+) -> tuple[Array, int]:
+    """Non-finite poses raise; a non-PSD smoothed/batch covariance is repaired or raises.
+
+    The RTS recursion subtracts covariances that, after a re-entry's inflation, differ by
+    orders of magnitude; rounding can leave a slightly indefinite result. With ``repair`` each
+    such covariance is replaced by its projection onto the PSD cone (symmetrised, negative
+    eigenvalues set to zero) and the number of repaired poses is returned.
+    """
     from relation_metric.errors import DivergenceError
 
     bad = ~(np.isfinite(poses).all(axis=1) & np.isfinite(covs).all(axis=(1, 2)))
+    n_rep = 0
     if not bad.any():
         ev = np.linalg.eigvalsh(covs)
         scale = np.maximum(np.abs(ev).max(axis=1), 1e-300)
-        bad = ev[:, 0] < -1e-9 * scale
+        neg = ev[:, 0] < -1e-9 * scale
+        if neg.any() and repair:
+            sym = 0.5 * (covs[neg] + covs[neg].transpose(0, 2, 1))
+            w, v = np.linalg.eigh(sym)
+            covs = covs.copy()
+            covs[neg] = (v * np.maximum(w, 0.0)[:, None, :]) @ v.transpose(0, 2, 1)
+            n_rep = int(neg.sum())
+        else:
+            bad = neg
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise DivergenceError(
             f"recovery diverged at t={float(times[k]):.6f} s (pose {k}): non-finite or non-PSD "
             "covariance"
         )
+    return covs, n_rep

@@ -164,6 +164,7 @@ def run_pipeline(
     max_outlier_run: int | None = DEFAULT_MAX_OUTLIER_RUN,
     on_divergence: str = "reenter",
     robust: str | None = None,
+    process_noise_scale: float = 1.0,
 ) -> RunResult:
     """Run the whole chain on a built-in world, or score a SLAM result bundle directory.
 
@@ -172,7 +173,8 @@ def run_pipeline(
     (``../shared/BUNDLE.md``) and scored against its ``groundtruth.csv`` (required) and, when
     present, ``landmarks_groundtruth.csv``; an ``online.csv`` beside it (written by
     ``slamrel slam --store-online``) is scored too. ``max_outlier_run``, ``on_divergence``
-    and ``robust`` are passed to :func:`recovery.recover.recover`.
+    and ``robust`` are passed to :func:`recovery.recover.recover`; ``process_noise_scale`` to
+    :func:`slamrel.simulate.slam_bundle` (worlds only).
     """
     if Path(source).is_dir():
         bundle = read_bundle(source)
@@ -193,8 +195,9 @@ def run_pipeline(
     world = make_world(source, noise=noise, seed=seed, rate=rate)
     log = world_bundle(world)
     bundle, slam = slam_bundle(
-        log, corrupt_fraction=corrupt_fraction, noise_scale=noise_scale, seed=seed
-    )
+        log, corrupt_fraction=corrupt_fraction, noise_scale=noise_scale, seed=seed,
+        process_noise_scale=process_noise_scale,
+    )  # fmt: skip
     return score_bundle(
         bundle, name=f"{source}/{noise}/seed {seed}", seed=seed, method=method,
         max_outlier_run=max_outlier_run, online=slam.online,
