@@ -45,6 +45,7 @@ __all__ = [
     "USED",
     "GATED",
     "ROBUST",
+    "ROBUST_DEFAULTS",
     "REENTRY",
     "EVENT_KINDS",
     "FilterEvents",
@@ -60,6 +61,8 @@ __all__ = [
 Array = NDArray[np.float64]
 USED, GATED, UNASSOCIATED, OUTSIDE = 0, 1, 2, 3
 ROBUST = (None, "huber", "cauchy")
+#: Default ``c`` of each M-estimator on the standardised distance (see ``recover``).
+ROBUST_DEFAULTS = {"huber": 1.5, "cauchy": 1.5}
 #: Consecutive outlying innovations after which the filter is re-entered (and a stretch of
 #: disagreement between map and log is reported).
 DEFAULT_MAX_OUTLIER_RUN = 10

@@ -30,6 +30,7 @@ from recovery.ekf import (
     GATED,
     OUTSIDE,
     REENTRY,
+    ROBUST_DEFAULTS,
     UNASSOCIATED,
     USED,
     FilterInput,
@@ -340,6 +341,7 @@ def recover(
     on_divergence: str = "reenter",
     robust: str | None = None,
     robust_threshold: float | None = None,
+    robust_scale: float | str = "auto",
     progress: bool = False,
 ) -> Recovery:
     """Recover the trajectory of a SLAM run by localisation in its final map.
@@ -366,7 +368,15 @@ def recover(
         smoother (through the filter's gains) and the batch (``refine(weights=...)``) use the
         same weights. The down-weighted fraction is reported in ``counts``.
     robust_threshold : float, optional
-        The M-estimator's ``c`` on the Mahalanobis distance (default ``√χ²₂(0.99)``).
+        The M-estimator's ``c`` on the standardised Mahalanobis distance ``d / ŝ`` (default
+        :data:`ROBUST_DEFAULTS` of the kind).
+    robust_scale : float or "auto"
+        ``ŝ``. ``"auto"`` (default) estimates it as in classical M-estimation, robustly from
+        the data: a first, plain pass of the filter gives ``ŝ² = median NIS / median χ²₂``,
+        so that a filter whose covariances are uniformly mis-scaled (a mis-tuned filter, or
+        a map that disagrees with most of the log) is not mistaken for one with outliers —
+        the more of the log disagrees, the less is down-weighted, and a broken map cannot be
+        weighted away. The filter then runs with ``c_eff = c ŝ``.
     progress : bool
         tqdm bar on the filter's epochs.
 
@@ -379,18 +389,28 @@ def recover(
     if gate is not None and not 0.0 < gate < 1.0:
         raise InputError(f"gate probability must be in (0, 1), got {gate}")
     inp = filter_input(bundle, map_mode=map_mode)
+    kw = dict(gate=gate, max_outlier_run=max_outlier_run, on_divergence=on_divergence)
+    extra: dict[str, object] = {}
+    c_eff = None
+    if robust is not None:
+        c = float(robust_threshold) if robust_threshold is not None else ROBUST_DEFAULTS[robust]
+        if robust_scale == "auto":
+            v = np.asarray(run_filter(inp, **kw).nis)  # type: ignore[arg-type]
+            v = v[np.isfinite(v)]
+            scale = float(np.sqrt(np.median(v) / chi2.ppf(0.5, 2))) if v.size else 1.0
+        else:
+            scale = float(robust_scale)
+        c_eff = c * scale
+        extra["robust"] = {"kind": robust, "threshold": c, "scale": scale, "effective": c_eff}
     fr: FilterResult = run_filter(
         inp,
-        gate=gate,
-        max_outlier_run=max_outlier_run,
-        on_divergence=on_divergence,
         robust=robust,
-        robust_threshold=robust_threshold,
+        robust_threshold=c_eff,
         progress=progress,
+        **kw,  # type: ignore[arg-type]
     )
     weights = None if robust is None else fr.weights
     iterations = 0
-    extra: dict[str, object] = {}
     if method == "filter":
         poses, covs = fr.poses, fr.covariances
     else:

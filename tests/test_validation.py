@@ -26,3 +26,38 @@ def test_recovered_ranks_runs_like_online(capsys):
     # the final map is at least as good as the map the filter had online: recovered errors
     # are not larger than online ones beyond a small margin, and never an order smaller
     assert ratio.max() < 1.25 and ratio.min() > 0.25
+
+
+def test_tuning_study_on_a_small_grid():
+    """The grid's bookkeeping on 2 × 2 runs of a small world (fast; the full grid is slow)."""
+    from slamrel.validation import tuning_study
+
+    s = tuning_study("simple1", noise="a", seeds=(0,), process_noise_scales=(0.1, 1.0),
+                     corruptions=(0.0, 0.05))  # fmt: skip
+    assert [(c["process_noise_scale"], c["corrupt_fraction"]) for c in s.configs] == [
+        (0.1, 0.0), (0.1, 0.05), (1.0, 0.0), (1.0, 0.05)
+    ]  # fmt: skip
+    assert s.broken.tolist() == [False, True, False, True]
+    np.testing.assert_allclose(s.ratio("global"), s.recovered["global"] / s.online["global"])
+    # separation oracle: count the pairs by hand
+    b, h = s.recovered["global"][[1, 3]], s.recovered["global"][[0, 2]]
+    assert s.separation() == pytest.approx(np.mean([x > y for x in b for y in h]))
+    assert s.disagreement.shape == (4,) and ((s.disagreement >= 0) & (s.disagreement <= 1)).all()
+    summ = s.summary()
+    assert summ["runs"] == 4 and -1.0 <= summ["kendall_tau_global"] <= 1.0
+
+
+@pytest.mark.slow
+def test_recovery_is_faithful_over_tuning_and_associations(capsys):
+    """Issue 12 grid: process-noise scale {0.03…10} × wrong associations {0…2%}, complex1."""
+    from slamrel.validation import tuning_study
+
+    s = tuning_study("complex1")
+    summ = s.summary()
+    with capsys.disabled():
+        print(f"\ntuning grid: {summ}")
+    assert summ["runs"] == 25
+    assert summ["ratio_broken_min"] >= 0.5  # no broken map looks healthy
+    assert summ["ratio_healthy_max"] <= 1.5
+    assert summ["kendall_tau_global"] >= 0.8
+    assert summ["separation_global"] == 1.0
