@@ -216,7 +216,49 @@ def test_robust_weights_reach_filter_counts_and_batch() -> None:
     _, _, c_one_w, _ = normal_equations(inp, x, one, robust=w)
     _, _, c_none, _ = normal_equations(inp, x, used[:0])
     assert c_one_w - c_none == pytest.approx(w[one[0]] * (c_one - c_none), rel=1e-6)
-    r = recover(bad, method="batch", robust="huber", max_outlier_run=None)
+    r = recover(bad, method="batch", robust="huber", max_outlier_run=None,
+                robust_threshold=ROBUST_C, robust_scale=1.0)  # fmt: skip
     assert r.counts["downweighted"] == int(((w < 1) & (fr.status == USED)).sum())
     assert 0.0 < r.counts["downweighted_fraction"] < 1.0
     assert (r.status != GATED).all()
+
+
+def test_robust_scale_is_estimated_from_a_plain_pass() -> None:
+    bad, _ = _inject(simulate_bundle(12, steps=400), 15.0, 16.0, 1)
+    r = recover(bad, method="smoother", robust="cauchy")
+    plain = recover(bad, method="filter")
+    v = np.asarray(plain.nis)
+    v = v[np.isfinite(v)]
+    scale = np.sqrt(np.median(v) / chi2.ppf(0.5, 2))
+    rb = r.extra["robust"]
+    assert rb["scale"] == pytest.approx(scale) and rb["threshold"] == 1.5  # type: ignore[index]
+    assert rb["effective"] == pytest.approx(1.5 * scale)  # type: ignore[index]
+    # a uniformly mis-scaled filter (all covariances × 100) gets the same weights: the scale
+    # absorbs the tuning, so a mis-tuned healthy run is not mistaken for one with outliers
+    k = 100.0
+    scaled = replace(
+        bad,
+        map_marginals=bad.map_marginals / k,
+        initial_covariance=bad.initial_covariance / k,
+        sensor=replace(bad.sensor, sigma_range=bad.sensor.sigma_range / 10,
+                       sigma_bearing=bad.sensor.sigma_bearing / 10),
+        motion=replace(bad.motion, sigma=tuple(s / 10 for s in bad.motion.sigma)),
+    )  # fmt: skip
+    r2 = recover(scaled, method="filter", robust="cauchy", max_outlier_run=None)
+    r1 = recover(bad, method="filter", robust="cauchy", max_outlier_run=None)
+    np.testing.assert_allclose(r2.weights, r1.weights, rtol=1e-6, atol=1e-9)
+    assert r.report()["robust"]["kind"] == "cauchy"  # type: ignore[index]
+
+
+def test_indefinite_smoothed_covariance_is_repaired_not_an_error() -> None:
+    from recovery.recover import _check_finite
+
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(6, 3, 3))
+    covs = a @ a.transpose(0, 2, 1)
+    covs[2] -= 1.5 * np.linalg.eigvalsh(covs[2])[0] * np.eye(3)  # min eigenvalue −0.5 λ_min
+    fixed, n = _check_finite(np.zeros((6, 3)), covs, np.arange(6.0), repair=True)
+    assert n == 1 and np.linalg.eigvalsh(fixed[2])[0] >= -1e-12
+    np.testing.assert_array_equal(fixed[[0, 1, 3, 4, 5]], covs[[0, 1, 3, 4, 5]])
+    with pytest.raises(DivergenceError, match="non-PSD"):
+        _check_finite(np.zeros((6, 3)), covs, np.arange(6.0))
