@@ -165,6 +165,26 @@ def disagreement_stretches(
     return res
 
 
+def nees_stretches(
+    times: Array, nees: Array, *, min_run: int = DEFAULT_MAX_OUTLIER_RUN
+) -> list[dict[str, float | int]]:
+    """NEES blow-ups against ground truth: runs of at least ``min_run`` consecutive poses (with
+    ground truth) whose NEES exceeds the 99.99% χ² bound (3 dof), merged across fewer than
+    ``min_run`` poses; ``[t0, t1]``, pose count and the largest NEES of each."""
+    ok = np.flatnonzero(np.isfinite(nees))
+    v = nees[ok]
+    st, en = _runs(v > chi2.ppf(0.9999, 3), max(1, min_run), max(1, min_run))
+    return [
+        {
+            "t0": float(times[ok[a]]),
+            "t1": float(times[ok[b]]),
+            "poses": int(b - a + 1),
+            "nees_max": float(v[a : b + 1].max()),
+        }
+        for a, b in zip(st.tolist(), en.tolist())
+    ]
+
+
 def nis_summary(fr: FilterResult) -> dict[str, float | int | None]:
     """NIS statistics of the measurements that reached the update (2 dof; mean 2 expected)."""
     v = np.asarray(fr.nis)
@@ -432,6 +452,8 @@ def recover(
     stretches = disagreement_stretches(fr, inp, min_run=min_run)
     divergence = divergence_summary(fr, inp, stretches, max_outlier_run=max_outlier_run)
     divergence["covariances_repaired"] = n_repaired
+    if nees is not None:
+        divergence["nees_stretches"] = nees_stretches(inp.times, nees, min_run=min_run)
     return Recovery(
         method=method,
         trajectory=traj,

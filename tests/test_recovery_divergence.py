@@ -262,3 +262,20 @@ def test_indefinite_smoothed_covariance_is_repaired_not_an_error() -> None:
     np.testing.assert_array_equal(fixed[[0, 1, 3, 4, 5]], covs[[0, 1, 3, 4, 5]])
     with pytest.raises(DivergenceError, match="non-PSD"):
         _check_finite(np.zeros((6, 3)), covs, np.arange(6.0))
+
+
+def test_nees_blowup_stretches_against_ground_truth() -> None:
+    from recovery.recover import nees_stretches
+
+    t = np.arange(40.0)
+    nees = np.full(40, 1.0)
+    nees[5:20] = 1e3  # 15 poses beyond the bound
+    nees[12] = 2.0  # one pose inside: bridged
+    nees[30:33] = 1e4  # too short a run
+    nees[25] = np.nan  # no ground truth there
+    out = nees_stretches(t, nees, min_run=5)
+    assert out == [{"t0": 5.0, "t1": 19.0, "poses": 15, "nees_max": 1e3}]
+    bad, _ = _inject(simulate_bundle(4, steps=600), 20.0, 22.0, 4)
+    r = recover(bad, method="filter")
+    ns = r.divergence["nees_stretches"]
+    assert len(ns) == 1 and 19.0 <= ns[0]["t0"] <= 21.0 and ns[0]["t1"] <= 26.0  # type: ignore[index]

@@ -79,6 +79,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="M-estimator weights on outlying innovations (smoother and batch use the same "
         "weights; the down-weighted fraction is reported; default: none)",
     )
+    p.add_argument(
+        "--robust-threshold",
+        type=opt.positive_float,
+        default=None,
+        metavar="C",
+        help="the M-estimator's threshold on the innovation's Mahalanobis distance, in units "
+        "of the scale estimated from a plain pass (default: 1.5)",
+    )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary")
     p.set_defaults(func=run)
 
@@ -100,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
             max_outlier_run=args.max_outlier_run or None,
             on_divergence="raise" if args.fail_on_divergence else "reenter",
             robust=args.robust,
+            robust_threshold=args.robust_threshold,
             progress=not args.quiet and sys.stderr.isatty(),
         )
     write_trajectory(args.output, result.trajectory, format=fmt)
