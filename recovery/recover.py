@@ -215,7 +215,9 @@ class Recovery:
     counts : dict
         ``measurements``, ``used``, ``gated``, ``unassociated``, ``outside`` (of the control
         span), ``skipped_unknown`` (dropped by the reader), and ``gated_fraction`` (of the
-        associated measurements inside the span).
+        associated measurements inside the span); with a robust update ``downweighted`` (weight
+        below 1), ``downweighted_fraction`` and ``downweight_loss`` (``Σ (1 − w)`` over the
+        associated measurements, the share of their information the weights took away).
     status : ndarray of int, shape (J,)
         Per measurement: 0 used, 1 gated, 2 unassociated, 3 outside.
     nis : ndarray, shape (J,)
@@ -335,6 +337,9 @@ def _counts(
     down = 0 if weights is None else int(((weights < 1.0) & (status == USED)).sum())
     c["downweighted"] = down
     c["downweighted_fraction"] = down / (used + gated) if used + gated else 0.0
+    # the information the weights took away: Σ (1 − w) over the associated measurements
+    loss = 0.0 if weights is None else float((1.0 - weights[status == USED]).sum())
+    c["downweight_loss"] = loss / (used + gated) if used + gated else 0.0
     return c
 
 

@@ -312,8 +312,9 @@ def _recovery_notes(rec: Any, method: str) -> list[str]:
     if counts.get("downweighted"):
         notes.append(
             f"The robust update down-weighted {int(counts['downweighted'])} measurements "
-            f"({100 * counts['downweighted_fraction']:.1f}%); like a gated fraction, a large "
-            "one is a finding about the map."
+            f"({100 * counts['downweighted_fraction']:.1f}%, weight lost "
+            f"{100 * counts['downweight_loss']:.1f}%); like a gated fraction, a large loss is a "
+            "finding about the map."
         )
     d = rec.divergence
     if d.get("stretches"):

@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         write_bytes_atomic(args.covariances, buf.getvalue())
     report = result.report()
     report["gate"] = args.gate
-    report["robust"] = args.robust
+    report.setdefault("robust", None)
     if args.report:
         write_json(args.report, report)
     if not args.quiet:
@@ -133,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
         if args.robust:
             print(
                 f"robust ({args.robust}): {c['downweighted']} measurements down-weighted "
-                f"({100 * c['downweighted_fraction']:.1f}% of associated)"
+                f"({100 * c['downweighted_fraction']:.1f}% of associated; weight lost "
+                f"{100 * c['downweight_loss']:.1f}%)"
             )
         print(divergence_summary_text(result))
         if c["gated_fraction"] > 0.05:
