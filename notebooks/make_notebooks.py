@@ -207,7 +207,7 @@ VALIDATION = [
         "for cfg, on, rec, dis in zip(grid.configs, grid.online['global'], "
         "grid.recovered['global'], grid.disagreement):\n"
         "    print(f\"{cfg['process_noise_scale']:6g} {100 * cfg['corrupt_fraction']:5.1f}% "
-        "{on:8.3f} {rec:9.3f} {rec / on:6.2f} {100 * dis:7.1f}%\")\n"
+        '{on:8.3f} {rec:9.3f} {rec / on:6.2f} {100 * dis:7.1f}%")\n'
         "summary = grid.summary()\n"
         "summary"
     ),
