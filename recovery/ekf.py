@@ -468,6 +468,14 @@ def run_filter(
     ev_kind: list[int] = []
     ev_a: list[float] = []
 
+    cos, sin, sqrt, atan2, isfinite, PI = (
+        math.cos,
+        math.sin,
+        math.sqrt,
+        math.atan2,
+        math.isfinite,
+        math.pi,
+    )  # fmt: skip  (local names: no attribute look-up per measurement)
     iterator = range(epochs.shape[0])
     bar = tqdm(
         iterator, desc="filter", unit="epoch", disable=not progress, file=sys.stderr, leave=False
@@ -477,8 +485,8 @@ def run_filter(
         if e > 0:
             ux, uy, uth = e_local[e]
             psi = lin_l[int(epochs[e - 1])][2] if fixed else th  # type: ignore[index]
-            c = math.cos(psi)
-            s = math.sin(psi)
+            c = cos(psi)
+            s = sin(psi)
             dx = c * ux - s * uy
             dy = s * ux + c * uy
             x += dx
@@ -513,7 +521,7 @@ def run_filter(
             ddx = lx - px
             ddy = ly - py
             qq = ddx * ddx + ddy * ddy
-            r = math.sqrt(qq)
+            r = sqrt(qq)
             h00, h01, h10, h11 = ddx / r, ddy / r, -ddy / qq, ddx / qq
             t00 = h00 * ca + h01 * cb
             t01 = h00 * cb + h01 * cd
@@ -559,8 +567,8 @@ def run_filter(
             i00, i01, i11 = s11 / det, -s01 / det, s00 / det
             zr, zb = zz[j]
             y0 = zr - r
-            y1 = zb - math.atan2(ddy, ddx) + pth
-            if not -math.pi <= y1 < math.pi:
+            y1 = zb - atan2(ddy, ddx) + pth
+            if not -PI <= y1 < PI:
                 y1 = float(wrap(y1))
             v = y0 * y0 * i00 + 2.0 * y0 * y1 * i01 + y1 * y1 * i11
             nis_l[j] = v
@@ -622,7 +630,14 @@ def run_filter(
             n11 = p11 - (a1 * k10 + b1 * k11)
             n12 = p12 - (a1 * k20 + b1 * k21)
             n22 = p22 - (a2 * k20 + b2 * k21)
-            if not _pd(n00, n01, n02, n11, n12, n22):
+            # finite and positive definite (leading principal minors; _pd inlined)
+            m2 = n00 * n11 - n01 * n01
+            d3 = (
+                n00 * (n11 * n22 - n12 * n12)
+                - n01 * (n01 * n22 - n12 * n02)
+                + n02 * (n01 * n12 - n11 * n02)
+            )
+            if not (n00 > 0.0 and m2 > 0.0 and d3 > 0.0 and isfinite(d3 + n22 + n00 + n11)):
                 if raise_ or fixed:
                     _diverged(inp, times[k], j, "pose covariance is not finite positive definite")
                 status[j] = GATED
