@@ -381,6 +381,8 @@ def run_filter(
     if robust not in ROBUST:
         raise ValueError(f"robust must be one of {ROBUST}, got {robust!r}")
     raise_ = on_divergence == "raise"
+    if robust_threshold is not None and not (0.0 < robust_threshold < math.inf):
+        raise ValueError(f"robust_threshold must be positive and finite, got {robust_threshold}")
     n = inp.times.shape[0]
     j_all = inp.meas_grid.shape[0]
     status = np.full(j_all, USED, dtype=np.int64)

@@ -17,6 +17,7 @@ the error.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -423,6 +424,8 @@ def recover(
             v = np.asarray(run_filter(inp, **kw).nis)  # type: ignore[arg-type]
             v = v[np.isfinite(v)]
             scale = float(np.sqrt(np.median(v) / chi2.ppf(0.5, 2))) if v.size else 1.0
+            if not (math.isfinite(scale) and scale > 0.0):  # no innovation to scale by
+                scale = 1.0
         else:
             scale = float(robust_scale)
         c_eff = c * scale
