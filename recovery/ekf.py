@@ -24,6 +24,13 @@ numpy's per-call overhead exceeds the arithmetic on 3 × 3 matrices. The result 
 per-step EKF (``recovery.baseline``) to rounding. The update uses
 ``P ← P − K S Kᵀ`` (equal to the Joseph form for the optimal gain, cheaper on scalars); the
 covariance is checked to be finite and positive definite after every update.
+
+**Divergence is a finding.** Runs of outlying innovations (NIS beyond the gate or the 99.99%
+χ² bound) are where the map and the log disagree; after ``max_outlier_run`` of them the
+filter is re-entered by inflating its pose covariance and goes on (:func:`run_filter`), and
+every such event is returned. An optional M-estimator (Huber or Cauchy weights on the
+innovation's Mahalanobis distance, iterated to the fixed point) down-weights outliers; the
+plain filter (no robust weights, no event) is the textbook EKF and equals filterpy's.
 """
 
 from __future__ import annotations
