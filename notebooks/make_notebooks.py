@@ -245,6 +245,7 @@ VALIDATION = [
         "print('recovered/online, broken runs min %.2f, healthy runs max %.2f' % "
         "(summary['ratio_broken_min'], summary['ratio_healthy_max']))\n"
         "assert summary['ratio_broken_min'] >= 0.5 and summary['ratio_healthy_max'] <= 1.5\n"
+        "assert summary['kendall_tau_global'] >= 0.8 and summary['separation_global'] == 1.0\n"
         "fig, ax = plt.subplots(figsize=(5, 5))\n"
         "sc = ax.scatter(grid.online['global'], grid.recovered['global'], "
         "c=np.log10([c['process_noise_scale'] for c in grid.configs]), "

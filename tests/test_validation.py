@@ -47,17 +47,6 @@ def test_tuning_study_on_a_small_grid():
     assert summ["runs"] == 4 and -1.0 <= summ["kendall_tau_global"] <= 1.0
 
 
-@pytest.mark.slow
-def test_recovery_is_faithful_over_tuning_and_associations(capsys):
-    """Issue 12 grid: process-noise scale {0.03…10} × wrong associations {0…2%}, complex1."""
-    from slamrel.validation import tuning_study
-
-    s = tuning_study("complex1")
-    summ = s.summary()
-    with capsys.disabled():
-        print(f"\ntuning grid: {summ}")
-    assert summ["runs"] == 25
-    assert summ["ratio_broken_min"] >= 0.5  # no broken map looks healthy
-    assert summ["ratio_healthy_max"] <= 1.5
-    assert summ["kendall_tau_global"] >= 0.8
-    assert summ["separation_global"] == 1.0
+# The full 5 × 5 grid (issue 12: broken runs ≥ 0.5× online, healthy ≤ 1.5×, τ ≥ 0.8 on
+# far-apart relations, separation 1) is asserted in notebooks/validation.ipynb, which
+# tests/test_notebooks.py executes: running it twice would add a minute to the suite.
