@@ -50,3 +50,42 @@ def test_tuning_study_on_a_small_grid():
 # The full 5 × 5 grid (issue 12: broken runs ≥ 0.5× online, healthy ≤ 1.5×, τ ≥ 0.8 on
 # far-apart relations, separation 1) is asserted in notebooks/validation.ipynb, which
 # tests/test_notebooks.py executes: running it twice would add a minute to the suite.
+
+
+def test_ate_at_reference_times_is_alignment_invariant():
+    from relation_metric import se2
+    from relation_metric.trajectory import Trajectory
+    from slamrel.validation import ate_at_reference_times
+
+    rng = np.random.default_rng(4)
+    t = np.arange(0.0, 50.0, 0.1)
+    ref = Trajectory(t, np.column_stack((np.cos(t / 5), np.sin(t / 7), t / 10)))
+    moved = se2.compose(np.array([3.0, -1.0, 0.7]), ref.poses)  # a rigid motion: ATE 0
+    # the estimate on a grid offset by 4 ms: each reference pose takes the nearest one
+    t_est = np.sort(np.concatenate((t + 0.004, t + 0.05)))
+    dense = np.zeros((t_est.size, 3))
+    dense[0::2] = moved
+    dense[1::2] = 1e3  # far poses 46 ms from every reference time: never picked
+    assert ate_at_reference_times(t_est, dense, ref) == pytest.approx(0.0, abs=1e-9)
+    # isotropic noise of σ = 0.05 m per axis: RMSE ≈ σ √2 (alignment absorbs ~3 dof)
+    noisy = dense.copy()
+    noisy[0::2, :2] += rng.normal(scale=0.05, size=(t.size, 2))
+    assert ate_at_reference_times(t_est, noisy, ref) == pytest.approx(0.05 * np.sqrt(2), rel=0.1)
+
+
+def test_robust_recovery_on_mrclam_robot5():
+    """Real data (MRCLAM dataset 7, robot 5, surveyed map): the plain EKF is thrown off by
+    outliers (and the divergence is reported), the Cauchy M-estimator is as good as the gated
+    EKF (≤ 1.05×) without gating anything, and its smoother is below its filter."""
+    from conftest import require_data
+
+    from slamrel.importers.mrclam import mrclam_bundle
+    from slamrel.validation import RECOVERY_VARIANTS, recovery_variants_table
+
+    d = require_data("mrclam", "MRCLAM_Dataset7")
+    keep = {k: RECOVERY_VARIANTS[k] for k in ("plain", "gated", "default", "cauchy")}
+    rows = {r["variant"]: r for r in recovery_variants_table({"r5": mrclam_bundle(d, 5)}, keep)}
+    assert rows["plain"]["filter_ratio"] > 2.0 and rows["default"]["stretches"] >= 1
+    assert rows["cauchy"]["filter_ratio"] <= 1.05 and rows["cauchy"]["gated_fraction"] == 0.0
+    assert rows["cauchy"]["smoother"] < rows["cauchy"]["filter"]
+    assert 0.0 < rows["cauchy"]["downweight_loss"] < rows["cauchy"]["downweighted_fraction"]
