@@ -89,3 +89,31 @@ def test_robust_recovery_on_mrclam_robot5():
     assert rows["cauchy"]["filter_ratio"] <= 1.05 and rows["cauchy"]["gated_fraction"] == 0.0
     assert rows["cauchy"]["smoother"] < rows["cauchy"]["filter"]
     assert 0.0 < rows["cauchy"]["downweight_loss"] < rows["cauchy"]["downweighted_fraction"]
+
+
+def test_robust_recovery_does_not_hide_a_broken_map():
+    """DESIGN.md pitfall: on an EKF-SLAM run with 1% wrong associations, a 99.9% gate without
+    re-entry makes the map look much better than the run was; the M-estimators (scale from a
+    plain pass) and the re-entering default stay near the online error."""
+    from recovery.recover import recover
+    from relation_metric.evaluate import evaluate
+    from relation_metric.relations import generate_relations
+    from relation_metric.trajectory import Trajectory
+    from slamrel.simulate import slam_bundle, world_bundle
+    from slamrel.worlds import make_world
+
+    world = make_world("complex1", noise="a", seed=0)
+    truth = world.truth
+    rel = generate_relations(truth, "global", count=2000, seed=0)
+    broken, slam = slam_bundle(world_bundle(world), corrupt_fraction=0.01, seed=1)
+
+    def score(tr):  # type: ignore[no-untyped-def]
+        k = np.searchsorted(tr.timestamps, truth.timestamps)
+        return evaluate(rel, Trajectory(truth.timestamps, tr.poses[k])).translation["abs"].mean
+
+    online = score(slam.online)
+    hidden = score(recover(broken, gate=0.999, max_outlier_run=None).trajectory)
+    assert hidden < 0.7 * online  # the oracle can tell hiding from faithfulness
+    for kw in ({}, {"robust": "cauchy"}, {"robust": "huber"}):
+        r = recover(broken, **kw)
+        assert score(r.trajectory) > 0.9 * online, kw
