@@ -390,6 +390,15 @@ def _divergence_section(result: RunResult) -> Section:
             else "The map and the log agree: no stretch of outlying innovations."
         ),
     ]
+    ns = d.get("nees_stretches") or []
+    if ns:
+        paragraphs.append(
+            f"Against the ground truth, the recovered pose's NEES exceeds its 99.99% χ² bound "
+            f"(3 dof) on {len(ns)} stretch(es): "
+            + ", ".join(f"[{s['t0']:.6g}, {s['t1']:.6g}] s" for s in ns[:10])
+            + (" …" if len(ns) > 10 else "")
+            + "."
+        )
     rows = [
         [s["t0"], s["t1"], s["duration"], s["measurements"], s["outlying"], s["nis_median"],
          s["nis_max"], s["reentries"]]

@@ -158,8 +158,15 @@ def divergence_summary_text(result: Recovery, *, limit: int = 5) -> str:
         else "no measurement reached the filter"
     )
     st = d.get("stretches") or []
+    ns = d.get("nees_stretches") or []
+    nees_txt = (
+        f"\nNEES vs ground truth beyond its 99.99% bound on {len(ns)} stretch(es), the first "  # type: ignore[arg-type]
+        f"[{float(ns[0]['t0']):.3f}, {float(ns[0]['t1']):.3f}] s"  # type: ignore[index]
+        if ns
+        else ""
+    )
     if not st:
-        return f"map and log agree: no stretch of outlying innovations; {nis_txt}"
+        return f"map and log agree: no stretch of outlying innovations; {nis_txt}{nees_txt}"
     ev = d.get("events", {})
     n_re = sum(int(v) for v in ev.values())  # type: ignore[union-attr]
     lines = [
@@ -176,6 +183,8 @@ def divergence_summary_text(result: Recovery, *, limit: int = 5) -> str:
         )
     if len(st) > limit:  # type: ignore[arg-type]
         lines.append(f"  ... {len(st) - limit} more in the --report JSON")  # type: ignore[arg-type]
+    if nees_txt:
+        lines.append(nees_txt.strip())
     lines.append(
         "note: divergence is a finding about the map (or the models), not an error; the score "
         "of this trajectory includes these stretches (--fail-on-divergence to stop instead)"
