@@ -30,7 +30,7 @@ from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, recover
 from recovery.steps import build_steps
 from relation_metric import se2
 from relation_metric.consistency import NeesSummary, pose_nees, summarize_nees
-from relation_metric.errors import DivergenceError, InputError, SlamrelError
+from relation_metric.errors import InputError, SlamrelError
 from relation_metric.evaluate import Evaluation, UnassociatedRelationsWarning, evaluate
 from relation_metric.formats import read_trajectory
 from relation_metric.plots import evaluation_figure
@@ -240,7 +240,7 @@ def score_bundle(
             on_divergence=on_divergence,
             robust=robust,
         )
-    except (DivergenceError, SlamrelError) as exc:
+    except SlamrelError as exc:  # DivergenceError with on_divergence="raise"
         if isinstance(exc, InputError):
             raise
         rec, rec_error = None, str(exc)
