@@ -190,6 +190,71 @@ VALIDATION = [
         "ax.set_xlabel('online: global relation error [m]'); ax.set_ylabel('recovered [m]')\n"
         "fig.colorbar(sc, label='corrupted associations'); fig.tight_layout()"
     ),
+    new_markdown_cell(
+        "## Faithfulness over the filter's tuning as well\n\n"
+        "The runs above differ in their noise and their wrong associations, but every filter "
+        "was tuned right. Real filters are not. `tuning_study` runs EKF-SLAM on `complex1` "
+        "(noise b) over a grid of **process-noise scale** {0.03, 0.1, 0.3, 1, 10} (the "
+        "filter's assumed motion noise, relative to the true one) × **wrong associations** "
+        "{0, 0.2, 0.5, 1, 2%}, and recovers each run with the CLI's default recovery (no "
+        "gate; stretches where map and log disagree are re-entered and reported)."
+    ),
+    new_code_cell(
+        "from slamrel.validation import tuning_study\n"
+        "grid = tuning_study('complex1')\n"
+        "print(f\"{'scale':>6s} {'wrong':>6s} {'online':>8s} {'recovered':>9s} {'ratio':>6s} "
+        "{'disagree':>8s}\")\n"
+        "for cfg, on, rec, dis in zip(grid.configs, grid.online['global'], "
+        "grid.recovered['global'], grid.disagreement):\n"
+        "    print(f\"{cfg['process_noise_scale']:6g} {100 * cfg['corrupt_fraction']:5.1f}% "
+        '{on:8.3f} {rec:9.3f} {rec / on:6.2f} {100 * dis:7.1f}%")\n'
+        "summary = grid.summary()\n"
+        "summary"
+    ),
+    new_markdown_cell(
+        "**How to read the two scores.** The *online* error is what the filter estimated "
+        "while it ran; the *recovered* error is how well the run's **final map**, with the "
+        "run's own models and associations, localises the log. They answer different "
+        "questions, and a mis-tuned filter separates them:\n\n"
+        "* An over-confident filter (process noise 0.03–0.1×) keeps a map whose covariance is "
+        "too small; localising in it with the same over-confident motion model, the recovery "
+        "sees innovations far outside their χ² bound and reports stretches of map/log "
+        "disagreement (the `disagree` column) even without a wrong association. That is a "
+        "true finding about the *tuning*: the map and the models do not agree with the "
+        "log. The recovered error itself stays close to the online one (ratio ≤ 1.5).\n"
+        "* An under-confident filter (10×) trusts its measurements more than its motion; its "
+        "final map is good, and the recovered error is at or below the online one, as for "
+        "well-tuned runs: the final map is better than the map the filter had early on.\n"
+        "* A broken map (any wrong association) scores as broken, whatever the tuning: the "
+        "recovered far-apart error stays of the order of the online one (ratio ≥ 0.5), so "
+        "no broken map looks healthy.\n\n"
+        "Read the recovered score as *the quality of the final map under the run's models* "
+        "and the disagreement fraction as *how much of the log that map and those models "
+        "cannot explain*; neither is the trajectory error the filter had online.\n\n"
+        "**Rank statistics.** Kendall τ compares the two rankings of all 25 runs. Among the "
+        "healthy runs the errors differ by less than the run-to-run spread, so their order is "
+        "close to a coin toss and pulls τ down without saying anything about faithfulness; "
+        "the question a user asks of the score — *is this run broken?* — is answered by the "
+        "separation `P(recovered error of a broken run > that of a healthy run)` (the "
+        "Mann–Whitney AUC), which should be 1."
+    ),
+    new_code_cell(
+        "print('Kendall tau, far-apart: %.3f, consecutive: %.3f' % "
+        "(summary['kendall_tau_global'], summary['kendall_tau_consecutive']))\n"
+        "print('separation (broken vs healthy, far-apart): %.3f' % summary['separation_global'])\n"
+        "print('recovered/online, broken runs min %.2f, healthy runs max %.2f' % "
+        "(summary['ratio_broken_min'], summary['ratio_healthy_max']))\n"
+        "assert summary['ratio_broken_min'] >= 0.5 and summary['ratio_healthy_max'] <= 1.5\n"
+        "assert summary['kendall_tau_global'] >= 0.8 and summary['separation_global'] == 1.0\n"
+        "fig, ax = plt.subplots(figsize=(5, 5))\n"
+        "sc = ax.scatter(grid.online['global'], grid.recovered['global'], "
+        "c=np.log10([c['process_noise_scale'] for c in grid.configs]), "
+        "marker='o', cmap='coolwarm')\n"
+        "ax.set_xscale('log'); ax.set_yscale('log')\n"
+        "lim = [0.1, 30]; ax.plot(lim, lim, 'k--', lw=0.8)\n"
+        "ax.set_xlabel('online: far-apart relation error [m]'); ax.set_ylabel('recovered [m]')\n"
+        "fig.colorbar(sc, label='log10 process-noise scale'); fig.tight_layout()"
+    ),
 ]
 
 

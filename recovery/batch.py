@@ -55,8 +55,18 @@ def regularised_sigma(sigma: Array) -> Array:
     return sigma + eps[:, None, None] * np.eye(3)
 
 
-def _residuals(inp: FilterInput, x: Array, w_motion: Array, used: NDArray[np.int64]):  # type: ignore[no-untyped-def]
-    """Residuals, weights and Jacobians of all factors at ``x``."""
+def _residuals(  # type: ignore[no-untyped-def]
+    inp: FilterInput,
+    x: Array,
+    w_motion: Array,
+    used: NDArray[np.int64],
+    robust: Array | None = None,
+):
+    """Residuals, weights and Jacobians of all factors at ``x``.
+
+    ``robust`` (J,): the filter's robust weight per measurement; the measurement information
+    ``(R + H_l Σ_l H_lᵀ)⁻¹`` is multiplied by it (the filter divides the same matrix by it).
+    """
     rp = x[0] - inp.x0
     rp[2] = se2.wrap_angle(rp[2])
     rm = se2.between(x[:-1], x[1:]) - inp.u
@@ -68,6 +78,8 @@ def _residuals(inp: FilterInput, x: Array, w_motion: Array, used: NDArray[np.int
     rz[:, 1] = se2.wrap_angle(rz[:, 1])
     reff = inp.r + h_l @ inp.map_marginals[li] @ h_l.transpose(0, 2, 1)
     wz = np.linalg.inv(reff)
+    if robust is not None:
+        wz = wz * robust[used][:, None, None]
     return rp, rm, rz, wz, h_x, k
 
 
@@ -78,13 +90,17 @@ def _cost(rp: Array, wp: Array, rm: Array, wm: Array, rz: Array, wz: Array) -> f
 
 
 def normal_equations(
-    inp: FilterInput, x: Array, used: NDArray[np.int64], sigma: Array | None = None
+    inp: FilterInput,
+    x: Array,
+    used: NDArray[np.int64],
+    sigma: Array | None = None,
+    robust: Array | None = None,
 ):  # type: ignore[no-untyped-def]
     """Sparse ``H = Jᵀ W J`` (3N × 3N), gradient ``g = Jᵀ W r`` (3N,) and the cost at ``x``."""
     n = x.shape[0]
     wp = np.linalg.inv(inp.p0 + 1e-15 * np.eye(3))
     wm = np.linalg.inv(regularised_sigma(inp.sigma if sigma is None else sigma))
-    rp, rm, rz, wz, h_x, k = _residuals(inp, x, wm, used)
+    rp, rm, rz, wz, h_x, k = _residuals(inp, x, wm, used, robust)
     c, s = np.cos(x[:-1, 2]), np.sin(x[:-1, 2])
     dx = x[1:, 0] - x[:-1, 0]
     dy = x[1:, 1] - x[:-1, 1]
@@ -122,8 +138,10 @@ def normal_equations(
     return h, g.ravel(), cost, (wp, wm)
 
 
-def _cost_at(inp: FilterInput, x: Array, used: NDArray[np.int64], wp: Array, wm: Array) -> float:
-    rp, rm, rz, wz, _, _ = _residuals(inp, x, wm, used)
+def _cost_at(  # type: ignore[no-untyped-def]
+    inp: FilterInput, x: Array, used: NDArray[np.int64], wp: Array, wm: Array, robust=None
+) -> float:
+    rp, rm, rz, wz, _, _ = _residuals(inp, x, wm, used, robust)
     return _cost(rp, wp, rm, wm, rz, wz)
 
 
@@ -132,6 +150,7 @@ def refine(
     start: Array,
     *,
     used: NDArray[np.bool_],
+    weights: Array | None = None,
     max_iterations: int = 50,
     tolerance: float = 1e-10,
 ) -> BatchResult:
@@ -144,6 +163,9 @@ def refine(
         Initial poses (the smoothed trajectory).
     used : ndarray of bool, shape (J,)
         Measurements that enter (those the filter used).
+    weights : ndarray, shape (J,), optional
+        The filter's robust weights (:attr:`recovery.ekf.FilterResult.weights`): the batch
+        uses the same robust model as the filter and the smoother.
     max_iterations : int
     tolerance : float
         Stop when the relative cost reduction or the largest step falls below it.
@@ -154,7 +176,7 @@ def refine(
     """
     idx = np.flatnonzero(used)
     x = np.array(start, dtype=np.float64, copy=True)
-    h, g, cost, (wp, wm) = normal_equations(inp, x, idx)
+    h, g, cost, (wp, wm) = normal_equations(inp, x, idx, robust=weights)
     cost0 = cost
     lam = 1e-6
     iterations = 0
@@ -167,7 +189,7 @@ def refine(
             if not np.isfinite(step).all():
                 raise DivergenceError("batch refinement: the normal equations are singular")
             trial = x + step
-            new_cost = _cost_at(inp, trial, idx, wp, wm)
+            new_cost = _cost_at(inp, trial, idx, wp, wm, weights)
             if new_cost <= cost:
                 break
             lam *= 10.0
@@ -178,16 +200,18 @@ def refine(
         x = trial
         reduction = (cost - new_cost) / max(cost, 1e-300)
         lam = max(lam / 10.0, 1e-12)
-        h, g, cost, _ = normal_equations(inp, x, idx)
+        h, g, cost, _ = normal_equations(inp, x, idx, robust=weights)
         if reduction < tolerance or np.abs(step).max() < tolerance:
             break
     x[:, 2] = se2.wrap_angle(x[:, 2])
-    covs = batch_covariances(inp, x, used)
+    covs = batch_covariances(inp, x, used, weights)
     return BatchResult(x, covs, iterations, cost0, cost)
 
 
-def batch_covariances(inp: FilterInput, x: Array, used: NDArray[np.bool_]) -> Array:
+def batch_covariances(
+    inp: FilterInput, x: Array, used: NDArray[np.bool_], weights: Array | None = None
+) -> Array:
     """Diagonal blocks of ``H⁻¹`` at ``x``: filter + RTS covariance pass linearised at ``x``."""
     reg = replace(inp, sigma=regularised_sigma(inp.sigma), map_covariance=None)
-    fr = run_filter(reg, linearize_at=x, use=used, max_outlier_run=None)
+    fr = run_filter(reg, linearize_at=x, use=used, weights=weights, max_outlier_run=None)
     return smooth(fr).covariances

@@ -24,6 +24,13 @@ numpy's per-call overhead exceeds the arithmetic on 3 × 3 matrices. The result 
 per-step EKF (``recovery.baseline``) to rounding. The update uses
 ``P ← P − K S Kᵀ`` (equal to the Joseph form for the optimal gain, cheaper on scalars); the
 covariance is checked to be finite and positive definite after every update.
+
+**Divergence is a finding.** Runs of outlying innovations (NIS beyond the gate or the 99.99%
+χ² bound) are where the map and the log disagree; after ``max_outlier_run`` of them the
+filter is re-entered by inflating its pose covariance and goes on (:func:`run_filter`), and
+every such event is returned. An optional M-estimator (Huber or Cauchy weights on the
+innovation's Mahalanobis distance, iterated to the fixed point) down-weights outliers; the
+plain filter (no robust weights, no event) is the textbook EKF and equals filterpy's.
 """
 
 from __future__ import annotations
@@ -44,6 +51,11 @@ from relation_metric.trajectory import readonly
 __all__ = [
     "USED",
     "GATED",
+    "ROBUST",
+    "ROBUST_DEFAULTS",
+    "REENTRY",
+    "EVENT_KINDS",
+    "FilterEvents",
     "UNASSOCIATED",
     "OUTSIDE",
     "FilterInput",
@@ -55,6 +67,19 @@ __all__ = [
 
 Array = NDArray[np.float64]
 USED, GATED, UNASSOCIATED, OUTSIDE = 0, 1, 2, 3
+ROBUST = (None, "huber", "cauchy")
+#: Default ``c`` of each M-estimator on the standardised distance (see ``recover``).
+ROBUST_DEFAULTS = {"huber": 1.5, "cauchy": 1.5}
+#: Consecutive outlying innovations after which the filter is re-entered (and a stretch of
+#: disagreement between map and log is reported).
+DEFAULT_MAX_OUTLIER_RUN = 10
+#: Kinds of :attr:`FilterResult.events`.
+REENTRY, SKIPPED_S, SKIPPED_P = 0, 1, 2
+EVENT_KINDS = {
+    REENTRY: "re-entered after consecutive outlying innovations",
+    SKIPPED_S: "innovation covariance not positive definite (measurement skipped)",
+    SKIPPED_P: "posterior covariance not positive definite (measurement skipped)",
+}
 
 
 @dataclass(frozen=True)
@@ -214,6 +239,28 @@ def prepare_segments(
 
 
 @dataclass(frozen=True)
+class FilterEvents:
+    """Where the filter had to leave the plain EKF recursion (see :func:`run_filter`).
+
+    Attributes
+    ----------
+    grid : ndarray of int, shape (V,)
+        Grid index of each event.
+    measurement : ndarray of int, shape (V,)
+        The measurement that triggered it.
+    kind : ndarray of int, shape (V,)
+        ``REENTRY``, ``SKIPPED_S`` or ``SKIPPED_P`` (:data:`EVENT_KINDS`).
+    inflation : ndarray, shape (V,)
+        The covariance inflation ``α`` of a re-entry (1 for skips).
+    """
+
+    grid: NDArray[np.int64]
+    measurement: NDArray[np.int64]
+    kind: NDArray[np.int64]
+    inflation: Array
+
+
+@dataclass(frozen=True)
 class FilterResult:
     """Output of :func:`run_filter` (angles unwrapped internally; wrap for output).
 
@@ -233,7 +280,15 @@ class FilterResult:
     status : ndarray of int, shape (J,)
         ``USED``, ``GATED``, ``UNASSOCIATED`` or ``OUTSIDE`` per measurement.
     nis : ndarray, shape (J,)
-        Normalised innovation squared of each measurement that reached the update (NaN else).
+        Normalised innovation squared of each measurement that reached the update (NaN else),
+        against the un-weighted ``S``.
+    order : ndarray of int, shape (A,)
+        The measurements that reached the filter, in processing order.
+    weights : ndarray, shape (J,)
+        Robust weight of each measurement (1 for the plain EKF and for every inlier).
+    events : FilterEvents
+    outlier_bound : float
+        The NIS above which a measurement counted as outlying.
     """
 
     poses: Array
@@ -246,6 +301,10 @@ class FilterResult:
     status: NDArray[np.int64]
     nis: Array
     psi: Array
+    order: NDArray[np.int64]
+    weights: Array
+    events: FilterEvents
+    outlier_bound: float
 
 
 def _pd(p00: float, p01: float, p02: float, p11: float, p12: float, p22: float) -> bool:
@@ -263,9 +322,13 @@ def run_filter(
     inp: FilterInput,
     *,
     gate: float | None = None,
-    max_outlier_run: int | None = 100,
+    max_outlier_run: int | None = DEFAULT_MAX_OUTLIER_RUN,
+    on_divergence: str = "reenter",
+    robust: str | None = None,
+    robust_threshold: float | None = None,
     linearize_at: Array | None = None,
     use: NDArray[np.bool_] | None = None,
+    weights: Array | None = None,
     progress: bool = False,
 ) -> FilterResult:
     """Run EKF localisation over the whole grid.
@@ -276,13 +339,36 @@ def run_filter(
     gate : float, optional
         χ² probability of the innovation gate (2 dof); ``None`` uses every measurement.
     max_outlier_run : int, optional
-        This many consecutive measurements with ``yᵀ S⁻¹ y`` beyond the gate (or beyond the
-        99.99% χ² bound without a gate) stop the filter with :class:`DivergenceError`.
+        A measurement is *outlying* when its NIS ``yᵀ S⁻¹ y`` exceeds the gate (or the 99.99%
+        χ² bound without a gate). After this many consecutive outlying measurements the map and
+        the log disagree and the filter is **re-entered** (see ``on_divergence``); ``None``
+        never re-enters (the plain EKF).
+    on_divergence : {"reenter", "raise"}
+        ``"reenter"`` (default): the re-entry rule — right after the run's last measurement,
+        the pose covariance (and the Schmidt cross-covariance, by the square root) is inflated
+        by ``α = max(1, median NIS of the run / outlier bound)``, the factor that would have
+        brought the run's median innovation back to the bound, around the current mean
+        (capped so that the position variance stays below the map's extent squared and the
+        heading variance below π²); the run counter restarts, so a lasting
+        disagreement inflates again every ``max_outlier_run`` outliers. A measurement whose
+        innovation covariance or posterior covariance is not positive definite is skipped
+        (counted as gated) and recorded. Every event is returned in :attr:`FilterResult.events`.
+        ``"raise"``: :class:`DivergenceError` instead (the old behaviour).
+    robust : {None, "huber", "cauchy"}
+        M-estimator on the innovation's Mahalanobis distance ``d = √NIS``: the measurement's
+        effective noise (sensor plus landmark) is divided by the weight ``w(d)`` —
+        Huber ``min(1, c/d)``, Cauchy ``1/(1 + (d/c)²)`` for ``d > c`` — iterated to the
+        fixed point ``w = w(d(w))`` (at most 8 iterations; ``d(w)`` uses the re-weighted
+        ``S``). Measurements with ``d ≤ c`` are untouched, so a healthy run is the plain EKF.
+    robust_threshold : float, optional
+        ``c``; default ``√χ²₂(0.99) ≈ 3.03``.
     linearize_at : ndarray, shape (N, 3), optional
         Covariance-only pass linearised at these poses (the mean is not updated, no gating):
         used for the covariances of the batch solution.
     use : ndarray of bool, shape (J,), optional
         With ``linearize_at``: which measurements enter.
+    weights : ndarray, shape (J,), optional
+        With ``linearize_at``: robust weights of the measurements (from a filter run).
     progress : bool
         Show a tqdm bar over the epochs.
 
@@ -293,9 +379,17 @@ def run_filter(
     Raises
     ------
     DivergenceError
-        Non-finite or non-positive-definite covariance, or persistent outliers; the message
+        A non-positive-definite initial covariance; with ``on_divergence="raise"`` also
+        non-finite or non-positive-definite covariances and persistent outliers; the message
         names the time and the measurement.
     """
+    if on_divergence not in ("reenter", "raise"):
+        raise ValueError(f"on_divergence must be 'reenter' or 'raise', got {on_divergence!r}")
+    if robust not in ROBUST:
+        raise ValueError(f"robust must be one of {ROBUST}, got {robust!r}")
+    raise_ = on_divergence == "raise"
+    if robust_threshold is not None and not (0.0 < robust_threshold < math.inf):
+        raise ValueError(f"robust_threshold must be positive and finite, got {robust_threshold}")
     n = inp.times.shape[0]
     j_all = inp.meas_grid.shape[0]
     status = np.full(j_all, USED, dtype=np.int64)
@@ -322,6 +416,10 @@ def run_filter(
 
     gate_thr = float(chi2.ppf(gate, 2)) if gate is not None else math.inf
     div_thr = gate_thr if gate is not None else float(chi2.ppf(0.9999, 2))
+    rob_c = float(robust_threshold) if robust_threshold is not None else ROBUST_C
+    rob_c2 = rob_c * rob_c if robust is not None else math.inf
+    cauchy = robust == "cauchy"
+    w_fixed = None if weights is None else np.asarray(weights, dtype=np.float64).tolist()
     schmidt = inp.map_covariance is not None
     mapcov = inp.map_covariance
     m = inp.map_xy.shape[0]
@@ -337,6 +435,9 @@ def run_filter(
         blocks = inp.map_marginals
         pxm = None
     lm_xy = inp.map_xy.tolist()
+    # re-entry never inflates the position variance beyond the map's extent squared, nor the
+    # heading variance beyond π² (a pose that uncertain is not localised at all)
+    ext2 = max(float(np.ptp(inp.map_xy, axis=0).max()) if m else 0.0, 1.0) ** 2
     lm_c = blocks.reshape(-1, 4)[:, [0, 1, 3]].tolist()
     rr, rb = float(inp.r[0, 0]), float(inp.r[1, 1])
     zz = inp.meas_z.tolist()
@@ -350,6 +451,7 @@ def run_filter(
     times = inp.times
     nis = np.full(j_all, np.nan)
     nis_l = nis  # written per measurement
+    wts = np.ones(j_all)
     wrap = se2.wrap_angle
 
     x, y, th = (float(v) for v in inp.x0)
@@ -357,13 +459,32 @@ def run_filter(
     p00, p01, p02, p11, p12, p22 = (
         float(p0[i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
     )
+    if not _pd(p00, p01, p02, p11, p12, p22):
+        raise DivergenceError(
+            f"filter cannot start at t={float(inp.times[0]):.6f} s: the initial covariance is "
+            "not finite positive definite"
+        )
     pri_x: list[tuple[float, float, float]] = []
     pri_p: list[tuple[float, ...]] = []
     post_x: list[tuple[float, float, float]] = []
     post_p: list[tuple[float, ...]] = []
     outlier_run = 0
     run_start = -1
+    run_nis: list[float] = []
+    pending = 0.0  # covariance inflation of a re-entry, applied before the next measurement
+    ev_k: list[int] = []
+    ev_j: list[int] = []
+    ev_kind: list[int] = []
+    ev_a: list[float] = []
 
+    cos, sin, sqrt, atan2, isfinite, PI = (
+        math.cos,
+        math.sin,
+        math.sqrt,
+        math.atan2,
+        math.isfinite,
+        math.pi,
+    )  # fmt: skip  (local names: no attribute look-up per measurement)
     iterator = range(epochs.shape[0])
     bar = tqdm(
         iterator, desc="filter", unit="epoch", disable=not progress, file=sys.stderr, leave=False
@@ -373,8 +494,8 @@ def run_filter(
         if e > 0:
             ux, uy, uth = e_local[e]
             psi = lin_l[int(epochs[e - 1])][2] if fixed else th  # type: ignore[index]
-            c = math.cos(psi)
-            s = math.sin(psi)
+            c = cos(psi)
+            s = sin(psi)
             dx = c * ux - s * uy
             dy = s * ux + c * uy
             x += dx
@@ -393,6 +514,14 @@ def run_filter(
         if fixed:
             lx_, ly_, lth_ = lin_l[k]  # type: ignore[index]
         for idx in range(bounds[e], bounds[e + 1]):
+            if pending:
+                p00, p01, p02, p11, p12, p22 = (
+                    pending * p00, pending * p01, pending * p02,
+                    pending * p11, pending * p12, pending * p22,
+                )  # fmt: skip
+                if pxm is not None:
+                    pxm *= math.sqrt(pending)
+                pending = 0.0
             j = active_l[idx]
             li = lmk[j]
             lx, ly = lm_xy[li]
@@ -401,7 +530,7 @@ def run_filter(
             ddx = lx - px
             ddy = ly - py
             qq = ddx * ddx + ddy * ddy
-            r = math.sqrt(qq)
+            r = sqrt(qq)
             h00, h01, h10, h11 = ddx / r, ddy / r, -ddy / qq, ddx / qq
             t00 = h00 * ca + h01 * cb
             t01 = h00 * cb + h01 * cd
@@ -439,33 +568,63 @@ def run_filter(
                 b2 += c21
             det = s00 * s11 - s01 * s01
             if not (det > 0.0 and s00 > 0.0):
-                _diverged(inp, times[k], j, "innovation covariance is not positive definite")
+                if raise_ or fixed:
+                    _diverged(inp, times[k], j, "innovation covariance is not positive definite")
+                status[j] = GATED
+                ev_k.append(k), ev_j.append(j), ev_kind.append(SKIPPED_S), ev_a.append(1.0)
+                continue
             i00, i01, i11 = s11 / det, -s01 / det, s00 / det
             zr, zb = zz[j]
             y0 = zr - r
-            y1 = zb - math.atan2(ddy, ddx) + pth
-            if not -math.pi <= y1 < math.pi:
+            y1 = zb - atan2(ddy, ddx) + pth
+            if not -PI <= y1 < PI:
                 y1 = float(wrap(y1))
             v = y0 * y0 * i00 + 2.0 * y0 * y1 * i01 + y1 * y1 * i11
             nis_l[j] = v
-            if not fixed:
+            wj = 1.0
+            if fixed:
+                if w_fixed is not None:
+                    wj = w_fixed[j]
+            else:
                 if v > div_thr:
                     if outlier_run == 0:
                         run_start = j
                     outlier_run += 1
+                    run_nis.append(v)
                     if max_outlier_run is not None and outlier_run >= max_outlier_run:
-                        _diverged(
-                            inp,
-                            times[k],
-                            j,
-                            f"{outlier_run} consecutive innovations beyond the χ² bound "
-                            f"{div_thr:.2f} (since {inp.label(run_start)})",
+                        if raise_:
+                            _diverged(
+                                inp,
+                                times[k],
+                                j,
+                                f"{outlier_run} consecutive innovations beyond the χ² bound "
+                                f"{div_thr:.2f} (since {inp.label(run_start)})",
+                            )
+                        run_nis.sort()
+                        pending = min(
+                            run_nis[len(run_nis) // 2] / div_thr,
+                            ext2 / max(p00, p11, 1e-300),
+                            math.pi * math.pi / max(p22, 1e-300),
                         )
+                        pending = max(1.0, pending)
+                        ev_k.append(k), ev_j.append(j), ev_kind.append(REENTRY)
+                        ev_a.append(pending)
+                        outlier_run = 0
+                        run_nis = []
                 else:
                     outlier_run = 0
+                    run_nis = []
                 if v > gate_thr:
                     status[j] = GATED
                     continue
+                if v > rob_c2:
+                    wj = _robust_weight(cauchy, rob_c, y0, y1, s00, s01, s11, re00, re01, re11)
+            if wj != 1.0:
+                wts[j] = wj
+                f = 1.0 / wj - 1.0
+                w00, w01, w11 = s00 + f * re00, s01 + f * re01, s11 + f * re11
+                det = w00 * w11 - w01 * w01
+                i00, i01, i11 = w11 / det, -w01 / det, w00 / det
             # K = N S⁻¹ with N = P H_xᵀ (+ P_xl H_lᵀ): columns (a*, b*)
             k00 = a0 * i00 + b0 * i01
             k01 = a0 * i01 + b0 * i11
@@ -473,6 +632,27 @@ def run_filter(
             k11 = a1 * i01 + b1 * i11
             k20 = a2 * i00 + b2 * i01
             k21 = a2 * i01 + b2 * i11
+            # P ← P − K S Kᵀ = P − N S⁻¹ Nᵀ
+            n00 = p00 - (a0 * k00 + b0 * k01)
+            n01 = p01 - (a0 * k10 + b0 * k11)
+            n02 = p02 - (a0 * k20 + b0 * k21)
+            n11 = p11 - (a1 * k10 + b1 * k11)
+            n12 = p12 - (a1 * k20 + b1 * k21)
+            n22 = p22 - (a2 * k20 + b2 * k21)
+            # finite and positive definite (leading principal minors; _pd inlined)
+            m2 = n00 * n11 - n01 * n01
+            d3 = (
+                n00 * (n11 * n22 - n12 * n12)
+                - n01 * (n01 * n22 - n12 * n02)
+                + n02 * (n01 * n12 - n11 * n02)
+            )
+            if not (n00 > 0.0 and m2 > 0.0 and d3 > 0.0 and isfinite(d3 + n22 + n00 + n11)):
+                if raise_ or fixed:
+                    _diverged(inp, times[k], j, "pose covariance is not finite positive definite")
+                status[j] = GATED
+                ev_k.append(k), ev_j.append(j), ev_kind.append(SKIPPED_P), ev_a.append(1.0)
+                continue
+            p00, p01, p02, p11, p12, p22 = n00, n01, n02, n11, n12, n22
             if not fixed:
                 x += k00 * y0 + k01 * y1
                 y += k10 * y0 + k11 * y1
@@ -482,15 +662,14 @@ def run_filter(
                 hl = np.array([[h00, h01], [h10, h11]])
                 tmp = hx @ pxm + hl @ mapcov[2 * li : 2 * li + 2]  # type: ignore[index]
                 pxm -= np.array([[k00, k01], [k10, k11], [k20, k21]]) @ tmp
-            # P ← P − K S Kᵀ = P − N S⁻¹ Nᵀ
-            p00 -= a0 * k00 + b0 * k01
-            p01 -= a0 * k10 + b0 * k11
-            p02 -= a0 * k20 + b0 * k21
-            p11 -= a1 * k10 + b1 * k11
-            p12 -= a1 * k20 + b1 * k21
-            p22 -= a2 * k20 + b2 * k21
-            if not _pd(p00, p01, p02, p11, p12, p22):
-                _diverged(inp, times[k], j, "pose covariance is not finite positive definite")
+        if pending:
+            p00, p01, p02, p11, p12, p22 = (
+                pending * p00, pending * p01, pending * p02,
+                pending * p11, pending * p12, pending * p22,
+            )  # fmt: skip
+            if pxm is not None:
+                pxm *= math.sqrt(pending)
+            pending = 0.0
         if bounds[e + 1] == bounds[e] and not _pd(p00, p01, p02, p11, p12, p22):
             raise DivergenceError(
                 f"filter diverged at t={float(times[k]):.6f} s: predicted covariance is not finite "
@@ -521,6 +700,15 @@ def run_filter(
         status=readonly(status, np.int64),
         nis=readonly(nis),
         psi=psi,
+        order=readonly(active, np.int64),
+        weights=readonly(wts),
+        events=FilterEvents(
+            grid=np.asarray(ev_k, dtype=np.int64).reshape(-1),
+            measurement=np.asarray(ev_j, dtype=np.int64).reshape(-1),
+            kind=np.asarray(ev_kind, dtype=np.int64).reshape(-1),
+            inflation=np.asarray(ev_a, dtype=np.float64).reshape(-1),
+        ),
+        outlier_bound=div_thr,
     )
 
 
@@ -577,6 +765,59 @@ def fill(seg: Segments, psi: Array, post_x: Array, post_p: Array) -> tuple[Array
     ps = psi[e_of]
     p6 = predict6(pb, tuple(seg.q), np.cos(ps), np.sin(ps), w[:, 0], w[:, 1])
     return poses, _full(np.column_stack(p6))
+
+
+#: Default robust threshold ``c`` on the Mahalanobis distance: ``√χ²₂(0.99)``.
+ROBUST_C = float(math.sqrt(chi2.ppf(0.99, 2)))
+
+
+def robust_weight_of_distance(cauchy: bool, c: float, d: float) -> float:
+    """``w(d)``: 1 for ``d ≤ c``; Huber ``c/d`` or Cauchy-type ``(c/d)²`` beyond."""
+    if d <= c:
+        return 1.0
+    return (c / d) ** 2 if cauchy else c / d
+
+
+def _robust_weight(  # type: ignore[no-untyped-def]
+    cauchy: bool, c: float, y0, y1, s00, s01, s11, re00, re01, re11
+) -> float:
+    """Fixed point ``w = w(d(w))``, ``d(w)² = yᵀ (S + (1/w − 1) R_eff)⁻¹ y``, on scalars.
+
+    ``g(u) = u − log w(d(eᵘ))`` is increasing in ``u = log w`` (``d`` grows with ``w``);
+    ``g(0) > 0`` and ``g(log w(d(1))) ≤ 0`` bracket the root, found by the Illinois variant of
+    regula falsi to ``1e-12`` in ``u``.
+    """
+
+    def g(u: float) -> float:
+        f = math.exp(-u) - 1.0
+        w00, w01, w11 = s00 + f * re00, s01 + f * re01, s11 + f * re11
+        d2 = (y0 * y0 * w11 - 2.0 * y0 * y1 * w01 + y1 * y1 * w00) / (w00 * w11 - w01 * w01)
+        return u - math.log(robust_weight_of_distance(cauchy, c, math.sqrt(max(d2, 1e-300))))
+
+    hi, g_hi = 0.0, g(0.0)
+    if g_hi <= 0.0:
+        return 1.0
+    lo = hi - g_hi  # log w(d(1))
+    g_lo = g(lo)
+    side = 0
+    for _ in range(100):
+        if g_lo >= 0.0 or hi - lo <= 1e-12:
+            break
+        u = (lo * g_hi - hi * g_lo) / (g_hi - g_lo)
+        gu = g(u)
+        if gu > 0.0:
+            hi, g_hi = u, gu
+            if side == -1:
+                g_lo *= 0.5
+            side = -1
+        elif gu < 0.0:
+            lo, g_lo = u, gu
+            if side == 1:
+                g_hi *= 0.5
+            side = 1
+        else:
+            return math.exp(u)
+    return math.exp(lo if g_lo >= 0.0 else 0.5 * (lo + hi))
 
 
 def _diverged(inp: FilterInput, t: float, j: int, why: str) -> None:

@@ -13,6 +13,10 @@ recursion over the epochs only — written as a suffix scan (Hillis–Steele dou
 affine maps ``δ ↦ C δ + C g`` and ``Δ ↦ C Δ Cᵀ + C G Cᵀ`` (``g = x⁺ − x⁻``, ``G = P⁺ − P⁻``
 the filter's correction at the next epoch; ``δ = x^s − x⁺``, ``Δ = P^s − P⁺``), which compose
 in closed form — and then fills every pose between epochs at once.
+
+The smoother works on the filter's own priors and posteriors, so a robust filter run
+(M-estimator weights) and the filter's re-entries (covariance inflation where the map and the
+log disagree) carry over unchanged: the smoother uses the same robust model as the filter.
 """
 
 from __future__ import annotations

@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric.consistency import NeesSummary
+from relation_metric.evaluate import Evaluation
 from relation_metric.plots import pyplot
 from relation_metric.trajectory import Trajectory
 
-__all__ = ["trajectories_figure", "nees_figure"]
+__all__ = ["trajectories_figure", "nees_figure", "mark_stretches_xy", "mark_stretches_time"]
 
 
 def trajectories_figure(
@@ -60,4 +62,47 @@ def nees_figure(
     ax.set_xlabel("time [s]")
     ax.set_ylabel("NEES")
     ax.legend(loc="best", fontsize=8)
+    return fig
+
+
+def mark_stretches_xy(
+    fig: Any, stretches: Sequence[Mapping[str, float]], estimate: Trajectory | None
+) -> Any:
+    """Mark the poses of ``estimate`` inside each stretch ``[t0, t1]`` on a trajectory plot.
+
+    ``stretches``: the ``divergence["stretches"]`` dicts of a recovery report. Returns ``fig``.
+    """
+    if not stretches or estimate is None or not fig.axes:
+        return fig
+    t = estimate.timestamps
+    t0 = np.array([float(s["t0"]) for s in stretches])
+    t1 = np.array([float(s["t1"]) for s in stretches])
+    k = np.searchsorted(t0, t, side="right") - 1
+    inside = (k >= 0) & (t <= t1[np.clip(k, 0, None)])
+    ax = fig.axes[0]
+    xy = estimate.poses[inside, :2]
+    ax.plot(xy[:, 0], xy[:, 1], ".", ms=4, color="tab:red", zorder=4, label="map/log disagree")
+    ax.legend(loc="best", fontsize=8)
+    return fig
+
+
+def mark_stretches_time(
+    fig: Any, stretches: Sequence[Mapping[str, float]], evaluation: Evaluation
+) -> Any:
+    """Shade each stretch ``[t0, t1]`` on the error timeline of an evaluation figure.
+
+    The timeline's axis is the relation mid-time since the first scored relation
+    (:func:`relation_metric.plots.evaluation_figure`). Returns ``fig``.
+    """
+    if not stretches or not fig.axes:
+        return fig
+    ev = evaluation
+    mid = 0.5 * (ev.relations.first + ev.relations.second)[ev.valid]
+    origin = float(mid.min()) if mid.size else 0.0
+    ax = fig.axes[0]
+    for k, s in enumerate(stretches):
+        a, b = float(s["t0"]) - origin, float(s["t1"]) - origin
+        ax.axvspan(a, max(b, a + 0.5), color="tab:red", alpha=0.15, lw=0,
+                   label="map/log disagree" if k == 0 else None)  # fmt: skip
+    ax.legend(loc="upper left", fontsize=8)
     return fig

@@ -26,11 +26,11 @@ from landmark_graph.compare import MapComparison, compare_maps
 from landmark_graph.maps import LandmarkMap
 from landmark_graph.plots import map_figure
 from recovery.bundle import Bundle, read_bundle, write_bundle
-from recovery.recover import recover
+from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, recover
 from recovery.steps import build_steps
 from relation_metric import se2
 from relation_metric.consistency import NeesSummary, pose_nees, summarize_nees
-from relation_metric.errors import InputError
+from relation_metric.errors import InputError, SlamrelError
 from relation_metric.evaluate import Evaluation, UnassociatedRelationsWarning, evaluate
 from relation_metric.formats import read_trajectory
 from relation_metric.outputs import staged_directory, write_text_atomic
@@ -38,7 +38,12 @@ from relation_metric.plots import evaluation_figure
 from relation_metric.relations import RelationSet, generate_relations
 from relation_metric.results import write_per_relation_csv
 from relation_metric.trajectory import Trajectory
-from slamrel.figures import nees_figure, trajectories_figure
+from slamrel.figures import (
+    mark_stretches_time,
+    mark_stretches_xy,
+    nees_figure,
+    trajectories_figure,
+)
 from slamrel.report import Figure, Section, Table, figure_png, render_html
 from slamrel.simulate import slam_bundle, world_bundle
 from slamrel.verdict import run_verdict
@@ -100,6 +105,9 @@ class RunResult:
     map : dict or None
         The landmark-map comparison (``slamrel map-compare`` JSON), when available.
     notes : list of str
+    recovery_error : str or None
+        Why no trajectory was recovered (``--fail-on-divergence``, or numerically impossible
+        input); the report then scores dead reckoning (and the online estimate).
     """
 
     name: str
@@ -111,11 +119,14 @@ class RunResult:
     map: dict[str, Any] | None
     notes: list[str] = field(default_factory=list)
     map_comparison: MapComparison | None = None
+    recovery_error: str | None = None
 
     def metrics(self) -> dict[str, Any]:
         """The ``metrics.json`` structure."""
         out: dict[str, Any] = {}
-        main_name = "recovered" if "recovered" in self.evaluations else "online"
+        main_name = next(
+            k for k in ("recovered", "online", "dead_reckoning") if k in self.evaluations
+        )
         for name, evs in self.evaluations.items():
             key = "trajectory" if name == main_name else name
             out[key] = evs["all"].as_dict()
@@ -123,6 +134,8 @@ class RunResult:
         out["trajectory_source"] = main_name
         out["map"] = self.map
         out["recovery"] = self.recovery
+        out["divergence"] = self.recovery.get("divergence")
+        out["recovery_error"] = self.recovery_error
         out["nees"] = {k: v[0].as_dict() for k, v in self.nees.items()}
         out["notes"] = self.notes
         return out
@@ -149,7 +162,10 @@ def run_pipeline(
     corrupt_fraction: float = 0.0,
     noise_scale: float = 1.0,
     method: str = "smoother",
-    max_outlier_run: int | None = 100,
+    max_outlier_run: int | None = DEFAULT_MAX_OUTLIER_RUN,
+    on_divergence: str = "reenter",
+    robust: str | None = None,
+    process_noise_scale: float = 1.0,
 ) -> RunResult:
     """Run the whole chain on a built-in world, or score a SLAM result bundle directory.
 
@@ -157,7 +173,9 @@ def run_pipeline(
     the filter's online estimate for validation). A directory is read as a SLAM result bundle
     (``../shared/BUNDLE.md``) and scored against its ``groundtruth.csv`` (required) and, when
     present, ``landmarks_groundtruth.csv``; an ``online.csv`` beside it (written by
-    ``slamrel slam --store-online``) is scored too.
+    ``slamrel slam --store-online``) is scored too. ``max_outlier_run``, ``on_divergence``
+    and ``robust`` are passed to :func:`recovery.recover.recover`; ``process_noise_scale`` to
+    :func:`slamrel.simulate.slam_bundle` (worlds only).
     """
     if Path(source).is_dir():
         bundle = read_bundle(source)
@@ -172,16 +190,20 @@ def run_pipeline(
             method=method,
             max_outlier_run=max_outlier_run,
             online=online_traj,
+            on_divergence=on_divergence,
+            robust=robust,
         )
     world = make_world(source, noise=noise, seed=seed, rate=rate)
     log = world_bundle(world)
     bundle, slam = slam_bundle(
-        log, corrupt_fraction=corrupt_fraction, noise_scale=noise_scale, seed=seed
-    )
+        log, corrupt_fraction=corrupt_fraction, noise_scale=noise_scale, seed=seed,
+        process_noise_scale=process_noise_scale,
+    )  # fmt: skip
     return score_bundle(
         bundle, name=f"{source}/{noise}/seed {seed}", seed=seed, method=method,
         max_outlier_run=max_outlier_run, online=slam.online,
         online_covariance=slam.online_covariance, dead_reckoning=world.odometry,
+        on_divergence=on_divergence, robust=robust,
     )  # fmt: skip
 
 
@@ -191,33 +213,52 @@ def score_bundle(
     name: str,
     seed: int = 0,
     method: str = "smoother",
-    max_outlier_run: int | None = 100,
+    max_outlier_run: int | None = DEFAULT_MAX_OUTLIER_RUN,
     online: Trajectory | None = None,
     online_covariance: NDArray[np.float64] | None = None,
     dead_reckoning: Trajectory | None = None,
+    on_divergence: str = "reenter",
+    robust: str | None = None,
 ) -> RunResult:
-    """Recover the trajectory from a SLAM result bundle and score it (and its baselines)."""
+    """Recover the trajectory from a SLAM result bundle and score it (and its baselines).
+
+    When the recovery fails (``on_divergence="raise"`` on a run where map and log disagree,
+    or numerically impossible input), the result still scores dead reckoning (and the online
+    estimate) and says why in ``recovery_error``: a report is always written.
+    """
     truth = bundle.groundtruth
     if truth is None:
         raise InputError(
             "the bundle has no groundtruth.csv: nothing to score against", path=bundle.path
         )
     sets = default_relations(truth, seed=seed)
-    rec = recover(bundle, method=method, max_outlier_run=max_outlier_run)
+    rec_error = None
+    try:
+        rec = recover(
+            bundle,
+            method=method,
+            max_outlier_run=max_outlier_run,
+            on_divergence=on_divergence,
+            robust=robust,
+        )
+    except SlamrelError as exc:  # DivergenceError with on_divergence="raise"
+        if isinstance(exc, InputError):
+            raise
+        rec, rec_error = None, str(exc)
     if dead_reckoning is None:
         steps = build_steps(bundle)
         dead_reckoning = Trajectory(
             steps.times, se2.cumulative_compose(steps.u, start=bundle.initial_pose)
         )
-    recovered, rec_rows = _at_truth_times(rec.trajectory, truth)
-    estimates: dict[str, Trajectory] = {
-        "recovered": recovered,
-        "dead_reckoning": _at_truth_times(dead_reckoning, truth)[0],
-    }
+    estimates: dict[str, Trajectory] = {}
     nees: dict[str, tuple[NeesSummary, np.ndarray]] = {}
-    truth_at = _truth_at(truth, recovered.timestamps)
-    nees_rec = pose_nees(recovered.poses[1:], truth_at[1:], rec.covariances[rec_rows][1:])
-    nees["recovered"] = (summarize_nees(nees_rec, dof=3), nees_rec)
+    if rec is not None:
+        recovered, rec_rows = _at_truth_times(rec.trajectory, truth)
+        estimates["recovered"] = recovered
+        truth_at = _truth_at(truth, recovered.timestamps)
+        nees_rec = pose_nees(recovered.poses[1:], truth_at[1:], rec.covariances[rec_rows][1:])
+        nees["recovered"] = (summarize_nees(nees_rec, dof=3), nees_rec)
+    estimates["dead_reckoning"] = _at_truth_times(dead_reckoning, truth)[0]
     if online is not None:
         online_t, online_rows = _at_truth_times(online, truth)
         estimates["online"] = online_t
@@ -229,22 +270,16 @@ def score_bundle(
             )
             nees["online"] = (summarize_nees(v, dof=3), v)
     evaluations = {k: _evaluate_sets(sets, est) for k, est in estimates.items()}
-    counts = dict(rec.counts)
     map_cmp = None
     if bundle.landmarks_groundtruth is not None:
         gt_ids, gt_xy = bundle.landmarks_groundtruth
         map_cmp = compare_maps(
             LandmarkMap(bundle.map_ids, bundle.map_xy), LandmarkMap(gt_ids, gt_xy)
         )
-    notes = [
-        f"The recovered trajectory is EKF localisation in the SLAM run's final map with its "
-        f"data associations and models, then smoothed ({method}); it scores the final map, "
-        "not the estimate the filter had online.",
-        f"Recovery used {int(counts['used'])} of {int(counts['measurements'])} measurements; "
-        f"{int(counts['gated'])} were gated ({100 * counts['gated_fraction']:.1f}%), "
-        f"{int(counts['unassociated'])} were unassociated. A large gated fraction is a finding "
-        "about the map, not noise.",
-    ]
+    notes = _recovery_notes(rec, method) if rec is not None else [
+        f"No trajectory was recovered: {rec_error}. The report scores dead reckoning"
+        + (" and the online estimate." if online is not None else ".")
+    ]  # fmt: skip
     if online is not None:
         notes.append(
             "The online estimate is the EKF-SLAM filter's own pose; it is shown for validation "
@@ -256,11 +291,42 @@ def score_bundle(
         estimates=estimates,
         evaluations=evaluations,
         nees=nees,
-        recovery=rec.report(),
+        recovery=rec.report() if rec is not None else {},
         map=None if map_cmp is None else map_cmp.as_dict(),
         notes=notes,
         map_comparison=map_cmp,
+        recovery_error=rec_error,
     )
+
+
+def _recovery_notes(rec: Any, method: str) -> list[str]:
+    counts = rec.counts
+    notes = [
+        f"The recovered trajectory is EKF localisation in the SLAM run's final map with its "
+        f"data associations and models, then smoothed ({method}); it scores the final map, "
+        "not the estimate the filter had online.",
+        f"Recovery used {int(counts['used'])} of {int(counts['measurements'])} measurements; "
+        f"{int(counts['gated'])} were gated ({100 * counts['gated_fraction']:.1f}%), "
+        f"{int(counts['unassociated'])} were unassociated. A large gated fraction is a finding "
+        "about the map, not noise.",
+    ]
+    if counts.get("downweighted"):
+        notes.append(
+            f"The robust update down-weighted {int(counts['downweighted'])} measurements "
+            f"({100 * counts['downweighted_fraction']:.1f}%, weight lost "
+            f"{100 * counts['downweight_loss']:.1f}%); like a gated fraction, a large loss is a "
+            "finding about the map."
+        )
+    d = rec.divergence
+    if d.get("stretches"):
+        notes.append(
+            f"The map and the log DISAGREE on {len(d['stretches'])} stretch(es) covering "
+            f"{100 * d['fraction_of_log']:.1f}% of the log (runs of innovations beyond the "
+            f"χ² bound {d['outlier_bound']:.2f}; mean NIS {rec.nis_stats['mean']:.3g}, 2 "
+            "expected). Divergence is a finding: the recovery was re-entered after each run "
+            "and went on; the score includes these stretches (see the section below)."
+        )
+    return notes
 
 
 def _at_truth_times(est: Trajectory, truth: Trajectory) -> tuple[Trajectory, NDArray[np.int64]]:
@@ -308,6 +374,83 @@ def _stats_table(result: RunResult, part: str) -> Table:
     )
 
 
+def _divergence_section(result: RunResult) -> Section:
+    """Where the map and the log disagree (stretches, NIS), or why nothing was recovered."""
+    if result.recovery_error is not None:
+        return Section(
+            "Map–log agreement",
+            paragraphs=[f"No trajectory was recovered: {result.recovery_error}"],
+        )
+    d = result.recovery.get("divergence") or {}
+    nis = result.recovery.get("nis") or {}
+    st = d.get("stretches") or []
+    paragraphs = [
+        "EKF localisation in the final map checks every innovation against its covariance: "
+        f"a stretch is a run of at least {d.get('max_outlier_run') or 'the default number of'} "
+        f"consecutive innovations with NIS beyond the χ² bound {d.get('outlier_bound', 0.0):.2f}"
+        " (2 dof). Divergence is a finding about the map (or the models), not an error: "
+        "the filter was re-entered after each run (its pose covariance inflated) and went on, "
+        "and the scores above include these stretches.",
+        f"Rule: {d.get('rule', '')}.",
+        (
+            f"{len(st)} stretch(es), {100 * float(d.get('fraction_of_log', 0.0)):.1f}% of the log, "
+            f"{100 * float(d.get('fraction_of_measurements', 0.0)):.1f}% of the measurements."
+            if st
+            else "The map and the log agree: no stretch of outlying innovations."
+        ),
+    ]
+    ns = d.get("nees_stretches") or []
+    if ns:
+        paragraphs.append(
+            f"Against the ground truth, the recovered pose's NEES exceeds its 99.99% χ² bound "
+            f"(3 dof) on {len(ns)} stretch(es): "
+            + ", ".join(f"[{s['t0']:.6g}, {s['t1']:.6g}] s" for s in ns[:10])
+            + (" …" if len(ns) > 10 else "")
+            + "."
+        )
+    rows = [
+        [s["t0"], s["t1"], s["duration"], s["measurements"], s["outlying"], s["nis_median"],
+         s["nis_max"], s["reentries"]]
+        for s in st[:50]
+    ]  # fmt: skip
+    if len(st) > 50:
+        paragraphs.append(f"The first 50 of {len(st)} stretches are listed; all in metrics.json.")
+    tables = [
+        Table(
+            "NIS of the recovery's innovations (2 dof)",
+            ["measurements", "mean", "median", "expected mean", "beyond 95%", "beyond bound"],
+            [
+                [
+                    nis.get("count"),
+                    nis.get("mean"),
+                    nis.get("median"),
+                    2.0,
+                    nis.get("fraction_beyond_95"),
+                    nis.get("fraction_beyond_bound"),
+                ]
+            ],
+        ),  # fmt: skip
+    ]
+    if rows:
+        tables.append(
+            Table(
+                "stretches where the map and the log disagree (times in s)",
+                [
+                    "t0",
+                    "t1",
+                    "duration",
+                    "measurements",
+                    "outlying",
+                    "NIS median",
+                    "NIS max",
+                    "re-entries",
+                ],
+                rows,
+            )  # fmt: skip
+        )
+    return Section("Map–log agreement", paragraphs=paragraphs, tables=tables)
+
+
 def write_report(result: RunResult, directory: str | Path, *, force: bool = True) -> Path:
     """Write the report folder, swapped in whole; returns the path of ``report.html``.
 
@@ -325,17 +468,22 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
         for name, evs in result.evaluations.items():
             write_per_relation_csv(tmp / f"relations_{name}.csv", evs["all"])
         main_name = metrics["trajectory_source"]
+        stretches = (result.recovery.get("divergence") or {}).get("stretches") or []
         figs = [
             Figure(
                 "Estimates against the ground truth, with the true landmarks and the SLAM map",
                 figure_png(
-                    trajectories_figure(
-                        truth,
-                        result.estimates,
-                        landmarks=result.bundle.landmarks_groundtruth[1]
-                        if result.bundle.landmarks_groundtruth
-                        else None,
-                        mapped=result.bundle.map_xy,
+                    mark_stretches_xy(
+                        trajectories_figure(
+                            truth,
+                            result.estimates,
+                            landmarks=result.bundle.landmarks_groundtruth[1]
+                            if result.bundle.landmarks_groundtruth
+                            else None,
+                            mapped=result.bundle.map_xy,
+                        ),
+                        stretches,
+                        result.estimates.get("recovered"),
                     )
                 ),
             ),
@@ -343,8 +491,12 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
                 f"The {main_name} trajectory coloured by relation error (all relation sets), "
                 "and the errors over time",
                 figure_png(
-                    evaluation_figure(
-                        result.evaluations[main_name]["all"], result.estimates[main_name]
+                    mark_stretches_time(
+                        evaluation_figure(
+                            result.evaluations[main_name]["all"], result.estimates[main_name]
+                        ),
+                        stretches,
+                        result.evaluations[main_name]["all"],
                     )
                 ),
             ),
@@ -408,6 +560,7 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
                 figures=figs[2:3],
             ),
         ]
+        sections.append(_divergence_section(result))
         if result.map is not None:
             mp = result.map
             sections.append(

@@ -74,6 +74,7 @@ def slam_bundle(
     noise_scale: float = 1.0,
     outlier_gate: float | None = None,
     seed: int = 0,
+    process_noise_scale: float = 1.0,
 ) -> tuple[Bundle, EkfSlamResult]:
     """Run the reference EKF-SLAM on ``bundle``'s log; return the SLAM result bundle.
 
@@ -84,7 +85,21 @@ def slam_bundle(
     models it used. ``outlier_gate`` is the χ² validation gate on known-association updates
     (:func:`slamrel.backends.ekfslam.ekf_slam`); rejected measurements are left
     unassociated in the result bundle and counted in its description.
+    ``process_noise_scale`` scales the motion model's standard deviations only (a filter
+    mis-tuned in its process noise; ``noise_scale`` scales motion and sensor alike, which
+    leaves the filter's gains, and so its online estimate, unchanged).
     """
+    if process_noise_scale != 1.0:
+        m0 = bundle.motion
+        k = process_noise_scale
+        bundle = replace(
+            bundle,
+            motion=replace(
+                m0,
+                sigma=None if m0.sigma is None else tuple(k * s for s in m0.sigma),
+                alpha=None if m0.alpha is None else tuple(k**2 * a for a in m0.alpha),
+            ),
+        )
     steps = build_steps(bundle)
     true_ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks, -1)
     res = ekf_slam(
@@ -129,6 +144,7 @@ def slam_bundle(
         description=(bundle.description + "; " if bundle.description else "")
         + f"EKF-SLAM ({association} association, corrupted {corrupt_fraction:g}, "
         f"noise scale {noise_scale:g}"
+        + ("" if process_noise_scale == 1.0 else f", process noise scale {process_noise_scale:g}")
         + (
             ""
             if outlier_gate is None

@@ -63,3 +63,34 @@ def test_run_on_a_bundle_directory(tmp_path):
     # a bundle without ground truth cannot be scored: a clear error
     (slam / "groundtruth.csv").unlink()
     assert main(["run", str(slam), "-o", str(tmp_path / "rep2"), "-q"]) == 3
+
+
+def test_run_on_a_broken_slam_run_reports_divergence(tmp_path, capsys):
+    """Divergence is a finding: exit 0, a report with the stretches; --fail-on-divergence
+    exits 3 but still writes the report, scoring dead reckoning (and the online estimate)."""
+    out = tmp_path / "rep"
+    assert main(["run", "simple1", "--corrupt", "0.1", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "DISAGREE" in text and "np.float64" not in text
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["trajectory_source"] == "recovered" and m["recovery_error"] is None
+    d = m["divergence"]
+    assert d["diverged"] and d["count"] == len(d["stretches"]) >= 1
+    assert 0.0 < d["fraction_of_log"] <= 1.0
+    assert d == m["recovery"]["divergence"] and m["recovery"]["nis"]["mean"] > 2.0
+    # a broken run scores as broken: recovered far-apart error near the online one
+    rec = m["trajectory"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]
+    onl = m["online"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]
+    assert rec > 0.5 * onl
+    html = (out / "report.html").read_text()
+    assert "Map–log agreement" in html and "stretches where the map and the log disagree" in html
+    out2 = tmp_path / "rep2"
+    assert main(["run", "simple1", "--corrupt", "0.1", "-o", str(out2), "-q",
+                 "--fail-on-divergence"]) == 3  # fmt: skip
+    err = capsys.readouterr().err
+    assert "no trajectory recovered" in err and "np.float64" not in err
+    m2 = json.loads((out2 / "metrics.json").read_text())
+    assert m2["trajectory_source"] == "online" and "recovered" not in m2
+    assert m2["dead_reckoning"]["translation"]["abs"]["count"] > 0
+    assert "consecutive innovations" in m2["recovery_error"]
+    assert "No trajectory was recovered" in (out2 / "report.html").read_text()

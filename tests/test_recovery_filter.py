@@ -186,7 +186,7 @@ def test_divergence_names_time_and_measurement(tmp_path: Path) -> None:
     write_bundle(tmp_path / "b", replace(b, map_xy=b.map_xy + [3.0, -2.0]))
     bad = read_bundle(tmp_path / "b")
     with pytest.raises(DivergenceError) as info:
-        recover(bad, method="filter", max_outlier_run=20)
+        recover(bad, method="filter", max_outlier_run=20, on_divergence="raise")
     msg = str(info.value)
     assert "t=" in msg and "measurements.csv:" in msg and "consecutive" in msg
     # without the run limit it completes, and says how far off it is
@@ -204,6 +204,7 @@ def test_divergence_names_time_and_measurement(tmp_path: Path) -> None:
                 "-q",
                 "--max-outlier-run",
                 "20",
+                "--fail-on-divergence",
             ]
         )
         == 3

@@ -9,7 +9,8 @@ import sys
 import numpy as np
 
 from recovery.bundle import read_bundle
-from recovery.recover import MAP_MODES, METHODS, recover
+from recovery.ekf import ROBUST
+from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, MAP_MODES, METHODS, Recovery, recover
 from relation_metric.errors import InputError
 from relation_metric.formats import write_trajectory
 from relation_metric.results import write_json
@@ -60,9 +61,31 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "--max-outlier-run",
         type=opt.nonnegative_int,
-        default=100,
+        default=DEFAULT_MAX_OUTLIER_RUN,
         metavar="N",
-        help="stop as diverged after N consecutive outlying innovations (0: never)",
+        help="after N consecutive outlying innovations the map and the log disagree: the "
+        "stretch is reported and the filter re-entered by inflating its pose covariance "
+        "(0: never re-enter; default: %(default)s)",
+    )
+    p.add_argument(
+        "--fail-on-divergence",
+        action="store_true",
+        help="exit 3 at the first such stretch instead of recovering and reporting it",
+    )
+    p.add_argument(
+        "--robust",
+        choices=[r for r in ROBUST if r],
+        default=None,
+        help="M-estimator weights on outlying innovations (smoother and batch use the same "
+        "weights; the down-weighted fraction is reported; default: none)",
+    )
+    p.add_argument(
+        "--robust-threshold",
+        type=opt.positive_float,
+        default=None,
+        metavar="C",
+        help="the M-estimator's threshold on the innovation's Mahalanobis distance, in units "
+        "of the scale estimated from a plain pass (default: 1.5)",
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary")
     p.set_defaults(func=run)
@@ -81,6 +104,9 @@ def run(args: argparse.Namespace) -> int:
             gate=args.gate,
             map_mode=args.map_uncertainty,
             max_outlier_run=args.max_outlier_run or None,
+            on_divergence="raise" if args.fail_on_divergence else "reenter",
+            robust=args.robust,
+            robust_threshold=args.robust_threshold,
             progress=not args.quiet and sys.stderr.isatty(),
         )
     write_trajectory(args.output, result.trajectory, format=fmt)
@@ -92,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
     report["gate"] = args.gate
     # rows put in time order under the filter-log rule (relation_metric.timeorder)
     report["reordered"] = dict(bundle.reordered)
+    report.setdefault("robust", None)
     if args.report:
         write_json(args.report, report)
     if not args.quiet:
@@ -110,6 +137,13 @@ def run(args: argparse.Namespace) -> int:
                 f"{FILTER_TIME_TOLERANCE:g} s): "
                 + ", ".join(f"{n} row(s) of {name}" for name, n in moved.items())
             )
+        if args.robust:
+            print(
+                f"robust ({args.robust}): {c['downweighted']} measurements down-weighted "
+                f"({100 * c['downweighted_fraction']:.1f}% of associated; weight lost "
+                f"{100 * c['downweight_loss']:.1f}%)"
+            )
+        print(divergence_summary_text(result))
         if c["gated_fraction"] > 0.05:
             print(
                 "note: a large gated fraction is a finding about the map (wrong associations "
@@ -118,3 +152,48 @@ def run(args: argparse.Namespace) -> int:
         if result.nees is not None and "nees" in report:
             print(f"mean pose NEES vs ground truth: {report['nees']['mean']:.3f} (3 dof)")  # type: ignore[index]
     return 0
+
+
+def divergence_summary_text(result: Recovery, *, limit: int = 5) -> str:
+    """Console lines about the stretches where the map and the log disagree (no numpy reprs)."""
+    d = result.divergence
+    nis = result.nis_stats
+    nis_txt = (
+        f"NIS mean {float(nis['mean']):.3g} (2 expected), median {float(nis['median']):.3g}, "
+        f"{100 * float(nis['fraction_beyond_95']):.1f}% beyond the 95% bound"  # type: ignore[arg-type]
+        if nis.get("mean") is not None
+        else "no measurement reached the filter"
+    )
+    st = d.get("stretches") or []
+    ns = d.get("nees_stretches") or []
+    nees_txt = (
+        f"\nNEES vs ground truth beyond its 99.99% bound on {len(ns)} stretch(es), the first "  # type: ignore[arg-type]
+        f"[{float(ns[0]['t0']):.3f}, {float(ns[0]['t1']):.3f}] s"  # type: ignore[index]
+        if ns
+        else ""
+    )
+    if not st:
+        return f"map and log agree: no stretch of outlying innovations; {nis_txt}{nees_txt}"
+    ev = d.get("events", {})
+    n_re = sum(int(v) for v in ev.values())  # type: ignore[union-attr]
+    lines = [
+        f"map and log DISAGREE on {len(st)} stretch(es), "  # type: ignore[arg-type]
+        f"{100 * float(d['fraction_of_log']):.1f}% of the log "  # type: ignore[arg-type]
+        f"({100 * float(d['fraction_of_measurements']):.1f}% of the measurements); "  # type: ignore[arg-type]
+        f"filter re-entered {n_re} time(s); {nis_txt}"
+    ]
+    for s in st[:limit]:  # type: ignore[index]
+        lines.append(
+            f"  [{float(s['t0']):.3f}, {float(s['t1']):.3f}] s: {int(s['outlying'])} of "
+            f"{int(s['measurements'])} measurements outlying, median NIS "
+            f"{float(s['nis_median']):.3g}"
+        )
+    if len(st) > limit:  # type: ignore[arg-type]
+        lines.append(f"  ... {len(st) - limit} more in the --report JSON")  # type: ignore[arg-type]
+    if nees_txt:
+        lines.append(nees_txt.strip())
+    lines.append(
+        "note: divergence is a finding about the map (or the models), not an error; the score "
+        "of this trajectory includes these stretches (--fail-on-divergence to stop instead)"
+    )
+    return "\n".join(lines)

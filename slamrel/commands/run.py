@@ -6,6 +6,8 @@ import argparse
 import time
 from pathlib import Path
 
+from recovery.ekf import ROBUST
+from recovery.recover import DEFAULT_MAX_OUTLIER_RUN
 from relation_metric.errors import InputError
 from slamrel.commands import options as opt
 from slamrel.commands.common import add_force_argument, check_outputs
@@ -32,6 +34,25 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("--noise-scale", type=opt.positive_float, default=1.0)
     add_force_argument(p)
+    p.add_argument(
+        "--max-outlier-run",
+        type=opt.nonnegative_int,
+        default=DEFAULT_MAX_OUTLIER_RUN,
+        metavar="N",
+        help="recovery: after N consecutive outlying innovations the stretch is reported and "
+        "the filter re-entered (0: never re-enter; default: %(default)s)",
+    )
+    p.add_argument(
+        "--fail-on-divergence",
+        action="store_true",
+        help="exit 3 when the recovery diverges (the report is still written, with dead reckoning)",
+    )
+    p.add_argument(
+        "--robust",
+        choices=[r for r in ROBUST if r],
+        default=None,
+        help="recovery: M-estimator weights on outlying innovations (default: none)",
+    )
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=run)
 
@@ -48,6 +69,8 @@ def run(args: argparse.Namespace) -> int:
     result = run_pipeline(
         args.source, noise=args.noise, seed=args.seed, rate=args.rate,
         corrupt_fraction=args.corrupt, noise_scale=args.noise_scale,
+        max_outlier_run=args.max_outlier_run or None, robust=args.robust,
+        on_divergence="raise" if args.fail_on_divergence else "reenter",
     )  # fmt: skip
     html = write_report(result, args.output, force=args.force)
     if not args.quiet:
@@ -60,5 +83,16 @@ def run(args: argparse.Namespace) -> int:
                     print(
                         f"{name:16s}{set_name:>13s}{ev.translation['abs'].mean:16.4f}{ev.rotation['abs'].mean:16.4f}"
                     )
+        div = result.recovery.get("divergence") or {}
+        if div.get("stretches"):
+            print(
+                f"map and log DISAGREE on {len(div['stretches'])} stretch(es), "
+                f"{100 * float(div['fraction_of_log']):.1f}% of the log (see the report)"
+            )
         print(f"report: {html}")
+    if result.recovery_error is not None:
+        raise InputError(
+            f"no trajectory recovered ({result.recovery_error}); report with dead reckoning "
+            f"written to {html}"
+        )
     return 0
