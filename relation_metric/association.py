@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from relation_metric import se2
 from relation_metric.errors import InputError
+from relation_metric.groups import group_of
 from relation_metric.relations import RelationSet
 from relation_metric.trajectory import Trajectory
 
@@ -45,8 +45,8 @@ class Association:
 
     Attributes
     ----------
-    pose_first, pose_second : ndarray, shape (M, 3)
-        Estimate poses (NaN where unassociated).
+    pose_first, pose_second : ndarray, shape (M, 3) or (M, 7)
+        Estimate poses, on the estimate's group (NaN where unassociated).
     index_first, index_second : ndarray of int64, shape (M,)
         Nearest estimate pose of each end (−1 where there is none).
     valid : ndarray of bool, shape (M,)
@@ -70,8 +70,8 @@ class Association:
 
     @property
     def estimated_delta(self) -> NDArray[np.float64]:
-        """``δ_ij = x_i⁻¹ ∘ x_j`` of the estimate, shape (M, 3) (NaN where invalid)."""
-        return se2.between(self.pose_first, self.pose_second)
+        """``δ_ij = x_i⁻¹ ∘ x_j`` of the estimate, shape (M, 3) or (M, 7) (NaN where invalid)."""
+        return group_of(self.pose_first).between(self.pose_first, self.pose_second)
 
 
 def nearest_index(times: NDArray[np.float64], query: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -99,6 +99,7 @@ def _associate_times(
 ]:
     t = estimate.timestamps
     p = estimate.poses
+    group = estimate.group
     k = nearest_index(t, query)
     gap = np.abs(t[k] - query)
     poses = p[k].copy()
@@ -114,8 +115,7 @@ def _associate_times(
         can = far & inside & (span <= max_interpolation_gap) & (span > 0)
         if can.any():
             s = (query[can] - t[a[can]]) / span[can]
-            rel = se2.log(se2.between(p[a[can]], p[b[can]]))
-            poses[can] = se2.compose(p[a[can]], se2.exp(rel * s[:, None]))
+            poses[can] = group.interpolate(p[a[can]], p[b[can]], s)
             interp[can] = True
             far = far & ~can
     if odometry is not None and far.any():
@@ -125,7 +125,7 @@ def _associate_times(
         inside = (q >= to[0] - max_time_diff) & (q <= to[-1] + max_time_diff)
         at_query = nearest_index(to, q)
         at_pose = nearest_index(to, t[k[far]])
-        corrected = se2.compose(p[k[far]], se2.between(po[at_pose], po[at_query]))
+        corrected = group.compose(p[k[far]], group.between(po[at_pose], po[at_query]))
         idx = np.flatnonzero(far)
         ok = idx[inside]
         poses[ok] = corrected[inside]
@@ -155,11 +155,13 @@ def associate(
     estimate : Trajectory
         The evaluated trajectory.
     odometry : Trajectory, optional
-        Odometry log used to correct ends farther than ``max_time_diff`` from any pose.
+        Odometry log used to correct ends farther than ``max_time_diff`` from any pose; on
+        the estimate's group (a planar log is lifted for an SE(3) estimate).
     max_time_diff : float
         Seconds; the nearest-pose tolerance (0.1 s as in the metricEvaluator).
     interpolate : bool
-        Interpolate on SE(2) between the poses around an end beyond the tolerance.
+        Interpolate on the estimate's group (SE(2) or SE(3), constant twist) between the
+        poses around an end beyond the tolerance.
     max_interpolation_gap : float
         Seconds; longest gap between two estimate poses that is interpolated over.
 
@@ -174,17 +176,20 @@ def associate(
         if not (math.isfinite(value) and value >= 0.0):
             raise InputError(f"{name} must be a finite number of seconds >= 0, got {value}")
     m = len(relations)
+    width = estimate.group.width
+    if odometry is not None and odometry.group is not estimate.group:
+        odometry = odometry.lifted() if odometry.group.width < width else odometry.planar()
     if relations.key == "index":
         n = len(estimate)
         ends = np.concatenate((relations.first, relations.second)).astype(np.int64)
         good = (ends >= 0) & (ends < n)
-        poses = np.full((2 * m, 3), np.nan)
+        poses = np.full((2 * m, width), np.nan)
         poses[good] = estimate.poses[ends[good]]
         idx = np.where(good, ends, -1)
         reason = np.where(good, OK, BAD_INDEX).astype(np.int8)
         odo = interp = np.zeros(2 * m, dtype=bool)
     elif len(estimate) == 0:
-        poses = np.full((2 * m, 3), np.nan)
+        poses = np.full((2 * m, width), np.nan)
         idx = np.full(2 * m, -1, dtype=np.int64)
         reason = np.full(2 * m, OUTSIDE_SPAN, dtype=np.int8)
         odo = interp = np.zeros(2 * m, dtype=bool)
