@@ -27,7 +27,14 @@ from relation_metric.groups import group_of
 from relation_metric.relations import RelationSet
 from relation_metric.trajectory import Trajectory
 
-__all__ = ["Association", "associate", "nearest_index", "REASONS"]
+__all__ = [
+    "Association",
+    "associate",
+    "nearest_index",
+    "REASONS",
+    "match_nearest_times",
+    "synchronize",
+]
 
 # Why an endpoint could not be associated (codes of Association.reason).
 OK, OUTSIDE_SPAN, TOO_FAR, BAD_INDEX = 0, 1, 2, 3
@@ -210,3 +217,71 @@ def associate(
         interpolated=(interp[:m] | interp[m:]) & valid,
         reason=np.where(r1 != OK, r1, r2).astype(np.int8),
     )
+
+
+def match_nearest_times(
+    query: NDArray[np.float64], times: NDArray[np.float64], max_diff: float
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """evo's nearest-time matching (``evo.core.sync.matching_time_indices``), vectorised.
+
+    For each ``query`` stamp, the ``times`` stamp nearest to it (ties: the earlier) when it
+    lies within ``max_diff`` seconds (``<=``); ``times`` must be sorted. Several queries may
+    match one time.
+
+    Returns
+    -------
+    index_query, index_times : ndarray of int64, shape (K,)
+        The matched pairs, in query order.
+    """
+    q = np.asarray(query, dtype=np.float64)
+    t = np.asarray(times, dtype=np.float64)
+    if t.size == 0 or q.size == 0:
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    inside = (q >= t[0] - max_diff) & (q <= t[-1] + max_diff)
+    k = np.minimum(np.searchsorted(t, q, side="right"), t.size - 1)
+    diff_ub = t[k] - q
+    diff_lb = np.where(k > 0, q - t[np.maximum(k - 1, 0)], np.inf)
+    pick_ub = (diff_ub <= max_diff) & (diff_ub < diff_lb)
+    pick_lb = ~pick_ub & (diff_lb <= max_diff) & (diff_lb <= diff_ub)
+    ok = inside & (pick_ub | pick_lb)
+    best = np.where(pick_ub, k, k - 1)
+    return np.flatnonzero(ok).astype(np.int64), best[ok].astype(np.int64)
+
+
+def synchronize(
+    reference: Trajectory, estimate: Trajectory, *, max_diff: float = 0.01
+) -> tuple[Trajectory, Trajectory]:
+    """Pose-by-pose association of two trajectories, as ``evo`` does it (``t_max_diff``).
+
+    Every pose of the trajectory with fewer poses (the estimate when both have as many) is
+    matched to the nearest-in-time pose of the other (:func:`match_nearest_times`); poses
+    without a match within ``max_diff`` seconds are dropped. Relations on the result are
+    then named by index (``key="index"``): pose ``k`` of both is one matched pair. This is
+    ``evo.core.sync.associate_trajectories(reference, estimate, max_diff=...)``.
+
+    Returns
+    -------
+    reference_synced, estimate_synced : Trajectory
+        Equally long, each with its own timestamps.
+
+    Raises
+    ------
+    AssociationError
+        When no pose pair lies within ``max_diff``.
+    """
+    from relation_metric.errors import AssociationError
+
+    if not (math.isfinite(max_diff) and max_diff >= 0.0):
+        raise InputError(f"max_diff must be a finite number of seconds >= 0, got {max_diff}")
+    second_longer = len(estimate) > len(reference)
+    short, long_ = (reference, estimate) if second_longer else (estimate, reference)
+    i_short, i_long = match_nearest_times(short.timestamps, long_.timestamps, max_diff)
+    if i_short.size == 0:
+        raise AssociationError(
+            f"no reference and estimate poses lie within {max_diff:g} s of each other (the "
+            f"reference spans {reference.span()[0]:.6f} .. {reference.span()[1]:.6f} s, the "
+            f"estimate {estimate.span()[0]:.6f} .. {estimate.span()[1]:.6f} s)"
+        )
+    s = Trajectory(short.timestamps[i_short], short.poses[i_short])
+    lo = Trajectory(long_.timestamps[i_long], long_.poses[i_long])
+    return (s, lo) if second_longer else (lo, s)

@@ -225,6 +225,7 @@ def generate_relations(
     min_distance: float | None = None,
     seed: int = 0,
     key: Literal["time", "index"] = "time",
+    chained: bool = False,
 ) -> RelationSet:
     """Select relations from a reference trajectory (Kümmerle et al. 2009, Sec. V).
 
@@ -249,6 +250,13 @@ min_distance, seed :
         Strategy parameters, see above.
     key : {"time", "index"}
         Name the pairs by timestamps or by pose indices.
+    chained : bool
+        ``consecutive`` and ``distance`` only: instead of a relation from every pose, a
+        chain from pose 0, each relation starting where the previous one ended —
+        ``(0, s), (s, 2s), ...`` and, by travelled distance, ``0 → j₁ → j₂ ...`` with
+        ``j_{k+1}`` the first pose at least ``distance`` further along the path. These are
+        evo's RPE pairs (``all_pairs=False``, delta in frames or metres); without
+        ``chained`` they are evo's ``all_pairs=True`` in frames.
 
     Returns
     -------
@@ -261,16 +269,24 @@ min_distance, seed :
     if strategy == "consecutive":
         if step < 1:
             raise InputError(f"step must be >= 1, got {step}")
-        i = np.arange(0, n - step)
-        j = i + step
+        if chained:
+            ids = np.arange(0, n, step)
+            i, j = ids[:-1], ids[1:]
+        else:
+            i = np.arange(0, n - step)
+            j = i + step
     elif strategy == "distance":
         if not distance > 0:
             raise InputError(f"distance must be > 0, got {distance}")
         s = reference.path_length()
         j = np.searchsorted(s, s + distance, side="left")
-        i = np.arange(n)
-        keep = j < n
-        i, j = i[keep], j[keep]
+        if chained:
+            ids = _chain_from_zero(j, n)
+            i, j = ids[:-1], ids[1:]
+        else:
+            i = np.arange(n)
+            keep = j < n
+            i, j = i[keep], j[keep]
     elif strategy == "loops":
         i, j = _loop_pairs(reference, radius, min_separation_time, min_separation_distance)
     elif strategy == "global":
@@ -288,6 +304,19 @@ min_distance, seed :
         raise InputError(f"unknown strategy {strategy!r}; expected one of {', '.join(STRATEGIES)}")
     order = np.lexsort((j, i))
     return RelationSet.from_trajectory_pairs(reference, i[order], j[order], key=key)
+
+
+def _chain_from_zero(successor: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+    """``0, f(0), f(f(0)), ...`` while below ``n`` (``f = successor``, ``f(k) > k``).
+
+    Pointer doubling: ``log₂`` of the chain length vectorised steps, no loop per pose.
+    """
+    jump = np.append(np.minimum(successor, n), n).astype(np.int64)  # jump[n] = n (absorbing)
+    chain = np.zeros(1, dtype=np.int64)
+    while chain[-1] < n:
+        chain = np.concatenate((chain, jump[chain]))  # nodes 0 .. 2^(k+1) − 1 steps out
+        jump = jump[jump]
+    return chain[chain < n]
 
 
 def _loop_pairs(
