@@ -314,6 +314,7 @@ def run(args: argparse.Namespace) -> int:
         estimate_name=args.estimate,
         relations_name=args.reference,
     )
+    ev_estimate = scored.lifted() if ev.relations.group.name == "SE3" else scored
     result = ev.as_dict(degrees=args.degrees)
     result["group"] = ev.relations.group.name
     if estimate.skipped:
@@ -341,7 +342,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from relation_metric.plots import evaluation_figure, save_figure
 
-        save_figure(evaluation_figure(ev, estimate.trajectory, degrees=args.degrees), args.plot)
+        save_figure(evaluation_figure(ev, ev_estimate, degrees=args.degrees), args.plot)
     if not args.quiet:
         print(summary_text(ev, result, degrees=args.degrees))
     return 0
