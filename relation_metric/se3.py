@@ -80,11 +80,13 @@ def quat_multiply(a: ArrayLike, b: ArrayLike) -> Array:
     """Hamilton product ``a b`` of quaternions ``[x, y, z, w]``, shape ``(..., 4)``."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    va, wa = a[..., :3], a[..., 3:4]
-    vb, wb = b[..., :3], b[..., 3:4]
+    x1, y1, z1, w1 = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    x2, y2, z2, w2 = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., :3] = wa * vb + wb * va + np.cross(va, vb)
-    out[..., 3] = wa[..., 0] * wb[..., 0] - np.sum(va * vb, axis=-1)
+    out[..., 0] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+    out[..., 1] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+    out[..., 2] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+    out[..., 3] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
     return out
 
 
@@ -95,16 +97,27 @@ def quat_conjugate(q: ArrayLike) -> Array:
     return out
 
 
+def _cross(a0: Array, a1: Array, a2: Array, b0: Array, b1: Array, b2: Array) -> tuple:
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
 def quat_rotate(q: ArrayLike, v: ArrayLike) -> Array:
     """Rotate vectors ``v`` (``(..., 3)``) by unit quaternions ``q`` (``(..., 4)``).
 
-    ``v' = v + 2w (u × v) + 2 u × (u × v)`` with ``q = [u, w]``.
+    ``v' = v + w τ + u × τ`` with ``τ = 2 u × v`` and ``q = [u, w]``.
     """
     q = np.asarray(q, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
-    u, w = q[..., :3], q[..., 3:4]
-    uv = np.cross(u, v)
-    return v + 2.0 * (w * uv + np.cross(u, uv))
+    ux, uy, uz, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    tx, ty, tz = _cross(ux, uy, uz, vx, vy, vz)
+    tx, ty, tz = 2.0 * tx, 2.0 * ty, 2.0 * tz
+    cx, cy, cz = _cross(ux, uy, uz, tx, ty, tz)
+    out = np.empty(np.broadcast_shapes(q.shape[:-1], v.shape[:-1]) + (3,))
+    out[..., 0] = vx + w * tx + cx
+    out[..., 1] = vy + w * ty + cy
+    out[..., 2] = vz + w * tz + cz
+    return out
 
 
 def compose(a: ArrayLike, b: ArrayLike) -> Array:
