@@ -51,7 +51,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("reference", metavar="REFERENCE", help=".relations file or reference trajectory")
     p.add_argument(
-        "estimate", metavar="ESTIMATE", help="estimated trajectory (CARMEN, TUM, t x y θ, g2o, CSV)"
+        "estimate",
+        metavar="ESTIMATE",
+        help="estimated trajectory (CARMEN, TUM, t x y θ, g2o, CSV, KITTI, EuRoC)",
     )
     p.add_argument(
         "--format", choices=TRAJECTORY_FORMATS, help="format of ESTIMATE (default: recognised)"
@@ -69,7 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="nearest-pose tolerance [s] (default 0.1)",
     )
     p.add_argument(
-        "--interpolate", action="store_true", help="interpolate on SE(2) beyond the tolerance"
+        "--interpolate", action="store_true", help="interpolate on SE(2)/SE(3) beyond the tolerance"
     )
     p.add_argument(
         "--max-interpolation-gap",
