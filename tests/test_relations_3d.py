@@ -211,14 +211,16 @@ def test_interpolation_and_odometry_on_se3():
 # --- property: the SE(3) path on planar data is the SE(2) path -----------------------------
 
 
+@pytest.mark.filterwarnings("ignore::relation_metric.evaluate.UnassociatedRelationsWarning")
 @settings(max_examples=60, deadline=None)
 @given(
     st.integers(0, 2**31 - 1),
     st.sampled_from(["consecutive", "random", "distance"]),
     st.sampled_from(["paper", "metricevaluator"]),
     st.booleans(),
+    st.sampled_from(["nearest", "interpolate", "odometry"]),
 )
-def test_se3_path_on_planar_data_equals_se2_path(seed, strategy, mode, by_time):
+def test_se3_path_on_planar_data_equals_se2_path(seed, strategy, mode, by_time, assoc):
     rng = np.random.default_rng(seed)
     n = 60
     steps = np.column_stack(
@@ -226,12 +228,23 @@ def test_se3_path_on_planar_data_equals_se2_path(seed, strategy, mode, by_time):
     )
     ref = Trajectory.from_poses(se2.cumulative_compose(steps), dt=0.1)
     noisy = ref.poses + rng.normal(0, [0.05, 0.05, 0.05], (n, 3))
-    est = Trajectory(ref.timestamps, noisy)
-    key = "time" if by_time else "index"
+    key = "time" if by_time or assoc != "nearest" else "index"
+    # off the relation times: the ends are interpolated or corrected with odometry
+    shift = 0.0 if assoc == "nearest" else 0.04
+    est = Trajectory(ref.timestamps + shift, noisy)
+    odo = Trajectory(ref.timestamps, ref.poses + rng.normal(0, 0.01, (n, 3)))
     rel = generate_relations(ref, strategy, count=100, distance=0.7, key=key, seed=seed)
     w = rng.uniform(0, 1, 6).round(3)
-    planar = evaluate(rel, est, mode=mode, weights=w)
-    lifted = evaluate(rel.lifted(), est.lifted(), mode=mode, weights=w)
+    kw = {"mode": mode, "weights": w, "max_time_diff": 0.01}
+    kw |= {"interpolate": assoc == "interpolate", "max_interpolation_gap": 0.5}
+    planar = evaluate(rel, est, odometry=odo if assoc == "odometry" else None, **kw)
+    lifted = evaluate(
+        rel.lifted(), est.lifted(), odometry=odo if assoc == "odometry" else None, **kw
+    )
+    if assoc == "interpolate":
+        assert planar.association.interpolated.any()
+    if assoc == "odometry":
+        assert planar.association.via_odometry.any()
     assert planar.relations.group is SE2 and lifted.relations.group is SE3
     for part in ("translation", "rotation", "combined"):
         a, b = getattr(planar.errors, part), getattr(lifted.errors, part)
