@@ -65,7 +65,7 @@ from relation_metric.textio import (
     write_text_atomic,
 )
 from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
-from relation_metric.trajectory import Trajectory, check_coordinates
+from relation_metric.trajectory import OutOfPlane, Trajectory, check_coordinates
 
 __all__ = [
     "TRAJECTORY_FORMATS",
@@ -153,6 +153,9 @@ class LoadedTrajectory(NamedTuple):
     repeated_dropped : int
         Poses dropped because they repeat an earlier pose's timestamp (references only,
         :func:`without_repeated_times`).
+    discarded : OutOfPlane or None
+        The out-of-plane motion a ``dimension="2d"`` read projected away (``None`` when
+        nothing was projected).
     """
 
     trajectory: Trajectory
@@ -160,6 +163,7 @@ class LoadedTrajectory(NamedTuple):
     skipped: Mapping[str, int]
     time_order: TimeOrder = TimeOrder()
     repeated_dropped: int = 0
+    discarded: OutOfPlane | None = None
 
     @property
     def out_of_order(self) -> int:
@@ -294,8 +298,11 @@ def read_trajectory(
     if dimension not in DIMENSIONS:
         raise InputError(f"dimension must be one of {', '.join(DIMENSIONS)}, got {dimension!r}")
     skipped: Counter[str] = Counter()
+    discarded: list[OutOfPlane] = []
     if fmt in ("tum", "kitti", "euroc"):
-        t, poses, lines = _read_3d(src, fmt, path=path, times=times, dimension=dimension)
+        t, poses, lines = _read_3d(
+            src, fmt, path=path, times=times, dimension=dimension, discarded=discarded
+        )
     elif fmt == "plain":
         values, lines = read_numeric_table(
             path,
@@ -333,7 +340,9 @@ def read_trajectory(
     trajectory = Trajectory(t, poses)
     if dimension == "3d":
         trajectory = trajectory.lifted()
-    return LoadedTrajectory(trajectory, fmt, dict(skipped), report)
+    return LoadedTrajectory(
+        trajectory, fmt, dict(skipped), report, discarded=discarded[0] if discarded else None
+    )
 
 
 def _is_euroc_header(src: SourceText) -> bool:
@@ -345,7 +354,13 @@ def _is_euroc_header(src: SourceText) -> bool:
 
 
 def _read_3d(
-    src: SourceText, fmt: str, *, path: PathLike, times: PathLike | None, dimension: str
+    src: SourceText,
+    fmt: str,
+    *,
+    path: PathLike,
+    times: PathLike | None,
+    dimension: str,
+    discarded: list[OutOfPlane],
 ) -> tuple[NDArray, NDArray, Any]:
     """TUM, KITTI or EuRoC: times, poses (``(N, 7)`` or ``(N, 3)``) and the row → line map."""
     if fmt == "tum":
@@ -397,7 +412,7 @@ def _read_3d(
         poses7 = se3.from_matrix(m) if m.shape[0] else np.zeros((0, 7))
         xyz, q = poses7[:, :3], poses7[:, 3:]
         t = _kitti_times(times, m.shape[0], src.path)
-    return t, _poses_of_dimension(t, xyz, q, src, dimension), lines
+    return t, _poses_of_dimension(t, xyz, q, src, dimension, discarded), lines
 
 
 def _check_unit_quaternions(q: NDArray, src: SourceText, lines: Any) -> None:
@@ -426,11 +441,15 @@ def _kitti_times(times: PathLike | None, n: int, pose_path: str) -> NDArray:
 
 
 def _poses_of_dimension(
-    t: NDArray, xyz: NDArray, q: NDArray, src: SourceText, dimension: str
+    t: NDArray,
+    xyz: NDArray,
+    q: NDArray,
+    src: SourceText,
+    dimension: str,
+    discarded: list[OutOfPlane],
 ) -> NDArray:
     """SE(3) rows, or the planar slice when the dimension rule says 2-D (see module doc)."""
     from relation_metric import se3
-    from relation_metric.trajectory import OutOfPlane
 
     if dimension == "3d" or xyz.shape[0] == 0:
         return np.column_stack((xyz, q))
@@ -446,6 +465,7 @@ def _poses_of_dimension(
     if dimension == "auto" and not planar:
         return np.column_stack((xyz, q))
     if not planar:
+        discarded.append(oop)
         warnings.warn(
             f"{src.path}: 3-D trajectory scored in 2-D (--planar): discarding its out-of-plane "
             f"motion ({oop.describe()})",

@@ -304,7 +304,11 @@ def test_cli_scores_3d_and_planar_only_on_request(tmp_path, capsys):
         assert main(args) == 0
     err = capsys.readouterr().err
     assert "discarding its out-of-plane motion (z range 1.26 m" in err
-    assert json.loads(out.read_text())["group"] == "SE2"
+    res = json.loads(out.read_text())
+    assert res["group"] == "SE2"
+    z_est = est.poses[:, 2].max() - est.poses[:, 2].min()
+    assert res["planar_projection"]["estimate"]["z_range"] == pytest.approx(z_est, abs=1e-9)
+    assert res["planar_projection"]["reference"]["max_abs_roll"] == pytest.approx(0.2, abs=1e-3)
 
 
 def test_cli_3d_ate_evo_zip_plot_and_relations_generate(tmp_path):
@@ -331,3 +335,27 @@ def test_cli_3d_ate_evo_zip_plot_and_relations_generate(tmp_path):
     assert main(["relations", "generate", str(tmp_path / "gt.tum"), "-o", str(rel_path), "-q"]) == 0
     rel = read_relations(rel_path)
     assert rel.has_out_of_plane and len(rel) == len(ref) - 1
+
+
+def test_cli_sync_needs_a_reference_trajectory_and_kitti_is_recognised(tmp_path, capsys):
+    (tmp_path / "r.relations").write_text("0 1 1 0 0 0 0 0\n")
+    ref = helix(30)
+    write_tum(tmp_path / "est.tum", ref)
+    assert (
+        main(["evaluate", str(tmp_path / "r.relations"), str(tmp_path / "est.tum"), "--sync"]) == 3
+    )
+    assert "--sync needs a reference trajectory" in capsys.readouterr().err
+    # a KITTI pose file (12 columns, .txt) with its times file is recognised and scored in 3-D
+    m = se3.to_matrix(ref.poses)[:, :3, :].reshape(30, 12)
+    np.savetxt(tmp_path / "poses.txt", m, fmt="%.12e")
+    np.savetxt(tmp_path / "times.txt", ref.timestamps, fmt="%.6f")
+    out = tmp_path / "r.json"
+    args = [
+        "evaluate", str(tmp_path / "est.tum"), str(tmp_path / "poses.txt"),
+        "--times", str(tmp_path / "times.txt"), "--reference-format", "tum",
+        "--json", str(out), "-q",
+    ]  # fmt: skip
+    assert main(args) == 0
+    res = json.loads(out.read_text())
+    assert res["group"] == "SE3" and res["unassociated"] == 0
+    assert res["translation"]["abs"]["max"] < 1e-9

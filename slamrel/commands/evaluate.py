@@ -228,6 +228,7 @@ def load_reference(
     )
     ref = Path(args.reference)
     _refuse_if_strict(args, loaded, str(ref / "groundtruth.csv" if ref.is_dir() else ref))
+    _note_projection(notes, "reference", loaded)
     notes["reference_out_of_order"] = loaded.time_order.as_dict()
     notes["reference_repeated_times_dropped"] = loaded.repeated_dropped
     if args.strategy is None:
@@ -235,6 +236,12 @@ def load_reference(
     if args.sync:  # relations are generated after the pose-by-pose association, in run()
         return RelationSet(np.empty(0), np.empty(0), np.empty((0, 3))), loaded.trajectory
     return relations_from_args(loaded.trajectory, args), loaded.trajectory
+
+
+def _note_projection(notes: dict[str, Any], role: str, loaded: LoadedTrajectory) -> None:
+    """``--planar``: what the projection of a 3-D file discarded, for ``--json``."""
+    if loaded.discarded is not None:
+        notes.setdefault("planar_projection", {})[role] = dict(loaded.discarded._asdict())
 
 
 def _refuse_if_strict(args: argparse.Namespace, loaded: LoadedTrajectory, path: str) -> None:
@@ -277,6 +284,7 @@ def run(args: argparse.Namespace) -> int:
         times=args.times,
     )
     _refuse_if_strict(args, estimate, args.estimate)
+    _note_projection(notes, "estimate", estimate)
     notes["estimate_out_of_order"] = estimate.time_order.as_dict()
     odometry = None
     if args.odometry:
