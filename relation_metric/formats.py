@@ -373,8 +373,17 @@ def _read_3d(
         t, xyz, q = values[:, 0], values[:, 1:4], values[:, 4:8]
         _check_unit_quaternions(q, src, lines)
     elif fmt == "euroc":
-        header = src.lines[0].lstrip()
-        fixed = SourceText(src.path, [header[1:], *src.lines[1:]], src.ends_with_newline)
+        first = next((k for k, line in enumerate(src.lines) if line.strip()), None)
+        if first is None or not src.lines[first].lstrip().lower().startswith("#timestamp"):
+            raise InputError(
+                "expected an EuRoC header #timestamp,p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],"
+                "q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z [] as the first line",
+                path=src.path,
+                line=1 if first is None else first + 1,
+            )
+        lines_fixed = list(src.lines)
+        lines_fixed[first] = lines_fixed[first].lstrip()[1:]
+        fixed = SourceText(src.path, lines_fixed, src.ends_with_newline)
         table = read_csv_table(
             src.path,
             required=_EUROC_COLUMNS,
