@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import warnings
 from pathlib import Path
@@ -324,6 +325,13 @@ def run(args: argparse.Namespace) -> int:
         estimate_name=args.estimate,
         relations_name=args.reference,
     )
+    if args.sync:  # name the pose pairs by the reference's times in the outputs (CSV, zip, plot)
+        i = ev.relations.first.astype(np.int64)
+        j = ev.relations.second.astype(np.int64)
+        t = ref_sync.timestamps
+        ev = dataclasses.replace(
+            ev, relations=RelationSet(t[i], t[j], ev.relations.delta, key="time")
+        )
     ev_estimate = scored.lifted() if ev.relations.group.name == "SE3" else scored
     result = ev.as_dict(degrees=args.degrees)
     result["group"] = ev.relations.group.name
