@@ -4,7 +4,8 @@ For a timestamp ``t`` the estimate pose is found as the Freiburg metricEvaluator
 
 1. the estimate pose nearest in time, ``x_k`` with ``k = argmin |t_k − t|``; accepted when
    ``|t_k − t| ≤ max_time_diff`` (default 0.1 s);
-2. otherwise, with ``interpolate=True``, the SE(2) interpolation between the two estimate
+2. otherwise, with ``interpolate=True``, the interpolation on the estimate's group (SE(2) or
+   SE(3), :mod:`relation_metric.groups`) between the two estimate
    poses around ``t``, ``x_a ∘ exp(s · log(x_a⁻¹ ∘ x_b))`` with ``s = (t − t_a)/(t_b − t_a)``,
    when ``t_b − t_a ≤ max_interpolation_gap``;
 3. otherwise, when an odometry log is given, the nearest estimate pose corrected by the
