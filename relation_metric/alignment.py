@@ -2,7 +2,7 @@
 
 The naive absolute error — the sum of squared distances between estimate and reference
 poses — depends on the frame the estimate happens to be in. Its rescue is to minimise it over
-all rigid transforms (SE(2)) or similarities (Sim(2)) first; this module does that with
+all rigid transforms (SE(2)/SE(3)) or similarities (Sim(2)/Sim(3)) first; this module does that with
 Umeyama's closed form, tagged with the paper's equation numbers. Even aligned, the ATE weighs
 an early rotation error over the whole remaining trajectory while a late one barely counts —
 the reason for the relation metric (see the tests for the worked example).
@@ -15,9 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from relation_metric import se2
+from relation_metric import se2, se3
 from relation_metric.association import nearest_index
 from relation_metric.errors import AssociationError, InputError
+from relation_metric.groups import SE3
 from relation_metric.stats import Summary, summarize
 from relation_metric.trajectory import Trajectory
 
@@ -26,15 +27,27 @@ __all__ = ["Alignment", "umeyama", "ATEResult", "absolute_trajectory_error"]
 
 @dataclass(frozen=True)
 class Alignment:
-    """A similarity ``y ≈ scale · R(angle) x + translation``."""
+    """A similarity ``y ≈ scale · R x + translation`` in 2-D or 3-D.
+
+    ``angle`` is the rotation angle of ``R`` (2-D: signed, about z; 3-D: in ``[0, π]``);
+    ``rotation`` is ``R`` itself, ``(2, 2)`` or ``(3, 3)`` (``None``: ``R(angle)`` in 2-D).
+    """
 
     angle: float
     translation: NDArray[np.float64]
     scale: float
+    rotation: NDArray[np.float64] | None = None
 
     def apply(self, poses: ArrayLike) -> NDArray[np.float64]:
-        """Apply to poses ``(..., 3)``: positions are mapped, headings rotated by ``angle``."""
+        """Apply to poses ``(..., 3)`` or ``(..., 7)``: positions mapped, orientations rotated."""
         p = np.asarray(poses, dtype=np.float64)
+        if p.shape[-1] == 7:
+            r = np.eye(3) if self.rotation is None else self.rotation
+            q_r = se3.from_matrix(np.vstack((np.column_stack((r, np.zeros(3))), [0, 0, 0, 1])))
+            out = np.empty_like(p)
+            out[..., :3] = self.scale * p[..., :3] @ r.T + self.translation
+            out[..., 3:] = se3.quat_multiply(q_r[3:], p[..., 3:])
+            return out
         c, s = np.cos(self.angle), np.sin(self.angle)
         out = np.empty_like(p)
         out[..., 0] = self.scale * (c * p[..., 0] - s * p[..., 1]) + self.translation[0]
@@ -50,10 +63,10 @@ def umeyama(source: ArrayLike, target: ArrayLike, *, with_scale: bool = False) -
 
     Parameters
     ----------
-    source, target : array_like, shape (N, 2)
+    source, target : array_like, shape (N, 2) or (N, 3)
         Corresponding points ``x_i`` (estimate) and ``y_i`` (reference); N ≥ 2.
     with_scale : bool
-        Estimate the scale ``c`` (Sim(2)); otherwise ``c = 1`` (SE(2)).
+        Estimate the scale ``c`` (Sim(2)/Sim(3)); otherwise ``c = 1`` (SE(2)/SE(3)).
 
     Returns
     -------
@@ -61,8 +74,11 @@ def umeyama(source: ArrayLike, target: ArrayLike, *, with_scale: bool = False) -
     """
     x = np.asarray(source, dtype=np.float64)
     y = np.asarray(target, dtype=np.float64)
-    if x.shape != y.shape or x.ndim != 2 or x.shape[1] != 2:
-        raise InputError(f"alignment needs two (N, 2) point sets, got {x.shape} and {y.shape}")
+    if x.shape != y.shape or x.ndim != 2 or x.shape[1] not in (2, 3):
+        raise InputError(
+            f"alignment needs two (N, 2) or (N, 3) point sets, got {x.shape} and {y.shape}"
+        )
+    dim = x.shape[1]
     n = x.shape[0]
     if n < 2:
         raise InputError(f"alignment needs at least 2 corresponding points, got {n}")
@@ -73,13 +89,16 @@ def umeyama(source: ArrayLike, target: ArrayLike, *, with_scale: bool = False) -
     sigma_x2 = float(np.mean(np.sum(xc * xc, axis=1)))  # Eq. 36
     cov = yc.T @ xc / n  # Σ_xy, Eq. 38
     u, d, vt = np.linalg.svd(cov)
-    s = np.eye(2)
+    s = np.eye(dim)
     if np.linalg.det(u) * np.linalg.det(vt) < 0:  # Eq. 39 / 43: avoid a reflection
-        s[1, 1] = -1.0
+        s[-1, -1] = -1.0
     r = u @ s @ vt  # Eq. 40
     c = float(np.trace(np.diag(d) @ s) / sigma_x2) if with_scale and sigma_x2 > 0 else 1.0  # Eq. 42
     t = mu_y - c * r @ mu_x  # Eq. 41
-    return Alignment(angle=float(np.arctan2(r[1, 0], r[0, 0])), translation=t, scale=c)
+    if dim == 2:
+        return Alignment(angle=float(np.arctan2(r[1, 0], r[0, 0])), translation=t, scale=c)
+    angle = float(np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)))
+    return Alignment(angle=angle, translation=t, scale=c, rotation=r)
 
 
 @dataclass(frozen=True)
@@ -111,13 +130,21 @@ def absolute_trajectory_error(
     align: str = "se2",
     max_time_diff: float = 0.1,
 ) -> ATEResult:
-    """ATE of ``estimate`` against ``reference`` after ``align`` ∈ {"none", "se2", "sim2"}.
+    """ATE of ``estimate`` against ``reference`` after ``align``.
+
+    ``align`` ∈ {"none", "se2", "sim2", "se3", "sim3"}: a rigid or similarity alignment of
+    the positions (``se2``/``sim2`` and ``se3``/``sim3`` are the same request; the group of
+    the trajectories decides 2-D or 3-D). On SE(3) (either trajectory 3-D; the other is
+    lifted) the errors are evo's APE ``translation_part`` and ``rotation_angle``:
+    ``‖t_ref − t_est'‖`` and the angle of ``R_refᵀ R_est'``.
 
     Estimate poses are matched to the reference pose nearest in time (within
     ``max_time_diff``); unmatched estimate poses are left out and the count is reported.
     """
-    if align not in ("none", "se2", "sim2"):
-        raise InputError(f"align must be 'none', 'se2' or 'sim2', got {align!r}")
+    if align not in ("none", "se2", "sim2", "se3", "sim3"):
+        raise InputError(f"align must be 'none', 'se2', 'sim2', 'se3' or 'sim3', got {align!r}")
+    if estimate.group is SE3 or reference.group is SE3:
+        estimate, reference = estimate.lifted(), reference.lifted()
     k = nearest_index(reference.timestamps, estimate.timestamps)
     ok = np.abs(reference.timestamps[k] - estimate.timestamps) <= max_time_diff
     if ok.sum() < 2:
@@ -127,11 +154,20 @@ def absolute_trajectory_error(
         )
     est = estimate.poses[ok]
     ref = reference.poses[k[ok]]
+    group = estimate.group
+    dim = group.position_dim
     if align == "none":
-        al = Alignment(0.0, np.zeros(2), 1.0)
+        al = Alignment(0.0, np.zeros(dim), 1.0)
     else:
-        al = umeyama(est[:, :2], ref[:, :2], with_scale=(align == "sim2"))
+        al = umeyama(
+            group.positions(est), group.positions(ref), with_scale=align in ("sim2", "sim3")
+        )
     moved = al.apply(est)
+    if group is SE3:
+        err = se3.between(moved, ref)  # evo's APE: E = P_est⁻¹ P_ref
+        trans = np.linalg.norm(ref[:, :3] - moved[:, :3], axis=1)
+        rot = se3.rotation_angle(err[:, 3:])
+        return ATEResult(al, trans, rot, summarize(trans), summarize(rot), int(ok.sum()))
     trans = np.hypot(*(ref[:, :2] - moved[:, :2]).T)
     rot = np.abs(se2.wrap_angle(ref[:, 2] - moved[:, 2]))
     return ATEResult(al, trans, rot, summarize(trans), summarize(rot), int(ok.sum()))

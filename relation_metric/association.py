@@ -4,7 +4,8 @@ For a timestamp ``t`` the estimate pose is found as the Freiburg metricEvaluator
 
 1. the estimate pose nearest in time, ``x_k`` with ``k = argmin |t_k − t|``; accepted when
    ``|t_k − t| ≤ max_time_diff`` (default 0.1 s);
-2. otherwise, with ``interpolate=True``, the SE(2) interpolation between the two estimate
+2. otherwise, with ``interpolate=True``, the interpolation on the estimate's group (SE(2) or
+   SE(3), :mod:`relation_metric.groups`) between the two estimate
    poses around ``t``, ``x_a ∘ exp(s · log(x_a⁻¹ ∘ x_b))`` with ``s = (t − t_a)/(t_b − t_a)``,
    when ``t_b − t_a ≤ max_interpolation_gap``;
 3. otherwise, when an odometry log is given, the nearest estimate pose corrected by the
@@ -22,12 +23,19 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from relation_metric import se2
 from relation_metric.errors import InputError
+from relation_metric.groups import group_of
 from relation_metric.relations import RelationSet
 from relation_metric.trajectory import Trajectory
 
-__all__ = ["Association", "associate", "nearest_index", "REASONS"]
+__all__ = [
+    "Association",
+    "associate",
+    "nearest_index",
+    "REASONS",
+    "match_nearest_times",
+    "synchronize",
+]
 
 # Why an endpoint could not be associated (codes of Association.reason).
 OK, OUTSIDE_SPAN, TOO_FAR, BAD_INDEX = 0, 1, 2, 3
@@ -45,8 +53,8 @@ class Association:
 
     Attributes
     ----------
-    pose_first, pose_second : ndarray, shape (M, 3)
-        Estimate poses (NaN where unassociated).
+    pose_first, pose_second : ndarray, shape (M, 3) or (M, 7)
+        Estimate poses, on the estimate's group (NaN where unassociated).
     index_first, index_second : ndarray of int64, shape (M,)
         Nearest estimate pose of each end (−1 where there is none).
     valid : ndarray of bool, shape (M,)
@@ -70,8 +78,8 @@ class Association:
 
     @property
     def estimated_delta(self) -> NDArray[np.float64]:
-        """``δ_ij = x_i⁻¹ ∘ x_j`` of the estimate, shape (M, 3) (NaN where invalid)."""
-        return se2.between(self.pose_first, self.pose_second)
+        """``δ_ij = x_i⁻¹ ∘ x_j`` of the estimate, shape (M, 3) or (M, 7) (NaN where invalid)."""
+        return group_of(self.pose_first).between(self.pose_first, self.pose_second)
 
 
 def nearest_index(times: NDArray[np.float64], query: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -99,6 +107,7 @@ def _associate_times(
 ]:
     t = estimate.timestamps
     p = estimate.poses
+    group = estimate.group
     k = nearest_index(t, query)
     gap = np.abs(t[k] - query)
     poses = p[k].copy()
@@ -114,8 +123,7 @@ def _associate_times(
         can = far & inside & (span <= max_interpolation_gap) & (span > 0)
         if can.any():
             s = (query[can] - t[a[can]]) / span[can]
-            rel = se2.log(se2.between(p[a[can]], p[b[can]]))
-            poses[can] = se2.compose(p[a[can]], se2.exp(rel * s[:, None]))
+            poses[can] = group.interpolate(p[a[can]], p[b[can]], s)
             interp[can] = True
             far = far & ~can
     if odometry is not None and far.any():
@@ -125,7 +133,7 @@ def _associate_times(
         inside = (q >= to[0] - max_time_diff) & (q <= to[-1] + max_time_diff)
         at_query = nearest_index(to, q)
         at_pose = nearest_index(to, t[k[far]])
-        corrected = se2.compose(p[k[far]], se2.between(po[at_pose], po[at_query]))
+        corrected = group.compose(p[k[far]], group.between(po[at_pose], po[at_query]))
         idx = np.flatnonzero(far)
         ok = idx[inside]
         poses[ok] = corrected[inside]
@@ -155,11 +163,13 @@ def associate(
     estimate : Trajectory
         The evaluated trajectory.
     odometry : Trajectory, optional
-        Odometry log used to correct ends farther than ``max_time_diff`` from any pose.
+        Odometry log used to correct ends farther than ``max_time_diff`` from any pose; on
+        the estimate's group (a planar log is lifted for an SE(3) estimate).
     max_time_diff : float
         Seconds; the nearest-pose tolerance (0.1 s as in the metricEvaluator).
     interpolate : bool
-        Interpolate on SE(2) between the poses around an end beyond the tolerance.
+        Interpolate on the estimate's group (SE(2) or SE(3), constant twist) between the
+        poses around an end beyond the tolerance.
     max_interpolation_gap : float
         Seconds; longest gap between two estimate poses that is interpolated over.
 
@@ -174,17 +184,20 @@ def associate(
         if not (math.isfinite(value) and value >= 0.0):
             raise InputError(f"{name} must be a finite number of seconds >= 0, got {value}")
     m = len(relations)
+    width = estimate.group.width
+    if odometry is not None and odometry.group is not estimate.group:
+        odometry = odometry.lifted() if odometry.group.width < width else odometry.planar()
     if relations.key == "index":
         n = len(estimate)
         ends = np.concatenate((relations.first, relations.second)).astype(np.int64)
         good = (ends >= 0) & (ends < n)
-        poses = np.full((2 * m, 3), np.nan)
+        poses = np.full((2 * m, width), np.nan)
         poses[good] = estimate.poses[ends[good]]
         idx = np.where(good, ends, -1)
         reason = np.where(good, OK, BAD_INDEX).astype(np.int8)
         odo = interp = np.zeros(2 * m, dtype=bool)
     elif len(estimate) == 0:
-        poses = np.full((2 * m, 3), np.nan)
+        poses = np.full((2 * m, width), np.nan)
         idx = np.full(2 * m, -1, dtype=np.int64)
         reason = np.full(2 * m, OUTSIDE_SPAN, dtype=np.int8)
         odo = interp = np.zeros(2 * m, dtype=bool)
@@ -205,3 +218,71 @@ def associate(
         interpolated=(interp[:m] | interp[m:]) & valid,
         reason=np.where(r1 != OK, r1, r2).astype(np.int8),
     )
+
+
+def match_nearest_times(
+    query: NDArray[np.float64], times: NDArray[np.float64], max_diff: float
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """evo's nearest-time matching (``evo.core.sync.matching_time_indices``), vectorised.
+
+    For each ``query`` stamp, the ``times`` stamp nearest to it (ties: the earlier) when it
+    lies within ``max_diff`` seconds (``<=``); ``times`` must be sorted. Several queries may
+    match one time.
+
+    Returns
+    -------
+    index_query, index_times : ndarray of int64, shape (K,)
+        The matched pairs, in query order.
+    """
+    q = np.asarray(query, dtype=np.float64)
+    t = np.asarray(times, dtype=np.float64)
+    if t.size == 0 or q.size == 0:
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    inside = (q >= t[0] - max_diff) & (q <= t[-1] + max_diff)
+    k = np.minimum(np.searchsorted(t, q, side="right"), t.size - 1)
+    diff_ub = t[k] - q
+    diff_lb = np.where(k > 0, q - t[np.maximum(k - 1, 0)], np.inf)
+    pick_ub = (diff_ub <= max_diff) & (diff_ub < diff_lb)
+    pick_lb = ~pick_ub & (diff_lb <= max_diff) & (diff_lb <= diff_ub)
+    ok = inside & (pick_ub | pick_lb)
+    best = np.where(pick_ub, k, k - 1)
+    return np.flatnonzero(ok).astype(np.int64), best[ok].astype(np.int64)
+
+
+def synchronize(
+    reference: Trajectory, estimate: Trajectory, *, max_diff: float = 0.01
+) -> tuple[Trajectory, Trajectory]:
+    """Pose-by-pose association of two trajectories, as ``evo`` does it (``t_max_diff``).
+
+    Every pose of the trajectory with fewer poses (the estimate when both have as many) is
+    matched to the nearest-in-time pose of the other (:func:`match_nearest_times`); poses
+    without a match within ``max_diff`` seconds are dropped. Relations on the result are
+    then named by index (``key="index"``): pose ``k`` of both is one matched pair. This is
+    ``evo.core.sync.associate_trajectories(reference, estimate, max_diff=...)``.
+
+    Returns
+    -------
+    reference_synced, estimate_synced : Trajectory
+        Equally long, each with its own timestamps.
+
+    Raises
+    ------
+    AssociationError
+        When no pose pair lies within ``max_diff``.
+    """
+    from relation_metric.errors import AssociationError
+
+    if not (math.isfinite(max_diff) and max_diff >= 0.0):
+        raise InputError(f"max_diff must be a finite number of seconds >= 0, got {max_diff}")
+    second_longer = len(estimate) > len(reference)
+    short, long_ = (reference, estimate) if second_longer else (estimate, reference)
+    i_short, i_long = match_nearest_times(short.timestamps, long_.timestamps, max_diff)
+    if i_short.size == 0:
+        raise AssociationError(
+            f"no reference and estimate poses lie within {max_diff:g} s of each other (the "
+            f"reference spans {reference.span()[0]:.6f} .. {reference.span()[1]:.6f} s, the "
+            f"estimate {estimate.span()[0]:.6f} .. {estimate.span()[1]:.6f} s)"
+        )
+    s = Trajectory(short.timestamps[i_short], short.poses[i_short])
+    lo = Trajectory(long_.timestamps[i_long], long_.poses[i_long])
+    return (s, lo) if second_longer else (lo, s)

@@ -16,12 +16,19 @@ from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.association import REASONS, Association, associate
 from relation_metric.errors import AssociationError, InputError
+from relation_metric.groups import SE3
 from relation_metric.metric import Mode, RelationErrors, relation_errors
 from relation_metric.relations import RelationSet
 from relation_metric.stats import Summary, summarize
 from relation_metric.trajectory import Trajectory
 
-__all__ = ["Evaluation", "evaluate", "UnassociatedRelationsWarning", "error_summaries"]
+__all__ = [
+    "Evaluation",
+    "evaluate",
+    "UnassociatedRelationsWarning",
+    "error_summaries",
+    "on_common_group",
+]
 
 
 class UnassociatedRelationsWarning(UserWarning):
@@ -138,6 +145,7 @@ def evaluate(
         cannot be scored, and statistics of ``inf`` would be no score either.
     """
     of_relations = f" of {relations_name}" if relations_name else ""
+    relations, estimate = on_common_group(relations, estimate, mode=mode)
     with np.errstate(over="ignore", invalid="ignore"):
         assoc = associate(
             relations,
@@ -183,6 +191,27 @@ def evaluate(
         rotation=error_summaries(errors.rotation[valid]),
         combined=error_summaries(errors.combined[valid]),
     )
+
+
+def on_common_group(
+    relations: RelationSet, estimate: Trajectory, *, mode: str = "paper"
+) -> tuple[RelationSet, Trajectory]:
+    """Relations and estimate on one group: planar data is lifted to SE(3), never projected.
+
+    SE(3) when the estimate is 3-D, when the relations are, or when SE(2) relations carry
+    out-of-plane parts (Freiburg 6-DoF lines) in ``paper`` mode (the ``metricevaluator``
+    mode scores those with the parameter-vector difference on SE(2), as the C++ tool does).
+    Projecting 3-D data onto the plane is the caller's explicit choice
+    (:meth:`Trajectory.planar`, ``--planar``).
+    """
+    three_d = (
+        estimate.group is SE3
+        or relations.group is SE3
+        or (relations.has_out_of_plane and mode == "paper")
+    )
+    if three_d:
+        return relations.lifted(), estimate.lifted()
+    return relations, estimate
 
 
 def _check_representable(

@@ -1,4 +1,5 @@
-"""Trajectory file formats: plain ``t x y θ``, TUM, CARMEN logs, g2o ``VERTEX_SE2``, CSV.
+"""Trajectory file formats: plain ``t x y θ``, TUM, CARMEN logs, g2o ``VERTEX_SE2``, CSV, KITTI,
+EuRoC.
 
 Every reader is strict (see :mod:`relation_metric.textio`): a bad line raises
 :class:`~relation_metric.errors.InputError` with file and line; the one tolerated defect is a
@@ -9,8 +10,12 @@ whatever the file order, counted (:mod:`relation_metric.timeorder`).
 Formats
 -------
 ``plain``  ``t x y θ`` per line.
-``tum``    ``t x y z qx qy qz qw`` (what evo reads); the 2-D slice keeps x, y and the yaw
-           ``atan2(2(qw qz + qx qy), 1 − 2(qy² + qz²))``; z, roll and pitch are dropped.
+``tum``    ``t x y z qx qy qz qw`` (what evo reads). A file whose motion leaves the plane (z
+           varies, or roll/pitch are not zero) is read as SE(3) poses
+           ``[x, y, z, qx, qy, qz, qw]`` (``dimension="auto"``, the default); a planar file
+           as SE(2) ``[x, y, yaw]`` with ``yaw = atan2(2(qw qz + qx qy), 1 − 2(qy² + qz²))``.
+           ``dimension="2d"`` projects a 3-D file onto the plane and warns
+           (:class:`PlanarProjectionWarning`) with the out-of-plane motion it discards.
 ``carmen`` CARMEN log. Pose records: ``FLASER n r1..rn x y θ odom_x odom_y odom_θ
            ipc_timestamp hostname logger_timestamp``; ``ROBOTLASER1`` (laser pose and robot
            pose after the range and remission blocks); ``ODOM x y θ tv rv accel ipc_timestamp
@@ -22,6 +27,17 @@ Formats
            skipped and counted.
 ``csv``    comma separated with the header ``t,x,y,theta`` (the SLAM result bundle's
            ``groundtruth.csv``); ``#`` comment lines allowed.
+``kitti``  KITTI odometry poses: 12 numbers a line, the row-major 3×4 matrix ``[R | t]``.
+           Timestamps come from a times file (one number a line, KITTI's ``times.txt``;
+           ``times=``), else the line index is the timestamp. Always SE(3) unless planar.
+``euroc``  EuRoC ground-truth CSV (``state_groundtruth_estimate0/data.csv``): the header
+           ``#timestamp,p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],
+           q_RS_z [],...``; timestamps in nanoseconds (read as seconds), quaternion ``w`` first.
+           A ``.csv`` file with this header is read as ``euroc``.
+
+The dimension rule (``dimension``) is the same for TUM, KITTI and EuRoC: ``"auto"`` reads
+3-D when the motion leaves the plane (z range above 1e-9 m or a roll/pitch above 1e-9 rad),
+``"3d"`` always, ``"2d"`` never (with the warning).
 """
 
 from __future__ import annotations
@@ -32,7 +48,7 @@ import warnings
 from collections import Counter
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,13 +65,15 @@ from relation_metric.textio import (
     write_text_atomic,
 )
 from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
-from relation_metric.trajectory import Trajectory, check_coordinates
+from relation_metric.trajectory import OutOfPlane, Trajectory, check_coordinates
 
 __all__ = [
     "TRAJECTORY_FORMATS",
     "TRAJECTORY_EXTENSIONS",
     "LoadedTrajectory",
     "InvalidPoseWarning",
+    "PlanarProjectionWarning",
+    "DIMENSIONS",
     "detect_trajectory_format",
     "sniff_trajectory_format",
     "without_repeated_times",
@@ -65,8 +83,19 @@ __all__ = [
     "quaternion_from_yaw",
 ]
 
-TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv")
-TrajectoryFormat = Literal["plain", "tum", "carmen", "g2o", "csv"]
+TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc")
+TrajectoryFormat = Literal["plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc"]
+DIMENSIONS = ("auto", "2d", "3d")
+_EUROC_COLUMNS = (
+    "timestamp",
+    "p_rs_r_x [m]",
+    "p_rs_r_y [m]",
+    "p_rs_r_z [m]",
+    "q_rs_w []",
+    "q_rs_x []",
+    "q_rs_y []",
+    "q_rs_z []",
+)
 
 # File extensions that name a trajectory format: they decide, the content is not sniffed.
 TRAJECTORY_EXTENSIONS = {
@@ -104,6 +133,10 @@ class InvalidPoseWarning(UserWarning):
     """Pose records with non-finite values were skipped (``skip_invalid=True``)."""
 
 
+class PlanarProjectionWarning(UserWarning):
+    """A 3-D trajectory was projected onto the plane (``dimension="2d"``, ``--planar``)."""
+
+
 class LoadedTrajectory(NamedTuple):
     """A trajectory read from a file, with what the reader left out.
 
@@ -120,6 +153,9 @@ class LoadedTrajectory(NamedTuple):
     repeated_dropped : int
         Poses dropped because they repeat an earlier pose's timestamp (references only,
         :func:`without_repeated_times`).
+    discarded : OutOfPlane or None
+        The out-of-plane motion a ``dimension="2d"`` read projected away (``None`` when
+        nothing was projected).
     """
 
     trajectory: Trajectory
@@ -127,6 +163,7 @@ class LoadedTrajectory(NamedTuple):
     skipped: Mapping[str, int]
     time_order: TimeOrder = TimeOrder()
     repeated_dropped: int = 0
+    discarded: OutOfPlane | None = None
 
     @property
     def out_of_order(self) -> int:
@@ -158,6 +195,9 @@ def detect_trajectory_format(path: PathLike, source: SourceText | None = None) -
     (:func:`sniff_trajectory_format`).
     """
     ext = Path(os.fspath(path)).suffix.lower()
+    if ext == ".csv":
+        src = read_source(path) if source is None else source
+        return "euroc" if _is_euroc_header(src) else "csv"
     if ext in TRAJECTORY_EXTENSIONS:
         return TRAJECTORY_EXTENSIONS[ext]
     if ext in RELATIONS_EXTENSIONS:
@@ -182,9 +222,12 @@ def sniff_trajectory_format(source: SourceText) -> str | None:
     """The format the first data line suggests, or None.
 
     A CARMEN record name → carmen, ``VERTEX``/``EDGE``/``FIX`` → g2o, a ``t,...`` header →
-    csv, 8 whitespace-separated fields → tum, 4 → plain. Note that 8 numeric columns are
+    csv, an EuRoC ``#timestamp,p_RS_R_x [m],...`` header → euroc, 8 whitespace-separated
+    fields → tum, 12 → kitti, 4 → plain. Note that 8 numeric columns are
     also what a Freiburg ``.relations`` file looks like.
     """
+    if _is_euroc_header(source):
+        return "euroc"
     for _, text in source.data_lines():
         head = text.split(None, 1)[0].split(",")[0]
         if head in CARMEN_POSE_RECORDS or head in _CARMEN_OTHER:
@@ -196,6 +239,8 @@ def sniff_trajectory_format(source: SourceText) -> str | None:
         fields = text.split()
         if len(fields) == 8:
             return "tum"
+        if len(fields) == 12:
+            return "kitti"
         if len(fields) == 4:
             return "plain"
         return None
@@ -209,6 +254,8 @@ def read_trajectory(
     pose: Literal["laser", "odometry"] = "laser",
     skip_invalid: bool = False,
     max_step_back: float | None = None,
+    dimension: str = "auto",
+    times: PathLike | None = None,
 ) -> LoadedTrajectory:
     """Read a trajectory file; its poses come back in time order.
 
@@ -229,6 +276,13 @@ def read_trajectory(
         counted in ``LoadedTrajectory.time_order`` and warned about (``TimeOrderWarning``).
         A number of seconds (a log that drives a filter, e.g. a bundle's ground truth): a
         larger step back raises :class:`InputError`.
+    dimension : {"auto", "2d", "3d"}
+        TUM, KITTI, EuRoC: SE(3) poses ``(N, 7)`` when the motion leaves the plane
+        (``"auto"``), always (``"3d"``), or never (``"2d"``: projected onto the plane, with a
+        :class:`PlanarProjectionWarning` that states the discarded z range and roll/pitch).
+        The planar formats are always SE(2) (``"3d"`` lifts them).
+    times : str or PathLike, optional
+        KITTI: a file with one timestamp a line (``times.txt``).
 
     Returns
     -------
@@ -241,8 +295,15 @@ def read_trajectory(
             f"unknown trajectory format {fmt!r}; expected one of {', '.join(TRAJECTORY_FORMATS)}",
             path=src.path,
         )
+    if dimension not in DIMENSIONS:
+        raise InputError(f"dimension must be one of {', '.join(DIMENSIONS)}, got {dimension!r}")
     skipped: Counter[str] = Counter()
-    if fmt == "plain":
+    discarded: list[OutOfPlane] = []
+    if fmt in ("tum", "kitti", "euroc"):
+        t, poses, lines = _read_3d(
+            src, fmt, path=path, times=times, dimension=dimension, discarded=discarded
+        )
+    elif fmt == "plain":
         values, lines = read_numeric_table(
             path,
             columns=("t", "x", "y", "theta"),
@@ -250,25 +311,6 @@ def read_trajectory(
             source=src,
         )
         t, poses = values[:, 0], values[:, 1:4]
-    elif fmt == "tum":
-        values, lines = read_numeric_table(
-            path,
-            columns=("t", "x", "y", "z", "qx", "qy", "qz", "qw"),
-            describe="a TUM trajectory",
-            source=src,
-        )
-        with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
-            norms = np.linalg.norm(values[:, 4:8], axis=1)
-        bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
-        if bad.size:
-            k = int(bad[0])
-            raise InputError(
-                f"quaternion norm {norms[k]:.6g}, expected a unit quaternion",
-                path=src.path,
-                line=lines(k),
-            )
-        t = values[:, 0]
-        poses = np.column_stack((values[:, 1], values[:, 2], yaw_from_quaternion(values[:, 4:8])))
     elif fmt == "csv":
         t, poses, line_of = _read_csv_trajectory(src)
         lines = line_of.__getitem__  # type: ignore[assignment]
@@ -283,7 +325,8 @@ def read_trajectory(
     if t.shape[0] == 0:
         hint = "" if format else "; pass --format if that is not its format"
         raise InputError(f"no poses found (read as {fmt}){hint}", path=src.path)
-    check_coordinates(poses[:, :2], what="pose", path=src.path, line_of=lines)
+    positions = poses[:, :3] if poses.shape[1] == 7 else poses[:, :2]
+    check_coordinates(positions, what="pose", path=src.path, line_of=lines)
     order, report = sort_by_time(
         t, tolerance=max_step_back, lines=lines, path=src.path, what="pose"
     )
@@ -294,7 +337,151 @@ def read_trajectory(
             TimeOrderWarning,
             stacklevel=2,
         )
-    return LoadedTrajectory(Trajectory(t, poses), fmt, dict(skipped), report)
+    trajectory = Trajectory(t, poses)
+    if dimension == "3d":
+        trajectory = trajectory.lifted()
+    return LoadedTrajectory(
+        trajectory, fmt, dict(skipped), report, discarded=discarded[0] if discarded else None
+    )
+
+
+def _is_euroc_header(src: SourceText) -> bool:
+    for line in src.lines[:5]:
+        text = line.strip().lower()
+        if text:
+            return text.startswith("#timestamp") and "p_rs_r_x" in text
+    return False
+
+
+def _read_3d(
+    src: SourceText,
+    fmt: str,
+    *,
+    path: PathLike,
+    times: PathLike | None,
+    dimension: str,
+    discarded: list[OutOfPlane],
+) -> tuple[NDArray, NDArray, Any]:
+    """TUM, KITTI or EuRoC: times, poses (``(N, 7)`` or ``(N, 3)``) and the row → line map."""
+    if fmt == "tum":
+        values, lines = read_numeric_table(
+            path,
+            columns=("t", "x", "y", "z", "qx", "qy", "qz", "qw"),
+            describe="a TUM trajectory",
+            source=src,
+        )
+        t, xyz, q = values[:, 0], values[:, 1:4], values[:, 4:8]
+        _check_unit_quaternions(q, src, lines)
+    elif fmt == "euroc":
+        first = next((k for k, line in enumerate(src.lines) if line.strip()), None)
+        if first is None or not src.lines[first].lstrip().lower().startswith("#timestamp"):
+            raise InputError(
+                "expected an EuRoC header #timestamp,p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],"
+                "q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z [] as the first line",
+                path=src.path,
+                line=1 if first is None else first + 1,
+            )
+        lines_fixed = list(src.lines)
+        lines_fixed[first] = lines_fixed[first].lstrip()[1:]
+        fixed = SourceText(src.path, lines_fixed, src.ends_with_newline)
+        table = read_csv_table(
+            src.path,
+            required=_EUROC_COLUMNS,
+            describe="an EuRoC ground-truth CSV (#timestamp [ns], p_RS_R_xyz, q_RS_wxyz)",
+            source=fixed,
+        )
+        c = table.columns
+        t = c["timestamp"] * 1e-9
+        xyz = np.column_stack([c[k] for k in _EUROC_COLUMNS[1:4]])
+        q = np.column_stack([c[k] for k in _EUROC_COLUMNS[5:8]] + [c[_EUROC_COLUMNS[4]]])
+        lines = table.lines.__getitem__
+        _check_unit_quaternions(q, src, lines)
+    else:  # kitti
+        values, lines = read_numeric_table(
+            path,
+            columns=tuple(f"r{i}{j}" for i in range(3) for j in range(4)),
+            describe="a KITTI pose file (12 numbers: the 3x4 matrix [R | t], row by row)",
+            source=src,
+        )
+        m = values.reshape(-1, 3, 4)
+        r = m[:, :, :3]
+        with np.errstate(over="ignore", invalid="ignore"):
+            dev = np.abs(np.einsum("nij,nik->njk", r, r) - np.eye(3)).max(axis=(1, 2))
+        bad = np.flatnonzero(~(dev <= 1e-3)) if m.shape[0] else np.empty(0, np.int64)
+        if bad.size:
+            k = int(bad[0])
+            raise InputError(
+                f"the rotation block is not orthonormal (|RᵀR − I| up to {float(dev[k]):.3g}); "
+                "expected a KITTI pose [R | t] with a rotation matrix R",
+                path=src.path,
+                line=lines(k),
+            )
+        from relation_metric import se3
+
+        poses7 = se3.from_matrix(m) if m.shape[0] else np.zeros((0, 7))
+        xyz, q = poses7[:, :3], poses7[:, 3:]
+        t = _kitti_times(times, m.shape[0], src.path)
+    return t, _poses_of_dimension(t, xyz, q, src, dimension, discarded), lines
+
+
+def _check_unit_quaternions(q: NDArray, src: SourceText, lines: Any) -> None:
+    with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
+        norms = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(
+            f"quaternion norm {norms[k]:.6g}, expected a unit quaternion",
+            path=src.path,
+            line=lines(k),
+        )
+
+
+def _kitti_times(times: PathLike | None, n: int, pose_path: str) -> NDArray:
+    if times is None:
+        return np.arange(n, dtype=np.float64)
+    values, _ = read_numeric_table(times, columns=("t",), describe="a KITTI times file")
+    if values.shape[0] != n:
+        raise InputError(
+            f"{values.shape[0]} timestamps for the {n} poses of {pose_path}; expected one a pose",
+            path=times,
+        )
+    return values[:, 0]
+
+
+def _poses_of_dimension(
+    t: NDArray,
+    xyz: NDArray,
+    q: NDArray,
+    src: SourceText,
+    dimension: str,
+    discarded: list[OutOfPlane],
+) -> NDArray:
+    """SE(3) rows, or the planar slice when the dimension rule says 2-D (see module doc)."""
+    from relation_metric import se3
+
+    if dimension == "3d" or xyz.shape[0] == 0:
+        return np.column_stack((xyz, q))
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        unit = q / np.linalg.norm(q, axis=1, keepdims=True)
+        rpy = se3.euler_zyx(unit)
+    oop = OutOfPlane(
+        z_range=float(xyz[:, 2].max() - xyz[:, 2].min()),
+        max_abs_roll=float(np.abs(rpy[:, 0]).max()),
+        max_abs_pitch=float(np.abs(rpy[:, 1]).max()),
+    )
+    planar = oop.is_planar()
+    if dimension == "auto" and not planar:
+        return np.column_stack((xyz, q))
+    if not planar:
+        discarded.append(oop)
+        warnings.warn(
+            f"{src.path}: 3-D trajectory scored in 2-D (--planar): discarding its out-of-plane "
+            f"motion ({oop.describe()})",
+            PlanarProjectionWarning,
+            stacklevel=4,
+        )
+    return np.column_stack((xyz[:, 0], xyz[:, 1], yaw_from_quaternion(q)))
 
 
 def without_repeated_times(loaded: LoadedTrajectory, path: PathLike) -> LoadedTrajectory:
@@ -484,12 +671,17 @@ def write_trajectory(
     t = trajectory.timestamps
     p = trajectory.poses
     n = len(trajectory)
+    if p.shape[1] == 7 and format != "tum":
+        raise InputError(f"a 3-D trajectory can be written as tum only, not {format}", path=path)
     if format == "plain":
         text = _rows(np.column_stack((t, p)), ("%.9f", "%.9f", "%.9f", "%.9f"))
         text = "# t x y theta\n" + text
     elif format == "tum":
-        q = quaternion_from_yaw(p[:, 2])
-        rows = np.column_stack((t, p[:, 0], p[:, 1], np.zeros(n), q))
+        if p.shape[1] == 7:
+            rows = np.column_stack((t, p))
+        else:
+            q = quaternion_from_yaw(p[:, 2])
+            rows = np.column_stack((t, p[:, 0], p[:, 1], np.zeros(n), q))
         text = "# t x y z qx qy qz qw\n" + _rows(rows, ["%.9f"] * 8)
     elif format == "csv":
         text = "t,x,y,theta\n" + _rows(np.column_stack((t, p)), ["%.9f"] * 4, ",")

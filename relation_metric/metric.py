@@ -18,6 +18,15 @@ rotation into one number (the C++ tool's single weighted error), (ii) for relati
 out-of-plane parts, where the parameter-vector difference is not a group error, and (iii) for
 per-axis weights (``wx ≠ wy``): the paper's components are in the reference frame, the C++
 tool's in the frame of the first pose of the estimate.
+
+On SE(3) (relations as ``(M, 7)`` ``[x, y, z, qx, qy, qz, qw]``, see
+:mod:`relation_metric.groups`) the same two definitions hold: ``paper`` takes
+``e = δ*⁻¹ ∘ δ`` on SE(3), whose translation ``[e_x, e_y, e_z]`` and rotation vector
+``ω = θ n`` are the six components (``‖ω‖`` is the rotation angle of ``e``; with unit weights
+the translational and rotational errors are evo's RPE ``translation_part`` and
+``rotation_angle``); ``metricevaluator`` takes the difference of the ZYX parameter vectors
+``[x, y, z, roll, pitch, yaw]`` (angles wrapped). One array is lifted to SE(3) when the
+other is 3-D.
 """
 
 from __future__ import annotations
@@ -30,6 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se2
 from relation_metric.errors import InputError
+from relation_metric.groups import SE2, common_group, group_of
 
 __all__ = ["RelationErrors", "relation_errors", "MODES", "parse_weights"]
 
@@ -98,17 +108,18 @@ def relation_errors(
 
     Parameters
     ----------
-    estimated : array_like, shape (M, 3)
-        ``δ_ij = x_i⁻¹ ∘ x_j`` of the estimate.
-    reference : array_like, shape (M, 3)
+    estimated : array_like, shape (M, 3) or (M, 7)
+        ``δ_ij = x_i⁻¹ ∘ x_j`` of the estimate (SE(2) or SE(3) rows).
+    reference : array_like, shape (M, 3) or (M, 7)
         ``δ*_ij``.
     mode : {"paper", "metricevaluator"}
         See the module docstring.
     weights : six floats or str, optional
         ``{wx, wy, wz, wroll, wpitch, wyaw}``; all ones by default.
     out_of_plane : array_like, shape (M, 3), optional
-        ``[z, roll, pitch]`` of the reference relations (``metricevaluator`` mode only; in
-        ``paper`` mode they must be zero, since a planar group error cannot hold them).
+        SE(2) only: ``[z, roll, pitch]`` of the reference relations (``metricevaluator``
+        mode only; in ``paper`` mode they must be zero, since a planar group error cannot
+        hold them — lift such relations to SE(3) instead).
 
     Returns
     -------
@@ -116,29 +127,39 @@ def relation_errors(
     """
     d = np.asarray(estimated, dtype=np.float64)
     r = np.asarray(reference, dtype=np.float64)
-    if d.shape != r.shape or d.shape[-1:] != (3,) or d.ndim != 2:
-        raise InputError(f"relation arrays must both be (M, 3); got {d.shape} and {r.shape}")
+    ok = d.ndim == 2 and r.ndim == 2 and d.shape[0] == r.shape[0]
+    if not ok or d.shape[1] not in (3, 7) or r.shape[1] not in (3, 7):
+        raise InputError(
+            f"relation arrays must both be (M, 3) or (M, 7); got {d.shape} and {r.shape}"
+        )
+    group = common_group(group_of(d), group_of(r))
+    d = d if d.shape[1] == group.width else group.to_se3(d)
+    r = r if r.shape[1] == group.width else group.to_se3(r)
     w = np.asarray(parse_weights(weights))
-    m = d.shape[0]
-    vec = np.zeros((m, 6))
     oop = None if out_of_plane is None else np.asarray(out_of_plane, dtype=np.float64)
+    if oop is not None and group is not SE2:
+        if np.any(oop != 0.0):
+            raise InputError("SE(3) relations hold z, roll and pitch in delta, not out_of_plane")
+        oop = None
     if mode == "paper":
         if oop is not None and np.any(oop != 0.0):
             raise InputError(
                 "relations with out-of-plane parts (z, roll, pitch) cannot be scored with "
-                "the planar paper definition; use mode 'metricevaluator'"
+                "the planar paper definition; lift them to SE(3) (RelationSet.lifted) or use "
+                "mode 'metricevaluator'"
             )
-        e = se2.ominus(d, r)
-        vec[:, 0:2] = e[:, 0:2]
-        vec[:, 5] = e[:, 2]
+        vec = group.error_components(group.ominus(d, r))
     elif mode == "metricevaluator":
-        vec[:, 0:2] = d[:, 0:2] - r[:, 0:2]
-        vec[:, 5] = se2.wrap_angle(d[:, 2] - r[:, 2])
+        vec = group.parameters(d) - group.parameters(r)
         if oop is not None:
-            vec[:, 2] = -oop[:, 0]
-            vec[:, 3:5] = se2.wrap_angle(-oop[:, 1:3])
+            vec[:, 2:5] -= oop
+        vec[:, 3:6] = se2.wrap_angle(vec[:, 3:6])
     else:
         raise InputError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
+    return _weighted(vec, w, mode)
+
+
+def _weighted(vec: NDArray[np.float64], w: NDArray[np.float64], mode: str) -> RelationErrors:
     sq = vec * vec * w
     trans2 = sq[:, 0:3].sum(axis=1)
     rot2 = sq[:, 3:6].sum(axis=1)

@@ -51,6 +51,8 @@ def evaluation_figure(
 ) -> Figure:
     """Errors over time (top) and the estimate with each relation coloured by its error.
 
+    A 3-D estimate is drawn from above (x, y) with a third panel of its height z over time.
+
     The estimate is coloured pose by pose with the largest translational error of the
     relations that touch each pose, and the ends of the ten worst relations are marked, so
     that large errors point at the part of the map that is wrong. Unassociated relations are
@@ -62,10 +64,20 @@ def evaluation_figure(
     ev = evaluation
     valid = ev.valid
     a = ev.association
-    fig, (ax_t, ax_xy) = plt.subplots(
-        2, 1, figsize=(8.0, 10.0), gridspec_kw={"height_ratios": [1, 2]}, constrained_layout=True
+    three_d = estimate.group.position_dim == 3
+    fig, axes = plt.subplots(
+        3 if three_d else 2,
+        1,
+        figsize=(8.0, 13.0 if three_d else 10.0),
+        gridspec_kw={"height_ratios": [1, 2, 1] if three_d else [1, 2]},
+        constrained_layout=True,
     )
-    t_mid = 0.5 * (ev.relations.first + ev.relations.second)[valid]
+    ax_t, ax_xy = axes[0], axes[1]
+    if ev.relations.key == "index":  # pose indices: the estimate's times of the two ends
+        t = estimate.timestamps
+        t_mid = 0.5 * (t[a.index_first[valid]] + t[a.index_second[valid]])
+    else:
+        t_mid = 0.5 * (ev.relations.first + ev.relations.second)[valid]
     order = np.argsort(t_mid, kind="stable")
     trans = ev.errors.translation[valid][order]
     rot = ev.errors.rotation[valid][order]
@@ -124,7 +136,23 @@ def evaluation_figure(
     ax_xy.set_aspect("equal", adjustable="datalim")
     ax_xy.set_xlabel("x [m]")
     ax_xy.set_ylabel("y [m]")
-    ax_xy.set_title(title or "estimate coloured by relation error")
+    ax_xy.set_title(title or ("estimate coloured by relation error" + (" (top view)" * three_d)))
+    if three_d:
+        ax_z = axes[2]
+        t0 = float(estimate.timestamps[0]) if len(estimate) else 0.0
+        ax_z.plot(estimate.timestamps - t0, estimate.poses[:, 2], "-", color="0.5", lw=1.0)
+        if hit.any():
+            ax_z.scatter(
+                estimate.timestamps[hit] - t0,
+                estimate.poses[hit, 2],
+                c=pose_err[hit],
+                s=4,
+                cmap="viridis",
+                zorder=2,
+            )
+        ax_z.set_xlabel("time since start [s]")
+        ax_z.set_ylabel("z [m]")
+        ax_z.set_title("height of the estimate, coloured by relation error")
     return fig
 
 

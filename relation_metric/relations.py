@@ -10,7 +10,9 @@ in Kümmerle et al. 2009 (Sec. V): local relations between nearby poses (every k
 d metres of travel), loop-closing relations between poses that are close in space but far
 apart along the path, global relations between far-apart poses, and a seeded random sample.
 Every generated set reproduces its reference trajectory exactly (``δ*`` are computed with
-:func:`relation_metric.se2.between` on the reference poses).
+the group's ``between`` on the reference poses). Relations live on the reference's group:
+``delta`` is ``(M, 3)`` on SE(2) and ``(M, 7)`` ``[x, y, z, qx, qy, qz, qw]`` on SE(3)
+(:mod:`relation_metric.groups`); spatial strategies use 2-D or 3-D positions accordingly.
 """
 
 from __future__ import annotations
@@ -23,8 +25,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from relation_metric import se2
+from relation_metric import se3
 from relation_metric.errors import InputError
+from relation_metric.groups import SE2, SE3, PoseGroup, group_of
 from relation_metric.textio import PathLike, read_numeric_table, write_text_atomic
 from relation_metric.trajectory import Trajectory, readonly
 
@@ -48,12 +51,13 @@ class RelationSet:
     first, second : array_like, shape (M,)
         Timestamps (``key="time"``) or pose indices (``key="index"``) of the two poses.
         ``second < first`` is allowed (the Freiburg files contain such relations).
-    delta : array_like, shape (M, 3)
-        Reference motions ``δ*_k = x*_first⁻¹ ∘ x*_second`` as ``[x, y, θ]``.
+    delta : array_like, shape (M, 3) or (M, 7)
+        Reference motions ``δ*_k = x*_first⁻¹ ∘ x*_second``: ``[x, y, θ]`` on SE(2),
+        ``[x, y, z, qx, qy, qz, qw]`` on SE(3) (the column count decides :attr:`group`).
     key : {"time", "index"}
     out_of_plane : array_like, shape (M, 3), optional
-        ``[z, roll, pitch]`` of the relations (Freiburg files carry them; zero for planar
-        data). Only the ``metricevaluator`` mode uses them.
+        SE(2) only: ``[z, roll, pitch]`` of the relations (Freiburg files carry them; zero
+        for planar data). :meth:`lifted` turns them into SE(3) relations.
     information : array_like, shape (M, 3, 3), optional
         Information matrices of the relations, where a source provides them.
     """
@@ -70,9 +74,9 @@ class RelationSet:
         b = np.asarray(self.second, dtype=np.float64)
         d = np.asarray(self.delta, dtype=np.float64)
         m = a.shape[0] if a.ndim == 1 else -1
-        if a.ndim != 1 or b.shape != (m,) or d.shape != (m, 3):
+        if a.ndim != 1 or b.shape != (m,) or d.shape not in ((m, 3), (m, 7)):
             raise InputError(
-                f"relation arrays must have shapes (M,), (M,), (M, 3); got {a.shape}, "
+                f"relation arrays must have shapes (M,), (M,), (M, 3) or (M, 7); got {a.shape}, "
                 f"{b.shape}, {d.shape}"
             )
         if self.key not in ("time", "index"):
@@ -83,8 +87,12 @@ class RelationSet:
             raise InputError("index relations need integer pose indices")
         object.__setattr__(self, "first", readonly(a))
         object.__setattr__(self, "second", readonly(b))
-        object.__setattr__(self, "delta", readonly(se2.wrap_last(d)))
-        for name, shape in (("out_of_plane", (m, 3)), ("information", (m, 3, 3))):
+        group = group_of(d)
+        object.__setattr__(self, "delta", readonly(group.normalize(d)))
+        if group is SE3 and self.out_of_plane is not None:
+            raise InputError("SE(3) relations hold z, roll and pitch in delta, not out_of_plane")
+        k = group.dof
+        for name, shape in (("out_of_plane", (m, 3)), ("information", (m, k, k))):
             value = getattr(self, name)
             if value is not None:
                 arr = np.asarray(value, dtype=np.float64)
@@ -94,6 +102,40 @@ class RelationSet:
 
     def __len__(self) -> int:
         return int(self.first.shape[0])
+
+    @property
+    def group(self) -> PoseGroup:
+        """The group of the relations: SE(2) for ``(M, 3)`` deltas, SE(3) for ``(M, 7)``."""
+        return group_of(self.delta)
+
+    @property
+    def has_out_of_plane(self) -> bool:
+        """SE(2) relations whose ``out_of_plane`` parts are not all zero."""
+        return self.out_of_plane is not None and bool(np.any(self.out_of_plane != 0.0))
+
+    def lifted(self) -> RelationSet:
+        """The relations on SE(3): ``[x, y, z]`` and the rotation of ``[roll, pitch, yaw]``.
+
+        SE(2) relations with ``out_of_plane = [z, roll, pitch]`` (Freiburg 6-DoF lines)
+        become the full 6-DoF motions; SE(3) relations are returned unchanged. Information
+        matrices are not carried over (their order differs between the groups).
+        """
+        if self.group is SE3:
+            return self
+        oop = np.zeros((len(self), 3)) if self.out_of_plane is None else self.out_of_plane
+        rpy = np.column_stack((oop[:, 1], oop[:, 2], self.delta[:, 2]))
+        delta = np.column_stack((self.delta[:, 0:2], oop[:, 0], se3.from_euler_zyx(rpy)))
+        return RelationSet(self.first, self.second, delta, key=self.key)
+
+    def planar(self) -> RelationSet:
+        """The relations projected onto SE(2) (``[x, y, yaw]``; z, roll, pitch kept in
+        ``out_of_plane``)."""
+        if self.group is SE2:
+            return self
+        p = SE3.parameters(self.delta)
+        return RelationSet(
+            self.first, self.second, p[:, [0, 1, 5]], key=self.key, out_of_plane=p[:, 2:5]
+        )
 
     def subset(self, mask: ArrayLike) -> RelationSet:
         """The relations selected by a boolean mask or index array."""
@@ -121,7 +163,7 @@ class RelationSet:
         """Relations between poses ``i`` and ``j`` of ``reference`` (δ* from the poses)."""
         i = np.asarray(i, dtype=np.int64)
         j = np.asarray(j, dtype=np.int64)
-        delta = se2.between(reference.poses[i], reference.poses[j])
+        delta = reference.group.between(reference.poses[i], reference.poses[j])
         if key == "time":
             return cls(reference.timestamps[i], reference.timestamps[j], delta, key="time")
         return cls(i.astype(np.float64), j.astype(np.float64), delta, key="index")
@@ -135,7 +177,8 @@ def read_relations(path: PathLike) -> RelationSet:
 
     ``#`` lines are comments; runs of blanks separate fields; ``t2 < t1`` is allowed.
     The planar part ``[x, y, yaw]`` becomes ``delta``; ``[z, roll, pitch]`` is kept in
-    ``out_of_plane``.
+    ``out_of_plane``; :meth:`RelationSet.lifted` makes 6-DoF relations of them (the CLI and
+    :func:`~relation_metric.evaluate.evaluate` do so when any of them is not zero).
     """
     values, _ = read_numeric_table(
         path, columns=_REL_COLUMNS, describe="a Freiburg .relations file"
@@ -153,12 +196,15 @@ def write_relations(path: PathLike, relations: RelationSet) -> None:
     """Write a Freiburg ``.relations`` file atomically (times with 6 decimals)."""
     if relations.key != "time":
         raise InputError("only time-stamped relations can be written as .relations", path=path)
-    oop = relations.out_of_plane
-    if oop is None:
-        oop = np.zeros((len(relations), 3))
-    rows = np.column_stack(
-        (relations.first, relations.second, relations.delta[:, :2], oop, relations.delta[:, 2])
-    )
+    if relations.group is SE3:
+        p = SE3.parameters(relations.delta)
+        delta, oop = p[:, [0, 1, 5]], p[:, 2:5]
+    else:
+        delta = relations.delta
+        oop = relations.out_of_plane
+        if oop is None:
+            oop = np.zeros((len(relations), 3))
+    rows = np.column_stack((relations.first, relations.second, delta[:, :2], oop, delta[:, 2]))
     fmt = "%.6f %.6f %.9f %.9f %.9f %.9f %.9f %.9f\n"
     text = "# t1 t2 x y z roll pitch yaw\n"
     if rows.shape[0]:
@@ -179,6 +225,7 @@ def generate_relations(
     min_distance: float | None = None,
     seed: int = 0,
     key: Literal["time", "index"] = "time",
+    chained: bool = False,
 ) -> RelationSet:
     """Select relations from a reference trajectory (Kümmerle et al. 2009, Sec. V).
 
@@ -203,6 +250,13 @@ min_distance, seed :
         Strategy parameters, see above.
     key : {"time", "index"}
         Name the pairs by timestamps or by pose indices.
+    chained : bool
+        ``consecutive`` and ``distance`` only: instead of a relation from every pose, a
+        chain from pose 0, each relation starting where the previous one ended —
+        ``(0, s), (s, 2s), ...`` and, by travelled distance, ``0 → j₁ → j₂ ...`` with
+        ``j_{k+1}`` the first pose at least ``distance`` further along the path. These are
+        evo's RPE pairs (``all_pairs=False``, delta in frames or metres); without
+        ``chained`` they are evo's ``all_pairs=True`` in frames.
 
     Returns
     -------
@@ -215,21 +269,31 @@ min_distance, seed :
     if strategy == "consecutive":
         if step < 1:
             raise InputError(f"step must be >= 1, got {step}")
-        i = np.arange(0, n - step)
-        j = i + step
+        if chained:
+            ids = np.arange(0, n, step)
+            i, j = ids[:-1], ids[1:]
+        else:
+            i = np.arange(0, n - step)
+            j = i + step
     elif strategy == "distance":
         if not distance > 0:
             raise InputError(f"distance must be > 0, got {distance}")
         s = reference.path_length()
         j = np.searchsorted(s, s + distance, side="left")
-        i = np.arange(n)
-        keep = j < n
-        i, j = i[keep], j[keep]
+        if chained:
+            ids = _chain_from_zero(j, n)
+            i, j = ids[:-1], ids[1:]
+        else:
+            i = np.arange(n)
+            keep = j < n
+            i, j = i[keep], j[keep]
     elif strategy == "loops":
         i, j = _loop_pairs(reference, radius, min_separation_time, min_separation_distance)
     elif strategy == "global":
-        xy = reference.xy
-        extent = float(np.hypot(*(xy.max(axis=0) - xy.min(axis=0))))
+        xy = reference.positions
+        extent = float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0)))
+        if xy.shape[1] == 2:
+            extent = float(np.hypot(*(xy.max(axis=0) - xy.min(axis=0))))
         dmin = extent / 4.0 if min_distance is None else float(min_distance)
         i, j = _random_pairs(n, count, seed, xy=xy, min_distance=dmin)
     elif strategy == "random":
@@ -242,6 +306,19 @@ min_distance, seed :
     return RelationSet.from_trajectory_pairs(reference, i[order], j[order], key=key)
 
 
+def _chain_from_zero(successor: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+    """``0, f(0), f(f(0)), ...`` while below ``n`` (``f = successor``, ``f(k) > k``).
+
+    Pointer doubling: ``log₂`` of the chain length vectorised steps, no loop per pose.
+    """
+    jump = np.append(np.minimum(successor, n), n).astype(np.int64)  # jump[n] = n (absorbing)
+    chain = np.zeros(1, dtype=np.int64)
+    while chain[-1] < n:
+        chain = np.concatenate((chain, jump[chain]))  # nodes 0 .. 2^(k+1) − 1 steps out
+        jump = jump[jump]
+    return chain[chain < n]
+
+
 def _loop_pairs(
     reference: Trajectory,
     radius: float,
@@ -252,7 +329,7 @@ def _loop_pairs(
         raise InputError(f"radius must be > 0, got {radius}")
     if min_time is None and min_travel is None:
         raise InputError("loop relations need a minimum separation in time or distance")
-    pairs = cKDTree(reference.xy).query_pairs(radius, output_type="ndarray")
+    pairs = cKDTree(reference.positions).query_pairs(radius, output_type="ndarray")
     if pairs.size == 0:
         return np.empty(0, np.int64), np.empty(0, np.int64)
     i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
@@ -314,7 +391,9 @@ def _random_pairs(
         i, j = np.minimum(a, b), np.maximum(a, b)
         ok = i != j
         if xy is not None:
-            ok &= np.hypot(*(xy[j] - xy[i]).T) >= min_distance
+            d = xy[j] - xy[i]
+            dist = np.hypot(d[:, 0], d[:, 1]) if d.shape[1] == 2 else np.linalg.norm(d, axis=1)
+            ok &= dist >= min_distance
         codes = i[ok] * n + j[ok]
         codes = codes[~np.isin(codes, picked)]
         _, first = np.unique(codes, return_index=True)

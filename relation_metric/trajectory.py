@@ -1,19 +1,20 @@
-"""Time-stamped SE(2) trajectories."""
+"""Time-stamped trajectories on SE(2) (``(N, 3)`` poses) or SE(3) (``(N, 7)`` poses)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from relation_metric import se2
+from relation_metric import se3
 from relation_metric.errors import InputError
+from relation_metric.groups import SE2, SE3, PoseGroup, group_of
 from relation_metric.timeorder import check_in_order
 
-__all__ = ["Trajectory", "readonly", "MAX_COORDINATE", "check_coordinates"]
+__all__ = ["Trajectory", "OutOfPlane", "readonly", "MAX_COORDINATE", "check_coordinates"]
 
 MAX_COORDINATE = 1e30
 """Largest position magnitude accepted [m] (10³ × the observable universe).
@@ -36,7 +37,7 @@ def check_coordinates(
     path: str | None = None,
     line_of: Callable[[int], int] | None = None,
 ) -> None:
-    """Refuse positions (shape (N, 2)) with a coordinate beyond :data:`MAX_COORDINATE`.
+    """Refuse positions (shape (N, 2) or (N, 3)) with a coordinate beyond :data:`MAX_COORDINATE`.
 
     ``path`` and ``line_of`` (row → 1-based file line) name where the row came from.
     """
@@ -46,23 +47,47 @@ def check_coordinates(
         line = int(line_of(k)) if line_of is not None else None
         name = f"{what} {k}: " if line is None else f"{what}: "
         raise InputError(
-            f"{name}position ({float(xy[k, 0]):.6g}, {float(xy[k, 1]):.6g}) is beyond "
+            f"{name}position ({', '.join(f'{float(v):.6g}' for v in xy[k])}) is beyond "
             f"{MAX_COORDINATE:.0e} m; expected coordinates in metres",
             path=path,
             line=line,
         )
 
 
+class OutOfPlane(NamedTuple):
+    """Out-of-plane motion: ``z`` range [m], largest ``|roll|`` and ``|pitch|`` [rad]."""
+
+    z_range: float
+    max_abs_roll: float
+    max_abs_pitch: float
+
+    def is_planar(self, *, tol_m: float = 1e-9, tol_rad: float = 1e-9) -> bool:
+        """Whether the motion stays in one horizontal plane (within the tolerances)."""
+        return (
+            self.z_range <= tol_m and self.max_abs_roll <= tol_rad and self.max_abs_pitch <= tol_rad
+        )
+
+    def describe(self) -> str:
+        """``z range 0.123 m, |roll| up to 4.5 deg, |pitch| up to 6.7 deg``."""
+        return (
+            f"z range {self.z_range:.3g} m, |roll| up to {np.degrees(self.max_abs_roll):.3g} deg, "
+            f"|pitch| up to {np.degrees(self.max_abs_pitch):.3g} deg"
+        )
+
+
 @dataclass(frozen=True)
 class Trajectory:
-    """N time-stamped poses ``w_T_k = [x, y, θ]`` in one world frame.
+    """N time-stamped poses ``w_T_k`` in one world frame, on SE(2) or SE(3).
 
     Parameters
     ----------
     timestamps : array_like, shape (N,)
         Seconds; finite and never decreasing (equal neighbours are allowed).
-    poses : array_like, shape (N, 3)
-        ``[x, y, θ]``; finite; θ is wrapped to ``[−π, π)`` on construction.
+    poses : array_like, shape (N, 3) or (N, 7)
+        SE(2): ``[x, y, θ]``, θ wrapped to ``[−π, π)`` on construction.
+        SE(3): ``[x, y, z, qx, qy, qz, qw]`` (the TUM column order), the quaternion
+        normalised to unit length with ``qw ≥ 0`` on construction.
+        The column count decides the group (:attr:`group`); finite.
 
     Both arrays are stored read-only. Construct from files with
     :func:`relation_metric.formats.read_trajectory`.
@@ -76,15 +101,57 @@ class Trajectory:
         p = np.asarray(self.poses, dtype=np.float64)
         if t.ndim != 1:
             raise InputError(f"timestamps must have shape (N,), got {t.shape}")
-        if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] != t.shape[0]:
-            raise InputError(f"poses must have shape ({t.shape[0]}, 3), got {p.shape}")
+        if p.ndim != 2 or p.shape[1] not in (3, 7) or p.shape[0] != t.shape[0]:
+            raise InputError(
+                f"poses must have shape ({t.shape[0]}, 3) or ({t.shape[0]}, 7), got {p.shape}"
+            )
         if not (np.isfinite(t).all() and np.isfinite(p).all()):
             bad = int(np.flatnonzero(~(np.isfinite(t) & np.isfinite(p).all(axis=1)))[0])
             raise InputError(f"pose {bad} is not finite: t={float(t[bad])}, pose={p[bad].tolist()}")
-        check_coordinates(p[:, :2], what="pose")
+        group = group_of(p)
+        check_coordinates(group.positions(p), what="pose")
+        if group is SE3 and p.shape[0]:
+            norms = np.linalg.norm(p[:, 3:7], axis=1)
+            if not (norms > 1e-12).all():
+                bad = int(np.flatnonzero(~(norms > 1e-12))[0])
+                raise InputError(f"pose {bad}: the quaternion is zero; expected a unit quaternion")
         check_in_order(t)
         object.__setattr__(self, "timestamps", readonly(t))
-        object.__setattr__(self, "poses", readonly(se2.wrap_last(p)))
+        object.__setattr__(self, "poses", readonly(group.normalize(p)))
+
+    @property
+    def group(self) -> PoseGroup:
+        """:data:`~relation_metric.groups.SE2` or :data:`~relation_metric.groups.SE3`."""
+        return group_of(self.poses)
+
+    @property
+    def positions(self) -> NDArray[np.float64]:
+        """Positions, shape (N, 2) on SE(2), (N, 3) on SE(3)."""
+        return self.group.positions(self.poses)
+
+    def lifted(self) -> Trajectory:
+        """The same trajectory on SE(3) (``z = roll = pitch = 0`` for planar poses)."""
+        if self.group is SE3:
+            return self
+        return Trajectory(self.timestamps, se3.from_planar(self.poses))
+
+    def planar(self) -> Trajectory:
+        """The trajectory projected onto SE(2): ``[x, y, yaw]`` (z, roll, pitch dropped)."""
+        if self.group is SE2:
+            return self
+        return Trajectory(self.timestamps, se3.to_planar(self.poses))
+
+    def out_of_plane(self) -> OutOfPlane:
+        """How far the trajectory leaves the plane (what :meth:`planar` discards)."""
+        if self.group is SE2 or len(self) == 0:
+            return OutOfPlane(0.0, 0.0, 0.0)
+        z = self.poses[:, 2]
+        rpy = se3.euler_zyx(self.poses[:, 3:7])
+        return OutOfPlane(
+            z_range=float(z.max() - z.min()),
+            max_abs_roll=float(np.abs(rpy[:, 0]).max()),
+            max_abs_pitch=float(np.abs(rpy[:, 1]).max()),
+        )
 
     def __len__(self) -> int:
         return int(self.timestamps.shape[0])
@@ -97,17 +164,23 @@ class Trajectory:
 
     @property
     def xy(self) -> NDArray[np.float64]:
-        """Positions, shape (N, 2)."""
+        """Horizontal positions ``[x, y]``, shape (N, 2)."""
         return self.poses[:, :2]
 
     def path_length(self) -> NDArray[np.float64]:
         """Cumulative travelled distance at each pose, shape (N,), starting at 0."""
-        steps = np.hypot(*np.diff(self.poses[:, :2], axis=0).T) if len(self) > 1 else []
+        if len(self) < 2:
+            return np.zeros(len(self))
+        diff = np.diff(self.positions, axis=0)
+        steps = (
+            np.hypot(diff[:, 0], diff[:, 1]) if diff.shape[1] == 2 else np.linalg.norm(diff, axis=1)
+        )
         return np.concatenate(([0.0], np.cumsum(steps)))
 
     def transformed(self, w_T_v: ArrayLike) -> Trajectory:
         """The whole trajectory moved rigidly: every pose becomes ``w_T_v ∘ pose``."""
-        return Trajectory(self.timestamps, se2.compose(np.asarray(w_T_v), self.poses))
+        g = self.group
+        return Trajectory(self.timestamps, g.compose(np.asarray(w_T_v), self.poses))
 
     def span(self) -> tuple[float, float]:
         """First and last timestamp."""

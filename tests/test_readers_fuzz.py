@@ -130,6 +130,18 @@ EST_MAP = LandmarkMap(np.array([1, 2, 3]), np.array([[0.0, 0], [1, 1], [1, 0]]))
 REF_MAP = LandmarkMap(np.array([1, 2, 3]), np.array([[1.0, 0], [1, 1], [0, 0]]))
 
 
+TUM_3D = (
+    "# t x y z qx qy qz qw\n0 0 0 0 0 0 0 1\n1 1 0 0.5 0.1 0 0 0.994987437\n2 2 0.1 0.7 0 0 0 1\n"
+)
+KITTI = "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 1 0 1 0 0 0 0 1 0.5\n0 -1 0 2 1 0 0 0.1 0 0 1 0.7\n"
+EUROC = (
+    "#timestamp,p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []\n"
+    "1403636579758555392,0,0,0,1,0,0,0\n"
+    "1403636579763555584,1,0,0.5,0.994987437,0.1,0,0\n"
+    "1403636579768555520,2,0.1,0.7,1,0,0,0\n"
+)
+
+
 class Reader(NamedTuple):
     """A reader and its valid input: ``files`` (name → content) in one folder."""
 
@@ -154,6 +166,9 @@ READERS: dict[str, Reader] = {
     "trajectory-g2o": _one("t.g2o", G2O_TRAJ, _traj("g2o")),
     "trajectory-csv": _one("t.csv", CSV_TRAJ, _traj("csv")),
     "trajectory-detected": _one("t.dat", PLAIN, lambda p: read_trajectory(p)),
+    "trajectory-tum-3d": _one("t3.tum", TUM_3D, _traj("tum")),
+    "trajectory-kitti": _one("k.txt", KITTI, _traj("kitti")),
+    "trajectory-euroc": _one("data.csv", EUROC, _traj("euroc")),
     "relations": _one("r.relations", RELATIONS, read_relations),
     "map-csv": _one("m.csv", MAP_CSV, read_map),
     "map-g2o": _one("m.g2o", MAP_G2O, read_map),

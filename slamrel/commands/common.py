@@ -88,9 +88,17 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         help="global: min distance between the poses [m] (default: extent/4)",
     )
     g.add_argument("--seed", type=opt.seed, default=0, help="global/random: seed")
+    g.add_argument(
+        "--chained",
+        action="store_true",
+        help="consecutive/distance: one chain of relations from pose 0, each starting where "
+        "the previous ended (evo's RPE pairs) instead of one relation from every pose",
+    )
 
 
-def relations_from_args(reference: Trajectory, args: argparse.Namespace) -> RelationSet:
+def relations_from_args(
+    reference: Trajectory, args: argparse.Namespace, *, key: str = "time"
+) -> RelationSet:
     """Generate relations from ``reference`` with the strategy options in ``args``."""
     return generate_relations(
         reference,
@@ -103,6 +111,8 @@ def relations_from_args(reference: Trajectory, args: argparse.Namespace) -> Rela
         count=args.count,
         min_distance=args.min_distance,
         seed=args.seed,
+        chained=getattr(args, "chained", False),
+        key=key,
     )
 
 
@@ -113,6 +123,8 @@ def load_trajectory_arg(
     pose: str = "laser",
     skip_invalid: bool = False,
     role: str = "reference",
+    planar: bool = False,
+    times: str | None = None,
 ) -> LoadedTrajectory:
     """Read a trajectory given on the command line.
 
@@ -125,6 +137,9 @@ def load_trajectory_arg(
       estimated trajectory; its ground truth would be scored against itself).
 
     Poses out of time order are sorted and counted (``LoadedTrajectory.time_order``).
+    3-D formats (TUM, KITTI, EuRoC) are read as SE(3) when their motion leaves the plane;
+    ``planar`` (``--planar``) projects them onto the plane with a warning that states the
+    out-of-plane motion discarded. ``times`` is a KITTI times file.
     """
     p = Path(path)
     if p.is_dir():
@@ -148,7 +163,14 @@ def load_trajectory_arg(
         return without_repeated_times(loaded, gt)
     if fmt is not None and fmt not in TRAJECTORY_FORMATS:
         raise InputError(f"unknown format {fmt!r}", path=path)
-    loaded = read_trajectory(path, format=fmt, pose=pose, skip_invalid=skip_invalid)  # type: ignore[arg-type]
+    loaded = read_trajectory(
+        path,
+        format=fmt,
+        pose=pose,  # type: ignore[arg-type]
+        skip_invalid=skip_invalid,
+        dimension="2d" if planar else "auto",
+        times=times,
+    )
     if role == "reference":
         loaded = without_repeated_times(loaded, path)
     return loaded

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import warnings
 from pathlib import Path
@@ -11,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from relation_metric.alignment import absolute_trajectory_error
+from relation_metric.association import synchronize
 from relation_metric.errors import InputError
 from relation_metric.evaluate import Evaluation, evaluate
 from relation_metric.formats import (
@@ -18,6 +20,7 @@ from relation_metric.formats import (
     TRAJECTORY_EXTENSIONS,
     TRAJECTORY_FORMATS,
     LoadedTrajectory,
+    PlanarProjectionWarning,
     sniff_trajectory_format,
 )
 from relation_metric.metric import MODES
@@ -49,7 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("reference", metavar="REFERENCE", help=".relations file or reference trajectory")
     p.add_argument(
-        "estimate", metavar="ESTIMATE", help="estimated trajectory (CARMEN, TUM, t x y θ, g2o, CSV)"
+        "estimate",
+        metavar="ESTIMATE",
+        help="estimated trajectory (CARMEN, TUM, t x y θ, g2o, CSV, KITTI, EuRoC)",
     )
     p.add_argument(
         "--format", choices=TRAJECTORY_FORMATS, help="format of ESTIMATE (default: recognised)"
@@ -67,7 +72,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="nearest-pose tolerance [s] (default 0.1)",
     )
     p.add_argument(
-        "--interpolate", action="store_true", help="interpolate on SE(2) beyond the tolerance"
+        "--interpolate", action="store_true", help="interpolate on SE(2)/SE(3) beyond the tolerance"
     )
     p.add_argument(
         "--max-interpolation-gap",
@@ -114,6 +119,21 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default="trans",
         help="which error the evo zip holds",
     )
+    p.add_argument(
+        "--planar",
+        action="store_true",
+        help="score 3-D inputs (TUM/KITTI/EuRoC with out-of-plane motion, 6-DoF relations) in "
+        "2-D: z, roll and pitch are discarded, with a warning that states how much",
+    )
+    p.add_argument(
+        "--sync",
+        action="store_true",
+        help="associate reference and estimate pose by pose first, as evo does (nearest time "
+        "within --max-time-diff; use 0.01 for evo's default t_max_diff), then generate the "
+        "relations on the matched poses (needs a reference trajectory)",
+    )
+    p.add_argument("--times", metavar="FILE", help="KITTI ESTIMATE: timestamps, one a line")
+    p.add_argument("--reference-times", metavar="FILE", help="KITTI REFERENCE: timestamps")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     add_strategy_arguments(p, default=None)
     p.set_defaults(func=run)
@@ -186,15 +206,43 @@ def load_reference(
                 stacklevel=2,
             )
             relations = relations.subset(~zero)
+        if relations.has_out_of_plane and args.planar:
+            oop = np.abs(relations.out_of_plane)
+            warnings.warn(
+                f"{args.reference}: 6-DoF relations scored in 2-D (--planar): discarding "
+                f"their out-of-plane parts (|z| up to {float(oop[:, 0].max()):.3g} m, |roll| up "
+                f"to {float(np.degrees(oop[:, 1].max())):.3g} deg, |pitch| up to "
+                f"{float(np.degrees(oop[:, 2].max())):.3g} deg)",
+                PlanarProjectionWarning,
+                stacklevel=2,
+            )
+            relations = RelationSet(
+                relations.first, relations.second, relations.delta, key=relations.key
+            )
         return relations, None
-    loaded = load_trajectory_arg(args.reference, args.reference_format, role="reference")
+    loaded = load_trajectory_arg(
+        args.reference,
+        args.reference_format,
+        role="reference",
+        planar=args.planar,
+        times=args.reference_times,
+    )
     ref = Path(args.reference)
     _refuse_if_strict(args, loaded, str(ref / "groundtruth.csv" if ref.is_dir() else ref))
+    _note_projection(notes, "reference", loaded)
     notes["reference_out_of_order"] = loaded.time_order.as_dict()
     notes["reference_repeated_times_dropped"] = loaded.repeated_dropped
     if args.strategy is None:
         args.strategy = "consecutive"
+    if args.sync:  # relations are generated after the pose-by-pose association, in run()
+        return RelationSet(np.empty(0), np.empty(0), np.empty((0, 3))), loaded.trajectory
     return relations_from_args(loaded.trajectory, args), loaded.trajectory
+
+
+def _note_projection(notes: dict[str, Any], role: str, loaded: LoadedTrajectory) -> None:
+    """``--planar``: what the projection of a 3-D file discarded, for ``--json``."""
+    if loaded.discarded is not None:
+        notes.setdefault("planar_projection", {})[role] = dict(loaded.discarded._asdict())
 
 
 def _refuse_if_strict(args: argparse.Namespace, loaded: LoadedTrajectory, path: str) -> None:
@@ -228,20 +276,45 @@ def run(args: argparse.Namespace) -> int:
     notes: dict[str, Any] = {}
     relations, reference = load_reference(args, notes)
     skip = args.skip_invalid_poses or args.mode == "metricevaluator"
-    estimate = load_trajectory_arg(args.estimate, args.format, skip_invalid=skip, role="estimate")
+    estimate = load_trajectory_arg(
+        args.estimate,
+        args.format,
+        skip_invalid=skip,
+        role="estimate",
+        planar=args.planar,
+        times=args.times,
+    )
     _refuse_if_strict(args, estimate, args.estimate)
+    _note_projection(notes, "estimate", estimate)
     notes["estimate_out_of_order"] = estimate.time_order.as_dict()
     odometry = None
     if args.odometry:
         loaded_odometry = load_trajectory_arg(
-            args.odometry, args.odometry_format, pose="odometry", skip_invalid=skip, role="odometry"
+            args.odometry,
+            args.odometry_format,
+            pose="odometry",
+            skip_invalid=skip,
+            role="odometry",
+            planar=args.planar,
         )
         _refuse_if_strict(args, loaded_odometry, args.odometry)
         notes["odometry_out_of_order"] = loaded_odometry.time_order.as_dict()
         odometry = loaded_odometry.trajectory
+    scored = estimate.trajectory
+    ate_pair = (estimate.trajectory, reference)
+    if args.sync:
+        if reference is None:
+            raise InputError(
+                "--sync needs a reference trajectory, not a .relations file", path=args.reference
+            )
+        ref_sync, est_sync = synchronize(reference, scored, max_diff=args.max_time_diff)
+        notes["synchronized_pairs"] = len(ref_sync)
+        relations = relations_from_args(ref_sync, args, key="index")
+        scored = est_sync
+        ate_pair = _same_times(est_sync, ref_sync)
     ev = evaluate(
         relations,
-        estimate.trajectory,
+        scored,
         odometry=odometry,
         mode=args.mode,
         weights=args.weights,
@@ -252,7 +325,16 @@ def run(args: argparse.Namespace) -> int:
         estimate_name=args.estimate,
         relations_name=args.reference,
     )
+    if args.sync:  # name the pose pairs by the reference's times in the outputs (CSV, zip, plot)
+        i = ev.relations.first.astype(np.int64)
+        j = ev.relations.second.astype(np.int64)
+        t = ref_sync.timestamps
+        ev = dataclasses.replace(
+            ev, relations=RelationSet(t[i], t[j], ev.relations.delta, key="time")
+        )
+    ev_estimate = scored.lifted() if ev.relations.group.name == "SE3" else scored
     result = ev.as_dict(degrees=args.degrees)
+    result["group"] = ev.relations.group.name
     if estimate.skipped:
         result["estimate_records_skipped"] = dict(estimate.skipped)
     result.update(notes)
@@ -261,7 +343,7 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(
                 "--ate needs a reference trajectory, not a .relations file", path=args.reference
             )
-        result["ate"] = _ate(estimate.trajectory, reference, args.max_time_diff)
+        result["ate"] = _ate(*ate_pair, args.max_time_diff)
     if args.json:
         write_json(args.json, result)
     if args.per_relation:
@@ -278,15 +360,22 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from relation_metric.plots import evaluation_figure, save_figure
 
-        save_figure(evaluation_figure(ev, estimate.trajectory, degrees=args.degrees), args.plot)
+        save_figure(evaluation_figure(ev, ev_estimate, degrees=args.degrees), args.plot)
     if not args.quiet:
         print(summary_text(ev, result, degrees=args.degrees))
     return 0
 
 
+def _same_times(est: Trajectory, ref: Trajectory) -> tuple[Trajectory, Trajectory]:
+    """Synchronised pairs with one time base, so the ATE's nearest-time match is the pairing."""
+    t = est.timestamps if np.all(np.diff(est.timestamps) > 0) else ref.timestamps
+    return Trajectory(t, est.poses), Trajectory(t, ref.poses)
+
+
 def _ate(estimate: Trajectory, reference: Trajectory, tol: float) -> dict[str, Any]:
     out: dict[str, Any] = {}
-    for align in ("none", "se2", "sim2"):
+    three_d = estimate.group.name == "SE3" or reference.group.name == "SE3"
+    for align in ("none", "se3", "sim3") if three_d else ("none", "se2", "sim2"):
         r = absolute_trajectory_error(estimate, reference, align=align, max_time_diff=tol)
         out[align] = {
             "translation": r.translation_stats.as_dict(),
@@ -316,6 +405,7 @@ def summary_text(ev: Evaluation, result: dict[str, Any], *, degrees: bool) -> st
         f"relations: {result['relations']} ({result['associated_by_odometry']} via odometry, "
         f"{result['interpolated']} interpolated, {result['unassociated']} unassociated); "
         f"mode: {ev.errors.mode}"
+        + (f"; {ev.relations.group.name}" if ev.relations.group.name == "SE3" else "")
     )
     text = head + "\n" + stats_table(rows)
     for name in ("estimate", "odometry", "reference"):
@@ -338,6 +428,6 @@ def summary_text(ev: Evaluation, result: dict[str, Any], *, degrees: bool) -> st
     if "ate" in result:
         a = result["ate"]
         text += "\nATE translation rmse [m]: " + ", ".join(
-            f"{k} {a[k]['translation']['rmse']:.6f}" for k in ("none", "se2", "sim2")
+            f"{k} {v['translation']['rmse']:.6f}" for k, v in a.items()
         )
     return text

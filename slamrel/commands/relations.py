@@ -27,6 +27,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     g.add_argument("reference", metavar="REFERENCE", help="reference trajectory or bundle")
     g.add_argument("--format", choices=TRAJECTORY_FORMATS, help="format of REFERENCE")
     g.add_argument("-o", "--output", required=True, metavar="OUT", help="output .relations file")
+    g.add_argument(
+        "--planar",
+        action="store_true",
+        help="project a 3-D reference onto the plane (warns what z/roll/pitch is discarded)",
+    )
+    g.add_argument("--times", metavar="FILE", help="KITTI: timestamps, one a line")
     g.add_argument("-q", "--quiet", action="store_true")
     add_strategy_arguments(g, default="consecutive")
     g.set_defaults(func=run_generate)
@@ -34,9 +40,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def run_generate(args: argparse.Namespace) -> int:
     check_outputs([args.output], [args.reference])
-    reference = load_trajectory_arg(args.reference, args.format).trajectory
+    reference = load_trajectory_arg(
+        args.reference, args.format, planar=args.planar, times=args.times
+    ).trajectory
     rel = relations_from_args(reference, args)
     write_relations(args.output, rel)
     if not args.quiet:
-        print(f"{len(rel)} {args.strategy} relations from {len(reference)} poses -> {args.output}")
+        dim = "3-D" if reference.group.name == "SE3" else "2-D"
+        print(
+            f"{len(rel)} {args.strategy} relations from {len(reference)} {dim} poses "
+            f"-> {args.output}"
+        )
     return 0
