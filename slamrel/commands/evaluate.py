@@ -147,6 +147,7 @@ def _is_relations_file(path: str, args: argparse.Namespace) -> bool:
     or a directory → a reference trajectory. Other files are sniffed; 8 numeric columns fit
     both readings and are refused with a message that names both and how to choose.
     """
+
     p = Path(path)
     if p.is_dir() or args.reference_format is not None:
         return False
@@ -192,6 +193,8 @@ def load_reference(
     ``relations_zero_length_dropped`` for a .relations file; ``reference_out_of_order`` and
     ``reference_repeated_times_dropped`` for a reference trajectory.
     """
+    import numpy as np
+
     notes = {} if notes is None else notes
     if _is_relations_file(args.reference, args):
         relations = read_relations(args.reference)
@@ -270,6 +273,7 @@ def _warn_same_file(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+
     outputs = [args.json, args.per_relation, args.plot, args.evo_zip]
     check_outputs(outputs, [args.reference, args.estimate, args.odometry])
     _warn_same_file(args)
@@ -373,6 +377,7 @@ def _same_times(est: Trajectory, ref: Trajectory) -> tuple[Trajectory, Trajector
 
 
 def _ate(estimate: Trajectory, reference: Trajectory, tol: float) -> dict[str, Any]:
+
     out: dict[str, Any] = {}
     three_d = estimate.group.name == "SE3" or reference.group.name == "SE3"
     for align in ("none", "se3", "sim3") if three_d else ("none", "se2", "sim2"):
@@ -388,6 +393,8 @@ def _ate(estimate: Trajectory, reference: Trajectory, tol: float) -> dict[str, A
 
 def summary_text(ev: Evaluation, result: dict[str, Any], *, degrees: bool) -> str:
     """The console summary of an evaluation."""
+    import numpy as np
+
     from relation_metric.evaluate import error_summaries
 
     unit = "deg" if degrees else "rad"

@@ -5,19 +5,16 @@ from __future__ import annotations
 import argparse
 import warnings
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from relation_metric.errors import InputError
-from relation_metric.formats import write_trajectory
-from relation_metric.landmarks import write_landmark_csv
-from relation_metric.outputs import staged_directory
-from relation_metric.trajectory import Trajectory
-from slamrel.backends.g2o import read_g2o_graph, write_g2o_graph
-from slamrel.backends.graph import PoseGraph, solve_graph, solve_graph_incremental
 from slamrel.commands import options as opt
 from slamrel.commands.common import add_force_argument, check_outputs, errors_about
-from slamrel.importers.isam import read_isam
+
+if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
+    import numpy as np
+
+    from slamrel.backends.graph import PoseGraph
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -78,10 +75,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     s = sub.add_parser(
         "solve",
         help="full least squares on a pose graph with landmarks (g2o or iSAM text)",
-        description="Levenberg-Marquardt from the file's initial guess, grown --batch poses "
-        "at a time in pose order (an incremental smoother's way to avoid the local minima a "
-        "single batch solve from chained odometry falls into on long runs such as Victoria "
-        "Park); writes trajectory.txt (t = pose index), landmarks.csv and solved.g2o into -o DIR.",
+        description="Levenberg-Marquardt from the file's initial guess: the whole graph "
+        "first, given up when it stalls (a step removing less than half the cost while "
+        "chi2/dof > 4); then on a problem grown in pose order, --batch poses first, the "
+        "step multiplied by --growth each time, a step "
+        "whose solution is far less consistent (chi2/dof) than the last undone and retried "
+        "smaller (an incremental smoother's way to avoid the local minima a single batch "
+        "solve from chained odometry falls into on long runs such as Victoria Park); writes "
+        "trajectory.txt (t = pose index), landmarks.csv and solved.g2o into -o DIR.",
     )
     s.add_argument("graph", metavar="GRAPH")
     s.add_argument("-o", "--output", required=True, metavar="DIR")
@@ -91,7 +92,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         type=opt.nonnegative_int,
         default=500,
         metavar="N",
-        help="poses added per sub-problem (default 500; 0: one batch solve of the whole graph)",
+        help="poses of the first sub-problem (default 500; 0: one batch solve of the whole graph)",
+    )
+    s.add_argument(
+        "--growth",
+        type=opt.float_at_least(1.0),
+        default=2.0,
+        metavar="F",
+        help="factor on the poses added per sub-problem (default 2; 1: a fixed step of --batch)",
     )
     s.add_argument("--noise", choices=("covariance", "sqrt-information"), default="covariance")
     add_force_argument(s)
@@ -101,6 +109,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
     """The graph and its file's pose and landmark ids."""
+    from slamrel.backends.g2o import read_g2o_graph
+    from slamrel.importers.isam import read_isam
+
     head = Path(path).read_text(errors="replace")[:4096].split()
     if head and head[0] in ("ODOMETRY", "LANDMARK"):
         data = read_isam(path, noise=noise)  # type: ignore[arg-type]
@@ -109,6 +120,9 @@ def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
 
 
 def run_import_isam(args: argparse.Namespace) -> int:
+    from slamrel.backends.g2o import write_g2o_graph
+    from slamrel.importers.isam import read_isam
+
     check_outputs([args.output], [args.file], dirs=[args.bundle], force=args.force)
     data = read_isam(args.file, noise=args.noise)
     # the file's ids are kept: landmark names then agree with the --bundle log's map.csv
@@ -129,6 +143,7 @@ def run_import_isam(args: argparse.Namespace) -> int:
 
 def run_import_mrclam(args: argparse.Namespace) -> int:
     from recovery.bundle import write_bundle
+    from relation_metric.outputs import staged_directory
     from slamrel.importers.mrclam import N_ROBOTS
 
     check_outputs([], [args.directory], dirs=[args.output], force=args.force)
@@ -165,6 +180,13 @@ def _mrclam_robot(args: argparse.Namespace, robot: int, out: Path):  # type: ign
 
 
 def run_solve(args: argparse.Namespace) -> int:
+    from relation_metric.formats import write_trajectory
+    from relation_metric.landmarks import write_landmark_csv
+    from relation_metric.outputs import staged_directory
+    from relation_metric.trajectory import Trajectory
+    from slamrel.backends.g2o import write_g2o_graph
+    from slamrel.backends.graph import solve_graph, solve_graph_incremental
+
     check_outputs([], [args.graph], dirs=[args.output], force=args.force)
     if not Path(args.graph).is_file():
         raise InputError("no such file", path=args.graph)
@@ -174,7 +196,7 @@ def run_solve(args: argparse.Namespace) -> int:
             sol = solve_graph(graph, max_iterations=args.max_iterations)
         else:
             sol = solve_graph_incremental(
-                graph, batch=args.batch, max_iterations=args.max_iterations
+                graph, batch=args.batch, growth=args.growth, max_iterations=args.max_iterations
             )
     out = Path(args.output)
     with staged_directory(out, kind="solve", force=args.force) as tmp:

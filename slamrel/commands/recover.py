@@ -5,19 +5,19 @@ from __future__ import annotations
 import argparse
 import io
 import sys
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from recovery.bundle import read_bundle
-from recovery.ekf import ROBUST
-from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, MAP_MODES, METHODS, Recovery, recover
-from relation_metric.errors import InputError
-from relation_metric.formats import write_trajectory
-from relation_metric.results import write_json
-from relation_metric.textio import write_bytes_atomic
-from relation_metric.timeorder import FILTER_TIME_TOLERANCE
 from slamrel.commands import options as opt
+from slamrel.commands.choices import (
+    DEFAULT_MAX_OUTLIER_RUN,
+    MAP_MODES,
+    METHODS,
+    ROBUST_CHOICES,
+)
 from slamrel.commands.common import check_outputs, errors_about
+
+if TYPE_CHECKING:
+    from recovery.recover import Recovery
 
 HELP = "recover the trajectory of an EKF-SLAM run by localisation in its final map"
 
@@ -74,7 +74,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument(
         "--robust",
-        choices=[r for r in ROBUST if r],
+        choices=ROBUST_CHOICES,
         default=None,
         help="M-estimator weights on outlying innovations (smoother and batch use the same "
         "weights; the down-weighted fraction is reported; default: none)",
@@ -92,10 +92,17 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from recovery.bundle import read_bundle
+    from recovery.recover import recover
+    from relation_metric.formats import write_trajectory
+    from relation_metric.results import write_json
+    from relation_metric.textio import write_bytes_atomic
+    from relation_metric.timeorder import FILTER_TIME_TOLERANCE
+
     check_outputs([args.output, args.covariances, args.report], [args.bundle])
     fmt = args.format or ("tum" if args.output.lower().endswith(".tum") else "plain")
-    if args.gate is not None and not 0.0 < args.gate < 1.0:
-        raise InputError(f"--gate must be a probability in (0, 1), got {args.gate}")
     bundle = read_bundle(args.bundle, skip_unknown_landmarks=args.skip_unknown_landmarks)
     with errors_about(args.bundle):
         result = recover(

@@ -6,13 +6,15 @@ import argparse
 import time
 from pathlib import Path
 
-from recovery.ekf import ROBUST
-from recovery.recover import DEFAULT_MAX_OUTLIER_RUN
 from relation_metric.errors import InputError
 from slamrel.commands import options as opt
+from slamrel.commands.choices import (
+    DEFAULT_MAX_OUTLIER_RUN,
+    NOISE_TYPES,
+    ROBUST_CHOICES,
+    WORLDS,
+)
 from slamrel.commands.common import add_force_argument, check_outputs
-from slamrel.pipeline import run_pipeline, write_report
-from slamrel.worlds import NOISE_TYPES, WORLDS
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -24,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("source", nargs="?", default="simple1", metavar="SOURCE")
     p.add_argument("-o", "--output", default="slamrel-report", metavar="DIR")
-    p.add_argument("--noise", choices=sorted(NOISE_TYPES), default="a")
+    p.add_argument("--noise", choices=NOISE_TYPES, default="a")
     p.add_argument("--seed", type=opt.seed, default=0)
     p.add_argument(
         "--rate", type=opt.nonnegative_int, default=0, help="control steps per measurement step"
@@ -49,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument(
         "--robust",
-        choices=[r for r in ROBUST if r],
+        choices=ROBUST_CHOICES,
         default=None,
         help="recovery: M-estimator weights on outlying innovations (default: none)",
     )
@@ -58,6 +60,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
+    from slamrel.pipeline import run_pipeline, write_report
+
     if args.source not in WORLDS and not Path(args.source).is_dir():
         raise InputError(
             f"unknown SOURCE {args.source!r}; expected a SLAM result bundle directory or one of "
