@@ -17,6 +17,7 @@ from slamrel.backends.pose_only import (
     landmarks_given_poses,
     method1_pairs,
     method2_pairs,
+    nees3,
     observation_uses,
     pair_constraints,
     pose_only_least_squares,
@@ -191,3 +192,46 @@ def test_method2_is_consistent_and_far_more_accurate_than_method1():
     assert np.all(a["m2_plain"][:, 0] > a["m2_plain"][:, 1])  # information reused
     assert a["m2"][:, 2].mean() < 0.5 * a["m1"][:, 2].mean()  # M2 far more accurate
     assert a["full"][:, 2].mean() < a["m2"][:, 2].mean()  # full LS the most accurate
+
+
+def test_map_fitted_to_fixed_poses_is_chi2_consistent_with_propagated_pose_covariance(rng):
+    """NEES3's ingredients: poses drawn from N(x, P), observations from N(z, σ²I); the
+    fitted map's NEES under the propagated covariance averages its dof (10)."""
+    from relation_metric.consistency import nees2
+
+    base = four_pose_log()
+    z, _ = cartesian_observations(base)
+    x_true = base.odometry.poses
+    p = np.diag(np.tile([0.02**2, 0.02**2, 0.01**2], 4))
+    p[:3, :3] = 1e-12 * np.eye(3)  # pose 0 holds the gauge
+    truth = np.array([LM[c] for c in "ABCDE"])
+    vals = []
+    for _ in range(400):
+        x = x_true + (np.linalg.cholesky(p) @ rng.normal(size=12)).reshape(4, 3)
+        zn = z + rng.normal(0, SIGMA, z.shape)
+        log = LandmarkLog(
+            base.odometry, base.pose, np.hypot(zn[:, 0], zn[:, 1]),
+            np.arctan2(zn[:, 1], zn[:, 0]), base.landmark, base.sigma_odometry, 0.0, 0.0,
+            observation_covariance=base.observation_covariance,
+        )  # fmt: skip
+        lm, cov, ids = landmarks_given_poses(log, x, p)
+        vals.append(nees2(lm, truth[ids], cov).value)
+    assert np.mean(vals) == pytest.approx(10.0, rel=0.1)
+    # ignoring the pose covariance makes the map over-confident
+    lm, cov0, ids = landmarks_given_poses(log, x)
+    assert np.trace(cov0) < np.trace(cov)
+
+
+def test_nees3_of_method2_is_close_to_full_least_squares_nees2():
+    from relation_metric.consistency import nees2
+
+    w = make_world("simple1", noise="a", seed=1)
+    log = log_of(w)
+    g, ids = full_graph(log)
+    sol = solve_graph(g)
+    cov = joint_covariance(g, sol, poses=[], landmarks=np.arange(ids.size))
+    full = nees2(sol.landmarks, w.landmarks[ids], cov)
+    po = nees3(log, pose_only_least_squares(log), w.landmarks)
+    assert full.dof == po.dof == 2 * ids.size
+    assert full.passed and po.passed
+    assert abs(po.value - full.value) < 0.25 * full.value

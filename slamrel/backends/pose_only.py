@@ -54,12 +54,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se2
+from relation_metric.consistency import JointNees, nees2
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import Trajectory, readonly
 from slamrel.backends.graph import (
     GraphSolution,
     PoseGraph,
     initial_landmarks,
+    joint_covariance,
     solve_graph,
 )
 
@@ -75,6 +77,7 @@ __all__ = [
     "method2_pairs",
     "observation_uses",
     "landmarks_given_poses",
+    "nees3",
     "METHOD1_INFLATION",
     "METHOD2_MIN_COMMON",
 ]
@@ -553,3 +556,30 @@ def landmarks_given_poses(
         cov = cov + g @ px @ g.T
         cov = 0.5 * (cov + cov.T)
     return readonly(lm), readonly(cov), ids
+
+
+def nees3(
+    log: LandmarkLog,
+    result: PoseOnlyResult,
+    true_landmarks: ArrayLike,
+    *,
+    probability: float = 0.95,
+) -> JointNees:
+    """NEES3 of Hu et al.: the map fitted to the pose-only trajectory, poses held fixed.
+
+    The landmarks are :func:`landmarks_given_poses` of the pose-only solution with its joint
+    pose covariance propagated; the test is :func:`relation_metric.consistency.nees2`.
+
+    Parameters
+    ----------
+    log : LandmarkLog
+    result : PoseOnlyResult
+    true_landmarks : array_like, shape (M, 2)
+        True positions indexed by landmark id (ids in ``log.landmark`` index its rows).
+    """
+    px = joint_covariance(result.graph, result.solution)
+    lm, cov, ids = landmarks_given_poses(log, result.solution.poses, px)
+    truth = np.asarray(true_landmarks, dtype=np.float64).reshape(-1, 2)
+    if ids.size and (ids.min() < 0 or ids.max() >= truth.shape[0]):
+        raise InputError(f"landmark ids must index the {truth.shape[0]} true landmarks")
+    return nees2(lm, truth[ids], cov, probability=probability)
