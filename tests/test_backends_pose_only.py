@@ -235,3 +235,19 @@ def test_nees3_of_method2_is_close_to_full_least_squares_nees2():
     assert full.dof == po.dof == 2 * ids.size
     assert full.passed and po.passed
     assert abs(po.value - full.value) < 0.25 * full.value
+
+
+def test_pose_only_on_a_paper_world_uses_its_cartesian_noise():
+    w = make_world("hu-simple1", noise="c", seed=0)
+    log = LandmarkLog.from_world(w)
+    _, info = cartesian_observations(log)
+    np.testing.assert_allclose(info, np.broadcast_to(np.eye(2) / 0.09, info.shape))
+    po = pose_only_least_squares(log, start="truth", truth=w.truth)
+    n = len(w.truth)
+    t = nees1(
+        po.solution.poses,
+        w.truth.poses,
+        joint_covariance(po.graph, po.solution, poses=np.arange(1, n)),
+    )
+    assert t.dof == 243 and round(t.gate, 2) == 280.36
+    assert np.isfinite(t.value)

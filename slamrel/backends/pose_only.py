@@ -48,7 +48,7 @@ range-bearing covariance linearised, ``J diag(σ_r², σ_b²) Jᵀ``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -81,6 +81,9 @@ __all__ = [
     "METHOD1_INFLATION",
     "METHOD2_MIN_COMMON",
 ]
+
+if TYPE_CHECKING:
+    from slamrel.worlds import World
 
 Array = NDArray[np.float64]
 Start = Literal["align", "odometry", "truth"]
@@ -120,6 +123,23 @@ class LandmarkLog:
     sigma_range: float
     sigma_bearing: float
     observation_covariance: Array | None = None
+
+    @classmethod
+    def from_world(cls, world: World) -> LandmarkLog:
+        """The odometry and observations of a simulated world, with its noise model."""
+        nt = world.noise_params
+        o = world.observations
+        return cls(
+            world.odometry,
+            o.pose,
+            o.range,
+            o.bearing,
+            o.landmark,
+            (nt.sigma_dx, nt.sigma_dy, nt.sigma_dtheta),
+            nt.sigma_range,
+            nt.sigma_bearing,
+            world.observation_covariance,
+        )
 
 
 def cartesian_observations(log: LandmarkLog) -> tuple[Array, Array]:
