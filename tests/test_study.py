@@ -89,3 +89,92 @@ def test_killed_study_resumes_to_the_same_tables_byte_for_byte(tmp_path):
     assert not list((killed / "cases").glob(".*.tmp"))
     for name in ("table.md", "table.csv", "table.tex"):
         assert (killed / name).read_bytes() == (tmp_path / "straight" / name).read_bytes()
+
+
+def _wait_for(predicate, seconds=120.0):
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.1)
+    return False
+
+
+@pytest.mark.slow
+def test_study_on_a_local_dask_cluster_killed_and_resumed(tmp_path):
+    pytest.importorskip("distributed")
+    args = ["study", "pose-only", "--runs", "2", *SMALL, "-q"]
+    main([*args, "-o", str(tmp_path / "straight")])
+    env = dict(os.environ, PYTHONPATH=str(ROOT), MPLBACKEND="Agg")
+    killed = tmp_path / "killed"
+    dask_args = [*args, "--scheduler", "local", "--workers", "2", "-o", str(killed)]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "slamrel", *dask_args], env=env, start_new_session=True
+    )
+    _wait_for(lambda: len(list((killed / "cases").glob("*.json"))) >= 2)
+    os.killpg(proc.pid, signal.SIGKILL)  # the client and the cluster it started
+    proc.wait()
+    assert len(list((killed / "cases").glob("*.json"))) < 6
+    done = subprocess.run(
+        [sys.executable, "-m", "slamrel", *dask_args], env=env, capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stderr
+    for name in ("table.md", "table.csv", "table.tex"):
+        assert (killed / name).read_bytes() == (tmp_path / "straight" / name).read_bytes()
+
+
+@pytest.mark.slow
+def test_study_on_a_separately_started_dask_scheduler_and_worker(tmp_path):
+    pytest.importorskip("distributed")
+    env = dict(os.environ, PYTHONPATH=str(ROOT), MPLBACKEND="Agg")
+    sched_file = tmp_path / "scheduler.json"
+    procs = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "distributed.cli.dask_scheduler",
+                "--scheduler-file",
+                str(sched_file),
+                "--port",
+                "0",
+                "--dashboard-address",
+                ":0",
+            ],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+    ]
+    try:
+        assert _wait_for(sched_file.exists, 60)
+        procs.append(
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "distributed.cli.dask_worker",
+                    "--scheduler-file",
+                    str(sched_file),
+                    "--nthreads",
+                    "1",
+                    "--dashboard-address",
+                    ":0",
+                ],
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )  # fmt: skip
+        )
+        address = json.loads(sched_file.read_text())["address"]
+        out = tmp_path / "remote"
+        rc = main(["study", "pose-only", "--runs", "1", *SMALL, "-q", "-o", str(out),
+                   "--scheduler", address])  # fmt: skip
+        assert rc == 0
+        local = tmp_path / "local"
+        assert main(["study", "pose-only", "--runs", "1", *SMALL, "-q", "-o", str(local)]) == 0
+        assert (out / "table.csv").read_bytes() == (local / "table.csv").read_bytes()
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+            p.wait(timeout=30)
