@@ -43,6 +43,7 @@ arithmetic is vectorised over the path.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -212,9 +213,13 @@ def toro_optimize(
     scale = float(np.median(rho_all)) if e_n else 1.0
     anc_i = [anc[i] for i in graph.pp_i.tolist()]
     anc_j = [anc[j] for j in graph.pp_j.tolist()]
-    root = x[0].copy()
+    mi_i = [m_inv[q] for q in side_i]  # preconditioner rows of each path side
+    mi_j = [m_inv[q] for q in side_j]
+    zz = z.tolist()
+    ww = w.tolist()
+    inv_rho = (1.0 / rho_all).tolist()
+    rt = float(x[0, 2])  # the root heading (positions cancel in the residual)
     costs = [_cost(_poses_from_parameters(x, levels, parent), graph, omega)]
-    jac_i = np.eye(3)
     best_cost, best_x = costs[0], x.copy()
     for t in range(1, iterations + 1):
         lam = 1.0 / (gamma * scale * t)
@@ -222,30 +227,27 @@ def toro_optimize(
             si, sj = side_i[e], side_j[e]
             if si.size + sj.size == 0:
                 continue
-            pi = root + x[anc_i[e]].sum(axis=0)
-            pj = root + x[anc_j[e]].sum(axis=0)
-            c, s = np.cos(pi[2]), np.sin(pi[2])
-            rdt = np.array([c * z[e, 0] - s * z[e, 1], s * z[e, 0] + c * z[e, 1]])
-            r = np.array(
-                [
-                    pi[0] + rdt[0] - pj[0],
-                    pi[1] + rdt[1] - pj[1],
-                    se2.wrap_angle(pi[2] + z[e, 2] - pj[2]),
-                ]
-            )
-            wr = w[e] * r  # Ω r
-            # Jacobians: i side [[I, S R_i δ_t], [0, 1]], j side −I
-            jac_i[0, 2], jac_i[1, 2] = -rdt[1], rdt[0]
-            g_i = jac_i.T @ wr
-            # predicted change of r: −λ A Ω r with A = J_i diag(ΣM⁻¹_i) J_iᵀ + diag(ΣM⁻¹_j);
-            # scale the step so that it never overshoots (spectral radius ≤ 1)
-            a_mat = (jac_i * sum_i[e]) @ jac_i.T + np.diag(sum_j[e])
-            rho = float(np.max(np.abs(np.linalg.eigvals(a_mat * w[e]))))
-            step = min(lam, 1.0 / rho)
+            pi = x[anc_i[e]].sum(axis=0).tolist()
+            pj = x[anc_j[e]].sum(axis=0).tolist()
+            th = rt + pi[2]
+            c, s_ = math.cos(th), math.sin(th)
+            zx, zy, zt = zz[e]
+            dx, dy = c * zx - s_ * zy, s_ * zx + c * zy  # R_i δ_t
+            r0 = pi[0] + dx - pj[0]
+            r1 = pi[1] + dy - pj[1]
+            r2 = math.remainder(pi[2] + zt - pj[2], 2 * math.pi)
+            w0, w1, w2 = ww[e]
+            wr = np.array((w0 * r0, w1 * r1, w2 * r2))  # Ω r
+            # Jacobians: i side [[I, S R_i δ_t], [0, 1]], j side −I; the step is capped so
+            # that the predicted change −λ A Ω r of the constraint's own residual
+            # (A = Σ_k J_k M_k⁻¹ J_kᵀ) has spectral radius ≤ 1: ρ(A Ω) is rotation-invariant
+            # (M and Ω are spherical in x, y), so it was computed once
+            step = min(lam, inv_rho[e])
             if si.size:
-                x[si] -= step * m_inv[si] * g_i
+                g_i = np.array((wr[0], wr[1], -dy * wr[0] + dx * wr[1] + wr[2]))
+                x[si] -= step * mi_i[e] * g_i
             if sj.size:
-                x[sj] += step * m_inv[sj] * wr
+                x[sj] += step * mi_j[e] * wr
         costs.append(_cost(_poses_from_parameters(x, levels, parent), graph, omega))
         if costs[-1] < best_cost:
             best_cost, best_x = costs[-1], x.copy()
