@@ -51,6 +51,8 @@ __all__ = [
     "summary_rows",
     "write_tables",
     "write_figures",
+    "findings",
+    "write_findings",
 ]
 
 METHODS = ("full", "m1", "m2", "toro")
@@ -357,3 +359,90 @@ def write_figures(directory: str | Path, results: Sequence[dict[str, Any]]) -> l
         paths.append(out / "fig2_nees1.png")
         write_bytes_atomic(paths[-1], buf.getvalue())
     return paths
+
+
+def findings(rows: Sequence[dict[str, Any]]) -> list[tuple[str, bool, str]]:
+    """The paper's qualitative findings checked on :func:`summary_rows`.
+
+    Returns
+    -------
+    list of (finding, holds, evidence)
+        Only findings whose methods are in ``rows``; ``holds`` is True when it holds for
+        every world/noise group (evidence lists the groups where it does not).
+    """
+    by: dict[tuple[str, str], dict[str, dict[str, Any]]] = {}
+    for r in rows:
+        by.setdefault((r["world"], r["noise"]), {})[r["method"]] = r
+    full, m1, m2, toro = (METHOD_NAMES[m] for m in METHODS)
+    out: list[tuple[str, bool, str]] = []
+
+    def check(title: str, needs: Sequence[str], test: Any, show: Any) -> None:
+        groups = {k: v for k, v in by.items() if all(m in v for m in needs)}
+        if not groups:
+            return
+        bad = [k for k, v in groups.items() if not test(v)]
+        ev = "; ".join(f"{w}/{n}: {show(groups[(w, n)])}" for w, n in groups)
+        head = "holds in all groups" if not bad else f"fails in {len(bad)}/{len(groups)} groups"
+        out.append((title, not bad, f"{head}. {ev}"))
+
+    def under(r: dict[str, Any]) -> str:
+        return f"{r['nees1_under']}/{r['runs']}"
+
+    check(
+        "full LS and pose-only M2 pass the NEES1 gate in most runs",
+        (full, m2),
+        lambda v: all(2 * v[m]["nees1_under"] > v[m]["runs"] for m in (full, m2)),
+        lambda v: f"full {under(v[full])}, M2 {under(v[m2])}",
+    )
+    check(
+        "pose-only M2 is far more accurate than M1 (RMS position error at most half)",
+        (m1, m2),
+        lambda v: v[m2]["rmse_xy"] <= 0.5 * v[m1]["rmse_xy"],
+        lambda v: f"M1 {v[m1]['rmse_xy']:.3f} m, M2 {v[m2]['rmse_xy']:.3f} m",
+    )
+    check(
+        "the TORO-style optimiser is less consistent than pose-only LS (higher mean NEES1)",
+        (m2, toro),
+        lambda v: v[toro]["nees1_mean"] > v[m2]["nees1_mean"],
+        lambda v: f"M2 {v[m2]['nees1_mean']:.0f}, TORO {v[toro]['nees1_mean']:.0f}",
+    )
+    worlds = sorted({w for w, _ in by})
+    if all((w, "c") in by and toro in by[(w, "c")] for w in worlds) and worlds:
+
+        def ratio(w: str, n: str) -> float:
+            r = by[(w, n)][toro]
+            return float(r["nees1_mean"] / r["gate1"])
+
+        noises = sorted({n for _, n in by})
+        bad = [w for w in worlds if max(noises, key=lambda n: ratio(w, n)) != "c"]
+        ev = "; ".join(
+            f"{w}: " + ", ".join(f"{n} {ratio(w, n):.2f}" for n in noises) for w in worlds
+        )
+        out.append(
+            (
+                "the TORO-style optimiser is least consistent under noise c (NEES1 / gate)",
+                not bad,
+                ("holds for every world. " if not bad else f"fails for {', '.join(bad)}. ") + ev,
+            )
+        )
+    check(
+        "the map fitted to the pose-only M2 trajectory (NEES3) is about as consistent as full "
+        "LS's map (NEES2): within 25 %",
+        (full, m2),
+        lambda v: (
+            abs(v[m2]["nees_map_mean"] - v[full]["nees_map_mean"])
+            <= 0.25 * v[full]["nees_map_mean"]
+        ),
+        lambda v: f"full {v[full]['nees_map_mean']:.0f}, M2 {v[m2]['nees_map_mean']:.0f}",
+    )
+    return out
+
+
+def write_findings(directory: str | Path, rows: Sequence[dict[str, Any]]) -> Path:
+    """``findings.md``: each finding, whether it holds, and the numbers behind it."""
+    lines = ["# Hu et al.'s findings, checked on this study", ""]
+    for title, holds, ev in findings(rows):
+        lines += [f"- **{'holds' if holds else 'does not hold'}** — {title}.", f"  {ev}", ""]
+    path = Path(directory) / "findings.md"
+    write_text_atomic(path, "\n".join(lines))
+    return path

@@ -178,3 +178,30 @@ def test_study_on_a_separately_started_dask_scheduler_and_worker(tmp_path):
         for p in reversed(procs):
             p.terminate()
             p.wait(timeout=30)
+
+
+def test_findings_are_checked_per_group():
+    from slamrel.study import findings
+
+    def row(world, noise, method, nees1, under, rmse, nmap, gate=280.4):
+        keys = ("world", "noise", "method", "nees1_mean", "nees1_under", "rmse_xy")
+        out = dict(zip(keys, (world, noise, method, nees1, under, rmse)))
+        return {**out, "runs": 4, "gate1": gate, "nees_map_mean": nmap}
+
+    rows = []
+    for noise, toro in (("a", 300.0), ("c", 400.0)):
+        rows += [
+            row("w", noise, "full LS", 240.0, 4, 0.1, 440.0),
+            row("w", noise, "pose-only M1", 130.0, 4, 0.5, 400.0),
+            row("w", noise, "pose-only M2", 150.0, 3, 0.12 if noise == "a" else 0.3, 420.0),
+            row("w", noise, "TORO-style (M2)", toro, 0, 0.3, 480.0),
+        ]
+    got = {title.split(" (")[0]: (holds, ev) for title, holds, ev in findings(rows)}
+    assert got["full LS and pose-only M2 pass the NEES1 gate in most runs"][0]
+    holds, ev = got["pose-only M2 is far more accurate than M1"]
+    assert (
+        not holds and ev.startswith("fails in 1/2 groups") and "w/c: M1 0.500 m, M2 0.300 m" in ev
+    )
+    assert got["the TORO-style optimiser is less consistent than pose-only LS"][0]
+    assert got["the TORO-style optimiser is least consistent under noise c"][0]
+    assert got["the map fitted to the pose-only M2 trajectory"][0]

@@ -5,7 +5,8 @@ merged it should use ``relation_metric.outputs.staged_directory``):
 
 * ``cases/`` — one JSON result per (world, noise, seed, method), the resumable state;
 * ``table.md``, ``table.csv``, ``table.tex`` — the Tables II/III analogue;
-* ``fig1_sigma_bounds.png``, ``fig2_nees1.png`` — the Fig. 1 / Fig. 2 analogues.
+* ``fig1_sigma_bounds.png``, ``fig2_nees1.png`` — the Fig. 1 / Fig. 2 analogues;
+* ``findings.md`` — the paper's findings, each checked (holds or not, with the numbers).
 """
 
 from __future__ import annotations
@@ -89,7 +90,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def run_study(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from slamrel.study import study_tasks, summary_rows, write_figures, write_tables
+    from slamrel.study import (
+        study_tasks,
+        summary_rows,
+        write_figures,
+        write_findings,
+        write_tables,
+    )
 
     out = Path(args.output)
     if out.exists() and not out.is_dir():
@@ -115,6 +122,7 @@ def run_study(args: argparse.Namespace) -> int:
     rows = summary_rows(results)
     paths = write_tables(out, rows, timing=args.timing)
     paths += write_figures(out, results)
+    paths.append(write_findings(out, rows))
     if not args.quiet:
         print(
             f"study pose-only: {len(tasks)} cases ({report.ran} run now, {report.skipped} "
