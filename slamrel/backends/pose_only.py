@@ -154,7 +154,7 @@ def cartesian_observations(log: LandmarkLog) -> tuple[Array, Array]:
     j[:, 1, 0], j[:, 1, 1] = s, log.range * c
     r = np.diag([log.sigma_range**2, log.sigma_bearing**2])
     cov = j @ r @ np.swapaxes(j, 1, 2)
-    return z, np.linalg.inv(cov)
+    return z, np.asarray(np.linalg.inv(cov), dtype=np.float64)
 
 
 def _odometry_factors(log: LandmarkLog) -> tuple[NDArray[np.int64], Array, Array]:
@@ -495,7 +495,7 @@ def pose_only_least_squares(
         raise InputError(f"method must be 1 or 2, got {method!r}")
     cons = pair_constraints(log, pairs, inflation, start=start, truth=truth)
     pp_i, pp_j = pairs[:, 0], pairs[:, 1]
-    pp_z, pp_info = cons.delta, np.linalg.inv(cons.covariance)
+    pp_z, pp_info = cons.delta, np.asarray(np.linalg.inv(cons.covariance), dtype=np.float64)
     if odometry:
         oi, ou, oinfo = _odometry_factors(log)
         pp_i, pp_j = np.concatenate((pp_i, oi)), np.concatenate((pp_j, oi + 1))
