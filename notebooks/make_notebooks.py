@@ -384,6 +384,57 @@ MRCLAM = [
     ),
 ]
 
+# The full-size study (10 runs), measured with `slamrel study pose-only --runs 10 -o DIR`;
+# pasted as text because it takes about half an hour (see the cell that recomputes it).
+POSE_ONLY_FULL_STUDY = "(not yet measured)"
+
+POSE_ONLY_STUDY = [
+    new_markdown_cell(
+        "# Evaluation of pose-only SLAM (Hu, Huang & Dissanayake 2010), reproduced\n\n"
+        "Four methods on the paper's worlds (`hu-simple1/2`: 82 poses, `hu-complex1/2`: 420; "
+        "0.5 m steps, 5 m / 180° sensor, 225 features, Cartesian observation noise a/b/c):\n\n"
+        "* **full LS** — least squares over poses and landmarks;\n"
+        "* **pose-only M1** — constraints between adjacent poses (and last–first), observation "
+        "covariances × 2;\n"
+        "* **pose-only M2** — constraints between every pair sharing ≥ 5 landmarks, each "
+        "observation's covariance × the number of constraints using it;\n"
+        "* **TORO-style** — tree-parameterised stochastic gradient descent on the M2 graph with "
+        "spherical information.\n\n"
+        "NEES1 is the whole trajectory's NEES with the joint covariance against the one-sided "
+        "gate χ²₀.₉₅(3(N−1)) (280.36 for 82 poses, 1340.59 for 420); the map NEES is NEES2 "
+        "for full LS and NEES3 (landmarks fitted with the poses held fixed) for the others."
+    ),
+    new_markdown_cell(
+        "## A reduced study, run here\n\n"
+        "One simple world, noise a and c, 2 runs, 30 TORO iterations: small enough for the "
+        "test suite, which executes this notebook."
+    ),
+    new_code_cell(
+        "import tempfile\n"
+        "from pathlib import Path\n"
+        "from slamrel.cli import main\n"
+        "out = Path(tempfile.mkdtemp()) / 'study'\n"
+        "rc = main(['study', 'pose-only', '--runs', '2', '--worlds', 'hu-simple1', '--noise', 'a,c',\n"
+        "           '--toro-iterations', '30', '-q', '-o', str(out)])\n"
+        "assert rc == 0\n"
+        "print((out / 'table.md').read_text())"
+    ),
+    new_code_cell(
+        "import csv\n"
+        "from slamrel.study import findings\n"
+        "def load(path):\n"
+        "    rows = list(csv.DictReader(path.open()))\n"
+        "    num = lambda v: int(v) if v.isdigit() else float(v)\n"
+        "    return [{k: (v if k in ('world', 'noise', 'method') else num(v)) for k, v in r.items()}\n"
+        "            for r in rows]\n"
+        "for title, holds, evidence in findings(load(out / 'table.csv')):\n"
+        "    print(f\"{'HOLDS' if holds else 'DOES NOT HOLD'}: {title}\\n    {evidence}\")"
+    ),
+    new_markdown_cell(
+        "## The full-size study (10 runs, all worlds and noise types)\n\n" + POSE_ONLY_FULL_STUDY
+    ),
+]
+
 
 def main(argv: list[str] | None = None) -> None:
     import argparse
@@ -397,6 +448,7 @@ def main(argv: list[str] | None = None) -> None:
         ("run_walkthrough", RUN_WALKTHROUGH),
         ("validation", VALIDATION),
         ("mrclam", MRCLAM),
+        ("pose_only_study", POSE_ONLY_STUDY),
     ):
         for i, cell in enumerate(cells):
             cell.id = f"{name}-{i:02d}"  # stable ids: regenerating gives no diff
