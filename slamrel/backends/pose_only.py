@@ -282,6 +282,12 @@ def _align(p: Array, q: Array, seg: NDArray[np.int64], starts: NDArray[np.int64]
     return np.column_stack((t, th))
 
 
+def _pair_cost(r1: Array, r2: Array, w1: Array, w2: Array, starts: NDArray[np.int64]) -> Array:
+    """Per-pair ``Σ r1ᵀ W1 r1 + r2ᵀ W2 r2`` of the pair least squares, shape (E,)."""
+    q = np.einsum("ra,rab,rb->r", r1, w1, r1) + np.einsum("ra,rab,rb->r", r2, w2, r2)
+    return np.add.reduceat(q, starts)
+
+
 def pair_constraints(
     log: LandmarkLog,
     pairs: ArrayLike,
@@ -389,9 +395,27 @@ def pair_constraints(
         k_dm = np.swapaxes(h_md, 1, 2) @ h_mm_inv  # (R, 3, 2)
         s_red = np.add.reduceat(h_dd - k_dm @ h_md, st)
         b_red = np.add.reduceat(g_d - np.einsum("rab,rb->ra", k_dm, g_m), st)
-        step_d = -np.linalg.solve(s_red, b_red[..., None])[..., 0]
+        try:
+            step_d = -np.linalg.solve(s_red, b_red[..., None])[..., 0]
+        except np.linalg.LinAlgError:  # a degenerate pair: least-norm step for all
+            step_d = -np.einsum("eab,eb->ea", np.linalg.pinv(s_red), b_red)
         step_m = -np.einsum("rab,rb->ra", h_mm_inv, g_m + np.einsum("rab,rb->ra", h_md, step_d[sg]))
         s_all[active] = s_red
+        # damped Gauss–Newton: halve a pair's step until its cost does not increase (an
+        # ill-conditioned pair, e.g. two close landmarks under large noise, overshoots)
+        cost0 = _pair_cost(r1, r2, wa[rows], w2, st)
+        scale = np.ones(active.size)
+        for _ in range(30):
+            d_new = dl + scale[:, None] * step_d
+            m_new = m[rows] + scale[sg, None] * step_m
+            rn = np.einsum("rba,rb->ra", _rot(d_new[sg, 2]), m_new - d_new[sg, :2]) - zb[rows]
+            new = _pair_cost(m_new - za[rows], rn, wa[rows], w2, st)
+            worse = ~(new <= cost0 * (1 + 1e-9) + 1e-12)  # increases beyond rounding
+            if not worse.any():
+                break
+            scale[worse] *= 0.5
+        step_d *= scale[:, None]
+        step_m *= scale[sg, None]
         delta[active] += step_d
         delta[active, 2] = se2.wrap_angle(delta[active, 2])
         m[rows] += step_m
