@@ -8,9 +8,15 @@ is killed at any moment leaves only whole results; a re-run skips the tasks whos
 exists. A task that raises is recorded in ``DIR/<key>.error.json`` (and retried on the next
 run); it does not stop the sweep.
 
-Execution: in this process (``workers=1``), in a process pool (``workers > 1``), or on a
-Dask cluster (``scheduler=ADDRESS``, or ``"local"`` for a ``LocalCluster``; needs the optional
+Execution: in a pool of ``workers`` spawned processes (``workers=0``: in this process), or on
+a Dask cluster (``scheduler=ADDRESS``, or ``"local"`` for a ``LocalCluster``; needs the optional
 ``dask[distributed]``). Progress goes to a callback as counts and an ETA.
+
+The processes this module starts run single-threaded BLAS (``OPENBLAS_NUM_THREADS=1`` and
+the like, unless the environment sets them): the tasks are many small linear-algebra calls,
+for which BLAS threads only contend. Measured on this 2-core machine (shared, load ≈ 3):
+24 study cases (hu-simple1, full LS and pose-only M2) took 29.4 s in one process with
+OpenBLAS's default threads and 2.4 s with one thread.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from __future__ import annotations
 import hashlib
 import importlib
 import json
+import multiprocessing
 import os
 import time
 import traceback
@@ -93,6 +100,36 @@ def _store(directory: Path, task: Task, ok: bool, value: Any) -> None:
         write_text_atomic(err, json.dumps(record, sort_keys=True))
 
 
+_BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+class _single_threaded_blas_env:
+    """Set the BLAS thread variables to 1 (where unset) while child processes start."""
+
+    def __enter__(self) -> None:
+        self.saved = {k: os.environ.get(k) for k in _BLAS_THREADS}
+        for k, v in self.saved.items():
+            if v is None:
+                os.environ[k] = "1"
+
+    def __exit__(self, *exc: object) -> None:
+        for k, v in self.saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+
+
+def _exit_with_parent(parent: int) -> None:
+    """Pool initializer: end this worker when the sweep's process dies (e.g. SIGKILL)."""
+    import threading
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
 def format_progress(done: int, total: int, failed: int, elapsed: float) -> str:
     """``"12/48 done, 1 failed, 35 s elapsed, ETA 1 min 45 s"``."""
 
@@ -121,7 +158,8 @@ def run_sweep(
     directory : path
         Where results live (created).
     workers : int
-        Processes (1: this process); with ``scheduler="local"`` the Dask workers.
+        Worker processes (spawned, single-threaded BLAS; 0: this process); with
+        ``scheduler="local"`` the Dask workers.
     scheduler : str, optional
         A Dask scheduler address (``tcp://host:8786``) or ``"local"`` for a
         ``LocalCluster`` with ``workers`` single-threaded workers.
@@ -150,11 +188,17 @@ def run_sweep(
 
     if scheduler is not None:
         _run_dask(todo, scheduler, workers, finished)
-    elif workers <= 1 or len(todo) <= 1:
+    elif workers <= 0 or not todo:
         for t in todo:
             finished(t, *_guarded(t.function, t.kwargs))
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        ctx = multiprocessing.get_context("spawn")
+        pool_args = {
+            "mp_context": ctx,
+            "initializer": _exit_with_parent,
+            "initargs": (os.getpid(),),
+        }
+        with _single_threaded_blas_env(), ProcessPoolExecutor(workers, **pool_args) as pool:
             futures = {pool.submit(_guarded, t.function, t.kwargs): t for t in todo}
             for fut in as_completed(futures):
                 finished(futures[fut], *fut.result())
@@ -176,7 +220,8 @@ def _run_dask(
         ) from None
     cluster = None
     if scheduler == "local":
-        cluster = LocalCluster(n_workers=max(workers, 1), threads_per_worker=1, processes=True)
+        with _single_threaded_blas_env():
+            cluster = LocalCluster(n_workers=max(workers, 1), threads_per_worker=1, processes=True)
         client = Client(cluster)
     else:
         client = Client(scheduler)

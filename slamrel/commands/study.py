@@ -74,7 +74,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     s.add_argument("--min-common", type=opt.int_range(2, 1000), default=5, metavar="K")
     s.add_argument("--toro-iterations", type=opt.positive_int, default=100, metavar="N")
-    s.add_argument("--workers", type=opt.positive_int, default=1, help="processes (1)")
+    s.add_argument("--workers", type=opt.positive_int, default=1, help="worker processes (1)")
     s.add_argument(
         "--scheduler",
         default=None,
