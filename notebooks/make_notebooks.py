@@ -449,6 +449,142 @@ MRCLAM = [
     ),
 ]
 
+# The full-size study (10 runs), measured with `slamrel study pose-only --runs 10 -o DIR`;
+# pasted as text because it takes about half an hour (see the cell that recomputes it).
+POSE_ONLY_FULL_STUDY = (
+    "Measured with `slamrel study pose-only --runs 10 --workers 2 -o DIR` at commit cc52a2b (480 cases; the pose-only pair least squares started at the truth, as in the paper; TORO-style: 100 iterations). Map NEES: NEES2 for full LS, NEES3 for the others.\n"
+    "\n"
+    "| world | noise | method | runs | NEES1 mean | NEES1 std | NEES1 gate | runs under gate | map NEES (2 / 3) mean | map gate | map runs under gate | RMS position error [m] | RMS heading error [rad] |\n"
+    "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+    "| hu-simple1 | a | full LS | 10 | 240.6 | 25.5 | 280.4 | 9 | 433.9 | 495.4 | 10 | 0.070 | 0.011 |\n"
+    "| hu-simple1 | a | pose-only M1 | 10 | 135.8 | 13.5 | 280.4 | 10 | 399.1 | 495.4 | 10 | 0.139 | 0.020 |\n"
+    "| hu-simple1 | a | pose-only M2 | 10 | 145.5 | 13.3 | 280.4 | 10 | 419.6 | 495.4 | 10 | 0.072 | 0.012 |\n"
+    "| hu-simple1 | a | TORO-style (M2) | 10 | 295.6 | 47.3 | 280.4 | 5 | 449.8 | 495.4 | 10 | 0.133 | 0.020 |\n"
+    "| hu-simple1 | b | full LS | 10 | 239.6 | 25.3 | 280.4 | 9 | 434.5 | 495.4 | 10 | 0.070 | 0.012 |\n"
+    "| hu-simple1 | b | pose-only M1 | 10 | 122.0 | 13.9 | 280.4 | 10 | 394.4 | 495.4 | 10 | 0.129 | 0.020 |\n"
+    "| hu-simple1 | b | pose-only M2 | 10 | 135.2 | 13.4 | 280.4 | 10 | 419.8 | 495.4 | 10 | 0.069 | 0.012 |\n"
+    "| hu-simple1 | b | TORO-style (M2) | 10 | 287.2 | 54.8 | 280.4 | 6 | 449.4 | 495.4 | 10 | 0.129 | 0.020 |\n"
+    "| hu-simple1 | c | full LS | 10 | 239.3 | 22.5 | 280.4 | 9 | 433.5 | 495.4 | 10 | 0.203 | 0.031 |\n"
+    "| hu-simple1 | c | pose-only M1 | 10 | 185.0 | 13.8 | 280.4 | 10 | 419.6 | 495.4 | 10 | 0.455 | 0.059 |\n"
+    "| hu-simple1 | c | pose-only M2 | 10 | 181.9 | 11.3 | 280.4 | 10 | 423.7 | 495.4 | 10 | 0.264 | 0.037 |\n"
+    "| hu-simple1 | c | TORO-style (M2) | 10 | 370.1 | 40.4 | 280.4 | 0 | 455.9 | 495.4 | 9 | 0.395 | 0.055 |\n"
+    "| hu-simple2 | a | full LS | 10 | 247.9 | 20.1 | 280.4 | 9 | 438.0 | 496.2 | 9 | 0.115 | 0.015 |\n"
+    "| hu-simple2 | a | pose-only M1 | 10 | 140.1 | 9.7 | 280.4 | 10 | 403.2 | 496.2 | 10 | 0.182 | 0.024 |\n"
+    "| hu-simple2 | a | pose-only M2 | 10 | 151.2 | 10.5 | 280.4 | 10 | 423.5 | 496.2 | 9 | 0.115 | 0.015 |\n"
+    "| hu-simple2 | a | TORO-style (M2) | 10 | 242.8 | 15.1 | 280.4 | 10 | 435.8 | 496.2 | 9 | 0.115 | 0.016 |\n"
+    "| hu-simple2 | b | full LS | 10 | 249.1 | 22.6 | 280.4 | 9 | 438.3 | 496.2 | 9 | 0.116 | 0.015 |\n"
+    "| hu-simple2 | b | pose-only M1 | 10 | 127.5 | 12.5 | 280.4 | 10 | 398.4 | 496.2 | 10 | 0.187 | 0.024 |\n"
+    "| hu-simple2 | b | pose-only M2 | 10 | 142.0 | 12.5 | 280.4 | 10 | 423.1 | 496.2 | 9 | 0.114 | 0.015 |\n"
+    "| hu-simple2 | b | TORO-style (M2) | 10 | 235.9 | 18.6 | 280.4 | 9 | 435.2 | 496.2 | 9 | 0.106 | 0.016 |\n"
+    "| hu-simple2 | c | full LS | 10 | 245.6 | 15.2 | 280.4 | 10 | 438.5 | 496.2 | 9 | 0.318 | 0.040 |\n"
+    "| hu-simple2 | c | pose-only M1 | 10 | 185.7 | 9.2 | 280.4 | 10 | 421.8 | 496.2 | 9 | 0.490 | 0.062 |\n"
+    "| hu-simple2 | c | pose-only M2 | 10 | 184.7 | 12.0 | 280.4 | 10 | 426.9 | 496.2 | 9 | 0.335 | 0.042 |\n"
+    "| hu-simple2 | c | TORO-style (M2) | 10 | 297.6 | 25.1 | 280.4 | 2 | 438.5 | 496.2 | 9 | 0.357 | 0.047 |\n"
+    "| hu-complex1 | a | full LS | 10 | 1251.4 | 48.1 | 1340.6 | 9 | 438.0 | 498.8 | 10 | 0.243 | 0.027 |\n"
+    "| hu-complex1 | a | pose-only M1 | 10 | 903.8 | 111.7 | 1340.6 | 10 | 849.2 | 498.8 | 6 | 2.784 | 0.176 |\n"
+    "| hu-complex1 | a | pose-only M2 | 10 | 854.6 | 40.6 | 1340.6 | 10 | 494.3 | 498.8 | 7 | 1.027 | 0.080 |\n"
+    "| hu-complex1 | a | TORO-style (M2) | 10 | 1832.7 | 126.7 | 1340.6 | 0 | 605.3 | 498.8 | 3 | 1.306 | 0.099 |\n"
+    "| hu-complex1 | b | full LS | 10 | 1259.4 | 51.3 | 1340.6 | 9 | 442.1 | 498.8 | 10 | 0.328 | 0.048 |\n"
+    "| hu-complex1 | b | pose-only M1 | 10 | 845.5 | 164.6 | 1340.6 | 10 | 1005.6 | 498.8 | 4 | 3.451 | 0.226 |\n"
+    "| hu-complex1 | b | pose-only M2 | 10 | 3042.7 | 3202.5 | 1340.6 | 7 | 12168.2 | 498.8 | 2 | 3.737 | 0.309 |\n"
+    "| hu-complex1 | b | TORO-style (M2) | 10 | 3821.5 | 3160.6 | 1340.6 | 0 | 12179.4 | 498.8 | 1 | 3.885 | 0.317 |\n"
+    "| hu-complex1 | c | full LS | 10 | 1254.3 | 53.5 | 1340.6 | 9 | 441.6 | 498.8 | 10 | 0.568 | 0.056 |\n"
+    "| hu-complex1 | c | pose-only M1 | 10 | 1441.8 | 480.9 | 1340.6 | 6 | 1545.7 | 498.8 | 3 | 5.369 | 0.350 |\n"
+    "| hu-complex1 | c | pose-only M2 | 10 | 1050.2 | 51.0 | 1340.6 | 10 | 441.7 | 498.8 | 9 | 1.377 | 0.104 |\n"
+    "| hu-complex1 | c | TORO-style (M2) | 10 | 1897.7 | 124.4 | 1340.6 | 0 | 548.4 | 498.8 | 3 | 2.021 | 0.154 |\n"
+    "| hu-complex2 | a | full LS | 10 | 1235.5 | 42.8 | 1340.6 | 10 | 444.8 | 497.5 | 10 | 0.082 | 0.014 |\n"
+    "| hu-complex2 | a | pose-only M1 | 10 | 873.4 | 190.9 | 1340.6 | 9 | 754.3 | 497.5 | 6 | 2.167 | 0.160 |\n"
+    "| hu-complex2 | a | pose-only M2 | 10 | 760.2 | 26.4 | 1340.6 | 10 | 413.4 | 497.5 | 10 | 0.112 | 0.018 |\n"
+    "| hu-complex2 | a | TORO-style (M2) | 10 | 2458.5 | 112.4 | 1340.6 | 0 | 505.2 | 497.5 | 6 | 0.244 | 0.030 |\n"
+    "| hu-complex2 | b | full LS | 10 | 53354.1 | 156329.4 | 1340.6 | 9 | 32019.3 | 497.5 | 9 | 0.412 | 0.091 |\n"
+    "| hu-complex2 | b | pose-only M1 | 10 | 737.3 | 70.4 | 1340.6 | 10 | 659.8 | 497.5 | 5 | 2.254 | 0.178 |\n"
+    "| hu-complex2 | b | pose-only M2 | 10 | 678.3 | 24.9 | 1340.6 | 10 | 408.4 | 497.5 | 10 | 0.125 | 0.026 |\n"
+    "| hu-complex2 | b | TORO-style (M2) | 10 | 1783.6 | 119.0 | 1340.6 | 0 | 487.6 | 497.5 | 8 | 0.283 | 0.043 |\n"
+    "| hu-complex2 | c | full LS | 10 | 1232.9 | 48.4 | 1340.6 | 10 | 445.8 | 497.5 | 10 | 0.220 | 0.035 |\n"
+    "| hu-complex2 | c | pose-only M1 | 10 | 1460.4 | 855.9 | 1340.6 | 7 | 1164.4 | 497.5 | 5 | 4.686 | 0.317 |\n"
+    "| hu-complex2 | c | pose-only M2 | 10 | 975.9 | 41.1 | 1340.6 | 10 | 426.1 | 497.5 | 10 | 0.311 | 0.044 |\n"
+    "| hu-complex2 | c | TORO-style (M2) | 10 | 2068.6 | 94.3 | 1340.6 | 0 | 493.3 | 497.5 | 8 | 0.650 | 0.072 |\n"
+    "\n"
+    "### The paper's findings, checked\n"
+    "\n"
+    "- **holds** — full LS and pose-only M2 pass the NEES1 gate in most runs.\n"
+    "  holds in all groups. hu-simple1/a: full 9/10, M2 10/10; hu-simple1/b: full 9/10, M2 10/10; hu-simple1/c: full 9/10, M2 10/10; hu-simple2/a: full 9/10, M2 10/10; hu-simple2/b: full 9/10, M2 10/10; hu-simple2/c: full 10/10, M2 10/10; hu-complex1/a: full 9/10, M2 10/10; hu-complex1/b: full 9/10, M2 7/10; hu-complex1/c: full 9/10, M2 10/10; hu-complex2/a: full 10/10, M2 10/10; hu-complex2/b: full 9/10, M2 10/10; hu-complex2/c: full 10/10, M2 10/10\n"
+    "\n"
+    "- **does not hold** — pose-only M2 is far more accurate than M1 (RMS position error at most half).\n"
+    "  fails in 7/12 groups. hu-simple1/a: M1 0.139 m, M2 0.072 m; hu-simple1/b: M1 0.129 m, M2 0.069 m; hu-simple1/c: M1 0.455 m, M2 0.264 m; hu-simple2/a: M1 0.182 m, M2 0.115 m; hu-simple2/b: M1 0.187 m, M2 0.114 m; hu-simple2/c: M1 0.490 m, M2 0.335 m; hu-complex1/a: M1 2.784 m, M2 1.027 m; hu-complex1/b: M1 3.451 m, M2 3.737 m; hu-complex1/c: M1 5.369 m, M2 1.377 m; hu-complex2/a: M1 2.167 m, M2 0.112 m; hu-complex2/b: M1 2.254 m, M2 0.125 m; hu-complex2/c: M1 4.686 m, M2 0.311 m\n"
+    "\n"
+    "- **holds** — the TORO-style optimiser is less consistent than pose-only LS (higher mean NEES1).\n"
+    "  holds in all groups. hu-simple1/a: M2 145, TORO 296; hu-simple1/b: M2 135, TORO 287; hu-simple1/c: M2 182, TORO 370; hu-simple2/a: M2 151, TORO 243; hu-simple2/b: M2 142, TORO 236; hu-simple2/c: M2 185, TORO 298; hu-complex1/a: M2 855, TORO 1833; hu-complex1/b: M2 3043, TORO 3822; hu-complex1/c: M2 1050, TORO 1898; hu-complex2/a: M2 760, TORO 2458; hu-complex2/b: M2 678, TORO 1784; hu-complex2/c: M2 976, TORO 2069\n"
+    "\n"
+    "- **does not hold** — the TORO-style optimiser is least consistent under noise c (NEES1 / gate).\n"
+    "  fails for hu-complex1, hu-complex2. hu-complex1: a 1.37, b 2.85, c 1.42; hu-complex2: a 1.83, b 1.33, c 1.54; hu-simple1: a 1.05, b 1.02, c 1.32; hu-simple2: a 0.87, b 0.84, c 1.06\n"
+    "\n"
+    "- **does not hold** — the map fitted to the pose-only M2 trajectory (NEES3) is about as consistent as full LS's map (NEES2): within 25 %.\n"
+    "  fails in 2/12 groups. hu-simple1/a: full 434, M2 420; hu-simple1/b: full 435, M2 420; hu-simple1/c: full 433, M2 424; hu-simple2/a: full 438, M2 423; hu-simple2/b: full 438, M2 423; hu-simple2/c: full 438, M2 427; hu-complex1/a: full 438, M2 494; hu-complex1/b: full 442, M2 12168; hu-complex1/c: full 442, M2 442; hu-complex2/a: full 445, M2 413; hu-complex2/b: full 32019, M2 408; hu-complex2/c: full 446, M2 426\n"
+)
+
+POSE_ONLY_STUDY = [
+    new_markdown_cell(
+        "# Evaluation of pose-only SLAM (Hu, Huang & Dissanayake 2010), reproduced\n\n"
+        "Four methods on the paper's worlds (`hu-simple1/2`: 82 poses, `hu-complex1/2`: 420; "
+        "0.5 m steps, 5 m / 180° sensor, 225 features, Cartesian observation noise a/b/c):\n\n"
+        "* **full LS** — least squares over poses and landmarks;\n"
+        "* **pose-only M1** — constraints between adjacent poses (and last–first), observation "
+        "covariances × 2;\n"
+        "* **pose-only M2** — constraints between every pair sharing ≥ 5 landmarks, each "
+        "observation's covariance × the number of constraints using it;\n"
+        "* **TORO-style** — tree-parameterised stochastic gradient descent on the M2 graph with "
+        "spherical information.\n\n"
+        "NEES1 is the whole trajectory's NEES with the joint covariance against the one-sided "
+        "gate χ²₀.₉₅(3(N−1)) (280.36 for 82 poses, 1340.59 for 420); the map NEES is NEES2 "
+        "for full LS and NEES3 (landmarks fitted with the poses held fixed) for the others."
+    ),
+    new_markdown_cell(
+        "## A reduced study, run here\n\n"
+        "One simple world, noise a and c, 2 runs, 30 TORO iterations: small enough for the "
+        "test suite, which executes this notebook."
+    ),
+    new_code_cell(
+        "import tempfile\n"
+        "from pathlib import Path\n"
+        "from slamrel.cli import main\n"
+        "out = Path(tempfile.mkdtemp()) / 'study'\n"
+        "rc = main(['study', 'pose-only', '--runs', '2', '--worlds', 'hu-simple1', '--noise', 'a,c',\n"
+        "           '--toro-iterations', '30', '-q', '-o', str(out)])\n"
+        "assert rc == 0\n"
+        "print((out / 'table.md').read_text())"
+    ),
+    new_code_cell(
+        "import csv\n"
+        "from slamrel.study import findings\n"
+        "def load(path):\n"
+        "    rows = list(csv.DictReader(path.open()))\n"
+        "    num = lambda v: int(v) if v.isdigit() else float(v)\n"
+        "    return [{k: (v if k in ('world', 'noise', 'method') else num(v)) for k, v in r.items()}\n"
+        "            for r in rows]\n"
+        "for title, holds, evidence in findings(load(out / 'table.csv')):\n"
+        "    print(f\"{'HOLDS' if holds else 'DOES NOT HOLD'}: {title}\\n    {evidence}\")"
+    ),
+    new_markdown_cell(
+        "## The full-size study (10 runs, all worlds and noise types)\n\n" + POSE_ONLY_FULL_STUDY
+    ),
+    new_markdown_cell(
+        "## Where the findings do not hold, and why\n\n"
+        "* **M2 far more accurate than M1** holds on the complex worlds (M1 2.2–5.4 m, M2 "
+        "0.11–1.4 m RMS), except hu-complex1/b where both fail (3.5 / 3.7 m). On the simple "
+        "worlds Method 1's last–first constraint closes the single loop, so M1 is 1.4–1.9 × "
+        "M2's error: worse, but not by the factor 2 the check asks for.\n"
+        "* **TORO-style least consistent under noise c** holds on the simple worlds only. On the "
+        "complex ones it is inconsistent under every noise type (NEES1 / gate 1.3–2.9, 0 of 10 "
+        "runs under the gate) and worst under b on hu-complex1, where the Method 2 graph it "
+        "optimises already fails in 3 of 10 runs (0.2 rad a step of heading noise leaves parts "
+        "of the trajectory constrained by odometry alone), and under a on hu-complex2.\n"
+        "* **NEES3 close to NEES2** fails on hu-complex1/b (the same 3 pose-only failures) and on "
+        "hu-complex2/b, where it is full LS that fails once (seed 4: Levenberg–Marquardt from "
+        "the odometry stops at 3.4 m RMS error, NEES1 ≈ 5 × 10⁵), not pose-only."
+    ),
+]
+
 
 def main(argv: list[str] | None = None) -> None:
     import argparse
@@ -462,6 +598,7 @@ def main(argv: list[str] | None = None) -> None:
         ("run_walkthrough", RUN_WALKTHROUGH),
         ("validation", VALIDATION),
         ("mrclam", MRCLAM),
+        ("pose_only_study", POSE_ONLY_STUDY),
     ):
         for i, cell in enumerate(cells):
             cell.id = f"{name}-{i:02d}"  # stable ids: regenerating gives no diff

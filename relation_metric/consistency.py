@@ -6,6 +6,17 @@ Gaussian estimator ``ε ~ χ²(d)``; averaged over R independent Monte Carlo run
 ``R · ε̄ ~ χ²(R d)``, so the two-sided ``p`` band of the average NEES is
 ``[χ²⁻¹((1 − p)/2; R d) / R, χ²⁻¹((1 + p)/2; R d) / R]``. For SE(2) poses the error is taken
 as ``[x − x̂, y − ŷ, wrap(θ − θ̂)]`` (the filter's own parameterisation).
+
+Hu, Huang & Dissanayake ("Evaluation of Pose Only SLAM", IROS 2010) test a *whole* batch
+estimate at once, with its *joint* covariance, against the one-sided gate
+``χ²₀.₉₅(d)`` (:func:`nees_gate`):
+
+* **NEES1** (:func:`nees1`): the trajectory; pose 0 holds the gauge, so the error of poses
+  ``1 … N−1`` has ``d = 3(N − 1)`` dimensions (gate 280.36 for 82 poses, 1340.59 for 420).
+* **NEES2** (:func:`nees2`): the map, ``d = 2L`` for L landmarks.
+* **NEES3**: the map fitted to a pose-only trajectory with the poses held fixed, tested like
+  NEES2 (the fit lives with the back-end:
+  :func:`slamrel.backends.pose_only.landmarks_given_poses`).
 """
 
 from __future__ import annotations
@@ -18,7 +29,18 @@ from numpy.typing import ArrayLike, NDArray
 from relation_metric import se2
 from relation_metric.errors import InputError
 
-__all__ = ["nees", "pose_nees", "nees_band", "NeesSummary", "summarize_nees"]
+__all__ = [
+    "nees",
+    "pose_nees",
+    "nees_band",
+    "NeesSummary",
+    "summarize_nees",
+    "nees_gate",
+    "joint_nees",
+    "JointNees",
+    "nees1",
+    "nees2",
+]
 
 
 def nees(errors: ArrayLike, covariances: ArrayLike) -> NDArray[np.float64]:
@@ -106,3 +128,124 @@ def summarize_nees(values: ArrayLike, *, dof: int, probability: float = 0.95) ->
     avg = v.mean(axis=0)
     inside = float(np.mean((avg >= band[0]) & (avg <= band[1]))) if avg.size else float("nan")
     return NeesSummary(float(v.mean()), band, inside, runs, dof)
+
+
+def nees_gate(dof: int, probability: float = 0.95) -> float:
+    """One-sided gate ``χ²⁻¹(probability; dof)``: a consistent estimate's NEES stays below it.
+
+    ``nees_gate(243)`` (82 poses) is 280.36 and ``nees_gate(1257)`` (420 poses) 1340.59.
+    """
+    if dof < 1 or not 0 < probability < 1:
+        raise InputError(f"need dof >= 1 and 0 < probability < 1; got {dof}, {probability}")
+    return float(chi2.ppf(probability, dof))
+
+
+def joint_nees(error: ArrayLike, covariance: ArrayLike) -> float:
+    """``eᵀ P⁻¹ e`` of one stacked error ``e`` (D,) with its joint covariance ``P`` (D, D)."""
+    e = np.asarray(error, dtype=np.float64).ravel()
+    p = np.asarray(covariance, dtype=np.float64)
+    if p.shape != (e.size, e.size):
+        raise InputError(f"error (D,) and covariance (D, D) expected, got {e.shape}, {p.shape}")
+    try:
+        low = np.linalg.cholesky(p)
+    except np.linalg.LinAlgError:
+        raise InputError("the joint covariance is not positive definite") from None
+    w = np.linalg.solve(low, e)
+    return float(w @ w)
+
+
+@dataclass(frozen=True)
+class JointNees:
+    """A whole-estimate NEES and its one-sided χ² gate.
+
+    Attributes
+    ----------
+    value : float
+    dof : int
+    gate : float
+        ``χ²⁻¹(probability; dof)``.
+    probability : float
+    """
+
+    value: float
+    dof: int
+    gate: float
+    probability: float
+
+    @property
+    def passed(self) -> bool:
+        """True when the NEES is under the gate (consistent at this level)."""
+        return self.value <= self.gate
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "value": self.value,
+            "dof": self.dof,
+            "gate": self.gate,
+            "probability": self.probability,
+            "passed": self.passed,
+        }
+
+
+def nees1(
+    estimate: ArrayLike,
+    truth: ArrayLike,
+    covariance: ArrayLike,
+    *,
+    probability: float = 0.95,
+) -> JointNees:
+    """NEES1 of Hu et al.: the trajectory against its joint covariance.
+
+    Parameters
+    ----------
+    estimate, truth : array_like, shape (N, 3)
+        Poses ``[x, y, θ]``; pose 0 is the gauge (held fixed) and left out.
+    covariance : array_like, shape (3(N−1), 3(N−1))
+        Joint covariance of poses ``1 … N−1`` (ordered pose by pose).
+
+    Returns
+    -------
+    JointNees
+        ``dof = 3(N − 1)``.
+    """
+    est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
+    tru = np.asarray(truth, dtype=np.float64).reshape(-1, 3)
+    if est.shape != tru.shape or est.shape[0] < 2:
+        raise InputError(
+            f"estimate and truth must both be (N >= 2, 3), got {est.shape}, {tru.shape}"
+        )
+    e = tru[1:] - est[1:]
+    e[:, 2] = se2.wrap_angle(e[:, 2])
+    dof = e.size
+    return JointNees(joint_nees(e, covariance), dof, nees_gate(dof, probability), probability)
+
+
+def nees2(
+    estimate: ArrayLike,
+    truth: ArrayLike,
+    covariance: ArrayLike,
+    *,
+    probability: float = 0.95,
+) -> JointNees:
+    """NEES2 of Hu et al. (and NEES3 for a map fitted to fixed poses): landmarks, jointly.
+
+    Parameters
+    ----------
+    estimate, truth : array_like, shape (L, 2)
+    covariance : array_like, shape (2L, 2L)
+        Joint covariance, ordered landmark by landmark.
+
+    Returns
+    -------
+    JointNees
+        ``dof = 2L``.
+    """
+    est = np.asarray(estimate, dtype=np.float64).reshape(-1, 2)
+    tru = np.asarray(truth, dtype=np.float64).reshape(-1, 2)
+    if est.shape != tru.shape or est.shape[0] < 1:
+        raise InputError(
+            f"estimate and truth must both be (L >= 1, 2), got {est.shape}, {tru.shape}"
+        )
+    e = tru - est
+    dof = e.size
+    return JointNees(joint_nees(e, covariance), dof, nees_gate(dof, probability), probability)

@@ -31,6 +31,7 @@ COMMAND_MODULES = (
     "slamrel.commands.compare",
     "slamrel.commands.graph",
     "slamrel.commands.example",
+    "slamrel.commands.study",
 )
 
 EXIT_OK, EXIT_BUG, EXIT_USAGE, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 130

@@ -19,6 +19,14 @@ range-bearing (the SLAM result bundle's sensor model), so the observation noise 
 ``σ_range = σ`` and ``σ_bearing = σ / r₀`` with ``r₀ = 2.5 m`` (the middle of the sensing
 range), which gives the same cross-range standard deviation at ``r₀``.
 
+The worlds ``hu-simple1``, ``hu-simple2``, ``hu-complex1``, ``hu-complex2``
+(:data:`PAPER_WORLDS`) follow the paper to the letter: exactly 82 poses (simple) and 420
+poses (complex), the same drives trimmed or extended to that length, no minimum sensing range,
+and the paper's Cartesian observation noise (``σ`` on the relative position's x and y,
+``observation="cartesian"``; the observations are still stored as range and bearing, the
+exact polar form of the noisy relative position). The older worlds keep their numbers
+(other results depend on them); either sensor model can be chosen for any world.
+
 A world and its noise realisation are fully determined by ``(trajectory, noise type, seed)``:
 the landmark layout draws from ``seed`` and the noise from an independent child stream, so
 changing the noise type keeps the same features.
@@ -39,6 +47,9 @@ from relation_metric.trajectory import Trajectory, readonly
 
 __all__ = [
     "WORLDS",
+    "PAPER_WORLDS",
+    "PAPER_POSES",
+    "OBSERVATION_MODELS",
     "NOISE_TYPES",
     "NoiseType",
     "Observations",
@@ -116,12 +127,36 @@ def _segments(name: str) -> list[tuple[int, float]]:
 
 
 WORLDS = ("simple1", "simple2", "complex1", "complex2")
+PAPER_WORLDS = ("hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2")
+PAPER_POSES = {"simple": 82, "complex": 420}  # Hu et al.: poses of the simple / complex runs
+OBSERVATION_MODELS = ("range-bearing", "cartesian")
+
+
+def _paper_segments(name: str) -> list[tuple[int, float]]:
+    """A paper world's drive: its base world's, cut or extended to the paper's pose count."""
+    base = name.removeprefix("hu-")
+    if base == "simple1":  # the 10 m square with the turn in each side's last step, then
+        return [(19, 0.0), (1, _Q)] * 4 + [(1, 0.0)]  # one step past the start: 82 poses
+    if base == "simple2":  # the 40 m circle and one step past the start
+        return [(80, 2 * np.pi), (1, 0.0)]
+    steps = PAPER_POSES["complex"] - 1
+    legs: list[tuple[int, float]] = []
+    for n, turn in _segments(base) * 2:  # cut (or re-drive) to exactly `steps` steps
+        take = min(n, steps - sum(k for k, _ in legs))
+        if take <= 0:
+            break
+        legs.append((take, turn * take / n))
+    return legs
 
 
 def path_of(name: str) -> NDArray[np.float64]:
     """The noise-free poses of a world's drive, shape (N, 3), starting at the origin."""
     inc = []
-    for steps, turn in _segments(name):
+    if name not in WORLDS and name not in PAPER_WORLDS:
+        raise InputError(
+            f"unknown world {name!r}; expected one of {', '.join(WORLDS + PAPER_WORLDS)}"
+        )
+    for steps, turn in _paper_segments(name) if name in PAPER_WORLDS else _segments(name):
         per = turn / steps
         for _ in range(steps):
             # each step: rotate half the turn, move, rotate the other half (an arc chord)
@@ -181,10 +216,18 @@ class World:
     controls: NDArray[np.float64] | None
     observations: Observations
     rate: int
+    observation_model: str = "range-bearing"
 
     @property
     def noise_params(self) -> NoiseType:
         return NOISE_TYPES[self.noise]
+
+    @property
+    def observation_covariance(self) -> NDArray[np.float64] | None:
+        """``σ² I`` (2 × 2) for Cartesian observations, None for range-bearing ones."""
+        if self.observation_model != "cartesian":
+            return None
+        return self.noise_params.sigma_observation**2 * np.eye(2)
 
 
 def _landmarks(path: NDArray[np.float64], rng: np.random.Generator) -> NDArray[np.float64]:
@@ -198,13 +241,20 @@ def _observe(
     landmarks: NDArray[np.float64],
     noise: NoiseType,
     rng: np.random.Generator,
+    *,
+    min_range: float = SENSOR_MIN_RANGE,
+    cartesian: bool = False,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
     # All pose × landmark pairs at once: (N, L, 2) landmark positions in each pose frame.
     k_p_l = se2.inverse_transform_points(poses[:, None, :], landmarks[None, :, :])
     r = np.hypot(k_p_l[..., 0], k_p_l[..., 1])
     b = np.arctan2(k_p_l[..., 1], k_p_l[..., 0])
-    seen = (r <= SENSOR_RANGE) & (np.abs(b) <= SENSOR_FOV / 2) & (r >= SENSOR_MIN_RANGE)
+    seen = (r <= SENSOR_RANGE) & (np.abs(b) <= SENSOR_FOV / 2) & (r >= min_range)
     k, lm = np.nonzero(seen)  # row-major: time order, then landmark id
+    if cartesian:  # the paper's sensor: N(0, σ² I) on the relative position
+        z = k_p_l[k, lm] + rng.normal(0.0, noise.sigma_observation, (k.size, 2))
+        z_r, z_b = np.hypot(z[:, 0], z[:, 1]), np.arctan2(z[:, 1], z[:, 0])
+        return k.astype(np.int64), lm.astype(np.int64), z_r, se2.wrap_angle(z_b)
     # a range is a distance: the rare noisy value below zero is reflected (|r + n|)
     z_r = np.abs(r[k, lm] + rng.normal(0.0, noise.sigma_range, k.size))
     z_b = se2.wrap_angle(b[k, lm] + rng.normal(0.0, noise.sigma_bearing, k.size))
@@ -218,12 +268,14 @@ def make_world(
     seed: int = 0,
     rate: int = 0,
     dt: float = 1.0,
+    observation: str | None = None,
 ) -> World:
     """Build a world and its noise realisation.
 
     Parameters
     ----------
-    name : {"simple1", "simple2", "complex1", "complex2"}
+    name : {"simple1", "simple2", "complex1", "complex2", "hu-simple1", …, "hu-complex2"}
+        :data:`WORLDS` or :data:`PAPER_WORLDS`.
     noise : {"a", "b", "c"}
         Noise type of Hu et al., Table I.
     seed : int
@@ -235,11 +287,21 @@ def make_world(
         drift matches the odometry noise type (σ_v = σ_dx √k / dt, σ_ω = σ_dθ √k / dt).
     dt : float
         Seconds between measurement steps.
+    observation : {"range-bearing", "cartesian"}, optional
+        Sensor noise model: ``σ_range = σ``, ``σ_bearing = σ / 2.5 m`` (default for
+        :data:`WORLDS`) or the paper's ``N(0, σ² I)`` on the relative position (default for
+        :data:`PAPER_WORLDS`, which also have no minimum range).
     """
     if noise not in NOISE_TYPES:
         raise InputError(f"unknown noise type {noise!r}; expected one of a, b, c")
     if rate < 0:
         raise InputError(f"rate must be >= 0, got {rate}")
+    paper = name in PAPER_WORLDS
+    model = observation if observation is not None else ("cartesian" if paper else "range-bearing")
+    if model not in OBSERVATION_MODELS:
+        raise InputError(
+            f"unknown observation model {model!r}; expected one of {', '.join(OBSERVATION_MODELS)}"
+        )
     nt = NOISE_TYPES[noise]
     layout_rng, noise_rng = (
         np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2)
@@ -281,7 +343,14 @@ def make_world(
         controls = np.column_stack((t_ctrl, v_meas, w_meas))
         truth = path
         odo = se2.cumulative_compose(velocity_increment(v_meas, w_meas, h)[0])[::rate]
-    k, lm, z_r, z_b = _observe(truth, landmarks, nt, noise_rng)
+    k, lm, z_r, z_b = _observe(
+        truth,
+        landmarks,
+        nt,
+        noise_rng,
+        min_range=0.0 if paper else SENSOR_MIN_RANGE,
+        cartesian=model == "cartesian",
+    )
     obs = Observations(k, t[k], z_r, z_b, lm)
     return World(
         name=name,
@@ -293,4 +362,5 @@ def make_world(
         controls=None if controls is None else readonly(controls),
         observations=obs,
         rate=rate,
+        observation_model=model,
     )

@@ -322,3 +322,32 @@ def test_pose_covariances_equal_dense_inverse(rng):
         np.testing.assert_allclose(
             cov[k], dense[3 * i : 3 * i + 3, 3 * i : 3 * i + 3], rtol=1e-6, atol=1e-14
         )
+
+
+def test_joint_covariance_blocks_are_the_marginal_pose_covariances(rng):
+    from slamrel.backends.graph import joint_covariance, pose_covariances
+
+    n = 6
+    truth = np.cumsum(np.column_stack((np.full(n, 1.0), rng.normal(0, 0.1, (n, 2)))), axis=0)
+    truth[0] = 0.0
+    i = np.arange(n - 1)
+    z = se2.between(truth[:-1], truth[1:]) + rng.normal(0, 0.01, (n - 1, 3))
+    lm = rng.uniform(-2, 8, (4, 2))
+    k = np.repeat(np.arange(n), 4)
+    l_ = np.tile(np.arange(4), n)
+    zl = se2.inverse_transform_points(truth[k], lm[l_]) + rng.normal(0, 0.05, (k.size, 2))
+    g = PoseGraph(
+        truth, lm, i, i + 1, z, np.broadcast_to(np.eye(3) * 1e4, (n - 1, 3, 3)),
+        k, l_, zl, np.broadcast_to(np.eye(2) * 400, (k.size, 2, 2)),
+    )  # fmt: skip
+    sol = solve_graph(g)
+    full = joint_covariance(g, sol, poses=np.arange(n), landmarks=np.arange(4))
+    blocks = pose_covariances(g, sol)
+    for p in range(n):
+        np.testing.assert_allclose(full[3 * p : 3 * p + 3, 3 * p : 3 * p + 3], blocks[p], rtol=1e-9)
+    # a subset in another order gives the same blocks (cross-covariances included)
+    sub = joint_covariance(g, sol, poses=[4, 2])
+    np.testing.assert_allclose(sub[:3, :3], full[12:15, 12:15], rtol=1e-9)
+    np.testing.assert_allclose(sub[:3, 3:], full[12:15, 6:9], rtol=1e-9)
+    np.testing.assert_allclose(full, full.T)
+    assert np.all(np.linalg.eigvalsh(full) > 0)

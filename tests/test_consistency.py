@@ -46,3 +46,54 @@ def test_consistent_gaussian_samples_fall_in_the_band(rng):
 def test_non_pd_covariance_is_an_error():
     with pytest.raises(InputError, match="positive definite"):
         nees([[1.0, 0.0]], [[[1.0, 2.0], [2.0, 1.0]]])
+
+
+# --- Hu, Huang & Dissanayake's whole-estimate NEES -------------------------------------------
+
+
+@pytest.mark.parametrize(("poses", "gate"), [(82, 280.36), (420, 1340.59)])
+def test_nees1_gate_is_the_papers(poses, gate):
+    from relation_metric.consistency import nees1, nees_gate
+
+    assert nees_gate(3 * (poses - 1)) == pytest.approx(gate, abs=0.005)
+    z = np.zeros((poses, 3))
+    t = nees1(z, z, np.eye(3 * (poses - 1)))
+    assert (t.dof, round(t.gate, 2), t.value, t.passed) == (3 * (poses - 1), gate, 0.0, True)
+
+
+def test_joint_nees1_is_the_sum_of_per_pose_nees_when_block_diagonal(rng):
+    from scipy.linalg import block_diag
+
+    from relation_metric.consistency import nees1
+
+    n = 12
+    a = rng.normal(size=(n - 1, 3, 3))
+    blocks = a @ np.swapaxes(a, 1, 2) + 0.1 * np.eye(3)
+    truth = rng.normal(size=(n, 3))
+    est = truth + rng.normal(0, 0.5, (n, 3))
+    est[:, 2] = truth[:, 2] + 3.0  # angle errors near ±π: wrapped the same way both times
+    joint = nees1(est, truth, block_diag(*blocks))
+    assert joint.value == pytest.approx(pose_nees(est[1:], truth[1:], blocks).sum(), rel=1e-10)
+    # with correlations the joint value differs from the per-pose sum
+    corr = block_diag(*blocks) + 0.05 * np.ones((3 * (n - 1),) * 2)
+    assert nees1(est, truth, corr).value != pytest.approx(joint.value, rel=1e-3)
+
+
+def test_nees2_is_chi2_distributed_under_its_own_covariance(rng):
+    from relation_metric.consistency import nees2
+
+    L = 30
+    a = rng.normal(size=(2 * L, 2 * L))
+    cov = a @ a.T / (2 * L) + 0.01 * np.eye(2 * L)
+    low = np.linalg.cholesky(cov)
+    truth = rng.normal(size=(L, 2))
+    vals = [
+        nees2(truth + (low @ rng.normal(size=2 * L)).reshape(L, 2), truth, cov) for _ in range(2000)
+    ]
+    v = np.array([t.value for t in vals])
+    assert v.mean() == pytest.approx(2 * L, rel=0.03)
+    assert np.mean([t.passed for t in vals]) == pytest.approx(0.95, abs=0.015)
+    with pytest.raises(InputError, match="not positive definite"):
+        nees2(truth, truth, -np.eye(2 * L))
+    with pytest.raises(InputError, match=r"\(L >= 1, 2\)"):
+        nees2(truth, truth[:-1], cov)

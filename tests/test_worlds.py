@@ -107,3 +107,44 @@ def test_unknown_names():
         make_world("nowhere")
     with pytest.raises(InputError, match="noise"):
         make_world("simple1", noise="z")
+
+
+# --- the paper's worlds ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2"])
+def test_paper_worlds_have_the_papers_size_steps_and_sensor(name):
+    from slamrel.worlds import PAPER_POSES
+
+    w = make_world(name, noise="a", seed=2)
+    p = w.truth.poses
+    assert len(p) == PAPER_POSES["simple" if "simple" in name else "complex"]
+    steps = np.hypot(*np.diff(p[:, :2], axis=0).T)
+    assert np.all(steps <= 0.5 + 1e-9) and np.all(steps > 0.49)
+    assert w.landmarks.shape == (225, 2)
+    assert w.observation_model == "cartesian"
+    np.testing.assert_allclose(w.observation_covariance, 0.01 * np.eye(2))
+    # every feature within 5 m and ±90° is seen, also the close ones (no minimum range)
+    k_p_l = se2.inverse_transform_points(p[:, None, :], w.landmarks[None])
+    rr = np.hypot(k_p_l[..., 0], k_p_l[..., 1])
+    bb = np.arctan2(k_p_l[..., 1], k_p_l[..., 0])
+    assert w.observations.t.size == int(((rr <= 5.0) & (np.abs(bb) <= np.pi / 2)).sum())
+
+
+@pytest.mark.parametrize("noise", sorted(NOISE_TYPES))
+def test_cartesian_observation_noise_is_isotropic_with_the_papers_sigma(noise):
+    errs = []
+    for seed in range(3):
+        w = make_world("hu-complex2", noise=noise, seed=seed)
+        o = w.observations
+        true = se2.inverse_transform_points(w.truth.poses[o.pose], w.landmarks[o.landmark])
+        z = np.column_stack((o.range * np.cos(o.bearing), o.range * np.sin(o.bearing)))
+        errs.append(z - true)
+    e = np.concatenate(errs)
+    sigma = NOISE_TYPES[noise].sigma_observation
+    np.testing.assert_allclose(np.cov(e.T), sigma**2 * np.eye(2), atol=0.05 * sigma**2)
+    # the range-bearing model can be chosen for a paper world too (and vice versa)
+    assert make_world("hu-simple1", observation="range-bearing").observation_covariance is None
+    assert make_world("simple1", observation="cartesian").observation_model == "cartesian"
+    with pytest.raises(InputError, match="observation model"):
+        make_world("simple1", observation="polar")

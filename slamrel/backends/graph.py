@@ -34,6 +34,7 @@ __all__ = [
     "solve_graph_incremental",
     "initial_landmarks",
     "pose_covariances",
+    "joint_covariance",
 ]
 
 Array = NDArray[np.float64]
@@ -734,3 +735,51 @@ def pose_covariances(
     blocks = sol[cols, :].reshape(idx.size, 3, idx.size, 3)
     out = blocks[np.arange(idx.size), :, np.arange(idx.size), :]
     return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+
+def joint_covariance(
+    graph: PoseGraph,
+    solution: GraphSolution,
+    *,
+    poses: ArrayLike | None = None,
+    landmarks: ArrayLike | None = None,
+    prior_sigma: float = 1e-6,
+) -> Array:
+    """Joint (dense) covariance of chosen poses and landmarks at the solution, from ``H⁻¹``.
+
+    The other states are marginalised out (the block of ``H⁻¹``, not of ``H``), so for a
+    full SLAM graph the pose block is the pose covariance with the landmarks marginalised.
+
+    Parameters
+    ----------
+    graph, solution :
+        The problem and its solution (the gauge prior of :func:`solve_graph` included).
+    poses : array_like of int, shape (P,), optional
+        Pose indices (default: all).
+    landmarks : array_like of int, shape (Q,), optional
+        Landmark indices (default: none).
+
+    Returns
+    -------
+    ndarray, shape (3P + 2Q, 3P + 2Q)
+        Ordered ``[x_p0, y_p0, θ_p0, x_p1, …, x_l0, y_l0, …]``.
+    """
+    w_pp = _upper_sqrt(graph.pp_info)
+    w_pl = _upper_sqrt(graph.pl_info) if graph.pl_k.size else np.empty((0, 2, 2))
+    prior = (graph.poses[0].copy(), np.eye(3) / prior_sigma)
+    _, jac = _residuals_and_jacobian(
+        graph, np.asarray(solution.poses), np.asarray(solution.landmarks), w_pp, w_pl, prior
+    )
+    h = (jac.T @ jac).tocsc()
+    pi = np.arange(graph.n_poses) if poses is None else np.asarray(poses, dtype=np.int64)
+    li = np.empty(0, np.int64) if landmarks is None else np.asarray(landmarks, dtype=np.int64)
+    cols = np.concatenate(
+        (
+            (3 * pi[:, None] + np.arange(3)[None, :]).ravel(),
+            (3 * graph.n_poses + 2 * li[:, None] + np.arange(2)[None, :]).ravel(),
+        )
+    )
+    rhs = np.zeros((h.shape[0], cols.size))
+    rhs[cols, np.arange(cols.size)] = 1.0
+    out = spla.splu(h).solve(rhs)[cols, :]
+    return 0.5 * (out + out.T)

@@ -1,0 +1,133 @@
+"""``slamrel study pose-only``: Hu, Huang & Dissanayake's study of pose-only SLAM, reproduced.
+
+Writes into the output folder (plain atomic writes per file; after the outputs branch is
+merged it should use ``relation_metric.outputs.staged_directory``):
+
+* ``cases/`` — one JSON result per (world, noise, seed, method), the resumable state;
+* ``table.md``, ``table.csv``, ``table.tex`` — the Tables II/III analogue;
+* ``fig1_sigma_bounds.png``, ``fig2_nees1.png`` — the Fig. 1 / Fig. 2 analogues;
+* ``findings.md`` — the paper's findings, each checked (holds or not, with the numbers).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from relation_metric.errors import InputError
+from slamrel.commands import options as opt
+from slamrel.sweep import load_results, run_sweep
+from slamrel.worlds import NOISE_TYPES, PAPER_WORLDS, WORLDS
+
+STUDIES = ("pose-only",)
+
+
+def _names(allowed: tuple[str, ...], what: str):  # type: ignore[no-untyped-def]
+    def parse(text: str) -> list[str]:
+        items = [t.strip() for t in text.split(",") if t.strip()]
+        bad = [t for t in items if t not in allowed]
+        if not items or bad:
+            raise argparse.ArgumentTypeError(
+                f"expected a comma-separated list of {what} ({', '.join(allowed)}), got {text!r}"
+            )
+        return items
+
+    return parse
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    from slamrel.study import METHODS
+
+    s = sub.add_parser(
+        "study",
+        help="reproduce Hu et al.'s pose-only SLAM study: worlds x noise x runs x methods",
+    )
+    s.add_argument("study", choices=STUDIES, metavar="STUDY", help=", ".join(STUDIES))
+    s.add_argument("-o", "--output", required=True, metavar="DIR")
+    s.add_argument("--runs", type=opt.positive_int, default=10, help="Monte Carlo runs (10)")
+    s.add_argument(
+        "--worlds",
+        type=_names(PAPER_WORLDS + WORLDS, "worlds"),
+        default=list(PAPER_WORLDS),
+        metavar="LIST",
+        help="comma-separated worlds (default: the paper's four)",
+    )
+    s.add_argument(
+        "--noise",
+        type=_names(tuple(sorted(NOISE_TYPES)), "noise types"),
+        default=sorted(NOISE_TYPES),
+        metavar="LIST",
+        help="comma-separated noise types (default a,b,c)",
+    )
+    s.add_argument(
+        "--methods",
+        type=_names(METHODS, "methods"),
+        default=list(METHODS),
+        metavar="LIST",
+        help="comma-separated methods: " + ", ".join(METHODS),
+    )
+    s.add_argument(
+        "--pair-start",
+        choices=("truth", "odometry", "align"),
+        default="truth",
+        help="start of the pose-only pair least squares (truth: as the paper)",
+    )
+    s.add_argument("--min-common", type=opt.int_range(2, 1000), default=5, metavar="K")
+    s.add_argument("--toro-iterations", type=opt.positive_int, default=100, metavar="N")
+    s.add_argument("--workers", type=opt.positive_int, default=1, help="worker processes (1)")
+    s.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run on Dask: a scheduler address, or 'local' for a LocalCluster of --workers "
+        "(needs dask[distributed])",
+    )
+    s.add_argument("--timing", action="store_true", help="add a time column to the tables")
+    s.add_argument("-q", "--quiet", action="store_true")
+    s.set_defaults(func=run_study)
+
+
+def run_study(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from slamrel.study import (
+        study_tasks,
+        summary_rows,
+        write_figures,
+        write_findings,
+        write_tables,
+    )
+
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise InputError("the output exists and is not a folder", path=out)
+    tasks = study_tasks(
+        args.worlds,
+        args.noise,
+        args.runs,
+        args.methods,
+        pair_start=args.pair_start,
+        min_common=args.min_common,
+        toro_iterations=args.toro_iterations,
+    )
+
+    def progress(line: str) -> None:
+        if not args.quiet:
+            print(f"study: {line}", file=sys.stderr, flush=True)
+
+    report = run_sweep(
+        tasks, out / "cases", workers=args.workers, scheduler=args.scheduler, progress=progress
+    )
+    results = load_results(out / "cases", tasks)
+    rows = summary_rows(results)
+    paths = write_tables(out, rows, timing=args.timing)
+    paths += write_figures(out, results)
+    paths.append(write_findings(out, rows))
+    if not args.quiet:
+        print(
+            f"study pose-only: {len(tasks)} cases ({report.ran} run now, {report.skipped} "
+            f"already done, {len(report.failed)} failed) -> " + ", ".join(str(p) for p in paths)
+        )
+        for key in report.failed:
+            print(f"failed: {out / 'cases' / (key + '.error.json')}")
+    return 0 if not report.failed else 3
