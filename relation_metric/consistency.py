@@ -137,6 +137,8 @@ def nees_gate(dof: int, probability: float = 0.95) -> float:
     """
     if dof < 1 or not 0 < probability < 1:
         raise InputError(f"need dof >= 1 and 0 < probability < 1; got {dof}, {probability}")
+    from scipy.stats import chi2  # here, not at import: scipy.stats costs start-up
+
     return float(chi2.ppf(probability, dof))
 
 

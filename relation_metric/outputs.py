@@ -49,6 +49,7 @@ __all__ = [
     "check_outputs",
     "is_slamrel_output",
     "staged_directory",
+    "resumable_directory",
 ]
 
 PathLike = str | os.PathLike[str]
@@ -479,3 +480,41 @@ def _swap(new: Path, final: Path) -> None:
         _remove(aside)
         raise
     _remove(aside)
+
+
+def resumable_directory(
+    path: PathLike, *, kind: str, inputs: Iterable[PathLike | None] = ()
+) -> Path:
+    """Open the folder of a resumable job (e.g. a study), creating it when absent.
+
+    A resumable job keeps its finished tasks in its output folder and skips them when run
+    again, so the folder is reused, not swapped: it must be absent, empty, or a folder that
+    slamrel wrote for the same ``kind`` (its manifest says so). Anything else is refused
+    before any work, with the other rules of :func:`check_output_dir` (not an input, not
+    inside one, not containing one, not the current folder or above it, writable parent).
+    Each file inside is then written atomically by the job.
+    """
+    root = Path(path)
+    if root.is_dir() and any(os.scandir(root)):
+        try:
+            data = json.loads((root / MANIFEST).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            data = None
+        if not isinstance(data, dict) or data.get("kind") != kind:
+            found = data.get("kind") if isinstance(data, dict) else None
+            raise InputError(
+                f"exists and is not a {kind} folder slamrel wrote "
+                f"({MANIFEST} says {found!s}); choose a new or empty folder",
+                path=path,
+            )
+    check_output_dir(path, inputs=list(inputs), force=True)
+    if root.is_dir() and any(os.scandir(root)):
+        return root
+    _make_parent(root.parent, path)
+    try:
+        root.mkdir(mode=dir_mode(), exist_ok=True)
+        os.chmod(root, dir_mode())
+    except OSError as exc:
+        raise _os_error(exc, path, "cannot create the folder") from None
+    write_manifest(root, kind)
+    return root

@@ -205,3 +205,20 @@ def test_findings_are_checked_per_group():
     assert got["the TORO-style optimiser is less consistent than pose-only LS"][0]
     assert got["the TORO-style optimiser is least consistent under noise c"][0]
     assert got["the map fitted to the pose-only M2 trajectory"][0]
+
+
+def test_the_study_folder_is_reused_only_when_it_is_a_study_folder(tmp_path, capsys):
+    """The resumable output rule: foreign or other slamrel folders are refused before work."""
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine\n")
+    assert main(["study", "pose-only", "--runs", "1", "-o", str(foreign), "-q", *SMALL]) == 3
+    assert "not a pose-only-study folder" in capsys.readouterr().err
+    assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
+    other = tmp_path / "example"
+    assert main(["example", "-o", str(other), "-q"]) == 0
+    before = sorted(p.name for p in other.iterdir())
+    assert main(["study", "pose-only", "--runs", "1", "-o", str(other), "-q", *SMALL]) == 3
+    assert "says example" in capsys.readouterr().err
+    assert sorted(p.name for p in other.iterdir()) == before
+    assert main(["study", "pose-only", "--runs", "1", "-o", str(tmp_path), "-q", *SMALL]) == 3

@@ -1,7 +1,8 @@
 """``slamrel study pose-only``: Hu, Huang & Dissanayake's study of pose-only SLAM, reproduced.
 
-Writes into the output folder (plain atomic writes per file; after the outputs branch is
-merged it should use ``relation_metric.outputs.staged_directory``):
+Writes into the output folder, which is reused when the study is run again (finished cases
+are skipped; :func:`relation_metric.outputs.resumable_directory`: only an absent or empty
+folder, or a study folder slamrel wrote, is accepted; each file is written atomically):
 
 * ``cases/`` — one JSON result per (world, noise, seed, method), the resumable state;
 * ``table.md``, ``table.csv``, ``table.tex`` — the Tables II/III analogue;
@@ -14,7 +15,6 @@ from __future__ import annotations
 import argparse
 import sys
 
-from relation_metric.errors import InputError
 from slamrel.commands import options as opt
 from slamrel.sweep import load_results, run_sweep
 from slamrel.worlds import NOISE_TYPES, PAPER_WORLDS, WORLDS
@@ -88,8 +88,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run_study(args: argparse.Namespace) -> int:
-    from pathlib import Path
 
+    from relation_metric.outputs import resumable_directory
     from slamrel.study import (
         study_tasks,
         summary_rows,
@@ -98,9 +98,8 @@ def run_study(args: argparse.Namespace) -> int:
         write_tables,
     )
 
-    out = Path(args.output)
-    if out.exists() and not out.is_dir():
-        raise InputError("the output exists and is not a folder", path=out)
+    # the folder keeps finished cases (resume): reused when it is a study folder slamrel wrote
+    out = resumable_directory(args.output, kind="pose-only-study")
     tasks = study_tasks(
         args.worlds,
         args.noise,
