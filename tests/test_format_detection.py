@@ -109,33 +109,45 @@ def test_tum_reference_is_a_trajectory_without_strategy(tmp_path, capsys, tum_pa
     assert res["relations"] == 59 and res["reference_repeated_times_dropped"] == 0
 
 
-def test_ambiguous_txt_reference_names_both_readings(tmp_path, capsys, tum_pair):
+def test_eight_column_txt_reference_is_told_apart_by_its_quaternions(tmp_path, capsys, tum_pair):
+    """A .txt says nothing: unit quaternions in every row → TUM, the guess said in a warning."""
     ref, est, oracle = tum_pair
     txt = tmp_path / "ref.txt"
     shutil.copy(ref, txt)
-    code = main(["evaluate", str(txt), str(est)])
+    js = tmp_path / "out.json"
+    assert main(["evaluate", str(txt), str(est), "--json", str(js), "-q"]) == 0
     err = capsys.readouterr().err
-    assert code == 3
-    assert err.startswith(f"slamrel evaluate: error: {txt}: ambiguous reference")
-    for words in (".relations", "TUM trajectory", "--reference-format tum", "--strategy"):
-        assert words in err
-    assert _mean(capsys, tmp_path, txt, est, "--reference-format", "tum")[0] == pytest.approx(
+    assert f"{txt}: read as a TUM trajectory (every row ends in a unit quaternion)" in err
+    assert "--reference-format tum" in err
+    assert json.loads(js.read_text())["translation"]["abs"]["mean"] == pytest.approx(
         oracle, rel=1e-9
     )
-    assert _mean(capsys, tmp_path, txt, est, "--strategy", "consecutive")[0] == pytest.approx(
-        oracle, rel=1e-9
-    )
+    for option in (["--reference-format", "tum"], ["--strategy", "consecutive"]):
+        assert _mean(capsys, tmp_path, txt, est, *option)[0] == pytest.approx(oracle, rel=1e-9)
 
 
-def test_relations_in_a_txt_file_are_read_once_renamed(tmp_path, capsys):
+def test_relations_in_a_txt_file_are_read_as_relations_with_a_warning(tmp_path, capsys):
     rel = "0 1 1 0 0 0 0 0\n1 2 1 0 0 0 0 0\n"
     (tmp_path / "rel.txt").write_text(rel)
     (tmp_path / "est.txt").write_text("0 0 0 0\n1 1.5 0 0\n2 3 0 0\n")
-    assert main(["evaluate", str(tmp_path / "rel.txt"), str(tmp_path / "est.txt")]) == 3
-    assert "ambiguous reference" in capsys.readouterr().err
-    shutil.copy(tmp_path / "rel.txt", tmp_path / "rel.relations")
-    mean, res = _mean(capsys, tmp_path, tmp_path / "rel.relations", tmp_path / "est.txt")
+    mean, res = _mean(capsys, tmp_path, tmp_path / "rel.txt", tmp_path / "est.txt")
     assert res["relations"] == 2 and mean == pytest.approx(0.5)  # hand: 1.5 m against 1 m
+    js = tmp_path / "o.json"
+    assert main(["evaluate", str(tmp_path / "rel.txt"), str(tmp_path / "est.txt"), "-q"]) == 0
+    assert "read as Freiburg relations" in capsys.readouterr().err
+    shutil.copy(tmp_path / "rel.txt", tmp_path / "rel.relations")
+    assert _mean(capsys, tmp_path, tmp_path / "rel.relations", tmp_path / "est.txt")[0] == mean
+    assert not js.exists()
+
+
+def test_one_row_of_eight_that_fits_both_readings_is_refused(tmp_path, capsys):
+    (tmp_path / "r.txt").write_text("0 1 0 0 0 0 0 1\n")
+    (tmp_path / "e.txt").write_text(PLAIN)
+    assert main(["evaluate", str(tmp_path / "r.txt"), str(tmp_path / "e.txt")]) == 3
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'r.txt'}: ambiguous reference" in err
+    for words in (".relations", "TUM trajectory", "--reference-format tum", "--strategy"):
+        assert words in err
 
 
 def test_relations_file_with_strategy_is_refused(tmp_path, capsys):

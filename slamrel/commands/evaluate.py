@@ -145,7 +145,8 @@ def _is_relations_file(path: str, args: argparse.Namespace) -> bool:
     ``.relations``/``.rel`` → relations; an extension that names a trajectory format
     (``.tum``, ``.csv``, ``.g2o``, ``.log``, ``.clf``), ``--reference-format``, ``--strategy``
     or a directory → a reference trajectory. Other files are sniffed; 8 numeric columns fit
-    both readings and are refused with a message that names both and how to choose.
+    both readings and are told apart by their last four columns
+    (:func:`_eight_columns_are_relations`), the guess said in a warning.
     """
 
     p = Path(path)
@@ -165,14 +166,7 @@ def _is_relations_file(path: str, args: argparse.Namespace) -> bool:
         return False
     fmt = sniff_trajectory_format(read_source(path))
     if fmt == "tum":
-        raise InputError(
-            "ambiguous reference: 8 numeric columns read either as a Freiburg .relations "
-            "file (t1 t2 x y z roll pitch yaw) or as a TUM trajectory (t x y z qx qy qz qw); "
-            "say which: rename it to *.relations (or *.rel) to read relations, or pass "
-            "--reference-format tum (or a --strategy) to generate relations from a TUM "
-            "reference trajectory",
-            path=path,
-        )
+        return _eight_columns_are_relations(path)
     if fmt is None:
         raise InputError(
             "cannot recognise the reference: expected a Freiburg .relations file (8 columns "
@@ -182,6 +176,51 @@ def _is_relations_file(path: str, args: argparse.Namespace) -> bool:
             path=path,
         )
     return False
+
+
+def _eight_columns_are_relations(path: str) -> bool:
+    """Tell a TUM trajectory from Freiburg relations, both 8 numbers a line, by content.
+
+    A TUM file's last four columns are unit quaternions (its reader refuses any other); a
+    relations file's are ``z roll pitch yaw``, whose norm is 1 only by accident. Every row a
+    unit quaternion (≥ 2 rows) → TUM; otherwise relations. Either way the guess is said in a
+    warning with how to state it; a file that cannot be told apart (fewer than 2 rows, all
+    unit) is refused naming both readings.
+    """
+    from relation_metric.textio import read_numeric_table
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the reader proper warns (cut-off last line, …)
+        values, _ = read_numeric_table(
+            path, columns=("c1", "c2", "c3", "c4", "c5", "c6", "c7", "c8")
+        )
+    unit = np.abs(np.linalg.norm(values[:, 4:8], axis=1) - 1.0) <= 1e-3
+    if unit.all() and values.shape[0] < 2:
+        raise InputError(
+            "ambiguous reference: 8 numeric columns read either as a Freiburg .relations "
+            "file (t1 t2 x y z roll pitch yaw) or as a TUM trajectory (t x y z qx qy qz qw); "
+            "say which: rename it to *.relations (or *.rel) to read relations, or pass "
+            "--reference-format tum (or a --strategy) to generate relations from a TUM "
+            "reference trajectory",
+            path=path,
+        )
+    if unit.all():
+        warnings.warn(
+            f"{path}: read as a TUM trajectory (every row ends in a unit quaternion); rename it "
+            "to *.tum or pass --reference-format tum to say so",
+            UserWarning,
+            stacklevel=2,
+        )
+        return False
+    k = int(np.flatnonzero(~unit)[0])
+    warnings.warn(
+        f"{path}: read as Freiburg relations (t1 t2 x y z roll pitch yaw): row {k + 1} does "
+        "not end in a unit quaternion, so it is no TUM trajectory; rename it to *.relations "
+        "to say so",
+        UserWarning,
+        stacklevel=2,
+    )
+    return True
 
 
 def load_reference(
