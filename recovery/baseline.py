@@ -17,10 +17,9 @@ from scipy.stats import chi2
 from recovery.ekf import GATED, OUTSIDE, UNASSOCIATED, USED, FilterInput
 from recovery.models import compose_jacobian, process_noise, range_bearing
 from relation_metric import se2
+from relation_metric.arrays import Array
 
 __all__ = ["filterpy_localisation"]
-
-Array = NDArray[np.float64]
 
 
 class _UnicycleEKF(ExtendedKalmanFilter):  # type: ignore[misc]

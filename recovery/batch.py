@@ -31,11 +31,10 @@ from recovery.ekf import FilterInput, run_filter
 from recovery.models import range_bearing
 from recovery.smoother import smooth
 from relation_metric import se2
+from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError
 
 __all__ = ["BatchResult", "refine", "normal_equations"]
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -30,9 +30,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from relation_metric import se2
+from relation_metric.arrays import Array
 
 __all__ = [
     "MotionModel",
@@ -48,7 +49,6 @@ __all__ = [
     "range_bearing",
 ]
 
-Array = NDArray[np.float64]
 _SMALL = 1e-2  # below: 3-term Taylor series (truncation < 2e-16)
 
 MOTION_TYPES = ("velocity", "odometry")

@@ -41,6 +41,7 @@ from recovery.ekf import (
 from recovery.smoother import smooth
 from recovery.steps import Steps, build_steps
 from relation_metric import consistency
+from relation_metric.arrays import Array
 from relation_metric.errors import InputError
 from relation_metric.trajectory import Trajectory, readonly
 
@@ -55,7 +56,6 @@ __all__ = [
     "recover",
 ]
 
-Array = NDArray[np.float64]
 METHODS = ("filter", "smoother", "batch")
 MAP_MODES = ("joint", "marginal", "ignore")
 

@@ -24,13 +24,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from recovery.ekf import FilterResult, shear, world_steps
+from relation_metric.arrays import Array
 
 __all__ = ["SmootherResult", "smooth"]
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,9 @@ Conventions (used throughout slamrel):
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
+
+from relation_metric.arrays import Array
 
 __all__ = [
     "wrap_angle",
@@ -40,8 +42,6 @@ _TWO_PI = 2.0 * np.pi
 # Below this |φ| the series expansions of sin(φ)/φ and (1 - cos φ)/φ are used (their error
 # at 1e-4 is ~1e-17 relative, below double precision).
 _SMALL_ANGLE = 1e-4
-
-Array = NDArray[np.float64]
 
 
 def wrap_angle(angle: ArrayLike) -> Array:

@@ -51,8 +51,6 @@ from slamrel.worlds import make_world
 
 __all__ = ["RunResult", "default_relations", "run_pipeline", "write_report"]
 
-RELATION_SETS = ("consecutive", "loops", "global")
-
 
 def default_relations(reference: Trajectory, *, seed: int = 0) -> dict[str, RelationSet]:
     """Consecutive (1 s apart), loop-closing and global relations from the ground truth.

@@ -31,12 +31,12 @@ from scipy.stats import chi2
 from recovery.models import SensorModel, compose_jacobian, process_noise, range_bearing
 from recovery.steps import Steps
 from relation_metric import se2
+from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import Trajectory, readonly
 
 __all__ = ["EkfSlamResult", "ekf_slam"]
 
-Array = NDArray[np.float64]
 UNASSOCIATED = -1
 # Rows of the covariance per block of the in-place update (see _update).
 _UPDATE_ROWS = 32

@@ -24,6 +24,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se2
+from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import readonly
 
@@ -36,8 +37,6 @@ __all__ = [
     "pose_covariances",
     "joint_covariance",
 ]
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
