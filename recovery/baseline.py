@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from recovery.ekf import GATED, OUTSIDE, UNASSOCIATED, USED, FilterInput
-from recovery.models import compose_jacobian, process_noise, range_bearing
+from recovery.models import process_noise, range_bearing
 from relation_metric import se2
 from relation_metric.arrays import Array
 
@@ -72,7 +72,7 @@ def filterpy_localisation(
         if k > 0:
             u = inp.u[k - 1]
             x = ekf.x.ravel()
-            ekf.F = compose_jacobian(x, u)
+            ekf.F = se2.compose_jacobian(x, u)
             ekf.Q = process_noise(x[2], inp.sigma[k - 1])
             ekf.predict(u=u)
         for j in by_grid.get(k, ()):

@@ -721,14 +721,6 @@ def _full(p6: Array) -> Array:
     return out
 
 
-def shear(d: Array) -> Array:
-    """``S(d) = [[1, 0, −d_y], [0, 1, d_x], [0, 0, 1]]``, shape (..., 3, 3)."""
-    out = np.broadcast_to(np.eye(3), d.shape[:-1] + (3, 3)).copy()
-    out[..., 0, 2] = -d[..., 1]
-    out[..., 1, 2] = d[..., 0]
-    return out
-
-
 def world_steps(seg: Segments, psi: Array) -> Array:
     """World-frame pose of every grid pose relative to its base epoch: ``R(ψ) local``, (N, 3)."""
     e_of = np.searchsorted(seg.epochs, seg.base)

@@ -25,8 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from recovery.ekf import FilterResult, shear, world_steps
+from recovery.ekf import FilterResult, world_steps
 from relation_metric.arrays import Array
+from relation_metric.se2 import shear
 
 __all__ = ["SmootherResult", "smooth"]
 
