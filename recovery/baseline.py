@@ -15,12 +15,11 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from recovery.ekf import GATED, OUTSIDE, UNASSOCIATED, USED, FilterInput
-from recovery.models import compose_jacobian, process_noise, range_bearing
+from recovery.models import process_noise, range_bearing
 from relation_metric import se2
+from relation_metric.arrays import Array
 
 __all__ = ["filterpy_localisation"]
-
-Array = NDArray[np.float64]
 
 
 class _UnicycleEKF(ExtendedKalmanFilter):  # type: ignore[misc]
@@ -73,7 +72,7 @@ def filterpy_localisation(
         if k > 0:
             u = inp.u[k - 1]
             x = ekf.x.ravel()
-            ekf.F = compose_jacobian(x, u)
+            ekf.F = se2.compose_jacobian(x, u)
             ekf.Q = process_noise(x[2], inp.sigma[k - 1])
             ekf.predict(u=u)
         for j in by_grid.get(k, ()):

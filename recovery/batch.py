@@ -31,11 +31,10 @@ from recovery.ekf import FilterInput, run_filter
 from recovery.models import range_bearing
 from recovery.smoother import smooth
 from relation_metric import se2
+from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError
 
 __all__ = ["BatchResult", "refine", "normal_equations"]
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -101,17 +100,7 @@ def normal_equations(
     wp = np.linalg.inv(inp.p0 + 1e-15 * np.eye(3))
     wm = np.linalg.inv(regularised_sigma(inp.sigma if sigma is None else sigma))
     rp, rm, rz, wz, h_x, k = _residuals(inp, x, wm, used, robust)
-    c, s = np.cos(x[:-1, 2]), np.sin(x[:-1, 2])
-    dx = x[1:, 0] - x[:-1, 0]
-    dy = x[1:, 1] - x[:-1, 1]
-    ja = np.zeros((n - 1, 3, 3))
-    ja[:, 0, 0], ja[:, 0, 1], ja[:, 0, 2] = -c, -s, -s * dx + c * dy
-    ja[:, 1, 0], ja[:, 1, 1], ja[:, 1, 2] = s, -c, -c * dx - s * dy
-    ja[:, 2, 2] = -1.0
-    jb = np.zeros((n - 1, 3, 3))
-    jb[:, 0, 0], jb[:, 0, 1] = c, s
-    jb[:, 1, 0], jb[:, 1, 1] = -s, c
-    jb[:, 2, 2] = 1.0
+    _, ja, jb = se2.between(x[:-1], x[1:], jacobians=True)
     jat_w = ja.transpose(0, 2, 1) @ wm
     jbt_w = jb.transpose(0, 2, 1) @ wm
     diag = np.zeros((n, 3, 3))

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recovery.models import MOTION_TYPES, MotionModel, SensorModel
+from relation_metric.arrays import Array
 from relation_metric.checks import check_covariances, check_joint_covariance
 from relation_metric.errors import InputError
 from relation_metric.formats import read_trajectory
@@ -45,7 +46,6 @@ from relation_metric.trajectory import Trajectory, readonly
 __all__ = ["FORMAT", "Bundle", "read_bundle", "write_bundle"]
 
 FORMAT = "slamrel-bundle/1"
-Array = NDArray[np.float64]
 PathLike = str | os.PathLike[str]
 
 

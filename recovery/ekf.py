@@ -45,6 +45,7 @@ from scipy.stats import chi2
 from tqdm import tqdm
 
 from relation_metric import se2
+from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError
 from relation_metric.trajectory import readonly
 
@@ -65,7 +66,6 @@ __all__ = [
     "run_filter",
 ]
 
-Array = NDArray[np.float64]
 USED, GATED, UNASSOCIATED, OUTSIDE = 0, 1, 2, 3
 ROBUST = (None, "huber", "cauchy")
 #: Default ``c`` of each M-estimator on the standardised distance (see ``recover``).
@@ -718,26 +718,6 @@ def _full(p6: Array) -> Array:
     for col, (i, j) in enumerate(idx):
         out[:, i, j] = p6[:, col]
         out[:, j, i] = p6[:, col]
-    return out
-
-
-def rotation_matrices(theta: Array) -> Array:
-    """``Rot(θ) = [[c, −s, 0], [s, c, 0], [0, 0, 1]]``, shape (..., 3, 3)."""
-    c, s = np.cos(theta), np.sin(theta)
-    rot = np.zeros(np.shape(theta) + (3, 3))
-    rot[..., 0, 0] = c
-    rot[..., 0, 1] = -s
-    rot[..., 1, 0] = s
-    rot[..., 1, 1] = c
-    rot[..., 2, 2] = 1.0
-    return rot
-
-
-def shear(d: Array) -> Array:
-    """``S(d) = [[1, 0, −d_y], [0, 1, d_x], [0, 0, 1]]``, shape (..., 3, 3)."""
-    out = np.broadcast_to(np.eye(3), d.shape[:-1] + (3, 3)).copy()
-    out[..., 0, 2] = -d[..., 1]
-    out[..., 1, 2] = d[..., 0]
     return out
 
 

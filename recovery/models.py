@@ -7,7 +7,8 @@ increment; the EKF then needs only ``F = ∂(x ∘ u)/∂x`` (a shear) and ``Q =
 Velocity model (Thrun, Burgard & Fox, *Probabilistic Robotics*, Sec. 5.3, exact arc)
     ``u(v, ω, Δt) = exp([v Δt, 0, ω Δt]) = [v Δt A(φ), v Δt B(φ), φ]`` with ``φ = ω Δt``,
     ``A = sin φ / φ`` and ``B = (1 − cos φ) / φ`` (straight line ``[v Δt, 0, 0]`` as ω → 0, by
-    Taylor series below ``|φ| < 1e-2``). This equals the book's Eq. 5.9 arc. Control noise
+    Taylor series below ``|φ| < 1e-2``: :func:`relation_metric.se2.v_coefficients`). This equals
+    the book's Eq. 5.9 arc. Control noise
     ``M = diag(σ_v², σ_ω²)`` or (Table 5.3) ``diag(α1 v² + α2 ω², α3 v² + α4 ω²)``, held over
     Δt, gives ``Σ = J_u M J_uᵀ`` with ``J_u = ∂u/∂(v, ω)`` (rank 2).
 
@@ -30,9 +31,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from relation_metric import se2
+from relation_metric.arrays import Array
 
 __all__ = [
     "MotionModel",
@@ -43,13 +45,9 @@ __all__ = [
     "odometry_from_deltas",
     "odometry_delta_covariance",
     "increment_covariance",
-    "compose_jacobian",
     "process_noise",
     "range_bearing",
 ]
-
-Array = NDArray[np.float64]
-_SMALL = 1e-2  # below: 3-term Taylor series (truncation < 2e-16)
 
 MOTION_TYPES = ("velocity", "odometry")
 
@@ -105,21 +103,6 @@ class SensorModel:
         }
 
 
-def _arc_coefficients(phi: Array) -> tuple[Array, Array, Array, Array]:
-    """``A = sin φ/φ``, ``B = (1 − cos φ)/φ`` and their derivatives, series near 0."""
-    phi = np.asarray(phi, dtype=np.float64)
-    small = np.abs(phi) < _SMALL
-    p = np.where(small, 1.0, phi)
-    s, c = np.sin(p), np.cos(p)
-    phi2 = phi * phi
-    phi4 = phi2 * phi2
-    a = np.where(small, 1.0 - phi2 / 6.0 + phi4 / 120.0, s / p)
-    b = np.where(small, phi * (0.5 - phi2 / 24.0 + phi4 / 720.0), (1.0 - c) / p)
-    da = np.where(small, phi * (-1.0 / 3.0 + phi2 / 30.0 - phi4 / 840.0), (p * c - s) / (p * p))
-    db = np.where(small, 0.5 - phi2 / 8.0 + phi4 / 144.0, (p * s - (1.0 - c)) / (p * p))
-    return a, b, da, db
-
-
 def velocity_increment(v: ArrayLike, omega: ArrayLike, dt: ArrayLike) -> tuple[Array, Array]:
     """Body-frame increment of the exact-arc velocity model and its Jacobian.
 
@@ -137,7 +120,7 @@ def velocity_increment(v: ArrayLike, omega: ArrayLike, dt: ArrayLike) -> tuple[A
     """
     v, omega, dt = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (v, omega, dt)))
     phi = omega * dt
-    a, b, da, db = _arc_coefficients(phi)
+    a, b, da, db = se2.v_coefficients(phi, derivatives=True)
     s = v * dt
     u = np.stack((s * a, s * b, phi), axis=-1)
     j = np.zeros(v.shape + (3, 2))
@@ -254,24 +237,6 @@ def increment_covariance(model: MotionModel, u: ArrayLike, aux: ArrayLike) -> Ar
         assert model.sigma is not None
         sig = np.broadcast_to(np.diag(np.square(model.sigma)), u.shape[:-1] + (3, 3)).copy()
     return sig * aux[..., None, None]
-
-
-def compose_jacobian(x: ArrayLike, u: ArrayLike) -> Array:
-    """``F = ∂(x ∘ u)/∂x = [[1, 0, −Δy], [0, 1, Δx], [0, 0, 1]]``, ``Δ = R(θ) u_xy``.
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 3)
-    """
-    x = np.asarray(x, dtype=np.float64)
-    u = np.asarray(u, dtype=np.float64)
-    c, s = np.cos(x[..., 2]), np.sin(x[..., 2])
-    dx = c * u[..., 0] - s * u[..., 1]
-    dy = s * u[..., 0] + c * u[..., 1]
-    f = np.broadcast_to(np.eye(3), dx.shape + (3, 3)).copy()
-    f[..., 0, 2] = -dy
-    f[..., 1, 2] = dx
-    return f
 
 
 def process_noise(theta: ArrayLike, sigma_u: ArrayLike) -> Array:

@@ -41,6 +41,8 @@ from recovery.ekf import (
 from recovery.smoother import smooth
 from recovery.steps import Steps, build_steps
 from relation_metric import consistency
+from relation_metric.arrays import Array
+from relation_metric.association import match_nearest_times
 from relation_metric.errors import InputError
 from relation_metric.trajectory import Trajectory, readonly
 
@@ -55,7 +57,6 @@ __all__ = [
     "recover",
 ]
 
-Array = NDArray[np.float64]
 METHODS = ("filter", "smoother", "batch")
 MAP_MODES = ("joint", "marginal", "ignore")
 
@@ -346,14 +347,10 @@ def _counts(
 
 def pose_nees_against(truth: Trajectory, times: Array, poses: Array, covs: Array) -> Array:
     """NEES at the grid times that equal a ground-truth time (within 1 µs), NaN elsewhere."""
-    gt_t = truth.timestamps
-    idx = np.clip(np.searchsorted(gt_t, times), 0, len(gt_t) - 1)
-    prev = np.clip(idx - 1, 0, len(gt_t) - 1)
-    best = np.where(np.abs(gt_t[prev] - times) < np.abs(gt_t[idx] - times), prev, idx)
-    ok = np.abs(gt_t[best] - times) <= 1e-6
+    at, gt = match_nearest_times(times, truth.timestamps, 1e-6)
     out = np.full(times.shape[0], np.nan)
-    if ok.any():
-        out[ok] = consistency.pose_nees(poses[ok], truth.poses[best[ok]], covs[ok])
+    if at.size:
+        out[at] = consistency.pose_nees(poses[at], truth.poses[gt], covs[at])
     return out
 
 

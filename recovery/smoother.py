@@ -24,13 +24,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
-from recovery.ekf import FilterResult, shear, world_steps
+from recovery.ekf import FilterResult, world_steps
+from relation_metric.arrays import Array
+from relation_metric.se2 import shear
 
 __all__ = ["SmootherResult", "smooth"]
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -24,12 +24,11 @@ from numpy.typing import NDArray
 from recovery.bundle import Bundle
 from recovery.models import increment_covariance, velocity_increment
 from relation_metric import se2
+from relation_metric.arrays import Array
 from relation_metric.errors import InputError
 from relation_metric.trajectory import readonly
 
 __all__ = ["Steps", "build_steps"]
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -84,7 +84,6 @@ __all__ = [
 ]
 
 TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc")
-TrajectoryFormat = Literal["plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc"]
 DIMENSIONS = ("auto", "2d", "3d")
 _EUROC_COLUMNS = (
     "timestamp",

@@ -22,13 +22,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from relation_metric import se2, se3
+from relation_metric.arrays import Array
 
 __all__ = ["PoseGroup", "SE2", "SE3", "group_of", "common_group"]
-
-Array = NDArray[np.float64]
 
 
 class PoseGroup:

@@ -14,18 +14,30 @@ Conventions (used throughout slamrel):
 * ``exp``/``log`` map between the tangent vector ``ξ = [ρ_x, ρ_y, φ]`` (translation part in
   the left-Jacobian coordinates) and the group, so ``exp(log(p)) == p`` for ``θ ∈ [−π, π)``;
 * all angles are wrapped to ``[−π, π)`` by :func:`wrap_angle`, the only place that does so.
+
+The derivatives live here too, next to the operations they differentiate: ``between(a, b,
+jacobians=True)``, :func:`compose_jacobian` (and :func:`shear`, the same matrix written with
+the world-frame step), and :func:`v_coefficients` (``sin φ/φ``, ``(1 − cos φ)/φ`` and their
+derivatives, with one small-angle cut-off).
 """
 
 from __future__ import annotations
 
+from typing import Literal, overload
+
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
+
+from relation_metric.arrays import Array
 
 __all__ = [
     "wrap_angle",
     "compose",
     "inverse",
     "between",
+    "compose_jacobian",
+    "shear",
+    "v_coefficients",
     "ominus",
     "exp",
     "log",
@@ -37,11 +49,12 @@ __all__ = [
 ]
 
 _TWO_PI = 2.0 * np.pi
-# Below this |φ| the series expansions of sin(φ)/φ and (1 - cos φ)/φ are used (their error
-# at 1e-4 is ~1e-17 relative, below double precision).
-_SMALL_ANGLE = 1e-4
-
-Array = NDArray[np.float64]
+# Below this |φ| the Taylor series (up to φ⁴) of sin φ/φ, (1 − cos φ)/φ and their derivatives
+# are used. Measured against 40-digit mpmath over |φ| in [1e-7, 0.5]: the largest relative
+# error of the four is 4.1e-12 (of d/dφ sin φ/φ, cancellation in φ cos φ − sin φ just above
+# the cut-off; 9.8e-13 for (1 − cos φ)/φ); a cut-off of 1e-4 gave 9.9e-9 for (1 − cos φ)/φ
+# and 4.2e-8 for its derivative, 3e-2 gives 7.7e-13, 5e-2 1e-12 (series truncation grows).
+_SMALL_ANGLE = 1e-2
 
 
 def wrap_angle(angle: ArrayLike) -> Array:
@@ -119,7 +132,19 @@ def inverse(a: ArrayLike) -> Array:
     return out
 
 
-def between(a: ArrayLike, b: ArrayLike) -> Array:
+@overload
+def between(a: ArrayLike, b: ArrayLike, *, jacobians: Literal[False] = ...) -> Array: ...
+
+
+@overload
+def between(
+    a: ArrayLike, b: ArrayLike, *, jacobians: Literal[True]
+) -> tuple[Array, Array, Array]: ...
+
+
+def between(
+    a: ArrayLike, b: ArrayLike, *, jacobians: bool = False
+) -> Array | tuple[Array, Array, Array]:
     """Relative motion ``a⁻¹ ∘ b``: pose ``b`` expressed in the frame of pose ``a``.
 
     This is the relation ``δ_ij = x_i⁻¹ ∘ x_j`` of Kümmerle et al. 2009 (their Eq. 1 writes
@@ -129,10 +154,17 @@ def between(a: ArrayLike, b: ArrayLike) -> Array:
     Parameters
     ----------
     a, b : array_like, shape (..., 3)
+    jacobians : bool, keyword-only
+        Also return the derivatives (of the unwrapped angle difference, i.e. the ones a
+        least-squares residual ``between(a, b) − z`` needs).
 
     Returns
     -------
-    ndarray, shape (..., 3)
+    d : ndarray, shape (..., 3)
+    j_a : ndarray, shape (..., 3, 3), only with ``jacobians=True``
+        ``∂d/∂a = [[−c, −s, −s Δx + c Δy], [s, −c, −c Δx − s Δy], [0, 0, −1]]``.
+    j_b : ndarray, shape (..., 3, 3), only with ``jacobians=True``
+        ``∂d/∂b = [[c, s, 0], [−s, c, 0], [0, 0, 1]]``.
     """
     a = _as_poses(a, "a")
     b = _as_poses(b, "b")
@@ -143,6 +175,58 @@ def between(a: ArrayLike, b: ArrayLike) -> Array:
     out[..., 0] = c * dx + s * dy
     out[..., 1] = -s * dx + c * dy
     out[..., 2] = wrap_angle(b[..., 2] - a[..., 2])
+    if not jacobians:
+        return out
+    shape = out.shape[:-1] + (3, 3)
+    c, s = np.broadcast_to(c, shape[:-2]), np.broadcast_to(s, shape[:-2])
+    j_a = np.zeros(shape)
+    j_a[..., 0, 0], j_a[..., 0, 1], j_a[..., 0, 2] = -c, -s, -s * dx + c * dy
+    j_a[..., 1, 0], j_a[..., 1, 1], j_a[..., 1, 2] = s, -c, -c * dx - s * dy
+    j_a[..., 2, 2] = -1.0
+    j_b = np.zeros(shape)
+    j_b[..., 0, 0], j_b[..., 0, 1] = c, s
+    j_b[..., 1, 0], j_b[..., 1, 1] = -s, c
+    j_b[..., 2, 2] = 1.0
+    return out, j_a, j_b
+
+
+def compose_jacobian(a: ArrayLike, b: ArrayLike) -> Array:
+    """``∂(a ∘ b)/∂a = [[1, 0, −Δy], [0, 1, Δx], [0, 0, 1]]`` with ``Δ = R(θ_a) t_b``.
+
+    (``∂(a ∘ b)/∂b`` is ``blockdiag(R(θ_a), 1)``.)
+
+    Parameters
+    ----------
+    a, b : array_like, shape (..., 3)
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    d = np.stack((c * b[..., 0] - s * b[..., 1], s * b[..., 0] + c * b[..., 1]), axis=-1)
+    return shear(d)
+
+
+def shear(d: ArrayLike) -> Array:
+    """``S(d) = [[1, 0, −d_y], [0, 1, d_x], [0, 0, 1]]``: :func:`compose_jacobian` from the step.
+
+    ``d`` is the world-frame translation ``t(a ∘ b) − t(a)`` of the composition.
+
+    Parameters
+    ----------
+    d : array_like, shape (..., 2) (or (..., 3); the angle is not used)
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+    """
+    d = np.asarray(d, dtype=np.float64)
+    out = np.broadcast_to(np.eye(3), d.shape[:-1] + (3, 3)).copy()
+    out[..., 0, 2] = -d[..., 1]
+    out[..., 1, 2] = d[..., 0]
     return out
 
 
@@ -181,7 +265,7 @@ def exp(xi: ArrayLike) -> Array:
     """
     xi = _as_poses(xi, "xi")
     phi = xi[..., 2]
-    a, b = _v_coefficients(phi)
+    a, b = v_coefficients(phi)
     out = np.empty_like(xi)
     out[..., 0] = a * xi[..., 0] - b * xi[..., 1]
     out[..., 1] = b * xi[..., 0] + a * xi[..., 1]
@@ -205,7 +289,7 @@ def log(p: ArrayLike) -> Array:
     """
     p = _as_poses(p, "p")
     phi = wrap_angle(p[..., 2])
-    a, b = _v_coefficients(phi)
+    a, b = v_coefficients(phi)
     det = a * a + b * b
     out = np.empty_like(p)
     out[..., 0] = (a * p[..., 0] + b * p[..., 1]) / det
@@ -214,15 +298,48 @@ def log(p: ArrayLike) -> Array:
     return out
 
 
-def _v_coefficients(phi: Array) -> tuple[Array, Array]:
-    """``A = sin φ/φ`` and ``B = (1 − cos φ)/φ`` with Taylor series near 0."""
+@overload
+def v_coefficients(phi: ArrayLike, *, derivatives: Literal[False] = ...) -> tuple[Array, Array]: ...
+
+
+@overload
+def v_coefficients(
+    phi: ArrayLike, *, derivatives: Literal[True]
+) -> tuple[Array, Array, Array, Array]: ...
+
+
+def v_coefficients(
+    phi: ArrayLike, *, derivatives: bool = False
+) -> tuple[Array, Array] | tuple[Array, Array, Array, Array]:
+    """``A = sin φ/φ``, ``B = (1 − cos φ)/φ`` (the entries of ``V(φ)``) and their derivatives.
+
+    Below ``|φ| < 1e-2`` their Taylor series up to ``φ⁴`` are used; the largest relative error
+    (against 40-digit arithmetic, ``|φ| ∈ [1e-7, 0.5]``) is 4.1e-12 (``dA/dφ``), 9.8e-13 (``B``).
+
+    Parameters
+    ----------
+    phi : array_like, shape (...)
+    derivatives : bool, keyword-only
+        Also return ``dA/dφ`` and ``dB/dφ``.
+
+    Returns
+    -------
+    a, b : ndarray, shape (...)
+    da, db : ndarray, shape (...), only with ``derivatives=True``
+    """
     phi = np.asarray(phi, dtype=np.float64)
     small = np.abs(phi) < _SMALL_ANGLE
-    safe = np.where(small, 1.0, phi)
+    p = np.where(small, 1.0, phi)
+    s, c = np.sin(p), np.cos(p)
     phi2 = phi * phi
-    a = np.where(small, 1.0 - phi2 / 6.0, np.sin(safe) / safe)
-    b = np.where(small, phi / 2.0 - phi * phi2 / 24.0, (1.0 - np.cos(safe)) / safe)
-    return a, b
+    phi4 = phi2 * phi2
+    a = np.where(small, 1.0 - phi2 / 6.0 + phi4 / 120.0, s / p)
+    b = np.where(small, phi * (0.5 - phi2 / 24.0 + phi4 / 720.0), (1.0 - c) / p)
+    if not derivatives:
+        return a, b
+    da = np.where(small, phi * (-1.0 / 3.0 + phi2 / 30.0 - phi4 / 840.0), (p * c - s) / (p * p))
+    db = np.where(small, 0.5 - phi2 / 8.0 + phi4 / 144.0, (p * s - (1.0 - c)) / (p * p))
+    return a, b, da, db
 
 
 def transform_points(p: ArrayLike, points: ArrayLike) -> Array:

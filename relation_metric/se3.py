@@ -20,7 +20,9 @@ of the metricEvaluator's parameter vector.
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
+
+from relation_metric.arrays import Array
 
 __all__ = [
     "identity",
@@ -46,7 +48,6 @@ __all__ = [
     "transform_points",
 ]
 
-Array = NDArray[np.float64]
 # Below this angle [rad] the Taylor series of the exp/log coefficients are used.
 _SMALL = 1e-4
 

@@ -29,6 +29,7 @@ from recovery.bundle import Bundle, read_bundle, write_bundle
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, recover
 from recovery.steps import build_steps
 from relation_metric import se2
+from relation_metric.association import match_nearest_times, nearest_index
 from relation_metric.consistency import NeesSummary, pose_nees, summarize_nees
 from relation_metric.errors import InputError, SlamrelError
 from relation_metric.evaluate import Evaluation, UnassociatedRelationsWarning, evaluate
@@ -50,8 +51,6 @@ from slamrel.verdict import run_verdict
 from slamrel.worlds import make_world
 
 __all__ = ["RunResult", "default_relations", "run_pipeline", "write_report"]
-
-RELATION_SETS = ("consecutive", "loops", "global")
 
 
 def default_relations(reference: Trajectory, *, seed: int = 0) -> dict[str, RelationSet]:
@@ -331,24 +330,17 @@ def _recovery_notes(rec: Any, method: str) -> list[str]:
 
 def _at_truth_times(est: Trajectory, truth: Trajectory) -> tuple[Trajectory, NDArray[np.int64]]:
     """The estimate's poses at the ground-truth times it has (within 1 µs)."""
-    k = np.searchsorted(est.timestamps, truth.timestamps).clip(0, len(est) - 1)
-    k2 = np.clip(k - 1, 0, len(est) - 1)
-    k = np.where(
-        np.abs(est.timestamps[k2] - truth.timestamps)
-        < np.abs(est.timestamps[k] - truth.timestamps),
-        k2,
-        k,
-    )
-    ok = np.abs(est.timestamps[k] - truth.timestamps) <= 1e-6
-    if not ok.any():
+    at, k = match_nearest_times(truth.timestamps, est.timestamps, 1e-6)
+    if not at.size:
         raise InputError(
             "no estimate pose lies at a ground-truth time; are they in the same time base?"
         )
-    return Trajectory(truth.timestamps[ok], est.poses[k[ok]]), k[ok]
+    return Trajectory(truth.timestamps[at], est.poses[k]), k
 
 
 def _truth_at(truth: Trajectory, t: NDArray[np.float64]) -> NDArray[np.float64]:
-    return truth.poses[np.searchsorted(truth.timestamps, t).clip(0, len(truth) - 1)]
+    """Ground-truth poses nearest in time to ``t`` (the callers pass ground-truth times)."""
+    return truth.poses[nearest_index(truth.timestamps, t)]
 
 
 def _stats_table(result: RunResult, part: str) -> Table:

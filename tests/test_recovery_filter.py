@@ -14,7 +14,7 @@ from recovery.baseline import filterpy_localisation
 from recovery.batch import normal_equations, refine
 from recovery.bundle import read_bundle, write_bundle
 from recovery.ekf import GATED, USED, run_filter
-from recovery.models import compose_jacobian, process_noise, range_bearing
+from recovery.models import process_noise, range_bearing
 from recovery.recover import filter_input, recover
 from recovery.simulate import simulate_bundle
 from recovery.smoother import smooth
@@ -80,7 +80,7 @@ def _per_step_rts(inp):  # type: ignore[no-untyped-def]
     )
     for k in range(n):
         if k:
-            f = compose_jacobian(x, inp.u[k - 1])
+            f = se2.compose_jacobian(x, inp.u[k - 1])
             fs[k - 1] = f
             p = f @ p @ f.T + process_noise(x[2], inp.sigma[k - 1])
             x = x + (se2.compose(x, inp.u[k - 1]) - x)  # unwrapped heading
@@ -155,7 +155,7 @@ def test_schmidt_equals_dense_augmented_consider_filter() -> None:
     for k in range(inp.times.shape[0]):
         if k:
             f = np.eye(dim)
-            f[:3, :3] = compose_jacobian(x, inp.u[k - 1])
+            f[:3, :3] = se2.compose_jacobian(x, inp.u[k - 1])
             q = np.zeros((dim, dim))
             q[:3, :3] = process_noise(x[2], inp.sigma[k - 1])
             p = f @ p @ f.T + q

@@ -8,7 +8,6 @@ import pytest
 
 from recovery.models import (
     MotionModel,
-    compose_jacobian,
     increment_covariance,
     odometry_delta_covariance,
     odometry_deltas,
@@ -100,7 +99,7 @@ def test_increment_covariance_parameterisations() -> None:
 def test_compose_jacobian_and_process_noise(rng: np.random.Generator) -> None:
     x, u = rng.normal(size=3), rng.normal(size=3)
     np.testing.assert_allclose(
-        compose_jacobian(x, u), fd(lambda a: se2.compose(a, u), x), atol=1e-8
+        se2.compose_jacobian(x, u), fd(lambda a: se2.compose(a, u), x), atol=1e-8
     )
     # Q is the covariance of x ∘ (u + n): Jacobian w.r.t. u at small u is Rot(θ)
     sig = np.diag([0.1, 0.2, 0.3])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -114,3 +115,87 @@ def test_cumulative_compose_equals_loop(rng):
     for step in u:
         slow.append(se2.compose(slow[-1], step))
     np.testing.assert_allclose(fast, np.array(slow), atol=1e-9)
+
+
+# --- derivatives (issue 13: one home in se2) -------------------------------------------------
+
+
+def _fd(f, x: np.ndarray, h: float = 1e-6) -> np.ndarray:
+    """Central finite-difference Jacobian of ``f`` at ``x`` (an independent oracle)."""
+    cols = []
+    for k in range(x.size):
+        e = np.zeros_like(x)
+        e[k] = h
+        cols.append((f(x + e) - f(x - e)) / (2 * h))
+    return np.stack(cols, axis=-1)
+
+
+def _between_unwrapped(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    d = se2.between(a, b)
+    d[..., 2] = b[..., 2] - a[..., 2]  # the derivative is of the unwrapped difference
+    return d
+
+
+def test_between_jacobians_match_finite_differences(rng: np.random.Generator) -> None:
+    a = rng.normal(size=(20, 3)) * [3.0, 3.0, 2.0]
+    b = rng.normal(size=(20, 3)) * [3.0, 3.0, 2.0]
+    d, j_a, j_b = se2.between(a, b, jacobians=True)
+    np.testing.assert_array_equal(d, se2.between(a, b))
+    assert j_a.shape == j_b.shape == (20, 3, 3)
+    for k in range(20):
+        fa = _fd(lambda x, k=k: _between_unwrapped(x, b[k]), a[k])
+        fb = _fd(lambda x, k=k: _between_unwrapped(a[k], x), b[k])
+        np.testing.assert_allclose(j_a[k], fa, atol=1e-7)
+        np.testing.assert_allclose(j_b[k], fb, atol=1e-7)
+
+
+def test_between_jacobians_broadcast_one_pose_against_many(rng: np.random.Generator) -> None:
+    a, b = rng.normal(size=3), rng.normal(size=(5, 3))
+    _, j_a, j_b = se2.between(a, b, jacobians=True)
+    _, j_a1, j_b1 = se2.between(np.broadcast_to(a, (5, 3)), b, jacobians=True)
+    np.testing.assert_array_equal(j_a, j_a1)
+    np.testing.assert_array_equal(j_b, j_b1)
+
+
+def test_compose_jacobian_and_shear_match_finite_differences(rng: np.random.Generator) -> None:
+    a = rng.normal(size=(20, 3)) * [3.0, 3.0, 2.0]
+    b = rng.normal(size=(20, 3)) * [3.0, 3.0, 0.5]
+    f = se2.compose_jacobian(a, b)
+    for k in range(20):
+
+        def comp(x: np.ndarray, k: int = k) -> np.ndarray:
+            out = se2.compose(x, b[k])
+            out[2] = x[2] + b[k, 2]  # unwrapped
+            return out
+
+        np.testing.assert_allclose(f[k], _fd(comp, a[k]), atol=1e-7)
+    step = se2.compose(a, b)[:, :2] - a[:, :2]
+    np.testing.assert_allclose(se2.shear(step), f, atol=1e-12)
+
+
+@pytest.mark.parametrize("scale", [1e-6, 1e-3, 9e-3, 1.1e-2, 0.3, 2.5])
+def test_v_coefficients_and_derivatives(scale: float, rng: np.random.Generator) -> None:
+    phi = rng.uniform(-1.0, 1.0, size=50) * scale
+    a, b, da, db = se2.v_coefficients(phi, derivatives=True)
+    a2, b2 = se2.v_coefficients(phi)
+    np.testing.assert_array_equal(a, a2)
+    np.testing.assert_array_equal(b, b2)
+    # oracle: closed forms in extended precision where they do not cancel (long double)
+    p = phi.astype(np.longdouble)
+    np.testing.assert_allclose(a, np.sin(p) / p, rtol=1e-12)
+    big = np.abs(phi) > 1e-3
+    np.testing.assert_allclose(b[big], ((1 - np.cos(p)) / p)[big], rtol=1e-9)
+    # derivatives against central differences of the function itself
+    h = 1e-6
+    ap, bp = se2.v_coefficients(phi + h)
+    am, bm = se2.v_coefficients(phi - h)
+    np.testing.assert_allclose(da, (ap - am) / (2 * h), atol=1e-8)
+    np.testing.assert_allclose(db, (bp - bm) / (2 * h), atol=1e-8)
+
+
+def test_v_coefficients_continuous_across_the_cut_off() -> None:
+    eps = np.spacing(1e-2)
+    below = se2.v_coefficients(np.array([1e-2 - eps, -1e-2 + eps]), derivatives=True)
+    above = se2.v_coefficients(np.array([1e-2 + eps, -1e-2 - eps]), derivatives=True)
+    for lo, hi in zip(below, above, strict=True):
+        np.testing.assert_allclose(lo, hi, rtol=1e-11, atol=1e-15)

@@ -28,15 +28,15 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from recovery.models import SensorModel, compose_jacobian, process_noise, range_bearing
+from recovery.models import SensorModel, process_noise, range_bearing
 from recovery.steps import Steps
 from relation_metric import se2
+from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import Trajectory, readonly
 
 __all__ = ["EkfSlamResult", "ekf_slam"]
 
-Array = NDArray[np.float64]
 UNASSOCIATED = -1
 # Rows of the covariance per block of the in-place update (see _update).
 _UPDATE_ROWS = 32
@@ -199,7 +199,7 @@ def ekf_slam(
     for k in range(n_poses):
         if k > 0:
             u = inc[k - 1]
-            fx = compose_jacobian(mu[:3], u)
+            fx = se2.compose_jacobian(mu[:3], u)
             q = process_noise(mu[2], sig_u[k - 1])
             mu[:3] = se2.compose(mu[:3], u)
             # P_xx ← F P_xx Fᵀ + Q, P_xm ← F P_xm

@@ -24,6 +24,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se2
+from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import readonly
 
@@ -36,8 +37,6 @@ __all__ = [
     "pose_covariances",
     "joint_covariance",
 ]
-
-Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -224,17 +223,8 @@ def _linearise(
     g: PoseGraph, x: Array, lm: Array, w_pp: Array, w_pl: Array, prior: tuple[Array, Array]
 ) -> _Linearised:
     """Residuals and whitened Jacobian blocks at ``(x, lm)`` (vectorised over factors)."""
-    r, (c, s, dt, ck, sk, d) = _residuals(g, x, lm, w_pp, w_pl, prior)
-    ji = np.zeros((c.size, 3, 3))
-    ji[:, 0, 0], ji[:, 0, 1] = -c, -s
-    ji[:, 1, 0], ji[:, 1, 1] = s, -c
-    ji[:, 0, 2] = -s * dt[:, 0] + c * dt[:, 1]
-    ji[:, 1, 2] = -c * dt[:, 0] - s * dt[:, 1]
-    ji[:, 2, 2] = -1.0
-    jj = np.zeros_like(ji)
-    jj[:, 0, 0], jj[:, 0, 1] = c, s
-    jj[:, 1, 0], jj[:, 1, 1] = -s, c
-    jj[:, 2, 2] = 1.0
+    r, (_, _, _, ck, sk, d) = _residuals(g, x, lm, w_pp, w_pl, prior)
+    _, ji, jj = se2.between(x[g.pp_i], x[g.pp_j], jacobians=True)
     jk = np.zeros((ck.size, 2, 3))
     jk[:, 0, 0], jk[:, 0, 1] = -ck, -sk
     jk[:, 1, 0], jk[:, 1, 1] = sk, -ck

@@ -54,6 +54,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se2
+from relation_metric.arrays import Array
 from relation_metric.consistency import JointNees, nees2
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import Trajectory, readonly
@@ -86,7 +87,6 @@ __all__ = [
 if TYPE_CHECKING:
     from slamrel.worlds import World
 
-Array = NDArray[np.float64]
 Start = Literal["align", "odometry", "truth"]
 
 METHOD1_INFLATION = 2.0  # Hu et al.: each observation is used by two adjacent-pair constraints

@@ -208,7 +208,8 @@ def add_force_argument(parser: argparse.ArgumentParser) -> None:
 
 def stats_table(rows: Sequence[tuple[str, Summary]]) -> str:
     """A fixed-width console table of summaries, one row per ``(label, Summary)``."""
-    names = ("mean", "std", "min", "max", "median", "rmse", "count")
+    from relation_metric.stats import STAT_NAMES as names  # here: start-up stays light
+
     width = max(len(label) for label, _ in rows) if rows else 10
     head = " " * width + "".join(f"{n:>12}" for n in names)
     lines = [head]

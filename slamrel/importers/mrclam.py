@@ -481,7 +481,7 @@ def mrclam_bundle(
     d = Path(directory)
     r = read_mrclam_robot(d, robot)
     lm_path = d / "Landmark_Groundtruth.dat"
-    lm, lm_lines = read_numeric_table(
+    lm, _ = read_numeric_table(
         lm_path, columns=("subject", "x", "y", "sx", "sy"), describe="MRCLAM landmarks"
     )
     cal = calibrate_odometry(r) if calibrate else None
