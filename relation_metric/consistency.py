@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2
 
 from relation_metric import se2
 from relation_metric.errors import InputError
@@ -62,6 +61,8 @@ def nees_band(dof: int, runs: int = 1, probability: float = 0.95) -> tuple[float
         raise InputError(
             f"need dof >= 1, runs >= 1, 0 < probability < 1; got {dof}, {runs}, {probability}"
         )
+    from scipy.stats import chi2  # here, not at import: scipy.stats costs start-up
+
     lo, hi = chi2.ppf([(1 - probability) / 2, (1 + probability) / 2], dof * runs)
     return float(lo / runs), float(hi / runs)
 

@@ -21,7 +21,6 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from relation_metric import se2
 from relation_metric.errors import InputError
@@ -252,6 +251,8 @@ def _loop_pairs(
         raise InputError(f"radius must be > 0, got {radius}")
     if min_time is None and min_travel is None:
         raise InputError("loop relations need a minimum separation in time or distance")
+    from scipy.spatial import cKDTree  # here, not at import: scipy.spatial costs start-up
+
     pairs = cKDTree(reference.xy).query_pairs(radius, output_type="ndarray")
     if pairs.size == 0:
         return np.empty(0, np.int64), np.empty(0, np.int64)

@@ -80,19 +80,19 @@ FILE: dict[str, Argv] = {
 }
 
 # The function that does each command's first real work (reading inputs or computing).
-HEAVY = {
-    "run": ("slamrel.commands.run", "run_pipeline"),
-    "simulate": ("slamrel.commands.simulate", "make_world"),
-    "slam": ("slamrel.commands.simulate", "read_bundle"),
-    "import-isam": ("slamrel.commands.graph", "read_isam"),
+HEAVY = {  # the module that owns it: commands import the library inside their run functions
+    "run": ("slamrel.pipeline", "run_pipeline"),
+    "simulate": ("slamrel.worlds", "make_world"),
+    "slam": ("recovery.bundle", "read_bundle"),
+    "import-isam": ("slamrel.importers.isam", "read_isam"),
     "import-mrclam": ("slamrel.importers.mrclam", "mrclam_bundle"),
     "solve": ("slamrel.commands.graph", "_load"),
-    "compare": ("slamrel.commands.compare", "read_per_relation"),
+    "compare": ("slamrel.compare", "read_per_relation"),
     "example": ("slamrel.commands.example", "example_world"),
-    "recover": ("slamrel.commands.recover", "read_bundle"),
+    "recover": ("recovery.bundle", "read_bundle"),
     "evaluate": ("slamrel.commands.evaluate", "load_reference"),
     "relations": ("slamrel.commands.relations", "load_trajectory_arg"),
-    "map-compare": ("slamrel.commands.map_compare", "read_map"),
+    "map-compare": ("landmark_graph.maps", "read_map"),
 }
 
 

@@ -7,20 +7,17 @@ import os
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from relation_metric.errors import InputError, SlamrelError
-from relation_metric.formats import (
-    TRAJECTORY_FORMATS,
-    LoadedTrajectory,
-    read_trajectory,
-    without_repeated_times,
-)
-from relation_metric.outputs import check_outputs as _check_outputs
-from relation_metric.relations import STRATEGIES, RelationSet, generate_relations
-from relation_metric.stats import Summary
-from relation_metric.timeorder import FILTER_TIME_TOLERANCE
-from relation_metric.trajectory import Trajectory
 from slamrel.commands import options as opt
+from slamrel.commands.choices import STRATEGIES, TRAJECTORY_FORMATS
+
+if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
+    from relation_metric.formats import LoadedTrajectory
+    from relation_metric.relations import RelationSet
+    from relation_metric.stats import Summary
+    from relation_metric.trajectory import Trajectory
 
 __all__ = [
     "errors_about",
@@ -92,6 +89,8 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
 
 def relations_from_args(reference: Trajectory, args: argparse.Namespace) -> RelationSet:
     """Generate relations from ``reference`` with the strategy options in ``args``."""
+    from relation_metric.relations import generate_relations
+
     return generate_relations(
         reference,
         args.strategy,
@@ -126,6 +125,9 @@ def load_trajectory_arg(
 
     Poses out of time order are sorted and counted (``LoadedTrajectory.time_order``).
     """
+    from relation_metric.formats import read_trajectory, without_repeated_times
+    from relation_metric.timeorder import FILTER_TIME_TOLERANCE
+
     p = Path(path)
     if p.is_dir():
         if role != "reference":
@@ -168,6 +170,8 @@ def check_outputs(
     share a path; an existing non-empty folder is replaced only with ``force`` and only when
     slamrel wrote it.
     """
+    from relation_metric.outputs import check_outputs as _check_outputs
+
     _check_outputs(outputs, dirs=dirs, inputs=inputs, force=force)
 
 

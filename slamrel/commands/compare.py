@@ -7,13 +7,9 @@ import re
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from relation_metric.errors import InputError
-from relation_metric.outputs import staged_directory, write_text_atomic
 from slamrel.commands import options as opt
 from slamrel.commands.common import add_force_argument, check_outputs
-from slamrel.compare import compare_results, read_per_relation
 
 _SPEC = re.compile(r"^(?P<dataset>[^:=]+):(?P<algorithm>[^=]+)=(?P<path>.+)$")
 
@@ -36,6 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
+    from relation_metric.outputs import staged_directory, write_text_atomic
+    from slamrel.compare import compare_results, read_per_relation
+
     specs = []
     for spec in args.results:
         m = _SPEC.match(spec)
@@ -62,6 +61,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _figure(comp, path: Path) -> None:  # type: ignore[no-untyped-def]
+    import numpy as np
+
     from relation_metric.plots import pyplot, save_figure
 
     plt = pyplot()

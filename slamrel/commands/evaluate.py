@@ -6,27 +6,11 @@ import argparse
 import os
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from relation_metric.alignment import absolute_trajectory_error
 from relation_metric.errors import InputError
-from relation_metric.evaluate import Evaluation, evaluate
-from relation_metric.formats import (
-    RELATIONS_EXTENSIONS,
-    TRAJECTORY_EXTENSIONS,
-    TRAJECTORY_FORMATS,
-    LoadedTrajectory,
-    sniff_trajectory_format,
-)
-from relation_metric.metric import MODES
-from relation_metric.relations import RelationSet, read_relations
-from relation_metric.results import write_evo_zip, write_json, write_per_relation_csv
-from relation_metric.textio import read_source
-from relation_metric.timeorder import RepeatedTimeWarning, zero_length
-from relation_metric.trajectory import Trajectory
 from slamrel.commands import options as opt
+from slamrel.commands.choices import MODES, TRAJECTORY_FORMATS
 from slamrel.commands.common import (
     add_strategy_arguments,
     check_outputs,
@@ -34,6 +18,12 @@ from slamrel.commands.common import (
     relations_from_args,
     stats_table,
 )
+
+if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
+    from relation_metric.evaluate import Evaluation
+    from relation_metric.formats import LoadedTrajectory
+    from relation_metric.relations import RelationSet
+    from relation_metric.trajectory import Trajectory
 
 HELP = "score an estimated trajectory against reference relations"
 
@@ -127,6 +117,13 @@ def _is_relations_file(path: str, args: argparse.Namespace) -> bool:
     or a directory → a reference trajectory. Other files are sniffed; 8 numeric columns fit
     both readings and are refused with a message that names both and how to choose.
     """
+    from relation_metric.formats import (
+        RELATIONS_EXTENSIONS,
+        TRAJECTORY_EXTENSIONS,
+        sniff_trajectory_format,
+    )
+    from relation_metric.textio import read_source
+
     p = Path(path)
     if p.is_dir() or args.reference_format is not None:
         return False
@@ -172,6 +169,11 @@ def load_reference(
     ``relations_zero_length_dropped`` for a .relations file; ``reference_out_of_order`` and
     ``reference_repeated_times_dropped`` for a reference trajectory.
     """
+    import numpy as np
+
+    from relation_metric.relations import read_relations
+    from relation_metric.timeorder import RepeatedTimeWarning, zero_length
+
     notes = {} if notes is None else notes
     if _is_relations_file(args.reference, args):
         relations = read_relations(args.reference)
@@ -222,6 +224,9 @@ def _warn_same_file(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from relation_metric.evaluate import evaluate
+    from relation_metric.results import write_evo_zip, write_json, write_per_relation_csv
+
     outputs = [args.json, args.per_relation, args.plot, args.evo_zip]
     check_outputs(outputs, [args.reference, args.estimate, args.odometry])
     _warn_same_file(args)
@@ -285,6 +290,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _ate(estimate: Trajectory, reference: Trajectory, tol: float) -> dict[str, Any]:
+    from relation_metric.alignment import absolute_trajectory_error
+
     out: dict[str, Any] = {}
     for align in ("none", "se2", "sim2"):
         r = absolute_trajectory_error(estimate, reference, align=align, max_time_diff=tol)
@@ -299,6 +306,8 @@ def _ate(estimate: Trajectory, reference: Trajectory, tol: float) -> dict[str, A
 
 def summary_text(ev: Evaluation, result: dict[str, Any], *, degrees: bool) -> str:
     """The console summary of an evaluation."""
+    import numpy as np
+
     from relation_metric.evaluate import error_summaries
 
     unit = "deg" if degrees else "rad"

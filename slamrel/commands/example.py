@@ -4,16 +4,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from relation_metric import se2
-from relation_metric.formats import write_trajectory
-from relation_metric.outputs import staged_directory
-from relation_metric.relations import RelationSet, generate_relations, write_relations
-from relation_metric.trajectory import Trajectory
 from slamrel.commands import options as opt
 from slamrel.commands.common import add_force_argument, check_outputs
+
+if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
+    from relation_metric.trajectory import Trajectory
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -34,6 +31,11 @@ def example_world(seed: int = 0, n: int = 600, dt: float = 0.5) -> tuple[Traject
     The estimate chains the reference's relative motions with Gaussian noise
     (σ = 2 cm, 2 cm, 0.005 rad per step), i.e. dead reckoning with good odometry.
     """
+    import numpy as np
+
+    from relation_metric import se2
+    from relation_metric.trajectory import Trajectory
+
     rng = np.random.default_rng(seed)
     s = np.linspace(0.0, 2.0 * np.pi, n)
     xy = np.column_stack((20.0 * np.sin(s), 10.0 * np.sin(2.0 * s)))
@@ -48,6 +50,12 @@ def example_world(seed: int = 0, n: int = 600, dt: float = 0.5) -> tuple[Traject
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from relation_metric.formats import write_trajectory
+    from relation_metric.outputs import staged_directory
+    from relation_metric.relations import RelationSet, generate_relations, write_relations
+
     check_outputs([], [], dirs=[args.output], force=args.force)
     out = Path(args.output)
     reference, estimate = example_world(args.seed)

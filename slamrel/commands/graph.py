@@ -5,19 +5,16 @@ from __future__ import annotations
 import argparse
 import warnings
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from relation_metric.errors import InputError
-from relation_metric.formats import write_trajectory
-from relation_metric.landmarks import write_landmark_csv
-from relation_metric.outputs import staged_directory
-from relation_metric.trajectory import Trajectory
-from slamrel.backends.g2o import read_g2o_graph, write_g2o_graph
-from slamrel.backends.graph import PoseGraph, solve_graph, solve_graph_incremental
 from slamrel.commands import options as opt
 from slamrel.commands.common import add_force_argument, check_outputs, errors_about
-from slamrel.importers.isam import read_isam
+
+if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
+    import numpy as np
+
+    from slamrel.backends.graph import PoseGraph
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -101,6 +98,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
     """The graph and its file's pose and landmark ids."""
+    from slamrel.backends.g2o import read_g2o_graph
+    from slamrel.importers.isam import read_isam
+
     head = Path(path).read_text(errors="replace")[:4096].split()
     if head and head[0] in ("ODOMETRY", "LANDMARK"):
         data = read_isam(path, noise=noise)  # type: ignore[arg-type]
@@ -109,6 +109,9 @@ def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
 
 
 def run_import_isam(args: argparse.Namespace) -> int:
+    from slamrel.backends.g2o import write_g2o_graph
+    from slamrel.importers.isam import read_isam
+
     check_outputs([args.output], [args.file], dirs=[args.bundle], force=args.force)
     data = read_isam(args.file, noise=args.noise)
     # the file's ids are kept: landmark names then agree with the --bundle log's map.csv
@@ -129,6 +132,7 @@ def run_import_isam(args: argparse.Namespace) -> int:
 
 def run_import_mrclam(args: argparse.Namespace) -> int:
     from recovery.bundle import write_bundle
+    from relation_metric.outputs import staged_directory
     from slamrel.importers.mrclam import N_ROBOTS
 
     check_outputs([], [args.directory], dirs=[args.output], force=args.force)
@@ -165,6 +169,13 @@ def _mrclam_robot(args: argparse.Namespace, robot: int, out: Path):  # type: ign
 
 
 def run_solve(args: argparse.Namespace) -> int:
+    from relation_metric.formats import write_trajectory
+    from relation_metric.landmarks import write_landmark_csv
+    from relation_metric.outputs import staged_directory
+    from relation_metric.trajectory import Trajectory
+    from slamrel.backends.g2o import write_g2o_graph
+    from slamrel.backends.graph import solve_graph, solve_graph_incremental
+
     check_outputs([], [args.graph], dirs=[args.output], force=args.force)
     if not Path(args.graph).is_file():
         raise InputError("no such file", path=args.graph)

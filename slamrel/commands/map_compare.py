@@ -6,12 +6,6 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
-from landmark_graph.association import read_association_csv, write_association_csv
-from landmark_graph.compare import compare_maps
-from landmark_graph.maps import read_map
-from relation_metric.textio import write_text_atomic
 from slamrel.commands import options as opt
 from slamrel.commands.common import check_outputs, errors_about, stats_table
 
@@ -67,6 +61,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from landmark_graph.association import read_association_csv, write_association_csv
+    from landmark_graph.compare import compare_maps
+    from landmark_graph.maps import read_map
+    from relation_metric.textio import write_text_atomic
+
     assoc_file = None if args.associate in ("id", "auto") else args.associate
     check_outputs(
         [args.json, args.per_edge, args.plot, args.write_association, args.review],

@@ -6,16 +6,9 @@ import argparse
 import io
 import sys
 
-import numpy as np
-
-from recovery.bundle import read_bundle
-from recovery.recover import MAP_MODES, METHODS, recover
 from relation_metric.errors import InputError
-from relation_metric.formats import write_trajectory
-from relation_metric.results import write_json
-from relation_metric.textio import write_bytes_atomic
-from relation_metric.timeorder import FILTER_TIME_TOLERANCE
 from slamrel.commands import options as opt
+from slamrel.commands.choices import MAP_MODES, METHODS
 from slamrel.commands.common import check_outputs, errors_about
 
 HELP = "recover the trajectory of an EKF-SLAM run by localisation in its final map"
@@ -69,6 +62,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from recovery.bundle import read_bundle
+    from recovery.recover import recover
+    from relation_metric.formats import write_trajectory
+    from relation_metric.results import write_json
+    from relation_metric.textio import write_bytes_atomic
+    from relation_metric.timeorder import FILTER_TIME_TOLERANCE
+
     check_outputs([args.output, args.covariances, args.report], [args.bundle])
     fmt = args.format or ("tum" if args.output.lower().endswith(".tum") else "plain")
     if args.gate is not None and not 0.0 < args.gate < 1.0:

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from relation_metric.formats import TRAJECTORY_FORMATS
-from relation_metric.relations import write_relations
+from slamrel.commands.choices import TRAJECTORY_FORMATS
 from slamrel.commands.common import (
     add_strategy_arguments,
     check_outputs,
@@ -33,6 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run_generate(args: argparse.Namespace) -> int:
+    from relation_metric.relations import write_relations
+
     check_outputs([args.output], [args.reference])
     reference = load_trajectory_arg(args.reference, args.format).trajectory
     rel = relations_from_args(reference, args)

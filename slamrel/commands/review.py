@@ -4,17 +4,14 @@ from __future__ import annotations
 
 import argparse
 import os
+from typing import TYPE_CHECKING
 
-from landmark_graph.association import (
-    Association,
-    associate_auto,
-    associate_by_id,
-    read_association_csv,
-)
-from landmark_graph.maps import LandmarkMap, read_map
-from landmark_graph.review import write_review
 from slamrel.commands import options as opt
 from slamrel.commands.common import check_outputs, errors_about
+
+if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
+    from landmark_graph.association import Association
+    from landmark_graph.maps import LandmarkMap
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -54,6 +51,12 @@ def proposal(
     mode: str, est: LandmarkMap, ref: LandmarkMap, *, cutoff: float, seed: int
 ) -> Association:
     """The association named by ``--associate id|auto|FILE``."""
+    from landmark_graph.association import (
+        associate_auto,
+        associate_by_id,
+        read_association_csv,
+    )
+
     if mode == "id":
         return associate_by_id(est, ref)
     if mode == "auto":
@@ -62,6 +65,9 @@ def proposal(
 
 
 def run(args: argparse.Namespace) -> int:
+    from landmark_graph.maps import read_map
+    from landmark_graph.review import write_review
+
     assoc_file = None if args.associate in ("id", "auto") else args.associate
     check_outputs([args.output], [args.estimate, args.reference, assoc_file])
     est = read_map(args.estimate)

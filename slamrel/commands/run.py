@@ -8,9 +8,8 @@ from pathlib import Path
 
 from relation_metric.errors import InputError
 from slamrel.commands import options as opt
+from slamrel.commands.choices import NOISE_TYPES, WORLDS
 from slamrel.commands.common import add_force_argument, check_outputs
-from slamrel.pipeline import run_pipeline, write_report
-from slamrel.worlds import NOISE_TYPES, WORLDS
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -22,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("source", nargs="?", default="simple1", metavar="SOURCE")
     p.add_argument("-o", "--output", default="slamrel-report", metavar="DIR")
-    p.add_argument("--noise", choices=sorted(NOISE_TYPES), default="a")
+    p.add_argument("--noise", choices=NOISE_TYPES, default="a")
     p.add_argument("--seed", type=opt.seed, default=0)
     p.add_argument(
         "--rate", type=opt.nonnegative_int, default=0, help="control steps per measurement step"
@@ -37,6 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
+    from slamrel.pipeline import run_pipeline, write_report
+
     if args.source not in WORLDS and not Path(args.source).is_dir():
         raise InputError(
             f"unknown SOURCE {args.source!r}; expected a SLAM result bundle directory or one of "

@@ -5,12 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from recovery.bundle import read_bundle, write_bundle
-from relation_metric.formats import write_trajectory
 from slamrel.commands import options as opt
+from slamrel.commands.choices import NOISE_TYPES, WORLDS
 from slamrel.commands.common import add_force_argument, check_outputs, errors_about
-from slamrel.simulate import slam_bundle, world_bundle
-from slamrel.worlds import NOISE_TYPES, WORLDS, make_world
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -19,7 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="write a simulated world (Hu et al.) as a bundle: log, true map, ground truth",
     )
     s.add_argument("world", choices=WORLDS, metavar="WORLD", help=", ".join(WORLDS))
-    s.add_argument("--noise", choices=sorted(NOISE_TYPES), default="a")
+    s.add_argument("--noise", choices=NOISE_TYPES, default="a")
     s.add_argument("--seed", type=opt.seed, default=0)
     s.add_argument(
         "--rate",
@@ -72,6 +69,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run_simulate(args: argparse.Namespace) -> int:
+    from recovery.bundle import write_bundle
+    from slamrel.simulate import world_bundle
+    from slamrel.worlds import make_world
+
     check_outputs([], [], dirs=[args.output], force=args.force)
     world = make_world(args.world, noise=args.noise, seed=args.seed, rate=args.rate)
     write_bundle(args.output, world_bundle(world), force=args.force)
@@ -85,6 +86,10 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 
 def run_slam(args: argparse.Namespace) -> int:
+    from recovery.bundle import read_bundle, write_bundle
+    from relation_metric.formats import write_trajectory
+    from slamrel.simulate import slam_bundle
+
     check_outputs([], [args.bundle], dirs=[args.output], force=args.force)
     bundle = read_bundle(args.bundle)
     with errors_about(args.bundle):

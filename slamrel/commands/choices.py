@@ -1,0 +1,22 @@
+"""Option choices the sub-command parsers need, without importing the modules that own them.
+
+``slamrel --help`` and ``slamrel CMD --help`` build every parser; importing the library
+modules that define these names would pull numpy, scipy.stats and the pipeline into every
+start-up. The values are copies; ``tests/test_cli_imports.py`` checks that each equals the
+owner's constant (named in the comment), so a change there fails the tests, not the CLI.
+"""
+
+from __future__ import annotations
+
+# relation_metric.formats.TRAJECTORY_FORMATS
+TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv")
+# relation_metric.metric.MODES
+MODES = ("paper", "metricevaluator")
+# relation_metric.relations.STRATEGIES
+STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs")
+# recovery.recover.METHODS, recovery.recover.MAP_MODES
+METHODS = ("filter", "smoother", "batch")
+MAP_MODES = ("joint", "marginal", "ignore")
+# slamrel.worlds.WORLDS, sorted(slamrel.worlds.NOISE_TYPES)
+WORLDS = ("simple1", "simple2", "complex1", "complex2")
+NOISE_TYPES = ("a", "b", "c")

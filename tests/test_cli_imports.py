@@ -1,0 +1,77 @@
+"""Start-up cost: what each entry point imports (issue 15).
+
+Each check runs a fresh interpreter (``sys.modules`` of the test process already holds
+everything) and lists the heavy modules it ended up with. The oracle is the rule itself:
+the modules named must be absent. The choices the parsers copy are checked against the
+constants of the modules that own them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from slamrel.commands import choices
+
+ROOT = Path(__file__).resolve().parents[1]
+HEAVY = ("matplotlib", "scipy.stats", "scipy.optimize", "scipy.spatial", "slamrel.pipeline")
+
+
+def _imported_after(code: str) -> set[str]:
+    """The heavy modules in ``sys.modules`` after running ``code`` in a fresh interpreter."""
+    probe = (
+        "import sys, json, io, contextlib\n"
+        f"{code}\n"
+        f"print(json.dumps([m for m in sys.modules if m in {list(HEAVY)!r}]))\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    out = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, env=env, check=True
+    )
+    return set(json.loads(out.stdout.strip().splitlines()[-1]))
+
+
+def test_import_relation_metric_is_light() -> None:
+    assert _imported_after("import relation_metric") == set()
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["evaluate", "--help"], ["recover", "--help"]])
+def test_help_imports_no_heavy_module(argv: list[str]) -> None:
+    code = (
+        "from slamrel.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        f"    try:\n        main({argv!r})\n    except SystemExit:\n        pass"
+    )
+    assert _imported_after(code) == set()
+
+
+def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
+    from slamrel.cli import main
+
+    assert main(["example", "-o", str(tmp_path / "ex"), "-q"]) == 0
+    ex = tmp_path / "ex"
+    for reference in ("reference.relations", "reference.txt"):
+        argv = ["evaluate", str(ex / reference), str(ex / "estimate.txt"), "-q"]
+        code = f"from slamrel.cli import main\nassert main({argv!r}) == 0"
+        assert _imported_after(code) == set(), reference
+
+
+def test_choices_equal_the_owners() -> None:
+    from recovery.recover import MAP_MODES, METHODS
+    from relation_metric.formats import TRAJECTORY_FORMATS
+    from relation_metric.metric import MODES
+    from relation_metric.relations import STRATEGIES
+    from slamrel.worlds import NOISE_TYPES, WORLDS
+
+    assert choices.TRAJECTORY_FORMATS == TRAJECTORY_FORMATS
+    assert choices.MODES == MODES
+    assert choices.STRATEGIES == STRATEGIES
+    assert choices.METHODS == METHODS
+    assert choices.MAP_MODES == MAP_MODES
+    assert choices.WORLDS == WORLDS
+    assert choices.NOISE_TYPES == tuple(sorted(NOISE_TYPES))
