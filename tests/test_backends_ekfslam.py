@@ -187,3 +187,62 @@ def test_bad_input():
             initial_covariance=np.zeros((3, 3)),
             noise_scale=0.0,
         )
+
+
+def _update_before_issue15(mu, cov, n, slot, meas, r_cov, t, m, gate=np.inf):
+    """The update as it was before issue 15 (full ``K Hᵀ`` product + ``0.5·(P + Pᵀ)`` pass)."""
+    from recovery.models import range_bearing
+
+    h, hx, hl = range_bearing(mu[:3], mu[slot : slot + 2])
+    nu = meas - h
+    nu[1] = se2.wrap_angle(nu[1])
+    pht = cov[:n, :3] @ hx.T + cov[:n, slot : slot + 2] @ hl.T
+    s = hx @ pht[:3] + hl @ pht[slot : slot + 2] + r_cov
+    s_inv = np.linalg.inv(s)
+    np.linalg.cholesky(s)
+    if gate < np.inf and float(nu @ s_inv @ nu) > gate:
+        return False
+    gain = pht @ s_inv
+    mu[:n] += gain @ nu
+    mu[2] = se2.wrap_angle(mu[2])
+    cov[:n, :n] -= gain @ pht.T
+    cov[:n, :n] = 0.5 * (cov[:n, :n] + cov[:n, :n].T)
+    return True
+
+
+@pytest.mark.parametrize("world, gate", [("complex1", None), ("simple2", 0.999)])
+def test_symmetric_update_equals_the_old_formula(monkeypatch, world, gate):
+    """The in-place symmetric update gives the old formula's results to 1e-12 (seeded run)."""
+    import slamrel.backends.ekfslam as ekfslam
+
+    b = world_bundle(make_world(world, noise="b", seed=7))
+    new = slam_bundle(b, outlier_gate=gate)[1]
+    monkeypatch.setattr(ekfslam, "_update", _update_before_issue15)
+    old = slam_bundle(b, outlier_gate=gate)[1]
+    np.testing.assert_array_equal(new.association, old.association)
+    np.testing.assert_allclose(new.map_xy, old.map_xy, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(new.map_covariance, old.map_covariance, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(new.online.poses, old.online.poses, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(new.online_covariance, old.online_covariance, rtol=0, atol=1e-12)
+
+
+def test_symmetric_update_keeps_the_covariance_exactly_symmetric():
+    """One update on a random symmetric P (in a larger buffer): P stays bit-symmetric."""
+    from slamrel.backends.ekfslam import _update
+
+    rng = np.random.default_rng(5)
+    n, cap = 203, 240  # more rows than one block, a view into a larger buffer
+    a = rng.normal(size=(n, n))
+    cov = np.zeros((cap, cap))
+    cov[:n, :n] = a @ a.T / n + np.eye(n)
+    mu = np.zeros(cap)
+    mu[3:n] = rng.uniform(-10, 10, n - 3)
+    ref_mu, ref_cov = mu.copy(), cov.copy()
+    r_cov = np.diag([0.1, 0.01])
+    assert _update(mu, cov, n, 41, np.array([5.0, 0.3]), r_cov, 0.0, 0)
+    _update_before_issue15(ref_mu, ref_cov, n, 41, np.array([5.0, 0.3]), r_cov, 0.0, 0)
+    p = cov[:n, :n]
+    assert np.array_equal(p, p.T)
+    np.testing.assert_allclose(p, ref_cov[:n, :n], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(mu, ref_mu, rtol=0, atol=1e-12)
+    assert not cov[n:].any() and not cov[:, n:].any()  # the unused buffer is untouched

@@ -38,6 +38,8 @@ __all__ = ["EkfSlamResult", "ekf_slam"]
 
 Array = NDArray[np.float64]
 UNASSOCIATED = -1
+# Rows of the covariance per block of the in-place update (see _update).
+_UPDATE_ROWS = 32
 
 
 @dataclass(frozen=True)
@@ -203,6 +205,7 @@ def ekf_slam(
             # P_xx ← F P_xx Fᵀ + Q, P_xm ← F P_xm
             top = fx @ cov[:3, :n]
             pxx = top[:, :3] @ fx.T + q
+            pxx = 0.5 * (pxx + pxx.T)  # 3×3: the covariance stays exactly symmetric
             cov[:3, :n] = top
             cov[:n, :3] = top.T
             cov[:3, :3] = pxx
@@ -257,7 +260,8 @@ def _initialise(mu: Array, cov: Array, n: int, meas: Array, r_cov: Array) -> Non
     cross = gx @ cov[:3, :n]  # (2, n)
     cov[n : n + 2, :n] = cross
     cov[:n, n : n + 2] = cross.T
-    cov[n : n + 2, n : n + 2] = gx @ cov[:3, :3] @ gx.T + gz @ r_cov @ gz.T
+    pll = gx @ cov[:3, :3] @ gx.T + gz @ r_cov @ gz.T
+    cov[n : n + 2, n : n + 2] = 0.5 * (pll + pll.T)
 
 
 def _update(
@@ -271,26 +275,40 @@ def _update(
     m: int,
     gate: float = np.inf,
 ) -> bool:
-    """EKF update with one range-bearing measurement; False (no update) when ``νᵀS⁻¹ν > gate``."""
+    """EKF update with one range-bearing measurement; False (no update) when ``νᵀS⁻¹ν > gate``.
+
+    The covariance update is written in a symmetric form, in place, one block of rows at a
+    time: with ``S = L Lᵀ`` (Cholesky) and ``W = P Hᵀ L⁻ᵀ`` (n × 2),
+    ``P ← P − K S Kᵀ = P − W Wᵀ``. Each element ``W_i·W_j`` is the same two products summed
+    in the same order as ``W_j·W_i``, so an exactly symmetric ``P`` stays exactly symmetric
+    (predict and initialise keep their small blocks symmetric) and no ``0.5·(P + Pᵀ)`` pass
+    over the whole matrix is needed. Rows are done :data:`_UPDATE_ROWS` at a time so the
+    temporary stays in cache and the matrix is read and written once (memory-bound: the
+    second BLAS thread does not pay at these shapes, so blocks are kept small enough that
+    OpenBLAS uses one).
+    """
     h, hx, hl = range_bearing(mu[:3], mu[slot : slot + 2])
     nu = meas - h
     nu[1] = se2.wrap_angle(nu[1])
     pht = cov[:n, :3] @ hx.T + cov[:n, slot : slot + 2] @ hl.T  # (n, 2)
     s = hx @ pht[:3] + hl @ pht[slot : slot + 2] + r_cov
+    s = 0.5 * (s + s.T)
     try:
-        s_inv = np.linalg.inv(s)
-        np.linalg.cholesky(s)
+        l_inv = np.linalg.inv(np.linalg.cholesky(s))  # S = L Lᵀ; fails unless S is PD
     except np.linalg.LinAlgError:
         raise DivergenceError(
             f"innovation covariance not positive definite at t={float(t):.6f} s (measurement {m})"
         ) from None
-    if gate < np.inf and float(nu @ s_inv @ nu) > gate:
+    white = l_inv @ nu  # L⁻¹ν: νᵀS⁻¹ν = |L⁻¹ν|²
+    if gate < np.inf and float(white @ white) > gate:
         return False
-    gain = pht @ s_inv
-    mu[:n] += gain @ nu
+    w = pht @ l_inv.T  # (n, 2): K = W L⁻¹, K S Kᵀ = W Wᵀ
+    mu[:n] += w @ white
     mu[2] = se2.wrap_angle(mu[2])
-    cov[:n, :n] -= gain @ pht.T
-    cov[:n, :n] = 0.5 * (cov[:n, :n] + cov[:n, :n].T)
+    wt = np.ascontiguousarray(w.T)
+    for i in range(0, n, _UPDATE_ROWS):
+        j = min(i + _UPDATE_ROWS, n)
+        cov[i:j, :n] -= w[i:j] @ wt
     return True
 
 
