@@ -123,12 +123,10 @@ def test_incremental_one_batch_is_solve_graph(rng):
         solve_graph_incremental(g, batch=0)
 
 
-def test_incremental_escapes_a_drifted_guess():
+def _drifted_loop():
     """Two laps of a 20 m circle whose odometry heading is biased by 0.02 rad a step (16 rad
-    over the run): from the chained guess the single batch solve stops in a minimum 100x
-    worse; the incremental one, each pose started next to optimised ones, finds a consistent
-    solution. Oracle: χ²/dof and the true landmarks (the gauge prior holds the true pose 0).
-    Seeded: with this geometry 5 of seeds 0-5 show the local minimum."""
+    over the run), 40 landmarks seen within 8 m; the guess is the chained odometry.
+    Returns the graph, the true landmarks and the dof (residuals minus unknowns)."""
     from slamrel.backends.graph import initial_landmarks
 
     rng = np.random.default_rng(1)
@@ -148,12 +146,67 @@ def test_incremental_escapes_a_drifted_guess():
     init = se2.cumulative_compose(z_pp, start=truth[0])
     g = PoseGraph(init, initial_landmarks(init, k, lm, z_pl, m), i, i + 1, z_pp, info3,
                   k, lm, z_pl, info2)  # fmt: skip
-    dof = 2 * k.size - 2 * m  # residuals minus unknowns (the odometry ones cancel the poses)
-    inc = solve_graph_incremental(g, batch=20)
+    return g, lms, 2 * k.size - 2 * m  # the odometry residuals cancel the pose unknowns
+
+
+def test_incremental_escapes_a_drifted_guess():
+    """From the chained guess of :func:`_drifted_loop` the single batch solve stops in a
+    minimum 100x worse; the incremental one, each pose started next to optimised ones, finds
+    a consistent solution. Oracle: χ²/dof and the true landmarks (the gauge prior holds the
+    true pose 0). Seeded: with this geometry 5 of seeds 0-5 show the local minimum."""
+    g, lms, dof = _drifted_loop()
+    inc = solve_graph_incremental(g, batch=20, growth=1.0)
     assert inc.converged and 2 * inc.cost[-1] / dof < 3.0  # the bias costs a little
     np.testing.assert_allclose(inc.landmarks, lms, atol=0.3)
     one = solve_graph(g)
     assert one.cost[-1] > 10 * inc.cost[-1]
+
+
+@pytest.mark.parametrize("batch, growth", [(20, 2.0), (20, 4.0), (50, 3.0), (20, 20.0)])
+def test_geometric_growth_with_stall_check_reaches_the_fixed_step_minimum(batch, growth):
+    """Growing geometrically solves fewer sub-problems; where a step grows too far (4x, 20x
+    here) the solution falls into the wrong minimum (shown with the check off), the χ²
+    check undoes it, and the result is the fixed-step scheme's minimum."""
+    g, lms, dof = _drifted_loop()
+    fixed = solve_graph_incremental(g, batch=20, growth=1.0)
+    grown = solve_graph_incremental(g, batch=batch, growth=growth)
+    assert grown.converged
+    assert grown.cost[-1] == pytest.approx(fixed.cost[-1], rel=1e-8)
+    np.testing.assert_allclose(grown.landmarks, fixed.landmarks, atol=1e-5)
+    np.testing.assert_allclose(grown.poses, fixed.poses, atol=1e-5)
+    if growth >= 3.0:
+        unchecked = solve_graph_incremental(g, batch=batch, growth=growth, gate=np.inf)
+        assert 2 * unchecked.cost[-1] / dof > 10 * (2 * fixed.cost[-1] / dof)
+    with pytest.raises(InputError, match="growth must be"):
+        solve_graph_incremental(g, batch=batch, growth=0.5)
+
+
+def test_normal_equations_equal_the_sparse_products(rng):
+    """H and the gradient assembled block-wise (in the fill-reducing order) equal JᵀJ and
+    Jᵀr from the sparse Jacobian; a solve equals a dense solve."""
+    from slamrel.backends.graph import _linearise, _NormalEquations
+
+    g, _, _ = small_world(rng, n=25, m=6)
+    w_pp, w_pl = _upper_sqrt(g.pp_info), _upper_sqrt(g.pl_info)
+    prior = (g.poses[0].copy(), np.eye(3) * 10)
+    x = g.poses + rng.normal(0, 0.1, g.poses.shape)
+    lm = g.landmarks + rng.normal(0, 0.1, g.landmarks.shape)
+    r, jac = _residuals_and_jacobian(g, x, lm, w_pp, w_pl, prior)
+    normal = _NormalEquations(g, g.n_poses, g.n_landmarks)
+    h_data, grad = normal.assemble(_linearise(g, x, lm, w_pp, w_pl, prior))
+    size = normal.size
+    h_new = np.zeros((size, size))
+    cols = np.repeat(np.arange(size), np.diff(normal.indptr))
+    h_new[normal.indices, cols] = h_data
+    perm = normal.perm  # new index of each variable
+    dense = (jac.T @ jac).toarray()
+    np.testing.assert_allclose(h_new[np.ix_(perm, perm)], dense, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(grad[perm], jac.T @ r, rtol=1e-12, atol=1e-9)
+    assert sorted(perm.tolist()) == list(range(size))
+    damping = np.full(size, 0.5)
+    got = normal.solve(h_data, damping, grad)
+    want = np.linalg.solve(dense + 0.5 * np.eye(size), jac.T @ r)
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
 
 
 def test_graph_validation(rng):

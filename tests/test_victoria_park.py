@@ -52,6 +52,17 @@ def test_least_squares_converges_from_odometry(vp, least_squares):
     assert 0.5 < 2 * sol.cost[-1] / dof < 1.5  # measured 0.89
 
 
+def test_grown_and_fixed_step_schemes_reach_one_minimum(vp, least_squares):
+    """The default geometric growth (500 poses, x2) and the fixed 500-pose step it replaced
+    end at the same minimum, cost 3091.97 (measured before issue 15)."""
+    fixed = solve_graph_incremental(vp.graph, batch=500, growth=1.0)
+    for sol in (least_squares, fixed):
+        assert sol.converged
+        assert sol.cost[-1] == pytest.approx(3091.97, abs=0.01)
+    np.testing.assert_allclose(least_squares.poses, fixed.poses, atol=1e-4)
+    np.testing.assert_allclose(least_squares.landmarks, fixed.landmarks, atol=1e-4)
+
+
 def test_two_starts_reach_one_minimum(vp, least_squares, ekf):
     slam, rec = ekf
     assert (slam.map_ids == vp.landmark_ids).all()

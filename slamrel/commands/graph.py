@@ -75,10 +75,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     s = sub.add_parser(
         "solve",
         help="full least squares on a pose graph with landmarks (g2o or iSAM text)",
-        description="Levenberg-Marquardt from the file's initial guess, grown --batch poses "
-        "at a time in pose order (an incremental smoother's way to avoid the local minima a "
-        "single batch solve from chained odometry falls into on long runs such as Victoria "
-        "Park); writes trajectory.txt (t = pose index), landmarks.csv and solved.g2o into -o DIR.",
+        description="Levenberg-Marquardt from the file's initial guess on a problem grown in "
+        "pose order, --batch poses first, the step multiplied by --growth each time, a step "
+        "whose solution is far less consistent (chi2/dof) than the last undone and retried "
+        "smaller (an incremental smoother's way to avoid the local minima a single batch "
+        "solve from chained odometry falls into on long runs such as Victoria Park); writes "
+        "trajectory.txt (t = pose index), landmarks.csv and solved.g2o into -o DIR.",
     )
     s.add_argument("graph", metavar="GRAPH")
     s.add_argument("-o", "--output", required=True, metavar="DIR")
@@ -88,7 +90,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         type=opt.nonnegative_int,
         default=500,
         metavar="N",
-        help="poses added per sub-problem (default 500; 0: one batch solve of the whole graph)",
+        help="poses of the first sub-problem (default 500; 0: one batch solve of the whole graph)",
+    )
+    s.add_argument(
+        "--growth",
+        type=opt.float_at_least(1.0),
+        default=2.0,
+        metavar="F",
+        help="factor on the poses added per sub-problem (default 2; 1: a fixed step of --batch)",
     )
     s.add_argument("--noise", choices=("covariance", "sqrt-information"), default="covariance")
     add_force_argument(s)
@@ -185,7 +194,7 @@ def run_solve(args: argparse.Namespace) -> int:
             sol = solve_graph(graph, max_iterations=args.max_iterations)
         else:
             sol = solve_graph_incremental(
-                graph, batch=args.batch, max_iterations=args.max_iterations
+                graph, batch=args.batch, growth=args.growth, max_iterations=args.max_iterations
             )
     out = Path(args.output)
     with staged_directory(out, kind="solve", force=args.force) as tmp:
