@@ -1,0 +1,298 @@
+"""Full least squares vs GTSAM (issue 15), both as whole processes, in the same run.
+
+Problems:
+
+* **Victoria Park** (``/work/shared/data/victoria_park/victoria_park.txt``, 6,969 poses,
+  151 landmarks, 3,640 landmark sightings), from chained odometry.
+* **Manhattan 10⁴**: a synthetic Manhattan-world pose graph (M3500-like: a walk on a 40 × 40 m
+  grid, 1 m steps, turns at random, a loop closure to the last visit of the same cell),
+  generated here, seeded, written as g2o; from chained odometry.
+
+slamrel: ``python -m slamrel solve FILE -o DIR`` (the default scheme: 500 poses first, the
+step doubled, χ² stall check) and, on Manhattan, ``--batch 0`` (one batch LM).
+GTSAM (in its own venv ``benchmarks/.venv-gtsam``, ``pip install gtsam numpy`` on first use):
+``LevenbergMarquardtOptimizer`` from the same initial guess (default parameters), and on
+Victoria Park also iSAM2 pose by pose followed by a final LM (GTSAM's best route there,
+since its batch LM from odometry stops in a local minimum, as slamrel's does). GTSAM gets
+the graph as arrays (``.npz``: no text parsing in its time); slamrel reads the text file.
+
+Objectives: pose–pose factors are GTSAM's ``BetweenFactorPose2`` with the same information
+matrix (its error is the SE(2) log of the discrepancy; slamrel's is
+``[R_iᵀ(t_j − t_i) − z_t, wrap(θ_j − θ_i − z_θ)]``: equal to first order). Landmark sightings
+(a point in the pose frame, isotropic σ) are GTSAM ``BearingRangeFactor2D`` with
+``σ_range = σ``, ``σ_bearing = σ / range`` (first-order equivalent). So each solution is
+scored in slamrel's objective too (``cost(GTSAM)`` below), which is what "same minimum"
+means here.
+
+Target (issue 15): no slower than GTSAM's LM where it converges (Manhattan), faster than
+GTSAM's best route on Victoria Park, same minimum.
+
+Run: ``python benchmarks/bench_least_squares.py`` (``--poses N`` for the Manhattan size).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(ROOT))
+
+from relation_metric import se2  # noqa: E402
+from slamrel.backends.g2o import write_g2o_graph  # noqa: E402
+from slamrel.backends.graph import PoseGraph, _residuals, _upper_sqrt  # noqa: E402
+from slamrel.importers.isam import read_isam  # noqa: E402
+
+VP = Path("/work/shared/data/victoria_park/victoria_park.txt")
+GTSAM_VENV = HERE / ".venv-gtsam"
+
+GTSAM_SCRIPT = textwrap.dedent(
+    """
+    import json, sys, time
+    import numpy as np
+    import gtsam
+    from gtsam import symbol
+
+    d = np.load(sys.argv[1])
+    route = sys.argv[2]
+    X = lambda k: symbol("x", int(k))
+    L = lambda k: symbol("l", int(k))
+    poses, lms = d["poses"], d["landmarks"]
+    graph = gtsam.NonlinearFactorGraph()
+    graph.add(gtsam.PriorFactorPose2(X(0), gtsam.Pose2(*poses[0]),
+                                     gtsam.noiseModel.Isotropic.Sigma(3, 1e-6)))
+    pp_factors = [[] for _ in range(len(poses))]
+    for i, j, z, info in zip(d["pp_i"], d["pp_j"], d["pp_z"], d["pp_info"]):
+        f = gtsam.BetweenFactorPose2(X(i), X(j), gtsam.Pose2(*z),
+                                     gtsam.noiseModel.Gaussian.Information(info))
+        pp_factors[max(i, j)].append(f)
+    pl_factors = [[] for _ in range(len(poses))]
+    for k, l, z, info in zip(d["pl_k"], d["pl_l"], d["pl_z"], d["pl_info"]):
+        r = float(np.hypot(*z))
+        s = 1.0 / np.sqrt(info[0, 0])
+        f = gtsam.BearingRangeFactor2D(X(k), L(l), gtsam.Rot2(float(np.arctan2(z[1], z[0]))), r,
+                                       gtsam.noiseModel.Diagonal.Sigmas(np.array([s / r, s])))
+        pl_factors[k].append(f)
+    initial = gtsam.Values()
+    for k, p in enumerate(poses):
+        initial.insert(X(k), gtsam.Pose2(*p))
+    for l, p in enumerate(lms):
+        initial.insert(L(l), gtsam.Point2(*p))
+    for fs in pp_factors + pl_factors:
+        for f in fs:
+            graph.add(f)
+    out = {}
+    start = time.perf_counter()
+    if route == "lm":
+        params = gtsam.LevenbergMarquardtParams()
+        opt = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
+        result = opt.optimize()
+        out["iterations"] = opt.iterations()
+    else:  # iSAM2 pose by pose, then a final LM
+        isam = gtsam.ISAM2(gtsam.ISAM2Params())
+        seen = set()
+        est = gtsam.Values()
+        for k in range(len(poses)):
+            new_f = gtsam.NonlinearFactorGraph()
+            new_v = gtsam.Values()
+            if k == 0:
+                new_f.add(graph.at(0))
+                new_v.insert(X(0), gtsam.Pose2(*poses[0]))
+            else:
+                prev = est.atPose2(X(k - 1))
+                rel = gtsam.Pose2(*poses[k - 1]).between(gtsam.Pose2(*poses[k]))
+                new_v.insert(X(k), prev.compose(rel))
+            for f in pp_factors[k]:
+                new_f.add(f)
+            for f, l in zip(pl_factors[k], d["pl_l"][d["pl_k"] == k]):
+                new_f.add(f)
+                if l not in seen:
+                    seen.add(l)
+                    p = gtsam.Pose2(*poses[k]).transformTo(gtsam.Point2(*lms[l]))
+                    new_v.insert(L(l), new_v.atPose2(X(k)).transformFrom(p)
+                                 if new_v.exists(X(k)) else est.atPose2(X(k)).transformFrom(p))
+            isam.update(new_f, new_v)
+            est = isam.calculateEstimate()
+        opt = gtsam.LevenbergMarquardtOptimizer(graph, est, gtsam.LevenbergMarquardtParams())
+        result = opt.optimize()
+        out["iterations"] = len(poses) + opt.iterations()
+    out["optimise_s"] = time.perf_counter() - start
+    out["error"] = graph.error(result)
+    out["initial_error"] = graph.error(initial)
+    np.savez(sys.argv[3],
+             poses=np.array([[result.atPose2(X(k)).x(), result.atPose2(X(k)).y(),
+                              result.atPose2(X(k)).theta()] for k in range(len(poses))]),
+             landmarks=np.array([result.atPoint2(L(l)) for l in range(len(lms))]).reshape(-1, 2))
+    print(json.dumps(out))
+    """
+)
+
+
+def manhattan(n: int, seed: int = 0, size: int = 40) -> PoseGraph:
+    """A Manhattan-world pose graph: 1 m steps on a grid, loop closures to the last visit."""
+    rng = np.random.default_rng(seed)
+    moves = np.array([[1, 0], [0, 1], [-1, 0], [0, -1]])
+    cell = np.zeros((n, 2), dtype=np.int64)
+    head = np.zeros(n, dtype=np.int64)
+    h = 0
+    for k in range(1, n):  # the walk itself (a generator, not a hot path)
+        if rng.random() < 0.25:
+            h = (h + rng.choice((1, 3))) % 4
+        while not (0 <= cell[k - 1] + moves[h]).all() or not (cell[k - 1] + moves[h] < size).all():
+            h = (h + rng.choice((1, 3))) % 4
+        cell[k] = cell[k - 1] + moves[h]
+        head[k] = h
+    truth = np.column_stack((cell.astype(float), head * np.pi / 2))
+    sd = np.array([0.05, 0.05, 0.01])
+    i = np.arange(n - 1)
+    j = i + 1
+    key = cell[:, 0] * size + cell[:, 1]
+    order = np.lexsort((np.arange(n), key))
+    same = np.flatnonzero(key[order][1:] == key[order][:-1])
+    ci, cj = order[same], order[same + 1]  # consecutive visits of one cell
+    keep = cj - ci > 1
+    pp_i = np.concatenate((i, ci[keep]))
+    pp_j = np.concatenate((j, cj[keep]))
+    z = se2.between(truth[pp_i], truth[pp_j]) + rng.normal(0, 1, (pp_i.size, 3)) * sd
+    z[:, 2] = se2.wrap_angle(z[:, 2])
+    info = np.broadcast_to(np.diag(sd**-2), (pp_i.size, 3, 3))
+    init = se2.cumulative_compose(z[: n - 1], start=truth[0])
+    return PoseGraph(init, np.empty((0, 2)), pp_i, pp_j, z, info)
+
+
+def slamrel_cost(g: PoseGraph, poses: np.ndarray, landmarks: np.ndarray) -> float:
+    w_pl = _upper_sqrt(g.pl_info) if g.pl_k.size else np.empty((0, 2, 2))
+    prior = (g.poses[0].copy(), np.eye(3) / 1e-6)
+    r, _ = _residuals(g, poses, landmarks, _upper_sqrt(g.pp_info), w_pl, prior)
+    return 0.5 * float(r @ r)
+
+
+def run_slamrel(path: Path, out: Path, extra: list[str]) -> dict[str, float]:
+    argv = [sys.executable, "-m", "slamrel", "solve", str(path), "-o", str(out), "--force"]
+    start = time.perf_counter()
+    r = subprocess.run([*argv, *extra], capture_output=True, text=True, check=True)
+    wall = time.perf_counter() - start
+    m = re.search(r"after (\d+) iterations: cost \S+ -> (\S+);", r.stdout)
+    assert m, r.stdout
+    poses = np.loadtxt(out / "trajectory.txt")[:, 1:4]
+    return {"wall_s": wall, "iterations": int(m.group(1)), "poses": poses}
+
+
+def ensure_gtsam() -> Path | None:
+    python = GTSAM_VENV / "bin" / "python"
+    if python.exists():
+        if subprocess.run([str(python), "-c", "import gtsam"], capture_output=True).returncode == 0:
+            return python
+    print(f"creating {GTSAM_VENV} with gtsam (once) ...", flush=True)
+    if subprocess.run([sys.executable, "-m", "venv", str(GTSAM_VENV)]).returncode:
+        return None
+    r = subprocess.run(
+        [str(python), "-m", "pip", "install", "-q", "gtsam", "numpy"],
+        capture_output=True,
+        text=True,
+    )
+    if r.returncode:
+        print("cannot install gtsam:", r.stderr.strip()[-500:])
+        return None
+    return python
+
+
+def run_gtsam(python: Path, g: PoseGraph, route: str, tmp: Path) -> dict[str, float] | None:
+    npz, sol, script = tmp / "graph.npz", tmp / f"gtsam_{route}.npz", tmp / "gtsam_solve.py"
+    np.savez(
+        npz,
+        poses=g.poses,
+        landmarks=g.landmarks,
+        pp_i=g.pp_i,
+        pp_j=g.pp_j,
+        pp_z=g.pp_z,
+        pp_info=g.pp_info,
+        pl_k=g.pl_k,
+        pl_l=g.pl_l,
+        pl_z=g.pl_z,
+        pl_info=g.pl_info,
+    )
+    script.write_text(GTSAM_SCRIPT)
+    start = time.perf_counter()
+    r = subprocess.run(
+        [str(python), str(script), str(npz), route, str(sol)], capture_output=True, text=True
+    )
+    wall = time.perf_counter() - start
+    if r.returncode:
+        print(f"gtsam {route} failed:", r.stderr.strip()[-800:])
+        return None
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    res = np.load(sol)
+    out.update(wall_s=wall, cost=slamrel_cost(g, res["poses"], res["landmarks"]))
+    out["poses"] = res["poses"]
+    return out
+
+
+def report(name: str, g: PoseGraph, ours: dict, gtsam: dict[str, dict | None]) -> None:
+    c_ours = slamrel_cost(g, ours["poses"], _landmarks_of(ours))
+    print(f"\n{name}: {g.n_poses} poses, {g.n_landmarks} landmarks, {g.pp_i.size} pose-pose and "
+          f"{g.pl_k.size} pose-landmark factors")  # fmt: skip
+    print(f"  slamrel {ours['label']:<28s} {ours['wall_s']:7.2f} s  {ours['iterations']:5d} it  "
+          f"cost {c_ours:.6g}")  # fmt: skip
+    for route, res in gtsam.items():
+        if res is None:
+            print(f"  GTSAM {route}: unavailable")
+            continue
+        dxy = float(np.abs(res["poses"][:, :2] - ours["poses"][:, :2]).max())
+        print(
+            f"  GTSAM {route:<30s} {res['wall_s']:7.2f} s  {res['iterations']:5d} it  "
+            f"cost {res['cost']:.6g} (GTSAM's own error {res['error']:.6g}); "
+            f"time ratio GTSAM/slamrel {res['wall_s'] / ours['wall_s']:.2f}; "
+            f"max |Δxy| to slamrel {dxy:.2g} m"
+        )
+
+
+def _landmarks_of(ours: dict) -> np.ndarray:
+    return ours["landmarks"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--poses", type=int, default=10_000)
+    parser.add_argument("--no-gtsam", action="store_true")
+    args = parser.parse_args()
+    python = None if args.no_gtsam else ensure_gtsam()
+    with tempfile.TemporaryDirectory() as tmpdir:
+        tmp = Path(tmpdir)
+        # --- Manhattan -------------------------------------------------------------------
+        g = manhattan(args.poses)
+        path = tmp / "manhattan.g2o"
+        write_g2o_graph(path, g)
+        for label, extra in (("default (500, x2)", []), ("--batch 0 (one LM)", ["--batch", "0"])):
+            ours = run_slamrel(path, tmp / "m_out", extra)
+            ours.update(label=label, landmarks=np.empty((0, 2)))
+            gt = {"LM": run_gtsam(python, g, "lm", tmp)} if python and not extra else {}
+            report(f"Manhattan {args.poses}", g, ours, gt)
+        # --- Victoria Park ---------------------------------------------------------------
+        if VP.is_file():
+            vp = read_isam(VP).graph
+            ours = run_slamrel(VP, tmp / "vp_out", [])
+            lm_csv = np.genfromtxt(tmp / "vp_out" / "landmarks.csv", delimiter=",", names=True)
+            ours.update(
+                label="default (500, x2)",
+                landmarks=np.column_stack((lm_csv["x"], lm_csv["y"])),
+            )
+            gt = {}
+            if python:
+                gt["LM from odometry"] = run_gtsam(python, vp, "lm", tmp)
+                gt["iSAM2 + final LM"] = run_gtsam(python, vp, "isam2", tmp)
+            report("Victoria Park", vp, ours, gt)
+
+
+if __name__ == "__main__":
+    main()
