@@ -13,7 +13,8 @@ step doubled, χ² stall check) and, on Manhattan, ``--batch 0`` (one batch LM).
 GTSAM (in its own venv ``benchmarks/.venv-gtsam``, ``pip install gtsam numpy`` on first use):
 ``LevenbergMarquardtOptimizer`` from the same initial guess (default parameters), and on
 Victoria Park also iSAM2 pose by pose followed by a final LM (GTSAM's best route there,
-since its batch LM from odometry stops in a local minimum, as slamrel's does). GTSAM gets
+since its batch LM from odometry stops in a local minimum, as slamrel's does), and the
+driver slamrel used before issue 15 (grown 500 poses at a time, LM on each). GTSAM gets
 the graph as arrays (``.npz``: no text parsing in its time); slamrel reads the text file.
 
 Objectives: pose–pose factors are GTSAM's ``BetweenFactorPose2`` with the same information
@@ -98,20 +99,51 @@ GTSAM_SCRIPT = textwrap.dedent(
         opt = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
         result = opt.optimize()
         out["iterations"] = opt.iterations()
+    elif route == "grow":  # the driver slamrel had before issue 15: 500 poses at a time
+        pp_i, pp_j, pl_k, pl_l = d["pp_i"], d["pp_j"], d["pl_k"], d["pl_l"]
+        est = gtsam.Values()
+        iterations = 0
+        start_k = 0
+        while start_k < len(poses):
+            end = min(start_k + 500, len(poses))
+            sub = gtsam.NonlinearFactorGraph()
+            sub.add(graph.at(0))
+            for k in range(end):
+                for f in pp_factors[k]:
+                    sub.add(f)
+                for f in pl_factors[k]:
+                    sub.add(f)
+            for k in range(start_k, end):
+                if k == 0:
+                    est.insert(X(0), gtsam.Pose2(*poses[0]))
+                else:
+                    rel = gtsam.Pose2(*poses[k - 1]).between(gtsam.Pose2(*poses[k]))
+                    est.insert(X(k), est.atPose2(X(k - 1)).compose(rel))
+            for k, l in zip(pl_k[(pl_k >= start_k) & (pl_k < end)],
+                            pl_l[(pl_k >= start_k) & (pl_k < end)]):
+                if not est.exists(L(l)):
+                    p = gtsam.Pose2(*poses[k]).transformTo(gtsam.Point2(*lms[l]))
+                    est.insert(L(l), est.atPose2(X(k)).transformFrom(p))
+            opt = gtsam.LevenbergMarquardtOptimizer(sub, est, gtsam.LevenbergMarquardtParams())
+            est = opt.optimize()
+            iterations += opt.iterations()
+            start_k = end
+        result = est
+        out["iterations"] = iterations
     else:  # iSAM2 pose by pose, then a final LM
         isam = gtsam.ISAM2(gtsam.ISAM2Params())
         seen = set()
-        est = gtsam.Values()
+        last = None
         for k in range(len(poses)):
             new_f = gtsam.NonlinearFactorGraph()
             new_v = gtsam.Values()
             if k == 0:
                 new_f.add(graph.at(0))
-                new_v.insert(X(0), gtsam.Pose2(*poses[0]))
+                xk = gtsam.Pose2(*poses[0])
             else:
-                prev = est.atPose2(X(k - 1))
                 rel = gtsam.Pose2(*poses[k - 1]).between(gtsam.Pose2(*poses[k]))
-                new_v.insert(X(k), prev.compose(rel))
+                xk = last.compose(rel)
+            new_v.insert(X(k), xk)
             for f in pp_factors[k]:
                 new_f.add(f)
             for f, l in zip(pl_factors[k], d["pl_l"][d["pl_k"] == k]):
@@ -119,11 +151,11 @@ GTSAM_SCRIPT = textwrap.dedent(
                 if l not in seen:
                     seen.add(l)
                     p = gtsam.Pose2(*poses[k]).transformTo(gtsam.Point2(*lms[l]))
-                    new_v.insert(L(l), new_v.atPose2(X(k)).transformFrom(p)
-                                 if new_v.exists(X(k)) else est.atPose2(X(k)).transformFrom(p))
+                    new_v.insert(L(l), xk.transformFrom(p))
             isam.update(new_f, new_v)
-            est = isam.calculateEstimate()
-        opt = gtsam.LevenbergMarquardtOptimizer(graph, est, gtsam.LevenbergMarquardtParams())
+            last = isam.calculateEstimatePose2(X(k))
+        opt = gtsam.LevenbergMarquardtOptimizer(graph, isam.calculateEstimate(),
+                                                gtsam.LevenbergMarquardtParams())
         result = opt.optimize()
         out["iterations"] = len(poses) + opt.iterations()
     out["optimise_s"] = time.perf_counter() - start
@@ -290,6 +322,7 @@ def main() -> None:
             gt = {}
             if python:
                 gt["LM from odometry"] = run_gtsam(python, vp, "lm", tmp)
+                gt["grown 500 at a time (LM each)"] = run_gtsam(python, vp, "grow", tmp)
                 gt["iSAM2 + final LM"] = run_gtsam(python, vp, "isam2", tmp)
             report("Victoria Park", vp, ours, gt)
 

@@ -75,8 +75,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     s = sub.add_parser(
         "solve",
         help="full least squares on a pose graph with landmarks (g2o or iSAM text)",
-        description="Levenberg-Marquardt from the file's initial guess on a problem grown in "
-        "pose order, --batch poses first, the step multiplied by --growth each time, a step "
+        description="Levenberg-Marquardt from the file's initial guess: the whole graph "
+        "first, given up when it stalls (a step removing less than half the cost while "
+        "chi2/dof > 4); then on a problem grown in pose order, --batch poses first, the "
+        "step multiplied by --growth each time, a step "
         "whose solution is far less consistent (chi2/dof) than the last undone and retried "
         "smaller (an incremental smoother's way to avoid the local minima a single batch "
         "solve from chained odometry falls into on long runs such as Victoria Park); writes "
