@@ -25,6 +25,9 @@ matrix (its error is the SE(2) log of the discrepancy; slamrel's is
 scored in slamrel's objective too (``cost(GTSAM)`` below), which is what "same minimum"
 means here.
 
+Also, in process: the solver as it was before issue 15 (``slamrel/backends/graph.py`` at
+``defa31f``, loaded from git) against the current one on both problems.
+
 Target (issue 15): no slower than GTSAM's LM where it converges (Manhattan), faster than
 GTSAM's best route on Victoria Park, same minimum.
 
@@ -220,6 +223,36 @@ def run_slamrel(path: Path, out: Path, extra: list[str]) -> dict[str, float]:
     return {"wall_s": wall, "iterations": int(m.group(1)), "poses": poses}
 
 
+BEFORE = "defa31f"  # main before issue 15
+
+
+def old_solver():  # type: ignore[no-untyped-def]
+    """``slamrel.backends.graph`` as it was before issue 15 (from git), as a module."""
+    import importlib.util
+
+    text = subprocess.run(
+        ["git", "-C", str(ROOT), "show", f"{BEFORE}:slamrel/backends/graph.py"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    path = Path(tempfile.mkdtemp()) / "graph_before_issue15.py"
+    path.write_text(text)
+    spec = importlib.util.spec_from_file_location("graph_before_issue15", path)
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    return module
+
+
+def in_process(label: str, fn) -> None:  # type: ignore[no-untyped-def]
+    start = time.perf_counter()
+    sol = fn()
+    wall = time.perf_counter() - start
+    print(
+        f"  in process: {label:<44s} {wall:7.2f} s  {sol.iterations:5d} it  cost {sol.cost[-1]:.6g}"
+    )
+
+
 def ensure_gtsam() -> Path | None:
     python = GTSAM_VENV / "bin" / "python"
     if python.exists():
@@ -297,6 +330,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--poses", type=int, default=10_000)
     parser.add_argument("--no-gtsam", action="store_true")
+    parser.add_argument("--no-before", action="store_true", help="skip the pre-issue-15 solver")
     args = parser.parse_args()
     python = None if args.no_gtsam else ensure_gtsam()
     with tempfile.TemporaryDirectory() as tmpdir:
@@ -310,6 +344,15 @@ def main() -> None:
             ours.update(label=label, landmarks=np.empty((0, 2)))
             gt = {"LM": run_gtsam(python, g, "lm", tmp)} if python and not extra else {}
             report(f"Manhattan {args.poses}", g, ours, gt)
+        new = __import__("slamrel.backends.graph", fromlist=["solve_graph"])
+        if not args.no_before:
+            old = old_solver()
+            in_process(f"before issue 15 ({BEFORE}) solve_graph", lambda: old.solve_graph(g))
+        in_process("now solve_graph", lambda: new.solve_graph(g))
+        in_process(
+            "now solve_graph_incremental(batch=500)",
+            lambda: new.solve_graph_incremental(g, batch=500),
+        )
         # --- Victoria Park ---------------------------------------------------------------
         if VP.is_file():
             vp = read_isam(VP).graph
@@ -325,6 +368,15 @@ def main() -> None:
                 gt["grown 500 at a time (LM each)"] = run_gtsam(python, vp, "grow", tmp)
                 gt["iSAM2 + final LM"] = run_gtsam(python, vp, "isam2", tmp)
             report("Victoria Park", vp, ours, gt)
+            if not args.no_before:
+                in_process(
+                    f"before issue 15 ({BEFORE}) incremental(batch=500)",
+                    lambda: old.solve_graph_incremental(vp, batch=500),
+                )
+            in_process(
+                "now solve_graph_incremental(batch=500)",
+                lambda: new.solve_graph_incremental(vp, batch=500),
+            )
 
 
 if __name__ == "__main__":
