@@ -240,6 +240,7 @@ def old_solver():  # type: ignore[no-untyped-def]
     path.write_text(text)
     spec = importlib.util.spec_from_file_location("graph_before_issue15", path)
     module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    sys.modules[spec.name] = module  # type: ignore[union-attr]
     spec.loader.exec_module(module)  # type: ignore[union-attr]
     return module
 
