@@ -289,6 +289,23 @@ def test_cli_solve_zero_isam_covariance_exit_3(tmp_path, capsys):
     assert "Traceback" not in err and "np." not in err
 
 
+def test_cli_solve_growth_option(tmp_path, capsys, rng):
+    """--growth below 1 is a usage error (exit 2); a valid one solves to the minimum."""
+    from slamrel.backends.g2o import write_g2o_graph
+
+    g, _, _ = small_world(rng, n=30, m=8)
+    path = tmp_path / "g.g2o"
+    write_g2o_graph(path, g)
+    with pytest.raises(SystemExit) as e:
+        main(["solve", str(path), "-o", str(tmp_path / "a"), "--growth", "0.5"])
+    assert e.value.code == 2
+    assert "--growth: expected a finite number >= 1" in capsys.readouterr().err
+    out = tmp_path / "b"
+    assert main(["solve", str(path), "-o", str(out), "--batch", "7", "--growth", "3", "-q"]) == 0
+    poses = np.loadtxt(out / "trajectory.txt")[:, 1:4]
+    np.testing.assert_allclose(poses, solve_graph(g).poses, atol=1e-6)
+
+
 def test_pose_covariances_equal_dense_inverse(rng):
     from slamrel.backends.graph import pose_covariances
 
