@@ -37,7 +37,6 @@ from relation_metric.errors import InputError
 from relation_metric.fastparse import UTF8_BOM, read_decimal_table
 from relation_metric.outputs import (
     atomic_write,
-    check_output_file,
     write_bytes_atomic,
     write_text_atomic,
 )
@@ -48,7 +47,6 @@ __all__ = [
     "read_source",
     "read_numeric_table",
     "atomic_write",
-    "check_not_input",
     "RowLines",
     "CsvTable",
     "read_csv_table",
@@ -120,15 +118,6 @@ class SourceText:
                     self.warn_cut_off(number)
                     return
                 yield number, text
-
-    def is_last_line(self, number: int) -> bool:
-        """True when ``number`` is the cut-off last line (kept for older callers;
-        :meth:`data_lines` never yields it)."""
-        return number == self.cut_off_line()
-
-    def warn_truncated(self, number: int, expected: str = "") -> None:
-        """Alias of :meth:`warn_cut_off` (kept for older callers)."""
-        self.warn_cut_off(number)
 
     def warn_cut_off(self, number: int) -> None:
         """Issue the warning for the skipped, cut-off last line (once)."""
@@ -584,12 +573,6 @@ def write_csv_table(
 ) -> None:
     """Write :func:`format_csv_table` to ``path`` atomically."""
     write_text_atomic(path, format_csv_table(header, columns, fmt))
-
-
-def check_not_input(output: PathLike, inputs: Sequence[PathLike | None]) -> None:
-    """Refuse to write ``output`` over one of the ``inputs`` (see
-    :func:`relation_metric.outputs.check_output_file`, which this calls)."""
-    check_output_file(output, inputs=inputs)
 
 
 def read_keyword_records(

@@ -1,13 +1,13 @@
-"""Self-contained HTML reports and atomic report directories.
+"""Self-contained HTML reports.
 
 A report is a list of sections, each with a heading, prose, tables and figures. Figures are
 embedded as base64 PNG, styles are inline: the single ``report.html`` opens offline. Every
 number shown in a table comes from the same dictionaries that are written to
 ``metrics.json``, so the two cannot disagree.
 
-:func:`report_directory` (an alias of :func:`relation_metric.outputs.staged_directory`)
-builds a report in a temporary folder beside the target and swaps it in only when everything
-is written, so an interrupted run (Ctrl-C) leaves no half-written report behind.
+The report folder is written by :func:`slamrel.pipeline.write_report` through
+:func:`relation_metric.outputs.staged_directory`: built beside the target and swapped in only
+when everything is written, so an interrupted run (Ctrl-C) leaves no half-written report.
 """
 
 from __future__ import annotations
@@ -16,14 +16,10 @@ import base64
 import html
 import io
 import math
-import os
 from collections.abc import Sequence
-from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
-from relation_metric.outputs import staged_directory
 from slamrel.verdict import Verdict
 
 __all__ = [
@@ -32,7 +28,6 @@ __all__ = [
     "Section",
     "render_html",
     "verdict_html",
-    "report_directory",
     "figure_png",
 ]
 
@@ -182,11 +177,3 @@ def figure_png(fig: Any, *, dpi: int = 100) -> bytes:
     finally:
         plt.close(fig)
     return buf.getvalue()
-
-
-def report_directory(
-    target: str | os.PathLike[str], *, force: bool = True
-) -> AbstractContextManager[Path]:
-    """A report folder built beside ``target`` and swapped in whole (thin alias of
-    :func:`relation_metric.outputs.staged_directory` with ``kind="report"``)."""
-    return staged_directory(target, kind="report", force=force)

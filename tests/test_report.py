@@ -6,8 +6,8 @@ import html.parser
 
 import pytest
 
-from relation_metric.outputs import MANIFEST
-from slamrel.report import Figure, Section, Table, render_html, report_directory
+from relation_metric.outputs import MANIFEST, staged_directory
+from slamrel.report import Figure, Section, Table, render_html
 
 PNG = b"\x89PNG\r\n\x1a\n" + b"\x00" * 16
 
@@ -51,18 +51,18 @@ def test_render_html_tables_and_figures_are_embedded():
     assert "data:image/png;base64," in text and "http" not in text  # self-contained
 
 
-def test_report_directory_replaces_only_when_complete(tmp_path):
+def test_report_folder_replaces_only_when_complete(tmp_path):
     target = tmp_path / "rep"
-    with report_directory(target) as d:
+    with staged_directory(target, kind="report") as d:
         (d / "a.txt").write_text("1")
     assert (target / "a.txt").read_text() == "1"
     with pytest.raises(KeyboardInterrupt):
-        with report_directory(target) as d:
+        with staged_directory(target, kind="report") as d:
             (d / "a.txt").write_text("half")
             raise KeyboardInterrupt
     assert (target / "a.txt").read_text() == "1"  # the old report survives
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]  # nothing half-written left
-    with report_directory(target) as d:
+    with staged_directory(target, kind="report") as d:
         (d / "b.txt").write_text("2")
     assert sorted(p.name for p in target.iterdir()) == ["b.txt", MANIFEST]  # a.txt is gone
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]

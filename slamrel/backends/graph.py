@@ -710,6 +710,18 @@ def pose_covariances(
     ndarray, shape (K, 3, 3)
         Computed with one sparse LU factorisation and a multi-right-hand-side solve.
     """
+    idx = np.arange(graph.n_poses) if indices is None else np.asarray(indices, dtype=np.int64)
+    cols = (3 * idx[:, None] + np.arange(3)[None, :]).ravel()
+    sol = _inverse_block(graph, solution, cols, prior_sigma)
+    blocks = sol.reshape(idx.size, 3, idx.size, 3)
+    return blocks[np.arange(idx.size), :, np.arange(idx.size), :]
+
+
+def _inverse_block(
+    graph: PoseGraph, solution: GraphSolution, cols: NDArray[np.int64], prior_sigma: float
+) -> Array:
+    """``(H⁻¹)[cols][:, cols]`` (symmetrised) with ``H = JᵀJ`` at the solution, gauge prior
+    included: one sparse LU factorisation and a multi-right-hand-side solve."""
     w_pp = _upper_sqrt(graph.pp_info)
     w_pl = _upper_sqrt(graph.pl_info) if graph.pl_k.size else np.empty((0, 2, 2))
     prior = (graph.poses[0].copy(), np.eye(3) / prior_sigma)
@@ -717,14 +729,10 @@ def pose_covariances(
         graph, np.asarray(solution.poses), np.asarray(solution.landmarks), w_pp, w_pl, prior
     )
     h = (jac.T @ jac).tocsc()
-    idx = np.arange(graph.n_poses) if indices is None else np.asarray(indices, dtype=np.int64)
-    cols = (3 * idx[:, None] + np.arange(3)[None, :]).ravel()
     rhs = np.zeros((h.shape[0], cols.size))
     rhs[cols, np.arange(cols.size)] = 1.0
-    sol = spla.splu(h).solve(rhs)
-    blocks = sol[cols, :].reshape(idx.size, 3, idx.size, 3)
-    out = blocks[np.arange(idx.size), :, np.arange(idx.size), :]
-    return 0.5 * (out + np.swapaxes(out, 1, 2))
+    out = spla.splu(h).solve(rhs)[cols, :]
+    return 0.5 * (out + out.T)
 
 
 def joint_covariance(
@@ -754,13 +762,6 @@ def joint_covariance(
     ndarray, shape (3P + 2Q, 3P + 2Q)
         Ordered ``[x_p0, y_p0, θ_p0, x_p1, …, x_l0, y_l0, …]``.
     """
-    w_pp = _upper_sqrt(graph.pp_info)
-    w_pl = _upper_sqrt(graph.pl_info) if graph.pl_k.size else np.empty((0, 2, 2))
-    prior = (graph.poses[0].copy(), np.eye(3) / prior_sigma)
-    _, jac = _residuals_and_jacobian(
-        graph, np.asarray(solution.poses), np.asarray(solution.landmarks), w_pp, w_pl, prior
-    )
-    h = (jac.T @ jac).tocsc()
     pi = np.arange(graph.n_poses) if poses is None else np.asarray(poses, dtype=np.int64)
     li = np.empty(0, np.int64) if landmarks is None else np.asarray(landmarks, dtype=np.int64)
     cols = np.concatenate(
@@ -769,7 +770,4 @@ def joint_covariance(
             (3 * graph.n_poses + 2 * li[:, None] + np.arange(2)[None, :]).ravel(),
         )
     )
-    rhs = np.zeros((h.shape[0], cols.size))
-    rhs[cols, np.arange(cols.size)] = 1.0
-    out = spla.splu(h).solve(rhs)[cols, :]
-    return 0.5 * (out + out.T)
+    return _inverse_block(graph, solution, cols, prior_sigma)

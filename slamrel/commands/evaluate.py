@@ -14,7 +14,7 @@ import numpy as np
 from relation_metric.alignment import absolute_trajectory_error
 from relation_metric.association import synchronize
 from relation_metric.errors import InputError
-from relation_metric.evaluate import Evaluation, evaluate
+from relation_metric.evaluate import Evaluation, error_summaries, evaluate
 from relation_metric.formats import (
     RELATIONS_EXTENSIONS,
     TRAJECTORY_EXTENSIONS,
@@ -26,7 +26,7 @@ from relation_metric.formats import (
 from relation_metric.metric import MODES
 from relation_metric.relations import RelationSet, read_relations
 from relation_metric.results import write_evo_zip, write_json, write_per_relation_csv
-from relation_metric.textio import read_source
+from relation_metric.textio import read_numeric_table, read_source
 from relation_metric.timeorder import RepeatedTimeWarning, zero_length
 from relation_metric.trajectory import Trajectory
 from slamrel.commands import options as opt
@@ -187,7 +187,6 @@ def _eight_columns_are_relations(path: str) -> bool:
     warning with how to state it; a file that cannot be told apart (fewer than 2 rows, all
     unit) is refused naming both readings.
     """
-    from relation_metric.textio import read_numeric_table
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the reader proper warns (cut-off last line, …)
@@ -232,7 +231,6 @@ def load_reference(
     ``relations_zero_length_dropped`` for a .relations file; ``reference_out_of_order`` and
     ``reference_repeated_times_dropped`` for a reference trajectory.
     """
-    import numpy as np
 
     notes = {} if notes is None else notes
     if _is_relations_file(args.reference, args):
@@ -432,9 +430,6 @@ def _ate(estimate: Trajectory, reference: Trajectory, tol: float) -> dict[str, A
 
 def summary_text(ev: Evaluation, result: dict[str, Any], *, degrees: bool) -> str:
     """The console summary of an evaluation."""
-    import numpy as np
-
-    from relation_metric.evaluate import error_summaries
 
     unit = "deg" if degrees else "rad"
     rot_values = ev.errors.rotation[ev.valid]
