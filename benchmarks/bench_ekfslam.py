@@ -1,8 +1,8 @@
 """EKF-SLAM update speed (issue 15), against the update before it, measured in the same run.
 
 1. One update at n ≈ 2,335 state dimensions (1,166 landmarks): the symmetric in-place form
-   ``P −= W Wᵀ`` (``slamrel.backends.ekfslam._update``) vs the old full product +
-   ``0.5·(P + Pᵀ)`` pass (a copy of it lives in ``tests/test_backends_ekfslam.py``), on the
+   ``P −= W Wᵀ`` (``recovery.estimation.ekfslam._update``) vs the old full product +
+   ``0.5·(P + Pᵀ)`` pass (a copy of it lives in ``tests/test_estimation_ekfslam.py``), on the
    same covariance; results compared. Target: ≥ 2× faster, equal to 1e-12.
 2. Whole EKF-SLAM runs (``slam_bundle``) on the built-in ``complex1`` world with 225
    (default) and 400 features, new vs old update (monkeypatched), max abs difference of the
@@ -24,9 +24,9 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE.parent / "tests"))
 
-from test_backends_ekfslam import _update_before_issue15 as old_update  # noqa: E402
+from test_estimation_ekfslam import _update_before_issue15 as old_update  # noqa: E402
 
-import slamrel.backends.ekfslam as ekfslam  # noqa: E402
+import recovery.estimation.ekfslam as ekfslam  # noqa: E402
 import slamrel.worlds as worlds  # noqa: E402
 from slamrel.simulate import slam_bundle, world_bundle  # noqa: E402
 

@@ -25,7 +25,7 @@ matrix (its error is the SE(2) log of the discrepancy; slamrel's is
 scored in slamrel's objective too (``cost(GTSAM)`` below), which is what "same minimum"
 means here.
 
-Also, in process: the solver as it was before issue 15 (``slamrel/backends/graph.py`` at
+Also, in process: the solver as it was before issue 15 (``recovery/estimation/graph.py`` at
 ``defa31f``, loaded from git) against the current one on both problems.
 
 Target (issue 15): no slower than GTSAM's LM where it converges (Manhattan), faster than
@@ -52,9 +52,9 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 
+from recovery.estimation.graph import PoseGraph, _residuals, _upper_sqrt  # noqa: E402
+from recovery.graph_formats.g2o import write_g2o_graph  # noqa: E402
 from relation_metric import se2  # noqa: E402
-from slamrel.backends.g2o import write_g2o_graph  # noqa: E402
-from slamrel.backends.graph import PoseGraph, _residuals, _upper_sqrt  # noqa: E402
 from slamrel.importers.isam import read_isam  # noqa: E402
 
 VP = Path("/work/shared/data/victoria_park/victoria_park.txt")
@@ -227,11 +227,11 @@ BEFORE = "defa31f"  # main before issue 15
 
 
 def old_solver():  # type: ignore[no-untyped-def]
-    """``slamrel.backends.graph`` as it was before issue 15 (from git), as a module."""
+    """``recovery.estimation.graph`` as it was before issue 15 (from git), as a module."""
     import importlib.util
 
     text = subprocess.run(
-        ["git", "-C", str(ROOT), "show", f"{BEFORE}:slamrel/backends/graph.py"],
+        ["git", "-C", str(ROOT), "show", f"{BEFORE}:recovery/estimation/graph.py"],
         capture_output=True,
         text=True,
         check=True,
@@ -345,7 +345,7 @@ def main() -> None:
             ours.update(label=label, landmarks=np.empty((0, 2)))
             gt = {"LM": run_gtsam(python, g, "lm", tmp)} if python and not extra else {}
             report(f"Manhattan {args.poses}", g, ours, gt)
-        new = __import__("slamrel.backends.graph", fromlist=["solve_graph"])
+        new = __import__("recovery.estimation.graph", fromlist=["solve_graph"])
         if not args.no_before:
             old = old_solver()
             in_process(f"before issue 15 ({BEFORE}) solve_graph", lambda: old.solve_graph(g))

@@ -36,8 +36,8 @@ from bench_least_squares import manhattan  # noqa: E402
 from bench_recovery import make_bundle  # noqa: E402
 
 import slamrel.worlds as worlds  # noqa: E402
+from recovery.estimation.graph import solve_graph_incremental  # noqa: E402
 from recovery.recover import recover  # noqa: E402
-from slamrel.backends.graph import solve_graph_incremental  # noqa: E402
 from slamrel.simulate import slam_bundle, world_bundle  # noqa: E402
 
 

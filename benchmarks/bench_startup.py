@@ -49,7 +49,7 @@ WORK_IMPORTS = {
     "simulate": "slamrel.simulate, slamrel.worlds, recovery.bundle",
     "slam": "slamrel.simulate, recovery.bundle, relation_metric.formats",
     "compare": "slamrel.compare",
-    "solve": "slamrel.backends.graph, slamrel.backends.g2o, slamrel.importers.isam, "
+    "solve": "recovery.estimation.graph, recovery.graph_formats.g2o, slamrel.importers.isam, "
     "relation_metric.formats, relation_metric.landmarks",
     "example": "relation_metric.relations, relation_metric.formats",
 }

@@ -16,9 +16,9 @@ from typing import Literal
 import numpy as np
 
 from recovery.bundle import Bundle
+from recovery.estimation.ekfslam import EkfSlamResult, ekf_slam
 from recovery.models import MotionModel, SensorModel
 from recovery.steps import build_steps
-from slamrel.backends.ekfslam import EkfSlamResult, ekf_slam
 from slamrel.worlds import World
 
 __all__ = ["world_bundle", "slam_bundle"]
@@ -83,7 +83,7 @@ def slam_bundle(
     the associations the filter made (empty where it rejected a measurement). The filter's
     assumed noise is the bundle's models scaled by ``noise_scale``; the bundle records the
     models it used. ``outlier_gate`` is the χ² validation gate on known-association updates
-    (:func:`slamrel.backends.ekfslam.ekf_slam`); rejected measurements are left
+    (:func:`recovery.estimation.ekfslam.ekf_slam`); rejected measurements are left
     unassociated in the result bundle and counted in its description.
     ``process_noise_scale`` scales the motion model's standard deviations only (a filter
     mis-tuned in its process noise; ``noise_scale`` scales motion and sensor alike, which

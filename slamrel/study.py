@@ -6,8 +6,8 @@ Worlds × noise types × Monte Carlo runs × methods, each case a pure function 
 
 * ``full`` — full least squares (poses and landmarks);
 * ``m1``, ``m2`` — pose-only least squares, Method 1 / Method 2
-  (:func:`slamrel.backends.pose_only.pose_only_least_squares`);
-* ``toro`` — the TORO-style optimiser (:mod:`slamrel.backends.toro`) on the Method 2 pose
+  (:func:`recovery.estimation.pose_only.pose_only_least_squares`);
+* ``toro`` — the TORO-style optimiser (:mod:`recovery.estimation.toro`) on the Method 2 pose
   graph, its covariance that of the spherical graph at its estimate.
 
 Per case: NEES1 (trajectory, joint covariance, gate ``χ²₀.₉₅(3(N−1))``), the map's NEES
@@ -29,18 +29,18 @@ from typing import Any
 
 import numpy as np
 
-from relation_metric import se2
-from relation_metric.consistency import nees1, nees2
-from relation_metric.errors import InputError
-from relation_metric.textio import write_text_atomic
-from slamrel.backends.graph import PoseGraph, joint_covariance, solve_graph
-from slamrel.backends.pose_only import (
+from recovery.estimation.graph import PoseGraph, joint_covariance, solve_graph
+from recovery.estimation.pose_only import (
     LandmarkLog,
     full_graph,
     landmarks_given_poses,
     pose_only_least_squares,
 )
-from slamrel.backends.toro import spherical_information, toro_optimize
+from recovery.estimation.toro import spherical_information, toro_optimize
+from relation_metric import se2
+from relation_metric.consistency import nees1, nees2
+from relation_metric.errors import InputError
+from relation_metric.textio import write_text_atomic
 from slamrel.sweep import Task
 from slamrel.worlds import make_world
 

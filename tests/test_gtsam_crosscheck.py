@@ -2,7 +2,7 @@
 
 GTSAM is the independent optimum: its ``LevenbergMarquardtOptimizer`` (its own linear algebra,
 ordering, damping and stopping rules) minimises the same objective as slamrel's
-:func:`~slamrel.backends.graph.solve_graph`, from the same initial guess, on seeded small
+:func:`~recovery.estimation.graph.solve_graph`, from the same initial guess, on seeded small
 planar graphs. The GTSAM graph is built to have exactly slamrel's objective:
 
 * pose–pose ``(i, j, z, Ω)``: ``e = [p.t − z_t, wrap(p.θ − z_θ)]`` with ``p = x_i⁻¹ ∘ x_j``
@@ -24,7 +24,7 @@ benchmarks/bench_least_squares.py), so the landmark factor is a ``CustomFactor``
 The TORO-style optimiser minimises the spherical-information problem (its residual
 ``(p_i ⊕ δ) − p_j`` has the same norm as slamrel's under ``diag(ω_t, ω_t, ω_θ)``); GTSAM solves
 that problem too, and the TORO result's cost must be at least GTSAM's minimum and within the
-tolerance tests/test_backends_toro.py accepts against its dense Gauss–Newton (1.5 ×).
+tolerance tests/test_estimation_toro.py accepts against its dense Gauss–Newton (1.5 ×).
 
 Where GTSAM runs: in process when ``import gtsam`` works; otherwise in
 ``benchmarks/.venv-gtsam`` (a subprocess, the graph passed as ``.npz``); otherwise the tests
@@ -43,9 +43,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from recovery.estimation.graph import PoseGraph, initial_landmarks, solve_graph
+from recovery.estimation.toro import spherical_information, toro_optimize
 from relation_metric import se2
-from slamrel.backends.graph import PoseGraph, initial_landmarks, solve_graph
-from slamrel.backends.toro import spherical_information, toro_optimize
 
 ROOT = Path(__file__).resolve().parent.parent
 VENV_PYTHON = ROOT / "benchmarks" / ".venv-gtsam" / "bin" / "python"
@@ -194,7 +194,7 @@ def gtsam_solve(tmp_path):
 
 
 def ring_graph(rng, n=30, loops=((0, 29), (5, 25), (10, 20), (3, 27), (7, 18))):
-    """The seeded ring of tests/test_backends_toro.py: full, correlated information."""
+    """The seeded ring of tests/test_estimation_toro.py: full, correlated information."""
     step = np.column_stack(
         (np.full(n - 1, 1.0), np.zeros(n - 1), np.full(n - 1, 2 * np.pi / (n - 1)))
     )
@@ -259,7 +259,7 @@ def test_full_least_squares_equals_gtsam_with_landmarks(gtsam_solve, rng):
 
 
 def test_toro_cost_is_at_least_gtsams_minimum_of_the_spherical_problem(gtsam_solve, rng):
-    g = ring_graph(rng)  # the seed and graph of tests/test_backends_toro.py
+    g = ring_graph(rng)  # the seed and graph of tests/test_estimation_toro.py
     omega = spherical_information(g.pp_info)
     spherical = PoseGraph(g.poses, g.landmarks, g.pp_i, g.pp_j, g.pp_z, omega)
     ref = gtsam_solve(spherical)

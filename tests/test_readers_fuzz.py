@@ -28,11 +28,11 @@ from hypothesis import strategies as st
 from landmark_graph.association import read_association_csv
 from landmark_graph.maps import LandmarkMap, read_map
 from recovery.bundle import read_bundle
+from recovery.graph_formats.g2o import read_g2o_graph
 from relation_metric.errors import InputError
 from relation_metric.formats import read_trajectory
 from relation_metric.relations import read_relations
 from relation_metric.textio import TruncatedLineWarning, read_keyword_records
-from slamrel.backends.g2o import read_g2o_graph
 from slamrel.compare import read_per_relation
 from slamrel.importers.isam import read_isam
 from slamrel.importers.mrclam import read_mrclam_robot

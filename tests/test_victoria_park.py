@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from conftest import require_data
 
-from slamrel.backends.graph import solve_graph, solve_graph_incremental
+from recovery.estimation.graph import solve_graph, solve_graph_incremental
 from slamrel.importers.isam import isam_log_bundle, read_isam
 
 pytestmark = pytest.mark.realdata

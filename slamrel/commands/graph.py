@@ -14,7 +14,7 @@ from slamrel.commands.common import add_force_argument, check_outputs, errors_ab
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     import numpy as np
 
-    from slamrel.backends.graph import PoseGraph
+    from recovery.estimation.graph import PoseGraph
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -109,7 +109,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
     """The graph and its file's pose and landmark ids."""
-    from slamrel.backends.g2o import read_g2o_graph
+    from recovery.graph_formats.g2o import read_g2o_graph
     from slamrel.importers.isam import read_isam
 
     head = Path(path).read_text(errors="replace")[:4096].split()
@@ -120,7 +120,7 @@ def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
 
 
 def run_import_isam(args: argparse.Namespace) -> int:
-    from slamrel.backends.g2o import write_g2o_graph
+    from recovery.graph_formats.g2o import write_g2o_graph
     from slamrel.importers.isam import read_isam
 
     check_outputs([args.output], [args.file], dirs=[args.bundle], force=args.force)
@@ -180,12 +180,12 @@ def _mrclam_robot(args: argparse.Namespace, robot: int, out: Path):  # type: ign
 
 
 def run_solve(args: argparse.Namespace) -> int:
+    from recovery.estimation.graph import solve_graph, solve_graph_incremental
+    from recovery.graph_formats.g2o import write_g2o_graph
     from relation_metric.formats import write_trajectory
     from relation_metric.landmarks import write_landmark_csv
     from relation_metric.outputs import staged_directory
     from relation_metric.trajectory import Trajectory
-    from slamrel.backends.g2o import write_g2o_graph
-    from slamrel.backends.graph import solve_graph, solve_graph_incremental
 
     check_outputs([], [args.graph], dirs=[args.output], force=args.force)
     if not Path(args.graph).is_file():

@@ -20,12 +20,12 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from recovery.estimation.graph import PoseGraph, initial_landmarks
 from relation_metric import se2
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
 from relation_metric.landmarks import integer_ids
 from relation_metric.textio import PathLike, read_keyword_records
-from slamrel.backends.graph import PoseGraph, initial_landmarks
 
 __all__ = ["IsamData", "read_isam"]
 

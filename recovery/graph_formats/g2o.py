@@ -12,11 +12,11 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from recovery.estimation.graph import PoseGraph
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
 from relation_metric.landmarks import integer_ids
 from relation_metric.textio import PathLike, read_keyword_records, write_text_atomic
-from slamrel.backends.graph import PoseGraph
 
 __all__ = ["read_g2o_graph", "write_g2o_graph"]
 

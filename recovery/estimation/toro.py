@@ -51,11 +51,11 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import breadth_first_order
 
+from recovery.estimation.graph import PoseGraph
 from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.errors import InputError
 from relation_metric.trajectory import readonly
-from slamrel.backends.graph import PoseGraph
 
 __all__ = ["TreeSolution", "spherical_information", "spanning_tree", "toro_optimize"]
 

@@ -1,7 +1,7 @@
 """Full and pose-only least-squares SLAM from a landmark log (Hu, Huang & Dissanayake 2010).
 
 *Full* least squares estimates all poses and landmarks from odometry and every landmark
-observation (:mod:`slamrel.backends.graph`).
+observation (:mod:`recovery.estimation.graph`).
 
 *Pose-only* least squares first turns the landmark observations into relative-pose
 constraints and then optimises the pose graph of those constraints (plus the odometry). For
@@ -53,18 +53,18 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from relation_metric import se2
-from relation_metric.arrays import Array
-from relation_metric.consistency import JointNees, nees2
-from relation_metric.errors import DivergenceError, InputError
-from relation_metric.trajectory import Trajectory, readonly
-from slamrel.backends.graph import (
+from recovery.estimation.graph import (
     GraphSolution,
     PoseGraph,
     initial_landmarks,
     joint_covariance,
     solve_graph,
 )
+from relation_metric import se2
+from relation_metric.arrays import Array
+from relation_metric.consistency import JointNees, nees2
+from relation_metric.errors import DivergenceError, InputError
+from relation_metric.trajectory import Trajectory, readonly
 
 __all__ = [
     "LandmarkLog",

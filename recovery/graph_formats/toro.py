@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from recovery.estimation.graph import PoseGraph
 from relation_metric.errors import InputError
 from relation_metric.textio import PathLike, read_keyword_records, write_text_atomic
-from slamrel.backends.graph import PoseGraph
 
 __all__ = ["read_toro_graph", "write_toro_graph", "TORO_INFO_ORDER"]
 

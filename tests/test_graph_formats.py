@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from recovery.estimation.graph import solve_graph
+from recovery.graph_formats.g2o import read_g2o_graph, write_g2o_graph
 from relation_metric.errors import InputError
-from slamrel.backends.g2o import read_g2o_graph, write_g2o_graph
-from slamrel.backends.graph import solve_graph
 from slamrel.importers.isam import read_isam
 
 ISAM = """ODOMETRY 0 1 1.0 0 0 0.01 0 0 0.01 0 0.0001

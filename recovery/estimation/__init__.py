@@ -1,0 +1,9 @@
+"""Estimation back-ends: the reference SLAM solvers the pipelines run and score.
+
+``graph``      pose graphs and full least squares (poses and landmarks),
+``pose_only``  pose-only SLAM (Hu, Huang & Dissanayake): pairwise relative poses, then a pose graph,
+``toro``       a TORO-style stochastic-gradient pose-graph optimiser,
+``ekfslam``    EKF-SLAM over range–bearing observations.
+
+Libraries only: no command-line code, no file output except through ``recovery.graph_formats``.
+"""

@@ -1,1 +1,0 @@
-"""Reference SLAM back-ends (least squares on pose graphs, EKF-SLAM)."""
