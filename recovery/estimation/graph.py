@@ -23,6 +23,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
+from recovery.estimation.lm import Linearisation, LMOptions, levenberg_marquardt
 from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError, InputError
@@ -454,6 +455,37 @@ def _dof(graph: PoseGraph) -> int:
     return 3 * graph.pp_i.size + 2 * graph.pl_k.size + 3 - 3 * graph.n_poses - 2 * graph.n_landmarks
 
 
+class _GraphProblem:
+    """:class:`PoseGraph` as a :class:`~recovery.estimation.lm.Problem`; state ``(x, lm)``."""
+
+    def __init__(self, graph: PoseGraph, prior_sigma: float) -> None:
+        self.graph = graph
+        self.w_pp, self.w_pl, self.prior = _whitening(graph, prior_sigma)
+        self.normal = _NormalEquations(graph, graph.n_poses, graph.n_landmarks)
+
+    def linearise(self, state: tuple[Array, Array]) -> Linearisation:
+        lin = _linearise(self.graph, *state, self.w_pp, self.w_pl, self.prior)
+        h, grad = self.normal.assemble(lin)
+        return Linearisation(0.5 * float(lin.r @ lin.r), grad, h[self.normal.diag], h)
+
+    def cost(self, state: tuple[Array, Array]) -> float:
+        r, _ = _residuals(self.graph, *state, self.w_pp, self.w_pl, self.prior)
+        return 0.5 * float(r @ r)
+
+    def solve(self, lin: Linearisation, damping: Array) -> Array:
+        return self.normal.solve(lin.system, damping, -lin.gradient)
+
+    def retract(self, state: tuple[Array, Array], delta: Array) -> tuple[Array, Array]:
+        return _apply(*state, delta)
+
+
+def _whitening(graph: PoseGraph, prior_sigma: float) -> tuple[Array, Array, tuple[Array, Array]]:
+    """Upper Cholesky factors of the pose–pose and pose–landmark informations; the prior."""
+    w_pp = _upper_sqrt(graph.pp_info)
+    w_pl = _upper_sqrt(graph.pl_info) if graph.pl_k.size else np.empty((0, 2, 2))
+    return w_pp, w_pl, (graph.poses[0].copy(), np.eye(3) / prior_sigma)
+
+
 def _levenberg_marquardt(
     graph: PoseGraph,
     *,
@@ -470,60 +502,24 @@ def _levenberg_marquardt(
     odometry: 35% off 4.3e7 at the 2nd step; where one batch works, each step removes
     most of the cost until χ²/dof is near 1).
     """
-    w_pp = _upper_sqrt(graph.pp_info)
-    w_pl = _upper_sqrt(graph.pl_info) if graph.pl_k.size else np.empty((0, 2, 2))
-    prior = (graph.poses[0].copy(), np.eye(3) / prior_sigma)
     dof = _dof(graph)
-    x = np.array(graph.poses, dtype=np.float64)
-    lm = np.array(graph.landmarks, dtype=np.float64)
-    normal = _NormalEquations(graph, graph.n_poses, graph.n_landmarks)
-    lin = _linearise(graph, x, lm, w_pp, w_pl, prior)
-    cost = 0.5 * float(lin.r @ lin.r)
-    costs = [cost]
-    lam = 1e-4
-    converged = False
-    it = 0
-    for it in range(1, max_iterations + 1):
-        h, grad = normal.assemble(lin)
-        diag = np.maximum(h[normal.diag], 1e-12)
-        improved = False
-        for _ in range(20):
-            delta = normal.solve(h, lam * diag, -grad)
-            if not np.isfinite(delta).all():
-                raise DivergenceError("the normal equations are singular (unobserved states?)")
-            x_new, lm_new = _apply(x, lm, delta)
-            r_new, _ = _residuals(graph, x_new, lm_new, w_pp, w_pl, prior)
-            cost_new = 0.5 * float(r_new @ r_new)
-            if not np.isfinite(cost_new):
-                raise DivergenceError(f"non-finite cost at iteration {it}")
-            if cost_new < cost:
-                improved = True
-                break
-            lam *= 10.0
-        if not improved:
-            converged = True  # no descent possible: at a minimum to working precision
-            break
+
+    def stall(cost: float, cost_new: float) -> bool:
         rel = (cost - cost_new) / max(cost, 1e-300)
-        stalled = stall_chi2 is not None and rel < 0.5 and 2.0 * cost_new > stall_chi2 * dof > 0
-        x, lm, cost = x_new, lm_new, cost_new
-        lin = _linearise(graph, x, lm, w_pp, w_pl, prior)
-        costs.append(cost)
-        lam = max(lam / 10.0, 1e-12)
-        if stalled:
-            return GraphSolution(
-                readonly(x), readonly(lm), readonly(np.asarray(costs)), it, False
-            ), True
-        if rel < tolerance:
-            converged = True
-            break
+        return stall_chi2 is not None and rel < 0.5 and 2.0 * cost_new > stall_chi2 * dof > 0
+
+    x0 = (np.array(graph.poses, dtype=np.float64), np.array(graph.landmarks, dtype=np.float64))
+    options = LMOptions(lambda_initial=1e-4, max_iterations=max_iterations, ftol=tolerance)
+    res = levenberg_marquardt(_GraphProblem(graph, prior_sigma), x0, options, stop=stall)
+    x, lm = res.x
     solution = GraphSolution(
         poses=readonly(x),
         landmarks=readonly(lm),
-        cost=readonly(np.asarray(costs)),
-        iterations=it,
-        converged=converged,
+        cost=readonly(res.costs),
+        iterations=res.iterations,
+        converged=res.converged,
     )
-    return solution, False
+    return solution, res.stopped
 
 
 def solve_graph_incremental(
@@ -606,12 +602,8 @@ def solve_graph_incremental(
     if not growth >= 1.0:
         raise InputError(f"growth must be >= 1, got {growth:g}")
     n = graph.n_poses
-    w_pp = _upper_sqrt(graph.pp_info)
-    w_pl = _upper_sqrt(graph.pl_info) if graph.pl_k.size else np.empty((0, 2, 2))
-    prior = (graph.poses[0].copy(), np.eye(3) / prior_sigma)
-    r0, _ = _residuals(graph, graph.poses, graph.landmarks, w_pp, w_pl, prior)
-    x0 = np.asarray(graph.poses)
-    x = np.array(x0, dtype=np.float64)
+    r0, _ = _residuals(graph, graph.poses, graph.landmarks, *_whitening(graph, prior_sigma))
+    x = np.array(graph.poses, dtype=np.float64)
     lm = np.array(graph.landmarks, dtype=np.float64)
     placed = np.zeros(graph.n_landmarks, dtype=bool)
     iterations = 0
@@ -633,35 +625,7 @@ def solve_graph_incremental(
     while start < n:
         end = min(start + max(int(step), 1), n)
         saved = (x.copy(), lm.copy(), placed.copy())
-        if start > 0:
-            # step 2: carry the unsolved poses along with the last solved one
-            x[start:] = se2.compose(x[start - 1], se2.between(x0[start - 1], x0[start:]))
-        pp = (graph.pp_i < end) & (graph.pp_j < end)
-        pl = graph.pl_k < end
-        if end == n:  # the whole graph, landmarks without observations too
-            used, pl_l = np.arange(graph.n_landmarks), graph.pl_l
-        else:
-            used, pl_l = np.unique(graph.pl_l[pl], return_inverse=True)
-        fresh = np.flatnonzero(pl & ~placed[graph.pl_l])  # sightings of unplaced landmarks
-        if fresh.size:
-            # keep the initial guess's landmark relative to its earliest observing pose
-            first = fresh[_first_of_each(graph.pl_l[fresh], graph.pl_k[fresh])]
-            k, l_ = graph.pl_k[first], graph.pl_l[first]
-            lm[l_] = se2.transform_points(
-                x[k], se2.inverse_transform_points(x0[k], graph.landmarks[l_])
-            )
-        sub = PoseGraph(
-            poses=x[:end],
-            landmarks=lm[used],
-            pp_i=graph.pp_i[pp],
-            pp_j=graph.pp_j[pp],
-            pp_z=graph.pp_z[pp],
-            pp_info=graph.pp_info[pp],
-            pl_k=graph.pl_k[pl],
-            pl_l=pl_l,
-            pl_z=graph.pl_z[pl],
-            pl_info=graph.pl_info[pl],
-        )
+        sub, used = _sub_problem(graph, x, lm, placed, start, end)
         sol = solve_graph(
             sub, max_iterations=max_iterations, tolerance=tolerance, prior_sigma=prior_sigma
         )
@@ -687,6 +651,47 @@ def solve_graph_incremental(
         iterations=iterations,
         converged=sol.converged,
     )
+
+
+def _sub_problem(
+    graph: PoseGraph, x: Array, lm: Array, placed: NDArray[np.bool_], start: int, end: int
+) -> tuple[PoseGraph, NDArray[np.int64]]:
+    """Steps 1–2 of :func:`solve_graph_incremental`: poses ``0 .. end-1`` and their landmarks.
+
+    Updates ``x[start:]`` (carried along with pose ``start-1``) and the first-seen landmarks
+    of ``lm`` in place; returns the sub-graph and the indices of its landmarks in ``lm``.
+    """
+    x0 = np.asarray(graph.poses)
+    if start > 0:
+        # step 2: carry the unsolved poses along with the last solved one
+        x[start:] = se2.compose(x[start - 1], se2.between(x0[start - 1], x0[start:]))
+    pp = (graph.pp_i < end) & (graph.pp_j < end)
+    pl = graph.pl_k < end
+    if end == graph.n_poses:  # the whole graph, landmarks without observations too
+        used, pl_l = np.arange(graph.n_landmarks), graph.pl_l
+    else:
+        used, pl_l = np.unique(graph.pl_l[pl], return_inverse=True)
+    fresh = np.flatnonzero(pl & ~placed[graph.pl_l])  # sightings of unplaced landmarks
+    if fresh.size:
+        # keep the initial guess's landmark relative to its earliest observing pose
+        first = fresh[_first_of_each(graph.pl_l[fresh], graph.pl_k[fresh])]
+        k, l_ = graph.pl_k[first], graph.pl_l[first]
+        lm[l_] = se2.transform_points(
+            x[k], se2.inverse_transform_points(x0[k], graph.landmarks[l_])
+        )
+    sub = PoseGraph(
+        poses=x[:end],
+        landmarks=lm[used],
+        pp_i=graph.pp_i[pp],
+        pp_j=graph.pp_j[pp],
+        pp_z=graph.pp_z[pp],
+        pp_info=graph.pp_info[pp],
+        pl_k=graph.pl_k[pl],
+        pl_l=pl_l,
+        pl_z=graph.pl_z[pl],
+        pl_info=graph.pl_info[pl],
+    )
+    return sub, used
 
 
 def pose_covariances(
@@ -722,11 +727,11 @@ def _inverse_block(
 ) -> Array:
     """``(H⁻¹)[cols][:, cols]`` (symmetrised) with ``H = JᵀJ`` at the solution, gauge prior
     included: one sparse LU factorisation and a multi-right-hand-side solve."""
-    w_pp = _upper_sqrt(graph.pp_info)
-    w_pl = _upper_sqrt(graph.pl_info) if graph.pl_k.size else np.empty((0, 2, 2))
-    prior = (graph.poses[0].copy(), np.eye(3) / prior_sigma)
     _, jac = _residuals_and_jacobian(
-        graph, np.asarray(solution.poses), np.asarray(solution.landmarks), w_pp, w_pl, prior
+        graph,
+        np.asarray(solution.poses),
+        np.asarray(solution.landmarks),
+        *_whitening(graph, prior_sigma),
     )
     h = (jac.T @ jac).tocsc()
     rhs = np.zeros((h.shape[0], cols.size))
