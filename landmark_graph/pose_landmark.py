@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from landmark_graph.association import Association
 from landmark_graph.maps import LandmarkMap
 from relation_metric import se2
+from relation_metric.covisibility import covisible_pairs
 from relation_metric.errors import InputError
 from relation_metric.evaluate import error_summaries
 from relation_metric.relations import RelationSet
@@ -174,26 +175,10 @@ def shared_landmark_relations(
     max_pairs : float
         Refuse (with :class:`InputError`) when ``Σ_l C(n_l, 2)`` — ``n_l`` the poses that
         observed landmark ``l``, a bound on the pose pairs to examine — exceeds this: the
-        sparse product ``S Sᵀ`` of the pose × landmark incidence matrix would not fit.
+        sparse product ``S Sᵀ`` of the pose × landmark incidence matrix would not fit
+        (:func:`relation_metric.covisibility.covisible_pairs`).
     """
-    k = np.asarray(pose, dtype=np.int64)
-    ids, lm = np.unique(np.asarray(landmark, dtype=np.int64), return_inverse=True)
-    n = len(reference)
-    if k.size and (k.min() < 0 or k.max() >= n):
-        raise InputError(f"pose index out of range 0..{n - 1}")
-    import scipy.sparse as sp
-
-    seen = sp.csr_matrix((np.ones(k.size), (k, lm.ravel())), shape=(n, ids.size))
-    seen.data[:] = 1.0  # an observation repeated at one pose counts once
-    per_landmark = np.diff(seen.tocsc().indptr).astype(np.float64)
-    bound = float((per_landmark * (per_landmark - 1) / 2).sum())  # ≥ candidate pairs
-    if bound > max_pairs:
-        raise InputError(
-            f"up to {bound:.3g} pose pairs share a landmark (limit max_pairs = {max_pairs:.3g}); "
-            "pass fewer poses (e.g. every k-th) or raise max_pairs"
-        )
-    common = (seen @ seen.T).tocoo()
-    keep = (common.col - common.row >= max(min_gap, 1)) & (common.data >= min_common)
-    i, j = common.row[keep], common.col[keep]
-    order = np.lexsort((j, i))
-    return RelationSet.from_trajectory_pairs(reference, i[order], j[order], key="index")
+    i, j, _ = covisible_pairs(
+        pose, landmark, len(reference), min_common=min_common, min_gap=min_gap, max_pairs=max_pairs
+    )
+    return RelationSet.from_trajectory_pairs(reference, i, j, key="index")

@@ -63,6 +63,7 @@ from recovery.estimation.graph import (
 from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.consistency import JointNees, nees2
+from relation_metric.covisibility import SharedObservations, covisible_pairs, shared_observations
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import Trajectory, readonly
 
@@ -192,13 +193,9 @@ def full_least_squares(log: LandmarkLog) -> tuple[GraphSolution, NDArray[np.int6
     return solve_graph(graph), ids
 
 
-def _seen(log: LandmarkLog) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """``(n, L)`` row of each observation (−1: not observed) and the landmark ids."""
-    n = len(log.odometry)
-    ids, lm_index = np.unique(log.landmark, return_inverse=True)
-    row = np.full((n, ids.size), -1, dtype=np.int64)
-    row[log.pose, lm_index] = np.arange(log.pose.size)
-    return row, ids
+def _shared(log: LandmarkLog, pairs: NDArray[np.int64]) -> SharedObservations:
+    """The landmarks each pair shares and their observations (sparse join, sorted by pair)."""
+    return shared_observations(log.pose, log.landmark, len(log.odometry), pairs)
 
 
 def method1_pairs(log: LandmarkLog, *, close_loop: bool = True) -> NDArray[np.int64]:
@@ -211,18 +208,18 @@ def method1_pairs(log: LandmarkLog, *, close_loop: bool = True) -> NDArray[np.in
     pairs = np.column_stack((a, a + 1))
     if close_loop and n > 2:
         pairs = np.vstack((pairs, [[n - 1, 0]]))
-    seen = _seen(log)[0] >= 0
-    common = np.sum(seen[pairs[:, 0]] & seen[pairs[:, 1]], axis=1)
+    common = np.bincount(_shared(log, pairs).pair, minlength=pairs.shape[0])
     return pairs[common >= _MIN_OBSERVABLE]
 
 
 def method2_pairs(log: LandmarkLog, *, min_common: int = METHOD2_MIN_COMMON) -> NDArray[np.int64]:
-    """Method 2 pairs: every ``i < j`` sharing at least ``min_common`` landmarks, shape (E, 2)."""
+    """Method 2 pairs: every ``i < j`` sharing at least ``min_common`` landmarks, shape (E, 2).
+
+    Sorted by ``i``, then ``j`` (:func:`relation_metric.covisibility.covisible_pairs`).
+    """
     if min_common < _MIN_OBSERVABLE:
         raise InputError(f"min_common must be >= {_MIN_OBSERVABLE}, got {min_common}")
-    seen = (_seen(log)[0] >= 0).astype(np.int64)
-    common = seen @ seen.T
-    i, j = np.nonzero(np.triu(common >= min_common, k=1))
+    i, j, _ = covisible_pairs(log.pose, log.landmark, len(log.odometry), min_common=min_common)
     return np.column_stack((i, j)).astype(np.int64)
 
 
@@ -230,18 +227,17 @@ def observation_uses(log: LandmarkLog, pairs: ArrayLike) -> NDArray[np.int64]:
     """How many of the pair constraints use each observation, shape (K,).
 
     Observation ``(p, l)`` is used by pair ``(p, q)`` or ``(q, p)`` when ``q`` also observes
-    ``l``.
+    ``l``. A repeated observation (the same landmark twice at one pose) gets the count of
+    its pose and landmark.
     """
     pr = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    row, _ = _seen(log)
-    seen = (row >= 0).astype(np.int64)
-    n = seen.shape[0]
-    adj = np.zeros((n, n), dtype=np.int64)
-    np.add.at(adj, (pr[:, 0], pr[:, 1]), 1)
-    np.add.at(adj, (pr[:, 1], pr[:, 0]), 1)
-    uses = adj @ seen  # (n, L)
-    lm_index = np.unique(log.landmark, return_inverse=True)[1]
-    return uses[log.pose, lm_index]
+    sh = _shared(log, pr)
+    k = log.pose.size
+    uses = np.bincount(sh.first, minlength=k) + np.bincount(sh.second, minlength=k)
+    key = np.unique(np.column_stack((log.pose, log.landmark)), axis=0, return_inverse=True)[1]
+    per_key = np.zeros(int(key.max(initial=-1)) + 1, dtype=np.int64)
+    np.maximum.at(per_key, key.ravel(), uses)
+    return per_key[key.ravel()]
 
 
 @dataclass(frozen=True)
@@ -336,18 +332,16 @@ def pair_constraints(
     if np.any(infl <= 0):
         raise InputError("covariance inflation factors must be positive")
     info = info / infl[:, None, None]
-    row, _ = _seen(log)
-    both = (row[pr[:, 0]] >= 0) & (row[pr[:, 1]] >= 0)  # (E, L)
-    common = both.sum(axis=1)
+    sh = _shared(log, pr)
+    common = np.bincount(sh.pair, minlength=pr.shape[0])
     if pr.shape[0] and common.min() < _MIN_OBSERVABLE:
         e_bad = int(np.argmin(common))
         raise InputError(
             f"pose pair {int(pr[e_bad, 0])}-{int(pr[e_bad, 1])} shares {int(common[e_bad])} "
             f"landmark(s); a relative pose needs at least {_MIN_OBSERVABLE}"
         )
-    seg, lm = np.nonzero(both)  # rows sorted by pair
+    seg, ra, rb = sh.pair, sh.first, sh.second  # rows sorted by pair
     starts = np.searchsorted(seg, np.arange(pr.shape[0]))
-    ra, rb = row[pr[seg, 0], lm], row[pr[seg, 1], lm]
     za, zb, wa, wb = z[ra], z[rb], info[ra], info[rb]
     if start == "align":
         delta = _align(za, zb, seg, starts)
