@@ -285,6 +285,85 @@ def _pair_cost(r1: Array, r2: Array, w1: Array, w2: Array, starts: NDArray[np.in
     return np.add.reduceat(q, starts)
 
 
+def _relative_start(
+    log: LandmarkLog, pr: NDArray[np.int64], start: Start, truth: Trajectory | None
+) -> Array:
+    """``x_i⁻¹ ∘ x_j`` of the odometry or the truth for each pair (``start``), shape (E, 3)."""
+    if start == "odometry":
+        p = log.odometry.poses
+    elif start == "truth":
+        if truth is None:
+            raise InputError('start="truth" needs the true trajectory (truth=)')
+        p = truth.poses
+    else:
+        raise InputError(f"unknown start {start!r}; expected align, odometry or truth")
+    return se2.between(p[pr[:, 0]], p[pr[:, 1]])
+
+
+def _pair_step(
+    dl: Array,
+    m: Array,
+    obs: tuple[Array, Array, Array, Array],
+    sg: NDArray[np.int64],
+    st: NDArray[np.int64],
+) -> tuple[Array, Array, Array]:
+    """One damped Gauss–Newton step of every pair's least squares, the landmarks eliminated.
+
+    ``dl`` (E, 3) the pairs' ``δ``; per row (one shared landmark of pair ``sg[r]``, rows of a
+    pair starting at ``st``): ``m`` (R, 2) the landmark in the frame of pose ``i`` and
+    ``obs = (za, zb, wa, wb)``, its observations from ``i`` and ``j`` and their informations.
+    Each pair's step is halved until its cost does not increase (an ill-conditioned pair,
+    e.g. two close landmarks under large noise, overshoots). Returns the steps of ``δ``
+    (E, 3) and ``m`` (R, 2) and the reduced (Schur complement) information of ``δ``
+    (E, 3, 3).
+
+    Not :func:`recovery.estimation.lm.levenberg_marquardt`: these are thousands of independent
+    problems of 3 + 2·(shared landmarks) unknowns solved side by side, each accepting or
+    shortening its own step; one shared damping parameter would let one pair's rejected step
+    slow all the others.
+    """
+    za, zb, wa, wb = obs
+    r_mat = _rot(dl[sg, 2])  # (R, 2, 2)
+    rt = np.swapaxes(r_mat, 1, 2)
+    d = m - dl[sg, :2]
+    r1 = m - za
+    r2 = np.einsum("rab,rb->ra", rt, d) - zb
+    # ∂r2/∂δ = [−Rᵀ, ∂Rᵀ/∂θ d];  ∂r2/∂m = Rᵀ;  ∂r1/∂m = I
+    jd = np.empty((m.shape[0], 2, 3))
+    jd[:, :, :2] = -rt
+    c, s = np.cos(dl[sg, 2]), np.sin(dl[sg, 2])
+    jd[:, 0, 2] = -s * d[:, 0] + c * d[:, 1]
+    jd[:, 1, 2] = -c * d[:, 0] - s * d[:, 1]
+    w2_r2 = np.einsum("rab,rb->ra", wb, r2)
+    w2_jd = wb @ jd
+    h_dd = np.swapaxes(jd, 1, 2) @ w2_jd  # (R, 3, 3)
+    h_md = r_mat @ w2_jd  # (R, 2, 3)
+    h_mm = wa + r_mat @ wb @ rt  # (R, 2, 2)
+    g_d = np.einsum("rba,rb->ra", jd, w2_r2)
+    g_m = np.einsum("rab,rb->ra", wa, r1) + np.einsum("rab,rb->ra", r_mat, w2_r2)
+    h_mm_inv = np.linalg.inv(h_mm)
+    k_dm = np.swapaxes(h_md, 1, 2) @ h_mm_inv  # (R, 3, 2)
+    s_red = np.add.reduceat(h_dd - k_dm @ h_md, st)
+    b_red = np.add.reduceat(g_d - np.einsum("rab,rb->ra", k_dm, g_m), st)
+    try:
+        step_d = -np.linalg.solve(s_red, b_red[..., None])[..., 0]
+    except np.linalg.LinAlgError:  # a degenerate pair: least-norm step for all
+        step_d = -np.einsum("eab,eb->ea", np.linalg.pinv(s_red), b_red)
+    step_m = -np.einsum("rab,rb->ra", h_mm_inv, g_m + np.einsum("rab,rb->ra", h_md, step_d[sg]))
+    cost0 = _pair_cost(r1, r2, wa, wb, st)
+    scale = np.ones(dl.shape[0])
+    for _ in range(30):
+        d_new = dl + scale[:, None] * step_d
+        m_new = m + scale[sg, None] * step_m
+        rn = np.einsum("rba,rb->ra", _rot(d_new[sg, 2]), m_new - d_new[sg, :2]) - zb
+        new = _pair_cost(m_new - za, rn, wa, wb, st)
+        worse = ~(new <= cost0 * (1 + 1e-9) + 1e-12)  # increases beyond rounding
+        if not worse.any():
+            break
+        scale[worse] *= 0.5
+    return step_d * scale[:, None], step_m * scale[sg, None], s_red
+
+
 def pair_constraints(
     log: LandmarkLog,
     pairs: ArrayLike,
@@ -345,16 +424,8 @@ def pair_constraints(
     za, zb, wa, wb = z[ra], z[rb], info[ra], info[rb]
     if start == "align":
         delta = _align(za, zb, seg, starts)
-    elif start == "odometry":
-        p = log.odometry.poses
-        delta = se2.between(p[pr[:, 0]], p[pr[:, 1]])
-    elif start == "truth":
-        if truth is None:
-            raise InputError('start="truth" needs the true trajectory (truth=)')
-        p = truth.poses
-        delta = se2.between(p[pr[:, 0]], p[pr[:, 1]])
     else:
-        raise InputError(f"unknown start {start!r}; expected align, odometry or truth")
+        delta = _relative_start(log, pr, start, truth)
     delta = np.array(delta, dtype=np.float64).reshape(-1, 3)
     m = za.copy()  # landmark guesses: the observation from pose i
     n_pairs = pr.shape[0]
@@ -366,51 +437,8 @@ def pair_constraints(
             break
         sg = np.searchsorted(active, seg[rows])  # active-local pair index of each row
         st = np.searchsorted(sg, np.arange(active.size))
-        dl = delta[active]
-        r_mat = _rot(dl[sg, 2])  # (R, 2, 2)
-        rt = np.swapaxes(r_mat, 1, 2)
-        d = m[rows] - dl[sg, :2]
-        r1 = m[rows] - za[rows]
-        r2 = np.einsum("rab,rb->ra", rt, d) - zb[rows]
-        # ∂r2/∂δ = [−Rᵀ, ∂Rᵀ/∂θ d];  ∂r2/∂m = Rᵀ;  ∂r1/∂m = I
-        jd = np.empty((rows.size, 2, 3))
-        jd[:, :, :2] = -rt
-        c, s = np.cos(dl[sg, 2]), np.sin(dl[sg, 2])
-        jd[:, 0, 2] = -s * d[:, 0] + c * d[:, 1]
-        jd[:, 1, 2] = -c * d[:, 0] - s * d[:, 1]
-        w2 = wb[rows]
-        w2_r2 = np.einsum("rab,rb->ra", w2, r2)
-        w2_jd = w2 @ jd
-        h_dd = np.swapaxes(jd, 1, 2) @ w2_jd  # (R, 3, 3)
-        h_md = r_mat @ w2_jd  # (R, 2, 3)
-        h_mm = wa[rows] + r_mat @ w2 @ rt  # (R, 2, 2)
-        g_d = np.einsum("rba,rb->ra", jd, w2_r2)
-        g_m = np.einsum("rab,rb->ra", wa[rows], r1) + np.einsum("rab,rb->ra", r_mat, w2_r2)
-        h_mm_inv = np.linalg.inv(h_mm)
-        k_dm = np.swapaxes(h_md, 1, 2) @ h_mm_inv  # (R, 3, 2)
-        s_red = np.add.reduceat(h_dd - k_dm @ h_md, st)
-        b_red = np.add.reduceat(g_d - np.einsum("rab,rb->ra", k_dm, g_m), st)
-        try:
-            step_d = -np.linalg.solve(s_red, b_red[..., None])[..., 0]
-        except np.linalg.LinAlgError:  # a degenerate pair: least-norm step for all
-            step_d = -np.einsum("eab,eb->ea", np.linalg.pinv(s_red), b_red)
-        step_m = -np.einsum("rab,rb->ra", h_mm_inv, g_m + np.einsum("rab,rb->ra", h_md, step_d[sg]))
-        s_all[active] = s_red
-        # damped Gauss–Newton: halve a pair's step until its cost does not increase (an
-        # ill-conditioned pair, e.g. two close landmarks under large noise, overshoots)
-        cost0 = _pair_cost(r1, r2, wa[rows], w2, st)
-        scale = np.ones(active.size)
-        for _ in range(30):
-            d_new = dl + scale[:, None] * step_d
-            m_new = m[rows] + scale[sg, None] * step_m
-            rn = np.einsum("rba,rb->ra", _rot(d_new[sg, 2]), m_new - d_new[sg, :2]) - zb[rows]
-            new = _pair_cost(m_new - za[rows], rn, wa[rows], w2, st)
-            worse = ~(new <= cost0 * (1 + 1e-9) + 1e-12)  # increases beyond rounding
-            if not worse.any():
-                break
-            scale[worse] *= 0.5
-        step_d *= scale[:, None]
-        step_m *= scale[sg, None]
+        obs = (za[rows], zb[rows], wa[rows], wb[rows])
+        step_d, step_m, s_all[active] = _pair_step(delta[active], m[rows], obs, sg, st)
         delta[active] += step_d
         delta[active, 2] = se2.wrap_angle(delta[active, 2])
         m[rows] += step_m
