@@ -121,8 +121,11 @@ def _band(  # type: ignore[no-untyped-def]
     wp: Array,
     wm: Array,
     robust: Array | None = None,
+    residuals: tuple[Array, ...] | None = None,
 ):
     """``H = Jᵀ W J`` in LAPACK upper band storage, the gradient ``Jᵀ W r`` (3N,), the cost.
+
+    ``residuals``: :func:`_residuals` at ``x`` when already computed.
 
     ``H`` is block tridiagonal with 3 × 3 blocks, so its upper bandwidth is 5: returned as
     ``ab`` (6, 3N) with ``ab[5 + i − j, j] = H[i, j]`` for ``i ≤ j`` (the upper form of
@@ -136,7 +139,7 @@ def _band(  # type: ignore[no-untyped-def]
     these ~40 element-wise operations cost less than two of them).
     """
     n = x.shape[0]
-    rp, rm, rz, wz, h_x, k = _residuals(inp, x, used, robust)
+    rp, rm, rz, wz, h_x, k = residuals or _residuals(inp, x, used, robust)
     c, s = np.cos(x[:-1, 2]), np.sin(x[:-1, 2])
     u0, u1 = x[:-1, 1] - x[1:, 1], x[1:, 0] - x[:-1, 0]
     g00, g01, g11, g02, g12, g22 = _rotated_information(wm, c, s)
@@ -214,13 +217,18 @@ class _BatchProblem:
     def __init__(self, inp: FilterInput, used: NDArray[np.int64], robust: Array | None) -> None:
         self.inp, self.used, self.robust = inp, used, robust
         self.wp, self.wm = _weights(inp)
+        self._trial: tuple[Array, tuple[Array, ...]] | None = None  # last cost()'s residuals
 
     def linearise(self, x: Array) -> Linearisation:
-        ab, g, cost = _band(self.inp, x, self.used, self.wp, self.wm, self.robust)
-        return Linearisation(cost, g, ab[5].copy(), ab)
+        # an accepted trial is linearised next: reuse the residuals its cost computed
+        res = self._trial[1] if self._trial is not None and self._trial[0] is x else None
+        ab, g, cost = _band(self.inp, x, self.used, self.wp, self.wm, self.robust, res)
+        return Linearisation(cost, g, ab[5], ab)
 
     def cost(self, x: Array) -> float:
-        rp, rm, rz, wz, _, _ = _residuals(self.inp, x, self.used, self.robust)
+        res = _residuals(self.inp, x, self.used, self.robust)
+        self._trial = (x, res)
+        rp, rm, rz, wz, _, _ = res
         return _cost(rp, self.wp, rm, self.wm, rz, wz)
 
     def solve(self, lin: Linearisation, damping: Array) -> Array:

@@ -22,11 +22,12 @@ Euclidean variables such as landmarks). One iteration at ``x``:
    otherwise *reject*: ``λ ← ν λ`` and back to 2.
 
 Damping rule: Marquardt's multiplicative update with ``ν = 10`` (``λ`` falls on an accepted
-step, rises on a rejected one). Nielsen's gain-ratio rule (``λ ← λ max(⅓, 1 − (2ρ − 1)³)``)
-adapts more smoothly where the quadratic model is poor; the problems here start near their
-minimum (a smoothed trajectory, a grown warm start), where Gauss–Newton steps are accepted
-at once and both rules take the same steps, so the simpler rule that the earlier loops used is
-kept and their results stay identical.
+step, rises on a rejected one), the rule both earlier loops used, so their results stay the
+same. Nielsen's gain-ratio rule (``λ ← λ max(⅓, 1 − (2ρ − 1)³)``, ``ρ`` the actual over the
+predicted decrease; ``ν`` doubling on rejections) was tried on batch recovery and took more
+steps to the same minimum: 17 against 11 iterations at 10⁴ steps, 20 against 16 at 10⁵
+(here the steps are nearly Gauss–Newton, ``λ`` ends at ``λ_min``, and Nielsen's rule lowers it
+more slowly).
 
 Stopping rules, checked in this order after each iteration:
 
