@@ -10,9 +10,14 @@ rows). Measured in the same run:
   predicted every step, updated with every measurement through ``update`` with a wrapping
   residual);
 * ours: :func:`recovery.ekf.run_filter` + :func:`recovery.smoother.smooth`;
-* also: the batch refinement (not part of the target), and peak memory (tracemalloc) of ours.
+* also peak memory (tracemalloc) of ours;
+* batch recovery (:func:`recovery.batch.refine` from the smoothed trajectory, its covariance
+  pass included; ``slamrel recover --method batch`` runs filter + smoother + this): its time
+  over filter + smoother's, and — with ``--scaling`` — both at three sizes a factor √10 apart
+  (``steps/10 … steps``) with the exponent ``b`` of ``t ≈ a·steps^b`` fitted on the logs.
 
-Target: ours ≤ 1/20 of the baseline's time. Prints the ratio and checks that both filters agree.
+Targets: ours ≤ 1/20 of the baseline's time; batch ≤ 3× filter + smoother, and linear
+(issue 15). Prints the ratios and checks that both filters agree.
 """
 
 from __future__ import annotations
@@ -73,6 +78,7 @@ def main() -> int:
     ap.add_argument("--steps", type=int, default=100_000)
     ap.add_argument("--measurements", type=int, default=10_000)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--scaling", action="store_true", help="batch vs smoother at 3 sizes")
     args = ap.parse_args()
 
     bundle = make_bundle(args.steps, args.measurements)
@@ -108,16 +114,52 @@ def main() -> int:
     tracemalloc.stop()
     print(f"peak memory (tracemalloc) filter + smoother: {peak / 2**20:.1f} MiB")
 
-    t0 = time.perf_counter()
-    br = refine(inp, sm.poses, used=fr.status == USED)
-    t_batch = time.perf_counter() - t0
-    print(f"batch refinement (LM, scipy.sparse): {t_batch:.3f} s, {br.iterations} iterations")
+    t_batch, br = best_of(lambda: refine(inp, sm.poses, used=fr.status == USED), args.repeat)
+    ratio_b = t_batch / t_ours
+    print(
+        f"batch refinement (LM, banded Cholesky): {t_batch:.3f} s, {br.iterations} iterations; "
+        f"batch / (filter + smoother) = {ratio_b:.2f} (target <= 3: "
+        f"{'met' if ratio_b <= 3 else 'NOT met'})"
+    )
     gt = bundle.groundtruth
     idx = np.searchsorted(inp.times, gt.timestamps)
     for name, p in (("filter", fr.poses), ("smoother", sm.poses), ("batch", br.poses)):
         e = p[idx, :2] - gt.poses[:, :2]
         print(f"  position RMSE {name:9s} {np.sqrt(np.mean(np.sum(e * e, axis=1))):.4f} m")
+    if args.scaling:
+        scaling(args.steps, args.repeat)
     return 0
+
+
+def time_batch(bundle, repeat: int):  # type: ignore[no-untyped-def]
+    """Best times of filter + smoother and of the batch refinement from its result."""
+    inp = filter_input(bundle, map_mode="marginal")
+    t_fs, (fr, sm) = best_of(lambda: (lambda f: (f, smooth(f)))(run_filter(inp)), repeat)
+    t_b, br = best_of(lambda: refine(inp, sm.poses, used=fr.status == USED), repeat)
+    return t_fs, t_b, br
+
+
+def scaling(steps: int, repeat: int) -> None:
+    """Filter + smoother and batch at ``steps/10, steps/√10, steps``; fitted exponents."""
+    sizes = [int(round(steps / 10 ** (k / 2))) for k in (2, 1, 0)]
+    rows = []
+    for size in sizes:
+        t_fs, t_b, br = time_batch(make_bundle(size, size // 10), repeat)
+        rows.append((size, t_fs, t_b, br.iterations))
+        print(
+            f"  steps {size:7d}: filter + smoother {t_fs:7.3f} s, batch {t_b:7.3f} s "
+            f"({br.iterations} it, {1e3 * t_b / br.iterations:.1f} ms/it), ratio {t_b / t_fs:.2f}"
+        )
+    x = np.log([r[0] for r in rows])
+    fit = {
+        name: float(np.polyfit(x, np.log(col), 1)[0])
+        for name, col in (
+            ("filter + smoother", [r[1] for r in rows]),
+            ("batch", [r[2] for r in rows]),
+            ("batch per iteration", [r[2] / r[3] for r in rows]),
+        )
+    }
+    print("  exponents over 10x steps: " + ", ".join(f"{k} {v:.2f}" for k, v in fit.items()))
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
 """Estimation back-ends: the reference SLAM solvers the pipelines run and score.
 
+``lm``         the one Levenberg–Marquardt (full LS, pose-only LS and batch recovery run on it),
 ``graph``      pose graphs and full least squares (poses and landmarks),
 ``pose_only``  pose-only SLAM (Hu, Huang & Dissanayake): pairwise relative poses, then a pose graph,
 ``toro``       a TORO-style stochastic-gradient pose-graph optimiser,

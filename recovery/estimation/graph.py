@@ -9,8 +9,9 @@ are
 * a prior on the first pose that fixes the gauge.
 
 Each residual is whitened by the upper Cholesky factor of its information matrix and the sum
-of squares is minimised by Levenberg–Marquardt (Marquardt's diagonal scaling) on the sparse
-normal equations; Jacobians are analytic and assembled without Python loops over factors.
+of squares is minimised by the estimation layer's Levenberg–Marquardt
+(:mod:`recovery.estimation.lm`, Marquardt's diagonal scaling) on the sparse normal
+equations; Jacobians are analytic and assembled without Python loops over factors.
 """
 
 from __future__ import annotations
@@ -421,11 +422,12 @@ def solve_graph(
 ) -> GraphSolution:
     """Levenberg–Marquardt on the whitened residuals of ``graph``.
 
-    Marquardt's damping ``H + λ diag(H)`` (λ from 1e-4, ×10 on a rejected step, ÷10 on an
-    accepted one). The normal equations are assembled block-wise into a fixed pattern and
-    factorised in a fill-reducing block ordering without pivoting (see
-    :class:`_NormalEquations`); a trial step evaluates residuals only, the Jacobian is
-    formed once a step is accepted.
+    The estimation layer's :func:`~recovery.estimation.lm.levenberg_marquardt`: Marquardt's
+    damping ``H + λ diag(H)`` (λ from 1e-4, ×10 on a rejected step, ÷10 on an accepted one, at
+    most 20 tries per iteration). The normal equations are assembled block-wise into a fixed
+    pattern and factorised in a fill-reducing block ordering without pivoting (see
+    :class:`_NormalEquations`); a trial step evaluates residuals only, the Jacobian is formed
+    once a step is accepted.
 
     Parameters
     ----------
