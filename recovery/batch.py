@@ -28,6 +28,7 @@ matrix, and vectorised like the smoother).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -93,9 +94,9 @@ def _cost(rp: Array, wp: Array, rm: Array, wm: Array, rz: Array, wz: Array) -> f
 
 def _weights(inp: FilterInput, sigma: Array | None = None) -> tuple[Array, Array]:
     """Prior information (3, 3) and motion informations (N − 1, 3, 3), symmetric."""
-    wp = np.linalg.inv(inp.p0 + 1e-15 * np.eye(3))
+    wp = np.asarray(np.linalg.inv(inp.p0 + 1e-15 * np.eye(3)), dtype=np.float64)
     wm = np.linalg.inv(regularised_sigma(inp.sigma if sigma is None else sigma))
-    return wp, 0.5 * (wm + wm.transpose(0, 2, 1))
+    return wp, np.asarray(0.5 * (wm + wm.transpose(0, 2, 1)), dtype=np.float64)
 
 
 def _rotated_information(w: Array, c: Array, s: Array) -> tuple[Array, ...]:
@@ -121,7 +122,7 @@ def _band(  # type: ignore[no-untyped-def]
     wp: Array,
     wm: Array,
     robust: Array | None = None,
-    residuals: tuple[Array, ...] | None = None,
+    residuals: tuple[Any, ...] | None = None,
 ):
     """``H = Jᵀ W J`` in LAPACK upper band storage, the gradient ``Jᵀ W r`` (3N,), the cost.
 
@@ -217,7 +218,7 @@ class _BatchProblem:
     def __init__(self, inp: FilterInput, used: NDArray[np.int64], robust: Array | None) -> None:
         self.inp, self.used, self.robust = inp, used, robust
         self.wp, self.wm = _weights(inp)
-        self._trial: tuple[Array, tuple[Array, ...]] | None = None  # last cost()'s residuals
+        self._trial: tuple[Array, tuple[Any, ...]] | None = None  # last cost()'s residuals
 
     def linearise(self, x: Array) -> Linearisation:
         # an accepted trial is linearised next: reuse the residuals its cost computed

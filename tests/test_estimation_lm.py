@@ -131,9 +131,12 @@ def test_stopping_rules() -> None:
     assert prob.solves == 4
     # the caller's stop
     calls: list[tuple[float, float]] = []
-    res = levenberg_marquardt(
-        Dense(f, jac), x0, stop=lambda c, c_new: calls.append((c, c_new)) or True
-    )
+
+    def stop(c: float, c_new: float) -> bool:
+        calls.append((c, c_new))
+        return True
+
+    res = levenberg_marquardt(Dense(f, jac), x0, stop=stop)
     assert res.stopped and not res.converged and res.iterations == 1 and len(calls) == 1
     assert calls[0] == (res.costs[0], res.costs[1])
     # max_iterations
