@@ -130,3 +130,34 @@ def test_import_mrclam_through_the_cli_names_the_folder(
     err = capsys.readouterr().err
     assert rc == 3 and "slamrel import mrclam: error:" in err and str(tmp_path / "M") in err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    ("text", "reason"),
+    [
+        ("ODOMETRY 0 1 1.0 0 0 0.01 0 0 0.01 0 0.0001\n", "LANDMARK observations: none"),
+        (ISAM.replace("1.0 1.0 0.04", "0.0 0.0 0.04"), "LANDMARK observations: the median range"),
+    ],
+)
+def test_import_isam_bundle_refused_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str, reason: str
+) -> None:
+    """No landmark seen at a positive range: no log bundle (was a ZeroDivisionError / NaN
+    sigma), exit 3 naming the file, and neither output written."""
+    from slamrel.cli import main
+
+    src = tmp_path / "a.txt"
+    src.write_text(text)
+    argv = [
+        "import",
+        "isam",
+        str(src),
+        "-o",
+        str(tmp_path / "a.g2o"),
+        "--bundle",
+        str(tmp_path / "b"),
+    ]
+    assert main(argv) == 3
+    err = capsys.readouterr().err
+    assert f"slamrel import isam: error: {src}: {reason}" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]

@@ -75,13 +75,18 @@ def run_import_isam(args: argparse.Namespace) -> int:
 
     check_outputs([args.output], [args.file], dirs=[args.bundle], force=args.force)
     data = read_isam(args.file, noise=args.noise)
-    # the file's ids are kept: landmark names then agree with the --bundle log's map.csv
-    write_g2o_graph(args.output, data.graph, pose_ids=data.pose_ids, landmark_ids=data.landmark_ids)
-    if args.bundle:
-        from recovery.bundle import write_bundle
+    log = None
+    if args.bundle:  # built before anything is written: a file that cannot be one writes nothing
         from slamrel.importers.isam import isam_log_bundle
 
-        write_bundle(args.bundle, isam_log_bundle(data), force=args.force)
+        with errors_about(args.file):
+            log = isam_log_bundle(data)
+    # the file's ids are kept: landmark names then agree with the --bundle log's map.csv
+    write_g2o_graph(args.output, data.graph, pose_ids=data.pose_ids, landmark_ids=data.landmark_ids)
+    if log is not None:
+        from recovery.bundle import write_bundle
+
+        write_bundle(args.bundle, log, force=args.force)
     g = data.graph
     if not args.quiet:
         print(

@@ -177,12 +177,18 @@ def isam_log_bundle(data: IsamData, *, sigma_scale: float = 1.0) -> Bundle:
     """
     g = data.graph
     n = g.n_poses
+    r = np.hypot(g.pl_z[:, 0], g.pl_z[:, 1])
+    if not r.size or not float(np.median(r)) > 0:
+        raise InputError(
+            "LANDMARK observations: "
+            + ("none" if not r.size else "the median range is 0")
+            + "; a range-bearing log bundle needs landmarks seen at a positive range"
+        )
     chain = g.pp_j == g.pp_i + 1
     cov_pp = np.linalg.inv(g.pp_info[chain])
     sig_odo = np.sqrt(np.median(np.diagonal(cov_pp, axis1=1, axis2=2), axis=0)) * sigma_scale
     cov_pl = np.linalg.inv(g.pl_info)
     sig_xy = float(np.sqrt(np.median(np.diagonal(cov_pl, axis1=1, axis2=2)))) * sigma_scale
-    r = np.hypot(g.pl_z[:, 0], g.pl_z[:, 1])
     b = np.arctan2(g.pl_z[:, 1], g.pl_z[:, 0])
     order = np.argsort(g.pl_k, kind="stable")
     t = np.arange(n, dtype=np.float64)
