@@ -192,6 +192,9 @@ class RunResult:
     recovery_error : str or None
         Why no trajectory was recovered (``--fail-on-divergence``, or numerically impossible
         input); the report then scores dead reckoning (and the online estimate).
+
+    Derived (computed once, on first use): ``recovery`` and ``map``, the JSON of the recovery
+    and of the map comparison (``metrics.json``); ``agreement``, the typed divergence summary.
     """
 
     name: str
