@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from recovery.models import MOTION_TYPES, MotionModel, SensorModel
+from recovery.models import MOTION_TYPES, SIGMA_NAMES, MotionModel, SensorModel
 from relation_metric.arrays import Array
 from relation_metric.checks import check_covariances, check_joint_covariance
 from relation_metric.errors import InputError
@@ -88,6 +88,17 @@ class Bundle:
         Rows of each time-stamped file (``controls.csv`` or ``odometry.csv``,
         ``measurements.csv``, ``groundtruth.csv``) that were out of time order by at most
         :data:`~relation_metric.timeorder.FILTER_TIME_TOLERANCE` and were put in order.
+
+    Raises
+    ------
+    InputError
+        Every bundle is checked when it is built, whether read from a directory or made in
+        memory (simulators, importers, ``dataclasses.replace``): the model the log needs
+        (controls or odometry, at least two rows), the shapes above, finite values, positive
+        ranges, measurement times in order, unique map ids, associated landmarks that are in
+        the map, and symmetric positive semi-definite covariances. The message names the
+        field; with ``path`` set (a bundle read from disk) also the file, and the line of a
+        measurement.
     """
 
     motion: MotionModel
@@ -140,10 +151,10 @@ class Bundle:
         if self.landmarks_groundtruth is not None:
             ids, xy = self.landmarks_groundtruth
             ro(self, "landmarks_groundtruth", (readonly(ids, np.int64), readonly(xy)))
-        if self.motion.type == "velocity" and self.controls is None:
-            raise InputError("the velocity model needs controls [t, v, omega]", path=self.path)
-        if self.motion.type == "odometry" and self.odometry is None:
-            raise InputError("the odometry model needs odometry poses", path=self.path)
+        _check_models(self)
+        _check_shapes(self)
+        _check_values(self)
+        _check_covariance_fields(self)
 
     def map_index(self) -> NDArray[np.int64]:
         """Row of ``map_ids`` of each measurement's landmark, −1 when unassociated, (J,)."""
@@ -158,6 +169,132 @@ class Bundle:
     def with_map(self, xy: Array, marginals: Array, covariance: Array | None) -> Bundle:
         """The same bundle with another map (same ids and order)."""
         return replace(self, map_xy=xy, map_marginals=marginals, map_covariance=covariance)
+
+
+# ------------------------------------------------------------------------------- validation
+
+
+def _where(bundle: Bundle, name: str) -> Path | None:
+    """The file ``name`` of the bundle's directory, for messages (None when built in memory)."""
+    return None if bundle.path is None else Path(bundle.path) / name
+
+
+def _check_models(b: Bundle) -> None:
+    """The log the motion model needs: controls (velocity) or odometry poses, two rows at least."""
+    if not isinstance(b.motion, MotionModel) or not isinstance(b.sensor, SensorModel):
+        raise InputError("motion and sensor: expected a MotionModel and a SensorModel")
+    if b.motion.type == "velocity":
+        if b.controls is None:
+            raise InputError("the velocity model needs controls [t, v, omega]", path=b.path)
+        if b.controls.ndim != 2 or b.controls.shape[1] != 3:
+            raise InputError(
+                f"controls: expected shape (K, 3) [t, v, omega], got {b.controls.shape}",
+                path=_where(b, "controls.csv"),
+            )
+        if b.controls.shape[0] < 2:
+            raise InputError(
+                "expected at least two control rows (the last one ends the run)",
+                path=_where(b, "controls.csv"),
+            )
+    else:
+        if b.odometry is None:
+            raise InputError("the odometry model needs odometry poses", path=b.path)
+        if len(b.odometry) < 2:
+            raise InputError("expected at least two odometry rows", path=_where(b, "odometry.csv"))
+
+
+def _check_shapes(b: Bundle) -> None:
+    """Every array has the shape the :class:`Bundle` docstring gives it."""
+    j, m = b.measurement_times.shape[0], b.map_ids.shape[0]
+    expected = {
+        "measurement_times": (b.measurement_times, (j,)),
+        "measurements": (b.measurements, (j, 2)),
+        "measurement_landmarks": (b.measurement_landmarks, (j,)),
+        "measurement_associated": (b.measurement_associated, (j,)),
+        "measurement_lines": (b.measurement_lines, (j,)),
+        "map_ids": (b.map_ids, (m,)),
+        "map_xy": (b.map_xy, (m, 2)),
+        "map_marginals": (b.map_marginals, (m, 2, 2)),
+        "initial_pose": (b.initial_pose, (3,)),
+        "initial_covariance": (b.initial_covariance, (3, 3)),
+    }
+    if b.map_covariance is not None:
+        expected["map_covariance"] = (b.map_covariance, (2 * m, 2 * m))
+    if b.landmarks_groundtruth is not None:
+        ids, xy = b.landmarks_groundtruth
+        expected["landmarks_groundtruth ids"] = (ids, (ids.shape[0],))
+        expected["landmarks_groundtruth xy"] = (xy, (ids.shape[0], 2))
+    for name, (array, shape) in expected.items():
+        if array.shape != shape:
+            raise InputError(
+                f"{name}: expected shape {shape} (J = {j} measurements, M = {m} landmarks), "
+                f"got {array.shape}",
+                path=b.path,
+            )
+
+
+def _check_values(b: Bundle) -> None:
+    """Finite numbers, positive ranges, times in order, unique map ids, known landmarks."""
+    src = _where(b, "measurements.csv")
+
+    def line(k: int) -> int | None:
+        return int(b.measurement_lines[k]) or None
+
+    for name in ("measurement_times", "measurements", "map_xy", "initial_pose"):
+        bad = np.flatnonzero(~np.isfinite(getattr(b, name)).reshape(len(getattr(b, name)), -1))
+        if bad.size:
+            raise InputError(f"{name}: expected finite numbers (row {int(bad[0])})", path=b.path)
+    if b.controls is not None and not np.isfinite(b.controls).all():
+        raise InputError("controls: expected finite numbers", path=_where(b, "controls.csv"))
+    bad = np.flatnonzero(b.measurements[:, 0] <= 0)
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(
+            f"range {float(b.measurements[k, 0])}: expected a positive range",
+            path=src,
+            line=line(k),
+        )
+    back = np.flatnonzero(np.diff(b.measurement_times) < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise InputError(
+            f"measurement_times: time {float(b.measurement_times[k]):g} goes back; expected "
+            "measurements in time order",
+            path=src,
+            line=line(k),
+        )
+    ids, first = np.unique(b.map_ids, return_index=True)
+    if ids.size != b.map_ids.size:
+        dup = int(np.setdiff1d(np.arange(b.map_ids.size), first)[0])
+        raise InputError(
+            f"map_ids: duplicate landmark id {int(b.map_ids[dup])}; expected unique ids",
+            path=_where(b, "map.csv"),
+        )
+    unknown = np.flatnonzero(b.measurement_associated & ~np.isin(b.measurement_landmarks, ids))
+    if unknown.size:
+        k = int(unknown[0])
+        raise InputError(
+            f"landmark {int(b.measurement_landmarks[k])} is not in map.csv ({unknown.size} such "
+            "measurement(s)); expected an id of the map or an empty field (unassociated)",
+            path=src,
+            line=line(k),
+        )
+
+
+def _check_covariance_fields(b: Bundle) -> None:
+    """Initial covariance, map marginals and joint map covariance: symmetric PSD."""
+    check_covariances(
+        b.initial_covariance[None], path=_where(b, "bundle.json"), what="initial_covariance"
+    )
+    check_covariances(
+        b.map_marginals,
+        path=_where(b, "map.csv"),
+        what=lambda k: f"landmark {int(b.map_ids[k])}: covariance",
+    )
+    if b.map_covariance is not None:
+        check_joint_covariance(
+            b.map_covariance, path=_where(b, "map_covariance.npy"), what="map covariance"
+        )
 
 
 # ----------------------------------------------------------------------------------- reading
@@ -215,9 +352,7 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
             path=path,
             line=_line_of_key(text, "type") if kind is not None else line,
         )
-    names = (
-        ("sigma_v", "sigma_omega") if kind == "velocity" else ("sigma_x", "sigma_y", "sigma_theta")
-    )
+    names = SIGMA_NAMES[kind]
     if "alpha" in spec:
         if any(n in spec for n in names):
             raise InputError(
@@ -361,10 +496,6 @@ def _time_ordered(
     return {k: v[order] for k, v in cols.items()}, lines[order], report.out_of_order
 
 
-def _integer_ids(v: Array, lines: NDArray[np.int64], path: Path, column: str) -> NDArray[np.int64]:
-    return integer_ids(v, lines, path, column)
-
-
 def _load_matrix(path: Path, n: int, *, what: str) -> Array:
     """A float ``.npy`` matrix of shape (n, n), with a clear :class:`InputError` otherwise.
 
@@ -399,6 +530,10 @@ def _load_matrix(path: Path, n: int, *, what: str) -> Array:
 def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) -> Bundle:
     """Read and validate a SLAM result bundle.
 
+    Parsing only: each file is read (with its own line-precise checks: columns, numbers,
+    time order, ids, landmark covariances), then the :class:`Bundle` constructor checks
+    the whole (shapes, ranges, known landmarks, covariances) and names the file and line.
+
     Parameters
     ----------
     directory : str or PathLike
@@ -423,108 +558,86 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     if not manifest.is_file():
         raise InputError("missing required file bundle.json", path=manifest)
     meta = _read_manifest(manifest)
-    motion: MotionModel = meta["motion"]
-
-    controls = odometry = None
     reordered: dict[str, int] = {}
+    log = _read_motion_log(root, meta["motion"], reordered)
+    map_fields = _read_map(root)
+    meas = _read_measurements(root, reordered)
+    skipped = 0
+    if skip_unknown_landmarks:
+        unknown = meas["measurement_associated"] & ~np.isin(
+            meas["measurement_landmarks"], map_fields["map_ids"]
+        )
+        skipped = int(unknown.sum())
+        meas = {k: v[~unknown] for k, v in meas.items()}
+    return Bundle(
+        **meta,
+        **log,
+        **map_fields,
+        **meas,
+        **_read_truth(root, reordered),
+        skipped_unknown=skipped,
+        path=str(root),
+        reordered=reordered,
+    )
+
+
+def _read_motion_log(root: Path, motion: MotionModel, reordered: dict[str, int]) -> dict[str, Any]:
+    """``controls`` (velocity model) or ``odometry`` (odometry model), in time order."""
     if motion.type == "velocity":
         p = root / "controls.csv"
         cols, lines = _read_csv(p, required=("t", "v", "omega"))
         cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "control")
-        controls = np.column_stack((cols["t"], cols["v"], cols["omega"]))
-        if controls.shape[0] < 2:
-            raise InputError(
-                "expected at least two control rows (the last one ends the run)", path=p
-            )
-    else:
-        p = root / "odometry.csv"
-        cols, lines = _read_csv(p, required=("t", "x", "y", "theta"))
-        cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "odometry pose")
-        if cols["t"].shape[0] < 2:
-            raise InputError("expected at least two odometry rows", path=p)
-        odometry = Trajectory(cols["t"], np.column_stack((cols["x"], cols["y"], cols["theta"])))
+        return {"controls": np.column_stack((cols["t"], cols["v"], cols["omega"]))}
+    p = root / "odometry.csv"
+    cols, lines = _read_csv(p, required=("t", "x", "y", "theta"))
+    cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "odometry pose")
+    poses = np.column_stack((cols["x"], cols["y"], cols["theta"]))
+    return {"odometry": Trajectory(cols["t"], poses)}
 
+
+def _read_map(root: Path) -> dict[str, Any]:
+    """``map.csv`` (ids, positions, marginals: zeros where none given) and the joint covariance."""
     p_map = root / "map.csv"
     if not p_map.is_file():
         raise InputError("missing required file; expected columns landmark,x,y", path=p_map)
-    lm_table = read_landmark_csv(p_map, describe="the bundle's map")
-    map_ids = lm_table.ids
-    m = map_ids.shape[0]
-    marg = np.zeros((m, 2, 2)) if lm_table.cov is None else np.nan_to_num(lm_table.cov, nan=0.0)
-    map_xy = lm_table.xy
-
-    map_cov = None
+    table = read_landmark_csv(p_map, describe="the bundle's map")
+    m = table.ids.shape[0]
+    marg = np.zeros((m, 2, 2)) if table.cov is None else np.nan_to_num(table.cov, nan=0.0)
     p_cov = root / "map_covariance.npy"
-    if p_cov.exists():
-        map_cov = _load_matrix(p_cov, 2 * m, what=f"for {m} landmarks")
-        check_joint_covariance(map_cov, path=p_cov, what="map covariance")
+    cov = _load_matrix(p_cov, 2 * m, what=f"for {m} landmarks") if p_cov.exists() else None
+    return {"map_ids": table.ids, "map_xy": table.xy, "map_marginals": marg, "map_covariance": cov}
 
-    p_meas = root / "measurements.csv"
-    cols, meas_lines = _read_csv(
-        p_meas, required=("t", "range", "bearing", "landmark"), empty_ok=("landmark",)
-    )
-    cols, meas_lines, reordered[p_meas.name] = _time_ordered(
-        cols, meas_lines, p_meas, "measurement"
-    )
-    bad = np.flatnonzero(cols["range"] <= 0)
-    if bad.size:
-        raise InputError(
-            f"range {float(cols['range'][bad[0]])}: expected a positive range",
-            path=p_meas,
-            line=int(meas_lines[bad[0]]),
-        )
-    assoc = ~np.isnan(cols["landmark"])
-    lm = _integer_ids(cols["landmark"], meas_lines, p_meas, "landmark")
-    known = np.isin(lm, map_ids)
-    unknown = np.flatnonzero(assoc & ~known)
-    keep = np.ones(lm.shape[0], dtype=bool)
-    if unknown.size:
-        if not skip_unknown_landmarks:
-            k = int(unknown[0])
-            raise InputError(
-                f"landmark {lm[k]} is not in map.csv ({unknown.size} such measurement(s)); "
-                "expected an id of the map or an empty field (unassociated)",
-                path=p_meas,
-                line=int(meas_lines[k]),
-            )
-        keep[unknown] = False
 
-    gt = None
+def _read_measurements(root: Path, reordered: dict[str, int]) -> dict[str, NDArray[Any]]:
+    """``measurements.csv`` in time order: the five ``measurement*`` fields of the bundle."""
+    p = root / "measurements.csv"
+    cols, lines = _read_csv(
+        p, required=("t", "range", "bearing", "landmark"), empty_ok=("landmark",)
+    )
+    cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "measurement")
+    return {
+        "measurement_times": cols["t"],
+        "measurements": np.column_stack((cols["range"], cols["bearing"])),
+        "measurement_landmarks": integer_ids(cols["landmark"], lines, p, "landmark"),
+        "measurement_associated": ~np.isnan(cols["landmark"]),
+        "measurement_lines": lines,
+    }
+
+
+def _read_truth(root: Path, reordered: dict[str, int]) -> dict[str, Any]:
+    """``groundtruth.csv`` and ``landmarks_groundtruth.csv`` when present (else None)."""
+    out: dict[str, Any] = {"groundtruth": None, "landmarks_groundtruth": None}
     if (root / "groundtruth.csv").exists():
         loaded = read_trajectory(
             root / "groundtruth.csv", format="csv", max_step_back=FILTER_TIME_TOLERANCE
         )
-        gt = loaded.trajectory
+        out["groundtruth"] = loaded.trajectory
         reordered["groundtruth.csv"] = loaded.out_of_order
-    lgt = None
     p_lgt = root / "landmarks_groundtruth.csv"
     if p_lgt.exists():
-        gt_table = read_landmark_csv(p_lgt, covariance=False, describe="landmark ground truth")
-        lgt = (gt_table.ids, gt_table.xy)
-
-    return Bundle(
-        motion=motion,
-        sensor=meta["sensor"],
-        initial_pose=meta["initial_pose"],
-        initial_covariance=meta["initial_covariance"],
-        controls=controls,
-        odometry=odometry,
-        measurement_times=cols["t"][keep],
-        measurements=np.column_stack((cols["range"], cols["bearing"]))[keep],
-        measurement_landmarks=lm[keep],
-        measurement_associated=assoc[keep],
-        map_ids=map_ids,
-        map_xy=map_xy,
-        map_marginals=marg,
-        map_covariance=map_cov,
-        groundtruth=gt,
-        landmarks_groundtruth=lgt,
-        description=meta["description"],
-        measurement_lines=meas_lines[keep],
-        skipped_unknown=int(unknown.size) if skip_unknown_landmarks else 0,
-        path=str(root),
-        reordered=reordered,
-    )
+        table = read_landmark_csv(p_lgt, covariance=False, describe="landmark ground truth")
+        out["landmarks_groundtruth"] = (table.ids, table.xy)
+    return out
 
 
 # ----------------------------------------------------------------------------------- writing

@@ -28,6 +28,7 @@ All functions are vectorised over leading axes.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +36,7 @@ from numpy.typing import ArrayLike
 
 from relation_metric import se2
 from relation_metric.arrays import Array
+from relation_metric.errors import InputError
 
 __all__ = [
     "MotionModel",
@@ -50,6 +52,25 @@ __all__ = [
 ]
 
 MOTION_TYPES = ("velocity", "odometry")
+#: The ``sigma`` entries of each motion model, in order (``bundle.json`` keys).
+SIGMA_NAMES = {
+    "velocity": ("sigma_v", "sigma_omega"),
+    "odometry": ("sigma_x", "sigma_y", "sigma_theta"),
+}
+
+
+def _nonnegative_numbers(values: object, size: int, *, what: str) -> tuple[float, ...]:
+    """``values`` as ``size`` finite floats ≥ 0, or :class:`InputError` naming ``what``."""
+    try:
+        out = tuple(float(v) for v in values)  # type: ignore[attr-defined]
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected {size} numbers, got {values!s:.60}") from None
+    if len(out) != size:
+        raise InputError(f"{what}: expected {size} numbers, got {len(out)}")
+    bad = [v for v in out if not (math.isfinite(v) and v >= 0.0)]
+    if bad:
+        raise InputError(f"{what}: expected finite numbers >= 0, got {bad[0]:g}")
+    return out
 
 
 @dataclass(frozen=True)
@@ -64,31 +85,71 @@ class MotionModel:
     alpha : tuple of float or None
         ``(α1, α2, α3, α4)`` of Probabilistic Robotics Table 5.3 / 5.6.
 
-    Exactly one of ``sigma`` and ``alpha`` is set.
+    Exactly one of ``sigma`` and ``alpha`` is set; each is stored as a tuple of float.
+
+    Raises
+    ------
+    InputError
+        When ``type`` is not one of :data:`MOTION_TYPES` (``"Velocity"`` is refused, not run
+        as odometry), when neither or both of ``sigma`` and ``alpha`` are given, or when one of
+        them has the wrong length or a negative or non-finite entry; the message names the
+        field.
     """
 
     type: str
     sigma: tuple[float, ...] | None = None
     alpha: tuple[float, ...] | None = None
 
+    def __post_init__(self) -> None:
+        if self.type not in MOTION_TYPES:
+            raise InputError(
+                f"motion_model.type: unknown type {self.type!r}; expected one of "
+                f"{', '.join(MOTION_TYPES)}"
+            )
+        names = SIGMA_NAMES[self.type]
+        if (self.sigma is None) == (self.alpha is None):
+            raise InputError(
+                f"motion_model ({self.type}): expected either sigma ({', '.join(names)}) or "
+                "alpha (alpha1..alpha4), exactly one of them"
+            )
+        field_name, size = ("sigma", len(names)) if self.alpha is None else ("alpha", 4)
+        values = _nonnegative_numbers(
+            getattr(self, field_name), size, what=f"motion_model.{field_name} ({self.type})"
+        )
+        object.__setattr__(self, field_name, values)
+
     def as_dict(self) -> dict[str, object]:
         out: dict[str, object] = {"type": self.type}
         if self.alpha is not None:
             out["alpha"] = list(self.alpha)
-        elif self.type == "velocity":
-            out["sigma_v"], out["sigma_omega"] = self.sigma  # type: ignore[misc]
         else:
-            out["sigma_x"], out["sigma_y"], out["sigma_theta"] = self.sigma  # type: ignore[misc]
+            out.update(zip(SIGMA_NAMES[self.type], self.sigma or ()))
         return out
 
 
 @dataclass(frozen=True)
 class SensorModel:
-    """Range-bearing sensor with independent Gaussian noise (standard deviations)."""
+    """Range-bearing sensor with independent Gaussian noise (standard deviations).
+
+    Raises
+    ------
+    InputError
+        When ``type`` is not ``"range_bearing"`` or a standard deviation is negative or not
+        finite (zero is allowed in memory: a noise-free simulation); the message names the field.
+    """
 
     sigma_range: float
     sigma_bearing: float
     type: str = "range_bearing"
+
+    def __post_init__(self) -> None:
+        if self.type != "range_bearing":
+            raise InputError(
+                f"sensor_model.type: unknown type {self.type!r}; expected range_bearing"
+            )
+        for name in ("sigma_range", "sigma_bearing"):
+            (value,) = _nonnegative_numbers((getattr(self, name),), 1, what=f"sensor_model.{name}")
+            object.__setattr__(self, name, value)
 
     @property
     def covariance(self) -> Array:

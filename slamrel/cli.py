@@ -29,6 +29,7 @@ COMMAND_MODULES = (
     "slamrel.commands.review",
     "slamrel.commands.simulate",
     "slamrel.commands.compare",
+    "slamrel.commands.importers",
     "slamrel.commands.graph",
     "slamrel.commands.example",
     "slamrel.commands.study",

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Sequence
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -14,6 +14,16 @@ from relation_metric.plots import pyplot
 from relation_metric.trajectory import Trajectory
 
 __all__ = ["trajectories_figure", "nees_figure", "mark_stretches_xy", "mark_stretches_time"]
+
+
+class TimeSpan(Protocol):
+    """Anything with a start and an end time [s] (e.g. :class:`recovery.recover.Stretch`)."""
+
+    @property
+    def t0(self) -> float: ...
+
+    @property
+    def t1(self) -> float: ...
 
 
 def trajectories_figure(
@@ -65,18 +75,17 @@ def nees_figure(
     return fig
 
 
-def mark_stretches_xy(
-    fig: Any, stretches: Sequence[Mapping[str, float]], estimate: Trajectory | None
-) -> Any:
+def mark_stretches_xy(fig: Any, stretches: Sequence[TimeSpan], estimate: Trajectory | None) -> Any:
     """Mark the poses of ``estimate`` inside each stretch ``[t0, t1]`` on a trajectory plot.
 
-    ``stretches``: the ``divergence["stretches"]`` dicts of a recovery report. Returns ``fig``.
+    ``stretches``: a recovery's :class:`recovery.recover.Stretch` list, in time order.
+    Returns ``fig``.
     """
     if not stretches or estimate is None or not fig.axes:
         return fig
     t = estimate.timestamps
-    t0 = np.array([float(s["t0"]) for s in stretches])
-    t1 = np.array([float(s["t1"]) for s in stretches])
+    t0 = np.array([float(s.t0) for s in stretches])
+    t1 = np.array([float(s.t1) for s in stretches])
     k = np.searchsorted(t0, t, side="right") - 1
     inside = (k >= 0) & (t <= t1[np.clip(k, 0, None)])
     ax = fig.axes[0]
@@ -86,9 +95,7 @@ def mark_stretches_xy(
     return fig
 
 
-def mark_stretches_time(
-    fig: Any, stretches: Sequence[Mapping[str, float]], evaluation: Evaluation
-) -> Any:
+def mark_stretches_time(fig: Any, stretches: Sequence[TimeSpan], evaluation: Evaluation) -> Any:
     """Shade each stretch ``[t0, t1]`` on the error timeline of an evaluation figure.
 
     The timeline's axis is the relation mid-time since the first scored relation
@@ -101,7 +108,7 @@ def mark_stretches_time(
     origin = float(mid.min()) if mid.size else 0.0
     ax = fig.axes[0]
     for k, s in enumerate(stretches):
-        a, b = float(s["t0"]) - origin, float(s["t1"]) - origin
+        a, b = float(s.t0) - origin, float(s.t1) - origin
         ax.axvspan(a, max(b, a + 0.5), color="tab:red", alpha=0.15, lw=0,
                    label="map/log disagree" if k == 0 else None)  # fmt: skip
     ax.legend(loc="upper left", fontsize=8)

@@ -1,8 +1,15 @@
 """The main job end to end: world → EKF-SLAM → bundle → recovery → relation metric → report.
 
-:func:`run_pipeline` computes everything and returns a :class:`RunResult` (no I/O);
-:func:`write_report` writes it atomically into a report folder (``report.html``,
-``metrics.json``, per-relation CSVs, figures).
+Three steps, the I/O at the ends (evo's ``main_ape``: load, a pure ``ape``, write):
+
+* :func:`read_run_input` reads a SLAM result bundle directory (and its ``online.csv``), or
+  :func:`simulate_run_input` simulates a built-in world and runs the reference EKF-SLAM —
+  either gives a :class:`RunInput`;
+* :func:`run_pipeline` (and :func:`score_bundle`) recover and score it and return a
+  :class:`RunResult` (no I/O);
+* :func:`write_report` writes the result atomically into a report folder (``report.html``,
+  ``metrics.json``, per-relation CSVs, figures); the page itself is built by
+  :mod:`slamrel.run_report`.
 
 The trajectory is scored on three relation sets generated from the ground truth — consecutive
 (local), loop-closing and global (far-apart) — because local relations alone cannot see
@@ -13,20 +20,19 @@ baseline everyone understands; the SLAM run's online estimate is scored *for val
 
 from __future__ import annotations
 
-import json
 import warnings
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from landmark_graph.compare import MapComparison, compare_maps
 from landmark_graph.maps import LandmarkMap
-from landmark_graph.plots import map_figure
 from recovery.bundle import Bundle, read_bundle, write_bundle
-from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, recover
+from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, Recovery, Stretch, recover
 from recovery.steps import build_steps
 from relation_metric import se2
 from relation_metric.association import match_nearest_times, nearest_index
@@ -35,22 +41,27 @@ from relation_metric.errors import InputError, SlamrelError
 from relation_metric.evaluate import Evaluation, UnassociatedRelationsWarning, evaluate
 from relation_metric.formats import read_trajectory
 from relation_metric.outputs import staged_directory, write_text_atomic
-from relation_metric.plots import evaluation_figure
 from relation_metric.relations import RelationSet, generate_relations
-from relation_metric.results import write_per_relation_csv
+from relation_metric.results import write_json, write_per_relation_csv
 from relation_metric.trajectory import Trajectory
-from slamrel.figures import (
-    mark_stretches_time,
-    mark_stretches_xy,
-    nees_figure,
-    trajectories_figure,
-)
-from slamrel.report import Figure, Section, Table, figure_png, render_html
+from slamrel.report import render_html
+from slamrel.run_report import report_figures, report_sections
 from slamrel.simulate import slam_bundle, world_bundle
 from slamrel.verdict import run_verdict
 from slamrel.worlds import make_world
 
-__all__ = ["RunResult", "default_relations", "run_pipeline", "write_report"]
+__all__ = [
+    "Agreement",
+    "NeesCurve",
+    "RunInput",
+    "RunResult",
+    "default_relations",
+    "read_run_input",
+    "run_pipeline",
+    "score_bundle",
+    "simulate_run_input",
+    "write_report",
+]
 
 
 def default_relations(reference: Trajectory, *, seed: int = 0) -> dict[str, RelationSet]:
@@ -87,6 +98,80 @@ def _merge(sets: dict[str, RelationSet]) -> RelationSet:
 
 
 @dataclass(frozen=True)
+class RunInput:
+    """What ``slamrel run`` scores: a SLAM result bundle and the baselines that came with it.
+
+    Attributes
+    ----------
+    bundle : Bundle
+        With ground truth (``groundtruth.csv``): required to score.
+    name : str
+        Shown in the report's title.
+    online : Trajectory or None
+        The SLAM run's own estimate (validation only).
+    online_covariance : ndarray, shape (N, 3, 3) or None
+        Its pose covariances, one per pose of ``online``.
+    dead_reckoning : Trajectory or None
+        Odometry alone; ``None``: chained from the bundle's log.
+    """
+
+    bundle: Bundle
+    name: str
+    online: Trajectory | None = None
+    online_covariance: NDArray[np.float64] | None = None
+    dead_reckoning: Trajectory | None = None
+
+
+class NeesCurve(NamedTuple):
+    """The NEES of one estimate: its summary and the per-step values, shape (steps,)."""
+
+    summary: NeesSummary
+    values: NDArray[np.float64]
+
+
+class NisStats(NamedTuple):
+    """NIS of the recovery's innovations (:func:`recovery.recover.nis_summary`)."""
+
+    count: int | None
+    mean: float | None
+    median: float | None
+    fraction_beyond_95: float | None
+    fraction_beyond_bound: float | None
+
+
+class Agreement(NamedTuple):
+    """Where the map and the log disagree: a recovery's divergence summary, typed.
+
+    Built once from :class:`recovery.recover.Recovery` (its JSON-ready ``divergence`` and
+    ``nis_stats``), read by the notes, the report and the command's summary line.
+    """
+
+    rule: str
+    max_outlier_run: int | None
+    outlier_bound: float
+    fraction_of_log: float
+    fraction_of_measurements: float
+    stretches: tuple[Stretch, ...]
+    nees_stretches: tuple[tuple[float, float], ...]
+    nis: NisStats
+
+    @classmethod
+    def of(cls, rec: Recovery) -> Agreement:
+        d: dict[str, Any] = dict(rec.divergence)
+        nis = rec.nis_stats
+        return cls(
+            rule=str(d.get("rule", "")),
+            max_outlier_run=d.get("max_outlier_run"),
+            outlier_bound=float(d.get("outlier_bound", 0.0)),
+            fraction_of_log=float(d.get("fraction_of_log", 0.0)),
+            fraction_of_measurements=float(d.get("fraction_of_measurements", 0.0)),
+            stretches=tuple(rec.stretches),
+            nees_stretches=tuple((s["t0"], s["t1"]) for s in d.get("nees_stretches") or ()),
+            nis=NisStats(*(nis.get(k) for k in NisStats._fields)),  # type: ignore[arg-type]
+        )
+
+
+@dataclass(frozen=True)
 class RunResult:
     """Everything ``slamrel run`` computed.
 
@@ -98,34 +183,54 @@ class RunResult:
     estimates : dict of name → Trajectory
         ``"recovered"`` (when a recovery ran), ``"dead_reckoning"``, ``"online"``.
     evaluations : dict of name → dict of relation-set name → Evaluation
-    nees : dict of name → (NeesSummary, per-step NEES)
-    recovery : dict
-        Counts of measurements used / gated / unassociated.
-    map : dict or None
-        The landmark-map comparison (``slamrel map-compare`` JSON), when available.
+    nees : dict of name → NeesCurve
+    recovery_result : Recovery or None
+        The recovery (``None`` when it failed: see ``recovery_error``).
+    map_comparison : MapComparison or None
+        The landmark-map comparison, when the bundle has the true landmarks.
     notes : list of str
     recovery_error : str or None
         Why no trajectory was recovered (``--fail-on-divergence``, or numerically impossible
         input); the report then scores dead reckoning (and the online estimate).
+
+    Derived (computed once, on first use): ``recovery`` and ``map``, the JSON of the recovery
+    and of the map comparison (``metrics.json``); ``agreement``, the typed divergence summary.
     """
 
     name: str
     bundle: Bundle
     estimates: dict[str, Trajectory]
     evaluations: dict[str, dict[str, Evaluation]]
-    nees: dict[str, tuple[NeesSummary, np.ndarray]]
-    recovery: dict[str, Any]
-    map: dict[str, Any] | None
-    notes: list[str] = field(default_factory=list)
+    nees: dict[str, NeesCurve]
+    recovery_result: Recovery | None
     map_comparison: MapComparison | None = None
+    notes: list[str] = field(default_factory=list)
     recovery_error: str | None = None
+
+    @property
+    def main_estimate(self) -> str:
+        """The estimate scored as ``trajectory``: recovered, else online, else dead reckoning."""
+        return next(k for k in ("recovered", "online", "dead_reckoning") if k in self.evaluations)
+
+    @cached_property
+    def recovery(self) -> dict[str, Any]:
+        """The recovery's JSON summary (``metrics.json`` ``recovery``; empty when none ran)."""
+        return {} if self.recovery_result is None else self.recovery_result.report()
+
+    @cached_property
+    def map(self) -> dict[str, Any] | None:
+        """The map comparison's JSON (``slamrel map-compare``), when there is one."""
+        return None if self.map_comparison is None else self.map_comparison.as_dict()
+
+    @cached_property
+    def agreement(self) -> Agreement | None:
+        """Where the map and the log disagree (``None`` when no recovery ran)."""
+        return None if self.recovery_result is None else Agreement.of(self.recovery_result)
 
     def metrics(self) -> dict[str, Any]:
         """The ``metrics.json`` structure."""
         out: dict[str, Any] = {}
-        main_name = next(
-            k for k in ("recovered", "online", "dead_reckoning") if k in self.evaluations
-        )
+        main_name = self.main_estimate
         for name, evs in self.evaluations.items():
             key = "trajectory" if name == main_name else name
             out[key] = evs["all"].as_dict()
@@ -135,7 +240,7 @@ class RunResult:
         out["recovery"] = self.recovery
         out["divergence"] = self.recovery.get("divergence")
         out["recovery_error"] = self.recovery_error
-        out["nees"] = {k: v[0].as_dict() for k, v in self.nees.items()}
+        out["nees"] = {k: v.summary.as_dict() for k, v in self.nees.items()}
         out["notes"] = self.notes
         return out
 
@@ -152,8 +257,50 @@ def _evaluate_sets(sets: dict[str, RelationSet], est: Trajectory) -> dict[str, E
     return out
 
 
+def read_run_input(directory: str | Path) -> RunInput:
+    """Read a SLAM result bundle directory to score (the I/O end of ``slamrel run``).
+
+    The bundle (``../shared/BUNDLE.md``) is scored against its ``groundtruth.csv`` (required by
+    :func:`score_bundle`) and, when present, ``landmarks_groundtruth.csv``; an ``online.csv``
+    beside it (written by ``slamrel slam --store-online``) is scored too.
+    """
+    bundle = read_bundle(directory)
+    online_path = Path(directory) / "online.csv"
+    online = (
+        read_trajectory(online_path, format="csv").trajectory if online_path.is_file() else None
+    )
+    return RunInput(bundle, name=str(directory), online=online)
+
+
+def simulate_run_input(
+    world: str = "simple1",
+    *,
+    noise: str = "a",
+    seed: int = 0,
+    rate: int = 0,
+    corrupt_fraction: float = 0.0,
+    noise_scale: float = 1.0,
+    process_noise_scale: float = 1.0,
+) -> RunInput:
+    """Simulate a built-in world and run the reference EKF-SLAM on it (no I/O).
+
+    The input carries the filter's online estimate and covariances (for validation) and the
+    world's odometry as dead reckoning. ``corrupt_fraction``, ``noise_scale`` and
+    ``process_noise_scale`` are passed to :func:`slamrel.simulate.slam_bundle`.
+    """
+    w = make_world(world, noise=noise, seed=seed, rate=rate)
+    bundle, slam = slam_bundle(
+        world_bundle(w), corrupt_fraction=corrupt_fraction, noise_scale=noise_scale, seed=seed,
+        process_noise_scale=process_noise_scale,
+    )  # fmt: skip
+    return RunInput(
+        bundle, name=f"{world}/{noise}/seed {seed}", online=slam.online,
+        online_covariance=slam.online_covariance, dead_reckoning=w.odometry,
+    )  # fmt: skip
+
+
 def run_pipeline(
-    source: str = "simple1",
+    source: str | RunInput = "simple1",
     *,
     noise: str = "a",
     seed: int = 0,
@@ -166,56 +313,32 @@ def run_pipeline(
     robust: str | None = None,
     process_noise_scale: float = 1.0,
 ) -> RunResult:
-    """Run the whole chain on a built-in world, or score a SLAM result bundle directory.
+    """Run the whole chain on a built-in world, or score a bundle read earlier (no I/O).
 
-    A world name simulates the world, runs the reference EKF-SLAM and scores its bundle (with
-    the filter's online estimate for validation). A directory is read as a SLAM result bundle
-    (``../shared/BUNDLE.md``) and scored against its ``groundtruth.csv`` (required) and, when
-    present, ``landmarks_groundtruth.csv``; an ``online.csv`` beside it (written by
-    ``slamrel slam --store-online``) is scored too. ``max_outlier_run``, ``on_divergence``
-    and ``robust`` are passed to :func:`recovery.recover.recover`; ``process_noise_scale`` to
-    :func:`slamrel.simulate.slam_bundle` (worlds only).
+    ``source``: a world name (simulated by :func:`simulate_run_input` with ``noise``, ``seed``,
+    ``rate``, ``corrupt_fraction``, ``noise_scale``, ``process_noise_scale``), or a
+    :class:`RunInput` (e.g. from :func:`read_run_input` for a bundle directory).
+    ``max_outlier_run``, ``on_divergence`` and ``robust`` are passed to
+    :func:`recovery.recover.recover`.
     """
-    if Path(source).is_dir():
-        bundle = read_bundle(source)
-        online_path = Path(source) / "online.csv"
-        online_traj = (
-            read_trajectory(online_path, format="csv").trajectory if online_path.is_file() else None
-        )
-        return score_bundle(
-            bundle,
-            name=str(source),
-            seed=seed,
-            method=method,
-            max_outlier_run=max_outlier_run,
-            online=online_traj,
-            on_divergence=on_divergence,
-            robust=robust,
-        )
-    world = make_world(source, noise=noise, seed=seed, rate=rate)
-    log = world_bundle(world)
-    bundle, slam = slam_bundle(
-        log, corrupt_fraction=corrupt_fraction, noise_scale=noise_scale, seed=seed,
-        process_noise_scale=process_noise_scale,
-    )  # fmt: skip
+    inp = source
+    if not isinstance(inp, RunInput):
+        inp = simulate_run_input(
+            inp, noise=noise, seed=seed, rate=rate, corrupt_fraction=corrupt_fraction,
+            noise_scale=noise_scale, process_noise_scale=process_noise_scale,
+        )  # fmt: skip
     return score_bundle(
-        bundle, name=f"{source}/{noise}/seed {seed}", seed=seed, method=method,
-        max_outlier_run=max_outlier_run, online=slam.online,
-        online_covariance=slam.online_covariance, dead_reckoning=world.odometry,
+        inp, seed=seed, method=method, max_outlier_run=max_outlier_run,
         on_divergence=on_divergence, robust=robust,
     )  # fmt: skip
 
 
 def score_bundle(
-    bundle: Bundle,
+    inp: RunInput,
     *,
-    name: str,
     seed: int = 0,
     method: str = "smoother",
     max_outlier_run: int | None = DEFAULT_MAX_OUTLIER_RUN,
-    online: Trajectory | None = None,
-    online_covariance: NDArray[np.float64] | None = None,
-    dead_reckoning: Trajectory | None = None,
     on_divergence: str = "reenter",
     robust: str | None = None,
 ) -> RunResult:
@@ -225,6 +348,7 @@ def score_bundle(
     or numerically impossible input), the result still scores dead reckoning (and the online
     estimate) and says why in ``recovery_error``: a report is always written.
     """
+    bundle = inp.bundle
     truth = bundle.groundtruth
     if truth is None:
         raise InputError(
@@ -234,71 +358,87 @@ def score_bundle(
     rec_error = None
     try:
         rec = recover(
-            bundle,
-            method=method,
-            max_outlier_run=max_outlier_run,
-            on_divergence=on_divergence,
-            robust=robust,
-        )
+            bundle, method=method, max_outlier_run=max_outlier_run,
+            on_divergence=on_divergence, robust=robust,
+        )  # fmt: skip
     except SlamrelError as exc:  # DivergenceError with on_divergence="raise"
         if isinstance(exc, InputError):
             raise
         rec, rec_error = None, str(exc)
-    if dead_reckoning is None:
-        steps = build_steps(bundle)
-        dead_reckoning = Trajectory(
-            steps.times, se2.cumulative_compose(steps.u, start=bundle.initial_pose)
-        )
-    estimates: dict[str, Trajectory] = {}
-    nees: dict[str, tuple[NeesSummary, np.ndarray]] = {}
-    if rec is not None:
-        recovered, rec_rows = _at_truth_times(rec.trajectory, truth)
-        estimates["recovered"] = recovered
-        truth_at = _truth_at(truth, recovered.timestamps)
-        nees_rec = pose_nees(recovered.poses[1:], truth_at[1:], rec.covariances[rec_rows][1:])
-        nees["recovered"] = (summarize_nees(nees_rec, dof=3), nees_rec)
-    estimates["dead_reckoning"] = _at_truth_times(dead_reckoning, truth)[0]
-    if online is not None:
-        online_t, online_rows = _at_truth_times(online, truth)
-        estimates["online"] = online_t
-        if online_covariance is not None:
-            v = pose_nees(
-                online_t.poses[1:],
-                _truth_at(truth, online_t.timestamps)[1:],
-                online_covariance[online_rows][1:],
-            )
-            nees["online"] = (summarize_nees(v, dof=3), v)
-    evaluations = {k: _evaluate_sets(sets, est) for k, est in estimates.items()}
+    estimates, nees = _estimates_at_truth(inp, rec)
     map_cmp = None
     if bundle.landmarks_groundtruth is not None:
         gt_ids, gt_xy = bundle.landmarks_groundtruth
         map_cmp = compare_maps(
             LandmarkMap(bundle.map_ids, bundle.map_xy), LandmarkMap(gt_ids, gt_xy)
         )
-    notes = _recovery_notes(rec, method) if rec is not None else [
-        f"No trajectory was recovered: {rec_error}. The report scores dead reckoning"
-        + (" and the online estimate." if online is not None else ".")
-    ]  # fmt: skip
-    if online is not None:
-        notes.append(
-            "The online estimate is the EKF-SLAM filter's own pose; it is shown for validation "
-            "only (a filter-based SLAM system keeps no trajectory)."
-        )
     return RunResult(
-        name=name,
+        name=inp.name,
         bundle=bundle,
         estimates=estimates,
-        evaluations=evaluations,
+        evaluations={k: _evaluate_sets(sets, est) for k, est in estimates.items()},
         nees=nees,
-        recovery=rec.report() if rec is not None else {},
-        map=None if map_cmp is None else map_cmp.as_dict(),
-        notes=notes,
+        recovery_result=rec,
         map_comparison=map_cmp,
+        notes=_notes(rec, rec_error, method, has_online=inp.online is not None),
         recovery_error=rec_error,
     )
 
 
-def _recovery_notes(rec: Any, method: str) -> list[str]:
+def _estimates_at_truth(
+    inp: RunInput, rec: Recovery | None
+) -> tuple[dict[str, Trajectory], dict[str, NeesCurve]]:
+    """Recovered, dead-reckoning and online estimates at the ground-truth times, and NEES."""
+    bundle, truth = inp.bundle, inp.bundle.groundtruth
+    assert truth is not None
+    dead_reckoning = inp.dead_reckoning
+    if dead_reckoning is None:
+        steps = build_steps(bundle)
+        dead_reckoning = Trajectory(
+            steps.times, se2.cumulative_compose(steps.u, start=bundle.initial_pose)
+        )
+    estimates: dict[str, Trajectory] = {}
+    nees: dict[str, NeesCurve] = {}
+    if rec is not None:
+        recovered, rec_rows = _at_truth_times(rec.trajectory, truth)
+        estimates["recovered"] = recovered
+        truth_at = _truth_at(truth, recovered.timestamps)
+        v = pose_nees(recovered.poses[1:], truth_at[1:], rec.covariances[rec_rows][1:])
+        nees["recovered"] = NeesCurve(summarize_nees(v, dof=3), v)
+    estimates["dead_reckoning"] = _at_truth_times(dead_reckoning, truth)[0]
+    if inp.online is not None:
+        online_t, online_rows = _at_truth_times(inp.online, truth)
+        estimates["online"] = online_t
+        if inp.online_covariance is not None:
+            v = pose_nees(
+                online_t.poses[1:],
+                _truth_at(truth, online_t.timestamps)[1:],
+                inp.online_covariance[online_rows][1:],
+            )
+            nees["online"] = NeesCurve(summarize_nees(v, dof=3), v)
+    return estimates, nees
+
+
+def _notes(
+    rec: Recovery | None, rec_error: str | None, method: str, *, has_online: bool
+) -> list[str]:
+    """The report's notes: what was recovered (or why nothing), and what the online estimate is."""
+    if rec is None:
+        notes = [
+            f"No trajectory was recovered: {rec_error}. The report scores dead "
+            "reckoning" + (" and the online estimate." if has_online else ".")
+        ]
+    else:
+        notes = _recovery_notes(rec, method)
+    if has_online:
+        notes.append(
+            "The online estimate is the EKF-SLAM filter's own pose; it is shown for validation "
+            "only (a filter-based SLAM system keeps no trajectory)."
+        )
+    return notes
+
+
+def _recovery_notes(rec: Recovery, method: str) -> list[str]:
     counts = rec.counts
     notes = [
         f"The recovered trajectory is EKF localisation in the SLAM run's final map with its "
@@ -316,12 +456,12 @@ def _recovery_notes(rec: Any, method: str) -> list[str]:
             f"{100 * counts['downweight_loss']:.1f}%); like a gated fraction, a large loss is a "
             "finding about the map."
         )
-    d = rec.divergence
-    if d.get("stretches"):
+    a = Agreement.of(rec)
+    if a.stretches:
         notes.append(
-            f"The map and the log DISAGREE on {len(d['stretches'])} stretch(es) covering "
-            f"{100 * d['fraction_of_log']:.1f}% of the log (runs of innovations beyond the "
-            f"χ² bound {d['outlier_bound']:.2f}; mean NIS {rec.nis_stats['mean']:.3g}, 2 "
+            f"The map and the log DISAGREE on {len(a.stretches)} stretch(es) covering "
+            f"{100 * a.fraction_of_log:.1f}% of the log (runs of innovations beyond the "
+            f"χ² bound {a.outlier_bound:.2f}; mean NIS {a.nis.mean:.3g}, 2 "
             "expected). Divergence is a finding: the recovery was re-entered after each run "
             "and went on; the score includes these stretches (see the section below)."
         )
@@ -343,277 +483,51 @@ def _truth_at(truth: Trajectory, t: NDArray[np.float64]) -> NDArray[np.float64]:
     return truth.poses[nearest_index(truth.timestamps, t)]
 
 
-def _stats_table(result: RunResult, part: str) -> Table:
-    rows = []
-    for name, evs in result.evaluations.items():
-        for set_name, ev in evs.items():
-            s = getattr(ev, part)["abs"]
-            q = getattr(ev, part)["sqr"]
-            rows.append([name, set_name, s.mean, s.std, q.mean, s.max, s.count])
-    unit = "m" if part == "translation" else "rad"
-    return Table(
-        f"{part} relation error [{unit}]",
-        [
-            "estimate",
-            "relations",
-            f"abs mean [{unit}]",
-            f"abs std [{unit}]",
-            f"sqr mean [{unit}²]",
-            f"abs max [{unit}]",
-            "count",
-        ],
-        rows,
-    )
-
-
-def _divergence_section(result: RunResult) -> Section:
-    """Where the map and the log disagree (stretches, NIS), or why nothing was recovered."""
-    if result.recovery_error is not None:
-        return Section(
-            "Map–log agreement",
-            paragraphs=[f"No trajectory was recovered: {result.recovery_error}"],
-        )
-    d = result.recovery.get("divergence") or {}
-    nis = result.recovery.get("nis") or {}
-    st = d.get("stretches") or []
-    paragraphs = [
-        "EKF localisation in the final map checks every innovation against its covariance: "
-        f"a stretch is a run of at least {d.get('max_outlier_run') or 'the default number of'} "
-        f"consecutive innovations with NIS beyond the χ² bound {d.get('outlier_bound', 0.0):.2f}"
-        " (2 dof). Divergence is a finding about the map (or the models), not an error: "
-        "the filter was re-entered after each run (its pose covariance inflated) and went on, "
-        "and the scores above include these stretches.",
-        f"Rule: {d.get('rule', '')}.",
-        (
-            f"{len(st)} stretch(es), {100 * float(d.get('fraction_of_log', 0.0)):.1f}% of the log, "
-            f"{100 * float(d.get('fraction_of_measurements', 0.0)):.1f}% of the measurements."
-            if st
-            else "The map and the log agree: no stretch of outlying innovations."
-        ),
-    ]
-    ns = d.get("nees_stretches") or []
-    if ns:
-        paragraphs.append(
-            f"Against the ground truth, the recovered pose's NEES exceeds its 99.99% χ² bound "
-            f"(3 dof) on {len(ns)} stretch(es): "
-            + ", ".join(f"[{s['t0']:.6g}, {s['t1']:.6g}] s" for s in ns[:10])
-            + (" …" if len(ns) > 10 else "")
-            + "."
-        )
-    rows = [
-        [s["t0"], s["t1"], s["duration"], s["measurements"], s["outlying"], s["nis_median"],
-         s["nis_max"], s["reentries"]]
-        for s in st[:50]
-    ]  # fmt: skip
-    if len(st) > 50:
-        paragraphs.append(f"The first 50 of {len(st)} stretches are listed; all in metrics.json.")
-    tables = [
-        Table(
-            "NIS of the recovery's innovations (2 dof)",
-            ["measurements", "mean", "median", "expected mean", "beyond 95%", "beyond bound"],
-            [
-                [
-                    nis.get("count"),
-                    nis.get("mean"),
-                    nis.get("median"),
-                    2.0,
-                    nis.get("fraction_beyond_95"),
-                    nis.get("fraction_beyond_bound"),
-                ]
-            ],
-        ),  # fmt: skip
-    ]
-    if rows:
-        tables.append(
-            Table(
-                "stretches where the map and the log disagree (times in s)",
-                [
-                    "t0",
-                    "t1",
-                    "duration",
-                    "measurements",
-                    "outlying",
-                    "NIS median",
-                    "NIS max",
-                    "re-entries",
-                ],
-                rows,
-            )  # fmt: skip
-        )
-    return Section("Map–log agreement", paragraphs=paragraphs, tables=tables)
-
-
 def write_report(result: RunResult, directory: str | Path, *, force: bool = True) -> Path:
     """Write the report folder, swapped in whole; returns the path of ``report.html``.
 
-    ``force``: may an existing report folder (one slamrel wrote) be replaced?
+    The folder holds ``bundle/``, ``metrics.json`` (:meth:`RunResult.metrics`, the numbers
+    every table of the page shows), ``relations_<estimate>.csv``, ``figure_<k>.png`` and,
+    with a map comparison, ``review.html``. ``force``: may an existing report folder (one
+    slamrel wrote) be replaced?
     """
     target = Path(directory)
     metrics = result.metrics()
-    truth = result.bundle.groundtruth
-    assert truth is not None
     with staged_directory(target, kind="report", force=force) as tmp:
         write_bundle(tmp / "bundle", result.bundle)
-        write_text_atomic(
-            tmp / "metrics.json", json.dumps(metrics, indent=2, allow_nan=False) + "\n"
-        )
+        write_json(tmp / "metrics.json", metrics)
         for name, evs in result.evaluations.items():
             write_per_relation_csv(tmp / f"relations_{name}.csv", evs["all"])
-        main_name = metrics["trajectory_source"]
-        stretches = (result.recovery.get("divergence") or {}).get("stretches") or []
-        figs = [
-            Figure(
-                "Estimates against the ground truth, with the true landmarks and the SLAM map",
-                figure_png(
-                    mark_stretches_xy(
-                        trajectories_figure(
-                            truth,
-                            result.estimates,
-                            landmarks=result.bundle.landmarks_groundtruth[1]
-                            if result.bundle.landmarks_groundtruth
-                            else None,
-                            mapped=result.bundle.map_xy,
-                        ),
-                        stretches,
-                        result.estimates.get("recovered"),
-                    )
-                ),
-            ),
-            Figure(
-                f"The {main_name} trajectory coloured by relation error (all relation sets), "
-                "and the errors over time",
-                figure_png(
-                    mark_stretches_time(
-                        evaluation_figure(
-                            result.evaluations[main_name]["all"], result.estimates[main_name]
-                        ),
-                        stretches,
-                        result.evaluations[main_name]["all"],
-                    )
-                ),
-            ),
-        ]
-        nees_curves = {k: v[1] for k, v in result.nees.items()}
-        nees_sum = {k: v[0] for k, v in result.nees.items()}
-        figs.append(
-            Figure(
-                "NEES over time with the 95% χ² band (3 dof)",
-                figure_png(nees_figure(truth.timestamps[1:], nees_curves, nees_sum)),
-            )
-        )
-        map_figs = []
-        if result.map_comparison is not None:
-            map_figs.append(
-                Figure(
-                    "The SLAM map against the true landmarks: the Delaunay mesh of the true "
-                    "landmarks, each edge coloured by its length error",
-                    figure_png(map_figure(result.map_comparison)),
-                )
-            )
-        figs += map_figs
-        for k, fig in enumerate(figs):
+        figures = report_figures(result)
+        for k, fig in enumerate(figures.in_order()):
             (tmp / f"figure_{k + 1}.png").write_bytes(fig.png)
-        review_links = []
+        review = None
         if result.map_comparison is not None:
-            from landmark_graph.review import write_review
-
-            mc = result.map_comparison
-            write_review(
-                tmp / "review.html", mc.estimate, mc.reference, mc.association, cutoff=mc.cutoff,
-                names=("SLAM map", "true landmarks"), title=f"slamrel review — {result.name}",
-            )  # fmt: skip
-            review_links.append(
-                (
-                    "review.html",
-                    "Review the landmark association in a browser (accept, reject or draw "
-                    "pairs; save the CSV for slamrel map-compare --associate FILE)",
-                )
-            )
-        sections = [
-            Section(
-                f"slamrel run: {result.name}",
-                paragraphs=[
-                    "Relation metric (Kümmerle et al. 2009): relative motions of each estimate "
-                    "against ground-truth relations, ε = 1/N Σ ‖δ_ij ⊖ δ*_ij‖².",
-                    *result.notes,
-                ],
-                tables=[_stats_table(result, "translation"), _stats_table(result, "rotation")],
-                figures=figs[:2],
-            ),
-            Section(
-                "Consistency",
-                tables=[
-                    Table(
-                        "NEES (3 dof) of the pose estimates",
-                        ["estimate", "mean", "band low", "band high", "fraction inside"],
-                        [[k, v.mean, v.band[0], v.band[1], v.inside] for k, v in nees_sum.items()],
-                    )
-                ],
-                figures=figs[2:3],
-            ),
-        ]
-        sections.append(_divergence_section(result))
-        if result.map is not None:
-            mp = result.map
-            sections.append(
-                Section(
-                    "Map",
-                    paragraphs=[
-                        "Relations of the landmark map: the Delaunay mesh over the true "
-                        "landmarks; per edge the length error, per triangle corner the angle "
-                        "error — local and independent of the map's frame.",
-                    ],
-                    tables=[
-                        Table(
-                            "landmark-map relation errors",
-                            ["relation", "abs mean", "abs std", "abs max", "count"],
-                            [
-                                ["edge length [m]"]
-                                + [
-                                    mp["translation"]["abs"][k]
-                                    for k in ("mean", "std", "max", "count")
-                                ],
-                                ["corner angle [rad]"]
-                                + [
-                                    mp["rotation"]["abs"][k]
-                                    for k in ("mean", "std", "max", "count")
-                                ],
-                            ],
-                        ),
-                        Table(
-                            "association and set distances",
-                            [
-                                "matched",
-                                "missed",
-                                "spurious",
-                                "OSPA [m]",
-                                "GOSPA [m]",
-                                "c [m]",
-                                "p",
-                            ],
-                            [
-                                [
-                                    mp["association"]["matched"],
-                                    mp["association"]["missed"],
-                                    mp["association"]["spurious"],
-                                    mp["ospa"]["value"],
-                                    mp["gospa"]["value"],
-                                    mp["ospa"]["c"],
-                                    mp["ospa"]["p"],
-                                ]
-                            ],
-                        ),
-                    ],
-                    figures=figs[3:],
-                    links=review_links,
-                )
-            )
+            review = _write_review(tmp / "review.html", result)
+        sections = report_sections(result, figures, review=review)
         write_text_atomic(
             tmp / "report.html",
             render_html(
                 f"slamrel report — {result.name}",
-                sections,
-                verdict=run_verdict(metrics, {k: v[1] for k, v in result.nees.items()}),
+                sections.in_order(),
+                verdict=run_verdict(metrics, {k: v.values for k, v in result.nees.items()}),
             ),
         )
     return target / "report.html"
+
+
+def _write_review(path: Path, result: RunResult) -> tuple[str, str]:
+    """Write the landmark-association review page; returns its ``(href, text)`` link."""
+    from landmark_graph.review import write_review
+
+    mc = result.map_comparison
+    assert mc is not None
+    write_review(
+        path, mc.estimate, mc.reference, mc.association, cutoff=mc.cutoff,
+        names=("SLAM map", "true landmarks"), title=f"slamrel review — {result.name}",
+    )  # fmt: skip
+    return (
+        path.name,
+        "Review the landmark association in a browser (accept, reject or draw "
+        "pairs; save the CSV for slamrel map-compare --associate FILE)",
+    )

@@ -96,8 +96,21 @@ def run_verdict(
     nees_curves : mapping of name → ndarray, shape (steps,), optional
         Per-step NEES of each estimate (for the inconsistent stretches).
     """
-    lines: list[Judgement] = []
     main = str(metrics.get("trajectory_source", "recovered"))
+    mp = metrics.get("map")
+    lines = [
+        *_accuracy_lines(metrics, main),
+        *_consistency_lines(metrics.get("nees") or {}, main, nees_curves or {}),
+        *(_map_lines(mp) if isinstance(mp, Mapping) else []),
+        *_measurement_lines((metrics.get("recovery") or {}).get("measurements") or {}),
+    ]
+    level = max((ln.level for ln in lines), key=LEVELS.index, default="amber")
+    return Verdict(level, _evidence(metrics), lines)
+
+
+def _accuracy_lines(metrics: Mapping[str, Any], main: str) -> list[Judgement]:
+    """The main estimate against dead reckoning, and the online estimate against it."""
+    lines = []
     ours = _translation(metrics, "trajectory")
     dr = _translation(metrics, "dead_reckoning")
     if ours is not None and dr is not None and dr > 0:
@@ -123,75 +136,88 @@ def run_verdict(
                 "ratio of the same errors; green within a factor 2, amber within 4, red beyond",
             )
         )
-    nees = metrics.get("nees") or {}
-    if main in nees:
-        n = nees[main]
-        inside = float(n["inside"])
+    return lines
+
+
+def _consistency_lines(
+    nees: Mapping[str, Any], main: str, nees_curves: Mapping[str, ArrayLike]
+) -> list[Judgement]:
+    """NEES inside the band, and stretches above it, of the main estimate."""
+    if main not in nees:
+        return []
+    n = nees[main]
+    inside = float(n["inside"])
+    lines = [
+        Judgement(
+            f"consistency ({main})",
+            f"NEES mean {_g(n['mean'])} (dof {n['dof']}), {100 * inside:.0f} % of steps "
+            f"inside [{_g(n['band'][0])}, {_g(n['band'][1])}]",
+            "green" if inside >= 0.9 else "amber" if inside >= 0.75 else "red",
+            "fraction of steps inside the 95 % χ² band; green ≥ 90 %, amber ≥ 75 %, red below",
+        )
+    ]
+    curve = nees_curves.get(main)
+    if curve is not None:
+        v = np.asarray(curve, dtype=np.float64)
+        runs = stretches(v, float(n["band"][1]))
+        cover = sum(runs) / v.size if v.size else 0.0
         lines.append(
             Judgement(
-                f"consistency ({main})",
-                f"NEES mean {_g(n['mean'])} (dof {n['dof']}), {100 * inside:.0f} % of steps "
-                f"inside [{_g(n['band'][0])}, {_g(n['band'][1])}]",
-                "green" if inside >= 0.9 else "amber" if inside >= 0.75 else "red",
-                "fraction of steps inside the 95 % χ² band; green ≥ 90 %, amber ≥ 75 %, red below",
+                "inconsistent stretches",
+                f"{len(runs)} (longest {max(runs, default=0)} steps, "
+                f"{100 * cover:.0f} % of {v.size})",
+                "green" if not runs else "amber" if cover < 0.1 else "red",
+                f"runs of ≥ {MIN_STRETCH} steps with NEES above the band; green none, "
+                "amber < 10 % of the steps, red ≥ 10 %",
             )
         )
-        curve = (nees_curves or {}).get(main)
-        if curve is not None:
-            v = np.asarray(curve, dtype=np.float64)
-            runs = stretches(v, float(n["band"][1]))
-            cover = sum(runs) / v.size if v.size else 0.0
-            lines.append(
-                Judgement(
-                    "inconsistent stretches",
-                    f"{len(runs)} (longest {max(runs, default=0)} steps, "
-                    f"{100 * cover:.0f} % of {v.size})",
-                    "green" if not runs else "amber" if cover < 0.1 else "red",
-                    f"runs of ≥ {MIN_STRETCH} steps with NEES above the band; green none, "
-                    "amber < 10 % of the steps, red ≥ 10 %",
-                )
-            )
-    mp = metrics.get("map")
-    if isinstance(mp, Mapping):
-        c = float(mp["ospa"]["c"])
-        edge = float(mp["translation"]["abs"]["mean"])
-        ospa = float(mp["ospa"]["value"])
-        lines.append(
-            Judgement(
-                "map edge error",
-                f"{_g(edge)} m (c = {_g(c)} m)",
-                _level(edge / c, 0.1, 0.3),
-                "mean abs edge-length error of the Delaunay mesh; green ≤ 0.1 c, amber ≤ 0.3 c",
-            )
+    return lines
+
+
+def _map_lines(mp: Mapping[str, Any]) -> list[Judgement]:
+    """Map edge error and OSPA, each over the association cut-off ``c``."""
+    c = float(mp["ospa"]["c"])
+    edge = float(mp["translation"]["abs"]["mean"])
+    ospa = float(mp["ospa"]["value"])
+    return [
+        Judgement(
+            "map edge error",
+            f"{_g(edge)} m (c = {_g(c)} m)",
+            _level(edge / c, 0.1, 0.3),
+            "mean abs edge-length error of the Delaunay mesh; green ≤ 0.1 c, amber ≤ 0.3 c",
+        ),
+        Judgement(
+            "map OSPA",
+            f"{_g(ospa)} m (c = {_g(c)} m)",
+            _level(ospa / c, 0.25, 0.5),
+            "OSPA of the whole maps; green ≤ 0.25 c, amber ≤ 0.5 c, red above",
+        ),
+    ]
+
+
+def _measurement_lines(meas: Mapping[str, Any]) -> list[Judgement]:
+    """The recovery's gated / down-weighted fractions of the measurements."""
+    return [
+        Judgement(
+            key.replace("_fraction", "") + " measurements",
+            f"{100 * float(meas[key]):.1f} %",
+            _level(float(meas[key]), 0.01, 0.05),
+            "fraction of the recovery's measurements; green ≤ 1 %, amber ≤ 5 %, red above",
         )
-        lines.append(
-            Judgement(
-                "map OSPA",
-                f"{_g(ospa)} m (c = {_g(c)} m)",
-                _level(ospa / c, 0.25, 0.5),
-                "OSPA of the whole maps; green ≤ 0.25 c, amber ≤ 0.5 c, red above",
-            )
-        )
-    meas = (metrics.get("recovery") or {}).get("measurements") or {}
-    for key in sorted(k for k in meas if k.endswith("_fraction")):
-        f = float(meas[key])
-        lines.append(
-            Judgement(
-                key.replace("_fraction", "") + " measurements",
-                f"{100 * f:.1f} %",
-                _level(f, 0.01, 0.05),
-                "fraction of the recovery's measurements; green ≤ 1 %, amber ≤ 5 %, red above",
-            )
-        )
-    level = max((ln.level for ln in lines), key=LEVELS.index, default="amber")
-    main_ev = metrics.get("trajectory") or {}
-    evidence = [f"{main_ev.get('relations', 0)} relations"]
+        for key in sorted(k for k in meas if k.endswith("_fraction"))
+    ]
+
+
+def _evidence(metrics: Mapping[str, Any]) -> str:
+    """The evidence sentence: relations, poses and matched landmarks counted."""
+    evidence = [f"{(metrics.get('trajectory') or {}).get('relations', 0)} relations"]
     poses = (metrics.get("recovery") or {}).get("poses")
     if poses:
         evidence.append(f"{poses} poses")
+    mp = metrics.get("map")
     if isinstance(mp, Mapping):
         a = mp["association"]
         evidence.append(
             f"{a['matched']} matched landmarks ({a['missed']} missed, {a['spurious']} spurious)"
         )
-    return Verdict(level, "Based on " + ", ".join(evidence) + ".", lines)
+    return "Based on " + ", ".join(evidence) + "."

@@ -40,7 +40,10 @@ def test_import_relation_metric_is_light() -> None:
     assert _imported_after("import relation_metric") == set()
 
 
-@pytest.mark.parametrize("argv", [["--help"], ["evaluate", "--help"], ["recover", "--help"]])
+@pytest.mark.parametrize(
+    "argv",
+    [["--help"], ["evaluate", "--help"], ["recover", "--help"], ["import", "isam", "--help"]],
+)
 def test_help_imports_no_heavy_module(argv: list[str]) -> None:
     code = (
         "from slamrel.cli import main\n"
@@ -78,3 +81,83 @@ def test_choices_equal_the_owners() -> None:
     assert choices.NOISE_TYPES == tuple(sorted(NOISE_TYPES))
     assert choices.ROBUST_CHOICES == tuple(r for r in ROBUST if r)
     assert choices.DEFAULT_MAX_OUTLIER_RUN == DEFAULT_MAX_OUTLIER_RUN
+
+
+def test_import_commands_have_their_own_module() -> None:
+    """``import isam`` / ``import mrclam`` live in commands/importers.py, ``solve`` in graph.py."""
+    from slamrel.cli import build_parser
+
+    parser = build_parser()
+    owners = {
+        tuple(argv): parser.parse_args(argv).func.__module__
+        for argv in (["import", "isam", "f", "-o", "g"], ["import", "mrclam", "d", "-o", "b"])
+    }
+    assert set(owners.values()) == {"slamrel.commands.importers"}
+    assert parser.parse_args(["solve", "g", "-o", "d"]).func.__module__ == "slamrel.commands.graph"
+
+
+ISAM = """ODOMETRY 0 1 1.0 0 0 0.01 0 0 0.01 0 0.0001
+LANDMARK 1 2 1.0 1.0 0.04 0 0.04
+"""
+
+
+def test_import_isam_through_the_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The moved command still reads iSAM text and writes the g2o graph and the log bundle."""
+    from slamrel.cli import main
+
+    src = tmp_path / "a.txt"
+    src.write_text(ISAM)
+    out, log = tmp_path / "a.g2o", tmp_path / "log"
+    assert main(["import", "isam", str(src), "-o", str(out), "--bundle", str(log)]) == 0
+    printed = capsys.readouterr().out
+    assert "2 poses, 1 landmarks, 1 pose-pose and 1 pose-landmark factors" in printed
+    lines = out.read_text().splitlines()
+    # by hand: two poses (the first at the origin, the second 1 m ahead), landmark 2 at (1, 1)
+    assert sum(ln.startswith("VERTEX_SE2") for ln in lines) == 2
+    assert sum(ln.startswith("VERTEX_XY 2 ") for ln in lines) == 1
+    assert (log / "bundle.json").is_file() and (log / "measurements.csv").is_file()
+    assert main(["import", "isam", str(tmp_path / "missing.txt"), "-o", str(out)]) == 3
+    assert "slamrel import isam: error:" in capsys.readouterr().err
+
+
+def test_import_mrclam_through_the_cli_names_the_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from slamrel.cli import main
+
+    (tmp_path / "M").mkdir()
+    rc = main(["import", "mrclam", str(tmp_path / "M"), "--robot", "1", "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 3 and "slamrel import mrclam: error:" in err and str(tmp_path / "M") in err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    ("text", "reason"),
+    [
+        ("ODOMETRY 0 1 1.0 0 0 0.01 0 0 0.01 0 0.0001\n", "LANDMARK observations: none"),
+        (ISAM.replace("1.0 1.0 0.04", "0.0 0.0 0.04"), "LANDMARK observations: the median range"),
+    ],
+)
+def test_import_isam_bundle_refused_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str, reason: str
+) -> None:
+    """No landmark seen at a positive range: no log bundle (was a ZeroDivisionError / NaN
+    sigma), exit 3 naming the file, and neither output written."""
+    from slamrel.cli import main
+
+    src = tmp_path / "a.txt"
+    src.write_text(text)
+    argv = [
+        "import",
+        "isam",
+        str(src),
+        "-o",
+        str(tmp_path / "a.g2o"),
+        "--bundle",
+        str(tmp_path / "b"),
+    ]
+    assert main(argv) == 3
+    err = capsys.readouterr().err
+    assert f"slamrel import isam: error: {src}: {reason}" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]

@@ -81,7 +81,7 @@ FILE: dict[str, Argv] = {
 
 # The function that does each command's first real work (reading inputs or computing).
 HEAVY = {  # the module that owns it: commands import the library inside their run functions
-    "run": ("slamrel.pipeline", "run_pipeline"),
+    "run": ("slamrel.pipeline", "read_run_input"),  # SOURCE is a bundle folder here
     "simulate": ("slamrel.worlds", "make_world"),
     "slam": ("recovery.bundle", "read_bundle"),
     "import-isam": ("slamrel.importers.isam", "read_isam"),

@@ -116,3 +116,41 @@ def test_range_bearing_jacobians(rng: np.random.Generator) -> None:
         d = lm - x[:2]
         assert z[0] == pytest.approx(np.hypot(*d))
         assert -np.pi <= z[1] < np.pi
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"type": "Velocity", "sigma": (0.1, 0.1)}, "motion_model.type: unknown type 'Velocity'"),
+        ({"type": "odometry"}, "exactly one of them"),
+        ({"type": "velocity", "sigma": (0.1, 0.1), "alpha": (0, 0, 0, 0)}, "exactly one"),
+        ({"type": "velocity", "sigma": (0.1, 0.1, 0.1)}, "motion_model.sigma (velocity)"),
+        ({"type": "odometry", "sigma": (0.1, 0.1)}, "expected 3 numbers, got 2"),
+        ({"type": "odometry", "alpha": (0.1, 0.1, 0.1)}, "motion_model.alpha (odometry)"),
+        ({"type": "velocity", "sigma": (0.1, -0.1)}, "expected finite numbers >= 0, got -0.1"),
+        ({"type": "velocity", "sigma": (np.float64(np.nan), 0.1)}, "got nan"),
+        ({"type": "velocity", "sigma": 0.1}, "expected 2 numbers"),
+    ],
+)
+def test_motion_model_validates_its_fields(kwargs: dict, message: str) -> None:  # type: ignore[type-arg]
+    from relation_metric.errors import InputError
+
+    with pytest.raises(InputError) as err:
+        MotionModel(**kwargs)
+    assert message in str(err.value) and "np.float64" not in str(err.value)
+
+
+def test_motion_and_sensor_models_store_floats_and_round_trip() -> None:
+    from recovery.models import SensorModel
+    from relation_metric.errors import InputError
+
+    m = MotionModel("velocity", sigma=[np.float64(0.1), 1])  # type: ignore[arg-type]
+    assert m.sigma == (0.1, 1.0) and all(type(v) is float for v in m.sigma)
+    assert m.as_dict() == {"type": "velocity", "sigma_v": 0.1, "sigma_omega": 1.0}
+    o = MotionModel("odometry", alpha=(0.1, 0.2, 0.3, 0.4))
+    assert o.as_dict() == {"type": "odometry", "alpha": [0.1, 0.2, 0.3, 0.4]}
+    assert SensorModel(0.0, 0.0).covariance.sum() == 0.0  # noise-free simulation allowed
+    with pytest.raises(InputError, match="sensor_model.sigma_bearing"):
+        SensorModel(0.1, -1.0)
+    with pytest.raises(InputError, match="sensor_model.type: unknown type 'bearing_only'"):
+        SensorModel(0.1, 0.1, type="bearing_only")

@@ -60,18 +60,19 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
-    from slamrel.pipeline import run_pipeline, write_report
+    from slamrel.pipeline import read_run_input, run_pipeline, write_report
 
     if args.source not in WORLDS and not Path(args.source).is_dir():
         raise InputError(
             f"unknown SOURCE {args.source!r}; expected a SLAM result bundle directory or one of "
             f"{', '.join(WORLDS)}"
         )
-    source = args.source if Path(args.source).is_dir() else None
-    check_outputs([], [source], dirs=[args.output], force=args.force)
+    is_dir = Path(args.source).is_dir()
+    check_outputs([], [args.source if is_dir else None], dirs=[args.output], force=args.force)
     start = time.perf_counter()
     result = run_pipeline(
-        args.source, noise=args.noise, seed=args.seed, rate=args.rate,
+        read_run_input(args.source) if is_dir else args.source,
+        noise=args.noise, seed=args.seed, rate=args.rate,
         corrupt_fraction=args.corrupt, noise_scale=args.noise_scale,
         max_outlier_run=args.max_outlier_run or None, robust=args.robust,
         on_divergence="raise" if args.fail_on_divergence else "reenter",
@@ -87,11 +88,11 @@ def run(args: argparse.Namespace) -> int:
                     print(
                         f"{name:16s}{set_name:>13s}{ev.translation['abs'].mean:16.4f}{ev.rotation['abs'].mean:16.4f}"
                     )
-        div = result.recovery.get("divergence") or {}
-        if div.get("stretches"):
+        a = result.agreement
+        if a is not None and a.stretches:
             print(
-                f"map and log DISAGREE on {len(div['stretches'])} stretch(es), "
-                f"{100 * float(div['fraction_of_log']):.1f}% of the log (see the report)"
+                f"map and log DISAGREE on {len(a.stretches)} stretch(es), "
+                f"{100 * a.fraction_of_log:.1f}% of the log (see the report)"
             )
         print(f"report: {html}")
     if result.recovery_error is not None:

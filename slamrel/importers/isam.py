@@ -15,19 +15,22 @@ square-root information matrix ``R`` (``Rᵀ R = Σ⁻¹``) in the same places �
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
+from recovery.bundle import Bundle
 from recovery.estimation.graph import PoseGraph, initial_landmarks
+from recovery.models import MotionModel, SensorModel
 from relation_metric import se2
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
 from relation_metric.landmarks import integer_ids
 from relation_metric.textio import PathLike, read_keyword_records
+from relation_metric.trajectory import Trajectory
 
-__all__ = ["IsamData", "read_isam"]
+__all__ = ["IsamData", "read_isam", "isam_log_bundle"]
 
 NoiseConvention = Literal["covariance", "sqrt-information"]
 
@@ -161,7 +164,7 @@ def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamD
     return IsamData(graph=graph, pose_ids=pose_ids, landmark_ids=landmark_ids)
 
 
-def isam_log_bundle(data: IsamData, *, sigma_scale: float = 1.0) -> Any:
+def isam_log_bundle(data: IsamData, *, sigma_scale: float = 1.0) -> Bundle:
     """The iSAM problem as an EKF-SLAM log bundle (odometry model, range-bearing sensor).
 
     Poses get the time ``t = k`` (the file has no time); the odometry poses chain the
@@ -172,18 +175,20 @@ def isam_log_bundle(data: IsamData, *, sigma_scale: float = 1.0) -> Any:
     σ becomes ``σ_range = σ`` and ``σ_bearing = σ / median range``. The map is the
     first-sighting guess (a log bundle needs one; EKF-SLAM replaces it); no ground truth.
     """
-    from recovery.bundle import Bundle
-    from recovery.models import MotionModel, SensorModel
-    from relation_metric.trajectory import Trajectory
-
     g = data.graph
     n = g.n_poses
+    r = np.hypot(g.pl_z[:, 0], g.pl_z[:, 1])
+    if not r.size or not float(np.median(r)) > 0:
+        raise InputError(
+            "LANDMARK observations: "
+            + ("none" if not r.size else "the median range is 0")
+            + "; a range-bearing log bundle needs landmarks seen at a positive range"
+        )
     chain = g.pp_j == g.pp_i + 1
     cov_pp = np.linalg.inv(g.pp_info[chain])
     sig_odo = np.sqrt(np.median(np.diagonal(cov_pp, axis1=1, axis2=2), axis=0)) * sigma_scale
     cov_pl = np.linalg.inv(g.pl_info)
     sig_xy = float(np.sqrt(np.median(np.diagonal(cov_pl, axis1=1, axis2=2)))) * sigma_scale
-    r = np.hypot(g.pl_z[:, 0], g.pl_z[:, 1])
     b = np.arctan2(g.pl_z[:, 1], g.pl_z[:, 0])
     order = np.argsort(g.pl_k, kind="stable")
     t = np.arange(n, dtype=np.float64)

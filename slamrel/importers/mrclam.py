@@ -17,12 +17,13 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import nnls
 
+from recovery.bundle import Bundle
+from recovery.models import MotionModel, SensorModel
 from relation_metric import se2
 from relation_metric.errors import InputError
 from relation_metric.landmarks import integer_ids
@@ -456,7 +457,7 @@ def mrclam_bundle(
     window: float = 1.0,
     calibrate: bool = True,
     motion_noise: str = "speed",
-) -> Any:
+) -> Bundle:
     """One robot of an MRCLAM dataset as a SLAM log bundle (velocity model, known association).
 
     The map is the surveyed landmarks (``Landmark_Groundtruth.dat``; subjects are the ids),
@@ -473,9 +474,6 @@ def mrclam_bundle(
     with ``"speed"`` it is 0.0063 (loop median 0.0075), and the other four robots stay below
     dead reckoning too. The bundle's description records all fitted values.
     """
-    from recovery.bundle import Bundle
-    from recovery.models import MotionModel, SensorModel
-
     if motion_noise not in ("speed", "constant"):
         raise InputError(f"motion_noise must be 'speed' or 'constant', got {motion_noise!r}")
     d = Path(directory)

@@ -1,0 +1,150 @@
+"""The ``slamrel run`` page as a typed report: named sections and figures, and every number
+shown equal to ``metrics.json`` (the file the tables are meant to mirror)."""
+
+from __future__ import annotations
+
+import base64
+import html.parser
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from slamrel.cli import main
+
+
+class _Page(html.parser.HTMLParser):
+    """Section headings, tables (caption → rows of cell texts) and embedded images."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.headings: list[str] = []
+        self.tables: dict[str, list[list[str]]] = {}
+        self.images: list[bytes] = []
+        self._tag: str | None = None
+        self._caption = ""
+        self._row: list[str] | None = None
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        self._tag = tag
+        if tag == "tr":
+            self._row = []
+        elif tag == "td" and self._row is not None:
+            self._row.append("")
+        elif tag == "img":
+            src = dict(attrs)["src"] or ""
+            self.images.append(base64.b64decode(src.split(",", 1)[1]))
+
+    def handle_endtag(self, tag: str) -> None:
+        if tag == "tr" and self._row:
+            self.tables.setdefault(self._caption, []).append(self._row)
+        if tag == "tr":
+            self._row = None
+        self._tag = None
+
+    def handle_data(self, data: str) -> None:
+        if self._tag == "h2":
+            self.headings.append(data)
+        elif self._tag == "caption":
+            self._caption = data
+        elif self._tag == "td" and self._row is not None:
+            self._row[-1] += data
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, _Page, dict[str, Any]]:
+    """One run with a broken map (stretches), through the CLI."""
+    out = tmp_path_factory.mktemp("run") / "rep"
+    assert main(["run", "simple1", "--corrupt", "0.1", "-o", str(out), "-q"]) == 0
+    page = _Page()
+    page.feed((out / "report.html").read_text())
+    return out, page, json.loads((out / "metrics.json").read_text())
+
+
+def _num(cell: str) -> float:
+    return float(cell.replace("−", "-").replace("∞", "inf"))
+
+
+def _close(cell: str, value: float) -> bool:
+    """A cell shows ``value`` to 3 significant digits (whole numbers from 1000 on)."""
+    return _num(cell) == pytest.approx(value, rel=5e-3, abs=1e-12 if value == 0 else 0.5e-3)
+
+
+def test_sections_in_order(report: tuple[Path, _Page, dict[str, Any]]) -> None:
+    _, page, _ = report
+    # h2 texts: the verdict's heading, the contents, then the four sections
+    sections = page.headings[page.headings.index("Contents") + 1 :]
+    assert sections == ["slamrel run: simple1/a/seed 0", "Consistency", "Map–log agreement", "Map"]
+
+
+def test_figures_are_the_files_in_order(report: tuple[Path, _Page, dict[str, Any]]) -> None:
+    out, page, _ = report
+    files = sorted(out.glob("figure_*.png"), key=lambda p: int(p.stem.split("_")[1]))
+    assert len(files) == 4  # trajectories, errors, NEES, map
+    assert [p.read_bytes() for p in files] == page.images
+
+
+def test_nees_nis_and_stretch_tables_equal_metrics(
+    report: tuple[Path, _Page, dict[str, Any]],
+) -> None:
+    _, page, m = report
+    nees = page.tables["NEES (3 dof) of the pose estimates"]
+    assert [row[0] for row in nees] == list(m["nees"])
+    for row in nees:
+        n = m["nees"][row[0]]
+        assert _close(row[1], n["mean"]) and _close(row[2], n["band"][0])
+        assert _close(row[3], n["band"][1]) and _close(row[4], n["inside"])
+    (nis_row,) = page.tables["NIS of the recovery's innovations (2 dof)"]
+    nis = m["recovery"]["nis"]
+    assert int(nis_row[0]) == nis["count"] and _close(nis_row[1], nis["mean"])
+    assert _close(nis_row[2], nis["median"]) and _close(nis_row[4], nis["fraction_beyond_95"])
+    stretches = m["divergence"]["stretches"]
+    rows = page.tables["stretches where the map and the log disagree (times in s)"]
+    assert len(rows) == min(len(stretches), 50) >= 1
+    for row, s in zip(rows, stretches):
+        assert _close(row[0], s["t0"]) and _close(row[2], s["duration"])
+        assert [int(row[k]) for k in (3, 4, 7)] == [
+            s["measurements"],
+            s["outlying"],
+            s["reentries"],
+        ]
+
+
+def test_map_tables_equal_metrics(report: tuple[Path, _Page, dict[str, Any]]) -> None:
+    _, page, m = report
+    mp = m["map"]
+    edge, corner = page.tables["landmark-map relation errors"]
+    for row, part in ((edge, "translation"), (corner, "rotation")):
+        s = mp[part]["abs"]
+        assert all(_close(c, s[k]) for c, k in zip(row[1:4], ("mean", "std", "max")))
+        assert int(row[4]) == s["count"]
+    (assoc,) = page.tables["association and set distances"]
+    a = mp["association"]
+    assert [int(c) for c in assoc[:3]] == [a["matched"], a["missed"], a["spurious"]]
+    assert _close(assoc[3], mp["ospa"]["value"]) and _close(assoc[4], mp["gospa"]["value"])
+    assert _close(assoc[5], mp["ospa"]["c"]) and _close(assoc[6], mp["ospa"]["p"])
+
+
+def test_result_holds_the_map_once_and_reads_nothing(
+    report: tuple[Path, _Page, dict[str, Any]], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``run_pipeline`` on a RunInput does no I/O; the map JSON is derived from the comparison."""
+    import slamrel.pipeline as pipeline
+    from slamrel.run_report import RunSections
+
+    out, _, m = report
+    inp = pipeline.read_run_input(out / "bundle")  # the report's bundle: map + ground truth
+    assert inp.bundle.groundtruth is not None and inp.online is None
+
+    def no_io(*a: object, **k: object) -> None:
+        raise AssertionError("run_pipeline read a file")
+
+    monkeypatch.setattr(pipeline, "read_bundle", no_io)
+    monkeypatch.setattr(pipeline, "read_trajectory", no_io)
+    result = pipeline.run_pipeline(inp)
+    assert result.map == result.map_comparison.as_dict()  # type: ignore[union-attr]
+    assert "map" not in {f.name for f in pipeline.RunResult.__dataclass_fields__.values()}
+    # the same bundle scored again: the same map numbers as the first report
+    assert result.metrics()["map"] == m["map"]
+    assert set(RunSections._fields) == {"summary", "consistency", "agreement", "map"}
