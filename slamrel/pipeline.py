@@ -26,7 +26,10 @@ from landmark_graph.compare import MapComparison, compare_maps
 from landmark_graph.maps import LandmarkMap
 from landmark_graph.plots import map_figure
 from recovery.bundle import Bundle, read_bundle, write_bundle
+from recovery.estimation.ekfslam import ekf_slam_bundle
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, recover
+from recovery.simulation.bundles import world_bundle
+from recovery.simulation.worlds import make_world
 from recovery.steps import build_steps
 from relation_metric import se2
 from relation_metric.association import match_nearest_times, nearest_index
@@ -46,9 +49,7 @@ from slamrel.figures import (
     trajectories_figure,
 )
 from slamrel.report import Figure, Section, Table, figure_png, render_html
-from slamrel.simulate import slam_bundle, world_bundle
 from slamrel.verdict import run_verdict
-from slamrel.worlds import make_world
 
 __all__ = ["RunResult", "default_relations", "run_pipeline", "write_report"]
 
@@ -174,7 +175,7 @@ def run_pipeline(
     present, ``landmarks_groundtruth.csv``; an ``online.csv`` beside it (written by
     ``slamrel slam --store-online``) is scored too. ``max_outlier_run``, ``on_divergence``
     and ``robust`` are passed to :func:`recovery.recover.recover`; ``process_noise_scale`` to
-    :func:`slamrel.simulate.slam_bundle` (worlds only).
+    :func:`recovery.estimation.ekfslam.ekf_slam_bundle` (worlds only).
     """
     if Path(source).is_dir():
         bundle = read_bundle(source)
@@ -194,7 +195,7 @@ def run_pipeline(
         )
     world = make_world(source, noise=noise, seed=seed, rate=rate)
     log = world_bundle(world)
-    bundle, slam = slam_bundle(
+    bundle, slam = ekf_slam_bundle(
         log, corrupt_fraction=corrupt_fraction, noise_scale=noise_scale, seed=seed,
         process_noise_scale=process_noise_scale,
     )  # fmt: skip
