@@ -80,6 +80,8 @@ def test_all_around_sensor_measures_from_part_of_the_next_increment():
     )  # fmt: skip
     np.testing.assert_allclose(got.range, [2.5])
     np.testing.assert_allclose(got.bearing, [0.0], atol=1e-15)
+    with pytest.raises(InputError, match="offset needs the increments"):
+        observe_all_around(truth, truth[:, :2], np.array([0]), sensor, None, offset=0.5)
 
 
 def test_simulate_bundle_rejects_an_unknown_motion_model():

@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric import se2
+from relation_metric.errors import InputError
 
 __all__ = [
     "AllAroundSensor",
@@ -162,6 +163,8 @@ def observe_all_around(
     offset : float
         Measure from ``truth[k] ∘ exp(offset · log u_k)`` (a constant twist), not ``truth[k]``.
     """
+    if offset and increments is None:
+        raise InputError("observe_all_around: an offset needs the increments")
     pose_k, lm_k = _candidates(truth, landmarks, at, sensor.max_range + 1.0)
     if offset:
         pose_m = se2.compose(truth[pose_k], se2.exp(offset * se2.log(increments[pose_k])))
