@@ -4,7 +4,7 @@
    ``P −= W Wᵀ`` (``recovery.estimation.ekfslam._update``) vs the old full product +
    ``0.5·(P + Pᵀ)`` pass (a copy of it lives in ``tests/test_estimation_ekfslam.py``), on the
    same covariance; results compared. Target: ≥ 2× faster, equal to 1e-12.
-2. Whole EKF-SLAM runs (``slam_bundle``) on the built-in ``complex1`` world with 225
+2. Whole EKF-SLAM runs (``ekf_slam_bundle``) on the built-in ``complex1`` world with 225
    (default) and 400 features, new vs old update (monkeypatched), max abs difference of the
    map, map covariance and online poses (alternated, best of 3 at 225). The per-element constant of the O(n²) update is
    printed (ns per covariance element).
@@ -27,8 +27,9 @@ sys.path.insert(0, str(HERE.parent / "tests"))
 from test_estimation_ekfslam import _update_before_issue15 as old_update  # noqa: E402
 
 import recovery.estimation.ekfslam as ekfslam  # noqa: E402
-import slamrel.worlds as worlds  # noqa: E402
-from slamrel.simulate import slam_bundle, world_bundle  # noqa: E402
+import recovery.simulation.worlds as worlds  # noqa: E402
+from recovery.estimation.ekfslam import ekf_slam_bundle  # noqa: E402
+from recovery.simulation.bundles import world_bundle  # noqa: E402
 
 
 def bench_one_update(n: int = 2335, cap: int = 2400, repeat: int = 7) -> dict[str, float]:
@@ -65,7 +66,7 @@ def run_slam(features: int, update) -> tuple[float, object, int]:  # type: ignor
         w = worlds.make_world("complex1", noise="a", seed=0)
         bundle = world_bundle(w)
         start = time.perf_counter()
-        res = slam_bundle(bundle)[1]
+        res = ekf_slam_bundle(bundle)[1]
         return time.perf_counter() - start, res, int(w.observations.t.size)
     finally:
         worlds.N_FEATURES, ekfslam._update = saved_features, saved_update

@@ -15,9 +15,10 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
+from recovery.estimation.ekfslam import ekf_slam_bundle  # noqa: E402
+from recovery.simulation.bundles import world_bundle  # noqa: E402
+from recovery.simulation.worlds import NOISE_TYPES, WORLDS, make_world  # noqa: E402
 from slamrel.pipeline import run_pipeline, write_report  # noqa: E402
-from slamrel.simulate import slam_bundle, world_bundle  # noqa: E402
-from slamrel.worlds import NOISE_TYPES, WORLDS, make_world  # noqa: E402
 
 
 def main() -> None:
@@ -28,7 +29,7 @@ def main() -> None:
     for world in WORLDS:
         for noise in sorted(NOISE_TYPES):
             t = time.perf_counter()
-            slam_bundle(world_bundle(make_world(world, noise=noise)))
+            ekf_slam_bundle(world_bundle(make_world(world, noise=noise)))
             t_slam = time.perf_counter() - t
             t = time.perf_counter()
             with tempfile.TemporaryDirectory() as tmp:

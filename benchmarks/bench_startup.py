@@ -46,12 +46,12 @@ WORK_IMPORTS = {
     "relations": "relation_metric.relations, relation_metric.formats",
     "map-compare": "landmark_graph.compare, landmark_graph.maps, landmark_graph.association",
     "review": "landmark_graph.review, landmark_graph.maps, landmark_graph.association",
-    "simulate": "slamrel.simulate, slamrel.worlds, recovery.bundle",
-    "slam": "slamrel.simulate, recovery.bundle, relation_metric.formats",
+    "simulate": "recovery.simulation.bundles, recovery.simulation.worlds, recovery.bundle",
+    "slam": "recovery.estimation.ekfslam, recovery.bundle, relation_metric.formats",
     "compare": "slamrel.compare",
     "solve": "recovery.estimation.graph, recovery.graph_formats.g2o, slamrel.importers.isam, "
     "relation_metric.formats, relation_metric.landmarks",
-    "example": "relation_metric.relations, relation_metric.formats",
+    "example": "recovery.simulation.example, relation_metric.relations, relation_metric.formats",
 }
 HEAVY = ("matplotlib", "scipy.stats", "scipy.optimize", "scipy.spatial", "slamrel.pipeline")
 

@@ -34,8 +34,8 @@ RELATION_METRIC = [
         "from relation_metric.relations import generate_relations\n"
         "from relation_metric.evaluate import evaluate\n"
         "from relation_metric.alignment import absolute_trajectory_error\n"
-        "from slamrel.commands.example import example_world\n"
-        "reference, estimate = example_world(seed=0)\n"
+        "from recovery.simulation.example import example_trajectories\n"
+        "reference, estimate = example_trajectories(seed=0)\n"
         "len(reference), reference.span()"
     ),
     new_markdown_cell(
@@ -106,15 +106,16 @@ RUN_WALKTHROUGH = [
     ),
     new_code_cell(
         "import numpy as np\n"
-        "from slamrel.worlds import make_world\n"
-        "from slamrel.simulate import world_bundle, slam_bundle\n"
+        "from recovery.simulation.worlds import make_world\n"
+        "from recovery.estimation.ekfslam import ekf_slam_bundle\n"
+        "from recovery.simulation.bundles import world_bundle\n"
         "from recovery.recover import recover\n"
         "from relation_metric.evaluate import evaluate\n"
         "from relation_metric.relations import generate_relations\n"
         "from relation_metric.trajectory import Trajectory\n"
         "world = make_world('complex1', noise='a', seed=0)\n"
         "log = world_bundle(world)            # odometry + measurements + true map\n"
-        "bundle, slam = slam_bundle(log)      # what an EKF-SLAM run leaves: map, covariance, associations\n"
+        "bundle, slam = ekf_slam_bundle(log)      # what an EKF-SLAM run leaves: map, covariance, associations\n"
         "len(world.truth), bundle.map_ids.size, int(bundle.measurement_associated.sum())"
     ),
     new_code_cell(
@@ -135,7 +136,7 @@ RUN_WALKTHROUGH = [
         "gated fraction is part of the result."
     ),
     new_code_cell(
-        "broken, _ = slam_bundle(log, corrupt_fraction=0.03, seed=1)\n"
+        "broken, _ = ekf_slam_bundle(log, corrupt_fraction=0.03, seed=1)\n"
         "for gate in (None, 0.999):\n"
         "    r = recover(broken, method='smoother', gate=gate, max_outlier_run=None)\n"
         "    k = np.searchsorted(r.trajectory.timestamps, truth.timestamps)\n"
@@ -299,7 +300,7 @@ MRCLAM = [
     ),
     new_code_cell(
         "if HAVE_DATA:\n"
-        "    from slamrel.simulate import slam_bundle\n"
+        "    from recovery.estimation.ekfslam import ekf_slam_bundle\n"
         "    from recovery.recover import recover\n"
         "    from recovery.steps import build_steps\n"
         "    from relation_metric import se2\n"
@@ -311,7 +312,7 @@ MRCLAM = [
         "    bundle = mrclam_bundle(data, 1)\n"
         "    raw = mrclam_bundle(data, 1, calibrate=False)\n"
         "    # EKF-SLAM with a 99.9% validation gate (10 rejections in a row: take the next one)\n"
-        "    slam, online = slam_bundle(bundle, outlier_gate=0.999)\n"
+        "    slam, online = ekf_slam_bundle(bundle, outlier_gate=0.999)\n"
         "    print((online.association < 0).sum(), 'of', online.association.size, 'measurements rejected by the gate')\n"
         "    # recovery uses the SLAM run's associations (rejected ones stay out), no gate of its own\n"
         "    rec = recover(slam, method='smoother', max_outlier_run=None)\n"
@@ -402,7 +403,7 @@ MRCLAM = [
         "    results, map_edges = [], {}\n"
         "    for r in range(1, 6):\n"
         "        b = mrclam_bundle(data, r)\n"
-        "        s, _ = slam_bundle(b, outlier_gate=0.999)\n"
+        "        s, _ = ekf_slam_bundle(b, outlier_gate=0.999)\n"
         "        est = recover(s, method='smoother', max_outlier_run=None).trajectory\n"
         "        st = build_steps(b)\n"
         "        dr = Trajectory(st.times, se2.cumulative_compose(st.u, start=b.initial_pose))\n"

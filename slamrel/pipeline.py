@@ -32,7 +32,10 @@ from numpy.typing import NDArray
 from landmark_graph.compare import MapComparison, compare_maps
 from landmark_graph.maps import LandmarkMap
 from recovery.bundle import Bundle, read_bundle, write_bundle
+from recovery.estimation.ekfslam import ekf_slam_bundle
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, Recovery, Stretch, recover
+from recovery.simulation.bundles import world_bundle
+from recovery.simulation.worlds import make_world
 from recovery.steps import build_steps
 from relation_metric import se2
 from relation_metric.association import match_nearest_times, nearest_index
@@ -46,9 +49,7 @@ from relation_metric.results import write_json, write_per_relation_csv
 from relation_metric.trajectory import Trajectory
 from slamrel.report import render_html
 from slamrel.run_report import report_figures, report_sections
-from slamrel.simulate import slam_bundle, world_bundle
 from slamrel.verdict import run_verdict
-from slamrel.worlds import make_world
 
 __all__ = [
     "Agreement",
@@ -286,10 +287,10 @@ def simulate_run_input(
 
     The input carries the filter's online estimate and covariances (for validation) and the
     world's odometry as dead reckoning. ``corrupt_fraction``, ``noise_scale`` and
-    ``process_noise_scale`` are passed to :func:`slamrel.simulate.slam_bundle`.
+    ``process_noise_scale`` are passed to :func:`recovery.estimation.ekfslam.ekf_slam_bundle`.
     """
     w = make_world(world, noise=noise, seed=seed, rate=rate)
-    bundle, slam = slam_bundle(
+    bundle, slam = ekf_slam_bundle(
         world_bundle(w), corrupt_fraction=corrupt_fraction, noise_scale=noise_scale, seed=seed,
         process_noise_scale=process_noise_scale,
     )  # fmt: skip

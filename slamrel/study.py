@@ -37,12 +37,12 @@ from recovery.estimation.pose_only import (
     pose_only_least_squares,
 )
 from recovery.estimation.toro import spherical_information, toro_optimize
+from recovery.simulation.worlds import make_world
 from relation_metric import se2
 from relation_metric.consistency import nees1, nees2
 from relation_metric.errors import InputError
 from relation_metric.textio import write_text_atomic
 from slamrel.sweep import Task
-from slamrel.worlds import make_world
 
 __all__ = [
     "METHODS",
@@ -86,7 +86,7 @@ def run_case(
     Parameters
     ----------
     world, noise, seed :
-        :func:`slamrel.worlds.make_world`.
+        :func:`recovery.simulation.worlds.make_world`.
     method : {"full", "m1", "m2", "toro"}
     pair_start : {"truth", "odometry", "align"}
         Where the pose-only pair least squares starts (the paper: truth).

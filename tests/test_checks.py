@@ -17,7 +17,7 @@ import pytest
 
 from landmark_graph.maps import LandmarkMap, read_map, write_map
 from recovery.bundle import read_bundle, write_bundle
-from recovery.simulate import simulate_bundle
+from recovery.simulation.bundles import simulate_bundle
 from relation_metric.checks import (
     COV_RTOL,
     bad_covariances,

@@ -67,10 +67,10 @@ def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
 def test_choices_equal_the_owners() -> None:
     from recovery.ekf import DEFAULT_MAX_OUTLIER_RUN, ROBUST
     from recovery.recover import MAP_MODES, METHODS
+    from recovery.simulation.worlds import NOISE_TYPES, WORLDS
     from relation_metric.formats import TRAJECTORY_FORMATS
     from relation_metric.metric import MODES
     from relation_metric.relations import STRATEGIES
-    from slamrel.worlds import NOISE_TYPES, WORLDS
 
     assert choices.TRAJECTORY_FORMATS == TRAJECTORY_FORMATS
     assert choices.MODES == MODES

@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from recovery.estimation.ekfslam import ekf_slam
+from recovery.estimation.ekfslam import ekf_slam, ekf_slam_bundle
 from recovery.models import SensorModel
+from recovery.simulation.bundles import world_bundle
+from recovery.simulation.worlds import make_world
 from recovery.steps import build_steps
 from relation_metric import se2
 from relation_metric.errors import DivergenceError, InputError
-from slamrel.simulate import slam_bundle, world_bundle
-from slamrel.worlds import make_world
 
 
 def run(world, **kw):
-    return slam_bundle(world_bundle(world), **kw)[1]
+    return ekf_slam_bundle(world_bundle(world), **kw)[1]
 
 
 def test_online_pose_is_consistent_over_monte_carlo_runs():
@@ -78,8 +78,8 @@ def test_outlier_gate_rejects_gross_outliers_and_keeps_good_data():
     bad = rng.random(z.shape[0]) < 0.03
     z[bad, 0] += 3.0
     b = replace(b, measurements=z)
-    plain = slam_bundle(b)[1]
-    gated = slam_bundle(b, outlier_gate=0.999)[1]
+    plain = ekf_slam_bundle(b)[1]
+    gated = ekf_slam_bundle(b, outlier_gate=0.999)[1]
     rejected = gated.association < 0
     first = np.zeros(z.shape[0], dtype=bool)  # a landmark's first sighting initialises it
     first[np.unique(b.measurement_landmarks, return_index=True)[1]] = True
@@ -95,7 +95,7 @@ def test_outlier_gate_rejects_gross_outliers_and_keeps_good_data():
     # no gate: every measurement is used, as before
     assert (plain.association >= 0).all()
     with pytest.raises(InputError, match="outlier_gate"):
-        slam_bundle(b, outlier_gate=1.0)
+        ekf_slam_bundle(b, outlier_gate=1.0)
 
 
 def test_gated_filter_recovers_from_an_unmodelled_turn():
@@ -149,14 +149,14 @@ def test_nearest_neighbour_with_well_separated_landmarks():
         measurement_associated=b.measurement_associated[sel],
         measurement_lines=None,
     )
-    out, r = slam_bundle(b, association="nn")
+    out, r = ekf_slam_bundle(b, association="nn")
     assert r.wrong_association.mean() < 0.02
     assert (r.association >= 0).mean() > 0.9
 
 
 def test_velocity_driven_world():
     w = make_world("simple2", noise="a", seed=4, rate=10)
-    out, r = slam_bundle(world_bundle(w))
+    out, r = ekf_slam_bundle(world_bundle(w))
     assert len(r.online) == 10 * (len(w.truth) - 1)  # one pose per control step
     at = np.searchsorted(r.online.timestamps, w.truth.timestamps[:-1])
     err = np.hypot(*(r.online.poses[at, :2] - w.truth.poses[:-1, :2]).T).mean()
@@ -216,9 +216,9 @@ def test_symmetric_update_equals_the_old_formula(monkeypatch, world, gate):
     import recovery.estimation.ekfslam as ekfslam
 
     b = world_bundle(make_world(world, noise="b", seed=7))
-    new = slam_bundle(b, outlier_gate=gate)[1]
+    new = ekf_slam_bundle(b, outlier_gate=gate)[1]
     monkeypatch.setattr(ekfslam, "_update", _update_before_issue15)
-    old = slam_bundle(b, outlier_gate=gate)[1]
+    old = ekf_slam_bundle(b, outlier_gate=gate)[1]
     np.testing.assert_array_equal(new.association, old.association)
     np.testing.assert_allclose(new.map_xy, old.map_xy, rtol=0, atol=1e-12)
     np.testing.assert_allclose(new.map_covariance, old.map_covariance, rtol=0, atol=1e-12)

@@ -21,7 +21,7 @@ from recovery.estimation.lm import (
     retract_poses,
 )
 from recovery.recover import filter_input
-from recovery.simulate import simulate_bundle
+from recovery.simulation.bundles import simulate_bundle
 from relation_metric import se2
 from relation_metric.errors import DivergenceError
 

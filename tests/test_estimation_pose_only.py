@@ -19,10 +19,10 @@ from recovery.estimation.pose_only import (
     pair_constraints,
     pose_only_least_squares,
 )
+from recovery.simulation.worlds import make_world
 from relation_metric.consistency import nees1
 from relation_metric.errors import InputError
 from relation_metric.trajectory import Trajectory
-from slamrel.worlds import make_world
 
 
 def log_of(world):

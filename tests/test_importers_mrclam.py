@@ -185,6 +185,7 @@ def test_dataset7_slam_and_recovery_beat_dead_reckoning():
 
     from scipy.stats import wilcoxon
 
+    from recovery.estimation.ekfslam import ekf_slam_bundle
     from recovery.recover import recover
     from recovery.steps import build_steps
     from relation_metric import se2
@@ -192,12 +193,11 @@ def test_dataset7_slam_and_recovery_beat_dead_reckoning():
     from relation_metric.relations import generate_relations
     from relation_metric.trajectory import Trajectory
     from slamrel.importers.mrclam import mrclam_bundle
-    from slamrel.simulate import slam_bundle
 
     d = require_data("mrclam", "MRCLAM_Dataset7")
     for robot in range(1, 6):
         b = mrclam_bundle(d, robot)
-        s, _ = slam_bundle(b, outlier_gate=0.999)
+        s, _ = ekf_slam_bundle(b, outlier_gate=0.999)
         rec = recover(s, method="smoother", max_outlier_run=None)
         gt = b.groundtruth
         step = max(1, int(round(1 / np.median(np.diff(gt.timestamps)))))

@@ -82,13 +82,13 @@ FILE: dict[str, Argv] = {
 # The function that does each command's first real work (reading inputs or computing).
 HEAVY = {  # the module that owns it: commands import the library inside their run functions
     "run": ("slamrel.pipeline", "read_run_input"),  # SOURCE is a bundle folder here
-    "simulate": ("slamrel.worlds", "make_world"),
+    "simulate": ("recovery.simulation.worlds", "make_world"),
     "slam": ("recovery.bundle", "read_bundle"),
     "import-isam": ("slamrel.importers.isam", "read_isam"),
     "import-mrclam": ("slamrel.importers.mrclam", "mrclam_bundle"),
     "solve": ("slamrel.commands.graph", "_load"),
     "compare": ("slamrel.compare", "read_per_relation"),
-    "example": ("slamrel.commands.example", "example_world"),
+    "example": ("recovery.simulation.example", "example_pair"),
     "recover": ("recovery.bundle", "read_bundle"),
     "evaluate": ("slamrel.commands.evaluate", "load_reference"),
     "relations": ("slamrel.commands.relations", "load_trajectory_arg"),

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from recovery.bundle import read_bundle, write_bundle
-from recovery.simulate import simulate_bundle
+from recovery.simulation.bundles import simulate_bundle
 from relation_metric.errors import InputError
 from slamrel.cli import main
 

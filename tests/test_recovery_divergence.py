@@ -16,7 +16,7 @@ from recovery.batch import normal_equations
 from recovery.bundle import read_bundle, write_bundle
 from recovery.ekf import GATED, REENTRY, ROBUST_C, USED, run_filter
 from recovery.recover import _runs, filter_input, recover
-from recovery.simulate import simulate_bundle
+from recovery.simulation.bundles import simulate_bundle
 from relation_metric.errors import DivergenceError
 from relation_metric.formats import read_trajectory
 from slamrel.cli import main

@@ -16,7 +16,7 @@ from recovery.bundle import read_bundle, write_bundle
 from recovery.ekf import GATED, USED, run_filter
 from recovery.models import process_noise, range_bearing
 from recovery.recover import filter_input, recover
-from recovery.simulate import simulate_bundle
+from recovery.simulation.bundles import simulate_bundle
 from recovery.smoother import smooth
 from relation_metric import se2
 from relation_metric.errors import DivergenceError

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from recovery.recover import recover
-from recovery.simulate import simulate_bundle
+from recovery.simulation.bundles import simulate_bundle
 from relation_metric.consistency import summarize_nees
 
 RUNS = 50

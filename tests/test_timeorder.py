@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from test_importers_mrclam import HEAD, make_dataset
 
 from recovery.bundle import write_bundle
-from recovery.simulate import simulate_bundle
+from recovery.simulation.bundles import simulate_bundle
 from relation_metric.errors import InputError
 from relation_metric.formats import read_trajectory
 from relation_metric.timeorder import (

@@ -95,17 +95,18 @@ def test_robust_recovery_does_not_hide_a_broken_map():
     """DESIGN.md pitfall: on an EKF-SLAM run with 1% wrong associations, a 99.9% gate without
     re-entry makes the map look much better than the run was; the M-estimators (scale from a
     plain pass) and the re-entering default stay near the online error."""
+    from recovery.estimation.ekfslam import ekf_slam_bundle
     from recovery.recover import recover
+    from recovery.simulation.bundles import world_bundle
+    from recovery.simulation.worlds import make_world
     from relation_metric.evaluate import evaluate
     from relation_metric.relations import generate_relations
     from relation_metric.trajectory import Trajectory
-    from slamrel.simulate import slam_bundle, world_bundle
-    from slamrel.worlds import make_world
 
     world = make_world("complex1", noise="a", seed=0)
     truth = world.truth
     rel = generate_relations(truth, "global", count=2000, seed=0)
-    broken, slam = slam_bundle(world_bundle(world), corrupt_fraction=0.01, seed=1)
+    broken, slam = ekf_slam_bundle(world_bundle(world), corrupt_fraction=0.01, seed=1)
 
     def score(tr):  # type: ignore[no-untyped-def]
         k = np.searchsorted(tr.timestamps, truth.timestamps)

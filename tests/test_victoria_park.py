@@ -35,10 +35,10 @@ def least_squares(vp):
 
 @pytest.fixture(scope="module")
 def ekf(vp):
+    from recovery.estimation.ekfslam import ekf_slam_bundle
     from recovery.recover import recover
-    from slamrel.simulate import slam_bundle
 
-    slam, _ = slam_bundle(isam_log_bundle(vp))
+    slam, _ = ekf_slam_bundle(isam_log_bundle(vp))
     return slam, recover(slam, method="smoother", max_outlier_run=None)
 
 

@@ -13,7 +13,18 @@ Data association is *known* (the landmark ids given with the measurements) or
 *nearest neighbour* with a χ² gate on the innovation; in the latter mode every decision is
 kept, and when the true ids are given the wrong ones are recorded as such. For experiments
 on degraded maps a seeded fraction of the known associations can be corrupted on purpose
-(``corrupt_fraction``), and the filter's assumed noise can be scaled (``noise_scale``).
+(:func:`corrupt_associations`, outside the filter), and the filter's assumed noise can be
+scaled (``noise_scale``). :func:`ekf_slam_bundle` runs the filter on a log bundle and returns
+the result bundle a filter-based SLAM system would leave behind.
+
+The optional validation gate on known associations (``outlier_gate``): real sensors have
+outliers that a Gaussian filter cannot absorb (MRCLAM: a few per cent beyond 5 σ); a gate
+trades them for the risk of rejecting good data when the filter is overconfident, so the
+rejected count is always reported (rejected measurements get association −1, so recovery
+does not use them either). After ``max_rejected_run`` consecutive rejections the next
+measurement is taken whatever its innovation: a run of rejections means the pose, not the
+measurements, is wrong (a bump, wheel slip); without this rule a gated filter never recovers
+from it (MRCLAM dataset 7, robot 5, ~700 s: 0.9 rad of unmodelled turn).
 
 The filter keeps no trajectory by design; ``online`` poses (the pose estimate after each
 step's updates) are stored for validation only.
@@ -21,21 +32,22 @@ step's updates) are stored for validation only.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal
+from dataclasses import dataclass, replace
+from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from recovery.models import SensorModel, process_noise, range_bearing
-from recovery.steps import Steps
+from recovery.bundle import Bundle
+from recovery.models import MotionModel, SensorModel, process_noise, range_bearing
+from recovery.steps import Steps, build_steps
 from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import Trajectory, readonly
 
-__all__ = ["EkfSlamResult", "ekf_slam"]
+__all__ = ["EkfSlamResult", "corrupt_associations", "ekf_slam", "ekf_slam_bundle"]
 
 UNASSOCIATED = -1
 # Rows of the covariance per block of the in-place update (see _update).
@@ -87,9 +99,7 @@ def ekf_slam(
     outlier_gate: float | None = None,
     max_rejected_run: int = 10,
     true_ids: NDArray[np.int64] | None = None,
-    corrupt_fraction: float = 0.0,
     noise_scale: float = 1.0,
-    seed: int = 0,
 ) -> EkfSlamResult:
     """Run EKF-SLAM over a log.
 
@@ -103,7 +113,7 @@ def ekf_slam(
         ``[range, bearing]``, in time order.
     landmarks : ndarray, shape (J,)
         Landmark id of each measurement for ``association="known"`` (ignored, may be NaN,
-        for ``"nn"``).
+        for ``"nn"``); :func:`corrupt_associations` spoils a share of them on purpose.
     sensor : recovery.models.SensorModel
     initial_pose, initial_covariance : ndarray, shapes (3,) and (3, 3)
     association : {"known", "nn"}
@@ -112,27 +122,17 @@ def ekf_slam(
         landmark (Mahalanobis) inside ``gate``, starts a new landmark outside
         ``new_landmark_gate`` and is rejected in between.
     outlier_gate : float, optional
-        χ² probability (2 dof) of a validation gate on the updates of *known* associations:
-        a measurement of a mapped landmark whose normalised innovation squared exceeds it is
-        rejected (association −1 in the result, so recovery does not use it either).
-        ``None`` (default) uses every measurement. Real sensors have outliers that a
-        Gaussian filter cannot absorb (MRCLAM: a few per cent beyond 5 σ); a gate trades
-        them for the risk of rejecting good data when the filter is overconfident, so the
-        rejected count is always reported.
+        χ² probability (2 dof) of a validation gate on the updates of *known* associations
+        (module doc): a measurement of a mapped landmark whose normalised innovation squared
+        exceeds it is rejected (association −1). ``None`` (default) uses every measurement.
     max_rejected_run : int
         With ``outlier_gate``: after this many consecutive rejections the filter takes the
-        next measurement whatever its innovation. A run of rejections means the pose, not
-        the measurements, is wrong (a bump, wheel slip); without this rule a gated filter
-        never recovers from it (MRCLAM dataset 7, robot 5, ~700 s: 0.9 rad of unmodelled
-        turn).
+        next measurement whatever its innovation (module doc).
     true_ids : ndarray of int, shape (J,), optional
-        True landmark of each measurement, to record wrong associations.
-    corrupt_fraction : float
-        Fraction of known associations replaced on purpose by another, seeded, landmark id.
+        True landmark of each measurement, to record wrong associations (with ``"known"``:
+        the used measurements whose given id differs from it).
     noise_scale : float
         Factor on every standard deviation the filter assumes (an inflated-noise filter).
-    seed : int
-        For ``corrupt_fraction``.
 
     Returns
     -------
@@ -145,109 +145,217 @@ def ekf_slam(
         the message names the time and the measurement.
     """
     z = np.asarray(measurements, dtype=np.float64).reshape(-1, 2)
-    grid = np.asarray(steps.measurement_grid, dtype=np.int64)
-    if grid.shape[0] != z.shape[0]:
-        raise InputError(f"{z.shape[0]} measurements but {grid.shape[0]} grid indices")
-    used = grid >= 0
-    if np.any(np.diff(grid[used]) < 0):
-        raise InputError("measurements must be sorted by time")
-    if not (0.0 <= corrupt_fraction < 1.0):
-        raise InputError(f"corrupt_fraction must be in [0, 1), got {corrupt_fraction}")
-    ids_in = np.asarray(landmarks, dtype=np.float64).copy()
-    wrong = np.zeros(z.shape[0], dtype=bool)
-    if association == "known":
-        if not np.isfinite(ids_in[used]).all():
-            raise InputError("known association needs a landmark id for every measurement")
-        if corrupt_fraction > 0:
-            rng = np.random.default_rng(seed)
-            pool = np.unique(ids_in[used])
-            pick = used & (rng.random(z.shape[0]) < corrupt_fraction)
-            other = pool[rng.integers(0, pool.size, pick.sum())]
-            same = other == ids_in[pick]
-            other[same] = pool[(np.searchsorted(pool, other[same]) + 1) % pool.size]
-            ids_in[pick] = other
-            wrong[pick] = pool.size > 1
-    elif association != "nn":
-        raise InputError(f"association must be 'known' or 'nn', got {association!r}")
-    sig_u = np.asarray(steps.sigma) * noise_scale**2
-    r_cov = sensor.covariance * noise_scale**2
-    g_in = chi2.ppf(gate, 2)
-    g_new = chi2.ppf(new_landmark_gate, 2)
-    if outlier_gate is not None and not 0.0 < outlier_gate < 1.0:
-        raise InputError(f"outlier_gate must be in (0, 1), got {outlier_gate}")
-    g_out = np.inf if outlier_gate is None else float(chi2.ppf(outlier_gate, 2))
-    if max_rejected_run < 1:
-        raise InputError(f"max_rejected_run must be at least 1, got {max_rejected_run}")
-    run = 0  # consecutive rejections
-
+    grid, used = _measurement_grid(steps, z.shape[0])
+    ids_in = np.asarray(landmarks, dtype=np.float64)
+    known = _check_association(association, ids_in, used)
+    f = _Filter(
+        3 + 2 * (int(np.unique(ids_in[used]).size) if known else int(used.sum())),
+        initial_pose,
+        initial_covariance,
+        sensor.covariance * noise_scale**2,
+        _Gates.of(gate, new_landmark_gate, outlier_gate, max_rejected_run),
+    )
+    assoc_out, online, online_cov = f.run(
+        steps, np.asarray(steps.sigma) * noise_scale**2, z, ids_in if known else None, grid, used
+    )
     t = steps.times
-    n_poses = t.size
-    inc = steps.u
-    cap = 3 + 2 * (int(np.unique(ids_in[used]).size) if association == "known" else int(used.sum()))
-    mu = np.zeros(cap)
-    cov = np.zeros((cap, cap))
-    mu[:3] = np.asarray(initial_pose, dtype=np.float64)
-    cov[:3, :3] = np.asarray(initial_covariance, dtype=np.float64)
-    n = 3  # used size of the state
-    slot_of: dict[int, int] = {}  # landmark id -> state offset
-    ids_out: list[int] = []
-    assoc_out = np.full(z.shape[0], UNASSOCIATED, dtype=np.int64)
-    online = np.empty((n_poses, 3))
-    online_cov = np.empty((n_poses, 3, 3))
-    order = np.flatnonzero(used)
-    starts = np.searchsorted(grid[order], np.arange(n_poses + 1))
-    for k in range(n_poses):
-        if k > 0:
-            u = inc[k - 1]
-            fx = se2.compose_jacobian(mu[:3], u)
-            q = process_noise(mu[2], sig_u[k - 1])
-            mu[:3] = se2.compose(mu[:3], u)
-            # P_xx ← F P_xx Fᵀ + Q, P_xm ← F P_xm
-            top = fx @ cov[:3, :n]
-            pxx = top[:, :3] @ fx.T + q
-            pxx = 0.5 * (pxx + pxx.T)  # 3×3: the covariance stays exactly symmetric
-            cov[:3, :n] = top
-            cov[:n, :3] = top.T
-            cov[:3, :3] = pxx
-        for m in order[starts[k] : starts[k + 1]]:
-            meas = z[m]
-            if association == "known":
-                lid = int(ids_in[m])
-                slot = slot_of.get(lid)
-            else:
-                slot, lid = _nearest(mu, cov, n, meas, r_cov, g_in, g_new, len(ids_out))
-                if slot == -2:  # ambiguous: rejected
-                    continue
-            if slot is None or slot < 0:
-                slot = n
-                _initialise(mu, cov, n, meas, r_cov)
-                n += 2
-                slot_of[lid] = slot
-                ids_out.append(lid)
-            else:
-                g = g_out if run < max_rejected_run else np.inf
-                if not _update(mu, cov, n, slot, meas, r_cov, t[k], int(m), g):
-                    run += 1
-                    continue  # outside the validation gate: rejected
-                run = 0
-            assoc_out[m] = lid
-        online[k] = mu[:3]
-        online_cov[k] = cov[:3, :3]
-        if not np.isfinite(mu[:n]).all():
-            raise DivergenceError(f"non-finite state at t={float(t[k]):.6f} s (step {k})")
-    m_count = len(ids_out)
-    ids_arr = np.asarray(ids_out, dtype=np.int64)
-    if association == "nn" and true_ids is not None:
-        wrong = _nn_mistakes(assoc_out, np.asarray(true_ids, dtype=np.int64))
     return EkfSlamResult(
-        landmark_ids=readonly(ids_arr, np.int64),
-        map_xy=readonly(mu[3:n].reshape(m_count, 2)),
-        map_covariance=readonly(0.5 * (cov[3:n, 3:n] + cov[3:n, 3:n].T)),
+        landmark_ids=readonly(np.asarray(f.ids, dtype=np.int64), np.int64),
+        map_xy=readonly(f.mu[3 : f.n].reshape(len(f.ids), 2)),
+        map_covariance=readonly(0.5 * (f.cov[3 : f.n, 3 : f.n] + f.cov[3 : f.n, 3 : f.n].T)),
         association=readonly(assoc_out, np.int64),
-        wrong_association=readonly(wrong, np.bool_),
+        wrong_association=readonly(_mistakes(assoc_out, ids_in, used, true_ids, known), np.bool_),
         online=Trajectory(t, online),
         online_covariance=readonly(online_cov),
     )
+
+
+def _measurement_grid(steps: Steps, count: int) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """Each measurement's grid index and whether it is used; InputError when out of order."""
+    grid = np.asarray(steps.measurement_grid, dtype=np.int64)
+    if grid.shape[0] != count:
+        raise InputError(f"{count} measurements but {grid.shape[0]} grid indices")
+    used = grid >= 0
+    if np.any(np.diff(grid[used]) < 0):
+        raise InputError("measurements must be sorted by time")
+    return grid, used
+
+
+def _check_association(association: str, ids: Array, used: NDArray[np.bool_]) -> bool:
+    """True for known association (every used measurement has an id), False for ``"nn"``."""
+    if association == "known":
+        if not np.isfinite(ids[used]).all():
+            raise InputError("known association needs a landmark id for every measurement")
+        return True
+    if association != "nn":
+        raise InputError(f"association must be 'known' or 'nn', got {association!r}")
+    return False
+
+
+def _mistakes(
+    assoc: NDArray[np.int64],
+    ids: Array,
+    used: NDArray[np.bool_],
+    true_ids: NDArray[np.int64] | None,
+    known: bool,
+) -> NDArray[np.bool_]:
+    """``wrong_association`` of the result (all False without ``true_ids``)."""
+    if true_ids is None:
+        return np.zeros(assoc.shape, dtype=bool)
+    true_ids = np.asarray(true_ids, dtype=np.int64)
+    if known:
+        return used & (ids != true_ids)
+    return _nn_mistakes(assoc, true_ids)
+
+
+class _Gates(NamedTuple):
+    """χ² thresholds (2 dof) of one run, and the rejected-run limit."""
+
+    associate: float
+    new_landmark: float
+    outlier: float
+    max_rejected_run: int
+
+    @classmethod
+    def of(cls, gate: float, new: float, outlier: float | None, max_run: int) -> _Gates:
+        if outlier is not None and not 0.0 < outlier < 1.0:
+            raise InputError(f"outlier_gate must be in (0, 1), got {outlier}")
+        if max_run < 1:
+            raise InputError(f"max_rejected_run must be at least 1, got {max_run}")
+        g_out = np.inf if outlier is None else float(chi2.ppf(outlier, 2))
+        return cls(chi2.ppf(gate, 2), chi2.ppf(new, 2), g_out, max_run)
+
+
+class _Filter:
+    """The state of one run: mean and covariance in buffers of the final size, used size
+    ``n``, landmark slots, and the count of consecutive rejections."""
+
+    def __init__(self, capacity: int, pose: Array, cov0: Array, r_cov: Array, gates: _Gates):
+        self.mu = np.zeros(capacity)
+        self.cov = np.zeros((capacity, capacity))
+        self.mu[:3] = np.asarray(pose, dtype=np.float64)
+        self.cov[:3, :3] = np.asarray(cov0, dtype=np.float64)
+        self.n = 3
+        self.slot_of: dict[int, int] = {}  # landmark id -> state offset
+        self.ids: list[int] = []
+        self.r_cov = r_cov
+        self.gates = gates
+        self.rejected_run = 0
+
+    def run(
+        self,
+        steps: Steps,
+        sig_u: Array,
+        z: Array,
+        ids: Array | None,
+        grid: NDArray[np.int64],
+        used: NDArray[np.bool_],
+    ) -> tuple[NDArray[np.int64], Array, Array]:
+        """Predict along ``steps`` (covariances ``sig_u``), measuring at each grid index.
+
+        ``ids`` None: nearest-neighbour association. Returns each measurement's landmark id
+        (−1: rejected or unused) and the pose and its covariance after each step.
+        """
+        t = steps.times
+        assoc_out = np.full(z.shape[0], UNASSOCIATED, dtype=np.int64)
+        online = np.empty((t.size, 3))
+        online_cov = np.empty((t.size, 3, 3))
+        order = np.flatnonzero(used)
+        starts = np.searchsorted(grid[order], np.arange(t.size + 1))
+        for k in range(t.size):
+            if k > 0:
+                self.predict(steps.u[k - 1], sig_u[k - 1])
+            for m in order[starts[k] : starts[k + 1]]:
+                lid = self.observe(z[m], None if ids is None else int(ids[m]), t[k], int(m))
+                if lid is not None:
+                    assoc_out[m] = lid
+            online[k] = self.mu[:3]
+            online_cov[k] = self.cov[:3, :3]
+            if not np.isfinite(self.mu[: self.n]).all():
+                raise DivergenceError(f"non-finite state at t={float(t[k]):.6f} s (step {k})")
+        return assoc_out, online, online_cov
+
+    def predict(self, u: Array, sigma: Array) -> None:
+        """``x ← x ∘ u``: ``P_xx ← F P_xx Fᵀ + Q``, ``P_xm ← F P_xm``."""
+        mu, cov, n = self.mu, self.cov, self.n
+        fx = se2.compose_jacobian(mu[:3], u)
+        q = process_noise(mu[2], sigma)
+        mu[:3] = se2.compose(mu[:3], u)
+        top = fx @ cov[:3, :n]
+        pxx = top[:, :3] @ fx.T + q
+        pxx = 0.5 * (pxx + pxx.T)  # 3×3: the covariance stays exactly symmetric
+        cov[:3, :n] = top
+        cov[:n, :3] = top.T
+        cov[:3, :3] = pxx
+
+    def observe(self, meas: Array, lid: int | None, t: float, m: int) -> int | None:
+        """Associate (``lid`` None: nearest neighbour), then initialise or update.
+
+        Returns the landmark id, or None when the measurement was rejected.
+        """
+        g = self.gates
+        if lid is None:
+            args = (self.mu, self.cov, self.n, meas, self.r_cov, g.associate, g.new_landmark)
+            slot, lid = _nearest(*args, len(self.ids))
+            if slot == -2:  # ambiguous: rejected
+                return None
+        else:
+            slot = self.slot_of.get(lid)
+        if slot is None or slot < 0:
+            _initialise(self.mu, self.cov, self.n, meas, self.r_cov)
+            self.slot_of[lid] = self.n
+            self.ids.append(lid)
+            self.n += 2
+            return lid
+        gate = g.outlier if self.rejected_run < g.max_rejected_run else np.inf
+        if not _update(self.mu, self.cov, self.n, slot, meas, self.r_cov, t, m, gate):
+            self.rejected_run += 1
+            return None  # outside the validation gate: rejected
+        self.rejected_run = 0
+        return lid
+
+
+def corrupt_associations(
+    landmarks: Array, used: NDArray[np.bool_], fraction: float, *, seed: int
+) -> NDArray[np.float64]:
+    """Replace a seeded share of the known associations by another landmark id (experiments).
+
+    Given the true ids as ``true_ids``, :func:`ekf_slam` records the replaced ones as wrong.
+
+    Parameters
+    ----------
+    landmarks : ndarray, shape (J,)
+        Landmark id of each measurement (finite wherever ``used``).
+    used : ndarray of bool, shape (J,)
+        Measurements the filter uses (only these are candidates).
+    fraction : float
+        In ``[0, 1)``: each used measurement is corrupted with this probability; the new id
+        is drawn from the used ids and always differs from the old one (unless there is
+        only one landmark).
+    seed : int
+
+    Returns
+    -------
+    ndarray, shape (J,)
+        The ids to give :func:`ekf_slam`.
+    """
+    _check_fraction(fraction)
+    ids = np.asarray(landmarks, dtype=np.float64).copy()
+    if fraction == 0 or not np.isfinite(ids[used]).all():
+        return ids  # nothing to do, or ekf_slam's input error
+    rng = np.random.default_rng(seed)
+    pool = np.unique(ids[used])
+    pick = used & (rng.random(ids.shape[0]) < fraction)
+    other = pool[rng.integers(0, pool.size, pick.sum())]
+    same = other == ids[pick]
+    other[same] = pool[(np.searchsorted(pool, other[same]) + 1) % pool.size]
+    ids[pick] = other
+    return ids
+
+
+def _check_fraction(fraction: float) -> None:
+    if not (0.0 <= fraction < 1.0):
+        raise InputError(f"corrupt_fraction must be in [0, 1), got {fraction}")
 
 
 def _initialise(mu: Array, cov: Array, n: int, meas: Array, r_cov: Array) -> None:
@@ -369,3 +477,88 @@ def _nn_mistakes(assoc: NDArray[np.int64], true_ids: NDArray[np.int64]) -> NDArr
     majority = dict(zip(pairs[order][first, 0].tolist(), pairs[order][first, 1].tolist()))
     wrong[used] = np.array([majority[x] for x in a.tolist()]) != tr
     return wrong
+
+
+def ekf_slam_bundle(
+    bundle: Bundle,
+    *,
+    association: Literal["known", "nn"] = "known",
+    corrupt_fraction: float = 0.0,
+    noise_scale: float = 1.0,
+    outlier_gate: float | None = None,
+    seed: int = 0,
+    process_noise_scale: float = 1.0,
+) -> tuple[Bundle, EkfSlamResult]:
+    """Run :func:`ekf_slam` on ``bundle``'s log; return the SLAM result bundle and the run.
+
+    The returned bundle keeps the log (and ground truth) and replaces the map by the filter's
+    final map with its marginals and joint covariance, and the measurements' landmark ids by
+    the associations the filter made (empty where it rejected a measurement): what a
+    filter-based SLAM system leaves behind. The filter's assumed noise is the bundle's models
+    scaled by ``noise_scale``; the bundle records the models it used. ``outlier_gate`` is the
+    χ² validation gate on known-association updates; rejected measurements are left
+    unassociated in the result bundle and counted in its description.
+
+    Experiment knobs: ``corrupt_fraction`` spoils that share of the known associations
+    (seeded by ``seed``, :func:`corrupt_associations`); ``process_noise_scale`` scales the
+    motion model's standard deviations only (a filter mis-tuned in its process noise;
+    ``noise_scale`` scales motion and sensor alike, which leaves the filter's gains, and so
+    its online estimate, unchanged).
+    """
+    if process_noise_scale != 1.0:
+        bundle = replace(bundle, motion=_scaled(bundle.motion, process_noise_scale))
+    steps = build_steps(bundle)
+    true_ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks, -1)
+    ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks, np.nan)
+    _check_fraction(corrupt_fraction)
+    if association == "known":
+        used = np.asarray(steps.measurement_grid) >= 0
+        ids = corrupt_associations(ids, used, corrupt_fraction, seed=seed)
+    res = ekf_slam(
+        steps,
+        bundle.measurements,
+        ids,
+        sensor=bundle.sensor,
+        initial_pose=bundle.initial_pose,
+        initial_covariance=bundle.initial_covariance,
+        association=association,
+        true_ids=true_ids,
+        noise_scale=noise_scale,
+        outlier_gate=outlier_gate,
+    )
+    m = res.landmark_ids.size
+    marg = res.map_covariance.reshape(m, 2, m, 2)[np.arange(m), :, np.arange(m), :]
+    sensor = bundle.sensor
+    if noise_scale != 1.0:
+        sensor = SensorModel(noise_scale * sensor.sigma_range, noise_scale * sensor.sigma_bearing)
+    rejected = int(((res.association < 0) & bundle.measurement_associated).sum())
+    out = replace(
+        bundle,
+        motion=_scaled(bundle.motion, noise_scale),
+        sensor=sensor,
+        measurement_landmarks=np.where(res.association >= 0, res.association, 0),
+        measurement_associated=res.association >= 0,
+        map_ids=res.landmark_ids,
+        map_xy=res.map_xy,
+        map_marginals=marg,
+        map_covariance=res.map_covariance,
+        description=(bundle.description + "; " if bundle.description else "")
+        + f"EKF-SLAM ({association} association, corrupted {corrupt_fraction:g}, "
+        f"noise scale {noise_scale:g}"
+        + ("" if process_noise_scale == 1.0 else f", process noise scale {process_noise_scale:g}")
+        + ("" if outlier_gate is None else f", outlier gate {outlier_gate:g}: {rejected} rejected")
+        + ")",
+        path=None,
+    )
+    return out, res
+
+
+def _scaled(motion: MotionModel, k: float) -> MotionModel:
+    """``motion`` with its standard deviations times ``k`` (``α`` times ``k²``)."""
+    if k == 1.0:
+        return motion
+    return replace(
+        motion,
+        sigma=None if motion.sigma is None else tuple(k * s for s in motion.sigma),
+        alpha=None if motion.alpha is None else tuple(k**2 * a for a in motion.alpha),
+    )

@@ -22,7 +22,7 @@ Hu et al. compare two ways of choosing pairs, each with its own inflation rule:
 
 Both add the odometry as separate constraints on adjacent poses.
 
-What the paper reports (and what this module reproduces on :mod:`slamrel.worlds`): full LS
+What the paper reports (and what this module reproduces on :mod:`recovery.simulation`): full LS
 and pose-only LS with Method 2 are both consistent (whole-trajectory NEES under the
 one-sided χ² gate in most runs, :func:`relation_metric.consistency.nees1`); Method 2 is far
 more accurate than Method 1, which throws away the information between non-adjacent poses;
@@ -86,7 +86,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from slamrel.worlds import World
+    from recovery.simulation.worlds import World
 
 Start = Literal["align", "odometry", "truth"]
 

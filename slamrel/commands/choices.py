@@ -17,7 +17,7 @@ STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs
 # recovery.recover.METHODS, recovery.recover.MAP_MODES
 METHODS = ("filter", "smoother", "batch")
 MAP_MODES = ("joint", "marginal", "ignore")
-# slamrel.worlds.WORLDS, sorted(slamrel.worlds.NOISE_TYPES)
+# recovery.simulation.worlds.WORLDS, sorted(recovery.simulation.worlds.NOISE_TYPES)
 WORLDS = ("simple1", "simple2", "complex1", "complex2")
 NOISE_TYPES = ("a", "b", "c")
 # recovery.ekf.ROBUST (without None), recovery.ekf.DEFAULT_MAX_OUTLIER_RUN

@@ -70,8 +70,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def run_simulate(args: argparse.Namespace) -> int:
     from recovery.bundle import write_bundle
-    from slamrel.simulate import world_bundle
-    from slamrel.worlds import make_world
+    from recovery.simulation.bundles import world_bundle
+    from recovery.simulation.worlds import make_world
 
     check_outputs([], [], dirs=[args.output], force=args.force)
     world = make_world(args.world, noise=args.noise, seed=args.seed, rate=args.rate)
@@ -87,13 +87,13 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 def run_slam(args: argparse.Namespace) -> int:
     from recovery.bundle import read_bundle, write_bundle
+    from recovery.estimation.ekfslam import ekf_slam_bundle
     from relation_metric.formats import write_trajectory
-    from slamrel.simulate import slam_bundle
 
     check_outputs([], [args.bundle], dirs=[args.output], force=args.force)
     bundle = read_bundle(args.bundle)
     with errors_about(args.bundle):
-        out, res = slam_bundle(
+        out, res = ekf_slam_bundle(
             bundle,
             association=args.association,
             corrupt_fraction=args.corrupt,

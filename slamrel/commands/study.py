@@ -15,9 +15,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from recovery.simulation.worlds import NOISE_TYPES, PAPER_WORLDS, WORLDS
 from slamrel.commands import options as opt
 from slamrel.sweep import load_results, run_sweep
-from slamrel.worlds import NOISE_TYPES, PAPER_WORLDS, WORLDS
 
 STUDIES = ("pose-only",)
 

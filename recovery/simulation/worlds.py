@@ -30,6 +30,9 @@ exact polar form of the noisy relative position). The older worlds keep their nu
 A world and its noise realisation are fully determined by ``(trajectory, noise type, seed)``:
 the landmark layout draws from ``seed`` and the noise from an independent child stream, so
 changing the noise type keeps the same features.
+
+The sensor is :func:`recovery.simulation.sensors.observe_field_of_view` (:func:`sensor_of`);
+:func:`recovery.simulation.bundles.world_bundle` turns a world into a log bundle.
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recovery.models import velocity_increment
+from recovery.simulation.sensors import FieldOfViewSensor, observe_field_of_view
 from relation_metric import se2
 from relation_metric.errors import InputError
 from relation_metric.trajectory import Trajectory, readonly
@@ -56,6 +60,7 @@ __all__ = [
     "World",
     "make_world",
     "path_of",
+    "sensor_of",
 ]
 
 STEP = 0.5  # metres a step
@@ -236,31 +241,6 @@ def _landmarks(path: NDArray[np.float64], rng: np.random.Generator) -> NDArray[n
     return anchor + rng.normal(0.0, FEATURE_SPREAD, (N_FEATURES, 2))
 
 
-def _observe(
-    poses: NDArray[np.float64],
-    landmarks: NDArray[np.float64],
-    noise: NoiseType,
-    rng: np.random.Generator,
-    *,
-    min_range: float = SENSOR_MIN_RANGE,
-    cartesian: bool = False,
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
-    # All pose × landmark pairs at once: (N, L, 2) landmark positions in each pose frame.
-    k_p_l = se2.inverse_transform_points(poses[:, None, :], landmarks[None, :, :])
-    r = np.hypot(k_p_l[..., 0], k_p_l[..., 1])
-    b = np.arctan2(k_p_l[..., 1], k_p_l[..., 0])
-    seen = (r <= SENSOR_RANGE) & (np.abs(b) <= SENSOR_FOV / 2) & (r >= min_range)
-    k, lm = np.nonzero(seen)  # row-major: time order, then landmark id
-    if cartesian:  # the paper's sensor: N(0, σ² I) on the relative position
-        z = k_p_l[k, lm] + rng.normal(0.0, noise.sigma_observation, (k.size, 2))
-        z_r, z_b = np.hypot(z[:, 0], z[:, 1]), np.arctan2(z[:, 1], z[:, 0])
-        return k.astype(np.int64), lm.astype(np.int64), z_r, se2.wrap_angle(z_b)
-    # a range is a distance: the rare noisy value below zero is reflected (|r + n|)
-    z_r = np.abs(r[k, lm] + rng.normal(0.0, noise.sigma_range, k.size))
-    z_b = se2.wrap_angle(b[k, lm] + rng.normal(0.0, noise.sigma_bearing, k.size))
-    return k.astype(np.int64), lm.astype(np.int64), z_r, z_b
-
-
 def make_world(
     name: str = "simple1",
     *,
@@ -292,75 +272,93 @@ def make_world(
         :data:`WORLDS`) or the paper's ``N(0, σ² I)`` on the relative position (default for
         :data:`PAPER_WORLDS`, which also have no minimum range).
     """
-    if noise not in NOISE_TYPES:
-        raise InputError(f"unknown noise type {noise!r}; expected one of a, b, c")
-    if rate < 0:
-        raise InputError(f"rate must be >= 0, got {rate}")
-    paper = name in PAPER_WORLDS
-    model = observation if observation is not None else ("cartesian" if paper else "range-bearing")
-    if model not in OBSERVATION_MODELS:
-        raise InputError(
-            f"unknown observation model {model!r}; expected one of {', '.join(OBSERVATION_MODELS)}"
-        )
+    model = _check(name, noise, rate, observation)
     nt = NOISE_TYPES[noise]
     layout_rng, noise_rng = (
         np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2)
     )
     path = path_of(name)
     landmarks = _landmarks(path, layout_rng)
-    n = path.shape[0]
-    t = dt * np.arange(n, dtype=np.float64)
-    controls = None
+    t = dt * np.arange(path.shape[0], dtype=np.float64)
     if rate == 0:
-        true_inc = se2.between(path[:-1], path[1:])
-        noisy_inc = true_inc + noise_rng.normal(
-            0.0, [nt.sigma_dx, nt.sigma_dy, nt.sigma_dtheta], true_inc.shape
-        )
-        odo = se2.cumulative_compose(noisy_inc)
-        truth = path
+        controls, odo = None, _odometry_drive(path, nt, noise_rng)
     else:
-        # Velocity-driven: per measurement step, v and ω that take pose k to pose k+1 along an
-        # arc (exactly, for the chord-arc steps above), held over `rate` control steps.
-        inc = se2.between(path[:-1], path[1:])
-        omega = inc[:, 2] / dt
-        # arc length of a chord of length c subtending angle φ: c φ / (2 sin(φ/2))
-        chord = np.hypot(inc[:, 0], inc[:, 1])
-        half = inc[:, 2] / 2
-        arc = np.where(
-            np.abs(half) > 1e-12,
-            chord * half / np.where(np.abs(half) > 1e-12, np.sin(half), 1.0),
-            chord,
-        )
-        v = arc / dt
-        h = dt / rate
-        v_k = np.repeat(v, rate)
-        w_k = np.repeat(omega, rate)
-        sv = nt.sigma_dx * np.sqrt(rate) / dt
-        sw = nt.sigma_dtheta * np.sqrt(rate) / dt
-        v_meas = v_k + noise_rng.normal(0.0, sv, v_k.size)
-        w_meas = w_k + noise_rng.normal(0.0, sw, w_k.size)
-        t_ctrl = h * np.arange(v_k.size)
-        controls = np.column_stack((t_ctrl, v_meas, w_meas))
-        truth = path
-        odo = se2.cumulative_compose(velocity_increment(v_meas, w_meas, h)[0])[::rate]
-    k, lm, z_r, z_b = _observe(
-        truth,
-        landmarks,
-        nt,
-        noise_rng,
-        min_range=0.0 if paper else SENSOR_MIN_RANGE,
-        cartesian=model == "cartesian",
-    )
-    obs = Observations(k, t[k], z_r, z_b, lm)
+        controls, odo = _velocity_drive(path, nt, noise_rng, rate=rate, dt=dt)
+    obs = observe_field_of_view(path, landmarks, sensor_of(nt, name, model), noise_rng)
     return World(
         name=name,
         noise=noise,
         seed=seed,
-        truth=Trajectory(t, truth),
+        truth=Trajectory(t, path),
         landmarks=readonly(landmarks),
         odometry=Trajectory(t, odo),
         controls=None if controls is None else readonly(controls),
-        observations=obs,
+        observations=Observations(obs.pose, t[obs.pose], obs.range, obs.bearing, obs.landmark),
         rate=rate,
         observation_model=model,
     )
+
+
+def sensor_of(noise: NoiseType, name: str, observation: str) -> FieldOfViewSensor:
+    """The world's sensor: 180°, 5 m, and 0.5 m minimum range except in :data:`PAPER_WORLDS`."""
+    return FieldOfViewSensor(
+        noise.sigma_range,
+        noise.sigma_bearing,
+        max_range=SENSOR_RANGE,
+        min_range=0.0 if name in PAPER_WORLDS else SENSOR_MIN_RANGE,
+        fov=SENSOR_FOV,
+        cartesian_sigma=noise.sigma_observation if observation == "cartesian" else None,
+    )
+
+
+def _check(name: str, noise: str, rate: int, observation: str | None) -> str:
+    """The observation model to use; InputError on an unknown noise type, model or rate."""
+    if noise not in NOISE_TYPES:
+        raise InputError(f"unknown noise type {noise!r}; expected one of a, b, c")
+    if rate < 0:
+        raise InputError(f"rate must be >= 0, got {rate}")
+    default = "cartesian" if name in PAPER_WORLDS else "range-bearing"
+    model = observation if observation is not None else default
+    if model not in OBSERVATION_MODELS:
+        raise InputError(
+            f"unknown observation model {model!r}; expected one of {', '.join(OBSERVATION_MODELS)}"
+        )
+    return model
+
+
+def _odometry_drive(
+    path: NDArray[np.float64], nt: NoiseType, rng: np.random.Generator
+) -> NDArray[np.float64]:
+    """Wheel odometry: each true increment plus ``N(0, diag(σ_dx², σ_dy², σ_dθ²))``."""
+    true_inc = se2.between(path[:-1], path[1:])
+    sigma = [nt.sigma_dx, nt.sigma_dy, nt.sigma_dtheta]
+    noisy_inc = true_inc + rng.normal(0.0, sigma, true_inc.shape)
+    return se2.cumulative_compose(noisy_inc)
+
+
+def _velocity_drive(
+    path: NDArray[np.float64], nt: NoiseType, rng: np.random.Generator, *, rate: int, dt: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Noisy ``[t, v, ω]`` controls, ``rate`` per measurement step, and their odometry poses.
+
+    Per measurement step, v and ω take pose k to pose k+1 along an arc (exactly, for the
+    chord-arc steps of :func:`path_of`), held over ``rate`` control steps.
+    """
+    inc = se2.between(path[:-1], path[1:])
+    omega = inc[:, 2] / dt
+    # arc length of a chord of length c subtending angle φ: c φ / (2 sin(φ/2))
+    chord = np.hypot(inc[:, 0], inc[:, 1])
+    half = inc[:, 2] / 2
+    turning = np.abs(half) > 1e-12
+    arc = np.where(turning, chord * half / np.where(turning, np.sin(half), 1.0), chord)
+    v = arc / dt
+    h = dt / rate
+    v_k = np.repeat(v, rate)
+    w_k = np.repeat(omega, rate)
+    sv = nt.sigma_dx * np.sqrt(rate) / dt
+    sw = nt.sigma_dtheta * np.sqrt(rate) / dt
+    v_meas = v_k + rng.normal(0.0, sv, v_k.size)
+    w_meas = w_k + rng.normal(0.0, sw, w_k.size)
+    controls = np.column_stack((h * np.arange(v_k.size), v_meas, w_meas))
+    odo = se2.cumulative_compose(velocity_increment(v_meas, w_meas, h)[0])[::rate]
+    return controls, odo
