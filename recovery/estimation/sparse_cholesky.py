@@ -171,19 +171,14 @@ class SparseCholesky:
         col = np.repeat(np.arange(self.size, dtype=np.int32), np.diff(self.indptr))
         upper = self.indices <= col
         self._upper = np.flatnonzero(upper)  # slots of the upper triangle, in CSC order
-        self._upper_indptr = np.concatenate(
-            ([0], np.cumsum(np.bincount(col[upper], minlength=self.size)))
-        ).astype(np.int32)
-        self._upper_indices = self.indices[upper]
+        upper_indptr = np.concatenate(([0], np.cumsum(np.bincount(col[upper], minlength=size))))
+        shape = (self.size, self.size)
+        # both matrices built (and checked by scipy) once; factor() overwrites their values
+        self._full = sp.csc_matrix((np.zeros(self.indices.size), self.indices, self.indptr), shape)
+        self._upper_matrix = sp.csc_matrix(
+            (np.zeros(self._upper.size), self.indices[upper], upper_indptr.astype(np.int32)), shape
+        )
         self._factor: Any = None
-        self._data = np.empty(0)
-
-    def _matrix(self, data: Array, *, upper: bool) -> sp.csc_matrix:
-        if upper:
-            pattern = (data[self._upper], self._upper_indices, self._upper_indptr)
-        else:
-            pattern = (data, self.indices, self.indptr)
-        return sp.csc_matrix(pattern, shape=(self.size, self.size))
 
     def factor(self, data: Array) -> None:
         """Factorise the matrix with values ``data`` (shape ``(nnz,)``) in the stored pattern."""
@@ -191,7 +186,8 @@ class SparseCholesky:
         if self.backend == "qdldl":
             import qdldl
 
-            a = self._matrix(data, upper=True)
+            np.take(data, self._upper, out=self._upper_matrix.data)
+            a = self._upper_matrix
             try:
                 if self._factor is None:  # ordering + symbolic + numeric, once per pattern
                     self._factor = qdldl.Solver(a, upper=True)
@@ -199,7 +195,7 @@ class SparseCholesky:
                     self._factor.update(a, upper=True)
             except RuntimeError:  # an exactly zero pivot ("not quasi-definite")
                 raise DivergenceError(_SINGULAR) from None
-            self._data = data  # for the residual check in solve
+            self._full.data[:] = data  # for the residual check in solve
         elif self.backend == "cholmod":
             import cholespy
 
@@ -212,7 +208,7 @@ class SparseCholesky:
         else:
             try:
                 self._factor = spla.splu(
-                    self._matrix(data, upper=False),
+                    sp.csc_matrix((data, self.indices, self.indptr), shape=self._full.shape),
                     permc_spec="MMD_AT_PLUS_A",
                     diag_pivot_thresh=0.0,
                     options={"SymmetricMode": True},
@@ -237,8 +233,8 @@ class SparseCholesky:
             x = self._factor.solve(b)
         # QDLDL's refactorisation stops silently at an exactly zero pivot and leaves a
         # stale factor: a backward-stable solve has a residual near rounding, that one not
-        a = self._matrix(self._data, upper=False)
-        scale = np.abs(self._data).max() * np.abs(x).sum(axis=0) + np.abs(b).sum(axis=0)
+        a = self._full
+        scale = np.abs(a.data).max() * np.abs(x).sum(axis=0) + np.abs(b).sum(axis=0)
         if not (np.abs(a @ x - b).sum(axis=0) <= 1e-8 * scale).all():
             raise DivergenceError(_SINGULAR)
         return x
