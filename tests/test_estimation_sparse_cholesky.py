@@ -48,7 +48,10 @@ def test_solves_equal_dense_solve_and_refactor_keeps_pattern(rng, backend):
         d = rng.uniform(0.5, 2.0, a.shape[0])
         data = m.data * d[m.indices] * d[col] + trial * (m.indices == col)
         dense = sp.csc_matrix((data, m.indices, m.indptr), shape=a.shape).toarray()
+        given = (m.indptr.copy(), m.indices.copy(), data.copy())
         chol.factor(data)
+        for before, after in zip(given, (m.indptr, m.indices, data), strict=True):
+            np.testing.assert_array_equal(after, before)  # the caller's arrays left alone
         b = rng.normal(size=a.shape[0])
         np.testing.assert_allclose(chol.solve(b), np.linalg.solve(dense, b), rtol=1e-9, atol=1e-12)
         bb = rng.normal(size=(a.shape[0], 4))

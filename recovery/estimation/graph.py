@@ -11,6 +11,9 @@ are
 Each residual is whitened by the upper Cholesky factor of its information matrix and the sum
 of squares is minimised by Levenberg–Marquardt (Marquardt's diagonal scaling) on the sparse
 normal equations; Jacobians are analytic and assembled without Python loops over factors.
+The damped normal equations are factorised by :mod:`recovery.estimation.sparse_cholesky`
+(QDLDL with its symbolic factorisation reused across iterations; CHOLMOD with the ``fast``
+extra on graphs with much fill; SuperLU as the fallback): see there for the choice.
 """
 
 from __future__ import annotations

@@ -199,9 +199,13 @@ class SparseCholesky:
         elif self.backend == "cholmod":
             import cholespy
 
-            try:
+            try:  # copies: the wheel sorts the index and value arrays it is given in place
                 self._factor = cholespy.CholeskySolverD(
-                    self.size, self.indptr, self.indices, data, cholespy.MatrixType.CSC
+                    self.size,
+                    self.indptr.copy(),
+                    self.indices.copy(),
+                    data.copy(),
+                    cholespy.MatrixType.CSC,
                 )
             except ValueError:  # "Matrix is not positive definite!"
                 raise DivergenceError(_SINGULAR) from None
