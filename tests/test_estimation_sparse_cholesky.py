@@ -137,3 +137,22 @@ def test_least_squares_same_minimum_on_every_backend(rng, monkeypatch, have, exp
     np.testing.assert_allclose(got.poses, reference.poses, rtol=0, atol=1e-9)
     np.testing.assert_allclose(got.landmarks, reference.landmarks, rtol=0, atol=1e-9)
     np.testing.assert_allclose(got.cost[-1], reference.cost[-1], rtol=1e-9)
+
+
+def test_available_backends_follow_the_installed_libraries(monkeypatch):
+    """Libraries that do not import are not offered; SuperLU (scipy) always is."""
+    import importlib.util
+
+    for missing, expected in (
+        ({"cholespy", "qdldl"}, ("superlu",)),
+        ({"cholespy"}, ("qdldl", "superlu")),
+        ({"qdldl"}, ("cholmod", "superlu")),
+        (set(), ("cholmod", "qdldl", "superlu")),
+    ):
+        found = object()  # stands for a module spec
+        monkeypatch.setattr(
+            importlib.util,
+            "find_spec",
+            lambda name, *a, m=missing, f=found: None if name in m else f,
+        )
+        assert sparse_cholesky.available_backends() == expected
