@@ -227,11 +227,11 @@ BEFORE = "defa31f"  # main before issue 15
 
 
 def old_solver():  # type: ignore[no-untyped-def]
-    """``recovery.estimation.graph`` as it was before issue 15 (from git), as a module."""
+    """``slamrel.backends.graph`` as it was before issue 15 (from git), as a module."""
     import importlib.util
 
     text = subprocess.run(
-        ["git", "-C", str(ROOT), "show", f"{BEFORE}:recovery/estimation/graph.py"],
+        ["git", "-C", str(ROOT), "show", f"{BEFORE}:slamrel/backends/graph.py"],  # moved since
         capture_output=True,
         text=True,
         check=True,
@@ -245,10 +245,21 @@ def old_solver():  # type: ignore[no-untyped-def]
     return module
 
 
-def in_process(label: str, fn) -> None:  # type: ignore[no-untyped-def]
-    start = time.perf_counter()
-    sol = fn()
-    wall = time.perf_counter() - start
+def in_process(label: str, fn, backends: tuple[str, ...] | None = None) -> None:  # type: ignore[no-untyped-def]
+    """Time ``fn()``; with ``backends``, as if only those sparse Cholesky back-ends were
+    installed (``("superlu",)``: the fallback, scipy alone)."""
+    from recovery.estimation import sparse_cholesky
+
+    installed = sparse_cholesky.BACKENDS
+    sparse_cholesky.BACKENDS = installed if backends is None else backends
+    try:
+        start = time.perf_counter()
+        sol = fn()
+        wall = time.perf_counter() - start
+    finally:
+        sparse_cholesky.BACKENDS = installed
+    if backends is not None:
+        label = f"{label} [{'+'.join(backends)}]"
     print(
         f"  in process: {label:<44s} {wall:7.2f} s  {sol.iterations:5d} it  cost {sol.cost[-1]:.6g}"
     )
@@ -350,6 +361,8 @@ def main() -> None:
             old = old_solver()
             in_process(f"before issue 15 ({BEFORE}) solve_graph", lambda: old.solve_graph(g))
         in_process("now solve_graph", lambda: new.solve_graph(g))
+        for only in (("qdldl", "superlu"), ("superlu",)):
+            in_process("now solve_graph", lambda: new.solve_graph(g), only)
         in_process(
             "now solve_graph_incremental(batch=500)",
             lambda: new.solve_graph_incremental(g, batch=500),
@@ -374,10 +387,12 @@ def main() -> None:
                     f"before issue 15 ({BEFORE}) incremental(batch=500)",
                     lambda: old.solve_graph_incremental(vp, batch=500),
                 )
-            in_process(
-                "now solve_graph_incremental(batch=500)",
-                lambda: new.solve_graph_incremental(vp, batch=500),
-            )
+            for only in (None, ("superlu",)):
+                in_process(
+                    "now solve_graph_incremental(batch=500)",
+                    lambda: new.solve_graph_incremental(vp, batch=500),
+                    only,
+                )
 
 
 if __name__ == "__main__":

@@ -12,6 +12,9 @@ Each residual is whitened by the upper Cholesky factor of its information matrix
 of squares is minimised by the estimation layer's Levenberg–Marquardt
 (:mod:`recovery.estimation.lm`, Marquardt's diagonal scaling) on the sparse normal
 equations; Jacobians are analytic and assembled without Python loops over factors.
+The damped normal equations are factorised by :mod:`recovery.estimation.sparse_cholesky`
+(QDLDL with its symbolic factorisation reused across iterations; CHOLMOD with the ``fast``
+extra on graphs with much fill; SuperLU as the fallback): see there for the choice.
 """
 
 from __future__ import annotations
@@ -24,10 +27,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
+from recovery.estimation import sparse_cholesky
 from recovery.estimation.lm import Linearisation, LMOptions, levenberg_marquardt
 from relation_metric import se2
 from relation_metric.arrays import Array
-from relation_metric.errors import DivergenceError, InputError
+from relation_metric.errors import InputError
 from relation_metric.trajectory import readonly
 
 __all__ = [
@@ -285,27 +289,46 @@ def _apply(x: Array, lm: Array, delta: Array) -> tuple[Array, Array]:
     return x_new, lm_new
 
 
+def _block_order_permutation(pattern: sp.csc_matrix, n: int, m: int) -> NDArray[np.int64]:
+    """New index of each variable when the blocks (3 per pose, 2 per landmark) are put in a
+    symmetric minimum-degree order of the block ``pattern`` (shape ``(n + m, n + m)``, SPD)."""
+    block_pos = spla.splu(
+        pattern, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+    ).perm_c  # new position of each block
+    bsize = np.concatenate((np.full(n, 3), np.full(m, 2)))
+    order = np.argsort(block_pos)
+    start = np.empty(n + m, dtype=np.int64)
+    start[order] = np.cumsum(bsize[order]) - bsize[order]
+    old_start = np.concatenate((3 * np.arange(n), 3 * n + 2 * np.arange(m)))
+    perm = np.empty(3 * n + 2 * m, dtype=np.int64)
+    for k in range(3):
+        has = bsize > k
+        perm[old_start[has] + k] = start[has] + k
+    return perm
+
+
 class _NormalEquations:
     """``H = JᵀJ`` and ``Jᵀr`` assembled block by block into a sparsity pattern fixed per problem.
 
     Built once per :func:`solve_graph` call: the pattern of ``H`` (CSC) and, for every entry
     of every factor's block product, the slot of ``H.data`` it adds into. Each iteration then
     costs one ``np.bincount`` for ``H`` and one for the gradient (no sparse matrix products,
-    no COO→CSR sorting), and each trial step one SuperLU factorisation of ``H + λ D``:
+    no COO→CSR sorting), and each trial step one factorisation of ``H + λ D`` by
+    :class:`~recovery.estimation.sparse_cholesky.SparseCholesky`, built once for the fixed
+    pattern (QDLDL reuses its ordering and symbolic factorisation across all of them;
+    CHOLMOD, with the ``fast`` extra, is taken when the factor is large; SuperLU is the
+    fallback):
 
-    * ``H + λ D`` is symmetric positive definite (the gauge prior, ``λ > 0``), so the LU runs
-      with ``SymmetricMode`` and no pivoting (``diag_pivot_thresh=0``) in a symmetric
-      minimum-degree ordering (``MMD_AT_PLUS_A``): the fill of a Cholesky factor. The old
-      default (COLAMD with partial pivoting) took 83 ms per factorisation on Victoria Park;
-      this takes about 20 ms.
-    * the variables are stored pre-permuted by a minimum-degree ordering of the *block*
-      graph (one node per pose and landmark), computed once. SuperLU's own ordering on top of
-      it breaks ties far better than on the natural order (measured on a 10⁴-pose Manhattan
-      graph: 0.65 s against 1.5 s per factorisation for the same fill). Reusing the ordering
-      alone (``NATURAL`` on the permuted matrix) was slower still (1.7 s): scipy's SuperLU
-      cannot keep a symbolic factorisation, and its supernodes come out worse without its
-      own ordering pass, so the ordering is recomputed per factorisation (a few per cent of
-      its time).
+    * QDLDL (AMD) and CHOLMOD (AMD/METIS) order the scalar matrix themselves: the variables
+      keep their natural order (measured with QDLDL on a 10⁴-pose Manhattan graph: 3.03·10⁶
+      entries in L from the natural order, 3.16·10⁶ from the block order below). When
+      CHOLMOD is installed, the expected work ``27 Σ c²`` (``c``: column counts of the
+      Cholesky factor of the *block* graph, one node per pose and landmark, 3 × 3 blocks)
+      picks between the two (:func:`~recovery.estimation.sparse_cholesky.choose_backend`).
+    * SuperLU fallback: the variables are stored pre-permuted by a symmetric minimum-degree
+      ordering of the block graph (:func:`_block_order_permutation`), computed once.
+      SuperLU's own ordering on top of it breaks ties far better than on the natural order
+      (10⁴-pose Manhattan graph: 0.65 s against 1.5 s per factorisation for the same fill).
     """
 
     def __init__(self, g: PoseGraph, n: int, m: int) -> None:
@@ -318,22 +341,14 @@ class _NormalEquations:
         bcol = np.concatenate((g.pp_j, g.pp_i, pl_b, g.pl_k, np.arange(nb)))
         pattern = sp.csc_matrix((np.ones(brow.size), (brow, bcol)), shape=(nb, nb))
         pattern.data[:] = 1.0
-        pattern = pattern + sp.diags(np.asarray(pattern.sum(axis=0)).ravel() + 1.0)
-        block_pos = spla.splu(
-            pattern.tocsc(),
-            permc_spec="MMD_AT_PLUS_A",
-            diag_pivot_thresh=0.0,
-            options={"SymmetricMode": True},
-        ).perm_c  # new position of each block
-        bsize = np.concatenate((np.full(n, 3), np.full(m, 2)))
-        order = np.argsort(block_pos)
-        start = np.empty(nb, dtype=np.int64)
-        start[order] = np.cumsum(bsize[order]) - bsize[order]
-        old_start = np.concatenate((3 * np.arange(n), 3 * n + 2 * np.arange(m)))
-        perm = np.empty(size, dtype=np.int64)  # new index of each variable
-        for k in range(3):
-            has = bsize > k
-            perm[old_start[has] + k] = start[has] + k
+        pattern = (pattern + sp.diags(np.asarray(pattern.sum(axis=0)).ravel() + 1.0)).tocsc()
+        if sparse_cholesky.BACKENDS[0] == "superlu":  # no Cholesky library: order for SuperLU
+            perm = _block_order_permutation(pattern, n, m)
+            flops = None
+        else:  # QDLDL and CHOLMOD order the scalar matrix themselves
+            perm = np.arange(size)
+            has_cholmod = "cholmod" in sparse_cholesky.BACKENDS
+            flops = 27.0 * sparse_cholesky.factor_flops(pattern) if has_cholmod else None
         self.perm = perm
         # --- variables of every factor, in the new numbering ------------------------------
         pi = perm[3 * g.pp_i[:, None] + np.arange(3)]
@@ -359,6 +374,7 @@ class _NormalEquations:
         self.nnz = uniq.size
         self.diag = np.flatnonzero(row == col)  # slots of H_vv, v in the new numbering
         self.grad_index = np.concatenate((pi.ravel(), pj.ravel(), pk.ravel(), pl.ravel(), p0))
+        self.cholesky = sparse_cholesky.SparseCholesky(self.indptr, self.indices, size, flops=flops)
 
     def assemble(self, lin: _Linearised) -> tuple[Array, Array]:
         """``H.data`` (in the stored pattern) and the gradient ``Jᵀr``, both in the new order."""
@@ -398,19 +414,8 @@ class _NormalEquations:
         """``(H + diag(damping))⁻¹ rhs`` in the new order; the solution in the old order."""
         data = h.copy()
         data[self.diag] += damping
-        a = sp.csc_matrix((data, self.indices, self.indptr), shape=(self.size, self.size))
-        try:
-            lu = spla.splu(
-                a,
-                permc_spec="MMD_AT_PLUS_A",
-                diag_pivot_thresh=0.0,
-                options={"SymmetricMode": True},
-            )
-        except RuntimeError:  # an exactly zero pivot
-            raise DivergenceError(
-                "the normal equations are singular (unobserved states?)"
-            ) from None
-        return lu.solve(rhs)[self.perm]
+        self.cholesky.factor(data)
+        return self.cholesky.solve(rhs)[self.perm]
 
 
 def solve_graph(

@@ -141,6 +141,57 @@ def _cost(p: Array, g: PoseGraph, omega: Array) -> float:
     return 0.5 * float(np.einsum("ea,eab,eb->", r, omega, r))
 
 
+def _constraint_sides(
+    anc: list[NDArray[np.int64]], pp_i: NDArray[np.int64], pp_j: NDArray[np.int64]
+) -> tuple[list[NDArray[np.int64]], list[NDArray[np.int64]]]:
+    """The path of each constraint below the lowest common ancestor of its two poses in the
+    tree (``anc``: root-first ancestors of each pose): the i side, then the j side."""
+    side_i: list[NDArray[np.int64]] = []
+    side_j: list[NDArray[np.int64]] = []
+    for i, j in zip(pp_i.tolist(), pp_j.tolist()):
+        ai, aj = anc[i], anc[j]
+        m = min(ai.size, aj.size)
+        common = int(np.argmin(np.append(ai[:m] == aj[:m], False)))  # shared prefix length
+        side_i.append(ai[common:])
+        side_j.append(aj[common:])
+    return side_i, side_j
+
+
+def _preconditioner(
+    n: int,
+    w: Array,
+    z: Array,
+    side_i: list[NDArray[np.int64]],
+    side_j: list[NDArray[np.int64]],
+) -> tuple[Array, Array]:
+    """``M⁻¹`` (shape ``(n, 3)``, the inverse of ``diag(Σ J_kᵀ Ω J_k)``, 0 where no constraint
+    acts) and ``ρ_c`` per constraint (shape ``(E,)``), the spectral radius of ``A_c Ω_c``.
+
+    On the i side the angle also turns ``R_i δ_t``, whose length ``|δ_t|`` does not depend on
+    the state, so ``M`` is constant. ``ρ_c`` says how much of its own residual a unit-rate
+    visit removes (rotation-invariant: ``M`` and ``Ω`` are spherical in x, y).
+    """
+    e_n = len(side_i)
+    lever = w[:, 0] * np.sum(z[:, :2] ** 2, axis=1)
+    m_diag = np.zeros((n, 3))
+    if e_n:
+        owner_i = np.repeat(np.arange(e_n), [q.size for q in side_i])
+        owner_j = np.repeat(np.arange(e_n), [q.size for q in side_j])
+        np.add.at(m_diag, np.concatenate(side_j), w[owner_j])
+        wi = w[owner_i].copy()
+        wi[:, 2] += lever[owner_i]
+        np.add.at(m_diag, np.concatenate(side_i), wi)
+    m_inv = np.zeros_like(m_diag)
+    np.divide(1.0, m_diag, out=m_inv, where=m_diag > 0)
+    sum_i = np.array([m_inv[q].sum(axis=0) for q in side_i]).reshape(-1, 3)
+    sum_j = np.array([m_inv[q].sum(axis=0) for q in side_j]).reshape(-1, 3)
+    jac = np.broadcast_to(np.eye(3), (e_n, 3, 3)).copy()
+    jac[:, 0, 2], jac[:, 1, 2] = -z[:, 1], z[:, 0]
+    a_all = (jac * sum_i[:, None, :]) @ np.swapaxes(jac, 1, 2) + sum_j[:, :, None] * np.eye(3)
+    rho_all = np.max(np.abs(np.linalg.eigvals(a_all * w[:, None, :])), axis=1) if e_n else w[:, 0]
+    return m_inv, rho_all
+
+
 def toro_optimize(
     graph: PoseGraph,
     *,
@@ -177,38 +228,10 @@ def toro_optimize(
     x = p0.copy()
     x[1:] = p0[1:] - p0[parent[1:]]
     x[1:, 2] = se2.wrap_angle(x[1:, 2])
-    # the path of each constraint below the lowest common ancestor: i side, then j side
     e_n = graph.pp_i.size
     z = np.asarray(graph.pp_z)
-    side_i: list[NDArray[np.int64]] = []
-    side_j: list[NDArray[np.int64]] = []
-    for i, j in zip(graph.pp_i.tolist(), graph.pp_j.tolist()):
-        ai, aj = anc[i], anc[j]
-        m = min(ai.size, aj.size)
-        common = int(np.argmin(np.append(ai[:m] == aj[:m], False)))  # shared prefix length
-        side_i.append(ai[common:])
-        side_j.append(aj[common:])
-    # preconditioner: diag(Σ J_kᵀ Ω J_k); on the i side the angle also turns R_i δ_t, whose
-    # length |δ_t| does not depend on the state, so M is constant
-    lever = w[:, 0] * np.sum(z[:, :2] ** 2, axis=1)
-    m_diag = np.zeros((n, 3))
-    if e_n:
-        owner_i = np.repeat(np.arange(e_n), [q.size for q in side_i])
-        owner_j = np.repeat(np.arange(e_n), [q.size for q in side_j])
-        np.add.at(m_diag, np.concatenate(side_j), w[owner_j])
-        wi = w[owner_i].copy()
-        wi[:, 2] += lever[owner_i]
-        np.add.at(m_diag, np.concatenate(side_i), wi)
-    m_inv = np.zeros_like(m_diag)
-    np.divide(1.0, m_diag, out=m_inv, where=m_diag > 0)
-    sum_i = np.array([m_inv[q].sum(axis=0) for q in side_i]).reshape(-1, 3)
-    sum_j = np.array([m_inv[q].sum(axis=0) for q in side_j]).reshape(-1, 3)
-    # ρ_c: spectral radius of A_c Ω_c, how much of its own residual a unit-rate visit removes
-    # (rotation-invariant: M and Ω are spherical in x, y)
-    jac = np.broadcast_to(np.eye(3), (e_n, 3, 3)).copy()
-    jac[:, 0, 2], jac[:, 1, 2] = -z[:, 1], z[:, 0]
-    a_all = (jac * sum_i[:, None, :]) @ np.swapaxes(jac, 1, 2) + sum_j[:, :, None] * np.eye(3)
-    rho_all = np.max(np.abs(np.linalg.eigvals(a_all * w[:, None, :])), axis=1) if e_n else w[:, 0]
+    side_i, side_j = _constraint_sides(anc, graph.pp_i, graph.pp_j)
+    m_inv, rho_all = _preconditioner(n, w, z, side_i, side_j)
     scale = float(np.median(rho_all)) if e_n else 1.0
     anc_i = [anc[i] for i in graph.pp_i.tolist()]
     anc_j = [anc[j] for j in graph.pp_j.tolist()]
