@@ -67,10 +67,11 @@ def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
 def test_choices_equal_the_owners() -> None:
     from recovery.ekf import DEFAULT_MAX_OUTLIER_RUN, ROBUST
     from recovery.recover import MAP_MODES, METHODS
-    from recovery.simulation.worlds import NOISE_TYPES, WORLDS
+    from recovery.simulation.worlds import NOISE_TYPES, PAPER_WORLDS, WORLDS
     from relation_metric.formats import TRAJECTORY_FORMATS
     from relation_metric.metric import MODES
     from relation_metric.relations import STRATEGIES
+    from slamrel.study import METHODS as STUDY_METHODS
 
     assert choices.TRAJECTORY_FORMATS == TRAJECTORY_FORMATS
     assert choices.MODES == MODES
@@ -78,6 +79,8 @@ def test_choices_equal_the_owners() -> None:
     assert choices.METHODS == METHODS
     assert choices.MAP_MODES == MAP_MODES
     assert choices.WORLDS == WORLDS
+    assert choices.PAPER_WORLDS == PAPER_WORLDS
+    assert choices.STUDY_METHODS == STUDY_METHODS
     assert choices.NOISE_TYPES == tuple(sorted(NOISE_TYPES))
     assert choices.ROBUST_CHOICES == tuple(r for r in ROBUST if r)
     assert choices.DEFAULT_MAX_OUTLIER_RUN == DEFAULT_MAX_OUTLIER_RUN

@@ -17,9 +17,12 @@ STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs
 # recovery.recover.METHODS, recovery.recover.MAP_MODES
 METHODS = ("filter", "smoother", "batch")
 MAP_MODES = ("joint", "marginal", "ignore")
-# recovery.simulation.worlds.WORLDS, sorted(recovery.simulation.worlds.NOISE_TYPES)
+# recovery.simulation.worlds.WORLDS, .PAPER_WORLDS, sorted(recovery.simulation.worlds.NOISE_TYPES)
 WORLDS = ("simple1", "simple2", "complex1", "complex2")
+PAPER_WORLDS = ("hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2")
 NOISE_TYPES = ("a", "b", "c")
 # recovery.ekf.ROBUST (without None), recovery.ekf.DEFAULT_MAX_OUTLIER_RUN
 ROBUST_CHOICES = ("huber", "cauchy")
 DEFAULT_MAX_OUTLIER_RUN = 10
+# slamrel.study.METHODS
+STUDY_METHODS = ("full", "m1", "m2", "toro")

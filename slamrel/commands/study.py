@@ -15,9 +15,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from recovery.simulation.worlds import NOISE_TYPES, PAPER_WORLDS, WORLDS
 from slamrel.commands import options as opt
-from slamrel.sweep import load_results, run_sweep
+from slamrel.commands.choices import NOISE_TYPES, PAPER_WORLDS, STUDY_METHODS, WORLDS
 
 STUDIES = ("pose-only",)
 
@@ -36,8 +35,6 @@ def _names(allowed: tuple[str, ...], what: str):  # type: ignore[no-untyped-def]
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    from slamrel.study import METHODS
-
     s = sub.add_parser(
         "study",
         help="reproduce Hu et al.'s pose-only SLAM study: worlds x noise x runs x methods",
@@ -54,17 +51,17 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     s.add_argument(
         "--noise",
-        type=_names(tuple(sorted(NOISE_TYPES)), "noise types"),
-        default=sorted(NOISE_TYPES),
+        type=_names(NOISE_TYPES, "noise types"),
+        default=list(NOISE_TYPES),
         metavar="LIST",
         help="comma-separated noise types (default a,b,c)",
     )
     s.add_argument(
         "--methods",
-        type=_names(METHODS, "methods"),
-        default=list(METHODS),
+        type=_names(STUDY_METHODS, "methods"),
+        default=list(STUDY_METHODS),
         metavar="LIST",
-        help="comma-separated methods: " + ", ".join(METHODS),
+        help="comma-separated methods: " + ", ".join(STUDY_METHODS),
     )
     s.add_argument(
         "--pair-start",
@@ -97,6 +94,7 @@ def run_study(args: argparse.Namespace) -> int:
         write_findings,
         write_tables,
     )
+    from slamrel.sweep import load_results, run_sweep
 
     # the folder keeps finished cases (resume): reused when it is a study folder slamrel wrote
     out = resumable_directory(args.output, kind="pose-only-study")
