@@ -187,6 +187,20 @@ def associate(
     width = estimate.group.width
     if odometry is not None and odometry.group is not estimate.group:
         odometry = odometry.lifted() if odometry.group.width < width else odometry.planar()
+    if relations.key == "index" and _all_indices_in_range(relations, len(estimate)):
+        # the common case without a mask: two gathers, no (2M, width) buffer
+        first = relations.first.astype(np.int64)
+        second = relations.second.astype(np.int64)
+        return Association(
+            pose_first=estimate.poses.take(first, axis=0),
+            pose_second=estimate.poses.take(second, axis=0),
+            index_first=first,
+            index_second=second,
+            valid=np.ones(m, dtype=bool),
+            via_odometry=np.zeros(m, dtype=bool),
+            interpolated=np.zeros(m, dtype=bool),
+            reason=np.zeros(m, dtype=np.int8),
+        )
     if relations.key == "index":
         n = len(estimate)
         ends = np.concatenate((relations.first, relations.second)).astype(np.int64)
@@ -218,6 +232,15 @@ def associate(
         interpolated=(interp[:m] | interp[m:]) & valid,
         reason=np.where(r1 != OK, r1, r2).astype(np.int8),
     )
+
+
+def _all_indices_in_range(relations: RelationSet, n: int) -> bool:
+    """Every pose index of ``relations`` (``key="index"``) names one of ``n`` poses."""
+    if len(relations) == 0:
+        return False
+    lo = min(relations.first.min(), relations.second.min())
+    hi = max(relations.first.max(), relations.second.max())
+    return bool(lo >= 0 and hi < n)
 
 
 def match_nearest_times(

@@ -148,7 +148,13 @@ def relation_errors(
                 "the planar paper definition; lift them to SE(3) (RelationSet.lifted) or use "
                 "mode 'metricevaluator'"
             )
+        if group is SE2:
+            return _weighted_planar(se2.ominus(d, r), w, mode)
         vec = group.error_components(group.ominus(d, r))
+    elif mode == "metricevaluator" and group is SE2 and oop is None:
+        diff = d - r
+        diff[:, 2] = se2.wrap_angle(d[:, 2]) - se2.wrap_angle(r[:, 2])
+        return _weighted_planar(diff, w, mode)
     elif mode == "metricevaluator":
         vec = group.parameters(d) - group.parameters(r)
         if oop is not None:
@@ -157,6 +163,29 @@ def relation_errors(
     else:
         raise InputError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
     return _weighted(vec, w, mode)
+
+
+def _weighted_planar(e: NDArray[np.float64], w: NDArray[np.float64], mode: str) -> RelationErrors:
+    """:func:`_weighted` of ``[e_x, e_y, 0, 0, 0, wrap(e_θ)]`` from ``e`` (M, 3), same bits.
+
+    The three zero components add exact zeros to the sums, so they are left out of them;
+    the (M, 6) ``vector`` is filled once, for the result only.
+    """
+    ex, ey = e[:, 0], e[:, 1]
+    eth = se2.wrap_angle(e[:, 2])
+    vec = np.zeros((e.shape[0], 6))
+    vec[:, 0:2] = e[:, 0:2]
+    vec[:, 5] = eth
+    trans2 = ex * ex * w[0] + ey * ey * w[1]
+    rot2 = eth * eth * w[5]
+    return RelationErrors(
+        translation=np.sqrt(trans2),
+        rotation=np.sqrt(rot2),
+        combined=np.sqrt(trans2 + rot2),
+        vector=vec,
+        mode=mode,
+        weights=tuple(float(x) for x in w),
+    )
 
 
 def _weighted(vec: NDArray[np.float64], w: NDArray[np.float64], mode: str) -> RelationErrors:
