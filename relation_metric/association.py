@@ -85,7 +85,7 @@ class Association:
 def nearest_index(times: NDArray[np.float64], query: NDArray[np.float64]) -> NDArray[np.int64]:
     """Index of the element of sorted ``times`` nearest to each ``query`` (ties: earlier)."""
     n = times.shape[0]
-    k = np.searchsorted(times, query, side="left")
+    k = insertion_points(times, query)
     k = np.clip(k, 1, max(n - 1, 1))
     if n == 1:
         return np.zeros(query.shape, dtype=np.int64)
@@ -93,6 +93,53 @@ def nearest_index(times: NDArray[np.float64], query: NDArray[np.float64]) -> NDA
     after = times[k]
     pick_before = np.abs(query - before) <= np.abs(after - query)
     return np.where(pick_before, k - 1, k).astype(np.int64)
+
+
+_WINDOW = 8  # indices searched on each side of a guess before a full binary search
+
+
+def insertion_points(times: NDArray[np.float64], query: NDArray[np.float64]) -> NDArray[np.int64]:
+    """``np.searchsorted(times, query, side="left")`` for sorted ``times``, same result.
+
+    A binary search per query costs ~log2(N) unpredictable branches; pose times are
+    usually near-uniform, so each query's index is first guessed by linear interpolation
+    between the first and last time, then searched in a window of ±8 around the guess,
+    and kept only where ``times[k − 1] < query ≤ times[k]`` holds (the definition of the
+    left insertion point). The rest take the binary search.
+    """
+    q = np.asarray(query, dtype=np.float64)
+    n = times.shape[0]
+    if n < 4 * _WINDOW or q.size < n // 8 or not (times[-1] > times[0]):
+        return np.searchsorted(times, q, side="left").astype(np.int64)
+    if not np.isfinite(q).all():
+        return np.searchsorted(times, q, side="left").astype(np.int64)
+    guess = (q - times[0]) * ((n - 1) / (times[-1] - times[0]))
+    np.clip(guess, 0, n, out=guess)
+    k = np.ceil(guess).astype(np.int64)
+    ok = (k == 0) | (times[np.maximum(k - 1, 0)] < q)
+    ok &= (k == n) | (times[np.minimum(k, n - 1)] >= q)
+    miss = np.flatnonzero(~ok)
+    if miss.size:
+        k[miss] = _window_search(times, q[miss], k[miss])
+    return k
+
+
+def _window_search(
+    times: NDArray[np.float64], q: NDArray[np.float64], guess: NDArray[np.int64]
+) -> NDArray[np.int64]:
+    """Left insertion points of ``q`` searched among ``2W + 1`` times around ``guess``."""
+    n = times.shape[0]
+    width = 2 * _WINDOW + 1
+    lo = np.clip(guess - _WINDOW, 0, n - width)
+    k = lo.copy()
+    for off in range(width):
+        k += times[lo + off] < q
+    # the insertion point when it falls strictly inside the window or at an end of the array
+    inside = ((k > lo) | (lo == 0)) & ((k < lo + width) | (k == n))
+    miss = np.flatnonzero(~inside)
+    if miss.size:
+        k[miss] = np.searchsorted(times, q[miss], side="left")
+    return k
 
 
 def _associate_times(
@@ -110,7 +157,7 @@ def _associate_times(
     group = estimate.group
     k = nearest_index(t, query)
     gap = np.abs(t[k] - query)
-    poses = p[k].copy()
+    poses = p[k]  # a new array (fancy indexing)
     reason = np.full(query.shape, OK, dtype=np.int8)
     far = gap > max_time_diff
     interp = np.zeros(query.shape, dtype=bool)

@@ -127,3 +127,28 @@ def test_index_association_gathers_the_poses(rng):
     assert np.flatnonzero(~b.valid).tolist() == [3]
     assert np.array_equal(b.pose_first[b.valid], a.pose_first[b.valid])
     assert np.array_equal(b.index_second[b.valid], j[b.valid]) and b.index_second[3] == -1
+
+
+@pytest.mark.parametrize("kind", ["uniform", "jitter", "ties", "gap", "short"])
+def test_insertion_points_equal_searchsorted(rng, kind):
+    from relation_metric.association import insertion_points
+
+    n = 5 if kind == "short" else 3000
+    times = {
+        "uniform": 1.1e9 + np.arange(n) * 0.1,
+        "jitter": np.sort(np.arange(n) * 0.1 + rng.uniform(0, 0.3, n)),
+        "ties": np.sort(rng.integers(0, 40, n).astype(float)),
+        "gap": np.concatenate((np.arange(n // 2) * 0.01, 1e5 + np.arange(n - n // 2) * 0.01)),
+        "short": np.arange(n, dtype=float),
+    }[kind]
+    q = np.concatenate(
+        (
+            rng.uniform(times[0] - 5, times[-1] + 5, 4000),
+            times,
+            np.nextafter(times, np.inf),
+            np.nextafter(times, -np.inf),
+            [times[0] - 1e12, times[-1] + 1e12],
+        )
+    )
+    want = np.searchsorted(times, q, side="left")
+    assert np.array_equal(insertion_points(times, q), want)
