@@ -176,22 +176,22 @@ def _weighted_planar(e: NDArray[np.float64], w: NDArray[np.float64], mode: str) 
     vec = np.zeros((e.shape[0], 6))
     vec[:, 0:2] = e[:, 0:2]
     vec[:, 5] = eth
-    trans2 = ex * ex * w[0] + ey * ey * w[1]
-    rot2 = eth * eth * w[5]
-    return RelationErrors(
-        translation=np.sqrt(trans2),
-        rotation=np.sqrt(rot2),
-        combined=np.sqrt(trans2 + rot2),
-        vector=vec,
-        mode=mode,
-        weights=tuple(float(x) for x in w),
-    )
+    return _from_squares(ex * ex * w[0] + ey * ey * w[1], eth * eth * w[5], vec, w, mode)
 
 
 def _weighted(vec: NDArray[np.float64], w: NDArray[np.float64], mode: str) -> RelationErrors:
     sq = vec * vec * w
-    trans2 = sq[:, 0:3].sum(axis=1)
-    rot2 = sq[:, 3:6].sum(axis=1)
+    return _from_squares(sq[:, 0:3].sum(axis=1), sq[:, 3:6].sum(axis=1), vec, w, mode)
+
+
+def _from_squares(
+    trans2: NDArray[np.float64],
+    rot2: NDArray[np.float64],
+    vec: NDArray[np.float64],
+    w: NDArray[np.float64],
+    mode: str,
+) -> RelationErrors:
+    """The errors from the weighted squared translational and rotational parts, (M,) each."""
     return RelationErrors(
         translation=np.sqrt(trans2),
         rotation=np.sqrt(rot2),
