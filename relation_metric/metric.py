@@ -31,7 +31,8 @@ other is 3-D.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -70,9 +71,22 @@ class RelationErrors:
     translation: NDArray[np.float64]
     rotation: NDArray[np.float64]
     combined: NDArray[np.float64]
-    vector: NDArray[np.float64]
+    _components: NDArray[np.float64] = field(repr=False, compare=False)
+    """``vector``, or for planar errors only ``[e_x, e_y, e_yaw]`` (M, 3): the (M, 6) array is
+    built on first use, not on the hot path."""
     mode: str
     weights: tuple[float, ...]
+
+    @cached_property
+    def vector(self) -> NDArray[np.float64]:
+        """The unweighted components ``[e_x, e_y, e_z, e_roll, e_pitch, e_yaw]``, (M, 6)."""
+        c = self._components
+        if c.shape[1] == 6:
+            return c
+        vec = np.zeros((c.shape[0], 6))
+        vec[:, 0:2] = c[:, 0:2]
+        vec[:, 5] = c[:, 2]
+        return vec
 
 
 def parse_weights(text: str | ArrayLike | None) -> tuple[float, ...]:
@@ -168,15 +182,15 @@ def relation_errors(
 def _weighted_planar(e: NDArray[np.float64], w: NDArray[np.float64], mode: str) -> RelationErrors:
     """:func:`_weighted` of ``[e_x, e_y, 0, 0, 0, wrap(e_θ)]`` from ``e`` (M, 3), same bits.
 
+    ``e`` must be a fresh array (its angle column is wrapped in place and it is kept).
+
     The three zero components add exact zeros to the sums, so they are left out of them;
-    the (M, 6) ``vector`` is filled once, for the result only.
+    the (M, 6) ``vector`` is built only when asked for.
     """
     ex, ey = e[:, 0], e[:, 1]
     eth = se2.wrap_angle(e[:, 2])
-    vec = np.zeros((e.shape[0], 6))
-    vec[:, 0:2] = e[:, 0:2]
-    vec[:, 5] = eth
-    return _from_squares(ex * ex * w[0] + ey * ey * w[1], eth * eth * w[5], vec, w, mode)
+    e[:, 2] = eth  # e is the caller's scratch array: it becomes the stored components
+    return _from_squares(ex * ex * w[0] + ey * ey * w[1], eth * eth * w[5], e, w, mode)
 
 
 def _weighted(vec: NDArray[np.float64], w: NDArray[np.float64], mode: str) -> RelationErrors:
@@ -187,7 +201,7 @@ def _weighted(vec: NDArray[np.float64], w: NDArray[np.float64], mode: str) -> Re
 def _from_squares(
     trans2: NDArray[np.float64],
     rot2: NDArray[np.float64],
-    vec: NDArray[np.float64],
+    components: NDArray[np.float64],
     w: NDArray[np.float64],
     mode: str,
 ) -> RelationErrors:
@@ -196,7 +210,7 @@ def _from_squares(
         translation=np.sqrt(trans2),
         rotation=np.sqrt(rot2),
         combined=np.sqrt(trans2 + rot2),
-        vector=vec,
+        _components=components,
         mode=mode,
         weights=tuple(float(x) for x in w),
     )
