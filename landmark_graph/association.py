@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 from landmark_graph.maps import LandmarkMap
 from relation_metric.alignment import Alignment, umeyama
 from relation_metric.errors import InputError
+from relation_metric.ids import first_missing, rows_of
 from relation_metric.landmarks import integer_ids
 from relation_metric.textio import PathLike, read_csv_table, write_text_atomic
 
@@ -130,15 +131,13 @@ def _rows_of(
     what: str,
 ) -> NDArray[np.int64]:
     """Rows of ``ids`` holding each of ``wanted``; an unknown id raises at its line."""
-    order = np.argsort(ids, kind="stable")
-    pos = np.clip(np.searchsorted(ids[order], wanted), 0, max(ids.size - 1, 0))
-    ok = ids[order][pos] == wanted if ids.size else np.zeros(wanted.shape, dtype=bool)
-    if not ok.all():
-        k = int(np.flatnonzero(~ok)[0])
+    rows = rows_of(ids, wanted)
+    k = first_missing(rows)
+    if k is not None:
         raise InputError(
             f"unknown {what} landmark id {int(wanted[k])}", path=path, line=int(lines[k])
         )
-    return order[pos].astype(np.int64)
+    return rows
 
 
 def write_association_csv(

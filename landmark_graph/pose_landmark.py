@@ -25,6 +25,7 @@ from relation_metric import se2
 from relation_metric.covisibility import covisible_pairs
 from relation_metric.errors import InputError
 from relation_metric.evaluate import error_summaries
+from relation_metric.ids import first_missing, rows_of
 from relation_metric.relations import RelationSet
 from relation_metric.trajectory import Trajectory, readonly
 
@@ -136,12 +137,9 @@ def pose_landmark_relations(
     if k.size and (k.min() < 0 or k.max() >= x.shape[0]):
         bad = int(np.flatnonzero((k < 0) | (k >= x.shape[0]))[0])
         raise InputError(f"observation {bad}: pose index {int(k[bad])} outside 0..{x.shape[0] - 1}")
-    order = np.argsort(estimate.ids)
-    pos = np.clip(np.searchsorted(estimate.ids, lid, sorter=order), 0, max(len(estimate) - 1, 0))
-    row = order[pos] if len(estimate) else pos
-    known = (estimate.ids[row] == lid) if len(estimate) else np.zeros(lid.shape, bool)
-    if not known.all():
-        bad = int(np.flatnonzero(~known)[0])
+    row = rows_of(estimate.ids, lid)
+    bad = first_missing(row)
+    if bad is not None:
         raise InputError(f"observation {bad}: landmark id {int(lid[bad])} is not in the map")
     ref_row = np.full(len(estimate), -1, dtype=np.int64)
     ref_row[association.estimate_rows] = association.reference_rows

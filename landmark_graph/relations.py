@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from landmark_graph.mesh import Mesh, corner_angles
 from relation_metric import se2
 from relation_metric.alignment import umeyama
+from relation_metric.ids import rows_of
 
 __all__ = ["MeshErrors", "mesh_errors"]
 
@@ -104,8 +105,9 @@ def _opposite_corners(mesh: Mesh, n: int) -> tuple[NDArray[np.int64], NDArray[np
     start = np.flatnonzero(np.concatenate(([True], code[1:] != code[:-1])))
     stop = np.append(start[1:], code.size)
     edge_code = mesh.edges[:, 0] * n + mesh.edges[:, 1]
-    pos = np.clip(np.searchsorted(code[start], edge_code), 0, start.size - 1)
-    found = code[start][pos] == edge_code
+    pos = rows_of(code[start], edge_code)
+    found = pos >= 0
+    pos[~found] = 0
     first = np.where(found, opp[start[pos]], -1)
     second = np.where(
         found & (stop[pos] - start[pos] > 1), opp[np.minimum(start[pos] + 1, code.size - 1)], -1

@@ -85,7 +85,7 @@ class Association:
 def nearest_index(times: NDArray[np.float64], query: NDArray[np.float64]) -> NDArray[np.int64]:
     """Index of the element of sorted ``times`` nearest to each ``query`` (ties: earlier)."""
     n = times.shape[0]
-    k = np.searchsorted(times, query, side="left")
+    k = insertion_points(times, query)
     k = np.clip(k, 1, max(n - 1, 1))
     if n == 1:
         return np.zeros(query.shape, dtype=np.int64)
@@ -93,6 +93,53 @@ def nearest_index(times: NDArray[np.float64], query: NDArray[np.float64]) -> NDA
     after = times[k]
     pick_before = np.abs(query - before) <= np.abs(after - query)
     return np.where(pick_before, k - 1, k).astype(np.int64)
+
+
+_WINDOW = 8  # indices searched on each side of a guess before a full binary search
+
+
+def insertion_points(times: NDArray[np.float64], query: NDArray[np.float64]) -> NDArray[np.int64]:
+    """``np.searchsorted(times, query, side="left")`` for sorted ``times``, same result.
+
+    A binary search per query costs ~log2(N) unpredictable branches; pose times are
+    usually near-uniform, so each query's index is first guessed by linear interpolation
+    between the first and last time, then searched in a window of ±8 around the guess,
+    and kept only where ``times[k − 1] < query ≤ times[k]`` holds (the definition of the
+    left insertion point). The rest take the binary search.
+    """
+    q = np.asarray(query, dtype=np.float64)
+    n = times.shape[0]
+    if n < 4 * _WINDOW or q.size < n // 8 or not (times[-1] > times[0]):
+        return np.searchsorted(times, q, side="left").astype(np.int64)
+    if not np.isfinite(q).all():
+        return np.searchsorted(times, q, side="left").astype(np.int64)
+    guess = (q - times[0]) * ((n - 1) / (times[-1] - times[0]))
+    np.clip(guess, 0, n, out=guess)
+    k = np.ceil(guess).astype(np.int64)
+    ok = (k == 0) | (times[np.maximum(k - 1, 0)] < q)
+    ok &= (k == n) | (times[np.minimum(k, n - 1)] >= q)
+    miss = np.flatnonzero(~ok)
+    if miss.size:
+        k[miss] = _window_search(times, q[miss], k[miss])
+    return k
+
+
+def _window_search(
+    times: NDArray[np.float64], q: NDArray[np.float64], guess: NDArray[np.int64]
+) -> NDArray[np.int64]:
+    """Left insertion points of ``q`` searched among ``2W + 1`` times around ``guess``."""
+    n = times.shape[0]
+    width = 2 * _WINDOW + 1
+    lo = np.clip(guess - _WINDOW, 0, n - width)
+    k = lo.copy()
+    for off in range(width):
+        k += times[lo + off] < q
+    # the insertion point when it falls strictly inside the window or at an end of the array
+    inside = ((k > lo) | (lo == 0)) & ((k < lo + width) | (k == n))
+    miss = np.flatnonzero(~inside)
+    if miss.size:
+        k[miss] = np.searchsorted(times, q[miss], side="left")
+    return k
 
 
 def _associate_times(
@@ -110,7 +157,7 @@ def _associate_times(
     group = estimate.group
     k = nearest_index(t, query)
     gap = np.abs(t[k] - query)
-    poses = p[k].copy()
+    poses = p[k]  # a new array (fancy indexing)
     reason = np.full(query.shape, OK, dtype=np.int8)
     far = gap > max_time_diff
     interp = np.zeros(query.shape, dtype=bool)
@@ -187,6 +234,20 @@ def associate(
     width = estimate.group.width
     if odometry is not None and odometry.group is not estimate.group:
         odometry = odometry.lifted() if odometry.group.width < width else odometry.planar()
+    if relations.key == "index" and _all_indices_in_range(relations, len(estimate)):
+        # the common case without a mask: two gathers, no (2M, width) buffer
+        first = relations.first.astype(np.int64)
+        second = relations.second.astype(np.int64)
+        return Association(
+            pose_first=estimate.poses.take(first, axis=0),
+            pose_second=estimate.poses.take(second, axis=0),
+            index_first=first,
+            index_second=second,
+            valid=np.ones(m, dtype=bool),
+            via_odometry=np.zeros(m, dtype=bool),
+            interpolated=np.zeros(m, dtype=bool),
+            reason=np.zeros(m, dtype=np.int8),
+        )
     if relations.key == "index":
         n = len(estimate)
         ends = np.concatenate((relations.first, relations.second)).astype(np.int64)
@@ -218,6 +279,15 @@ def associate(
         interpolated=(interp[:m] | interp[m:]) & valid,
         reason=np.where(r1 != OK, r1, r2).astype(np.int8),
     )
+
+
+def _all_indices_in_range(relations: RelationSet, n: int) -> bool:
+    """Every pose index of ``relations`` (``key="index"``) names one of ``n`` poses."""
+    if len(relations) == 0:
+        return False
+    lo = min(relations.first.min(), relations.second.min())
+    hi = max(relations.first.max(), relations.second.max())
+    return bool(lo >= 0 and hi < n)
 
 
 def match_nearest_times(

@@ -19,7 +19,7 @@ from relation_metric.errors import AssociationError, InputError
 from relation_metric.groups import SE3
 from relation_metric.metric import Mode, RelationErrors, relation_errors
 from relation_metric.relations import RelationSet
-from relation_metric.stats import Summary, summarize
+from relation_metric.stats import Summary, summarize_with_squares
 from relation_metric.trajectory import Trajectory
 
 __all__ = [
@@ -95,8 +95,8 @@ def _json_float(x: float) -> float | None:
 
 def error_summaries(values: ArrayLike) -> dict[str, Summary]:
     """``{"abs": summarize(|e|), "sqr": summarize(e²)}`` of non-negative errors ``e``."""
-    v = np.asarray(values, dtype=np.float64)
-    return {"abs": summarize(v), "sqr": summarize(v * v)}
+    abs_part, sqr_part = summarize_with_squares(values)
+    return {"abs": abs_part, "sqr": sqr_part}
 
 
 def evaluate(
@@ -183,13 +183,17 @@ def evaluate(
             out_of_plane=relations.out_of_plane,
         )
     _check_representable(errors, valid, relations, estimate_name)
+
+    def scored(part: NDArray[np.float64]) -> NDArray[np.float64]:
+        return part if n_bad == 0 else part[valid]
+
     return Evaluation(
         relations=relations,
         association=assoc,
         errors=errors,
-        translation=error_summaries(errors.translation[valid]),
-        rotation=error_summaries(errors.rotation[valid]),
-        combined=error_summaries(errors.combined[valid]),
+        translation=error_summaries(scored(errors.translation)),
+        rotation=error_summaries(scored(errors.rotation)),
+        combined=error_summaries(scored(errors.combined)),
     )
 
 
@@ -220,6 +224,8 @@ def _check_representable(
     """Refuse errors whose squares (hence ε and the rmse) overflow float64."""
     limit = 1e150  # (1e150)² · 1e6 relations stays below float64's 1.8e308
     for part in (errors.translation, errors.rotation, errors.combined):
+        if part.size and np.abs(part).max() < limit:  # NaN (unassociated or not) fails here
+            continue
         v = part[valid]
         bad = np.flatnonzero(~(np.abs(v) < limit))
         if bad.size:

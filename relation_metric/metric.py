@@ -31,7 +31,8 @@ other is 3-D.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -70,9 +71,22 @@ class RelationErrors:
     translation: NDArray[np.float64]
     rotation: NDArray[np.float64]
     combined: NDArray[np.float64]
-    vector: NDArray[np.float64]
+    _components: NDArray[np.float64] = field(repr=False, compare=False)
+    """``vector``, or for planar errors only ``[e_x, e_y, e_yaw]`` (M, 3): the (M, 6) array is
+    built on first use, not on the hot path."""
     mode: str
     weights: tuple[float, ...]
+
+    @cached_property
+    def vector(self) -> NDArray[np.float64]:
+        """The unweighted components ``[e_x, e_y, e_z, e_roll, e_pitch, e_yaw]``, (M, 6)."""
+        c = self._components
+        if c.shape[1] == 6:
+            return c
+        vec = np.zeros((c.shape[0], 6))
+        vec[:, 0:2] = c[:, 0:2]
+        vec[:, 5] = c[:, 2]
+        return vec
 
 
 def parse_weights(text: str | ArrayLike | None) -> tuple[float, ...]:
@@ -148,7 +162,13 @@ def relation_errors(
                 "the planar paper definition; lift them to SE(3) (RelationSet.lifted) or use "
                 "mode 'metricevaluator'"
             )
+        if group is SE2:
+            return _weighted_planar(se2.ominus(d, r), w, mode)
         vec = group.error_components(group.ominus(d, r))
+    elif mode == "metricevaluator" and group is SE2 and oop is None:
+        diff = d - r
+        diff[:, 2] = se2.wrap_angle(d[:, 2]) - se2.wrap_angle(r[:, 2])
+        return _weighted_planar(diff, w, mode)
     elif mode == "metricevaluator":
         vec = group.parameters(d) - group.parameters(r)
         if oop is not None:
@@ -159,15 +179,38 @@ def relation_errors(
     return _weighted(vec, w, mode)
 
 
+def _weighted_planar(e: NDArray[np.float64], w: NDArray[np.float64], mode: str) -> RelationErrors:
+    """:func:`_weighted` of ``[e_x, e_y, 0, 0, 0, wrap(e_θ)]`` from ``e`` (M, 3), same bits.
+
+    ``e`` must be a fresh array (its angle column is wrapped in place and it is kept).
+
+    The three zero components add exact zeros to the sums, so they are left out of them;
+    the (M, 6) ``vector`` is built only when asked for.
+    """
+    ex, ey = e[:, 0], e[:, 1]
+    eth = se2.wrap_angle(e[:, 2])
+    e[:, 2] = eth  # e is the caller's scratch array: it becomes the stored components
+    return _from_squares(ex * ex * w[0] + ey * ey * w[1], eth * eth * w[5], e, w, mode)
+
+
 def _weighted(vec: NDArray[np.float64], w: NDArray[np.float64], mode: str) -> RelationErrors:
     sq = vec * vec * w
-    trans2 = sq[:, 0:3].sum(axis=1)
-    rot2 = sq[:, 3:6].sum(axis=1)
+    return _from_squares(sq[:, 0:3].sum(axis=1), sq[:, 3:6].sum(axis=1), vec, w, mode)
+
+
+def _from_squares(
+    trans2: NDArray[np.float64],
+    rot2: NDArray[np.float64],
+    components: NDArray[np.float64],
+    w: NDArray[np.float64],
+    mode: str,
+) -> RelationErrors:
+    """The errors from the weighted squared translational and rotational parts, (M,) each."""
     return RelationErrors(
         translation=np.sqrt(trans2),
         rotation=np.sqrt(rot2),
         combined=np.sqrt(trans2 + rot2),
-        vector=vec,
+        _components=components,
         mode=mode,
         weights=tuple(float(x) for x in w),
     )

@@ -17,6 +17,7 @@ from relation_metric.textio import PathLike, write_bytes_atomic
 from relation_metric.trajectory import Trajectory
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
 __all__ = ["evaluation_figure", "save_figure", "pyplot"]
@@ -59,11 +60,6 @@ def evaluation_figure(
     counted in the title, not drawn.
     """
     plt = pyplot()
-    from matplotlib.collections import LineCollection
-
-    ev = evaluation
-    valid = ev.valid
-    a = ev.association
     three_d = estimate.group.position_dim == 3
     fig, axes = plt.subplots(
         3 if three_d else 2,
@@ -72,7 +68,23 @@ def evaluation_figure(
         gridspec_kw={"height_ratios": [1, 2, 1] if three_d else [1, 2]},
         constrained_layout=True,
     )
-    ax_t, ax_xy = axes[0], axes[1]
+    _errors_over_time(axes[0], evaluation, estimate, degrees)
+    pose_err, hit = _pose_errors(evaluation, len(estimate))
+    _coloured_estimate(fig, axes[1], evaluation, estimate, pose_err)
+    ax_xy = axes[1]
+    ax_xy.set_aspect("equal", adjustable="datalim")
+    ax_xy.set_xlabel("x [m]")
+    ax_xy.set_ylabel("y [m]")
+    ax_xy.set_title(title or ("estimate coloured by relation error" + (" (top view)" * three_d)))
+    if three_d:
+        _height_over_time(axes[2], estimate, pose_err, hit)
+    return fig
+
+
+def _errors_over_time(ax_t: Axes, ev: Evaluation, estimate: Trajectory, degrees: bool) -> None:
+    """Translational (left axis) and rotational (right axis) errors by relation mid-time."""
+    valid = ev.valid
+    a = ev.association
     if ev.relations.key == "index":  # pose indices: the estimate's times of the two ends
         t = estimate.timestamps
         t_mid = 0.5 * (t[a.index_first[valid]] + t[a.index_second[valid]])
@@ -95,65 +107,83 @@ def evaluation_figure(
         f"{s.count} relations scored, {int((~valid).sum())} unassociated; "
         f"translation {s.mean:.4g} ± {s.std:.4g} m"
     )
+
+
+def _pose_errors(ev: Evaluation, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Largest translational error of the relations touching each of ``n`` poses (NaN where
+    none does), shape (n,), and the mask of touched poses."""
+    valid = ev.valid
+    a = ev.association
     err = ev.errors.translation[valid]
-    # Colour the estimate itself: each pose takes the largest error of the relations that
-    # touch it, each segment the larger of its two poses — the wrong part of the map lights up.
-    pose_err = np.full(len(estimate), np.nan)
+    pose_err = np.full(n, np.nan)
     idx = np.concatenate((a.index_first[valid], a.index_second[valid]))
-    touched = np.zeros(len(estimate))
+    touched = np.zeros(n)
     np.maximum.at(touched, idx, np.concatenate((err, err)))
-    hit = np.zeros(len(estimate), dtype=bool)
+    hit = np.zeros(n, dtype=bool)
     hit[idx] = True
     pose_err[hit] = touched[hit]
+    return pose_err, hit
+
+
+def _coloured_estimate(
+    fig: Figure, ax_xy: Axes, ev: Evaluation, estimate: Trajectory, pose_err: np.ndarray
+) -> None:
+    """The estimate in grey, each segment coloured by the larger error of its two poses (the
+    wrong part of the map lights up), and the ends of the ten worst relations marked."""
+    from matplotlib.collections import LineCollection
+
+    valid = ev.valid
+    a = ev.association
+    err = ev.errors.translation[valid]
     xy = estimate.poses[:, :2]
     ax_xy.plot(xy[:, 0], xy[:, 1], "-", color="0.8", lw=1.0, zorder=1)
-    if err.size and len(estimate) > 1:
-        seg_err = np.fmax(pose_err[:-1], pose_err[1:])
-        has = np.isfinite(seg_err)
-        segments = np.stack((xy[:-1], xy[1:]), axis=1)[has]
-        hi = max(float(np.percentile(err, 99)), 1e-12)
-        lc = LineCollection(segments, cmap="viridis", linewidths=2.0, zorder=2)  # type: ignore[arg-type]
-        lc.set_array(seg_err[has])
-        lc.set_clim(0.0, hi)
-        ax_xy.add_collection(lc)
-        worst = np.argsort(err)[-min(10, err.size) :]
-        ends = np.concatenate((a.pose_first[valid][worst, :2], a.pose_second[valid][worst, :2]))
-        ax_xy.plot(
-            ends[:, 0],
-            ends[:, 1],
-            "x",
-            color="tab:red",
-            ms=7,
-            zorder=3,
-            label="ends of the 10 worst relations",
+    if not (err.size and len(estimate) > 1):
+        return
+    seg_err = np.fmax(pose_err[:-1], pose_err[1:])
+    has = np.isfinite(seg_err)
+    segments = np.stack((xy[:-1], xy[1:]), axis=1)[has]
+    hi = max(float(np.percentile(err, 99)), 1e-12)
+    lc = LineCollection(segments, cmap="viridis", linewidths=2.0, zorder=2)  # type: ignore[arg-type]
+    lc.set_array(seg_err[has])
+    lc.set_clim(0.0, hi)
+    ax_xy.add_collection(lc)
+    worst = np.argsort(err)[-min(10, err.size) :]
+    ends = np.concatenate((a.pose_first[valid][worst, :2], a.pose_second[valid][worst, :2]))
+    ax_xy.plot(
+        ends[:, 0],
+        ends[:, 1],
+        "x",
+        color="tab:red",
+        ms=7,
+        zorder=3,
+        label="ends of the 10 worst relations",
+    )
+    fig.colorbar(
+        lc,
+        ax=ax_xy,
+        label="largest translational error of the relations at a pose [m] (clipped at p99)",
+    )
+    ax_xy.legend(loc="best")
+
+
+def _height_over_time(
+    ax_z: Axes, estimate: Trajectory, pose_err: np.ndarray, hit: np.ndarray
+) -> None:
+    """Height z of a 3-D estimate over time, the touched poses coloured by their error."""
+    t0 = float(estimate.timestamps[0]) if len(estimate) else 0.0
+    ax_z.plot(estimate.timestamps - t0, estimate.poses[:, 2], "-", color="0.5", lw=1.0)
+    if hit.any():
+        ax_z.scatter(
+            estimate.timestamps[hit] - t0,
+            estimate.poses[hit, 2],
+            c=pose_err[hit],
+            s=4,
+            cmap="viridis",
+            zorder=2,
         )
-        fig.colorbar(
-            lc,
-            ax=ax_xy,
-            label="largest translational error of the relations at a pose [m] (clipped at p99)",
-        )
-        ax_xy.legend(loc="best")
-    ax_xy.set_aspect("equal", adjustable="datalim")
-    ax_xy.set_xlabel("x [m]")
-    ax_xy.set_ylabel("y [m]")
-    ax_xy.set_title(title or ("estimate coloured by relation error" + (" (top view)" * three_d)))
-    if three_d:
-        ax_z = axes[2]
-        t0 = float(estimate.timestamps[0]) if len(estimate) else 0.0
-        ax_z.plot(estimate.timestamps - t0, estimate.poses[:, 2], "-", color="0.5", lw=1.0)
-        if hit.any():
-            ax_z.scatter(
-                estimate.timestamps[hit] - t0,
-                estimate.poses[hit, 2],
-                c=pose_err[hit],
-                s=4,
-                cmap="viridis",
-                zorder=2,
-            )
-        ax_z.set_xlabel("time since start [s]")
-        ax_z.set_ylabel("z [m]")
-        ax_z.set_title("height of the estimate, coloured by relation error")
-    return fig
+    ax_z.set_xlabel("time since start [s]")
+    ax_z.set_ylabel("z [m]")
+    ax_z.set_title("height of the estimate, coloured by relation error")
 
 
 def save_figure(fig: Figure, path: PathLike, *, dpi: int = 120) -> None:

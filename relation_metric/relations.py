@@ -28,7 +28,7 @@ from relation_metric import se3
 from relation_metric.errors import InputError
 from relation_metric.groups import SE2, SE3, PoseGroup, group_of
 from relation_metric.textio import PathLike, read_numeric_table, write_text_atomic
-from relation_metric.trajectory import Trajectory, readonly
+from relation_metric.trajectory import Trajectory, readonly, readonly_fresh
 
 __all__ = [
     "RelationSet",
@@ -87,7 +87,7 @@ class RelationSet:
         object.__setattr__(self, "first", readonly(a))
         object.__setattr__(self, "second", readonly(b))
         group = group_of(d)
-        object.__setattr__(self, "delta", readonly(group.normalize(d)))
+        object.__setattr__(self, "delta", readonly_fresh(group.normalize(d)))
         if group is SE3 and self.out_of_plane is not None:
             raise InputError("SE(3) relations hold z, roll and pitch in delta, not out_of_plane")
         k = group.dof

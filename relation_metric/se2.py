@@ -74,11 +74,21 @@ def wrap_angle(angle: ArrayLike) -> Array:
         The wrapped angles, float64.
     """
     a = np.asarray(angle, dtype=np.float64)
+    # Angles already in range are returned unchanged (a + π would round π − 1 ulp to 2π);
+    # only the others go through the reduction (one pass over the rest on the hot path).
+    out = np.array(a, dtype=np.float64, copy=True)
+    far = ~((a >= -np.pi) & (a < np.pi))
+    if out.ndim == 0:
+        return _reduce_angle(out) if far else out
+    if far.any():
+        out[far] = _reduce_angle(a[far])
+    return out
+
+
+def _reduce_angle(a: Array) -> Array:
     wrapped = np.mod(a + np.pi, _TWO_PI) - np.pi
     # np.mod can return exactly 2π for tiny negative inputs through rounding; fold it back.
-    wrapped = np.where(wrapped >= np.pi, wrapped - _TWO_PI, wrapped)
-    # Angles already in range are returned unchanged (a + π would round π − 1 ulp to 2π).
-    return np.where((a >= -np.pi) & (a < np.pi), a, wrapped)
+    return np.where(wrapped >= np.pi, wrapped - _TWO_PI, wrapped)
 
 
 def _as_poses(p: ArrayLike, name: str = "pose") -> Array:

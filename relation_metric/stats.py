@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["Summary", "summarize", "STAT_NAMES"]
+__all__ = ["Summary", "summarize", "summarize_with_squares", "STAT_NAMES"]
 
 STAT_NAMES = ("mean", "std", "min", "max", "median", "rmse", "count")
 
@@ -67,3 +67,51 @@ def summarize(values: ArrayLike) -> Summary:
         rmse=float(np.sqrt(np.mean(v * v))),
         count=n,
     )
+
+
+def summarize_with_squares(values: ArrayLike) -> tuple[Summary, Summary]:
+    """``(summarize(v), summarize(v * v))`` of non-negative errors ``v``, bit for bit, faster.
+
+    One ``np.partition`` serves both medians and the extremes of ``v²`` are those of ``v``
+    squared: rounding ``x ↦ fl(x²)`` keeps the order of non-negative numbers, so the order
+    statistics of ``v²`` are the squares of those of ``v``. ``v²`` is computed once (it is
+    also the abs part's ``rmse``). Values that are not all finite and non-negative take the
+    two plain :func:`summarize` calls.
+
+    Parameters
+    ----------
+    values : array_like, shape (N,)
+
+    Returns
+    -------
+    abs, sqr : Summary
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    sq = v * v
+    n = int(v.size)
+    lo, hi = (v.min(), v.max()) if n else (np.nan, np.nan)
+    if not (lo >= 0.0 and hi < np.inf):
+        return summarize(v), summarize(sq)
+    k = n // 2
+    kth = [k - 1, k] if n % 2 == 0 else [k]
+    middle = np.partition(v, [*kth, -1])[kth[0] : k + 1]  # np.median's own partition
+    nan = float("nan")
+    abs_part = Summary(
+        mean=float(v.mean()),
+        std=float(v.std(ddof=1)) if n > 1 else nan,
+        min=float(lo),
+        max=float(hi),
+        median=float(np.mean(middle)),
+        rmse=float(np.sqrt(np.mean(sq))),
+        count=n,
+    )
+    sqr_part = Summary(
+        mean=float(sq.mean()),
+        std=float(sq.std(ddof=1)) if n > 1 else nan,
+        min=float(lo * lo),
+        max=float(hi * hi),
+        median=float(np.mean(middle * middle)),
+        rmse=float(np.sqrt(np.mean(sq * sq))),
+        count=n,
+    )
+    return abs_part, sqr_part

@@ -14,7 +14,14 @@ from relation_metric.errors import InputError
 from relation_metric.groups import SE2, SE3, PoseGroup, group_of
 from relation_metric.timeorder import check_in_order
 
-__all__ = ["Trajectory", "OutOfPlane", "readonly", "MAX_COORDINATE", "check_coordinates"]
+__all__ = [
+    "Trajectory",
+    "OutOfPlane",
+    "readonly",
+    "readonly_fresh",
+    "MAX_COORDINATE",
+    "check_coordinates",
+]
 
 MAX_COORDINATE = 1e30
 """Largest position magnitude accepted [m] (10³ × the observable universe).
@@ -28,6 +35,17 @@ def readonly(a: ArrayLike, dtype: type = np.float64) -> NDArray[Any]:
     out: NDArray[Any] = np.array(a, dtype=dtype, copy=True, order="C")
     out.flags.writeable = False
     return out
+
+
+def readonly_fresh(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`readonly` without the copy for an array nobody else holds (just computed).
+
+    ``a`` itself is made read-only when it is C-contiguous float64, otherwise copied.
+    """
+    if a.dtype != np.float64 or not a.flags.c_contiguous or not a.flags.owndata:
+        return readonly(a)
+    a.flags.writeable = False
+    return a
 
 
 def check_coordinates(
@@ -117,7 +135,7 @@ class Trajectory:
                 raise InputError(f"pose {bad}: the quaternion is zero; expected a unit quaternion")
         check_in_order(t)
         object.__setattr__(self, "timestamps", readonly(t))
-        object.__setattr__(self, "poses", readonly(group.normalize(p)))
+        object.__setattr__(self, "poses", readonly_fresh(group.normalize(p)))
 
     @property
     def group(self) -> PoseGroup:

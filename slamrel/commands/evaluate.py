@@ -50,6 +50,16 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "result bundle with groundtruth.csv) from which relations are generated with "
         "--strategy.",
     )
+    _input_arguments(p)
+    _association_arguments(p)
+    _output_arguments(p)
+    _view_arguments(p)
+    add_strategy_arguments(p, default=None)
+    p.set_defaults(func=run)
+
+
+def _input_arguments(p: argparse.ArgumentParser) -> None:
+    """REFERENCE, ESTIMATE and their formats."""
     p.add_argument("reference", metavar="REFERENCE", help=".relations file or reference trajectory")
     p.add_argument(
         "estimate",
@@ -62,6 +72,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "--reference-format", choices=TRAJECTORY_FORMATS, help="format of a reference trajectory"
     )
+
+
+def _association_arguments(p: argparse.ArgumentParser) -> None:
+    """Timestamp association, error definition and what counts as an error."""
     p.add_argument("--odometry", metavar="LOG", help="odometry log that corrects far timestamps")
     p.add_argument("--odometry-format", choices=TRAJECTORY_FORMATS)
     p.add_argument(
@@ -107,6 +121,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         action="store_true",
         help="also the aligned absolute trajectory error (needs a reference trajectory)",
     )
+
+
+def _output_arguments(p: argparse.ArgumentParser) -> None:
+    """The files written besides the printed table."""
     p.add_argument("--json", metavar="FILE", help="write the results as JSON")
     p.add_argument("--per-relation", metavar="FILE", help="write per-relation errors as CSV")
     p.add_argument(
@@ -119,6 +137,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default="trans",
         help="which error the evo zip holds",
     )
+
+
+def _view_arguments(p: argparse.ArgumentParser) -> None:
+    """How 3-D inputs are scored, evo-style synchronisation, KITTI times, quiet."""
     p.add_argument(
         "--planar",
         action="store_true",
@@ -135,8 +157,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--times", metavar="FILE", help="KITTI ESTIMATE: timestamps, one a line")
     p.add_argument("--reference-times", metavar="FILE", help="KITTI REFERENCE: timestamps")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
-    add_strategy_arguments(p, default=None)
-    p.set_defaults(func=run)
 
 
 def _is_relations_file(path: str, args: argparse.Namespace) -> bool:
@@ -328,19 +348,7 @@ def run(args: argparse.Namespace) -> int:
     _refuse_if_strict(args, estimate, args.estimate)
     _note_projection(notes, "estimate", estimate)
     notes["estimate_out_of_order"] = estimate.time_order.as_dict()
-    odometry = None
-    if args.odometry:
-        loaded_odometry = load_trajectory_arg(
-            args.odometry,
-            args.odometry_format,
-            pose="odometry",
-            skip_invalid=skip,
-            role="odometry",
-            planar=args.planar,
-        )
-        _refuse_if_strict(args, loaded_odometry, args.odometry)
-        notes["odometry_out_of_order"] = loaded_odometry.time_order.as_dict()
-        odometry = loaded_odometry.trajectory
+    odometry = _load_odometry(args, skip, notes) if args.odometry else None
     scored = estimate.trajectory
     ate_pair = (estimate.trajectory, reference)
     if args.sync:
@@ -385,6 +393,31 @@ def run(args: argparse.Namespace) -> int:
                 "--ate needs a reference trajectory, not a .relations file", path=args.reference
             )
         result["ate"] = _ate(*ate_pair, args.max_time_diff)
+    _write_outputs(args, ev, ev_estimate, result)
+    if not args.quiet:
+        print(summary_text(ev, result, degrees=args.degrees))
+    return 0
+
+
+def _load_odometry(args: argparse.Namespace, skip: bool, notes: dict[str, Any]) -> Trajectory:
+    """The ``--odometry`` log (refused with ``--strict`` when out of time order)."""
+    loaded = load_trajectory_arg(
+        args.odometry,
+        args.odometry_format,
+        pose="odometry",
+        skip_invalid=skip,
+        role="odometry",
+        planar=args.planar,
+    )
+    _refuse_if_strict(args, loaded, args.odometry)
+    notes["odometry_out_of_order"] = loaded.time_order.as_dict()
+    return loaded.trajectory
+
+
+def _write_outputs(
+    args: argparse.Namespace, ev: Evaluation, ev_estimate: Trajectory, result: dict[str, Any]
+) -> None:
+    """``--json``, ``--per-relation``, ``--evo-zip`` and ``--plot``, in that order."""
     if args.json:
         write_json(args.json, result)
     if args.per_relation:
@@ -402,9 +435,6 @@ def run(args: argparse.Namespace) -> int:
         from relation_metric.plots import evaluation_figure, save_figure
 
         save_figure(evaluation_figure(ev, ev_estimate, degrees=args.degrees), args.plot)
-    if not args.quiet:
-        print(summary_text(ev, result, degrees=args.degrees))
-    return 0
 
 
 def _same_times(est: Trajectory, ref: Trajectory) -> tuple[Trajectory, Trajectory]:

@@ -5,9 +5,14 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from slamrel.commands import options as opt
 from slamrel.commands.common import check_outputs, errors_about, stats_table
+
+if TYPE_CHECKING:
+    from landmark_graph.compare import MapComparison
+    from landmark_graph.maps import LandmarkMap
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -92,22 +97,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         write_text_atomic(args.json, json.dumps(out, indent=2, allow_nan=False) + "\n")
     if args.per_edge:
-        ids = ref.ids[res.association.reference_rows]
-        e = res.mesh.edges
-        rows = np.column_stack(
-            (
-                ids[e[:, 0]],
-                ids[e[:, 1]],
-                res.errors.edge_length,
-                res.errors.edge_displacement_triangle,
-                res.errors.edge_displacement_aligned,
-            )
-        )
-        text = (
-            "landmark_i,landmark_j,length_error,displacement_triangle_frame,displacement_aligned\n"
-        )
-        text += ("%d,%d,%.9g,%.9g,%.9g\n" * rows.shape[0]) % tuple(rows.ravel().tolist())
-        write_text_atomic(args.per_edge, text)
+        _write_per_edge(args.per_edge, res, ref)
     if args.write_association:
         write_association_csv(args.write_association, res.association, est, ref)
     if args.plot:
@@ -124,35 +114,62 @@ def run(args: argparse.Namespace) -> int:
             title=f"slamrel review — {names[0]} against {names[1]}",
         )  # fmt: skip
     if not args.quiet:
-        a = out["association"]
-        print(
-            f"matched {a['matched']}, missed {a['missed']}, spurious {a['spurious']}; "
-            f"mesh {out['mesh']['edges']} edges, {out['mesh']['triangles']} triangles"
-        )
-        from relation_metric.evaluate import error_summaries
-
-        table = [
-            ("edge length abs [m]", error_summaries(res.errors.edge_length)["abs"]),
-            ("corner angle abs [rad]", error_summaries(res.errors.corner_angle.ravel())["abs"]),
-            (
-                "  excluding thin triangles",
-                error_summaries(res.errors.corner_angle[~res.mesh.thin].ravel())["abs"],
-            ),
-        ]
-        print(stats_table(table))
-        m = out["mesh"]
-        if m["thin_triangles"] or m["duplicates"] or m["collinear"]:
-            print(
-                f"mesh: {m['thin_triangles']} thin triangles (< {args.thin_angle:g} deg), "
-                f"{m['duplicates']} duplicate reference positions {m['duplicate_ids']}, "
-                f"collinear: {m['collinear']}"
-            )
-        print(
-            f"OSPA {res.ospa:.4f} m, GOSPA {res.gospa:.4f} m "
-            f"(c = {res.cutoff}, p = {res.order}; {out['ospa']['frame']})"
-        )
-        if args.review:
-            print(f"review the association: {args.review} (open it in a browser)")
-        elif args.plot:
-            print("to check and correct the association in a browser: --review F.html")
+        _print_summary(args, res, out)
     return 0
+
+
+def _write_per_edge(path: str, res: MapComparison, ref: LandmarkMap) -> None:
+    """One CSV row per mesh edge: the two reference ids and the edge's three errors."""
+    import numpy as np
+
+    from relation_metric.textio import write_text_atomic
+
+    ids = ref.ids[res.association.reference_rows]
+    e = res.mesh.edges
+    rows = np.column_stack(
+        (
+            ids[e[:, 0]],
+            ids[e[:, 1]],
+            res.errors.edge_length,
+            res.errors.edge_displacement_triangle,
+            res.errors.edge_displacement_aligned,
+        )
+    )
+    text = "landmark_i,landmark_j,length_error,displacement_triangle_frame,displacement_aligned\n"
+    text += ("%d,%d,%.9g,%.9g,%.9g\n" * rows.shape[0]) % tuple(rows.ravel().tolist())
+    write_text_atomic(path, text)
+
+
+def _print_summary(args: argparse.Namespace, res: MapComparison, out: dict[str, Any]) -> None:
+    """The association counts, the error table, mesh notes and OSPA/GOSPA on stdout."""
+    a = out["association"]
+    print(
+        f"matched {a['matched']}, missed {a['missed']}, spurious {a['spurious']}; "
+        f"mesh {out['mesh']['edges']} edges, {out['mesh']['triangles']} triangles"
+    )
+    from relation_metric.evaluate import error_summaries
+
+    table = [
+        ("edge length abs [m]", error_summaries(res.errors.edge_length)["abs"]),
+        ("corner angle abs [rad]", error_summaries(res.errors.corner_angle.ravel())["abs"]),
+        (
+            "  excluding thin triangles",
+            error_summaries(res.errors.corner_angle[~res.mesh.thin].ravel())["abs"],
+        ),
+    ]
+    print(stats_table(table))
+    m = out["mesh"]
+    if m["thin_triangles"] or m["duplicates"] or m["collinear"]:
+        print(
+            f"mesh: {m['thin_triangles']} thin triangles (< {args.thin_angle:g} deg), "
+            f"{m['duplicates']} duplicate reference positions {m['duplicate_ids']}, "
+            f"collinear: {m['collinear']}"
+        )
+    print(
+        f"OSPA {res.ospa:.4f} m, GOSPA {res.gospa:.4f} m "
+        f"(c = {res.cutoff}, p = {res.order}; {out['ospa']['frame']})"
+    )
+    if args.review:
+        print(f"review the association: {args.review} (open it in a browser)")
+    elif args.plot:
+        print("to check and correct the association in a browser: --review F.html")
