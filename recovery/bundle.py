@@ -32,6 +32,7 @@ from relation_metric.arrays import Array
 from relation_metric.checks import check_covariances, check_joint_covariance
 from relation_metric.errors import InputError
 from relation_metric.formats import read_trajectory
+from relation_metric.ids import rows_of
 from relation_metric.landmarks import integer_ids, read_landmark_csv, write_landmark_csv
 from relation_metric.outputs import staged_directory
 from relation_metric.textio import (
@@ -158,13 +159,8 @@ class Bundle:
 
     def map_index(self) -> NDArray[np.int64]:
         """Row of ``map_ids`` of each measurement's landmark, −1 when unassociated, (J,)."""
-        order = np.argsort(self.map_ids, kind="stable")
-        pos = np.searchsorted(self.map_ids[order], self.measurement_landmarks)
-        pos = np.clip(pos, 0, max(len(order) - 1, 0))
-        idx = order[pos] if len(order) else np.zeros_like(pos)
-        ok = self.measurement_associated & (len(order) > 0)
-        ok &= self.map_ids[idx] == self.measurement_landmarks if len(order) else ok
-        return np.where(ok, idx, -1).astype(np.int64)
+        idx = rows_of(self.map_ids, self.measurement_landmarks)
+        return np.where(self.measurement_associated & (idx >= 0), idx, -1)
 
     def with_map(self, xy: Array, marginals: Array, covariance: Array | None) -> Bundle:
         """The same bundle with another map (same ids and order)."""

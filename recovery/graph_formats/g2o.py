@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 from recovery.estimation.graph import PoseGraph
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
+from relation_metric.ids import first_missing, rows_of
 from relation_metric.landmarks import integer_ids
 from relation_metric.textio import PathLike, read_keyword_records, write_text_atomic
 
@@ -77,19 +78,15 @@ def read_g2o_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64], NDArra
         ids: NDArray[np.int64], wanted: NDArray[np.float64], kind: str, what: str
     ) -> NDArray[np.int64]:
         w = wanted.astype(np.int64)
-        if ids.size == 0:
-            pos, ok = np.zeros(w.shape, np.int64), np.zeros(w.shape, bool)
-        else:
-            pos = np.clip(np.searchsorted(ids, w), 0, ids.size - 1)
-            ok = ids[pos] == w
-        if not np.all(ok):
-            k = int(np.flatnonzero(~ok)[0])
+        pos = rows_of(ids, w)
+        k = first_missing(pos)
+        if k is not None:
             raise InputError(
                 f"{kind} refers to unknown {what} vertex {int(w[k])}",
                 path=path,
                 line=int(lines[kind][k]),
             )
-        return pos.astype(np.int64)
+        return pos
 
     e = recs["EDGE_SE2"][0]
     f2 = recs["EDGE_SE2_XY"][0]

@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from recovery.estimation.graph import PoseGraph
 from relation_metric.errors import InputError
+from relation_metric.ids import rows_of
 from relation_metric.textio import PathLike, read_keyword_records, write_text_atomic
 
 __all__ = ["read_toro_graph", "write_toro_graph", "TORO_INFO_ORDER"]
@@ -49,8 +50,8 @@ def read_toro_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64]]:
     order = np.argsort(ids)
     ids = ids[order]
     ends = edge[:, :2].astype(np.int64)
-    pos = np.clip(np.searchsorted(ids, ends), 0, ids.size - 1)
-    ok = ids[pos] == ends
+    pos = rows_of(ids, ends)
+    ok = pos >= 0
     if not ok.all():
         k = int(np.flatnonzero(~ok.all(axis=1))[0])
         bad = int(ends[k][~ok[k]][0])

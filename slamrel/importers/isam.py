@@ -26,6 +26,7 @@ from recovery.models import MotionModel, SensorModel
 from relation_metric import se2
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
+from relation_metric.ids import first_missing, rows_of
 from relation_metric.landmarks import integer_ids
 from relation_metric.textio import PathLike, read_keyword_records
 from relation_metric.trajectory import Trajectory
@@ -133,16 +134,15 @@ def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamD
         )
     poses = se2.cumulative_compose(step)
     if z.size:
-        known = np.isin(z[:, 0].astype(np.int64), pose_ids)
-        if not known.all():
-            bad = int(np.flatnonzero(~known)[0])
+        pk = rows_of(pose_ids, z[:, 0].astype(np.int64))
+        bad = first_missing(pk)
+        if bad is not None:
             raise InputError(
                 f"LANDMARK seen from unknown pose {int(z[bad, 0])}",
                 path=path,
                 line=int(z_lines[bad]),
             )
-        pk = np.searchsorted(pose_ids, z[:, 0].astype(np.int64))
-        pl = np.searchsorted(landmark_ids, z[:, 1].astype(np.int64))
+        pl = rows_of(landmark_ids, z[:, 1].astype(np.int64))
         info_pl = _information(z[:, 4:7], 2, noise, path=path, lines=z_lines, kind="LANDMARK")
         lm0 = initial_landmarks(poses, pk, pl, z[:, 2:4], landmark_ids.size)
     else:

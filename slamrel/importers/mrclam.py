@@ -26,6 +26,7 @@ from recovery.bundle import Bundle
 from recovery.models import MotionModel, SensorModel
 from relation_metric import se2
 from relation_metric.errors import InputError
+from relation_metric.ids import rows_of
 from relation_metric.landmarks import integer_ids
 from relation_metric.textio import PathLike, RowLines, read_numeric_table
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
@@ -140,10 +141,9 @@ def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
     code = meas[:, 1].astype(np.int64)
     table_codes = np.fromiter(barcodes.keys(), dtype=np.int64)
     table_subjects = np.fromiter(barcodes.values(), dtype=np.int64)
-    order = np.argsort(table_codes)
-    pos = np.clip(np.searchsorted(table_codes[order], code), 0, table_codes.size - 1)
-    known = table_codes[order][pos] == code
-    subject = np.where(known, table_subjects[order][pos], -1)
+    row = rows_of(table_codes, code)
+    known = row >= 0
+    subject = np.where(known, table_subjects[row], -1)
     is_robot = known & (subject <= N_ROBOTS)
     landmark = known & ~is_robot
     unknown_codes, unknown_counts = np.unique(code[~known], return_counts=True)
@@ -393,13 +393,12 @@ def fit_noise(
     # measurements
     m = robot.measurements
     subj = landmarks[:, 0].astype(np.int64)
-    order = np.argsort(subj)
-    pos = np.clip(np.searchsorted(subj[order], m[:, 3].astype(np.int64)), 0, subj.size - 1)
-    known = subj[order][pos] == m[:, 3].astype(np.int64)
+    row = rows_of(subj, m[:, 3].astype(np.int64))
+    known = row >= 0
     in_gt = (m[:, 0] >= gt.timestamps[0]) & (m[:, 0] <= gt.timestamps[-1])
     use = known & in_gt
     poses = _interp_poses(gt, m[use, 0])
-    lm_xy = landmarks[order][pos[use], 1:3]
+    lm_xy = landmarks[row[use], 1:3]
     k_p_l = se2.inverse_transform_points(poses, lm_xy)
     r_res = m[use, 1] - np.hypot(k_p_l[:, 0], k_p_l[:, 1])
     b_res = se2.wrap_angle(m[use, 2] - np.arctan2(k_p_l[:, 1], k_p_l[:, 0]))
