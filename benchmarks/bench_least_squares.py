@@ -351,10 +351,17 @@ def main() -> None:
         g = manhattan(args.poses)
         path = tmp / "manhattan.g2o"
         write_g2o_graph(path, g)
-        for label, extra in (("default (500, x2)", []), ("--batch 0 (one LM)", ["--batch", "0"])):
+        variants = (
+            ("default (500, x2)", []),
+            ("--batch 0 (one LM)", ["--batch", "0"]),
+            # the same stopping rule as GTSAM's LM (relativeErrorTol 1e-5): GTSAM run again
+            ("--tolerance 1e-5", ["--tolerance", "1e-5"]),
+        )
+        for label, extra in variants:
             ours = run_slamrel(path, tmp / "m_out", extra)
             ours.update(label=label, landmarks=np.empty((0, 2)))
-            gt = {"LM": run_gtsam(python, g, "lm", tmp)} if python and not extra else {}
+            gtsam_too = python and "--batch" not in extra
+            gt = {"LM": run_gtsam(python, g, "lm", tmp)} if gtsam_too else {}
             report(f"Manhattan {args.poses}", g, ours, gt)
         new = __import__("recovery.estimation.graph", fromlist=["solve_graph"])
         if not args.no_before:

@@ -351,3 +351,27 @@ def test_joint_covariance_blocks_are_the_marginal_pose_covariances(rng):
     np.testing.assert_allclose(sub[:3, 3:], full[12:15, 6:9], rtol=1e-9)
     np.testing.assert_allclose(full, full.T)
     assert np.all(np.linalg.eigvalsh(full) > 0)
+
+
+def test_cli_solve_tolerance_option(tmp_path, capsys, rng):
+    """--tolerance is the LM's relative-decrease stopping rule: outside (0, 1) exit 2; a looser
+    one stops no later, and both stop within the looser rule of solve_graph's minimum."""
+    from recovery.graph_formats.g2o import write_g2o_graph
+
+    g, _, _ = small_world(rng, n=30, m=8)
+    path = tmp_path / "g.g2o"
+    write_g2o_graph(path, g)
+    with pytest.raises(SystemExit) as e:
+        main(["solve", str(path), "-o", str(tmp_path / "a"), "--tolerance", "0"])
+    assert e.value.code == 2
+    assert "--tolerance: expected a probability in (0, 1)" in capsys.readouterr().err
+    best = solve_graph(g)
+    for tol in ("1e-9", "1e-3"):
+        out = tmp_path / f"t{tol}"
+        argv = ["solve", str(path), "-o", str(out), "--batch", "0", "--tolerance", tol, "-q"]
+        assert main(argv) == 0
+        poses = np.loadtxt(out / "trajectory.txt")[:, 1:4]
+        np.testing.assert_allclose(poses, best.poses, atol=1e-3)
+    loose = solve_graph(g, tolerance=1e-3)
+    assert loose.iterations <= best.iterations
+    assert loose.cost[-1] <= best.cost[-1] * (1 + 1e-3)

@@ -34,6 +34,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     s.add_argument("-o", "--output", required=True, metavar="DIR")
     s.add_argument("--max-iterations", type=opt.positive_int, default=100, help="per sub-problem")
     s.add_argument(
+        "--tolerance",
+        type=opt.probability,
+        default=1e-9,
+        metavar="R",
+        help="stop when an accepted step lowers the cost by less than this fraction of it "
+        "(default 1e-9; GTSAM's LM default, relativeErrorTol, is 1e-5)",
+    )
+    s.add_argument(
         "--batch",
         type=opt.nonnegative_int,
         default=500,
@@ -79,10 +87,14 @@ def run_solve(args: argparse.Namespace) -> int:
     graph, pose_ids, lm_ids = _load(args.graph, args.noise)
     with errors_about(args.graph):
         if args.batch == 0:
-            sol = solve_graph(graph, max_iterations=args.max_iterations)
+            sol = solve_graph(graph, max_iterations=args.max_iterations, tolerance=args.tolerance)
         else:
             sol = solve_graph_incremental(
-                graph, batch=args.batch, growth=args.growth, max_iterations=args.max_iterations
+                graph,
+                batch=args.batch,
+                growth=args.growth,
+                max_iterations=args.max_iterations,
+                tolerance=args.tolerance,
             )
     out = Path(args.output)
     with staged_directory(out, kind="solve", force=args.force) as tmp:
