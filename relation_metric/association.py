@@ -163,14 +163,12 @@ def _associate_times(
     interp = np.zeros(query.shape, dtype=bool)
     odo = np.zeros(query.shape, dtype=bool)
     if interpolate and far.any() and t.size > 1:
-        a = np.clip(np.searchsorted(t, query, side="right") - 1, 0, t.size - 2)
-        b = a + 1
+        a, _ = estimate.bracket(query)
         inside = (query >= t[0]) & (query <= t[-1])
-        span = t[b] - t[a]
+        span = t[a + 1] - t[a]
         can = far & inside & (span <= max_interpolation_gap) & (span > 0)
         if can.any():
-            s = (query[can] - t[a[can]]) / span[can]
-            poses[can] = group.interpolate(p[a[can]], p[b[can]], s)
+            poses[can] = estimate.poses_at(query[can])
             interp[can] = True
             far = far & ~can
     if odometry is not None and far.any():

@@ -200,6 +200,33 @@ class Trajectory:
         g = self.group
         return Trajectory(self.timestamps, g.compose(np.asarray(w_T_v), self.poses))
 
+    def bracket(self, t: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """The stored poses around times ``t`` (shape (M,)): index ``a`` of the last stored
+        time ≤ t (clipped to ``0 … N−2``) and the fraction ``s = (t − t_a) / (t_{a+1} − t_a)``
+        (NaN where the two times are equal). Needs N ≥ 2."""
+        t = np.asarray(t, dtype=np.float64)
+        times = self.timestamps
+        a = np.clip(np.searchsorted(times, t, side="right") - 1, 0, times.size - 2)
+        span = times[a + 1] - times[a]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = (t - times[a]) / span
+        return a, np.where(span > 0, s, np.nan)
+
+    def poses_at(self, t: ArrayLike) -> NDArray[np.float64]:
+        """Poses at times ``t`` (shape (M,)) → (M, width): the one pose interpolation.
+
+        Constant-twist motion between the two stored poses around each time,
+        ``w_T_a ∘ exp(s · log(w_T_a⁻¹ ∘ w_T_b))`` (:meth:`PoseGroup.interpolate`); times
+        before the first or after the last pose get that pose, and a time between two equal
+        time stamps the earlier pose. Needs N ≥ 1.
+        """
+        t = np.asarray(t, dtype=np.float64)
+        if len(self) == 1:
+            return np.repeat(self.poses, t.size, axis=0)
+        a, s = self.bracket(t)
+        s = np.clip(np.nan_to_num(s, nan=0.0), 0.0, 1.0)
+        return self.group.interpolate(self.poses[a], self.poses[a + 1], s)
+
     def span(self) -> tuple[float, float]:
         """First and last timestamp."""
         if len(self) == 0:

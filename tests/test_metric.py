@@ -168,3 +168,19 @@ def test_vectorised_equals_looped(seed, mode):
         assert one.translation[0] == vec.translation[k]
         assert one.rotation[0] == vec.rotation[k]
         assert one.combined[0] == vec.combined[k]
+
+
+def test_poses_at_is_the_constant_twist_interpolation() -> None:
+    """Trajectory.poses_at: stored poses at their own times, the constant-twist midpoint of a
+    turn on a circle (hand computation: the arc through both poses), ends clamped."""
+    import numpy as np
+
+    from relation_metric.trajectory import Trajectory
+
+    r, phi = 2.0, np.pi / 2  # a quarter circle of radius 2 about (0, 2), from (0, 0) heading +x
+    a = np.array([0.0, 0.0, 0.0])
+    b = np.array([r * np.sin(phi), r * (1 - np.cos(phi)), phi])
+    traj = Trajectory(np.array([10.0, 12.0]), np.vstack((a, b)))
+    got = traj.poses_at(np.array([9.0, 10.0, 11.0, 12.0, 13.0]))
+    mid = np.array([r * np.sin(phi / 2), r * (1 - np.cos(phi / 2)), phi / 2])
+    np.testing.assert_allclose(got, np.vstack((a, a, mid, b, b)), atol=1e-12)

@@ -198,14 +198,6 @@ class NoiseFit:
     alpha: tuple[float, float, float, float]
 
 
-def _interp_poses(gt: Trajectory, t: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Ground-truth poses at times ``t`` (linear in x, y; shortest-arc in θ)."""
-    x = np.interp(t, gt.timestamps, gt.poses[:, 0])
-    y = np.interp(t, gt.timestamps, gt.poses[:, 1])
-    th = np.interp(t, gt.timestamps, np.unwrap(gt.poses[:, 2]))
-    return np.column_stack((x, y, se2.wrap_angle(th)))
-
-
 @dataclass(frozen=True)
 class OdometryCalibration:
     """A delay and scale of the odometry, fitted against the ground truth.
@@ -397,7 +389,7 @@ def fit_noise(
     known = row >= 0
     in_gt = (m[:, 0] >= gt.timestamps[0]) & (m[:, 0] <= gt.timestamps[-1])
     use = known & in_gt
-    poses = _interp_poses(gt, m[use, 0])
+    poses = gt.poses_at(m[use, 0])
     lm_xy = landmarks[row[use], 1:3]
     k_p_l = se2.inverse_transform_points(poses, lm_xy)
     r_res = m[use, 1] - np.hypot(k_p_l[:, 0], k_p_l[:, 1])
@@ -492,7 +484,7 @@ def mrclam_bundle(
     m = r.measurements
     keep_m = (m[:, 0] >= c[0, 0]) & (m[:, 0] <= c[-1, 0])
     m = m[keep_m]
-    x0 = _interp_poses(gt, np.array([c[0, 0]]))[0]
+    x0 = gt.poses_at(np.array([c[0, 0]]))[0]
     ids = lm[:, 0].astype(np.int64)
     known = np.isin(m[:, 3].astype(np.int64), ids)
     return Bundle(
