@@ -41,10 +41,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 from tqdm import tqdm
 
 from relation_metric import se2
+from relation_metric.consistency import chi2_quantile
 from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError
 from relation_metric.trajectory import readonly
@@ -414,8 +414,8 @@ def run_filter(
         position = chain[:, :2]
     seg = prepare_segments(inp.sigma, heading, position, epochs)
 
-    gate_thr = float(chi2.ppf(gate, 2)) if gate is not None else math.inf
-    div_thr = gate_thr if gate is not None else float(chi2.ppf(0.9999, 2))
+    gate_thr = chi2_quantile(gate, 2) if gate is not None else math.inf
+    div_thr = gate_thr if gate is not None else chi2_quantile(0.9999, 2)
     rob_c = float(robust_threshold) if robust_threshold is not None else ROBUST_C
     rob_c2 = rob_c * rob_c if robust is not None else math.inf
     cauchy = robust == "cauchy"
@@ -748,7 +748,7 @@ def fill(seg: Segments, psi: Array, post_x: Array, post_p: Array) -> tuple[Array
 
 
 #: Default robust threshold ``c`` on the Mahalanobis distance: ``√χ²₂(0.99)``.
-ROBUST_C = float(math.sqrt(chi2.ppf(0.99, 2)))
+ROBUST_C = math.sqrt(chi2_quantile(0.99, 2))
 
 
 def robust_weight_of_distance(cauchy: bool, c: float, d: float) -> float:

@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from recovery.bundle import Bundle
 from recovery.ekf import (
@@ -43,6 +42,7 @@ from recovery.steps import Steps, build_steps
 from relation_metric import consistency
 from relation_metric.arrays import Array
 from relation_metric.association import match_nearest_times
+from relation_metric.consistency import chi2_quantile
 from relation_metric.errors import InputError
 from relation_metric.trajectory import Trajectory, readonly
 
@@ -175,7 +175,7 @@ def nees_stretches(
     ``min_run`` poses; ``[t0, t1]``, pose count and the largest NEES of each."""
     ok = np.flatnonzero(np.isfinite(nees))
     v = nees[ok]
-    st, en = _runs(v > chi2.ppf(0.9999, 3), max(1, min_run), max(1, min_run))
+    st, en = _runs(v > chi2_quantile(0.9999, 3), max(1, min_run), max(1, min_run))
     return [
         {
             "t0": float(times[ok[a]]),
@@ -198,7 +198,7 @@ def nis_summary(fr: FilterResult) -> dict[str, float | int | None]:
         "mean": float(v.mean()),
         "median": float(np.median(v)),
         "expected_mean": 2.0,
-        "fraction_beyond_95": float((v > chi2.ppf(0.95, 2)).mean()),
+        "fraction_beyond_95": float((v > chi2_quantile(0.95, 2)).mean()),
         "outlier_bound": float(fr.outlier_bound),
         "fraction_beyond_bound": float((v > fr.outlier_bound).mean()),
     }
@@ -270,7 +270,7 @@ class Recovery:
         }
         if self.nees is not None:
             ok = np.isfinite(self.nees)
-            bound = float(chi2.ppf(0.9999, 3))
+            bound = chi2_quantile(0.9999, 3)
             out["nees"] = {
                 "mean": float(np.mean(self.nees[ok])) if ok.any() else None,
                 "poses": int(ok.sum()),
@@ -420,7 +420,7 @@ def recover(
         if robust_scale == "auto":
             v = np.asarray(run_filter(inp, **kw).nis)  # type: ignore[arg-type]
             v = v[np.isfinite(v)]
-            scale = float(np.sqrt(np.median(v) / chi2.ppf(0.5, 2))) if v.size else 1.0
+            scale = float(np.sqrt(np.median(v) / chi2_quantile(0.5, 2))) if v.size else 1.0
             if not (math.isfinite(scale) and scale > 0.0):  # no innovation to scale by
                 scale = 1.0
         else:

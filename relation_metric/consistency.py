@@ -21,6 +21,7 @@ estimate at once, with its *joint* covariance, against the one-sided gate
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +36,7 @@ __all__ = [
     "nees_band",
     "NeesSummary",
     "summarize_nees",
+    "chi2_quantile",
     "nees_gate",
     "joint_nees",
     "JointNees",
@@ -130,16 +132,28 @@ def summarize_nees(values: ArrayLike, *, dof: int, probability: float = 0.95) ->
     return NeesSummary(float(v.mean()), band, inside, runs, dof)
 
 
+def chi2_quantile(probability: float, dof: int) -> float:
+    """``χ²⁻¹(probability; dof)``, the one home of χ² thresholds (gates, outlier bounds).
+
+    For 2 dof (range-bearing innovations) the quantile is ``−2 ln(1 − p)`` exactly and is
+    computed so (no scipy.stats import, which costs ~0.4 s of start-up; scipy's value differs
+    in the last bit at most); other dof use ``scipy.stats.chi2.ppf``, imported on first use.
+    """
+    if dof < 1 or not 0 < probability < 1:
+        raise InputError(f"need dof >= 1 and 0 < probability < 1; got {dof}, {probability}")
+    if dof == 2:
+        return -2.0 * math.log1p(-float(probability))
+    from scipy.stats import chi2  # here, not at import: scipy.stats costs start-up
+
+    return float(chi2.ppf(probability, dof))
+
+
 def nees_gate(dof: int, probability: float = 0.95) -> float:
     """One-sided gate ``χ²⁻¹(probability; dof)``: a consistent estimate's NEES stays below it.
 
     ``nees_gate(243)`` (82 poses) is 280.36 and ``nees_gate(1257)`` (420 poses) 1340.59.
     """
-    if dof < 1 or not 0 < probability < 1:
-        raise InputError(f"need dof >= 1 and 0 < probability < 1; got {dof}, {probability}")
-    from scipy.stats import chi2  # here, not at import: scipy.stats costs start-up
-
-    return float(chi2.ppf(probability, dof))
+    return chi2_quantile(probability, dof)
 
 
 def joint_nees(error: ArrayLike, covariance: ArrayLike) -> float:

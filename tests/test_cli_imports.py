@@ -50,6 +50,12 @@ def test_help_imports_no_heavy_module(argv: list[str]) -> None:
     assert _imported_after(code) == set()
 
 
+@pytest.mark.parametrize("module", ["recovery.ekf", "recovery.recover", "recovery.smoother"])
+def test_recovery_modules_import_no_scipy_stats(module: str) -> None:
+    """χ²(2) quantiles are analytic (consistency.chi2_quantile), others imported when used."""
+    assert _imported_after(f"import {module}") == set()
+
+
 def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
     from slamrel.cli import main
 
