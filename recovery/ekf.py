@@ -44,8 +44,8 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from relation_metric import se2
-from relation_metric.consistency import chi2_quantile
 from relation_metric.arrays import Array
+from relation_metric.consistency import chi2_quantile
 from relation_metric.errors import DivergenceError
 from relation_metric.trajectory import readonly
 
