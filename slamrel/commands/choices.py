@@ -21,5 +21,5 @@ MAP_MODES = ("joint", "marginal", "ignore")
 WORLDS = ("simple1", "simple2", "complex1", "complex2")
 NOISE_TYPES = ("a", "b", "c")
 # recovery.ekf.ROBUST (without None), recovery.ekf.DEFAULT_MAX_OUTLIER_RUN
-ROBUST_CHOICES = ("huber", "cauchy")
+ROBUST_CHOICES = ("huber", "cauchy", "redescending")
 DEFAULT_MAX_OUTLIER_RUN = 10
