@@ -87,7 +87,7 @@ USED, GATED, UNASSOCIATED, OUTSIDE = MeasurementStatus
 #: Robust weights of :func:`run_filter` (``None``: the plain EKF).
 ROBUST = (None, "huber", "cauchy", "redescending")
 #: Default ``c`` of each M-estimator on the standardised distance (see ``recover``).
-ROBUST_DEFAULTS = {"huber": 1.5, "cauchy": 1.5, "redescending": 1.25}
+ROBUST_DEFAULTS = {"huber": 1.5, "cauchy": 1.5, "redescending": 1.75}
 #: Consecutive outlying innovations after which the filter is re-entered (and a stretch of
 #: disagreement between map and log is reported).
 DEFAULT_MAX_OUTLIER_RUN = 10
@@ -373,7 +373,7 @@ class _ReentryRule:
     its own covariance. Both end a run of disagreement; only this one changes ``P``.
     """
 
-    __slots__ = ("bound", "max_run", "raise_", "ext2", "inp", "run", "start", "nis")
+    __slots__ = ("bound", "max_run", "raise_", "ext2", "inp", "run", "start", "nis", "reacquiring")
 
     def __init__(  # type: ignore[no-untyped-def]
         self, bound: float, max_run: int | None, raise_: bool, ext2: float, inp
@@ -382,6 +382,9 @@ class _ReentryRule:
             bound, max_run, raise_, ext2, inp
         )  # fmt: skip
         self.run, self.start, self.nis = 0, -1, []
+        #: after a re-entry until the first measurement within the bound: the filter, not the
+        #: measurements, is suspect, so robust weights are suspended (re-acquisition)
+        self.reacquiring = False
 
     def observe(self, v: float, p: tuple, t: float, j: int) -> float:
         """Count measurement ``j`` (NIS ``v``, prior covariance ``p``); ``α`` or 0.
@@ -390,7 +393,7 @@ class _ReentryRule:
         π² / p_θθ))`` after ``max_run`` consecutive outliers (then the count restarts).
         """
         if not v > self.bound:
-            self.run, self.nis = 0, []
+            self.run, self.nis, self.reacquiring = 0, [], False
             return 0.0
         if self.run == 0:
             self.start = j
@@ -412,7 +415,7 @@ class _ReentryRule:
             self.ext2 / max(p[0], p[3], 1e-300),
             math.pi * math.pi / max(p[5], 1e-300),
         )
-        self.run, self.nis = 0, []
+        self.run, self.nis, self.reacquiring = 0, [], True
         return max(1.0, alpha)
 
 
@@ -654,6 +657,10 @@ def run_filter(
         disagreement inflates again every ``max_outlier_run`` outliers. A measurement whose
         innovation covariance or posterior covariance is not positive definite is skipped
         (counted as gated) and recorded. Every event is returned in :attr:`FilterResult.events`.
+        After a re-entry the filter *re-acquires*: robust weights (``robust``) are suspended
+        until the first measurement within the outlier bound — after a run of outliers the
+        filter, not the measurements, is suspect, and down-weighting the measurements that
+        disagree with it would keep it off track.
         ``"raise"``: :class:`DivergenceError` instead (the old behaviour).
     robust : {None, "huber", "cauchy", "redescending"}
         M-estimator on the innovation's Mahalanobis distance ``d = √NIS``: the measurement's
@@ -814,13 +821,14 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
                 if w_fixed is not None:
                     wj = w_fixed[j]
             else:
+                reacquiring = reentry.reacquiring
                 alpha = reentry.observe(v, p, times[k], j)
                 if alpha:
                     events.append((k, j, REENTRY, alpha))
                 if v > rules.gate:
                     status[j] = GATED
                     gated = True
-                elif v > rules.robust_c2:
+                elif v > rules.robust_c2 and not reacquiring:
                     wj = _weight(rules, v, y, s, re)
             if not gated:
                 if wj != 1.0:

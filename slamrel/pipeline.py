@@ -26,7 +26,7 @@ from landmark_graph.compare import MapComparison, compare_maps
 from landmark_graph.maps import LandmarkMap
 from landmark_graph.plots import map_figure
 from recovery.bundle import Bundle, read_bundle, write_bundle
-from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, recover
+from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, recover
 from recovery.steps import build_steps
 from relation_metric import se2
 from relation_metric.association import match_nearest_times, nearest_index
@@ -163,7 +163,7 @@ def run_pipeline(
     method: str = "smoother",
     max_outlier_run: int | None = DEFAULT_MAX_OUTLIER_RUN,
     on_divergence: str = "reenter",
-    robust: str | None = None,
+    robust: str | None = DEFAULT_ROBUST,
     process_noise_scale: float = 1.0,
 ) -> RunResult:
     """Run the whole chain on a built-in world, or score a SLAM result bundle directory.
@@ -217,7 +217,7 @@ def score_bundle(
     online_covariance: NDArray[np.float64] | None = None,
     dead_reckoning: Trajectory | None = None,
     on_divergence: str = "reenter",
-    robust: str | None = None,
+    robust: str | None = DEFAULT_ROBUST,
 ) -> RunResult:
     """Recover the trajectory from a SLAM result bundle and score it (and its baselines).
 

@@ -69,7 +69,7 @@ def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
 
 def test_choices_equal_the_owners() -> None:
     from recovery.ekf import DEFAULT_MAX_OUTLIER_RUN, ROBUST
-    from recovery.recover import MAP_MODES, METHODS
+    from recovery.recover import DEFAULT_ROBUST, MAP_MODES, METHODS
     from relation_metric.formats import TRAJECTORY_FORMATS
     from relation_metric.metric import MODES
     from relation_metric.relations import STRATEGIES
@@ -84,3 +84,4 @@ def test_choices_equal_the_owners() -> None:
     assert choices.NOISE_TYPES == tuple(sorted(NOISE_TYPES))
     assert choices.ROBUST_CHOICES == tuple(r for r in ROBUST if r)
     assert choices.DEFAULT_MAX_OUTLIER_RUN == DEFAULT_MAX_OUTLIER_RUN
+    assert choices.DEFAULT_ROBUST == DEFAULT_ROBUST

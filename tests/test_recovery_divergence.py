@@ -119,10 +119,16 @@ def test_diverging_bundle_exits_0_with_trajectory_and_intervals(tmp_path: Path, 
     assert traj.timestamps[-1] == pytest.approx(bundle.controls[-1, 0])
     assert np.isfinite(traj.poses).all()
     d = json.loads(rep.read_text())["divergence"]
-    assert d["diverged"] and d["count"] >= 1 and 0.5 < d["fraction_of_log"] <= 1.0
+    # the default (redescending weights) follows one half of the self-contradicting map and
+    # reports the other: 48% of the log measured; the plain filter (+ re-entry) over 50%
+    assert d["diverged"] and d["count"] >= 1 and 0.4 < d["fraction_of_log"] <= 1.0
     for s in d["stretches"]:
         assert s["t0"] <= s["t1"] and s["outlying"] <= s["measurements"]
         assert s["nis_median"] > d["outlier_bound"]
+    argv = ["recover", str(b), "-o", str(out), "--report", str(rep), "--robust", "none", "-q"]
+    assert main(argv) == 0
+    d = json.loads(rep.read_text())["divergence"]
+    assert d["diverged"] and d["count"] >= 1 and 0.5 < d["fraction_of_log"] <= 1.0
     # opt-in failure restores the error
     rc = main(["recover", str(b), "-o", str(tmp_path / "u.txt"), "-q", "--fail-on-divergence"])
     assert rc == 3
@@ -226,7 +232,7 @@ def test_robust_weights_reach_filter_counts_and_batch() -> None:
 def test_robust_scale_is_estimated_from_a_plain_pass() -> None:
     bad, _ = _inject(simulate_bundle(12, steps=400), 15.0, 16.0, 1)
     r = recover(bad, method="smoother", robust="cauchy")
-    plain = recover(bad, method="filter")
+    plain = recover(bad, method="filter", robust=None)
     v = np.asarray(plain.nis)
     v = v[np.isfinite(v)]
     scale = np.sqrt(np.median(v) / chi2.ppf(0.5, 2))

@@ -22,4 +22,6 @@ WORLDS = ("simple1", "simple2", "complex1", "complex2")
 NOISE_TYPES = ("a", "b", "c")
 # recovery.ekf.ROBUST (without None), recovery.ekf.DEFAULT_MAX_OUTLIER_RUN
 ROBUST_CHOICES = ("huber", "cauchy", "redescending")
+# recovery.recover.DEFAULT_ROBUST
+DEFAULT_ROBUST = "redescending"
 DEFAULT_MAX_OUTLIER_RUN = 10
