@@ -29,8 +29,16 @@ covariance is checked to be finite and positive definite after every update.
 χ² bound) are where the map and the log disagree; after ``max_outlier_run`` of them the
 filter is re-entered by inflating its pose covariance and goes on (:func:`run_filter`), and
 every such event is returned. An optional M-estimator (Huber or Cauchy weights on the
-innovation's Mahalanobis distance, iterated to the fixed point) down-weights outliers; the
-plain filter (no robust weights, no event) is the textbook EKF and equals filterpy's.
+innovation's Mahalanobis distance, iterated to the fixed point, or the redescending
+``(c/d)²`` at the filter's own innovation covariance) down-weights outliers; the plain filter
+(no robust weights, no event) is the textbook EKF and equals filterpy's.
+
+**Pieces.** :func:`run_filter` checks its options and hands over to :func:`_setup` (status of
+every measurement, epochs, composed predictions, the map as lists), :func:`_filter_loop` (per
+epoch :func:`_predict`, then per measurement :func:`_innovation`, the gate / robust weight /
+re-entry decision, :func:`_correct`, :func:`_schmidt_correct`, and :func:`_inflate` after a
+re-entry of :class:`_ReentryRule`) and :func:`_result`. The covariance-only pass of the batch
+(``linearize_at``) runs the same loop with the mean held at the given poses.
 """
 
 from __future__ import annotations
