@@ -777,6 +777,36 @@ def _result(setup: _Setup, rules: _Rules, lin, pri_x, pri_p, post_x, post_p) -> 
     )
 
 
+def _decide(setup, rules, reentry, v, p, ysr, k, j) -> tuple[float, float]:  # type: ignore[no-untyped-def]
+    """Gate, robust weight and re-entry of a measurement with NIS ``v`` (not the covariance-only
+    pass): ``(w, α)``, ``w = 0`` when gated, ``α`` the re-entry's inflation (0: none)."""
+    reacquiring = reentry.reacquiring  # read before this measurement is counted
+    alpha = reentry.observe(v, p, reentry.inp.times[k], j)
+    if alpha:
+        setup.events.append((k, j, REENTRY, alpha))
+    if v > rules.gate:
+        setup.status[j] = GATED
+        return 0.0, alpha
+    if v > rules.robust_c2 and not reacquiring:
+        return _weight(rules, v, *ysr), alpha
+    return 1.0, alpha
+
+
+_SKIPPED = {
+    SKIPPED_S: "innovation covariance is not positive definite",
+    SKIPPED_P: "pose covariance is not finite positive definite",
+}
+
+
+def _skip(inp: FilterInput, setup: _Setup, rules: _Rules, k: int, j: int, kind: int) -> None:
+    """A measurement whose ``S`` or posterior is not positive definite: skipped (counted as
+    gated) and recorded, or :class:`DivergenceError` (``raise`` mode, covariance-only pass)."""
+    if rules.raise_ or rules.fixed:
+        _diverged(inp, inp.times[k], j, _SKIPPED[kind])
+    setup.status[j] = GATED
+    setup.events.append((k, j, kind, 1.0))
+
+
 def _weight(rules: _Rules, v: float, y: tuple, s: tuple, re: tuple) -> float:
     """Robust weight of an innovation with NIS ``v`` beyond ``c²`` (see :func:`run_filter`)."""
     if rules.robust == "redescending":
@@ -792,13 +822,7 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
     """
     lm_xy, lm_c, r, zz, lmk = setup.lm_xy, setup.lm_c, setup.r, setup.z, setup.landmark
     pxm, mapcov, lin, w_fixed = setup.pxm, inp.map_covariance, setup.lin, setup.w_fixed
-    status, nis, wts, events, times = (
-        setup.status,
-        setup.nis,
-        setup.weights,
-        setup.events,
-        inp.times,
-    )
+    nis, wts, times = setup.nis, setup.weights, inp.times
     pose = tuple(float(v) for v in inp.x0)
     p = tuple(float(inp.p0[i, j]) for i, j in SYM6)
     pri_x, pri_p, post_x, post_p = [], [], [], []
@@ -816,40 +840,22 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
             y, s, re, n, h = _innovation(at or pose, p, lm_xy[li], lm_c[li], r, zz[j], pxl)
             det = s[0] * s[2] - s[1] * s[1]
             if not (det > 0.0 and s[0] > 0.0):
-                if rules.raise_ or rules.fixed:
-                    _diverged(inp, times[k], j, "innovation covariance is not positive definite")
-                status[j] = GATED
-                events.append((k, j, SKIPPED_S, 1.0))
+                _skip(inp, setup, rules, k, j, SKIPPED_S)
                 continue
             i = (s[2] / det, -s[1] / det, s[0] / det)
             v = y[0] * y[0] * i[0] + 2.0 * y[0] * y[1] * i[1] + y[1] * y[1] * i[2]
             nis[j] = v
-            wj, alpha, gated = 1.0, 0.0, False
             if rules.fixed:
-                if w_fixed is not None:
-                    wj = w_fixed[j]
+                wj, alpha = 1.0 if w_fixed is None else w_fixed[j], 0.0
             else:
-                reacquiring = reentry.reacquiring
-                alpha = reentry.observe(v, p, times[k], j)
-                if alpha:
-                    events.append((k, j, REENTRY, alpha))
-                if v > rules.gate:
-                    status[j] = GATED
-                    gated = True
-                elif v > rules.robust_c2 and not reacquiring:
-                    wj = _weight(rules, v, y, s, re)
-            if not gated:
+                wj, alpha = _decide(setup, rules, reentry, v, p, (y, s, re), k, j)
+            if wj > 0.0:  # 0: gated
                 if wj != 1.0:
                     wts[j] = wj
                     i = _weighted_inverse(wj, s, re)
                 out = _correct(p, n, i, y)
                 if out is None:
-                    if rules.raise_ or rules.fixed:
-                        _diverged(
-                            inp, times[k], j, "pose covariance is not finite positive definite"
-                        )
-                    status[j] = GATED
-                    events.append((k, j, SKIPPED_P, 1.0))
+                    _skip(inp, setup, rules, k, j, SKIPPED_P)
                 else:
                     p, dx, gain = out
                     if not rules.fixed:
