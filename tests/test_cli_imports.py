@@ -56,6 +56,28 @@ def test_recovery_modules_import_no_scipy_stats(module: str) -> None:
     assert _imported_after(f"import {module}") == set()
 
 
+def test_recover_with_ground_truth_imports_no_scipy_stats(tmp_path: Path) -> None:
+    """Issue 15: NIS and NEES bounds (2 and 3 dof) and the NEES band are computed without
+    scipy.stats, so a whole ``slamrel recover`` of a bundle with ground truth needs none."""
+    from slamrel.cli import main
+
+    sim, slam = tmp_path / "sim", tmp_path / "slam"
+    assert main(["simulate", "simple1", "-o", str(sim), "-q"]) == 0
+    assert main(["slam", str(sim), "-o", str(slam), "-q"]) == 0
+    argv = [
+        "recover",
+        str(slam),
+        "-o",
+        str(tmp_path / "t.txt"),
+        "--report",
+        str(tmp_path / "r.json"),
+        "-q",
+    ]
+    code = f"from slamrel.cli import main\nassert main({argv!r}) == 0"
+    assert "scipy.stats" not in _imported_after(code)
+    assert "nees" in json.loads((tmp_path / "r.json").read_text())
+
+
 def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
     from slamrel.cli import main
 
