@@ -29,8 +29,16 @@ covariance is checked to be finite and positive definite after every update.
 χ² bound) are where the map and the log disagree; after ``max_outlier_run`` of them the
 filter is re-entered by inflating its pose covariance and goes on (:func:`run_filter`), and
 every such event is returned. An optional M-estimator (Huber or Cauchy weights on the
-innovation's Mahalanobis distance, iterated to the fixed point) down-weights outliers; the
-plain filter (no robust weights, no event) is the textbook EKF and equals filterpy's.
+innovation's Mahalanobis distance, iterated to the fixed point, or the redescending
+``(c/d)²`` at the filter's own innovation covariance) down-weights outliers; the plain filter
+(no robust weights, no event) is the textbook EKF and equals filterpy's.
+
+**Pieces.** :func:`run_filter` checks its options and hands over to :func:`_setup` (status of
+every measurement, epochs, composed predictions, the map as lists), :func:`_filter_loop` (per
+epoch :func:`_predict`, then per measurement :func:`_innovation`, the gate / robust weight /
+re-entry decision, :func:`_correct`, :func:`_schmidt_correct`, and :func:`_inflate` after a
+re-entry of :class:`_ReentryRule`) and :func:`_result`. The covariance-only pass of the batch
+(``linearize_at``) runs the same loop with the mean held at the given poses.
 """
 
 from __future__ import annotations
@@ -38,18 +46,21 @@ from __future__ import annotations
 import math
 import sys
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 from tqdm import tqdm
 
 from relation_metric import se2
 from relation_metric.arrays import Array
+from relation_metric.consistency import chi2_quantile
 from relation_metric.errors import DivergenceError
 from relation_metric.trajectory import readonly
 
 __all__ = [
+    "MeasurementStatus",
+    "FilterEvent",
     "USED",
     "GATED",
     "ROBUST",
@@ -66,15 +77,39 @@ __all__ = [
     "run_filter",
 ]
 
-USED, GATED, UNASSOCIATED, OUTSIDE = 0, 1, 2, 3
-ROBUST = (None, "huber", "cauchy")
+
+class MeasurementStatus(IntEnum):
+    """What the recovery filter did with each measurement (:attr:`FilterResult.status`).
+
+    ``UNASSOCIATED`` is 2 here; :mod:`recovery.estimation.ekfslam` marks an unassociated
+    measurement with −1 in its own association array (a landmark row, not a status).
+    """
+
+    USED = 0
+    GATED = 1  # beyond the gate, or skipped (non-positive-definite covariance)
+    UNASSOCIATED = 2
+    OUTSIDE = 3  # outside the span of the controls/odometry
+
+
+USED, GATED, UNASSOCIATED, OUTSIDE = MeasurementStatus
+#: Robust weights of :func:`run_filter` (``None``: the plain EKF).
+ROBUST = (None, "huber", "cauchy", "redescending")
 #: Default ``c`` of each M-estimator on the standardised distance (see ``recover``).
-ROBUST_DEFAULTS = {"huber": 1.5, "cauchy": 1.5}
+ROBUST_DEFAULTS = {"huber": 1.5, "cauchy": 1.5, "redescending": 1.75}
 #: Consecutive outlying innovations after which the filter is re-entered (and a stretch of
 #: disagreement between map and log is reported).
 DEFAULT_MAX_OUTLIER_RUN = 10
-#: Kinds of :attr:`FilterResult.events`.
-REENTRY, SKIPPED_S, SKIPPED_P = 0, 1, 2
+
+
+class FilterEvent(IntEnum):
+    """Kinds of :attr:`FilterResult.events`."""
+
+    REENTRY = 0
+    SKIPPED_S = 1
+    SKIPPED_P = 2
+
+
+REENTRY, SKIPPED_S, SKIPPED_P = FilterEvent
 EVENT_KINDS = {
     REENTRY: "re-entered after consecutive outlying innovations",
     SKIPPED_S: "innovation covariance not positive definite (measurement skipped)",
@@ -307,8 +342,9 @@ class FilterResult:
     outlier_bound: float
 
 
-def _pd(p00: float, p01: float, p02: float, p11: float, p12: float, p22: float) -> bool:
-    """Finite and positive definite (leading principal minors), on scalars."""
+def _pd(p: tuple) -> bool:
+    """Finite and positive definite (leading principal minors) on the 6 unique entries."""
+    p00, p01, p02, p11, p12, p22 = p
     m2 = p00 * p11 - p01 * p01
     det = (
         p00 * (p11 * p22 - p12 * p12)
@@ -316,6 +352,279 @@ def _pd(p00: float, p01: float, p02: float, p11: float, p12: float, p22: float) 
         + p02 * (p01 * p12 - p11 * p02)
     )
     return p00 > 0.0 and m2 > 0.0 and det > 0.0 and math.isfinite(det + p22 + p00 + p11)
+
+
+@dataclass(frozen=True)
+class _Rules:
+    """What one filter run does with a measurement once its NIS ``v`` is known.
+
+    ``gate``: gated when ``v > gate``; ``outlier``: counts as outlying when ``v > outlier``;
+    ``robust_c2``: robust weight when ``v > robust_c2`` (``inf``: never); ``fixed``: the
+    covariance-only pass (mean not updated, no gate, no re-entry, weights given).
+    """
+
+    gate: float
+    outlier: float
+    robust: str | None
+    robust_c: float
+    robust_c2: float
+    fixed: bool
+    raise_: bool
+
+
+class _ReentryRule:
+    """The re-entry rule of :func:`run_filter`: runs of outlying innovations → inflation ``α``.
+
+    Not to be confused with EKF-SLAM's ``max_rejected_run``
+    (:func:`recovery.estimation.ekfslam.ekf_slam`), which after a run of *gated* measurements
+    *force-accepts* the next one: there the filter stops rejecting, here it stops trusting
+    its own covariance. Both end a run of disagreement; only this one changes ``P``.
+    """
+
+    __slots__ = ("bound", "max_run", "raise_", "ext2", "inp", "run", "start", "nis", "reacquiring")
+
+    def __init__(  # type: ignore[no-untyped-def]
+        self, bound: float, max_run: int | None, raise_: bool, ext2: float, inp
+    ) -> None:
+        self.bound, self.max_run, self.raise_, self.ext2, self.inp = (
+            bound, max_run, raise_, ext2, inp
+        )  # fmt: skip
+        self.run, self.start, self.nis = 0, -1, []
+        #: after a re-entry until the first measurement within the bound: the filter, not the
+        #: measurements, is suspect, so robust weights are suspended (re-acquisition)
+        self.reacquiring = False
+
+    def observe(self, v: float, p: tuple, t: float, j: int) -> float:
+        """Count measurement ``j`` (NIS ``v``, prior covariance ``p``); ``α`` or 0.
+
+        ``α = max(1, min(median NIS of the run / bound, extent² / max(p_xx, p_yy),
+        π² / p_θθ))`` after ``max_run`` consecutive outliers (then the count restarts).
+        """
+        if not v > self.bound:
+            self.run, self.nis, self.reacquiring = 0, [], False
+            return 0.0
+        if self.run == 0:
+            self.start = j
+        self.run += 1
+        self.nis.append(v)
+        if self.max_run is None or self.run < self.max_run:
+            return 0.0
+        if self.raise_:
+            _diverged(
+                self.inp,
+                t,
+                j,
+                f"{self.run} consecutive innovations beyond the χ² bound {self.bound:.2f} "
+                f"(since {self.inp.label(self.start)})",
+            )
+        self.nis.sort()
+        alpha = min(
+            self.nis[len(self.nis) // 2] / self.bound,
+            self.ext2 / max(p[0], p[3], 1e-300),
+            math.pi * math.pi / max(p[5], 1e-300),
+        )
+        self.run, self.nis, self.reacquiring = 0, [], True
+        return max(1.0, alpha)
+
+
+def _predict(pose: tuple, p: tuple, pxm, local, q, psi: float):  # type: ignore[no-untyped-def]
+    """Composed prediction from the previous epoch: pose, 6 covariance entries (in place
+    on the Schmidt cross-covariance ``pxm``); ``psi`` rotates the segment's local frame."""
+    ux, uy, uth = local
+    c = math.cos(psi)
+    s = math.sin(psi)
+    dx = c * ux - s * uy
+    dy = s * ux + c * uy
+    x, y, th = pose
+    th += uth
+    if not -math.pi <= th < math.pi:  # keep prior and posterior on one branch
+        th = float(se2.wrap_angle(th))
+    if pxm is not None:
+        pxm[0] -= dy * pxm[2]
+        pxm[1] += dx * pxm[2]
+    return (x + dx, y + dy, th), predict6(p, q, c, s, dx, dy)
+
+
+def _innovation(pose, p, lm, lm_c, r, z, pxl):  # type: ignore[no-untyped-def]
+    """Range-bearing innovation of one measurement (scalars).
+
+    Returns ``y (2), S (3 unique), R_eff (3), N = P H_xᵀ (+ P_xl H_lᵀ) as columns (6),
+    H (h00, h01, h10, h11)``; ``R_eff = R + H_l Σ_l H_lᵀ``, ``H_x = [[−h00, −h01, 0],
+    [−h10, −h11, −1]]``, ``H_l = [[h00, h01], [h10, h11]]``.
+    """
+    px, py, pth = pose
+    p00, p01, p02, p11, p12, p22 = p
+    ca, cb, cd = lm_c
+    ddx = lm[0] - px
+    ddy = lm[1] - py
+    qq = ddx * ddx + ddy * ddy
+    rng = math.sqrt(qq)
+    h00, h01, h10, h11 = ddx / rng, ddy / rng, -ddy / qq, ddx / qq
+    t00 = h00 * ca + h01 * cb
+    t01 = h00 * cb + h01 * cd
+    t10 = h10 * ca + h11 * cb
+    t11 = h10 * cb + h11 * cd
+    re00 = r[0] + t00 * h00 + t01 * h01
+    re01 = t00 * h10 + t01 * h11
+    re11 = r[1] + t10 * h10 + t11 * h11
+    a0 = -h00 * p00 - h01 * p01
+    a1 = -h00 * p01 - h01 * p11
+    a2 = -h00 * p02 - h01 * p12
+    b0 = -h10 * p00 - h11 * p01 - p02
+    b1 = -h10 * p01 - h11 * p11 - p12
+    b2 = -h10 * p02 - h11 * p12 - p22
+    s00 = -h00 * a0 - h01 * a1 + re00
+    s01 = -h00 * b0 - h01 * b1 + re01
+    s11 = -h10 * b0 - h11 * b1 - b2 + re11
+    if pxl is not None:  # Schmidt: the pose-landmark cross-covariance enters S and N
+        bm = pxl @ np.array([[h00, h10], [h01, h11]])  # P_xl H_lᵀ, 3 × 2
+        (c00, c01), (c10, c11), (c20, c21) = bm.tolist()
+        hb01 = -h00 * c01 - h01 * c11
+        hb10 = -h10 * c00 - h11 * c10 - c20
+        s00 += 2.0 * (-h00 * c00 - h01 * c10)
+        s01 += hb01 + hb10
+        s11 += 2.0 * (-h10 * c01 - h11 * c11 - c21)
+        a0, a1, a2, b0, b1, b2 = a0 + c00, a1 + c10, a2 + c20, b0 + c01, b1 + c11, b2 + c21
+    y0 = z[0] - rng
+    y1 = z[1] - math.atan2(ddy, ddx) + pth
+    if not -math.pi <= y1 < math.pi:
+        y1 = float(se2.wrap_angle(y1))
+    return (y0, y1), (s00, s01, s11), (re00, re01, re11), (a0, a1, a2, b0, b1, b2), (
+        h00, h01, h10, h11
+    )  # fmt: skip
+
+
+def _correct(p: tuple, n: tuple, i: tuple, y: tuple):  # type: ignore[no-untyped-def]
+    """``K = N S⁻¹``, ``P ← P − N S⁻¹ Nᵀ``, ``Δx = K y`` on scalars (``i``: S⁻¹ unique).
+
+    Returns ``(P, Δx, K)`` or ``None`` when the posterior is not finite positive definite.
+    """
+    a0, a1, a2, b0, b1, b2 = n
+    i00, i01, i11 = i
+    k00 = a0 * i00 + b0 * i01
+    k01 = a0 * i01 + b0 * i11
+    k10 = a1 * i00 + b1 * i01
+    k11 = a1 * i01 + b1 * i11
+    k20 = a2 * i00 + b2 * i01
+    k21 = a2 * i01 + b2 * i11
+    post = (
+        p[0] - (a0 * k00 + b0 * k01),
+        p[1] - (a0 * k10 + b0 * k11),
+        p[2] - (a0 * k20 + b0 * k21),
+        p[3] - (a1 * k10 + b1 * k11),
+        p[4] - (a1 * k20 + b1 * k21),
+        p[5] - (a2 * k20 + b2 * k21),
+    )
+    if not _pd(post):
+        return None
+    y0, y1 = y
+    dx = (k00 * y0 + k01 * y1, k10 * y0 + k11 * y1, k20 * y0 + k21 * y1)
+    return post, dx, ((k00, k01), (k10, k11), (k20, k21))
+
+
+def _schmidt_correct(pxm: Array, h: tuple, gain: tuple, map_rows: Array) -> None:
+    """``P_xm ← P_xm − K (H_x P_xm + H_l Σ_lm)`` in place (``map_rows``: the landmark's 2 rows
+    of the map covariance)."""
+    h00, h01, h10, h11 = h
+    hx = np.array([[-h00, -h01, 0.0], [-h10, -h11, -1.0]])
+    hl = np.array([[h00, h01], [h10, h11]])
+    pxm -= np.array(gain) @ (hx @ pxm + hl @ map_rows)
+
+
+def _inflate(p: tuple, pxm, alpha: float) -> tuple:  # type: ignore[no-untyped-def]
+    """Re-entry: ``P ← α P``, ``P_xm ← √α P_xm`` (in place)."""
+    if pxm is not None:
+        pxm *= math.sqrt(alpha)
+    return tuple(alpha * v for v in p)
+
+
+def _weighted_inverse(wj: float, s: tuple, re: tuple) -> tuple:
+    """``(S + (1/w − 1) R_eff)⁻¹`` (unique entries): the measurement noise divided by ``w``."""
+    f = 1.0 / wj - 1.0
+    w00, w01, w11 = s[0] + f * re[0], s[1] + f * re[1], s[2] + f * re[2]
+    det = w00 * w11 - w01 * w01
+    return w11 / det, -w01 / det, w00 / det
+
+
+@dataclass
+class _Setup:
+    """Everything the scalar loop reads, as Python lists (no numpy look-up per measurement),
+    and the per-measurement outputs it fills (``status``, ``nis``, ``weights``, ``events``)."""
+
+    seg: Segments
+    epochs: list[int]
+    local: list[list[float]]
+    q: list[list[float]]
+    active: list[int]
+    bounds: list[int]
+    lm_xy: list[list[float]]
+    lm_c: list[list[float]]
+    r: tuple[float, float]
+    z: list[list[float]]
+    landmark: list[int]
+    pxm: Array | None
+    lin: list[list[float]] | None
+    w_fixed: list[float] | None
+    ext2: float
+    status: NDArray[np.int64]
+    nis: Array
+    weights: Array
+    events: list[tuple[int, int, int, float]]
+
+
+def _setup(inp: FilterInput, linearize_at: Array | None, use, weights) -> _Setup:  # type: ignore[no-untyped-def]
+    """Status of every measurement, the epochs, the composed predictions, the map as lists."""
+    n = inp.times.shape[0]
+    j_all = inp.meas_grid.shape[0]
+    status = np.full(j_all, USED, dtype=np.int64)
+    status[inp.meas_landmark < 0] = UNASSOCIATED
+    status[inp.meas_grid < 0] = OUTSIDE
+    if use is not None:
+        status[(status == USED) & ~use] = GATED
+    active = np.flatnonzero(status == USED)
+    active = active[np.argsort(inp.meas_grid[active], kind="stable")]
+    epochs = np.unique(np.concatenate(([0, n - 1], inp.meas_grid[active]))).astype(np.int64)
+    if linearize_at is not None:
+        # the batch's motion factor linearised at the solution: the shear of the actual
+        # displacement between consecutive poses, noise rotated by their headings
+        lin = np.asarray(linearize_at, dtype=np.float64)
+        heading, position = lin[:, 2].copy(), lin[:, :2]
+    else:
+        heading = np.concatenate(([0.0], np.cumsum(inp.u[:, 2])))
+        position = se2.cumulative_compose(inp.u)[:, :2]
+    seg = prepare_segments(inp.sigma, heading, position, epochs)
+    m = inp.map_xy.shape[0]
+    mapcov = inp.map_covariance
+    if mapcov is not None:
+        idx = 2 * np.arange(m)
+        blocks = mapcov[idx[:, None, None] + [[0], [1]], idx[:, None, None] + [[0, 1]]]
+    else:
+        blocks = inp.map_marginals
+    # re-entry never inflates the position variance beyond the map's extent squared, nor the
+    # heading variance beyond π² (a pose that uncertain is not localised at all)
+    ext2 = max(float(np.ptp(inp.map_xy, axis=0).max()) if m else 0.0, 1.0) ** 2
+    bounds = np.searchsorted(inp.meas_grid[active], epochs, side="left").tolist()
+    return _Setup(
+        seg=seg,
+        epochs=epochs.tolist(),
+        local=seg.local[epochs].tolist(),
+        q=seg.q[:, epochs].T.tolist(),
+        active=active.tolist(),
+        bounds=bounds + [active.shape[0]],
+        lm_xy=inp.map_xy.tolist(),
+        lm_c=blocks.reshape(-1, 4)[:, [0, 1, 3]].tolist(),
+        r=(float(inp.r[0, 0]), float(inp.r[1, 1])),
+        z=inp.meas_z.tolist(),
+        landmark=inp.meas_landmark.tolist(),
+        pxm=None if mapcov is None else np.zeros((3, 2 * m)),
+        lin=None if linearize_at is None else lin.tolist(),
+        w_fixed=None if weights is None else np.asarray(weights, dtype=np.float64).tolist(),
+        ext2=ext2,
+        status=status,
+        nis=np.full(j_all, np.nan),
+        weights=np.ones(j_all),
+        events=[],
+    )
 
 
 def run_filter(
@@ -342,7 +651,10 @@ def run_filter(
         A measurement is *outlying* when its NIS ``yᵀ S⁻¹ y`` exceeds the gate (or the 99.99%
         χ² bound without a gate). After this many consecutive outlying measurements the map and
         the log disagree and the filter is **re-entered** (see ``on_divergence``); ``None``
-        never re-enters (the plain EKF).
+        never re-enters (the plain EKF). Not the twin of EKF-SLAM's ``max_rejected_run``
+        (:func:`recovery.estimation.ekfslam.ekf_slam`): that one *force-accepts* a measurement
+        after a run of *gated* ones (the gate gives way); this one *inflates the covariance*
+        after a run of *outlying* ones, gated or not (the filter's confidence gives way).
     on_divergence : {"reenter", "raise"}
         ``"reenter"`` (default): the re-entry rule — right after the run's last measurement,
         the pose covariance (and the Schmidt cross-covariance, by the square root) is inflated
@@ -353,13 +665,22 @@ def run_filter(
         disagreement inflates again every ``max_outlier_run`` outliers. A measurement whose
         innovation covariance or posterior covariance is not positive definite is skipped
         (counted as gated) and recorded. Every event is returned in :attr:`FilterResult.events`.
+        After a re-entry the filter *re-acquires*: robust weights (``robust``) are suspended
+        until the first measurement within the outlier bound — after a run of outliers the
+        filter, not the measurements, is suspect, and down-weighting the measurements that
+        disagree with it would keep it off track.
         ``"raise"``: :class:`DivergenceError` instead (the old behaviour).
-    robust : {None, "huber", "cauchy"}
+    robust : {None, "huber", "cauchy", "redescending"}
         M-estimator on the innovation's Mahalanobis distance ``d = √NIS``: the measurement's
-        effective noise (sensor plus landmark) is divided by the weight ``w(d)`` —
-        Huber ``min(1, c/d)``, Cauchy ``1/(1 + (d/c)²)`` for ``d > c`` — iterated to the
-        fixed point ``w = w(d(w))`` (at most 8 iterations; ``d(w)`` uses the re-weighted
-        ``S``). Measurements with ``d ≤ c`` are untouched, so a healthy run is the plain EKF.
+        effective noise (sensor plus landmark) is divided by the weight ``w`` (1 for
+        ``d ≤ c``, so a healthy run is the plain EKF). ``"huber"`` ``c/d`` and ``"cauchy"``
+        ``(c/d)²``, iterated to the fixed point ``w = w(d(w))`` with ``d(w)`` under the
+        re-weighted ``S`` (:func:`_robust_weight`) — at the fixed point the pull ``w·y`` of a
+        gross outlier stays bounded but does not vanish (Cauchy: ``≈ c √R_eff``);
+        ``"redescending"`` ``(c/d)²`` with ``d`` under the filter's own ``S`` (one step,
+        no iteration): the pull ``c²/d`` of an innovation falls as it grows, so gross
+        outliers barely move the filter (measured on MRCLAM: what lets it match the gated
+        EKF, see :func:`recovery.recover.recover`).
     robust_threshold : float, optional
         ``c``; default ``√χ²₂(0.99) ≈ 3.03``.
     linearize_at : ndarray, shape (N, 3), optional
@@ -387,329 +708,170 @@ def run_filter(
         raise ValueError(f"on_divergence must be 'reenter' or 'raise', got {on_divergence!r}")
     if robust not in ROBUST:
         raise ValueError(f"robust must be one of {ROBUST}, got {robust!r}")
-    raise_ = on_divergence == "raise"
     if robust_threshold is not None and not (0.0 < robust_threshold < math.inf):
         raise ValueError(f"robust_threshold must be positive and finite, got {robust_threshold}")
-    n = inp.times.shape[0]
-    j_all = inp.meas_grid.shape[0]
-    status = np.full(j_all, USED, dtype=np.int64)
-    status[inp.meas_landmark < 0] = UNASSOCIATED
-    status[inp.meas_grid < 0] = OUTSIDE
-    if use is not None:
-        status[(status == USED) & ~use] = GATED
-    active = np.flatnonzero(status == USED)
-    active = active[np.argsort(inp.meas_grid[active], kind="stable")]
-    epochs = np.unique(np.concatenate(([0, n - 1], inp.meas_grid[active]))).astype(np.int64)
-
-    fixed = linearize_at is not None
-    if fixed:
-        lin = np.asarray(linearize_at, dtype=np.float64)
-        # the batch's motion factor linearised at the solution: the shear of the actual
-        # displacement between consecutive poses, noise rotated by their headings
-        heading = lin[:, 2].copy()
-        position = lin[:, :2]
-    else:
-        heading = np.concatenate(([0.0], np.cumsum(inp.u[:, 2])))
-        chain = se2.cumulative_compose(inp.u)
-        position = chain[:, :2]
-    seg = prepare_segments(inp.sigma, heading, position, epochs)
-
-    gate_thr = float(chi2.ppf(gate, 2)) if gate is not None else math.inf
-    div_thr = gate_thr if gate is not None else float(chi2.ppf(0.9999, 2))
-    rob_c = float(robust_threshold) if robust_threshold is not None else ROBUST_C
-    rob_c2 = rob_c * rob_c if robust is not None else math.inf
-    cauchy = robust == "cauchy"
-    w_fixed = None if weights is None else np.asarray(weights, dtype=np.float64).tolist()
-    schmidt = inp.map_covariance is not None
-    mapcov = inp.map_covariance
-    m = inp.map_xy.shape[0]
-    if schmidt:
-        assert mapcov is not None
-        blocks = (
-            np.stack([mapcov[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] for i in range(m)])
-            if m
-            else np.zeros((0, 2, 2))
-        )
-        pxm = np.zeros((3, 2 * m))
-    else:
-        blocks = inp.map_marginals
-        pxm = None
-    lm_xy = inp.map_xy.tolist()
-    # re-entry never inflates the position variance beyond the map's extent squared, nor the
-    # heading variance beyond π² (a pose that uncertain is not localised at all)
-    ext2 = max(float(np.ptp(inp.map_xy, axis=0).max()) if m else 0.0, 1.0) ** 2
-    lm_c = blocks.reshape(-1, 4)[:, [0, 1, 3]].tolist()
-    rr, rb = float(inp.r[0, 0]), float(inp.r[1, 1])
-    zz = inp.meas_z.tolist()
-    lmk = inp.meas_landmark.tolist()
-    e_local = seg.local[epochs].tolist()
-    e_q = seg.q[:, epochs].T.tolist()
-    grid_of_active = inp.meas_grid[active]
-    bounds = np.searchsorted(grid_of_active, epochs, side="left").tolist() + [active.shape[0]]
-    active_l = active.tolist()
-    lin_l = linearize_at.tolist() if fixed else None  # type: ignore[union-attr]
-    times = inp.times
-    nis = np.full(j_all, np.nan)
-    nis_l = nis  # written per measurement
-    wts = np.ones(j_all)
-    wrap = se2.wrap_angle
-
-    x, y, th = (float(v) for v in inp.x0)
-    p0 = np.asarray(inp.p0, dtype=np.float64)
-    p00, p01, p02, p11, p12, p22 = (
-        float(p0[i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
-    )
-    if not _pd(p00, p01, p02, p11, p12, p22):
+    if not _pd(tuple(float(inp.p0[i, j]) for i, j in SYM6)):
         raise DivergenceError(
             f"filter cannot start at t={float(inp.times[0]):.6f} s: the initial covariance is "
             "not finite positive definite"
         )
-    pri_x: list[tuple[float, float, float]] = []
-    pri_p: list[tuple[float, ...]] = []
-    post_x: list[tuple[float, float, float]] = []
-    post_p: list[tuple[float, ...]] = []
-    outlier_run = 0
-    run_start = -1
-    run_nis: list[float] = []
-    pending = 0.0  # covariance inflation of a re-entry, applied before the next measurement
-    ev_k: list[int] = []
-    ev_j: list[int] = []
-    ev_kind: list[int] = []
-    ev_a: list[float] = []
-
-    cos, sin, sqrt, atan2, isfinite, PI = (
-        math.cos,
-        math.sin,
-        math.sqrt,
-        math.atan2,
-        math.isfinite,
-        math.pi,
-    )  # fmt: skip  (local names: no attribute look-up per measurement)
-    iterator = range(epochs.shape[0])
-    bar = tqdm(
-        iterator, desc="filter", unit="epoch", disable=not progress, file=sys.stderr, leave=False
+    setup = _setup(inp, linearize_at, use, weights)
+    gate_thr = chi2_quantile(gate, 2) if gate is not None else math.inf
+    outlier = gate_thr if gate is not None else chi2_quantile(0.9999, 2)
+    c = float(robust_threshold) if robust_threshold is not None else ROBUST_C
+    rules = _Rules(
+        gate=gate_thr,
+        outlier=outlier,
+        robust=robust,
+        robust_c=c,
+        robust_c2=c * c if robust is not None else math.inf,
+        fixed=linearize_at is not None,
+        raise_=on_divergence == "raise",
     )
-    for e in bar:
-        k = int(epochs[e])
-        if e > 0:
-            ux, uy, uth = e_local[e]
-            psi = lin_l[int(epochs[e - 1])][2] if fixed else th  # type: ignore[index]
-            c = cos(psi)
-            s = sin(psi)
-            dx = c * ux - s * uy
-            dy = s * ux + c * uy
-            x += dx
-            y += dy
-            th += uth
-            p00, p01, p02, p11, p12, p22 = predict6(
-                (p00, p01, p02, p11, p12, p22), e_q[e], c, s, dx, dy
-            )
-            if not -math.pi <= th < math.pi:  # keep prior and posterior on one branch
-                th = float(wrap(th))
-            if pxm is not None:
-                pxm[0] -= dy * pxm[2]
-                pxm[1] += dx * pxm[2]
-        pri_x.append((x, y, th))
-        pri_p.append((p00, p01, p02, p11, p12, p22))
-        if fixed:
-            lx_, ly_, lth_ = lin_l[k]  # type: ignore[index]
-        for idx in range(bounds[e], bounds[e + 1]):
-            if pending:
-                p00, p01, p02, p11, p12, p22 = (
-                    pending * p00, pending * p01, pending * p02,
-                    pending * p11, pending * p12, pending * p22,
-                )  # fmt: skip
-                if pxm is not None:
-                    pxm *= math.sqrt(pending)
-                pending = 0.0
-            j = active_l[idx]
-            li = lmk[j]
-            lx, ly = lm_xy[li]
-            ca, cb, cd = lm_c[li]
-            px, py, pth = (lx_, ly_, lth_) if fixed else (x, y, th)
-            ddx = lx - px
-            ddy = ly - py
-            qq = ddx * ddx + ddy * ddy
-            r = sqrt(qq)
-            h00, h01, h10, h11 = ddx / r, ddy / r, -ddy / qq, ddx / qq
-            t00 = h00 * ca + h01 * cb
-            t01 = h00 * cb + h01 * cd
-            t10 = h10 * ca + h11 * cb
-            t11 = h10 * cb + h11 * cd
-            re00 = rr + t00 * h00 + t01 * h01
-            re01 = t00 * h10 + t01 * h11
-            re11 = rb + t10 * h10 + t11 * h11
-            # P H_xᵀ, H_x = [[-h00, -h01, 0], [-h10, -h11, -1]]
-            a0 = -h00 * p00 - h01 * p01
-            a1 = -h00 * p01 - h01 * p11
-            a2 = -h00 * p02 - h01 * p12
-            b0 = -h10 * p00 - h11 * p01 - p02
-            b1 = -h10 * p01 - h11 * p11 - p12
-            b2 = -h10 * p02 - h11 * p12 - p22
-            s00 = -h00 * a0 - h01 * a1 + re00
-            s01 = -h00 * b0 - h01 * b1 + re01
-            s11 = -h10 * b0 - h11 * b1 - b2 + re11
-            if pxm is not None:
-                pxl = pxm[:, 2 * li : 2 * li + 2]
-                bm = pxl @ np.array([[h00, h10], [h01, h11]])  # P_xl H_lᵀ, 3 × 2
-                (c00, c01), (c10, c11), (c20, c21) = bm.tolist()
-                hb00 = -h00 * c00 - h01 * c10
-                hb01 = -h00 * c01 - h01 * c11
-                hb10 = -h10 * c00 - h11 * c10 - c20
-                hb11 = -h10 * c01 - h11 * c11 - c21
-                s00 += 2.0 * hb00
-                s01 += hb01 + hb10
-                s11 += 2.0 * hb11
-                a0 += c00
-                a1 += c10
-                a2 += c20
-                b0 += c01
-                b1 += c11
-                b2 += c21
-            det = s00 * s11 - s01 * s01
-            if not (det > 0.0 and s00 > 0.0):
-                if raise_ or fixed:
-                    _diverged(inp, times[k], j, "innovation covariance is not positive definite")
-                status[j] = GATED
-                ev_k.append(k), ev_j.append(j), ev_kind.append(SKIPPED_S), ev_a.append(1.0)
-                continue
-            i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-            zr, zb = zz[j]
-            y0 = zr - r
-            y1 = zb - atan2(ddy, ddx) + pth
-            if not -PI <= y1 < PI:
-                y1 = float(wrap(y1))
-            v = y0 * y0 * i00 + 2.0 * y0 * y1 * i01 + y1 * y1 * i11
-            nis_l[j] = v
-            wj = 1.0
-            if fixed:
-                if w_fixed is not None:
-                    wj = w_fixed[j]
-            else:
-                if v > div_thr:
-                    if outlier_run == 0:
-                        run_start = j
-                    outlier_run += 1
-                    run_nis.append(v)
-                    if max_outlier_run is not None and outlier_run >= max_outlier_run:
-                        if raise_:
-                            _diverged(
-                                inp,
-                                times[k],
-                                j,
-                                f"{outlier_run} consecutive innovations beyond the χ² bound "
-                                f"{div_thr:.2f} (since {inp.label(run_start)})",
-                            )
-                        run_nis.sort()
-                        pending = min(
-                            run_nis[len(run_nis) // 2] / div_thr,
-                            ext2 / max(p00, p11, 1e-300),
-                            math.pi * math.pi / max(p22, 1e-300),
-                        )
-                        pending = max(1.0, pending)
-                        ev_k.append(k), ev_j.append(j), ev_kind.append(REENTRY)
-                        ev_a.append(pending)
-                        outlier_run = 0
-                        run_nis = []
-                else:
-                    outlier_run = 0
-                    run_nis = []
-                if v > gate_thr:
-                    status[j] = GATED
-                    continue
-                if v > rob_c2:
-                    wj = _robust_weight(cauchy, rob_c, y0, y1, s00, s01, s11, re00, re01, re11)
-            if wj != 1.0:
-                wts[j] = wj
-                f = 1.0 / wj - 1.0
-                w00, w01, w11 = s00 + f * re00, s01 + f * re01, s11 + f * re11
-                det = w00 * w11 - w01 * w01
-                i00, i01, i11 = w11 / det, -w01 / det, w00 / det
-            # K = N S⁻¹ with N = P H_xᵀ (+ P_xl H_lᵀ): columns (a*, b*)
-            k00 = a0 * i00 + b0 * i01
-            k01 = a0 * i01 + b0 * i11
-            k10 = a1 * i00 + b1 * i01
-            k11 = a1 * i01 + b1 * i11
-            k20 = a2 * i00 + b2 * i01
-            k21 = a2 * i01 + b2 * i11
-            # P ← P − K S Kᵀ = P − N S⁻¹ Nᵀ
-            n00 = p00 - (a0 * k00 + b0 * k01)
-            n01 = p01 - (a0 * k10 + b0 * k11)
-            n02 = p02 - (a0 * k20 + b0 * k21)
-            n11 = p11 - (a1 * k10 + b1 * k11)
-            n12 = p12 - (a1 * k20 + b1 * k21)
-            n22 = p22 - (a2 * k20 + b2 * k21)
-            # finite and positive definite (leading principal minors; _pd inlined)
-            m2 = n00 * n11 - n01 * n01
-            d3 = (
-                n00 * (n11 * n22 - n12 * n12)
-                - n01 * (n01 * n22 - n12 * n02)
-                + n02 * (n01 * n12 - n11 * n02)
-            )
-            if not (n00 > 0.0 and m2 > 0.0 and d3 > 0.0 and isfinite(d3 + n22 + n00 + n11)):
-                if raise_ or fixed:
-                    _diverged(inp, times[k], j, "pose covariance is not finite positive definite")
-                status[j] = GATED
-                ev_k.append(k), ev_j.append(j), ev_kind.append(SKIPPED_P), ev_a.append(1.0)
-                continue
-            p00, p01, p02, p11, p12, p22 = n00, n01, n02, n11, n12, n22
-            if not fixed:
-                x += k00 * y0 + k01 * y1
-                y += k10 * y0 + k11 * y1
-                th += k20 * y0 + k21 * y1
-            if pxm is not None:
-                hx = np.array([[-h00, -h01, 0.0], [-h10, -h11, -1.0]])
-                hl = np.array([[h00, h01], [h10, h11]])
-                tmp = hx @ pxm + hl @ mapcov[2 * li : 2 * li + 2]  # type: ignore[index]
-                pxm -= np.array([[k00, k01], [k10, k11], [k20, k21]]) @ tmp
-        if pending:
-            p00, p01, p02, p11, p12, p22 = (
-                pending * p00, pending * p01, pending * p02,
-                pending * p11, pending * p12, pending * p22,
-            )  # fmt: skip
-            if pxm is not None:
-                pxm *= math.sqrt(pending)
-            pending = 0.0
-        if bounds[e + 1] == bounds[e] and not _pd(p00, p01, p02, p11, p12, p22):
-            raise DivergenceError(
-                f"filter diverged at t={float(times[k]):.6f} s: predicted covariance is not finite "
-                "positive definite"
-            )
-        post_x.append((x, y, th))
-        post_p.append((p00, p01, p02, p11, p12, p22))
+    reentry = _ReentryRule(outlier, max_outlier_run, rules.raise_, setup.ext2, inp)
+    bar = tqdm(
+        range(len(setup.epochs)),
+        desc="filter",
+        unit="epoch",
+        disable=not progress,
+        file=sys.stderr,
+        leave=False,
+    )
+    pri_x, pri_p, post_x, post_p = _filter_loop(inp, setup, rules, reentry, bar)
     bar.close()
+    return _result(setup, rules, linearize_at, pri_x, pri_p, post_x, post_p)
 
-    pri_xa = np.array(pri_x)
+
+def _result(setup: _Setup, rules: _Rules, lin, pri_x, pri_p, post_x, post_p) -> FilterResult:  # type: ignore[no-untyped-def]
+    """Arrays of the loop's lists; every grid pose filled from its epoch's posterior."""
+    seg, epochs = setup.seg, np.asarray(setup.epochs, dtype=np.int64)
     post_xa = np.array(post_x)
-    pri_pa = _full(np.array(pri_p))
     post_pa = _full(np.array(post_p))
-    psi = lin[epochs, 2] if fixed else post_xa[:, 2]
+    psi = np.asarray(lin, dtype=np.float64)[epochs, 2] if rules.fixed else post_xa[:, 2]
     poses, covs = fill(seg, psi, post_xa, post_pa)
     poses[epochs] = post_xa
     covs[epochs] = post_pa
-    if fixed:
-        poses = lin.copy()
+    if rules.fixed:
+        poses = np.array(lin, dtype=np.float64)
+    ev = np.array(setup.events, dtype=np.float64).reshape(-1, 4)
     return FilterResult(
         poses=poses,
         covariances=covs,
         segments=seg,
-        prior_poses=pri_xa,
-        prior_covariances=pri_pa,
+        prior_poses=np.array(pri_x),
+        prior_covariances=_full(np.array(pri_p)),
         post_poses=post_xa,
         post_covariances=post_pa,
-        status=readonly(status, np.int64),
-        nis=readonly(nis),
+        status=readonly(setup.status, np.int64),
+        nis=readonly(setup.nis),
         psi=psi,
-        order=readonly(active, np.int64),
-        weights=readonly(wts),
+        order=readonly(np.asarray(setup.active, dtype=np.int64), np.int64),
+        weights=readonly(setup.weights),
         events=FilterEvents(
-            grid=np.asarray(ev_k, dtype=np.int64).reshape(-1),
-            measurement=np.asarray(ev_j, dtype=np.int64).reshape(-1),
-            kind=np.asarray(ev_kind, dtype=np.int64).reshape(-1),
-            inflation=np.asarray(ev_a, dtype=np.float64).reshape(-1),
+            grid=ev[:, 0].astype(np.int64),
+            measurement=ev[:, 1].astype(np.int64),
+            kind=ev[:, 2].astype(np.int64),
+            inflation=ev[:, 3].copy(),
         ),
-        outlier_bound=div_thr,
+        outlier_bound=rules.outlier,
     )
+
+
+def _decide(setup, rules, reentry, v, p, ysr, k, j) -> tuple[float, float]:  # type: ignore[no-untyped-def]
+    """Gate, robust weight and re-entry of a measurement with NIS ``v`` (not the covariance-only
+    pass): ``(w, α)``, ``w = 0`` when gated, ``α`` the re-entry's inflation (0: none)."""
+    reacquiring = reentry.reacquiring  # read before this measurement is counted
+    alpha = reentry.observe(v, p, reentry.inp.times[k], j)
+    if alpha:
+        setup.events.append((k, j, REENTRY, alpha))
+    if v > rules.gate:
+        setup.status[j] = GATED
+        return 0.0, alpha
+    if v > rules.robust_c2 and not reacquiring:
+        return _weight(rules, v, *ysr), alpha
+    return 1.0, alpha
+
+
+_SKIPPED = {
+    SKIPPED_S: "innovation covariance is not positive definite",
+    SKIPPED_P: "pose covariance is not finite positive definite",
+}
+
+
+def _skip(inp: FilterInput, setup: _Setup, rules: _Rules, k: int, j: int, kind: int) -> None:
+    """A measurement whose ``S`` or posterior is not positive definite: skipped (counted as
+    gated) and recorded, or :class:`DivergenceError` (``raise`` mode, covariance-only pass)."""
+    if rules.raise_ or rules.fixed:
+        _diverged(inp, inp.times[k], j, _SKIPPED[kind])
+    setup.status[j] = GATED
+    setup.events.append((k, j, kind, 1.0))
+
+
+def _weight(rules: _Rules, v: float, y: tuple, s: tuple, re: tuple) -> float:
+    """Robust weight of an innovation with NIS ``v`` beyond ``c²`` (see :func:`run_filter`)."""
+    if rules.robust == "redescending":
+        return rules.robust_c2 / v
+    return _robust_weight(rules.robust == "cauchy", rules.robust_c, *y, *s, *re)
+
+
+def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _ReentryRule, bar):  # type: ignore[no-untyped-def]
+    """The scalar recursion over the epochs: predict, then each measurement of the epoch.
+
+    Returns the priors and posteriors at the epochs (lists of tuples) and fills
+    ``setup.status``, ``setup.nis``, ``setup.weights`` and ``setup.events`` in place.
+    """
+    lm_xy, lm_c, r, zz, lmk = setup.lm_xy, setup.lm_c, setup.r, setup.z, setup.landmark
+    pxm, mapcov, lin, w_fixed = setup.pxm, inp.map_covariance, setup.lin, setup.w_fixed
+    nis, wts, times = setup.nis, setup.weights, inp.times
+    pose = tuple(float(v) for v in inp.x0)
+    p = tuple(float(inp.p0[i, j]) for i, j in SYM6)
+    pri_x, pri_p, post_x, post_p = [], [], [], []
+    for e in bar:
+        k = setup.epochs[e]
+        if e > 0:
+            psi = lin[setup.epochs[e - 1]][2] if rules.fixed else pose[2]
+            pose, p = _predict(pose, p, pxm, setup.local[e], setup.q[e], psi)
+        pri_x.append(pose)
+        pri_p.append(p)
+        at = lin[k] if rules.fixed else None
+        for j in setup.active[setup.bounds[e] : setup.bounds[e + 1]]:
+            li = lmk[j]
+            pxl = None if pxm is None else pxm[:, 2 * li : 2 * li + 2]
+            y, s, re, n, h = _innovation(at or pose, p, lm_xy[li], lm_c[li], r, zz[j], pxl)
+            det = s[0] * s[2] - s[1] * s[1]
+            if not (det > 0.0 and s[0] > 0.0):
+                _skip(inp, setup, rules, k, j, SKIPPED_S)
+                continue
+            i = (s[2] / det, -s[1] / det, s[0] / det)
+            v = y[0] * y[0] * i[0] + 2.0 * y[0] * y[1] * i[1] + y[1] * y[1] * i[2]
+            nis[j] = v
+            if rules.fixed:
+                wj, alpha = 1.0 if w_fixed is None else w_fixed[j], 0.0
+            else:
+                wj, alpha = _decide(setup, rules, reentry, v, p, (y, s, re), k, j)
+            if wj > 0.0:  # 0: gated
+                if wj != 1.0:
+                    wts[j] = wj
+                    i = _weighted_inverse(wj, s, re)
+                out = _correct(p, n, i, y)
+                if out is None:
+                    _skip(inp, setup, rules, k, j, SKIPPED_P)
+                else:
+                    p, dx, gain = out
+                    if not rules.fixed:
+                        pose = (pose[0] + dx[0], pose[1] + dx[1], pose[2] + dx[2])
+                    if pxm is not None:
+                        _schmidt_correct(pxm, h, gain, mapcov[2 * li : 2 * li + 2])
+            if alpha:  # the re-entry: right after the run's last measurement
+                p = _inflate(p, pxm, alpha)
+        if setup.bounds[e + 1] == setup.bounds[e] and not _pd(p):
+            raise DivergenceError(
+                f"filter diverged at t={float(times[k]):.6f} s: predicted covariance is not "
+                "finite positive definite"
+            )
+        post_x.append(pose)
+        post_p.append(p)
+    return pri_x, pri_p, post_x, post_p
 
 
 def _full(p6: Array) -> Array:
@@ -748,7 +910,7 @@ def fill(seg: Segments, psi: Array, post_x: Array, post_p: Array) -> tuple[Array
 
 
 #: Default robust threshold ``c`` on the Mahalanobis distance: ``√χ²₂(0.99)``.
-ROBUST_C = float(math.sqrt(chi2.ppf(0.99, 2)))
+ROBUST_C = math.sqrt(chi2_quantile(0.99, 2))
 
 
 def robust_weight_of_distance(cauchy: bool, c: float, d: float) -> float:

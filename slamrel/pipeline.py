@@ -33,7 +33,7 @@ from landmark_graph.compare import MapComparison, compare_maps
 from landmark_graph.maps import LandmarkMap
 from recovery.bundle import Bundle, read_bundle, write_bundle
 from recovery.estimation.ekfslam import ekf_slam_bundle
-from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, Recovery, Stretch, recover
+from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, Recovery, Stretch, recover
 from recovery.simulation.bundles import world_bundle
 from recovery.simulation.worlds import make_world
 from recovery.steps import build_steps
@@ -311,7 +311,7 @@ def run_pipeline(
     method: str = "smoother",
     max_outlier_run: int | None = DEFAULT_MAX_OUTLIER_RUN,
     on_divergence: str = "reenter",
-    robust: str | None = None,
+    robust: str | None = DEFAULT_ROBUST,
     process_noise_scale: float = 1.0,
 ) -> RunResult:
     """Run the whole chain on a built-in world, or score a bundle read earlier (no I/O).
@@ -341,7 +341,7 @@ def score_bundle(
     method: str = "smoother",
     max_outlier_run: int | None = DEFAULT_MAX_OUTLIER_RUN,
     on_divergence: str = "reenter",
-    robust: str | None = None,
+    robust: str | None = DEFAULT_ROBUST,
 ) -> RunResult:
     """Recover the trajectory from a SLAM result bundle and score it (and its baselines).
 

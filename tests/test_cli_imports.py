@@ -53,6 +53,34 @@ def test_help_imports_no_heavy_module(argv: list[str]) -> None:
     assert _imported_after(code) == set()
 
 
+@pytest.mark.parametrize("module", ["recovery.ekf", "recovery.recover", "recovery.smoother"])
+def test_recovery_modules_import_no_scipy_stats(module: str) -> None:
+    """χ²(2) quantiles are analytic (consistency.chi2_quantile), others imported when used."""
+    assert _imported_after(f"import {module}") == set()
+
+
+def test_recover_with_ground_truth_imports_no_scipy_stats(tmp_path: Path) -> None:
+    """Issue 15: NIS and NEES bounds (2 and 3 dof) and the NEES band are computed without
+    scipy.stats, so a whole ``slamrel recover`` of a bundle with ground truth needs none."""
+    from slamrel.cli import main
+
+    sim, slam = tmp_path / "sim", tmp_path / "slam"
+    assert main(["simulate", "simple1", "-o", str(sim), "-q"]) == 0
+    assert main(["slam", str(sim), "-o", str(slam), "-q"]) == 0
+    argv = [
+        "recover",
+        str(slam),
+        "-o",
+        str(tmp_path / "t.txt"),
+        "--report",
+        str(tmp_path / "r.json"),
+        "-q",
+    ]
+    code = f"from slamrel.cli import main\nassert main({argv!r}) == 0"
+    assert "scipy.stats" not in _imported_after(code)
+    assert "nees" in json.loads((tmp_path / "r.json").read_text())
+
+
 def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
     from slamrel.cli import main
 
@@ -66,7 +94,7 @@ def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
 
 def test_choices_equal_the_owners() -> None:
     from recovery.ekf import DEFAULT_MAX_OUTLIER_RUN, ROBUST
-    from recovery.recover import MAP_MODES, METHODS
+    from recovery.recover import DEFAULT_ROBUST, MAP_MODES, METHODS
     from recovery.simulation.worlds import NOISE_TYPES, PAPER_WORLDS, WORLDS
     from relation_metric.formats import TRAJECTORY_FORMATS
     from relation_metric.metric import MODES
@@ -84,6 +112,7 @@ def test_choices_equal_the_owners() -> None:
     assert choices.NOISE_TYPES == tuple(sorted(NOISE_TYPES))
     assert choices.ROBUST_CHOICES == tuple(r for r in ROBUST if r)
     assert choices.DEFAULT_MAX_OUTLIER_RUN == DEFAULT_MAX_OUTLIER_RUN
+    assert choices.DEFAULT_ROBUST == DEFAULT_ROBUST
 
 
 def test_import_commands_have_their_own_module() -> None:

@@ -97,3 +97,15 @@ def test_nees2_is_chi2_distributed_under_its_own_covariance(rng):
         nees2(truth, truth, -np.eye(2 * L))
     with pytest.raises(InputError, match=r"\(L >= 1, 2\)"):
         nees2(truth, truth[:-1], cov)
+
+
+@pytest.mark.parametrize("dof", [1, 2, 3])
+def test_chi2_quantile_equals_scipy(dof):
+    """The analytic 2-dof quantile −2 ln(1 − p) and the scipy path agree with chi2.ppf."""
+    from relation_metric.consistency import chi2_quantile
+
+    for p in (1e-3, 0.025, 0.05, 0.3, 0.5, 0.95, 0.975, 0.999, 0.9999, 1 - 1e-12):
+        assert chi2_quantile(p, dof) == pytest.approx(chi2.ppf(p, dof), rel=1e-14)
+    assert chi2_quantile(1e-9, dof) == pytest.approx(chi2.ppf(1e-9, dof), rel=1e-8)
+    with pytest.raises(InputError):
+        chi2_quantile(1.0, dof)

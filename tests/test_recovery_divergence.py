@@ -119,10 +119,16 @@ def test_diverging_bundle_exits_0_with_trajectory_and_intervals(tmp_path: Path, 
     assert traj.timestamps[-1] == pytest.approx(bundle.controls[-1, 0])
     assert np.isfinite(traj.poses).all()
     d = json.loads(rep.read_text())["divergence"]
-    assert d["diverged"] and d["count"] >= 1 and 0.5 < d["fraction_of_log"] <= 1.0
+    # the default (redescending weights) follows one half of the self-contradicting map and
+    # reports the other: 48% of the log measured; the plain filter (+ re-entry) over 50%
+    assert d["diverged"] and d["count"] >= 1 and 0.4 < d["fraction_of_log"] <= 1.0
     for s in d["stretches"]:
         assert s["t0"] <= s["t1"] and s["outlying"] <= s["measurements"]
         assert s["nis_median"] > d["outlier_bound"]
+    argv = ["recover", str(b), "-o", str(out), "--report", str(rep), "--robust", "none", "-q"]
+    assert main(argv) == 0
+    d = json.loads(rep.read_text())["divergence"]
+    assert d["diverged"] and d["count"] >= 1 and 0.5 < d["fraction_of_log"] <= 1.0
     # opt-in failure restores the error
     rc = main(["recover", str(b), "-o", str(tmp_path / "u.txt"), "-q", "--fail-on-divergence"])
     assert rc == 3
@@ -159,10 +165,54 @@ def test_robust_is_the_plain_filter_on_a_healthy_run() -> None:
     b = simulate_bundle(11, steps=250)
     inp = filter_input(b, map_mode="marginal")
     plain = run_filter(inp)
-    for kind in ("huber", "cauchy"):
+    for kind in ("huber", "cauchy", "redescending"):
         fr = run_filter(inp, robust=kind, robust_threshold=50.0)
         np.testing.assert_array_equal(fr.poses, plain.poses)
         assert (fr.weights == 1.0).all()
+
+
+def test_redescending_weight_is_taken_at_the_filter_innovation() -> None:
+    """Without re-entry: w = min(1, c²/NIS) exactly, NIS under the un-weighted S (the weight
+    is not iterated); the pull w·d = c²/d of an outlier falls as it grows."""
+    bad, _ = _inject(simulate_bundle(12, steps=400), 15.0, 16.0, 1)
+    inp = filter_input(bad, map_mode="marginal")
+    c = 2.0
+    fr = run_filter(inp, robust="redescending", robust_threshold=c, max_outlier_run=None)
+    used = np.asarray(fr.status) == USED
+    v = np.asarray(fr.nis)[used]
+    np.testing.assert_allclose(np.asarray(fr.weights)[used], np.minimum(1.0, c * c / v), rtol=1e-12)
+    assert (v > 10 * c * c).sum() >= 5  # gross outliers were there, and weighted down
+    plain = run_filter(inp, max_outlier_run=None)
+    order = np.asarray(fr.order)
+    first = int(np.argmax(np.asarray(fr.nis)[order] > c * c))  # the first weighted one
+    before = order[: first + 1]  # identical to the plain filter up to and including it
+    np.testing.assert_array_equal(np.asarray(fr.nis)[before], np.asarray(plain.nis)[before])
+    assert (
+        first > 0
+        and np.asarray(fr.nis)[order[first + 1]] != np.asarray(plain.nis)[order[first + 1]]
+    )
+
+
+def test_robust_weights_are_suspended_while_reacquiring() -> None:
+    """After a re-entry the filter re-acquires: every measurement from the next one up to the
+    first within the outlier bound gets weight 1, whatever its NIS; the others get c²/NIS."""
+    bad, _ = _inject(simulate_bundle(5, steps=600), 20.0, 22.0, 5)
+    inp = filter_input(bad, map_mode="marginal")
+    c = 1.5
+    fr = run_filter(inp, robust="redescending", robust_threshold=c)
+    order = np.asarray(fr.order)
+    v, w = np.asarray(fr.nis)[order], np.asarray(fr.weights)[order]
+    ok = np.asarray(fr.status)[order] == USED
+    reentries = set(fr.events.measurement[fr.events.kind == REENTRY].tolist())
+    assert reentries
+    expected = np.ones_like(v)
+    suspended = False
+    for i, j in enumerate(order.tolist()):  # the rule, written out per measurement
+        if not suspended and v[i] > c * c:
+            expected[i] = c * c / v[i]
+        suspended = (suspended and v[i] > fr.outlier_bound) or j in reentries
+    np.testing.assert_allclose(w[ok], expected[ok], rtol=1e-12)
+    assert (w[ok] == 1.0).sum() > (v[ok] <= c * c).sum()  # some outliers were not weighted
 
 
 @pytest.mark.parametrize("kind", ["huber", "cauchy"])
@@ -226,7 +276,7 @@ def test_robust_weights_reach_filter_counts_and_batch() -> None:
 def test_robust_scale_is_estimated_from_a_plain_pass() -> None:
     bad, _ = _inject(simulate_bundle(12, steps=400), 15.0, 16.0, 1)
     r = recover(bad, method="smoother", robust="cauchy")
-    plain = recover(bad, method="filter")
+    plain = recover(bad, method="filter", robust=None)
     v = np.asarray(plain.nis)
     v = v[np.isfinite(v)]
     scale = np.sqrt(np.median(v) / chi2.ppf(0.5, 2))

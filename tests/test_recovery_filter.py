@@ -62,7 +62,7 @@ def test_gating_equals_filterpy_and_is_counted() -> None:
     d = fr.poses - poses
     d[:, 2] = se2.wrap_angle(d[:, 2])
     assert np.abs(d).max() < 1e-9 and np.abs(fr.covariances - covs).max() < 1e-9
-    r = recover(b, method="filter", gate=0.99, max_outlier_run=None)
+    r = recover(b, method="filter", gate=0.99, max_outlier_run=None, robust=None)
     assert r.counts["gated"] == (status == GATED).sum()
     assert r.counts["used"] + r.counts["gated"] == b.measurement_times.shape[0]
 

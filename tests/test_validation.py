@@ -75,20 +75,53 @@ def test_ate_at_reference_times_is_alignment_invariant():
 
 def test_robust_recovery_on_mrclam_robot5():
     """Real data (MRCLAM dataset 7, robot 5, surveyed map): the plain EKF is thrown off by
-    outliers (and the divergence is reported), the Cauchy M-estimator is as good as the gated
-    EKF (≤ 1.05×) without gating anything, and its smoother is below its filter."""
+    outliers (and with re-entry the divergence is reported), the Cauchy M-estimator is as good
+    as the gated EKF (≤ 1.05×) without gating anything, and its smoother is below its filter."""
     from conftest import require_data
 
     from slamrel.importers.mrclam import mrclam_bundle
     from slamrel.validation import RECOVERY_VARIANTS, recovery_variants_table
 
     d = require_data("mrclam", "MRCLAM_Dataset7")
-    keep = {k: RECOVERY_VARIANTS[k] for k in ("plain", "gated", "default", "cauchy")}
+    keep = {k: RECOVERY_VARIANTS[k] for k in ("plain", "gated", "reentry", "cauchy")}
     rows = {r["variant"]: r for r in recovery_variants_table({"r5": mrclam_bundle(d, 5)}, keep)}
-    assert rows["plain"]["filter_ratio"] > 2.0 and rows["default"]["stretches"] >= 1
+    assert rows["plain"]["filter_ratio"] > 2.0 and rows["reentry"]["stretches"] >= 1
     assert rows["cauchy"]["filter_ratio"] <= 1.05 and rows["cauchy"]["gated_fraction"] == 0.0
     assert rows["cauchy"]["smoother"] < rows["cauchy"]["filter"]
     assert 0.0 < rows["cauchy"]["downweight_loss"] < rows["cauchy"]["downweighted_fraction"]
+
+
+@pytest.mark.parametrize("robot", [1, 2, 3, 4, 5])
+def test_default_recovery_meets_issue_12_on_mrclam(robot: int) -> None:
+    """Issue 12's acceptance (MRCLAM dataset 7, fitted noise, surveyed map): the default
+    filter's position ATE after SE(2) alignment at the Vicon times is ≤ 1.05 × min(plain EKF,
+    99.9%-gated EKF), nothing gated, the down-weighted share reported; the smoother is below
+    the filter on the 1 s relations and on the unaligned ATE (the map is in Vicon's frame).
+
+    Robot 4's aligned ATE is the exception, measured in every variant (plain, gated, Cauchy,
+    default: smoother 1.03–1.04 × filter): its measurements are biased (at the Vicon poses,
+    bearing residual −0.011 rad on average and negative for all 15 landmarks, range −0.16 to
+    −0.29 m on landmarks 3–7); the
+    filter's error from that bias is largely a rigid offset that the alignment removes, the
+    smoother's (which uses every biased measurement twice) is not.
+    """
+    from conftest import require_data
+
+    from slamrel.importers.mrclam import mrclam_bundle
+    from slamrel.validation import RECOVERY_VARIANTS, recovery_variants_table
+
+    d = require_data("mrclam", "MRCLAM_Dataset7")
+    keep = {k: RECOVERY_VARIANTS[k] for k in ("plain", "gated", "default")}
+    rows = recovery_variants_table({f"r{robot}": mrclam_bundle(d, robot)}, keep)
+    r = {row["variant"]: row for row in rows}["default"]
+    assert r["filter_ratio"] <= 1.05 and r["filter_1s_ratio"] <= 1.05
+    assert r["smoother_1s"] < r["filter_1s"] and r["smoother_raw"] < r["filter_raw"]
+    if robot != 4:
+        assert r["smoother"] < r["filter"]
+    else:
+        assert r["smoother"] < 1.05 * r["filter"]
+    assert r["gated_fraction"] == 0.0
+    assert 0.0 < r["downweight_loss"] < r["downweighted_fraction"] < 1.0
 
 
 def test_robust_recovery_does_not_hide_a_broken_map():

@@ -22,7 +22,9 @@ WORLDS = ("simple1", "simple2", "complex1", "complex2")
 PAPER_WORLDS = ("hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2")
 NOISE_TYPES = ("a", "b", "c")
 # recovery.ekf.ROBUST (without None), recovery.ekf.DEFAULT_MAX_OUTLIER_RUN
-ROBUST_CHOICES = ("huber", "cauchy")
+ROBUST_CHOICES = ("huber", "cauchy", "redescending")
+# recovery.recover.DEFAULT_ROBUST
+DEFAULT_ROBUST = "redescending"
 DEFAULT_MAX_OUTLIER_RUN = 10
 # slamrel.study.METHODS
 STUDY_METHODS = ("full", "m1", "m2", "toro")

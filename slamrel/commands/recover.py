@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 from slamrel.commands import options as opt
 from slamrel.commands.choices import (
     DEFAULT_MAX_OUTLIER_RUN,
+    DEFAULT_ROBUST,
     MAP_MODES,
     METHODS,
     ROBUST_CHOICES,
@@ -74,10 +75,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument(
         "--robust",
-        choices=ROBUST_CHOICES,
-        default=None,
+        choices=(*ROBUST_CHOICES, "none"),
+        default=DEFAULT_ROBUST,
         help="M-estimator weights on outlying innovations (smoother and batch use the same "
-        "weights; the down-weighted fraction is reported; default: none)",
+        "weights; the down-weighted fraction is reported; none: the plain EKF; "
+        "default: %(default)s)",
     )
     p.add_argument(
         "--robust-threshold",
@@ -85,7 +87,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default=None,
         metavar="C",
         help="the M-estimator's threshold on the innovation's Mahalanobis distance, in units "
-        "of the scale estimated from a plain pass (default: 1.5)",
+        "of the scale estimated from a plain pass (default: 1.75 redescending, 1.5 huber and "
+        "cauchy)",
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary")
     p.set_defaults(func=run)
@@ -144,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{FILTER_TIME_TOLERANCE:g} s): "
                 + ", ".join(f"{n} row(s) of {name}" for name, n in moved.items())
             )
-        if args.robust:
+        if args.robust != "none":
             print(
                 f"robust ({args.robust}): {c['downweighted']} measurements down-weighted "
                 f"({100 * c['downweighted_fraction']:.1f}% of associated; weight lost "

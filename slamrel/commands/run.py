@@ -10,6 +10,7 @@ from relation_metric.errors import InputError
 from slamrel.commands import options as opt
 from slamrel.commands.choices import (
     DEFAULT_MAX_OUTLIER_RUN,
+    DEFAULT_ROBUST,
     NOISE_TYPES,
     ROBUST_CHOICES,
     WORLDS,
@@ -51,9 +52,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument(
         "--robust",
-        choices=ROBUST_CHOICES,
-        default=None,
-        help="recovery: M-estimator weights on outlying innovations (default: none)",
+        choices=(*ROBUST_CHOICES, "none"),
+        default=DEFAULT_ROBUST,
+        help="recovery: M-estimator weights on outlying innovations (none: the plain EKF; "
+        "default: %(default)s)",
     )
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=run)
