@@ -12,12 +12,12 @@ from __future__ import annotations
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from recovery.ekf import GATED, OUTSIDE, UNASSOCIATED, USED, FilterInput
 from recovery.models import process_noise, range_bearing
 from relation_metric import se2
 from relation_metric.arrays import Array
+from relation_metric.consistency import chi2_quantile
 
 __all__ = ["filterpy_localisation"]
 
@@ -50,7 +50,7 @@ def filterpy_localisation(
     ekf = _UnicycleEKF(dim_x=3, dim_z=2)
     ekf.x = np.asarray(inp.x0, dtype=np.float64).reshape(3, 1).copy()
     ekf.P = np.asarray(inp.p0, dtype=np.float64).copy()
-    thr = float(chi2.ppf(gate, 2)) if gate is not None else np.inf
+    thr = chi2_quantile(gate, 2) if gate is not None else np.inf
     status = np.full(inp.meas_grid.shape[0], USED, dtype=np.int64)
     status[inp.meas_landmark < 0] = UNASSOCIATED
     status[inp.meas_grid < 0] = OUTSIDE

@@ -81,8 +81,8 @@ __all__ = [
 class MeasurementStatus(IntEnum):
     """What the recovery filter did with each measurement (:attr:`FilterResult.status`).
 
-    ``UNASSOCIATED`` is 2 here; :mod:`recovery.estimation.ekfslam` marks an unassociated
-    measurement with −1 in its own association array (a landmark row, not a status).
+    :mod:`recovery.estimation.ekfslam` marks an unassociated measurement with
+    ``NO_LANDMARK = −1`` in its association array (a landmark row, not a status).
     """
 
     USED = 0

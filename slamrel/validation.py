@@ -40,6 +40,7 @@ __all__ = [
     "RECOVERY_VARIANTS",
     "ate_at_reference_times",
     "relation_error_1s",
+    "relation_error_loops",
     "recovery_variants_table",
 ]
 
@@ -233,15 +234,44 @@ def relation_error_1s(
 ) -> float:
     """Mean translational error [m] of the 1 s relations (consecutive poses of the reference
     taken once a second; the relation metric, no alignment)."""
-    import warnings
-
-    from relation_metric.evaluate import evaluate
     from relation_metric.relations import generate_relations
     from relation_metric.trajectory import Trajectory
 
     t = reference.timestamps
     k = np.unique(np.searchsorted(t, np.arange(t[0], t[-1], 1.0)))
     rel = generate_relations(Trajectory(t[k], reference.poses[k]), "consecutive")
+    return _mean_translation_error(rel, times, poses)
+
+
+def relation_error_loops(
+    times: NDArray[np.float64],
+    poses: NDArray[np.float64],
+    reference: Any,
+    *,
+    radius: float = 0.5,
+    min_separation_time: float = 30.0,
+) -> float:
+    """Mean translational error [m] of the loop relations: pairs of reference poses (taken
+    once a second) within ``radius`` of each other and at least ``min_separation_time`` apart
+    (the relation metric, no alignment; NaN when the reference never revisits a place)."""
+    from relation_metric.relations import generate_relations
+    from relation_metric.trajectory import Trajectory
+
+    t = reference.timestamps
+    k = np.unique(np.searchsorted(t, np.arange(t[0], t[-1], 1.0)))
+    ref = Trajectory(t[k], reference.poses[k])
+    rel = generate_relations(ref, "loops", radius=radius, min_separation_time=min_separation_time)
+    return _mean_translation_error(rel, times, poses) if len(rel) else float("nan")
+
+
+def _mean_translation_error(
+    rel: Any, times: NDArray[np.float64], poses: NDArray[np.float64]
+) -> float:
+    import warnings
+
+    from relation_metric.evaluate import evaluate
+    from relation_metric.trajectory import Trajectory
+
     with warnings.catch_warnings():  # relations beyond the estimate's span are reported, not used
         warnings.simplefilter("ignore")
         return float(evaluate(rel, Trajectory(times, poses)).translation["abs"].mean)
@@ -267,7 +297,8 @@ def recovery_variants_table(
         SE(2) alignment, :func:`ate_at_reference_times`), their ratios to
         ``min(plain, gated)`` (when both variants are in the table); the same without
         alignment (``filter_raw``, ``smoother_raw``) and for the 1 s relations
-        (``filter_1s``, ``smoother_1s``, :func:`relation_error_1s`); ``gated_fraction``,
+        (``filter_1s``, ``smoother_1s``, :func:`relation_error_1s`) and the loop relations
+        (``filter_loops``, ``smoother_loops``, :func:`relation_error_loops`); ``gated_fraction``,
         ``downweighted_fraction``, ``downweight_loss``, ``stretches``, ``fraction_of_log``.
     """
     from recovery.recover import recover
@@ -286,6 +317,7 @@ def recovery_variants_table(
                 row[key] = ate_at_reference_times(t, x, gt)
                 row[f"{key}_raw"] = ate_at_reference_times(t, x, gt, align=False)
                 row[f"{key}_1s"] = relation_error_1s(t, x, gt)
+                row[f"{key}_loops"] = relation_error_loops(t, x, gt)
             row.update(
                 gated_fraction=c["gated_fraction"],
                 downweighted_fraction=c["downweighted_fraction"],
@@ -297,7 +329,7 @@ def recovery_variants_table(
         best = {r["variant"]: r for r in part}
         if "plain" in best and "gated" in best:
             for key in ("filter", "smoother", "filter_raw", "smoother_raw", "filter_1s",
-                        "smoother_1s"):  # fmt: skip
+                        "smoother_1s", "filter_loops", "smoother_loops"):  # fmt: skip
                 m = min(best["plain"][key], best["gated"][key])
                 for r in part:
                     r[f"{key}_ratio"] = r[key] / m

@@ -116,6 +116,8 @@ def test_default_recovery_meets_issue_12_on_mrclam(robot: int) -> None:
     r = {row["variant"]: row for row in rows}["default"]
     assert r["filter_ratio"] <= 1.05 and r["filter_1s_ratio"] <= 1.05
     assert r["smoother_1s"] < r["filter_1s"] and r["smoother_raw"] < r["filter_raw"]
+    # the issue's relation measure: 1 s and loop relations (revisits within 0.5 m, 30 s apart)
+    assert r["filter_loops_ratio"] <= 1.05 and r["smoother_loops"] < r["filter_loops"]
     if robot != 4:
         assert r["smoother"] < r["filter"]
     else:

@@ -24,7 +24,9 @@ rejected count is always reported (rejected measurements get association −1, s
 does not use them either). After ``max_rejected_run`` consecutive rejections the next
 measurement is taken whatever its innovation: a run of rejections means the pose, not the
 measurements, is wrong (a bump, wheel slip); without this rule a gated filter never recovers
-from it (MRCLAM dataset 7, robot 5, ~700 s: 0.9 rad of unmodelled turn).
+from it (MRCLAM dataset 7, robot 5, ~700 s: 0.9 rad of unmodelled turn). The recovery
+filter's ``max_outlier_run`` (:func:`recovery.ekf.run_filter`) answers the same symptom the
+other way: it inflates the pose covariance and re-enters, and reports the stretch.
 
 The filter keeps no trajectory by design; ``online`` poses (the pose estimate after each
 step's updates) are stored for validation only.
@@ -37,19 +39,21 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from recovery.bundle import Bundle
 from recovery.models import MotionModel, SensorModel, process_noise, range_bearing
 from recovery.steps import Steps, build_steps
 from relation_metric import se2
 from relation_metric.arrays import Array
+from relation_metric.consistency import chi2_quantile
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import Trajectory, readonly
 
 __all__ = ["EkfSlamResult", "corrupt_associations", "ekf_slam", "ekf_slam_bundle"]
 
-UNASSOCIATED = -1
+# The landmark row of a measurement no landmark was associated with (an association array
+# entry, not a status: recovery.ekf.MeasurementStatus is what the recovery filter did).
+NO_LANDMARK = -1
 # Rows of the covariance per block of the in-place update (see _update).
 _UPDATE_ROWS = 32
 
@@ -222,8 +226,8 @@ class _Gates(NamedTuple):
             raise InputError(f"outlier_gate must be in (0, 1), got {outlier}")
         if max_run < 1:
             raise InputError(f"max_rejected_run must be at least 1, got {max_run}")
-        g_out = np.inf if outlier is None else float(chi2.ppf(outlier, 2))
-        return cls(chi2.ppf(gate, 2), chi2.ppf(new, 2), g_out, max_run)
+        g_out = np.inf if outlier is None else chi2_quantile(outlier, 2)
+        return cls(chi2_quantile(gate, 2), chi2_quantile(new, 2), g_out, max_run)
 
 
 class _Filter:
@@ -257,7 +261,7 @@ class _Filter:
         (−1: rejected or unused) and the pose and its covariance after each step.
         """
         t = steps.times
-        assoc_out = np.full(z.shape[0], UNASSOCIATED, dtype=np.int64)
+        assoc_out = np.full(z.shape[0], NO_LANDMARK, dtype=np.int64)
         online = np.empty((t.size, 3))
         online_cov = np.empty((t.size, 3, 3))
         order = np.flatnonzero(used)
