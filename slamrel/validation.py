@@ -218,10 +218,10 @@ def ate_at_reference_times(
     already in the reference's frame, e.g. localised in a surveyed map).
     """
     from relation_metric.alignment import umeyama
+    from relation_metric.association import nearest_index
 
     t_ref = reference.timestamps
-    k = np.clip(np.searchsorted(times, t_ref), 1, len(times) - 1)
-    k = np.where(np.abs(times[k - 1] - t_ref) < np.abs(times[k] - t_ref), k - 1, k)
+    k = nearest_index(np.asarray(times, dtype=np.float64), t_ref)
     ok = np.abs(times[k] - t_ref) <= max_time_diff
     est, ref = poses[k[ok]], reference.poses[ok]
     moved = umeyama(est[:, :2], ref[:, :2]).apply(est) if align else est
