@@ -81,6 +81,28 @@ def test_recover_with_ground_truth_imports_no_scipy_stats(tmp_path: Path) -> Non
     assert "nees" in json.loads((tmp_path / "r.json").read_text())
 
 
+def test_help_imports_no_numpy() -> None:
+    """``slamrel --help`` builds every parser from option copies (commands/choices.py):
+    no numpy, no library module beyond the error types."""
+    code = (
+        "from slamrel.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        "    try:\n        main(['--help'])\n    except SystemExit:\n        pass\n"
+        "import json\n"
+        "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[0] in "
+        "('numpy', 'scipy', 'recovery', 'landmark_graph'))))"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    out = subprocess.run(
+        [sys.executable, "-c", "import sys, io, contextlib\n" + code],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+    )
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+
+
 def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
     from slamrel.cli import main
 

@@ -90,7 +90,7 @@ HEAVY = {  # the module that owns it: commands import the library inside their r
     "compare": ("slamrel.compare", "read_per_relation"),
     "example": ("recovery.simulation.example", "example_pair"),
     "recover": ("recovery.bundle", "read_bundle"),
-    "evaluate": ("slamrel.commands.evaluate", "load_reference"),
+    "evaluate": ("slamrel.commands.evaluate_run", "load_reference"),
     "relations": ("slamrel.commands.relations", "load_trajectory_arg"),
     "map-compare": ("landmark_graph.maps", "read_map"),
 }
