@@ -826,15 +826,24 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
     pose = tuple(float(v) for v in inp.x0)
     p = tuple(float(inp.p0[i, j]) for i, j in SYM6)
     pri_x, pri_p, post_x, post_p = [], [], [], []
+    # locals, not attribute lookups, in the per-epoch loop (10^5 epochs)
+    epochs, bounds, local, q, active = (
+        setup.epochs,
+        setup.bounds,
+        setup.local,
+        setup.q,
+        setup.active,
+    )
+    fixed = rules.fixed
     for e in bar:
-        k = setup.epochs[e]
+        k = epochs[e]
         if e > 0:
-            psi = lin[setup.epochs[e - 1]][2] if rules.fixed else pose[2]
-            pose, p = _predict(pose, p, pxm, setup.local[e], setup.q[e], psi)
+            psi = lin[epochs[e - 1]][2] if fixed else pose[2]
+            pose, p = _predict(pose, p, pxm, local[e], q[e], psi)
         pri_x.append(pose)
         pri_p.append(p)
-        at = lin[k] if rules.fixed else None
-        for j in setup.active[setup.bounds[e] : setup.bounds[e + 1]]:
+        at = lin[k] if fixed else None
+        for j in active[bounds[e] : bounds[e + 1]]:
             li = lmk[j]
             pxl = None if pxm is None else pxm[:, 2 * li : 2 * li + 2]
             y, s, re, n, h = _innovation(at or pose, p, lm_xy[li], lm_c[li], r, zz[j], pxl)
@@ -845,7 +854,7 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
             i = (s[2] / det, -s[1] / det, s[0] / det)
             v = y[0] * y[0] * i[0] + 2.0 * y[0] * y[1] * i[1] + y[1] * y[1] * i[2]
             nis[j] = v
-            if rules.fixed:
+            if fixed:
                 wj, alpha = 1.0 if w_fixed is None else w_fixed[j], 0.0
             else:
                 wj, alpha = _decide(setup, rules, reentry, v, p, (y, s, re), k, j)
@@ -858,13 +867,13 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
                     _skip(inp, setup, rules, k, j, SKIPPED_P)
                 else:
                     p, dx, gain = out
-                    if not rules.fixed:
+                    if not fixed:
                         pose = (pose[0] + dx[0], pose[1] + dx[1], pose[2] + dx[2])
                     if pxm is not None:
                         _schmidt_correct(pxm, h, gain, mapcov[2 * li : 2 * li + 2])
             if alpha:  # the re-entry: right after the run's last measurement
                 p = _inflate(p, pxm, alpha)
-        if setup.bounds[e + 1] == setup.bounds[e] and not _pd(p):
+        if bounds[e + 1] == bounds[e] and not _pd(p):
             raise DivergenceError(
                 f"filter diverged at t={float(times[k]):.6f} s: predicted covariance is not "
                 "finite positive definite"
