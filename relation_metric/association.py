@@ -163,12 +163,12 @@ def _associate_times(
     interp = np.zeros(query.shape, dtype=bool)
     odo = np.zeros(query.shape, dtype=bool)
     if interpolate and far.any() and t.size > 1:
-        a, _ = estimate.bracket(query)
+        a, s = estimate.bracket(query)
         inside = (query >= t[0]) & (query <= t[-1])
         span = t[a + 1] - t[a]
         can = far & inside & (span <= max_interpolation_gap) & (span > 0)
         if can.any():
-            poses[can] = estimate.poses_at(query[can])
+            poses[can] = group.interpolate(p[a[can]], p[a[can] + 1], s[can])
             interp[can] = True
             far = far & ~can
     if odometry is not None and far.any():

@@ -311,6 +311,7 @@ def write_figures(directory: str | Path, results: Sequence[dict[str, Any]]) -> l
     import matplotlib.pyplot as plt
 
     from relation_metric.textio import write_bytes_atomic
+    from slamrel.report import figure_png
 
     res = [r["result"] if "result" in r else r for r in results]
     out = Path(directory)
@@ -332,11 +333,8 @@ def write_figures(directory: str | Path, results: Sequence[dict[str, Any]]) -> l
             axes[-1, c].set_xlabel("pose")
         axes[0, 0].legend(loc="upper left")
         fig.tight_layout()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=90)
-        plt.close(fig)
         paths.append(out / "fig1_sigma_bounds.png")
-        write_bytes_atomic(paths[-1], buf.getvalue())
+        write_bytes_atomic(paths[-1], figure_png(fig, dpi=90))
     cases = sorted({(r["world"], r["noise"]) for r in res})
     if cases:
         fig, axes = plt.subplots(1, len(cases), figsize=(3.2 * len(cases), 3.5), squeeze=False)
@@ -353,11 +351,8 @@ def write_figures(directory: str | Path, results: Sequence[dict[str, Any]]) -> l
             ax.set_title(f"{case[0]} / {case[1]}", fontsize=9)
         axes[0, 0].set_ylabel("NEES1 (gate dashed)")
         fig.tight_layout()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=90)
-        plt.close(fig)
         paths.append(out / "fig2_nees1.png")
-        write_bytes_atomic(paths[-1], buf.getvalue())
+        write_bytes_atomic(paths[-1], figure_png(fig, dpi=90))
     return paths
 
 

@@ -235,11 +235,8 @@ def relation_error_1s(
     """Mean translational error [m] of the 1 s relations (consecutive poses of the reference
     taken once a second; the relation metric, no alignment)."""
     from relation_metric.relations import generate_relations
-    from relation_metric.trajectory import Trajectory
 
-    t = reference.timestamps
-    k = np.unique(np.searchsorted(t, np.arange(t[0], t[-1], 1.0)))
-    rel = generate_relations(Trajectory(t[k], reference.poses[k]), "consecutive")
+    rel = generate_relations(_once_a_second(reference), "consecutive")
     return _mean_translation_error(rel, times, poses)
 
 
@@ -255,13 +252,20 @@ def relation_error_loops(
     once a second) within ``radius`` of each other and at least ``min_separation_time`` apart
     (the relation metric, no alignment; NaN when the reference never revisits a place)."""
     from relation_metric.relations import generate_relations
+
+    ref = _once_a_second(reference)
+    rel = generate_relations(ref, "loops", radius=radius, min_separation_time=min_separation_time)
+    return _mean_translation_error(rel, times, poses) if len(rel) else float("nan")
+
+
+def _once_a_second(reference: Any) -> Any:
+    """The reference poses taken once a second (the first stored pose at or after each whole
+    second from the start), as a Trajectory."""
     from relation_metric.trajectory import Trajectory
 
     t = reference.timestamps
     k = np.unique(np.searchsorted(t, np.arange(t[0], t[-1], 1.0)))
-    ref = Trajectory(t[k], reference.poses[k])
-    rel = generate_relations(ref, "loops", radius=radius, min_separation_time=min_separation_time)
-    return _mean_translation_error(rel, times, poses) if len(rel) else float("nan")
+    return Trajectory(t[k], reference.poses[k])
 
 
 def _mean_translation_error(

@@ -11,7 +11,13 @@ from typing import TYPE_CHECKING
 
 from relation_metric.errors import InputError, SlamrelError
 from slamrel.commands import options as opt
-from slamrel.commands.choices import STRATEGIES, TRAJECTORY_FORMATS
+from slamrel.commands.choices import (
+    DEFAULT_MAX_OUTLIER_RUN,
+    DEFAULT_ROBUST,
+    ROBUST_CHOICES,
+    STRATEGIES,
+    TRAJECTORY_FORMATS,
+)
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from relation_metric.formats import LoadedTrajectory
@@ -195,6 +201,29 @@ def check_outputs(
     from relation_metric.outputs import check_outputs as _check_outputs
 
     _check_outputs(outputs, dirs=dirs, inputs=inputs, force=force)
+
+
+def add_recovery_arguments(parser: argparse.ArgumentParser, *, fail_help: str) -> None:
+    """``--max-outlier-run``, ``--fail-on-divergence`` (help: ``fail_help``) and ``--robust``:
+    the recovery filter's options, shared by ``recover`` and ``run``."""
+    parser.add_argument(
+        "--max-outlier-run",
+        type=opt.nonnegative_int,
+        default=DEFAULT_MAX_OUTLIER_RUN,
+        metavar="N",
+        help="after N consecutive outlying innovations the map and the log disagree: the "
+        "stretch is reported and the filter re-entered by inflating its pose covariance "
+        "(0: never re-enter; default: %(default)s)",
+    )
+    parser.add_argument("--fail-on-divergence", action="store_true", help=fail_help)
+    parser.add_argument(
+        "--robust",
+        choices=(*ROBUST_CHOICES, "none"),
+        default=DEFAULT_ROBUST,
+        help="M-estimator weights on outlying innovations (smoother and batch use the same "
+        "weights; the down-weighted fraction is reported; none: the plain EKF; "
+        "default: %(default)s)",
+    )
 
 
 def add_force_argument(parser: argparse.ArgumentParser) -> None:

@@ -8,14 +8,8 @@ import sys
 from typing import TYPE_CHECKING
 
 from slamrel.commands import options as opt
-from slamrel.commands.choices import (
-    DEFAULT_MAX_OUTLIER_RUN,
-    DEFAULT_ROBUST,
-    MAP_MODES,
-    METHODS,
-    ROBUST_CHOICES,
-)
-from slamrel.commands.common import check_outputs, errors_about
+from slamrel.commands.choices import MAP_MODES, METHODS
+from slamrel.commands.common import add_recovery_arguments, check_outputs, errors_about
 
 if TYPE_CHECKING:
     from recovery.recover import Recovery
@@ -59,27 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         action="store_true",
         help="drop (and count) measurements whose landmark is not in map.csv",
     )
-    p.add_argument(
-        "--max-outlier-run",
-        type=opt.nonnegative_int,
-        default=DEFAULT_MAX_OUTLIER_RUN,
-        metavar="N",
-        help="after N consecutive outlying innovations the map and the log disagree: the "
-        "stretch is reported and the filter re-entered by inflating its pose covariance "
-        "(0: never re-enter; default: %(default)s)",
-    )
-    p.add_argument(
-        "--fail-on-divergence",
-        action="store_true",
-        help="exit 3 at the first such stretch instead of recovering and reporting it",
-    )
-    p.add_argument(
-        "--robust",
-        choices=(*ROBUST_CHOICES, "none"),
-        default=DEFAULT_ROBUST,
-        help="M-estimator weights on outlying innovations (smoother and batch use the same "
-        "weights; the down-weighted fraction is reported; none: the plain EKF; "
-        "default: %(default)s)",
+    add_recovery_arguments(
+        p, fail_help="exit 3 at the first such stretch instead of recovering and reporting it"
     )
     p.add_argument(
         "--robust-threshold",

@@ -8,14 +8,8 @@ from pathlib import Path
 
 from relation_metric.errors import InputError
 from slamrel.commands import options as opt
-from slamrel.commands.choices import (
-    DEFAULT_MAX_OUTLIER_RUN,
-    DEFAULT_ROBUST,
-    NOISE_TYPES,
-    ROBUST_CHOICES,
-    WORLDS,
-)
-from slamrel.commands.common import add_force_argument, check_outputs
+from slamrel.commands.choices import NOISE_TYPES, WORLDS
+from slamrel.commands.common import add_force_argument, add_recovery_arguments, check_outputs
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -37,25 +31,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("--noise-scale", type=opt.positive_float, default=1.0)
     add_force_argument(p)
-    p.add_argument(
-        "--max-outlier-run",
-        type=opt.nonnegative_int,
-        default=DEFAULT_MAX_OUTLIER_RUN,
-        metavar="N",
-        help="recovery: after N consecutive outlying innovations the stretch is reported and "
-        "the filter re-entered (0: never re-enter; default: %(default)s)",
-    )
-    p.add_argument(
-        "--fail-on-divergence",
-        action="store_true",
-        help="exit 3 when the recovery diverges (the report is still written, with dead reckoning)",
-    )
-    p.add_argument(
-        "--robust",
-        choices=(*ROBUST_CHOICES, "none"),
-        default=DEFAULT_ROBUST,
-        help="recovery: M-estimator weights on outlying innovations (none: the plain EKF; "
-        "default: %(default)s)",
+    add_recovery_arguments(
+        p,
+        fail_help="exit 3 when the recovery diverges (the report is still written, with dead "
+        "reckoning)",
     )
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=run)
