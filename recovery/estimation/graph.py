@@ -281,6 +281,12 @@ def _residuals_and_jacobian(
     return lin.r, jac
 
 
+def _half_sum_sq(r: Array) -> float:
+    """``½ rᵀr``, without BLAS: OpenBLAS runs a long ``ddot`` on two threads and leaves the
+    second one spinning for ~0.1 s of CPU after it (measured: 90,000 residuals)."""
+    return 0.5 * float(np.einsum("i,i->", r, r))
+
+
 def _apply(x: Array, lm: Array, delta: Array) -> tuple[Array, Array]:
     n = x.shape[0]
     x_new = x + delta[: 3 * n].reshape(n, 3)
@@ -473,11 +479,11 @@ class _GraphProblem:
     def linearise(self, state: tuple[Array, Array]) -> Linearisation:
         lin = _linearise(self.graph, *state, self.w_pp, self.w_pl, self.prior)
         h, grad = self.normal.assemble(lin)
-        return Linearisation(0.5 * float(lin.r @ lin.r), grad, h[self.normal.diag], h)
+        return Linearisation(_half_sum_sq(lin.r), grad, h[self.normal.diag], h)
 
     def cost(self, state: tuple[Array, Array]) -> float:
         r, _ = _residuals(self.graph, *state, self.w_pp, self.w_pl, self.prior)
-        return 0.5 * float(r @ r)
+        return _half_sum_sq(r)
 
     def solve(self, lin: Linearisation, damping: Array) -> Array:
         return self.normal.solve(lin.system, damping, -lin.gradient)
@@ -654,7 +660,7 @@ def solve_graph_incremental(
     return GraphSolution(
         poses=readonly(x),
         landmarks=readonly(lm),
-        cost=readonly(np.concatenate(([0.5 * float(r0 @ r0)], sol.cost[1:]))),
+        cost=readonly(np.concatenate(([_half_sum_sq(r0)], sol.cost[1:]))),
         iterations=iterations,
         converged=sol.converged,
     )

@@ -11,14 +11,16 @@ Back-ends, chosen when the object is built:
     (``Solver.update``: numeric factorisation only). No supernodes, so its time grows with
     the flops: the right choice for graphs with little fill (a pose chain with landmarks:
     Victoria Park, 2.1·10⁴ unknowns, 2 ms per factorisation against 21 ms for SuperLU).
-``"cholmod"`` (optional extra ``fast``: the ``cholespy`` wheel)
-    CHOLMOD's supernodal Cholesky (BLAS-3 on dense supernodes, METIS/AMD ordering). The
-    wheel re-runs the analysis at each factorisation (it exposes no numeric-only
-    refactorisation), which costs more than QDLDL's whole factorisation on low-fill graphs
-    (43 ms on Victoria Park), but on graphs with much fill (2-D loop structure: a
-    10⁴-pose Manhattan grid, 3.2·10⁶ entries in L) it is 4× QDLDL (0.26 s against 1.04 s).
-    Its wheel bundles CHOLMOD's Supernodal module (GPL-2.0+), so it is an extra, not a core
-    dependency of this BSD-3 package.
+``"cholmod"`` (optional extra ``fast``: the ``cvxopt`` wheel)
+    CHOLMOD's supernodal Cholesky (BLAS-3 on dense supernodes) through ``cvxopt.cholmod``:
+    the ordering (CHOLMOD's AMD) and the symbolic analysis once per pattern
+    (``cholmod.symbolic``), then a numeric factorisation only per call (``cholmod.numeric``).
+    On graphs with much fill (2-D loop structure: a 10⁴-pose Manhattan grid, 3.6·10⁶
+    entries in L) it is 20× QDLDL (46 ms against 1.04 s);
+    on low-fill graphs QDLDL is as fast or faster (Victoria Park: 4 ms against 2 ms).
+    cvxopt is GPL-3.0 and bundles CHOLMOD's GPL-2.0+ Supernodal module, so it is an extra,
+    not a core dependency of this BSD-3 package. (Before: the ``cholespy`` wheel, which
+    re-ran the analysis at every factorisation and took no ordering: 0.21-0.26 s there.)
 ``"superlu"`` (fallback: scipy only)
     scipy's SuperLU in symmetric mode, no pivoting, minimum-degree ordering on ``A + Aᵀ``
     (an LU with a Cholesky's fill); no reuse between factorisations. Used when neither
@@ -54,10 +56,14 @@ __all__ = [
 ]
 
 #: Expected flops (``Σ_j c_j²`` over the columns of the Cholesky factor) above which CHOLMOD's
-#: supernodal factorisation (analysis included) beats QDLDL's numeric refactorisation.
-#: Measured: Victoria Park 2.9·10⁶ (QDLDL 2 ms, CHOLMOD 43 ms), Manhattan 10⁴ poses
-#: 1.3·10⁹ (QDLDL 1.04 s, CHOLMOD 0.26 s); the crossover lies near 10⁸.
-CHOLMOD_MIN_FLOPS = 1e8
+#: supernodal numeric factorisation beats QDLDL's (both reuse their analysis). Measured per
+#: factorisation + solve (``benchmarks/bench_sparse_cholesky.py``; flops as
+#: :mod:`~recovery.estimation.graph` estimates them from the block graph): Manhattan 10³
+#: poses 6.7·10⁵ (QDLDL 0.6 ms, CHOLMOD 1.0 ms), Victoria Park 4.9·10⁶ (8.1 and 7.2 ms,
+#: loaded run), Manhattan 2·10³ 5.8·10⁶ (3.1 and 2.5 ms), 3.5·10³ 2.8·10⁷ (13.8 and
+#: 9.7 ms), 10⁴ 1.35·10⁹ (509 and 54 ms): the crossover lies near 5·10⁶; above 10⁷
+#: CHOLMOD is clearly ahead (below, QDLDL keeps Victoria Park's results as they were).
+CHOLMOD_MIN_FLOPS = 1e7
 
 _SINGULAR = "the normal equations are singular (unobserved states?)"
 
@@ -66,7 +72,7 @@ def available_backends() -> tuple[str, ...]:
     """The back-ends whose libraries are installed, fastest first (``"superlu"`` always)."""
     found = [
         name
-        for name, module in (("cholmod", "cholespy"), ("qdldl", "qdldl"))
+        for name, module in (("cholmod", "cvxopt"), ("qdldl", "qdldl"))
         if importlib.util.find_spec(module) is not None
     ]
     return (*found, "superlu")
@@ -178,6 +184,8 @@ class SparseCholesky:
         self._upper_matrix = sp.csc_matrix(
             (np.zeros(self._upper.size), self.indices[upper], upper_indptr.astype(np.int32)), shape
         )
+        self._lower = np.flatnonzero(self.indices >= col)  # CHOLMOD reads the lower triangle
+        self._matrix: Any = None  # CHOLMOD: the cvxopt matrix whose values factor() replaces
         self._factor: Any = None
 
     def factor(self, data: Array) -> None:
@@ -197,17 +205,24 @@ class SparseCholesky:
                 raise DivergenceError(_SINGULAR) from None
             self._full.data[:] = data  # for the residual check in solve
         elif self.backend == "cholmod":
-            import cholespy
+            import cvxopt
+            from cvxopt import cholmod
 
-            try:  # copies: the wheel sorts the index and value arrays it is given in place
-                self._factor = cholespy.CholeskySolverD(
-                    self.size,
-                    self.indptr.copy(),
-                    self.indices.copy(),
-                    data.copy(),
-                    cholespy.MatrixType.CSC,
-                )
-            except ValueError:  # "Matrix is not positive definite!"
+            values = cvxopt.matrix(data[self._lower])
+            try:
+                if self._factor is None:  # ordering + symbolic analysis, once per pattern
+                    col = np.repeat(np.arange(self.size, dtype=np.int32), np.diff(self.indptr))
+                    self._matrix = cvxopt.spmatrix(
+                        values,
+                        cvxopt.matrix(self.indices[self._lower]),
+                        cvxopt.matrix(col[self._lower]),
+                        (self.size, self.size),
+                    )
+                    self._factor = cholmod.symbolic(self._matrix)
+                else:  # same pattern, same (CSC) order of the values: numeric only
+                    self._matrix.V = values
+                cholmod.numeric(self._matrix, self._factor)
+            except ArithmeticError:  # "not positive definite"
                 raise DivergenceError(_SINGULAR) from None
         else:
             try:
@@ -226,9 +241,12 @@ class SparseCholesky:
             raise RuntimeError("SparseCholesky.solve before factor")
         b = np.ascontiguousarray(rhs, dtype=np.float64)
         if self.backend == "cholmod":
-            x = np.zeros_like(b)
-            self._factor.solve(b, x)
-            return x
+            import cvxopt
+            from cvxopt import cholmod
+
+            x = cvxopt.matrix(np.asfortranarray(b))
+            cholmod.solve(self._factor, x)
+            return np.array(x).reshape(b.shape)
         if self.backend != "qdldl":
             return self._factor.solve(b)
         if b.ndim == 2:
