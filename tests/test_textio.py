@@ -162,3 +162,53 @@ def test_source_text_cut_off_line_rules():
     assert SourceText("f", ["1 2", "# c"], ends_with_newline=False).cut_off_line() is None
     assert SourceText("f", ["1 2", "  "], ends_with_newline=False).cut_off_line() is None
     assert SourceText("f", ["1 2", "3 4"], ends_with_newline=True).cut_off_line() is None
+
+
+# --- keyword records (g2o, iSAM text): the one-pass path and the diagnosing fallback -------
+
+from relation_metric.textio import (  # noqa: E402
+    _keyword_records_fast,
+    read_keyword_records,
+)
+
+KINDS = {"A": 3, "B": 2}
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from("AB"), decimal, decimal), min_size=0, max_size=30))
+def test_keyword_records_one_pass_equals_python_float(tmp_path_factory, records):
+    path = tmp_path_factory.mktemp("k") / "k.txt"
+    lines = ["# a comment", ""]  # line numbers count these
+    for kind, u, v in records:
+        lines.append(f"{kind} {u:f} {v:f}" if kind == "A" else f"{kind}  {u:e}")
+    path.write_text("\n".join(lines) + "\n")
+    fast = _keyword_records_fast(read_source(path), KINDS)
+    assert fast is not None
+    got = read_keyword_records(path, KINDS)
+    for kind, n in KINDS.items():
+        rows = [(i + 3, r) for i, r in enumerate(records) if r[0] == kind]  # 1-based, 2 skipped
+        want = [[float(f"{u:f}"), float(f"{v:f}")] if kind == "A" else [float(f"{u:e}")]
+                for _, (_, u, v) in rows]  # fmt: skip
+        for values, numbers in (fast[kind], got[kind]):
+            assert values.shape == (len(rows), n - 1)
+            np.testing.assert_array_equal(values, np.reshape(want, (-1, n - 1)))  # bit for bit
+            np.testing.assert_array_equal(numbers, [i for i, _ in rows])
+
+
+@pytest.mark.parametrize(
+    "text,line,msg",
+    [
+        ("A 1 2\nB nan\nC 1\n", 2, "finite"),  # the first bad line wins, not the unknown record
+        ("A 1 2\nB 1\nA 1 0x2\nB 1 2\n", 3, "got '0x2'"),
+        ("A 1 2\nB 1 2\nA 1 inf\n", 2, "expected 2 fields"),
+        ("A 1 2\nB 1\nA 1 1_0\n", 3, "got '1_0'"),
+        ("A 1 2\nD 4\n", 2, "unknown record 'D'"),
+    ],
+)
+def test_keyword_records_errors_name_the_first_bad_line(tmp_path, text, line, msg):
+    p = tmp_path / "k.txt"
+    p.write_text(text)
+    assert _keyword_records_fast(read_source(p), KINDS) is None
+    with pytest.raises(InputError) as err:
+        read_keyword_records(p, KINDS)
+    assert f"k.txt:{line}:" in str(err.value) and msg in str(err.value)
