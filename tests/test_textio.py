@@ -58,9 +58,14 @@ def test_fast_path_refuses_what_the_strict_reader_rejects(tmp_path, text, line, 
     p = tmp_path / "b.txt"
     p.write_text(text)
     assert _fast_table(p, 2, "#") is None
+    assert_error_at(lambda: read_numeric_table(p, columns=("a", "b")), f"b.txt:{line}:", msg)
+
+
+def assert_error_at(read, where, msg):
+    """``read()`` raises an :class:`InputError` naming ``where`` (``FILE:LINE:``) and ``msg``."""
     with pytest.raises(InputError) as err:
-        read_numeric_table(p, columns=("a", "b"))
-    assert f"b.txt:{line}:" in str(err.value) and msg in str(err.value)
+        read()
+    assert where in str(err.value) and msg in str(err.value)
 
 
 # --- the one header-CSV table reader --------------------------------------------------
@@ -209,6 +214,4 @@ def test_keyword_records_errors_name_the_first_bad_line(tmp_path, text, line, ms
     p = tmp_path / "k.txt"
     p.write_text(text)
     assert _keyword_records_fast(read_source(p), KINDS) is None
-    with pytest.raises(InputError) as err:
-        read_keyword_records(p, KINDS)
-    assert f"k.txt:{line}:" in str(err.value) and msg in str(err.value)
+    assert_error_at(lambda: read_keyword_records(p, KINDS), f"k.txt:{line}:", msg)
