@@ -325,7 +325,7 @@ class _NormalEquations:
     CHOLMOD, with the ``fast`` extra, is taken when the factor is large; SuperLU is the
     fallback):
 
-    * QDLDL (AMD) and CHOLMOD (AMD/METIS) order the scalar matrix themselves: the variables
+    * QDLDL (AMD) and CHOLMOD (AMD) order the scalar matrix themselves: the variables
       keep their natural order (measured with QDLDL on a 10⁴-pose Manhattan graph: 3.03·10⁶
       entries in L from the natural order, 3.16·10⁶ from the block order below). When
       CHOLMOD is installed, the expected work ``27 Σ c²`` (``c``: column counts of the
