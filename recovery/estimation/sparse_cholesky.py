@@ -170,11 +170,16 @@ class SparseCholesky:
     ) -> None:
         self.size = int(size)
         self.indptr = np.asarray(indptr, dtype=np.int32)
-        self.indices = np.asarray(indices, dtype=np.int32)
+        indices = np.asarray(indices, dtype=np.int32)
         self.backend = choose_backend(flops) if backend is None else backend
         if self.backend not in ("qdldl", "cholmod", "superlu"):
             raise ValueError(f"unknown sparse Cholesky back-end {self.backend}")
         col = np.repeat(np.arange(self.size, dtype=np.int32), np.diff(self.indptr))
+        # valid CSC may list a column's rows in any order; SuperLU and cvxopt's spmatrix.V
+        # assume them sorted, so the pattern is sorted once and factor() permutes the values
+        order = np.lexsort((indices, col))
+        self._order = None if np.array_equal(order, np.arange(order.size)) else order
+        self.indices = indices if self._order is None else indices[order]
         upper = self.indices <= col
         self._upper = np.flatnonzero(upper)  # slots of the upper triangle, in CSC order
         upper_indptr = np.concatenate(([0], np.cumsum(np.bincount(col[upper], minlength=size))))
@@ -191,6 +196,8 @@ class SparseCholesky:
     def factor(self, data: Array) -> None:
         """Factorise the matrix with values ``data`` (shape ``(nnz,)``) in the stored pattern."""
         data = np.ascontiguousarray(data, dtype=np.float64)
+        if self._order is not None:
+            data = data[self._order]
         if self.backend == "qdldl":
             import qdldl
 
