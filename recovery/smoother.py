@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from recovery.ekf import FilterResult, world_steps
+from recovery.ekf import FilterResult
 from relation_metric.arrays import Array
 from relation_metric.se2 import shear
 
@@ -74,7 +74,7 @@ def smooth(fr: FilterResult) -> SmootherResult:
     seg = fr.segments
     ep = seg.epochs
     n_e = ep.shape[0]
-    w = world_steps(seg, fr.psi)  # pose k relative to its base epoch, world frame
+    w = fr.steps  # pose k relative to its base epoch, world frame
     post_x, post_p = fr.post_poses, fr.post_covariances
     pri_x, pri_p = fr.prior_poses, fr.prior_covariances
     inv_pri = np.linalg.inv(pri_p)
