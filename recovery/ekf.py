@@ -429,14 +429,16 @@ class _ReentryRule:
         #: measurements, is suspect, so robust weights are suspended (re-acquisition)
         self.reacquiring = False
 
-    def observe(self, v: float, p: tuple, t: float, j: int) -> float:
-        """Count measurement ``j`` (NIS ``v``, prior covariance ``p``); ``α`` or 0.
+    def observe(self, v: float, p: tuple, k: int, j: int) -> float:
+        """Count measurement ``j`` (NIS ``v``, prior covariance ``p``, grid index ``k``); ``α``
+        or 0.
 
         ``α = max(1, min(median NIS of the run / bound, extent² / max(p_xx, p_yy),
         π² / p_θθ))`` after ``max_run`` consecutive outliers (then the count restarts).
         """
         if not v > self.bound:
-            self.run, self.nis, self.reacquiring = 0, [], False
+            if self.run or self.reacquiring:  # (the common case, an inlier after inliers,
+                self.run, self.nis, self.reacquiring = 0, [], False  # changes nothing)
             return 0.0
         if self.run == 0:
             self.start = j
@@ -447,7 +449,7 @@ class _ReentryRule:
         if self.raise_:
             _diverged(
                 self.inp,
-                t,
+                self.inp.times[k],
                 j,
                 f"{self.run} consecutive innovations beyond the χ² bound {self.bound:.2f} "
                 f"(since {self.inp.label(self.start)})",
@@ -517,15 +519,16 @@ def _innovation(pose, p, lm, lm_c, r, z, pxl):  # type: ignore[no-untyped-def]
     re00 = r[0] + t00 * h00 + t01 * h01
     re01 = t00 * h10 + t01 * h11
     re11 = r[1] + t10 * h10 + t11 * h11
-    a0 = -h00 * p00 - h01 * p01
-    a1 = -h00 * p01 - h01 * p11
-    a2 = -h00 * p02 - h01 * p12
-    b0 = -h10 * p00 - h11 * p01 - p02
-    b1 = -h10 * p01 - h11 * p11 - p12
-    b2 = -h10 * p02 - h11 * p12 - p22
-    s00 = -h00 * a0 - h01 * a1 + re00
-    s01 = -h00 * b0 - h01 * b1 + re01
-    s11 = -h10 * b0 - h11 * b1 - b2 + re11
+    m00, m10 = -h00, -h10  # H_x's leading entries (negated once, not per product)
+    a0 = m00 * p00 - h01 * p01
+    a1 = m00 * p01 - h01 * p11
+    a2 = m00 * p02 - h01 * p12
+    b0 = m10 * p00 - h11 * p01 - p02
+    b1 = m10 * p01 - h11 * p11 - p12
+    b2 = m10 * p02 - h11 * p12 - p22
+    s00 = m00 * a0 - h01 * a1 + re00
+    s01 = m00 * b0 - h01 * b1 + re01
+    s11 = m10 * b0 - h11 * b1 - b2 + re11
     if pxl is not None:  # Schmidt: the pose-landmark cross-covariance enters S and N
         bm = pxl @ np.array([[h00, h10], [h01, h11]])  # P_xl H_lᵀ, 3 × 2
         (c00, c01), (c10, c11), (c20, c21) = bm.tolist()
@@ -569,16 +572,16 @@ def _correct(p: tuple, n: tuple, i: tuple, y: tuple):  # type: ignore[no-untyped
         return None
     y0, y1 = y
     dx = (k00 * y0 + k01 * y1, k10 * y0 + k11 * y1, k20 * y0 + k21 * y1)
-    return post, dx, ((k00, k01), (k10, k11), (k20, k21))
+    return post, dx, (k00, k01, k10, k11, k20, k21)
 
 
 def _schmidt_correct(pxm: Array, h: tuple, gain: tuple, map_rows: Array) -> None:
-    """``P_xm ← P_xm − K (H_x P_xm + H_l Σ_lm)`` in place (``map_rows``: the landmark's 2 rows
-    of the map covariance)."""
+    """``P_xm ← P_xm − K (H_x P_xm + H_l Σ_lm)`` in place (``gain``: K's 6 entries row by row,
+    ``map_rows``: the landmark's 2 rows of the map covariance)."""
     h00, h01, h10, h11 = h
     hx = np.array([[-h00, -h01, 0.0], [-h10, -h11, -1.0]])
     hl = np.array([[h00, h01], [h10, h11]])
-    pxm -= np.array(gain) @ (hx @ pxm + hl @ map_rows)
+    pxm -= np.array(gain).reshape(3, 2) @ (hx @ pxm + hl @ map_rows)
 
 
 def _inflate(p: tuple, pxm, alpha: float) -> tuple:  # type: ignore[no-untyped-def]
@@ -833,7 +836,7 @@ def _decide(setup, rules, reentry, v, p, ysr, k, j) -> tuple[float, float]:  # t
     """Gate, robust weight and re-entry of a measurement with NIS ``v`` (not the covariance-only
     pass): ``(w, α)``, ``w = 0`` when gated, ``α`` the re-entry's inflation (0: none)."""
     reacquiring = reentry.reacquiring  # read before this measurement is counted
-    alpha = reentry.observe(v, p, reentry.inp.times[k], j)
+    alpha = reentry.observe(v, p, k, j)
     if alpha:
         setup.events.append((k, j, REENTRY, alpha))
     if v > rules.gate:
