@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import math
 import sys
+from array import array
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -266,7 +267,7 @@ def prepare_segments(
     dth = heading - heading[base]
     h_e = heading[epochs]
     c, s = np.cos(h_e)[epoch_of], np.sin(h_e)[epoch_of]  # = cos, sin of heading[base]
-    dp = position - position[base]
+    dp = position - np.take(position, base, axis=0)  # (np.take: 3-6x numpy's row indexing)
     local = np.column_stack((c * dp[:, 0] + s * dp[:, 1], -s * dp[:, 0] + c * dp[:, 1], dth))
     q = np.zeros((6, n))
     if n < 2:
@@ -795,11 +796,16 @@ def run_filter(
     return _result(setup, rules, linearize_at, pri_x, pri_p, post_x, post_p)
 
 
+def _rows(values: array, width: int) -> Array:
+    """(E, width) float64 array (a copy) of the loop's flat ``array('d')``."""
+    return np.frombuffer(values, dtype=np.float64).reshape(-1, width).copy()
+
+
 def _result(setup: _Setup, rules: _Rules, lin, pri_x, pri_p, post_x, post_p) -> FilterResult:  # type: ignore[no-untyped-def]
     """Arrays of the loop's lists; every grid pose filled from its epoch's posterior."""
     seg, epochs = setup.seg, np.asarray(setup.epochs, dtype=np.int64)
-    post_xa = np.array(post_x)
-    post_p6 = np.array(post_p)
+    post_xa = _rows(post_x, 3)
+    post_p6 = _rows(post_p, 6)
     post_pa = _full(post_p6.T)
     psi = np.asarray(lin, dtype=np.float64)[epochs, 2] if rules.fixed else post_xa[:, 2]
     steps, poses, covs = fill(seg, psi, post_xa, post_p6)
@@ -812,8 +818,8 @@ def _result(setup: _Setup, rules: _Rules, lin, pri_x, pri_p, post_x, post_p) -> 
         poses=poses,
         covariances=covs,
         segments=seg,
-        prior_poses=np.array(pri_x),
-        prior_covariances=_full(np.array(pri_p).T),
+        prior_poses=_rows(pri_x, 3),
+        prior_covariances=_full(_rows(pri_p, 6).T),
         post_poses=post_xa,
         post_covariances=post_pa,
         status=readonly(setup.status, np.int64),
@@ -872,7 +878,8 @@ def _weight(rules: _Rules, v: float, y: tuple, s: tuple, re: tuple) -> float:
 def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _ReentryRule, bar):  # type: ignore[no-untyped-def]
     """The scalar recursion over the epochs: predict, then each measurement of the epoch.
 
-    Returns the priors and posteriors at the epochs (lists of tuples) and fills
+    Returns the priors and posteriors at the epochs (flat ``array('d')``, 3 or 6 values per
+    epoch) and fills
     ``setup.status``, ``setup.nis``, ``setup.weights`` and ``setup.events`` in place.
     """
     lm_xy, lm_c, r, zz, lmk = setup.lm_xy, setup.lm_c, setup.r, setup.z, setup.landmark
@@ -880,7 +887,9 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
     nis, wts, times = setup.nis, setup.weights, inp.times
     pose = tuple(float(v) for v in inp.x0)
     p = tuple(float(inp.p0[i, j]) for i, j in SYM6)
-    pri_x, pri_p, post_x, post_p = [], [], [], []
+    # raw doubles (array.array), not lists of tuples: the arrays are read back without
+    # chasing 10^5 float objects scattered over the heap
+    pri_x, pri_p, post_x, post_p = array("d"), array("d"), array("d"), array("d")
     # locals, not attribute lookups, in the per-epoch loop (10^5 epochs)
     epochs, bounds, local, q, active = (
         setup.epochs,
@@ -895,8 +904,8 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
         if e > 0:
             psi = lin[epochs[e - 1]][2] if fixed else pose[2]
             pose, p = _predict(pose, p, pxm, local[e], q[e], psi)
-        pri_x.append(pose)
-        pri_p.append(p)
+        pri_x.extend(pose)
+        pri_p.extend(p)
         at = lin[k] if fixed else None
         for j in active[bounds[e] : bounds[e + 1]]:
             li = lmk[j]
@@ -933,8 +942,8 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
                 f"filter diverged at t={float(times[k]):.6f} s: predicted covariance is not "
                 "finite positive definite"
             )
-        post_x.append(pose)
-        post_p.append(p)
+        post_x.extend(pose)
+        post_p.extend(p)
     return pri_x, pri_p, post_x, post_p
 
 
@@ -981,8 +990,8 @@ def fill(seg: Segments, psi: Array, post_x: Array, post_p6: Array) -> tuple[Arra
     rot = _base_rotation(seg, psi)
     w = world_steps(seg, psi, rot)
     e_of = seg.epoch_of
-    poses = post_x[e_of] + w
-    pb = np.ascontiguousarray(post_p6.T)[:, e_of]
+    poses = np.take(post_x, e_of, axis=0) + w
+    pb = np.take(np.ascontiguousarray(post_p6.T), e_of, axis=1)
     p6 = predict6(tuple(pb), tuple(seg.q), rot[0], rot[1], w[:, 0], w[:, 1])
     return w, poses, _full(p6)
 
