@@ -213,8 +213,8 @@ def predict6(p: tuple, q: tuple, c, s, dx, dy) -> tuple:  # type: ignore[no-unty
 SYM6 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
-def _rotated_noise(sigma: Array, c: Array, s: Array) -> Array:
-    """``Rot(φ) Σ Rot(φ)ᵀ`` of every step, 6 unique entries, shape (6, N − 1).
+def _rotated_noise(sigma: Array, c: Array, s: Array, out: Array) -> None:
+    """``Rot(φ) Σ Rot(φ)ᵀ`` of every step, 6 unique entries, into ``out`` (6, N − 1).
 
     :func:`predict6` with ``P = 0`` and ``Δ = 0``, with its zero terms dropped: adding ``+0``
     only turns ``−0`` into ``+0``, which the ``+ 0.0`` kept after each first term repeats, so
@@ -222,14 +222,13 @@ def _rotated_noise(sigma: Array, c: Array, s: Array) -> Array:
     """
     q00, q01, q02, q11, q12, q22 = (sigma[:, i, j] for i, j in SYM6)
     cc, ss, cs = c * c, s * s, c * s
-    out = np.empty((6, c.shape[0]))
-    out[0] = (cc * q00 + 0.0) - 2.0 * cs * q01 + ss * q11
+    cs2q01 = 2.0 * cs * q01  # the same product in entries 00 and 11
+    out[0] = (cc * q00 + 0.0) - cs2q01 + ss * q11
     out[1] = (cs * (q00 - q11) + 0.0) + (cc - ss) * q01
     out[2] = (c * q02 + 0.0) - s * q12
-    out[3] = (ss * q00 + 0.0) + 2.0 * cs * q01 + cc * q11
+    out[3] = (ss * q00 + 0.0) + cs2q01 + cc * q11
     out[4] = (s * q02 + 0.0) + c * q12
     out[5] = q22 + 0.0
-    return out
 
 
 def prepare_segments(
@@ -274,12 +273,11 @@ def prepare_segments(
         return Segments(epochs, base, local, q, epoch_of)
     a = base[1:]  # step m (pose m -> m+1) belongs to the segment of pose m + 1
     phi = heading[:-1] - heading[a]
-    qm = _rotated_noise(sigma, np.cos(phi), np.sin(phi))
-    f0, f1 = -local[1:, 1], local[1:, 0]
-    q02, q12, q22 = qm[2], qm[4], qm[5]
     # the 15 series; their cumulative sums go to cum[:, 1:] (cum[:, 0] = 0 before any step)
     terms = np.empty((15, n - 1))
-    terms[:6] = qm
+    _rotated_noise(sigma, np.cos(phi), np.sin(phi), terms[:6])
+    f0, f1 = -local[1:, 1], local[1:, 0]
+    q02, q12, q22 = terms[2], terms[4], terms[5]
     np.multiply(f0, (q02, q12, q22), out=terms[6:9])
     np.multiply(f1, (q02, q12, q22), out=terms[9:12])
     g = q22 * f0
@@ -296,11 +294,13 @@ def prepare_segments(
     c00, c01, c02, c10, c11, c12 = seg[6:12]
     g00, g01, g11 = seg[12:15]
     e0, e1 = f0, f1  # e(d_k) for pose k = m + 1
-    q[0, 1:] = a00 + 2 * e0 * a02 - 2 * c00 + a22 * e0 * e0 - 2 * e0 * c02 + g00
-    q[1, 1:] = a01 + e0 * a12 + a02 * e1 - c01 - c10 + a22 * e0 * e1 - e0 * c12 - c02 * e1 + g01
-    q[2, 1:] = a02 + e0 * a22 - c02
-    q[3, 1:] = a11 + 2 * e1 * a12 - 2 * c11 + a22 * e1 * e1 - 2 * e1 * c12 + g11
-    q[4, 1:] = a12 + e1 * a22 - c12
+    # products used twice are formed once (the same operands, so the same bits)
+    t0, t1, ae0, ae1 = 2 * e0, 2 * e1, a22 * e0, a22 * e1
+    q[0, 1:] = a00 + t0 * a02 - 2 * c00 + ae0 * e0 - t0 * c02 + g00
+    q[1, 1:] = a01 + e0 * a12 + a02 * e1 - c01 - c10 + ae0 * e1 - e0 * c12 - c02 * e1 + g01
+    q[2, 1:] = a02 + ae0 - c02
+    q[3, 1:] = a11 + t1 * a12 - 2 * c11 + ae1 * e1 - t1 * c12 + g11
+    q[4, 1:] = a12 + ae1 - c12
     q[5, 1:] = a22
     return Segments(epochs, base, local, q, epoch_of)
 
