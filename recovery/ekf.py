@@ -20,10 +20,11 @@ between two measurement epochs is one shear plus an accumulated process noise
 ``Σ_m S(d_m) Q_m S(d_m)ᵀ``; expanding ``S`` makes that sum a combination of segmented
 cumulative sums computed for every grid pose at once with numpy. Only the per-epoch work
 (one composed prediction, the updates) runs in a Python loop, written on scalars because
-numpy's per-call overhead exceeds the arithmetic on 3 × 3 matrices. The result equals the
-per-step EKF (``recovery.baseline``) to rounding. The update uses
-``P ← P − K S Kᵀ`` (equal to the Joseph form for the optimal gain, cheaper on scalars); the
-covariance is checked to be finite and positive definite after every update.
+numpy's per-call overhead exceeds the arithmetic on 3 × 3 matrices (angles are wrapped by
+:func:`_wrap`, numpy's formula on one float). The result equals the per-step EKF
+(``recovery.baseline``) to rounding. The update uses ``P ← P − K S Kᵀ`` (equal to the Joseph
+form for the optimal gain, cheaper on scalars); the covariance is checked to be finite and
+positive definite after every update.
 
 **Divergence is a finding.** Runs of outlying innovations (NIS beyond the gate or the 99.99%
 χ² bound) are where the map and the log disagree; after ``max_outlier_run`` of them the
@@ -470,7 +471,7 @@ _TWO_PI = 2.0 * math.pi
 
 def _wrap(a: float) -> float:
     """:func:`relation_metric.se2.wrap_angle` of one float, bit for bit, in plain Python
-    (numpy's per-call overhead is ~10 µs, the arithmetic 0.1 µs); ``%`` on floats is numpy's
+    (numpy's per-call overhead is several µs, the arithmetic 0.1 µs); ``%`` on floats is numpy's
     ``mod`` (both fold C's ``fmod`` onto the divisor's sign). Non-finite angles go to numpy."""
     if -math.pi <= a < math.pi:
         return a
@@ -879,8 +880,8 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
     """The scalar recursion over the epochs: predict, then each measurement of the epoch.
 
     Returns the priors and posteriors at the epochs (flat ``array('d')``, 3 or 6 values per
-    epoch) and fills
-    ``setup.status``, ``setup.nis``, ``setup.weights`` and ``setup.events`` in place.
+    epoch) and fills ``setup.status``, ``setup.nis``, ``setup.weights`` and ``setup.events``
+    in place.
     """
     lm_xy, lm_c, r, zz, lmk = setup.lm_xy, setup.lm_c, setup.r, setup.z, setup.landmark
     pxm, mapcov, lin, w_fixed = setup.pxm, inp.map_covariance, setup.lin, setup.w_fixed
@@ -960,7 +961,7 @@ def _full(cols) -> Array:  # type: ignore[no-untyped-def]
 
 def _base_rotation(seg: Segments, psi: Array) -> tuple[Array, Array]:
     """``cos ψ_b, sin ψ_b`` of every grid pose's base epoch, shape (N,) each: computed per
-    epoch, then repeated (the same values as on the repeated angles, at 1/20 of the work)."""
+    epoch, then repeated (the same values as on the repeated angles, E evaluations, not N)."""
     return np.cos(psi)[seg.epoch_of], np.sin(psi)[seg.epoch_of]
 
 
