@@ -20,10 +20,11 @@ between two measurement epochs is one shear plus an accumulated process noise
 ``Σ_m S(d_m) Q_m S(d_m)ᵀ``; expanding ``S`` makes that sum a combination of segmented
 cumulative sums computed for every grid pose at once with numpy. Only the per-epoch work
 (one composed prediction, the updates) runs in a Python loop, written on scalars because
-numpy's per-call overhead exceeds the arithmetic on 3 × 3 matrices. The result equals the
-per-step EKF (``recovery.baseline``) to rounding. The update uses
-``P ← P − K S Kᵀ`` (equal to the Joseph form for the optimal gain, cheaper on scalars); the
-covariance is checked to be finite and positive definite after every update.
+numpy's per-call overhead exceeds the arithmetic on 3 × 3 matrices (angles are wrapped by
+:func:`_wrap`, numpy's formula on one float). The result equals the per-step EKF
+(``recovery.baseline``) to rounding. The update uses ``P ← P − K S Kᵀ`` (equal to the Joseph
+form for the optimal gain, cheaper on scalars); the covariance is checked to be finite and
+positive definite after every update.
 
 **Divergence is a finding.** Runs of outlying innovations (NIS beyond the gate or the 99.99%
 χ² bound) are where the map and the log disagree; after ``max_outlier_run`` of them the
@@ -45,6 +46,7 @@ from __future__ import annotations
 
 import math
 import sys
+from array import array
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -179,12 +181,15 @@ class Segments:
     local : ndarray, shape (N, 3)
     q : ndarray, shape (6, N)
         Unique entries ``(00, 01, 02, 11, 12, 22)`` of the accumulated process noise.
+    epoch_of : ndarray of int, shape (N,)
+        Index into ``epochs`` of ``base`` (``epochs[epoch_of] == base``).
     """
 
     epochs: NDArray[np.int64]
     base: NDArray[np.int64]
     local: Array
     q: Array
+    epoch_of: NDArray[np.int64]
 
 
 def predict6(p: tuple, q: tuple, c, s, dx, dy) -> tuple:  # type: ignore[no-untyped-def]
@@ -207,6 +212,24 @@ def predict6(p: tuple, q: tuple, c, s, dx, dy) -> tuple:  # type: ignore[no-unty
 
 
 SYM6 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+def _rotated_noise(sigma: Array, c: Array, s: Array, out: Array) -> None:
+    """``Rot(φ) Σ Rot(φ)ᵀ`` of every step, 6 unique entries, into ``out`` (6, N − 1).
+
+    :func:`predict6` with ``P = 0`` and ``Δ = 0``, with its zero terms dropped: adding ``+0``
+    only turns ``−0`` into ``+0``, which the ``+ 0.0`` kept after each first term repeats, so
+    every entry is bit for bit ``predict6``'s.
+    """
+    q00, q01, q02, q11, q12, q22 = (sigma[:, i, j] for i, j in SYM6)
+    cc, ss, cs = c * c, s * s, c * s
+    cs2q01 = 2.0 * cs * q01  # the same product in entries 00 and 11
+    out[0] = (cc * q00 + 0.0) - cs2q01 + ss * q11
+    out[1] = (cs * (q00 - q11) + 0.0) + (cc - ss) * q01
+    out[2] = (c * q02 + 0.0) - s * q12
+    out[3] = (ss * q00 + 0.0) + cs2q01 + cc * q11
+    out[4] = (s * q02 + 0.0) + c * q12
+    out[5] = q22 + 0.0
 
 
 def prepare_segments(
@@ -236,41 +259,51 @@ def prepare_segments(
         over poses.
     """
     n = heading.shape[0]
-    base = np.zeros(n, dtype=np.int64)
-    base[1:] = epochs[np.searchsorted(epochs, np.arange(n - 1), side="right") - 1]
+    # pose k >= 1 belongs to the segment of the last epoch before it: runs of equal bases
+    runs = np.diff(epochs)
+    epoch_of = np.zeros(n, dtype=np.int64)
+    epoch_of[1:] = np.repeat(np.arange(epochs.shape[0] - 1), runs)
+    base = epochs[epoch_of]
     dth = heading - heading[base]
-    c, s = np.cos(heading[base]), np.sin(heading[base])
-    dp = position - position[base]
+    h_e = heading[epochs]
+    c, s = np.cos(h_e)[epoch_of], np.sin(h_e)[epoch_of]  # = cos, sin of heading[base]
+    dp = position - np.take(position, base, axis=0)  # (np.take: 3-6x numpy's row indexing)
     local = np.column_stack((c * dp[:, 0] + s * dp[:, 1], -s * dp[:, 0] + c * dp[:, 1], dth))
     q = np.zeros((6, n))
     if n < 2:
-        return Segments(epochs, base, local, q)
+        return Segments(epochs, base, local, q, epoch_of)
     a = base[1:]  # step m (pose m -> m+1) belongs to the segment of pose m + 1
     phi = heading[:-1] - heading[a]
-    c, s = np.cos(phi), np.sin(phi)
-    zero = np.zeros(n - 1)
-    qm = predict6((zero,) * 6, tuple(sigma[:, i, j] for i, j in SYM6), c, s, zero, zero)
-    f0, f1 = -local[1:, 1], local[1:, 0]
-    q02, q12, q22 = qm[2], qm[4], qm[5]
+    # the 15 series; their cumulative sums go to cum[:, 1:] (cum[:, 0] = 0 before any step)
     terms = np.empty((15, n - 1))
-    terms[:6] = qm
-    terms[6:9] = f0 * q02, f0 * q12, f0 * q22
-    terms[9:12] = f1 * q02, f1 * q12, f1 * q22
-    terms[12:15] = q22 * f0 * f0, q22 * f0 * f1, q22 * f1 * f1
-    cs_ = np.cumsum(terms, axis=1)
-    before = np.concatenate((np.zeros((15, 1)), cs_), axis=1)
-    seg = cs_ - before[:, a]  # sum over m in [base, k-1] for pose k = m + 1
+    _rotated_noise(sigma, np.cos(phi), np.sin(phi), terms[:6])
+    f0, f1 = -local[1:, 1], local[1:, 0]
+    q02, q12, q22 = terms[2], terms[4], terms[5]
+    np.multiply(f0, (q02, q12, q22), out=terms[6:9])
+    np.multiply(f1, (q02, q12, q22), out=terms[9:12])
+    g = q22 * f0
+    np.multiply(g, f0, out=terms[12])
+    np.multiply(g, f1, out=terms[13])
+    np.multiply(q22 * f1, f1, out=terms[14])
+    cum = np.empty((15, n))
+    cum[:, 0] = 0.0
+    np.cumsum(terms, axis=1, out=cum[:, 1:])
+    # sum over m in [base, k-1] for pose k = m + 1 (the cumulative sum before each segment,
+    # repeated over the segment), written over the series themselves
+    seg = np.subtract(cum[:, 1:], np.repeat(cum[:, epochs[:-1]], runs, axis=1), out=terms)
     a00, a01, a02, a11, a12, a22 = seg[:6]
     c00, c01, c02, c10, c11, c12 = seg[6:12]
     g00, g01, g11 = seg[12:15]
     e0, e1 = f0, f1  # e(d_k) for pose k = m + 1
-    q[0, 1:] = a00 + 2 * e0 * a02 - 2 * c00 + a22 * e0 * e0 - 2 * e0 * c02 + g00
-    q[1, 1:] = a01 + e0 * a12 + a02 * e1 - c01 - c10 + a22 * e0 * e1 - e0 * c12 - c02 * e1 + g01
-    q[2, 1:] = a02 + e0 * a22 - c02
-    q[3, 1:] = a11 + 2 * e1 * a12 - 2 * c11 + a22 * e1 * e1 - 2 * e1 * c12 + g11
-    q[4, 1:] = a12 + e1 * a22 - c12
+    # products used twice are formed once (the same operands, so the same bits)
+    t0, t1, ae0, ae1 = 2 * e0, 2 * e1, a22 * e0, a22 * e1
+    q[0, 1:] = a00 + t0 * a02 - 2 * c00 + ae0 * e0 - t0 * c02 + g00
+    q[1, 1:] = a01 + e0 * a12 + a02 * e1 - c01 - c10 + ae0 * e1 - e0 * c12 - c02 * e1 + g01
+    q[2, 1:] = a02 + ae0 - c02
+    q[3, 1:] = a11 + t1 * a12 - 2 * c11 + ae1 * e1 - t1 * c12 + g11
+    q[4, 1:] = a12 + ae1 - c12
     q[5, 1:] = a22
-    return Segments(epochs, base, local, q)
+    return Segments(epochs, base, local, q, epoch_of)
 
 
 @dataclass(frozen=True)
@@ -312,6 +345,9 @@ class FilterResult:
     psi : ndarray, shape (E,)
         World heading by which each segment's local frame is rotated (the epoch's posterior
         heading, or the linearisation heading).
+    steps : ndarray, shape (N, 3)
+        Every grid pose relative to its base epoch in the world frame
+        (:func:`world_steps` of ``segments`` and ``psi``).
     status : ndarray of int, shape (J,)
         ``USED``, ``GATED``, ``UNASSOCIATED`` or ``OUTSIDE`` per measurement.
     nis : ndarray, shape (J,)
@@ -336,6 +372,7 @@ class FilterResult:
     status: NDArray[np.int64]
     nis: Array
     psi: Array
+    steps: Array
     order: NDArray[np.int64]
     weights: Array
     events: FilterEvents
@@ -394,14 +431,16 @@ class _ReentryRule:
         #: measurements, is suspect, so robust weights are suspended (re-acquisition)
         self.reacquiring = False
 
-    def observe(self, v: float, p: tuple, t: float, j: int) -> float:
-        """Count measurement ``j`` (NIS ``v``, prior covariance ``p``); ``α`` or 0.
+    def observe(self, v: float, p: tuple, k: int, j: int) -> float:
+        """Count measurement ``j`` (NIS ``v``, prior covariance ``p``, grid index ``k``); ``α``
+        or 0.
 
         ``α = max(1, min(median NIS of the run / bound, extent² / max(p_xx, p_yy),
         π² / p_θθ))`` after ``max_run`` consecutive outliers (then the count restarts).
         """
         if not v > self.bound:
-            self.run, self.nis, self.reacquiring = 0, [], False
+            if self.run or self.reacquiring:  # (the common case, an inlier after inliers,
+                self.run, self.nis, self.reacquiring = 0, [], False  # changes nothing)
             return 0.0
         if self.run == 0:
             self.start = j
@@ -412,7 +451,7 @@ class _ReentryRule:
         if self.raise_:
             _diverged(
                 self.inp,
-                t,
+                self.inp.times[k],
                 j,
                 f"{self.run} consecutive innovations beyond the χ² bound {self.bound:.2f} "
                 f"(since {self.inp.label(self.start)})",
@@ -427,6 +466,21 @@ class _ReentryRule:
         return max(1.0, alpha)
 
 
+_TWO_PI = 2.0 * math.pi
+
+
+def _wrap(a: float) -> float:
+    """:func:`relation_metric.se2.wrap_angle` of one float, bit for bit, in plain Python
+    (numpy's per-call overhead is several µs, the arithmetic 0.1 µs); ``%`` on floats is numpy's
+    ``mod`` (both fold C's ``fmod`` onto the divisor's sign). Non-finite angles go to numpy."""
+    if -math.pi <= a < math.pi:
+        return a
+    if not math.isfinite(a):
+        return float(se2.wrap_angle(a))
+    r = (a + math.pi) % _TWO_PI - math.pi
+    return r - _TWO_PI if r >= math.pi else r  # % can round to exactly 2π: fold it back
+
+
 def _predict(pose: tuple, p: tuple, pxm, local, q, psi: float):  # type: ignore[no-untyped-def]
     """Composed prediction from the previous epoch: pose, 6 covariance entries (in place
     on the Schmidt cross-covariance ``pxm``); ``psi`` rotates the segment's local frame."""
@@ -438,7 +492,7 @@ def _predict(pose: tuple, p: tuple, pxm, local, q, psi: float):  # type: ignore[
     x, y, th = pose
     th += uth
     if not -math.pi <= th < math.pi:  # keep prior and posterior on one branch
-        th = float(se2.wrap_angle(th))
+        th = _wrap(th)
     if pxm is not None:
         pxm[0] -= dy * pxm[2]
         pxm[1] += dx * pxm[2]
@@ -467,15 +521,16 @@ def _innovation(pose, p, lm, lm_c, r, z, pxl):  # type: ignore[no-untyped-def]
     re00 = r[0] + t00 * h00 + t01 * h01
     re01 = t00 * h10 + t01 * h11
     re11 = r[1] + t10 * h10 + t11 * h11
-    a0 = -h00 * p00 - h01 * p01
-    a1 = -h00 * p01 - h01 * p11
-    a2 = -h00 * p02 - h01 * p12
-    b0 = -h10 * p00 - h11 * p01 - p02
-    b1 = -h10 * p01 - h11 * p11 - p12
-    b2 = -h10 * p02 - h11 * p12 - p22
-    s00 = -h00 * a0 - h01 * a1 + re00
-    s01 = -h00 * b0 - h01 * b1 + re01
-    s11 = -h10 * b0 - h11 * b1 - b2 + re11
+    m00, m10 = -h00, -h10  # H_x's leading entries (negated once, not per product)
+    a0 = m00 * p00 - h01 * p01
+    a1 = m00 * p01 - h01 * p11
+    a2 = m00 * p02 - h01 * p12
+    b0 = m10 * p00 - h11 * p01 - p02
+    b1 = m10 * p01 - h11 * p11 - p12
+    b2 = m10 * p02 - h11 * p12 - p22
+    s00 = m00 * a0 - h01 * a1 + re00
+    s01 = m00 * b0 - h01 * b1 + re01
+    s11 = m10 * b0 - h11 * b1 - b2 + re11
     if pxl is not None:  # Schmidt: the pose-landmark cross-covariance enters S and N
         bm = pxl @ np.array([[h00, h10], [h01, h11]])  # P_xl H_lᵀ, 3 × 2
         (c00, c01), (c10, c11), (c20, c21) = bm.tolist()
@@ -488,7 +543,7 @@ def _innovation(pose, p, lm, lm_c, r, z, pxl):  # type: ignore[no-untyped-def]
     y0 = z[0] - rng
     y1 = z[1] - math.atan2(ddy, ddx) + pth
     if not -math.pi <= y1 < math.pi:
-        y1 = float(se2.wrap_angle(y1))
+        y1 = _wrap(y1)
     return (y0, y1), (s00, s01, s11), (re00, re01, re11), (a0, a1, a2, b0, b1, b2), (
         h00, h01, h10, h11
     )  # fmt: skip
@@ -519,16 +574,16 @@ def _correct(p: tuple, n: tuple, i: tuple, y: tuple):  # type: ignore[no-untyped
         return None
     y0, y1 = y
     dx = (k00 * y0 + k01 * y1, k10 * y0 + k11 * y1, k20 * y0 + k21 * y1)
-    return post, dx, ((k00, k01), (k10, k11), (k20, k21))
+    return post, dx, (k00, k01, k10, k11, k20, k21)
 
 
 def _schmidt_correct(pxm: Array, h: tuple, gain: tuple, map_rows: Array) -> None:
-    """``P_xm ← P_xm − K (H_x P_xm + H_l Σ_lm)`` in place (``map_rows``: the landmark's 2 rows
-    of the map covariance)."""
+    """``P_xm ← P_xm − K (H_x P_xm + H_l Σ_lm)`` in place (``gain``: K's 6 entries row by row,
+    ``map_rows``: the landmark's 2 rows of the map covariance)."""
     h00, h01, h10, h11 = h
     hx = np.array([[-h00, -h01, 0.0], [-h10, -h11, -1.0]])
     hl = np.array([[h00, h01], [h10, h11]])
-    pxm -= np.array(gain) @ (hx @ pxm + hl @ map_rows)
+    pxm -= np.array(gain).reshape(3, 2) @ (hx @ pxm + hl @ map_rows)
 
 
 def _inflate(p: tuple, pxm, alpha: float) -> tuple:  # type: ignore[no-untyped-def]
@@ -742,13 +797,19 @@ def run_filter(
     return _result(setup, rules, linearize_at, pri_x, pri_p, post_x, post_p)
 
 
+def _rows(values: array, width: int) -> Array:
+    """(E, width) float64 array (a copy) of the loop's flat ``array('d')``."""
+    return np.frombuffer(values, dtype=np.float64).reshape(-1, width).copy()
+
+
 def _result(setup: _Setup, rules: _Rules, lin, pri_x, pri_p, post_x, post_p) -> FilterResult:  # type: ignore[no-untyped-def]
     """Arrays of the loop's lists; every grid pose filled from its epoch's posterior."""
     seg, epochs = setup.seg, np.asarray(setup.epochs, dtype=np.int64)
-    post_xa = np.array(post_x)
-    post_pa = _full(np.array(post_p))
+    post_xa = _rows(post_x, 3)
+    post_p6 = _rows(post_p, 6)
+    post_pa = _full(post_p6.T)
     psi = np.asarray(lin, dtype=np.float64)[epochs, 2] if rules.fixed else post_xa[:, 2]
-    poses, covs = fill(seg, psi, post_xa, post_pa)
+    steps, poses, covs = fill(seg, psi, post_xa, post_p6)
     poses[epochs] = post_xa
     covs[epochs] = post_pa
     if rules.fixed:
@@ -758,13 +819,14 @@ def _result(setup: _Setup, rules: _Rules, lin, pri_x, pri_p, post_x, post_p) -> 
         poses=poses,
         covariances=covs,
         segments=seg,
-        prior_poses=np.array(pri_x),
-        prior_covariances=_full(np.array(pri_p)),
+        prior_poses=_rows(pri_x, 3),
+        prior_covariances=_full(_rows(pri_p, 6).T),
         post_poses=post_xa,
         post_covariances=post_pa,
         status=readonly(setup.status, np.int64),
         nis=readonly(setup.nis),
         psi=psi,
+        steps=steps,
         order=readonly(np.asarray(setup.active, dtype=np.int64), np.int64),
         weights=readonly(setup.weights),
         events=FilterEvents(
@@ -781,7 +843,7 @@ def _decide(setup, rules, reentry, v, p, ysr, k, j) -> tuple[float, float]:  # t
     """Gate, robust weight and re-entry of a measurement with NIS ``v`` (not the covariance-only
     pass): ``(w, α)``, ``w = 0`` when gated, ``α`` the re-entry's inflation (0: none)."""
     reacquiring = reentry.reacquiring  # read before this measurement is counted
-    alpha = reentry.observe(v, p, reentry.inp.times[k], j)
+    alpha = reentry.observe(v, p, k, j)
     if alpha:
         setup.events.append((k, j, REENTRY, alpha))
     if v > rules.gate:
@@ -817,15 +879,18 @@ def _weight(rules: _Rules, v: float, y: tuple, s: tuple, re: tuple) -> float:
 def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _ReentryRule, bar):  # type: ignore[no-untyped-def]
     """The scalar recursion over the epochs: predict, then each measurement of the epoch.
 
-    Returns the priors and posteriors at the epochs (lists of tuples) and fills
-    ``setup.status``, ``setup.nis``, ``setup.weights`` and ``setup.events`` in place.
+    Returns the priors and posteriors at the epochs (flat ``array('d')``, 3 or 6 values per
+    epoch) and fills ``setup.status``, ``setup.nis``, ``setup.weights`` and ``setup.events``
+    in place.
     """
     lm_xy, lm_c, r, zz, lmk = setup.lm_xy, setup.lm_c, setup.r, setup.z, setup.landmark
     pxm, mapcov, lin, w_fixed = setup.pxm, inp.map_covariance, setup.lin, setup.w_fixed
     nis, wts, times = setup.nis, setup.weights, inp.times
     pose = tuple(float(v) for v in inp.x0)
     p = tuple(float(inp.p0[i, j]) for i, j in SYM6)
-    pri_x, pri_p, post_x, post_p = [], [], [], []
+    # raw doubles (array.array), not lists of tuples: the arrays are read back without
+    # chasing 10^5 float objects scattered over the heap
+    pri_x, pri_p, post_x, post_p = array("d"), array("d"), array("d"), array("d")
     # locals, not attribute lookups, in the per-epoch loop (10^5 epochs)
     epochs, bounds, local, q, active = (
         setup.epochs,
@@ -840,8 +905,8 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
         if e > 0:
             psi = lin[epochs[e - 1]][2] if fixed else pose[2]
             pose, p = _predict(pose, p, pxm, local[e], q[e], psi)
-        pri_x.append(pose)
-        pri_p.append(p)
+        pri_x.extend(pose)
+        pri_p.extend(p)
         at = lin[k] if fixed else None
         for j in active[bounds[e] : bounds[e + 1]]:
             li = lmk[j]
@@ -878,44 +943,58 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
                 f"filter diverged at t={float(times[k]):.6f} s: predicted covariance is not "
                 "finite positive definite"
             )
-        post_x.append(pose)
-        post_p.append(p)
+        post_x.extend(pose)
+        post_p.extend(p)
     return pri_x, pri_p, post_x, post_p
 
 
-def _full(p6: Array) -> Array:
-    out = np.empty((p6.shape[0], 3, 3))
-    idx = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
-    for col, (i, j) in enumerate(idx):
-        out[:, i, j] = p6[:, col]
-        out[:, j, i] = p6[:, col]
+def _full(cols) -> Array:  # type: ignore[no-untyped-def]
+    """Symmetric (N, 3, 3) matrices from their 6 unique entries ``(00, 01, 02, 11, 12, 22)``,
+    given as 6 arrays of shape (N,) (e.g. ``p6.T`` of an (N, 6) array)."""
+    out = np.empty((cols[0].shape[0], 3, 3))
+    for col, (i, j) in zip(cols, SYM6):
+        out[:, i, j] = col
+        if i != j:
+            out[:, j, i] = col
     return out
 
 
-def world_steps(seg: Segments, psi: Array) -> Array:
-    """World-frame pose of every grid pose relative to its base epoch: ``R(ψ) local``, (N, 3)."""
-    e_of = np.searchsorted(seg.epochs, seg.base)
-    ps = psi[e_of]
-    c, s = np.cos(ps), np.sin(ps)
+def _base_rotation(seg: Segments, psi: Array) -> tuple[Array, Array]:
+    """``cos ψ_b, sin ψ_b`` of every grid pose's base epoch, shape (N,) each: computed per
+    epoch, then repeated (the same values as on the repeated angles, E evaluations, not N)."""
+    return np.cos(psi)[seg.epoch_of], np.sin(psi)[seg.epoch_of]
+
+
+def world_steps(seg: Segments, psi: Array, rotation: tuple[Array, Array] | None = None) -> Array:
+    """World-frame pose of every grid pose relative to its base epoch: ``R(ψ) local``, (N, 3).
+
+    ``rotation``: :func:`_base_rotation` of ``psi`` when already computed.
+    """
+    c, s = _base_rotation(seg, psi) if rotation is None else rotation
     loc = seg.local
-    return np.column_stack(
-        (c * loc[:, 0] - s * loc[:, 1], s * loc[:, 0] + c * loc[:, 1], loc[:, 2])
-    )
+    out = np.empty_like(loc)
+    out[:, 0] = c * loc[:, 0] - s * loc[:, 1]
+    out[:, 1] = s * loc[:, 0] + c * loc[:, 1]
+    out[:, 2] = loc[:, 2]
+    return out
 
 
-def fill(seg: Segments, psi: Array, post_x: Array, post_p: Array) -> tuple[Array, Array]:
+def fill(seg: Segments, psi: Array, post_x: Array, post_p6: Array) -> tuple[Array, Array, Array]:
     """Predicted poses and covariances of every grid pose from its base epoch's posterior.
 
     ``x_k = x⁺_b + [R(ψ_b) local_xy, local_θ]`` and
     ``P_k = S(Δ_k) P⁺_b S(Δ_k)ᵀ + Rot(ψ_b) q_k Rot(ψ_b)ᵀ`` (:func:`predict6`), vectorised.
+    ``post_x`` (E, 3) and ``post_p6`` (E, 6) (unique entries) are the epochs' posteriors.
+    Returns the world steps (:func:`world_steps`), the poses (N, 3) and covariances
+    (N, 3, 3).
     """
-    e_of = np.searchsorted(seg.epochs, seg.base)
-    w = world_steps(seg, psi)
-    poses = post_x[e_of] + w
-    pb = tuple(post_p[:, i, j][e_of] for i, j in SYM6)
-    ps = psi[e_of]
-    p6 = predict6(pb, tuple(seg.q), np.cos(ps), np.sin(ps), w[:, 0], w[:, 1])
-    return poses, _full(np.column_stack(p6))
+    rot = _base_rotation(seg, psi)
+    w = world_steps(seg, psi, rot)
+    e_of = seg.epoch_of
+    poses = np.take(post_x, e_of, axis=0) + w
+    pb = np.take(np.ascontiguousarray(post_p6.T), e_of, axis=1)
+    p6 = predict6(tuple(pb), tuple(seg.q), rot[0], rot[1], w[:, 0], w[:, 1])
+    return w, poses, _full(p6)
 
 
 #: Default robust threshold ``c`` on the Mahalanobis distance: ``√χ²₂(0.99)``.

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from recovery.ekf import FilterResult, world_steps
+from recovery.ekf import FilterResult
 from relation_metric.arrays import Array
 from relation_metric.se2 import shear
 
@@ -54,8 +54,9 @@ def _suffix_scan(a: Array, b: Array, d: Array) -> tuple[Array, Array]:
         a2, b2, d2 = a[off:], b[off:], d[off:]
         nb = b1 + np.einsum("nij,nj->ni", a1, b2)
         nd = d1 + a1 @ d2 @ a1.transpose(0, 2, 1)
-        na = a1 @ a2
-        a[: n - off], b[: n - off], d[: n - off] = na, nb, nd
+        b[: n - off], d[: n - off] = nb, nd
+        if 2 * off < n:  # the products are needed by a later round
+            a[: n - off] = a1 @ a2
         off *= 2
     return b, d
 
@@ -74,7 +75,7 @@ def smooth(fr: FilterResult) -> SmootherResult:
     seg = fr.segments
     ep = seg.epochs
     n_e = ep.shape[0]
-    w = world_steps(seg, fr.psi)  # pose k relative to its base epoch, world frame
+    w = fr.steps  # pose k relative to its base epoch, world frame
     post_x, post_p = fr.post_poses, fr.post_covariances
     pri_x, pri_p = fr.prior_poses, fr.prior_covariances
     inv_pri = np.linalg.inv(pri_p)
@@ -90,23 +91,41 @@ def smooth(fr: FilterResult) -> SmootherResult:
         delta_e[:-1], big_e[:-1] = _suffix_scan(gain, b, d)
     sm_x_e = post_x + delta_e
     sm_p_e = post_p + big_e
-
-    poses = fr.poses.copy()
-    covs = fr.covariances.copy()
+    poses = np.empty_like(fr.poses)
+    covs = np.empty_like(fr.covariances)
     poses[ep] = sm_x_e
     covs[ep] = sm_p_e
+    _between_epochs(fr, inv_pri, sm_x_e - pri_x, sm_p_e - pri_p, poses, covs)
+    return SmootherResult(poses=poses, covariances=covs)
+
+
+def _between_epochs(  # type: ignore[no-untyped-def]
+    fr: FilterResult, inv_pri: Array, corr_x: Array, corr_p: Array, poses, covs
+) -> None:
+    """Smoothed poses and covariances of every pose between two epochs, in place.
+
+    ``C_k = P_k S(p_j − p_k)ᵀ (P⁻_j)⁻¹`` towards the next epoch ``j``;
+    ``x^s_k = x_k + C_k (x^s_j − x⁻_j)``, ``P^s_k = P_k + C_k (P^s_j − P⁻_j) C_kᵀ``
+    (symmetrised). ``inv_pri`` (E, 3, 3): ``(P⁻)⁻¹`` of the epochs; ``corr_x`` (E, 3),
+    ``corr_p`` (E, 3, 3): ``x^s − x⁻`` and ``P^s − P⁻`` at the epochs.
+    """
+    seg, w = fr.segments, fr.steps
+    ep = seg.epochs
     is_epoch = np.zeros(poses.shape[0], dtype=bool)
     is_epoch[ep] = True
     k = np.flatnonzero(~is_epoch)
-    if k.size:
-        i = np.searchsorted(ep, seg.base[k]) + 1  # the next epoch
-        to_next = w[ep[i], :2] - w[k, :2]
-        pk = fr.covariances[k]
-        m = pk.copy()  # P_k S(Δ)ᵀ, with S(Δ)ᵀ = [[1, 0, 0], [0, 1, 0], [−Δy, Δx, 1]]
-        m[:, :, 0] -= to_next[:, 1, None] * pk[:, :, 2]
-        m[:, :, 1] += to_next[:, 0, None] * pk[:, :, 2]
-        ck = m @ inv_pri[i]
-        poses[k] = fr.poses[k] + (ck @ (sm_x_e[i] - pri_x[i])[:, :, None])[:, :, 0]
-        corr = ck @ (sm_p_e[i] - pri_p[i]) @ ck.transpose(0, 2, 1)
-        covs[k] = pk + 0.5 * (corr + corr.transpose(0, 2, 1))
-    return SmootherResult(poses=poses, covariances=covs)
+    if not k.size:
+        return
+    i = seg.epoch_of[k] + 1  # the next epoch
+    # np.take: rows gathered 3-6x faster than numpy's fancy indexing
+    to_next = np.take(w, ep[i], axis=0)[:, :2] - np.take(w, k, axis=0)[:, :2]
+    pk = np.take(fr.covariances, k, axis=0)
+    m = pk.copy()  # P_k S(Δ)ᵀ, with S(Δ)ᵀ = [[1, 0, 0], [0, 1, 0], [−Δy, Δx, 1]]
+    m[:, :, 0] -= to_next[:, 1, None] * pk[:, :, 2]
+    m[:, :, 1] += to_next[:, 0, None] * pk[:, :, 2]
+    ck = m @ np.take(inv_pri, i, axis=0)
+    poses[k] = np.take(fr.poses, k, axis=0) + (ck @ np.take(corr_x, i, axis=0)[:, :, None])[:, :, 0]
+    corr = ck @ np.take(corr_p, i, axis=0) @ ck.transpose(0, 2, 1)
+    corr += corr.transpose(0, 2, 1).copy()
+    corr *= 0.5
+    covs[k] = np.add(pk, corr, out=corr)
