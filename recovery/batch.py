@@ -76,8 +76,8 @@ from relation_metric.errors import DivergenceError
 __all__ = ["BatchResult", "refine", "normal_equations", "retract_chain", "batch_covariances"]
 
 
-LAMBDA_INITIAL = 1e-14
-LAMBDA_MIN = 1e-16
+LAMBDA_INITIAL = 1e-14  # LM's first λ: nearly undamped (module doc)
+LAMBDA_MIN = 1e-16  # and its floor
 
 
 @dataclass(frozen=True)
@@ -245,8 +245,10 @@ def normal_equations(
 class _BatchProblem:
     """The batch objective as a :class:`~recovery.estimation.lm.Problem` on poses (N, 3).
 
-    ``H`` is kept in band storage (:func:`upper_band`) and the damped normal equations are
+    ``H`` is kept in band storage (:func:`_band`) and the damped normal equations are
     solved by a banded Cholesky (LAPACK ``pbsv``): O(N) for the block-tridiagonal ``H``.
+    ``chain``: steps are applied along the chain (:func:`retract_chain`); False adds them to
+    the poses (:func:`~recovery.estimation.lm.retract_poses`, as before issue 15; tests).
     """
 
     def __init__(
