@@ -3,7 +3,8 @@
 Oracles: a per-pose loop of :func:`relation_metric.se2.compose` over the increments moved by
 their linear model (built from :func:`relation_metric.se2.between`'s own Jacobians), the
 additive retraction to first order, and the batch run the way it ran before the chain
-retraction (additive step, ``λ`` from 1e-6, floor 1e-12) driven to a tight tolerance.
+retraction (additive step, ``λ`` from 1e-6, floor 1e-12) driven to a tight tolerance; the
+retried factorisation against a direct banded solve with the floor damping.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from recovery.recover import filter_input
 from recovery.simulation.bundles import simulate_bundle
 from recovery.smoother import smooth
 from relation_metric import se2
+from relation_metric.errors import DivergenceError
 
 
 def _looped_chain(x: np.ndarray, delta: np.ndarray) -> np.ndarray:
@@ -129,3 +131,32 @@ def test_chain_retraction_reaches_the_minimum_of_the_additive_one(motion: str) -
     problem = _BatchProblem(inp, np.flatnonzero(used), None)
     lin = problem.linearise(new.poses)
     assert np.abs(problem.solve(lin, np.zeros_like(lin.diagonal))).max() < 1e-6
+
+
+def test_failed_factorisation_is_retried_with_the_damping_floor(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    import recovery.batch as batch
+
+    b = simulate_bundle(12, steps=60, measure_every=4)
+    inp = filter_input(b, map_mode="marginal")
+    fr = run_filter(inp)
+    problem = _BatchProblem(inp, np.flatnonzero(fr.status == USED), None)
+    lin = problem.linearise(smooth(fr).poses)
+    real, seen = batch.solveh_banded, []
+
+    def fails_first(ab, rhs, **kw):  # type: ignore[no-untyped-def]
+        seen.append(ab[5].copy())
+        if len(seen) == 1:
+            raise np.linalg.LinAlgError("not positive definite")
+        return real(ab, rhs, **kw)
+
+    monkeypatch.setattr(batch, "solveh_banded", fails_first)
+    damping = np.full_like(lin.diagonal, 1e-30)
+    step = problem.solve(lin, damping)
+    np.testing.assert_array_equal(seen[0], lin.system[5] + damping)
+    np.testing.assert_array_equal(seen[1], lin.system[5] + 1e-12 * lin.diagonal)
+    ab = lin.system.copy()
+    ab[5] += 1e-12 * lin.diagonal
+    np.testing.assert_allclose(step, real(ab, -lin.gradient), rtol=1e-12)
+    monkeypatch.setattr(batch, "solveh_banded", lambda *a, **k: real(-np.abs(a[0]), a[1]))
+    with pytest.raises(DivergenceError, match="not positive definite"):
+        problem.solve(lin, damping)
