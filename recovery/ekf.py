@@ -672,7 +672,7 @@ def _setup(inp: FilterInput, linearize_at: Array | None, use, weights) -> _Setup
         z=inp.meas_z.tolist(),
         landmark=inp.meas_landmark.tolist(),
         pxm=None if mapcov is None else np.zeros((3, 2 * m)),
-        lin=None if linearize_at is None else lin.tolist(),
+        lin=None if linearize_at is None else lin[epochs].tolist(),  # only the epochs are read
         w_fixed=None if weights is None else np.asarray(weights, dtype=np.float64).tolist(),
         ext2=ext2,
         status=status,
@@ -903,11 +903,11 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
     for e in bar:
         k = epochs[e]
         if e > 0:
-            psi = lin[epochs[e - 1]][2] if fixed else pose[2]
+            psi = lin[e - 1][2] if fixed else pose[2]
             pose, p = _predict(pose, p, pxm, local[e], q[e], psi)
         pri_x.extend(pose)
         pri_p.extend(p)
-        at = lin[k] if fixed else None
+        at = lin[e] if fixed else None
         for j in active[bounds[e] : bounds[e + 1]]:
             li = lmk[j]
             pxl = None if pxm is None else pxm[:, 2 * li : 2 * li + 2]
