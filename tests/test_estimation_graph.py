@@ -375,3 +375,32 @@ def test_cli_solve_tolerance_option(tmp_path, capsys, rng):
     loose = solve_graph(g, tolerance=1e-3)
     assert loose.iterations <= best.iterations
     assert loose.cost[-1] <= best.cost[-1] * (1 + 1e-3)
+
+
+@pytest.mark.parametrize("installed", [("qdldl", "superlu"), ("cholmod", "qdldl", "superlu")])
+def test_cli_solve_names_its_sparse_cholesky_and_the_missing_faster_one(
+    tmp_path, capsys, rng, monkeypatch, installed
+):
+    """``solve`` says which back-end factorised the graph; when CHOLMOD would have been chosen
+    but is not installed (the ``fast`` extra), it says so once, and the answer is the same."""
+    from recovery.estimation import sparse_cholesky
+    from recovery.graph_formats.g2o import write_g2o_graph
+
+    if "cholmod" in installed and "cholmod" not in sparse_cholesky.BACKENDS:
+        pytest.skip("cvxopt (the `fast` extra) is not installed")
+    monkeypatch.setattr(sparse_cholesky, "BACKENDS", installed)
+    monkeypatch.setattr(sparse_cholesky, "CHOLMOD_MIN_FLOPS", 0.0)  # any graph "has much fill"
+    g, _, _ = small_world(rng, n=30, m=8)
+    path = tmp_path / "g.g2o"
+    write_g2o_graph(path, g)
+    sol = solve_graph(g)
+    assert sol.linear_solver == installed[0]
+    assert sol.faster_solver == (None if "cholmod" in installed else "cholmod")
+    out = tmp_path / "out"
+    assert main(["solve", str(path), "-o", str(out), "--batch", "0"]) == 0
+    printed = capsys.readouterr().out
+    assert f"(sparse Cholesky: {installed[0]})" in printed
+    assert printed.count("optional `fast` extra") == (0 if "cholmod" in installed else 1)
+    np.testing.assert_allclose(np.loadtxt(out / "trajectory.txt")[:, 1:4], sol.poses, atol=1e-9)
+    monkeypatch.setattr(sparse_cholesky, "CHOLMOD_MIN_FLOPS", np.inf)  # a graph with little fill
+    assert solve_graph(g).faster_solver is None

@@ -144,6 +144,13 @@ class GraphSolution:
         ``½ Σ ‖W e‖²`` after each accepted step (first entry: the initial guess).
     iterations : int
     converged : bool
+    linear_solver : str
+        The sparse Cholesky back-end that factorised the normal equations
+        (:mod:`~recovery.estimation.sparse_cholesky`: ``"cholmod"``, ``"qdldl"``,
+        ``"superlu"``; of the last sub-problem for :func:`solve_graph_incremental`).
+    faster_solver : str or None
+        A back-end that is not installed and would have been chosen for this graph (CHOLMOD
+        without the ``fast`` extra on a graph with much fill), else None.
     """
 
     poses: Array
@@ -151,6 +158,8 @@ class GraphSolution:
     cost: Array
     iterations: int
     converged: bool
+    linear_solver: str = ""
+    faster_solver: str | None = None
 
 
 def initial_landmarks(
@@ -327,10 +336,11 @@ class _NormalEquations:
 
     * QDLDL (AMD) and CHOLMOD (AMD) order the scalar matrix themselves: the variables
       keep their natural order (measured with QDLDL on a 10⁴-pose Manhattan graph: 3.03·10⁶
-      entries in L from the natural order, 3.16·10⁶ from the block order below). When
-      CHOLMOD is installed, the expected work ``27 Σ c²`` (``c``: column counts of the
-      Cholesky factor of the *block* graph, one node per pose and landmark, 3 × 3 blocks)
-      picks between the two (:func:`~recovery.estimation.sparse_cholesky.choose_backend`).
+      entries in L from the natural order, 3.16·10⁶ from the block order below). The
+      expected work ``27 Σ c²`` (``c``: column counts of the Cholesky factor of the *block*
+      graph, one node per pose and landmark, 3 × 3 blocks) picks between the two
+      (:func:`~recovery.estimation.sparse_cholesky.choose_backend`; CHOLMOD only when
+      installed — otherwise ``solve`` says when it would have been chosen).
     * SuperLU fallback: the variables are stored pre-permuted by a symmetric minimum-degree
       ordering of the block graph (:func:`_block_order_permutation`), computed once.
       SuperLU's own ordering on top of it breaks ties far better than on the natural order
@@ -353,9 +363,11 @@ class _NormalEquations:
             flops = None
         else:  # QDLDL and CHOLMOD order the scalar matrix themselves
             perm = np.arange(size)
-            has_cholmod = "cholmod" in sparse_cholesky.BACKENDS
-            flops = 27.0 * sparse_cholesky.factor_flops(pattern) if has_cholmod else None
+            flops = 27.0 * sparse_cholesky.factor_flops(pattern)
         self.perm = perm
+        #: the back-end that would be chosen with every library installed (``solve`` says so
+        #: when it is not the one used: CHOLMOD needs the optional ``fast`` extra)
+        self.wanted = sparse_cholesky.choose_backend(flops, have=sparse_cholesky.ALL_BACKENDS)
         # --- variables of every factor, in the new numbering ------------------------------
         pi = perm[3 * g.pp_i[:, None] + np.arange(3)]
         pj = perm[3 * g.pp_j[:, None] + np.arange(3)]
@@ -523,14 +535,18 @@ def _levenberg_marquardt(
 
     x0 = (np.array(graph.poses, dtype=np.float64), np.array(graph.landmarks, dtype=np.float64))
     options = LMOptions(lambda_initial=1e-4, max_iterations=max_iterations, ftol=tolerance)
-    res = levenberg_marquardt(_GraphProblem(graph, prior_sigma), x0, options, stop=stall)
+    problem = _GraphProblem(graph, prior_sigma)
+    res = levenberg_marquardt(problem, x0, options, stop=stall)
     x, lm = res.x
+    used, wanted = problem.normal.cholesky.backend, problem.normal.wanted
     solution = GraphSolution(
         poses=readonly(x),
         landmarks=readonly(lm),
         cost=readonly(res.costs),
         iterations=res.iterations,
         converged=res.converged,
+        linear_solver=used,
+        faster_solver=wanted if wanted not in sparse_cholesky.BACKENDS else None,
     )
     return solution, res.stopped
 
@@ -663,6 +679,8 @@ def solve_graph_incremental(
         cost=readonly(np.concatenate(([_half_sum_sq(r0)], sol.cost[1:]))),
         iterations=iterations,
         converged=sol.converged,
+        linear_solver=sol.linear_solver,
+        faster_solver=sol.faster_solver,
     )
 
 

@@ -82,20 +82,27 @@ def available_backends() -> tuple[str, ...]:
 BACKENDS: tuple[str, ...] = available_backends()
 
 
-def choose_backend(flops: float | None = None) -> str:
+#: Every back-end this module knows, fastest first.
+ALL_BACKENDS: tuple[str, ...] = ("cholmod", "qdldl", "superlu")
+
+
+def choose_backend(flops: float | None = None, *, have: tuple[str, ...] | None = None) -> str:
     """The back-end for a factorisation of about ``flops`` work (see the module docstring).
 
     Parameters
     ----------
     flops : float, optional
         Expected factorisation work; ``None``: unknown (CHOLMOD is then not chosen).
+    have : tuple of str, optional
+        The back-ends to choose from; default: those installed (:data:`BACKENDS`).
+        ``have=ALL_BACKENDS`` tells which one would be chosen if every library were installed.
 
     Returns
     -------
     str
         ``"cholmod"``, ``"qdldl"`` or ``"superlu"``.
     """
-    have = BACKENDS
+    have = BACKENDS if have is None else have
     if "cholmod" in have and flops is not None and flops >= CHOLMOD_MIN_FLOPS:
         return "cholmod"
     return "qdldl" if "qdldl" in have else "superlu"

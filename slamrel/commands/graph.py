@@ -120,6 +120,12 @@ def run_solve(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(
             f"{'converged' if sol.converged else 'NOT converged'} after {sol.iterations} "
-            f"iterations: cost {sol.cost[0]:.6g} -> {sol.cost[-1]:.6g}; wrote {out}/"
+            f"iterations: cost {sol.cost[0]:.6g} -> {sol.cost[-1]:.6g} "
+            f"(sparse Cholesky: {sol.linear_solver}); wrote {out}/"
         )
+        if sol.faster_solver == "cholmod":
+            print(
+                "note: this graph has much fill-in; CHOLMOD's supernodal Cholesky would solve "
+                "it several times faster: install the optional `fast` extra (cvxopt, GPL-3.0)"
+            )
     return 0
