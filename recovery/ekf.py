@@ -21,10 +21,10 @@ between two measurement epochs is one shear plus an accumulated process noise
 cumulative sums computed for every grid pose at once with numpy. Only the per-epoch work
 (one composed prediction, the updates) runs in a Python loop, written on scalars because
 numpy's per-call overhead exceeds the arithmetic on 3 × 3 matrices (angles are wrapped by
-:func:`_wrap`, numpy's formula on one float). The result equals the per-step EKF
-(``recovery.baseline``) to rounding. The update uses ``P ← P − K S Kᵀ`` (equal to the Joseph
-form for the optimal gain, cheaper on scalars); the covariance is checked to be finite and
-positive definite after every update.
+:func:`~relation_metric.se2.wrap_angle_float`, numpy's formula on one float). The result
+equals the per-step EKF (``recovery.baseline``) to rounding. The update uses
+``P ← P − K S Kᵀ`` (equal to the Joseph form for the optimal gain, cheaper on scalars); the
+covariance is checked to be finite and positive definite after every update.
 
 **Divergence is a finding.** Runs of outlying innovations (NIS beyond the gate or the 99.99%
 χ² bound) are where the map and the log disagree; after ``max_outlier_run`` of them the
@@ -58,6 +58,7 @@ from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.consistency import chi2_quantile
 from relation_metric.errors import DivergenceError
+from relation_metric.se2 import wrap_angle_float
 from relation_metric.trajectory import readonly
 
 __all__ = [
@@ -466,21 +467,6 @@ class _ReentryRule:
         return max(1.0, alpha)
 
 
-_TWO_PI = 2.0 * math.pi
-
-
-def _wrap(a: float) -> float:
-    """:func:`relation_metric.se2.wrap_angle` of one float, bit for bit, in plain Python
-    (numpy's per-call overhead is several µs, the arithmetic 0.1 µs); ``%`` on floats is numpy's
-    ``mod`` (both fold C's ``fmod`` onto the divisor's sign). Non-finite angles go to numpy."""
-    if -math.pi <= a < math.pi:
-        return a
-    if not math.isfinite(a):
-        return float(se2.wrap_angle(a))
-    r = (a + math.pi) % _TWO_PI - math.pi
-    return r - _TWO_PI if r >= math.pi else r  # % can round to exactly 2π: fold it back
-
-
 def _predict(pose: tuple, p: tuple, pxm, local, q, psi: float):  # type: ignore[no-untyped-def]
     """Composed prediction from the previous epoch: pose, 6 covariance entries (in place
     on the Schmidt cross-covariance ``pxm``); ``psi`` rotates the segment's local frame."""
@@ -492,7 +478,7 @@ def _predict(pose: tuple, p: tuple, pxm, local, q, psi: float):  # type: ignore[
     x, y, th = pose
     th += uth
     if not -math.pi <= th < math.pi:  # keep prior and posterior on one branch
-        th = _wrap(th)
+        th = wrap_angle_float(th)
     if pxm is not None:
         pxm[0] -= dy * pxm[2]
         pxm[1] += dx * pxm[2]
@@ -543,7 +529,7 @@ def _innovation(pose, p, lm, lm_c, r, z, pxl):  # type: ignore[no-untyped-def]
     y0 = z[0] - rng
     y1 = z[1] - math.atan2(ddy, ddx) + pth
     if not -math.pi <= y1 < math.pi:
-        y1 = _wrap(y1)
+        y1 = wrap_angle_float(y1)
     return (y0, y1), (s00, s01, s11), (re00, re01, re11), (a0, a1, a2, b0, b1, b2), (
         h00, h01, h10, h11
     )  # fmt: skip

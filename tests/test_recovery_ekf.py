@@ -9,14 +9,11 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from recovery import ekf
 from recovery.recover import filter_input
 from recovery.simulation.bundles import simulate_bundle
 from recovery.smoother import smooth
-from relation_metric import se2
 from relation_metric.se2 import shear
 
 
@@ -112,20 +109,6 @@ def plain_smooth(fr):
     corr = ck @ (sm_p_e[i] - pri_p[i]) @ ck.transpose(0, 2, 1)
     covs[k] = pk + 0.5 * (corr + corr.transpose(0, 2, 1))
     return poses, covs
-
-
-angles = st.one_of(
-    st.floats(-1e6, 1e6, allow_nan=False),
-    st.sampled_from([math.pi, -math.pi, math.nextafter(math.pi, 0), math.nextafter(-math.pi, -4)]),
-    st.sampled_from([3 * math.pi, -3 * math.pi, 0.0, -0.0, 1e300, -1e300, math.nan]),
-    st.floats(-1e-300, 1e-300),
-)
-
-
-@settings(max_examples=200, deadline=None)
-@given(angles)
-def test_scalar_wrap_is_wrap_angle_bit_for_bit(a):
-    assert bits(ekf._wrap(a)) == bits(se2.wrap_angle(a))
 
 
 def test_rotated_noise_is_predict6_at_zero_bit_for_bit(rng):

@@ -199,3 +199,21 @@ def test_v_coefficients_continuous_across_the_cut_off() -> None:
     above = se2.v_coefficients(np.array([1e-2 + eps, -1e-2 - eps]), derivatives=True)
     for lo, hi in zip(below, above, strict=True):
         np.testing.assert_allclose(lo, hi, rtol=1e-11, atol=1e-15)
+
+
+angles = st.one_of(
+    st.floats(-1e6, 1e6, allow_nan=False),
+    st.sampled_from([math.pi, -math.pi, math.nextafter(math.pi, 0), math.nextafter(-math.pi, -4)]),
+    st.sampled_from([3 * math.pi, -3 * math.pi, 0.0, -0.0, 1e300, -1e300, math.nan]),
+    st.floats(-1e-300, 1e-300),
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(angles)
+def test_scalar_wrap_is_wrap_angle_bit_for_bit(a):
+    """The scalar twin used by the EKF's loop returns wrap_angle's bits, signed zeros and
+    the exact ±π edges included."""
+    got, want = se2.wrap_angle_float(a), se2.wrap_angle(a)
+    assert isinstance(got, float)
+    assert np.float64(got).tobytes() == np.asarray(want, dtype=np.float64).tobytes()
