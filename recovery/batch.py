@@ -62,7 +62,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.linalg import solveh_banded
+from scipy.linalg.lapack import dpbsv
 
 from recovery.ekf import FilterInput, run_filter
 from recovery.estimation.lm import Linearisation, LMOptions, levenberg_marquardt, retract_poses
@@ -104,9 +104,23 @@ def _residuals(  # type: ignore[no-untyped-def]
     ``robust`` (J,): the filter's robust weight per measurement; the measurement information
     ``(R + H_l Σ_l H_lᵀ)⁻¹`` is multiplied by it (the filter divides the same matrix by it).
     """
+    return _factors(inp, x, used, robust)[0]
+
+
+def _factors(  # type: ignore[no-untyped-def]
+    inp: FilterInput, x: Array, used: NDArray[np.int64], robust: Array | None = None
+):
+    """:func:`_residuals` and ``(cos θ_k, sin θ_k)`` (each (N − 1,)) of the motion factors,
+    which :func:`_band` reuses (``between`` written out with the same operations)."""
     rp = x[0] - inp.x0
     rp[2] = se2.wrap_angle(rp[2])
-    rm = se2.between(x[:-1], x[1:]) - inp.u
+    c, s = np.cos(x[:-1, 2]), np.sin(x[:-1, 2])
+    dx, dy = x[1:, 0] - x[:-1, 0], x[1:, 1] - x[:-1, 1]
+    rm = np.empty_like(inp.u)  # se2.between(x[:-1], x[1:]) − u, bit for bit
+    rm[:, 0] = c * dx + s * dy
+    rm[:, 1] = -s * dx + c * dy
+    rm[:, 2] = se2.wrap_angle(x[1:, 2] - x[:-1, 2])
+    rm -= inp.u
     rm[:, 2] = se2.wrap_angle(rm[:, 2])
     k = inp.meas_grid[used]
     li = inp.meas_landmark[used]
@@ -117,7 +131,7 @@ def _residuals(  # type: ignore[no-untyped-def]
     wz = np.linalg.inv(reff)
     if robust is not None:
         wz = wz * robust[used][:, None, None]
-    return rp, rm, rz, wz, h_x, k
+    return (rp, rm, rz, wz, h_x, k), (c, s)
 
 
 def _cost(rp: Array, wp: Array, rm: Array, wm: Array, rz: Array, wz: Array) -> float:
@@ -155,14 +169,15 @@ def _band(  # type: ignore[no-untyped-def]
     wp: Array,
     wm: Array,
     robust: Array | None = None,
-    residuals: tuple[Any, ...] | None = None,
+    factors: tuple[Any, ...] | None = None,
 ):
-    """``H = Jᵀ W J`` in LAPACK upper band storage, the gradient ``Jᵀ W r`` (3N,), the cost.
+    """``H = Jᵀ W J`` in LAPACK lower band storage, the gradient ``Jᵀ W r`` (3N,), the cost.
 
-    ``residuals``: :func:`_residuals` at ``x`` when already computed.
+    ``factors``: :func:`_factors` at ``x`` when already computed.
 
-    ``H`` is block tridiagonal with 3 × 3 blocks, so its upper bandwidth is 5: returned as
-    ``ab`` (6, 3N) with ``ab[5 + i − j, j] = H[i, j]`` for ``i ≤ j`` (the upper form of
+    ``H`` is block tridiagonal with 3 × 3 blocks, so its bandwidth is 5: returned as ``ab``
+    (6, 3N), Fortran-ordered (what LAPACK reads, so ``pbsv`` copies nothing), with
+    ``ab[i − j, j] = H[i, j]`` for ``i ≥ j`` (the lower form of
     :func:`scipy.linalg.solveh_banded`).
 
     The motion Jacobians of ``between(x_k, x_{k+1})`` are ``J_b = blockdiag(R_kᵀ, 1)`` and
@@ -173,8 +188,7 @@ def _band(  # type: ignore[no-untyped-def]
     these ~40 element-wise operations cost less than two of them).
     """
     n = x.shape[0]
-    rp, rm, rz, wz, h_x, k = residuals or _residuals(inp, x, used, robust)
-    c, s = np.cos(x[:-1, 2]), np.sin(x[:-1, 2])
+    (rp, rm, rz, wz, h_x, k), (c, s) = factors or _factors(inp, x, used, robust)
     u0, u1 = x[:-1, 1] - x[1:, 1], x[1:, 0] - x[:-1, 0]
     g00, g01, g11, g02, g12, g22 = _rotated_information(wm, c, s)
     gu0, gu1, gu2 = g00 * u0 + g01 * u1, g01 * u0 + g11 * u1, g02 * u0 + g12 * u1  # G u
@@ -184,7 +198,7 @@ def _band(  # type: ignore[no-untyped-def]
     diag[0] += wp
     jzt_w = -h_x.transpose(0, 2, 1) @ wz
     np.add.at(diag, k, jzt_w @ -h_x)
-    ab = np.zeros((6, n, 3))  # ab[5 + a − b, k, b] = H[3k + a, 3k + b]
+    band = np.zeros((n, 3, 6))  # band[k, a, d] = H[3k + a + d, 3k + a] = ab[d, 3k + a]
     for (a, b), here, after in (
         ((0, 0), g00, g00),
         ((0, 1), g01, g01),
@@ -193,10 +207,12 @@ def _band(  # type: ignore[no-untyped-def]
         ((1, 2), k12, g12),
         ((2, 2), k22, g22),
     ):
-        ab[5 + a - b, :, b] = diag[:, a, b]
-        ab[5 + a - b, :-1, b] += here
-        ab[5 + a - b, 1:, b] += after
-    # H_{k,k+1} = −Kᵀ G (G with G u added to its last row), at ab[2 + a − b, k + 1, b]
+        col = band[:, a, b - a]  # H[3k + b, 3k + a] = H[3k + a, 3k + b], a ≤ b
+        col[:] = diag[:, a, b]
+        col[:-1] += here
+        col[1:] += after
+    # H_{k+1,k} = H_{k,k+1}ᵀ, H_{k,k+1} = −Kᵀ G (G with G u added to its last row):
+    # H[3k + 3 + b, 3k + a] = H_{k,k+1}[a, b] at band[k, a, 3 + b − a]
     for (a, b), val in (
         ((0, 0), g00),
         ((0, 1), g01),
@@ -208,7 +224,7 @@ def _band(  # type: ignore[no-untyped-def]
         ((2, 1), k12),
         ((2, 2), g22 + gu2),
     ):
-        ab[2 + a - b, 1:, b] = -val
+        np.negative(val, out=band[:-1, a, 3 + b - a])
     wm_rm = np.einsum("nij,nj->ni", wm, rm)
     v0 = c * wm_rm[:, 0] - s * wm_rm[:, 1]  # v = J_bᵀ W r
     v1 = s * wm_rm[:, 0] + c * wm_rm[:, 1]
@@ -222,7 +238,7 @@ def _band(  # type: ignore[no-untyped-def]
     g[:-1, 2] -= wm_rm[:, 2] + u0 * v0 + u1 * v1
     np.add.at(g, k, np.einsum("nij,nj->ni", jzt_w, rz))
     cost = 0.5 * float(rp @ wp @ rp + np.sum(rm * wm_rm) + np.einsum("ni,nij,nj->", rz, wz, rz))
-    return ab.reshape(6, 3 * n), g.ravel(), cost
+    return band.reshape(3 * n, 6).T, g.ravel(), cost
 
 
 def normal_equations(
@@ -236,8 +252,8 @@ def normal_equations(
     wp, wm = _weights(inp, sigma)
     ab, g, cost = _band(inp, x, used, wp, wm, robust)
     size = ab.shape[1]
-    upper = sp.dia_array((ab[::-1], np.arange(6)), shape=(size, size))
-    h = (upper + upper.T - sp.diags_array(ab[5])).tocsc()
+    lower = sp.dia_array((np.ascontiguousarray(ab), -np.arange(6)), shape=(size, size))
+    h = (lower + lower.T - sp.diags_array(ab[0])).tocsc()
     return h, g, cost, (wp, wm)
 
 
@@ -266,22 +282,22 @@ class _BatchProblem:
         # an accepted trial is linearised next: reuse the residuals its cost computed
         res = self._trial[1] if self._trial is not None and self._trial[0] is x else None
         ab, g, cost = _band(self.inp, x, self.used, self.wp, self.wm, self.robust, res)
-        return Linearisation(cost, g, ab[5], ab)
+        return Linearisation(cost, g, ab[0], ab)
 
     def cost(self, x: Array) -> float:
-        res = _residuals(self.inp, x, self.used, self.robust)
+        res = _factors(self.inp, x, self.used, self.robust)
         self._trial = (x, res)
-        rp, rm, rz, wz, _, _ = res
+        rp, rm, rz, wz, _, _ = res[0]
         return _cost(rp, self.wp, rm, self.wm, rz, wz)
 
     def solve(self, lin: Linearisation, damping: Array) -> Array:
         # λ runs down to 1e-16: should the factorisation of the nearly undamped H fail in
         # rounding, retry once with the damping floor of the shared loop (1e-12 diag H)
         for floor in (0.0, 1e-12):
-            ab = lin.system.copy()
-            ab[5] += np.maximum(damping, floor * lin.diagonal)
+            ab = lin.system.copy(order="F")
+            ab[0] += np.maximum(damping, floor * lin.diagonal)
             try:
-                return solveh_banded(ab, -lin.gradient, overwrite_ab=True, check_finite=False)
+                return _cholesky_solve(ab, -lin.gradient)
             except np.linalg.LinAlgError:
                 pass
         raise DivergenceError(
@@ -290,6 +306,18 @@ class _BatchProblem:
 
     def retract(self, x: Array, delta: Array) -> Array:
         return retract_chain(x, delta) if self.chain else retract_poses(x, delta)
+
+
+def _cholesky_solve(ab: Array, rhs: Array) -> Array:
+    """``H⁻¹ rhs`` for ``H`` in lower band storage ``ab`` (6, 3N), Fortran-ordered: LAPACK
+    ``pbsv`` in place (overwrites ``ab`` and ``rhs``; :func:`scipy.linalg.solveh_banded`
+    without its checks and copies). Raises ``LinAlgError`` if ``H`` is not positive definite."""
+    _, x, info = dpbsv(ab, rhs, lower=1, overwrite_ab=1, overwrite_b=1)
+    if info > 0:
+        raise np.linalg.LinAlgError(f"leading minor {int(info)} is not positive definite")
+    if info < 0:
+        raise ValueError(f"illegal value in argument {-int(info)} of pbsv")
+    return np.asarray(x, dtype=np.float64)
 
 
 def retract_chain(x: Array, delta: Array) -> Array:
