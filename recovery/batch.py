@@ -67,7 +67,7 @@ from scipy.linalg.lapack import dpbsv
 from recovery.ekf import FilterInput, run_filter
 from recovery.estimation.lm import Linearisation, LMOptions, levenberg_marquardt, retract_poses
 from recovery.models import range_bearing
-from recovery.smoother import smooth
+from recovery.smoother import smoothed_covariances
 from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError
@@ -134,16 +134,31 @@ def _factors(  # type: ignore[no-untyped-def]
     return (rp, rm, rz, wz, h_x, k), (c, s)
 
 
-def _cost(rp: Array, wp: Array, rm: Array, wm: Array, rz: Array, wz: Array) -> float:
-    wm_rm = np.einsum("nij,nj->ni", wm, rm)
+def _motion_wr(wm: Array, rm: Array) -> Array:
+    """``W_k r_k`` of every motion factor, (N − 1, 3)."""
+    return np.einsum("nij,nj->ni", wm, rm)
+
+
+def _cost(rp: Array, wp: Array, rm: Array, wm_rm: Array, rz: Array, wz: Array) -> float:
+    """``½ Σ rᵀ W r`` with the motion factors' ``W r`` given (:func:`_motion_wr`)."""
     return 0.5 * float(rp @ wp @ rp + np.sum(rm * wm_rm) + np.einsum("ni,nij,nj->", rz, wz, rz))
 
 
-def _weights(inp: FilterInput, sigma: Array | None = None) -> tuple[Array, Array]:
-    """Prior information (3, 3) and motion informations (N − 1, 3, 3), symmetric."""
+def _weights(
+    inp: FilterInput, sigma: Array | None = None, *, regularised: Array | None = None
+) -> tuple[Array, Array]:
+    """Prior information (3, 3) and motion informations (N − 1, 3, 3), symmetric.
+
+    ``regularised``: :func:`regularised_sigma` of ``sigma`` (default ``inp.sigma``) when
+    already computed.
+    """
     wp = np.asarray(np.linalg.inv(inp.p0 + 1e-15 * np.eye(3)), dtype=np.float64)
-    wm = np.linalg.inv(regularised_sigma(inp.sigma if sigma is None else sigma))
-    return wp, np.asarray(0.5 * (wm + wm.transpose(0, 2, 1)), dtype=np.float64)
+    if regularised is None:
+        regularised = regularised_sigma(inp.sigma if sigma is None else sigma)
+    wm = np.asarray(np.linalg.inv(regularised), dtype=np.float64)
+    wm += wm.transpose(0, 2, 1)  # ½ (W + Wᵀ) in place (numpy buffers the overlapping operand)
+    wm *= 0.5
+    return wp, wm
 
 
 def _rotated_information(w: Array, c: Array, s: Array) -> tuple[Array, ...]:
@@ -170,10 +185,12 @@ def _band(  # type: ignore[no-untyped-def]
     wm: Array,
     robust: Array | None = None,
     factors: tuple[Any, ...] | None = None,
+    wm_rm: Array | None = None,
 ):
     """``H = Jᵀ W J`` in LAPACK lower band storage, the gradient ``Jᵀ W r`` (3N,), the cost.
 
-    ``factors``: :func:`_factors` at ``x`` when already computed.
+    ``factors``: :func:`_factors` at ``x`` when already computed; ``wm_rm`` (N − 1, 3):
+    ``W r`` of the motion factors when already computed (by :func:`_cost`).
 
     ``H`` is block tridiagonal with 3 × 3 blocks, so its bandwidth is 5: returned as ``ab``
     (6, 3N), Fortran-ordered (what LAPACK reads, so ``pbsv`` copies nothing), with
@@ -194,10 +211,8 @@ def _band(  # type: ignore[no-untyped-def]
     gu0, gu1, gu2 = g00 * u0 + g01 * u1, g01 * u0 + g11 * u1, g02 * u0 + g12 * u1  # G u
     k02, k12 = g02 + gu0, g12 + gu1  # Kᵀ G K: G with G u added to its last row and column
     k22 = g22 + gu2 + u0 * k02 + u1 * k12
-    diag = np.zeros((n, 3, 3))
-    diag[0] += wp
     jzt_w = -h_x.transpose(0, 2, 1) @ wz
-    np.add.at(diag, k, jzt_w @ -h_x)
+    hz = jzt_w @ -h_x  # each measurement's block of H_kk
     band = np.zeros((n, 3, 6))  # band[k, a, d] = H[3k + a + d, 3k + a] = ab[d, 3k + a]
     for (a, b), here, after in (
         ((0, 0), g00, g00),
@@ -207,10 +222,13 @@ def _band(  # type: ignore[no-untyped-def]
         ((1, 2), k12, g12),
         ((2, 2), k22, g22),
     ):
-        col = band[:, a, b - a]  # H[3k + b, 3k + a] = H[3k + a, 3k + b], a ≤ b
-        col[:] = diag[:, a, b]
+        # H[3k + b, 3k + a] = H[3k + a, 3k + b], a ≤ b: prior and measurements, then motion
+        col = np.zeros(n)  # summed contiguously, written to the band once
+        col[0] += wp[a, b]
+        np.add.at(col, k, hz[:, a, b])
         col[:-1] += here
         col[1:] += after
+        band[:, a, b - a] = col
     # H_{k+1,k} = H_{k,k+1}ᵀ, H_{k,k+1} = −Kᵀ G (G with G u added to its last row):
     # H[3k + 3 + b, 3k + a] = H_{k,k+1}[a, b] at band[k, a, 3 + b − a]
     for (a, b), val in (
@@ -225,7 +243,8 @@ def _band(  # type: ignore[no-untyped-def]
         ((2, 2), g22 + gu2),
     ):
         np.negative(val, out=band[:-1, a, 3 + b - a])
-    wm_rm = np.einsum("nij,nj->ni", wm, rm)
+    if wm_rm is None:
+        wm_rm = _motion_wr(wm, rm)
     v0 = c * wm_rm[:, 0] - s * wm_rm[:, 1]  # v = J_bᵀ W r
     v1 = s * wm_rm[:, 0] + c * wm_rm[:, 1]
     g = np.zeros((n, 3))
@@ -237,7 +256,7 @@ def _band(  # type: ignore[no-untyped-def]
     g[:-1, 1] -= v1
     g[:-1, 2] -= wm_rm[:, 2] + u0 * v0 + u1 * v1
     np.add.at(g, k, np.einsum("nij,nj->ni", jzt_w, rz))
-    cost = 0.5 * float(rp @ wp @ rp + np.sum(rm * wm_rm) + np.einsum("ni,nij,nj->", rz, wz, rz))
+    cost = _cost(rp, wp, rm, wm_rm, rz, wz)
     return band.reshape(3 * n, 6).T, g.ravel(), cost
 
 
@@ -264,6 +283,7 @@ class _BatchProblem:
     solved by a banded Cholesky (LAPACK ``pbsv``): O(N) for the block-tridiagonal ``H``.
     ``chain``: steps are applied along the chain (:func:`retract_chain`); False adds them to
     the poses (:func:`~recovery.estimation.lm.retract_poses`, as before issue 15; tests).
+    ``regularised``: :func:`regularised_sigma` of ``inp.sigma`` when already computed.
     """
 
     def __init__(
@@ -273,22 +293,26 @@ class _BatchProblem:
         robust: Array | None,
         *,
         chain: bool = True,
+        regularised: Array | None = None,
     ) -> None:
         self.inp, self.used, self.robust, self.chain = inp, used, robust, chain
-        self.wp, self.wm = _weights(inp)
-        self._trial: tuple[Array, tuple[Any, ...]] | None = None  # last cost()'s residuals
+        self.wp, self.wm = _weights(inp, regularised=regularised)
+        self._trial: tuple[Any, ...] | None = None  # last cost()'s x, factors and W r
 
     def linearise(self, x: Array) -> Linearisation:
         # an accepted trial is linearised next: reuse the residuals its cost computed
-        res = self._trial[1] if self._trial is not None and self._trial[0] is x else None
-        ab, g, cost = _band(self.inp, x, self.used, self.wp, self.wm, self.robust, res)
+        res, wm_rm = None, None
+        if self._trial is not None and self._trial[0] is x:
+            res, wm_rm = self._trial[1:]
+        ab, g, cost = _band(self.inp, x, self.used, self.wp, self.wm, self.robust, res, wm_rm)
         return Linearisation(cost, g, ab[0], ab)
 
     def cost(self, x: Array) -> float:
         res = _factors(self.inp, x, self.used, self.robust)
-        self._trial = (x, res)
         rp, rm, rz, wz, _, _ = res[0]
-        return _cost(rp, self.wp, rm, self.wm, rz, wz)
+        wm_rm = _motion_wr(self.wm, rm)
+        self._trial = (x, res, wm_rm)
+        return _cost(rp, self.wp, rm, wm_rm, rz, wz)
 
     def solve(self, lin: Linearisation, damping: Array) -> Array:
         # λ runs down to 1e-16: should the factorisation of the nearly undamped H fail in
@@ -351,17 +375,18 @@ def retract_chain(x: Array, delta: Array) -> Array:
     """
     step = delta.reshape(x.shape)
     phi = step[:, 2]
-    d = x[1:, :2] - x[:-1, :2]
-    a = d + (step[1:, :2] - step[:-1, :2])  # Δ + w
-    a[:, 0] += d[:, 1] * phi[:-1]
-    a[:, 1] -= d[:, 0] * phi[:-1]
-    c, s = np.cos(phi[:-1]), np.sin(phi[:-1])
-    inc = np.empty_like(d)
-    inc[:, 0] = (c * a[:, 0] - s * a[:, 1]) - d[:, 0]
-    inc[:, 1] = (s * a[:, 0] + c * a[:, 1]) - d[:, 1]
     out = np.empty_like(x)
-    out[:, :2] = x[:, :2] + step[0, :2]
-    out[1:, :2] += np.cumsum(inc, axis=0)
+    c, s = np.cos(phi[:-1]), np.sin(phi[:-1])
+    # one coordinate at a time on contiguous (N − 1,) arrays; the same operations as on the
+    # (N − 1, 2) blocks, so the same bits
+    dx, dy = x[1:, 0] - x[:-1, 0], x[1:, 1] - x[:-1, 1]  # Δ
+    ax = dx + (step[1:, 0] - step[:-1, 0])  # Δ + w
+    ax += dy * phi[:-1]
+    ay = dy + (step[1:, 1] - step[:-1, 1])
+    ay -= dx * phi[:-1]
+    for i, inc in ((0, (c * ax - s * ay) - dx), (1, (s * ax + c * ay) - dy)):
+        out[:, i] = x[:, i] + step[0, i]
+        out[1:, i] += np.cumsum(inc)
     out[:, 2] = se2.wrap_angle(x[:, 2] + phi)
     return out
 
@@ -395,7 +420,8 @@ def refine(
     -------
     BatchResult
     """
-    problem = _BatchProblem(inp, np.flatnonzero(used), weights)
+    reg = regularised_sigma(inp.sigma)  # shared by the weights and the covariance pass
+    problem = _BatchProblem(inp, np.flatnonzero(used), weights, regularised=reg)
     options = LMOptions(
         lambda_initial=LAMBDA_INITIAL,
         lambda_min=LAMBDA_MIN,
@@ -408,14 +434,24 @@ def refine(
     res = levenberg_marquardt(problem, np.array(start, dtype=np.float64), options)
     x = res.x
     x[:, 2] = se2.wrap_angle(x[:, 2])
-    covs = batch_covariances(inp, x, used, weights)
+    covs = batch_covariances(inp, x, used, weights, regularised=reg)
     return BatchResult(x, covs, res.iterations, float(res.costs[0]), float(res.costs[-1]))
 
 
 def batch_covariances(
-    inp: FilterInput, x: Array, used: NDArray[np.bool_], weights: Array | None = None
+    inp: FilterInput,
+    x: Array,
+    used: NDArray[np.bool_],
+    weights: Array | None = None,
+    *,
+    regularised: Array | None = None,
 ) -> Array:
-    """Diagonal blocks of ``H⁻¹`` at ``x``: filter + RTS covariance pass linearised at ``x``."""
-    reg = replace(inp, sigma=regularised_sigma(inp.sigma), map_covariance=None)
+    """Diagonal blocks of ``H⁻¹`` at ``x``: filter + RTS covariance pass linearised at ``x``.
+
+    ``regularised``: :func:`regularised_sigma` of ``inp.sigma`` when already computed. Only
+    covariances are smoothed (:func:`~recovery.smoother.smoothed_covariances`).
+    """
+    sigma = regularised_sigma(inp.sigma) if regularised is None else regularised
+    reg = replace(inp, sigma=sigma, map_covariance=None)
     fr = run_filter(reg, linearize_at=x, use=used, weights=weights, max_outlier_run=None)
-    return smooth(fr).covariances
+    return smoothed_covariances(fr)

@@ -9,6 +9,8 @@ retried factorisation against a direct banded solve with the floor damping.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -21,14 +23,16 @@ from recovery.batch import (
     _cholesky_solve,
     _factors,
     _weights,
+    batch_covariances,
     refine,
+    regularised_sigma,
     retract_chain,
 )
 from recovery.ekf import USED, run_filter
 from recovery.estimation.lm import LMOptions, levenberg_marquardt, retract_poses
 from recovery.recover import filter_input
 from recovery.simulation.bundles import simulate_bundle
-from recovery.smoother import smooth
+from recovery.smoother import smooth, smoothed_covariances
 from relation_metric import se2
 from relation_metric.errors import DivergenceError
 
@@ -209,3 +213,25 @@ def test_lower_band_is_the_dense_matrix_and_its_solve() -> None:
     np.testing.assert_array_equal(got, solveh_banded(ab, rhs, lower=True))
     with pytest.raises(np.linalg.LinAlgError):
         _cholesky_solve(-ab.copy(order="F"), rhs.copy())
+
+
+@pytest.mark.parametrize("seed", [23, 24])
+def test_covariance_only_smoother_is_the_full_one_bit_for_bit(seed: int) -> None:
+    inp, used, x = _small_problem(seed, steps=400)
+    fr = run_filter(inp)  # the filter's own run
+    np.testing.assert_array_equal(smoothed_covariances(fr), smooth(fr).covariances)
+    # and the batch's covariance pass: linearised at given poses, regularised noise
+    mask = fr.status == USED
+    got = batch_covariances(inp, x, mask, regularised=regularised_sigma(inp.sigma))
+    reg = replace(inp, sigma=regularised_sigma(inp.sigma), map_covariance=None)
+    full = run_filter(reg, linearize_at=x, use=mask, max_outlier_run=None)
+    np.testing.assert_array_equal(got, smooth(full).covariances)
+
+
+def test_weights_from_a_given_regularisation_are_the_plain_ones() -> None:
+    inp, _, _ = _small_problem(25)
+    wp, wm = _weights(inp, regularised=regularised_sigma(inp.sigma))
+    inv = np.linalg.inv(regularised_sigma(inp.sigma))
+    np.testing.assert_array_equal(wm, 0.5 * (inv + inv.transpose(0, 2, 1)))  # bit for bit
+    np.testing.assert_array_equal(wm, wm.transpose(0, 2, 1))
+    np.testing.assert_array_equal(wp, _weights(inp)[0])
