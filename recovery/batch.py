@@ -40,17 +40,24 @@ The minimiser is the estimation layer's :func:`~recovery.estimation.lm.levenberg
 
 The normal equations are block tridiagonal in time order (each measurement touches one pose,
 the map is fixed), so ``H`` is assembled straight into LAPACK's band storage (bandwidth 5)
-and each damped step is one banded Cholesky solve (``scipy.linalg.solveh_banded``): O(N) per
-iteration, no fill, no ordering. Measured at 10⁵ control steps (10⁵ grid poses): 25–55 ms
-per solve, against 0.4 s for SuperLU in the natural order and 0.7 s for ``spsolve``'s default
-(COLAMD with pivoting). A block Thomas recursion would be linear too but sequential (a Python
-loop per pose). Per-pose covariances are the diagonal blocks of ``H⁻¹`` at the solution,
-computed by the extended filter/RTS covariance recursion linearised at the solution (exact
-for a block-tridiagonal information matrix, and vectorised like the smoother; about as long
-as one filter + smoother pass). A vectorised block cyclic reduction of ``H`` itself was
-measured faster (0.15 against 0.23–0.28 s at 10⁵ steps) but inaccurate: the Schur
-complements of the information form cancel the stiff terms, leaving relative errors up to
-4·10⁻² in the covariances at 3·10³ steps (the covariance-form recursion: 3·10⁻⁷, against
+and each damped step is one banded Cholesky solve (LAPACK ``pbsv``): O(N) per iteration, no
+fill, no ordering. The band is stored *lower* and Fortran-ordered, so ``pbsv`` factorises in
+place: at 10⁵ control steps (3·10⁵ unknowns) 15 ms per solve against 22 ms for the upper
+form and 25 ms through ``scipy.linalg.solveh_banded`` (which copied the C-ordered band);
+LAPACK's unblocked band Cholesky walks columns, contiguous in the lower form, strided in the
+upper. The two forms round differently (steps ~10⁻¹⁰ relative apart; the same minimum, poses
+7·10⁻¹² m apart at 10⁵ steps). SuperLU in the natural order took 0.4 s, ``spsolve``'s
+default (COLAMD with pivoting) 0.7 s. A block Thomas recursion would be linear too but
+sequential (a Python loop per pose).
+
+Per-pose covariances are the diagonal blocks of ``H⁻¹`` at the solution, computed by the
+extended filter/RTS covariance recursion linearised at the solution (exact for a
+block-tridiagonal information matrix, and vectorised like the smoother; about as long as one
+filter + smoother pass, the smoother's mean half skipped:
+:func:`~recovery.smoother.smoothed_covariances`). A vectorised block cyclic reduction of
+``H`` itself was measured faster (0.15 against 0.23–0.28 s at 10⁵ steps) but inaccurate: the
+Schur complements of the information form cancel the stiff terms, leaving relative errors up
+to 4·10⁻² in the covariances at 3·10³ steps (the covariance-form recursion: 3·10⁻⁷, against
 a sparse LU solve).
 """
 
