@@ -40,17 +40,24 @@ The minimiser is the estimation layer's :func:`~recovery.estimation.lm.levenberg
 
 The normal equations are block tridiagonal in time order (each measurement touches one pose,
 the map is fixed), so ``H`` is assembled straight into LAPACK's band storage (bandwidth 5)
-and each damped step is one banded Cholesky solve (``scipy.linalg.solveh_banded``): O(N) per
-iteration, no fill, no ordering. Measured at 10⁵ control steps (10⁵ grid poses): 25–55 ms
-per solve, against 0.4 s for SuperLU in the natural order and 0.7 s for ``spsolve``'s default
-(COLAMD with pivoting). A block Thomas recursion would be linear too but sequential (a Python
-loop per pose). Per-pose covariances are the diagonal blocks of ``H⁻¹`` at the solution,
-computed by the extended filter/RTS covariance recursion linearised at the solution (exact
-for a block-tridiagonal information matrix, and vectorised like the smoother; about as long
-as one filter + smoother pass). A vectorised block cyclic reduction of ``H`` itself was
-measured faster (0.15 against 0.23–0.28 s at 10⁵ steps) but inaccurate: the Schur
-complements of the information form cancel the stiff terms, leaving relative errors up to
-4·10⁻² in the covariances at 3·10³ steps (the covariance-form recursion: 3·10⁻⁷, against
+and each damped step is one banded Cholesky solve (LAPACK ``pbsv``): O(N) per iteration, no
+fill, no ordering. The band is stored *lower* and Fortran-ordered, so ``pbsv`` factorises in
+place: at 10⁵ control steps (3·10⁵ unknowns) 15 ms per solve against 22 ms for the upper
+form and 25 ms through ``scipy.linalg.solveh_banded`` (which copied the C-ordered band);
+LAPACK's unblocked band Cholesky walks columns, contiguous in the lower form, strided in the
+upper. The two forms round differently (steps ~10⁻¹⁰ relative apart; the same minimum, poses
+7·10⁻¹² m apart at 10⁵ steps). SuperLU in the natural order took 0.4 s, ``spsolve``'s
+default (COLAMD with pivoting) 0.7 s. A block Thomas recursion would be linear too but
+sequential (a Python loop per pose).
+
+Per-pose covariances are the diagonal blocks of ``H⁻¹`` at the solution, computed by the
+extended filter/RTS covariance recursion linearised at the solution (exact for a
+block-tridiagonal information matrix, and vectorised like the smoother; about as long as one
+filter + smoother pass, the smoother's mean half skipped:
+:func:`~recovery.smoother.smoothed_covariances`). A vectorised block cyclic reduction of
+``H`` itself was measured faster (0.15 against 0.23–0.28 s at 10⁵ steps) but inaccurate: the
+Schur complements of the information form cancel the stiff terms, leaving relative errors up
+to 4·10⁻² in the covariances at 3·10³ steps (the covariance-form recursion: 3·10⁻⁷, against
 a sparse LU solve).
 """
 
@@ -62,12 +69,12 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from scipy.linalg import solveh_banded
+from scipy.linalg.lapack import dpbsv
 
 from recovery.ekf import FilterInput, run_filter
 from recovery.estimation.lm import Linearisation, LMOptions, levenberg_marquardt, retract_poses
 from recovery.models import range_bearing
-from recovery.smoother import smooth
+from recovery.smoother import smoothed_covariances
 from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError
@@ -104,9 +111,23 @@ def _residuals(  # type: ignore[no-untyped-def]
     ``robust`` (J,): the filter's robust weight per measurement; the measurement information
     ``(R + H_l Σ_l H_lᵀ)⁻¹`` is multiplied by it (the filter divides the same matrix by it).
     """
+    return _factors(inp, x, used, robust)[0]
+
+
+def _factors(  # type: ignore[no-untyped-def]
+    inp: FilterInput, x: Array, used: NDArray[np.int64], robust: Array | None = None
+):
+    """:func:`_residuals` and ``(cos θ_k, sin θ_k)`` (each (N − 1,)) of the motion factors,
+    which :func:`_band` reuses (``between`` written out with the same operations)."""
     rp = x[0] - inp.x0
     rp[2] = se2.wrap_angle(rp[2])
-    rm = se2.between(x[:-1], x[1:]) - inp.u
+    c, s = np.cos(x[:-1, 2]), np.sin(x[:-1, 2])
+    dx, dy = x[1:, 0] - x[:-1, 0], x[1:, 1] - x[:-1, 1]
+    rm = np.empty_like(inp.u)  # se2.between(x[:-1], x[1:]) − u, bit for bit
+    rm[:, 0] = c * dx + s * dy
+    rm[:, 1] = -s * dx + c * dy
+    rm[:, 2] = se2.wrap_angle(x[1:, 2] - x[:-1, 2])
+    rm -= inp.u
     rm[:, 2] = se2.wrap_angle(rm[:, 2])
     k = inp.meas_grid[used]
     li = inp.meas_landmark[used]
@@ -117,19 +138,38 @@ def _residuals(  # type: ignore[no-untyped-def]
     wz = np.linalg.inv(reff)
     if robust is not None:
         wz = wz * robust[used][:, None, None]
-    return rp, rm, rz, wz, h_x, k
+    return (rp, rm, rz, wz, h_x, k), (c, s)
 
 
-def _cost(rp: Array, wp: Array, rm: Array, wm: Array, rz: Array, wz: Array) -> float:
-    wm_rm = np.einsum("nij,nj->ni", wm, rm)
+def _motion_wr(wm: Array, rm: Array) -> Array:
+    """``W_k r_k`` of every motion factor, (N − 1, 3)."""
+    return np.einsum("nij,nj->ni", wm, rm)
+
+
+def _cost(rp: Array, wp: Array, rm: Array, wm_rm: Array, rz: Array, wz: Array) -> float:
+    """``½ Σ rᵀ W r`` with the motion factors' ``W r`` given (:func:`_motion_wr`)."""
     return 0.5 * float(rp @ wp @ rp + np.sum(rm * wm_rm) + np.einsum("ni,nij,nj->", rz, wz, rz))
 
 
-def _weights(inp: FilterInput, sigma: Array | None = None) -> tuple[Array, Array]:
-    """Prior information (3, 3) and motion informations (N − 1, 3, 3), symmetric."""
+def _weights(
+    inp: FilterInput, sigma: Array | None = None, *, regularised: Array | None = None
+) -> tuple[Array, Array]:
+    """Prior information (3, 3) and motion informations (N − 1, 3, 3), symmetric.
+
+    ``regularised``: :func:`regularised_sigma` of ``sigma`` (default ``inp.sigma``) when
+    already computed.
+    """
     wp = np.asarray(np.linalg.inv(inp.p0 + 1e-15 * np.eye(3)), dtype=np.float64)
-    wm = np.linalg.inv(regularised_sigma(inp.sigma if sigma is None else sigma))
-    return wp, np.asarray(0.5 * (wm + wm.transpose(0, 2, 1)), dtype=np.float64)
+    if regularised is None:
+        regularised = regularised_sigma(inp.sigma if sigma is None else sigma)
+    wm = np.asarray(np.linalg.inv(regularised), dtype=np.float64)
+    # ½ (W + Wᵀ) in place, bit for bit: the diagonal is unchanged (½ (a + a) = a exactly),
+    # so only the three off-diagonal pairs are averaged (3.4 → 0.7 ms at 10⁵ steps)
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        mean = (wm[:, i, j] + wm[:, j, i]) * 0.5
+        wm[:, i, j] = mean
+        wm[:, j, i] = mean
+    return wp, wm
 
 
 def _rotated_information(w: Array, c: Array, s: Array) -> tuple[Array, ...]:
@@ -155,14 +195,17 @@ def _band(  # type: ignore[no-untyped-def]
     wp: Array,
     wm: Array,
     robust: Array | None = None,
-    residuals: tuple[Any, ...] | None = None,
+    factors: tuple[Any, ...] | None = None,
+    wm_rm: Array | None = None,
 ):
-    """``H = Jᵀ W J`` in LAPACK upper band storage, the gradient ``Jᵀ W r`` (3N,), the cost.
+    """``H = Jᵀ W J`` in LAPACK lower band storage, the gradient ``Jᵀ W r`` (3N,), the cost.
 
-    ``residuals``: :func:`_residuals` at ``x`` when already computed.
+    ``factors``: :func:`_factors` at ``x`` when already computed; ``wm_rm`` (N − 1, 3):
+    ``W r`` of the motion factors when already computed (by :func:`_cost`).
 
-    ``H`` is block tridiagonal with 3 × 3 blocks, so its upper bandwidth is 5: returned as
-    ``ab`` (6, 3N) with ``ab[5 + i − j, j] = H[i, j]`` for ``i ≤ j`` (the upper form of
+    ``H`` is block tridiagonal with 3 × 3 blocks, so its bandwidth is 5: returned as ``ab``
+    (6, 3N), Fortran-ordered (what LAPACK reads, so ``pbsv`` copies nothing), with
+    ``ab[i − j, j] = H[i, j]`` for ``i ≥ j`` (the lower form of
     :func:`scipy.linalg.solveh_banded`).
 
     The motion Jacobians of ``between(x_k, x_{k+1})`` are ``J_b = blockdiag(R_kᵀ, 1)`` and
@@ -173,18 +216,15 @@ def _band(  # type: ignore[no-untyped-def]
     these ~40 element-wise operations cost less than two of them).
     """
     n = x.shape[0]
-    rp, rm, rz, wz, h_x, k = residuals or _residuals(inp, x, used, robust)
-    c, s = np.cos(x[:-1, 2]), np.sin(x[:-1, 2])
+    (rp, rm, rz, wz, h_x, k), (c, s) = factors or _factors(inp, x, used, robust)
     u0, u1 = x[:-1, 1] - x[1:, 1], x[1:, 0] - x[:-1, 0]
     g00, g01, g11, g02, g12, g22 = _rotated_information(wm, c, s)
     gu0, gu1, gu2 = g00 * u0 + g01 * u1, g01 * u0 + g11 * u1, g02 * u0 + g12 * u1  # G u
     k02, k12 = g02 + gu0, g12 + gu1  # Kᵀ G K: G with G u added to its last row and column
     k22 = g22 + gu2 + u0 * k02 + u1 * k12
-    diag = np.zeros((n, 3, 3))
-    diag[0] += wp
     jzt_w = -h_x.transpose(0, 2, 1) @ wz
-    np.add.at(diag, k, jzt_w @ -h_x)
-    ab = np.zeros((6, n, 3))  # ab[5 + a − b, k, b] = H[3k + a, 3k + b]
+    hz = jzt_w @ -h_x  # each measurement's block of H_kk
+    band = np.zeros((n, 3, 6))  # band[k, a, d] = H[3k + a + d, 3k + a] = ab[d, 3k + a]
     for (a, b), here, after in (
         ((0, 0), g00, g00),
         ((0, 1), g01, g01),
@@ -193,10 +233,15 @@ def _band(  # type: ignore[no-untyped-def]
         ((1, 2), k12, g12),
         ((2, 2), k22, g22),
     ):
-        ab[5 + a - b, :, b] = diag[:, a, b]
-        ab[5 + a - b, :-1, b] += here
-        ab[5 + a - b, 1:, b] += after
-    # H_{k,k+1} = −Kᵀ G (G with G u added to its last row), at ab[2 + a − b, k + 1, b]
+        # H[3k + b, 3k + a] = H[3k + a, 3k + b], a ≤ b: prior and measurements, then motion
+        col = np.zeros(n)  # summed contiguously, written to the band once
+        col[0] += wp[a, b]
+        np.add.at(col, k, hz[:, a, b])
+        col[:-1] += here
+        col[1:] += after
+        band[:, a, b - a] = col
+    # H_{k+1,k} = H_{k,k+1}ᵀ, H_{k,k+1} = −Kᵀ G (G with G u added to its last row):
+    # H[3k + 3 + b, 3k + a] = H_{k,k+1}[a, b] at band[k, a, 3 + b − a]
     for (a, b), val in (
         ((0, 0), g00),
         ((0, 1), g01),
@@ -208,8 +253,9 @@ def _band(  # type: ignore[no-untyped-def]
         ((2, 1), k12),
         ((2, 2), g22 + gu2),
     ):
-        ab[2 + a - b, 1:, b] = -val
-    wm_rm = np.einsum("nij,nj->ni", wm, rm)
+        np.negative(val, out=band[:-1, a, 3 + b - a])
+    if wm_rm is None:
+        wm_rm = _motion_wr(wm, rm)
     v0 = c * wm_rm[:, 0] - s * wm_rm[:, 1]  # v = J_bᵀ W r
     v1 = s * wm_rm[:, 0] + c * wm_rm[:, 1]
     g = np.zeros((n, 3))
@@ -221,8 +267,8 @@ def _band(  # type: ignore[no-untyped-def]
     g[:-1, 1] -= v1
     g[:-1, 2] -= wm_rm[:, 2] + u0 * v0 + u1 * v1
     np.add.at(g, k, np.einsum("nij,nj->ni", jzt_w, rz))
-    cost = 0.5 * float(rp @ wp @ rp + np.sum(rm * wm_rm) + np.einsum("ni,nij,nj->", rz, wz, rz))
-    return ab.reshape(6, 3 * n), g.ravel(), cost
+    cost = _cost(rp, wp, rm, wm_rm, rz, wz)
+    return band.reshape(3 * n, 6).T, g.ravel(), cost
 
 
 def normal_equations(
@@ -236,8 +282,8 @@ def normal_equations(
     wp, wm = _weights(inp, sigma)
     ab, g, cost = _band(inp, x, used, wp, wm, robust)
     size = ab.shape[1]
-    upper = sp.dia_array((ab[::-1], np.arange(6)), shape=(size, size))
-    h = (upper + upper.T - sp.diags_array(ab[5])).tocsc()
+    lower = sp.dia_array((np.ascontiguousarray(ab), -np.arange(6)), shape=(size, size))
+    h = (lower + lower.T - sp.diags_array(ab[0])).tocsc()
     return h, g, cost, (wp, wm)
 
 
@@ -248,6 +294,7 @@ class _BatchProblem:
     solved by a banded Cholesky (LAPACK ``pbsv``): O(N) for the block-tridiagonal ``H``.
     ``chain``: steps are applied along the chain (:func:`retract_chain`); False adds them to
     the poses (:func:`~recovery.estimation.lm.retract_poses`, as before issue 15; tests).
+    ``regularised``: :func:`regularised_sigma` of ``inp.sigma`` when already computed.
     """
 
     def __init__(
@@ -257,31 +304,35 @@ class _BatchProblem:
         robust: Array | None,
         *,
         chain: bool = True,
+        regularised: Array | None = None,
     ) -> None:
         self.inp, self.used, self.robust, self.chain = inp, used, robust, chain
-        self.wp, self.wm = _weights(inp)
-        self._trial: tuple[Array, tuple[Any, ...]] | None = None  # last cost()'s residuals
+        self.wp, self.wm = _weights(inp, regularised=regularised)
+        self._trial: tuple[Any, ...] | None = None  # last cost()'s x, factors and W r
 
     def linearise(self, x: Array) -> Linearisation:
         # an accepted trial is linearised next: reuse the residuals its cost computed
-        res = self._trial[1] if self._trial is not None and self._trial[0] is x else None
-        ab, g, cost = _band(self.inp, x, self.used, self.wp, self.wm, self.robust, res)
-        return Linearisation(cost, g, ab[5], ab)
+        res, wm_rm = None, None
+        if self._trial is not None and self._trial[0] is x:
+            res, wm_rm = self._trial[1:]
+        ab, g, cost = _band(self.inp, x, self.used, self.wp, self.wm, self.robust, res, wm_rm)
+        return Linearisation(cost, g, ab[0], ab)
 
     def cost(self, x: Array) -> float:
-        res = _residuals(self.inp, x, self.used, self.robust)
-        self._trial = (x, res)
-        rp, rm, rz, wz, _, _ = res
-        return _cost(rp, self.wp, rm, self.wm, rz, wz)
+        res = _factors(self.inp, x, self.used, self.robust)
+        rp, rm, rz, wz, _, _ = res[0]
+        wm_rm = _motion_wr(self.wm, rm)
+        self._trial = (x, res, wm_rm)
+        return _cost(rp, self.wp, rm, wm_rm, rz, wz)
 
     def solve(self, lin: Linearisation, damping: Array) -> Array:
         # λ runs down to 1e-16: should the factorisation of the nearly undamped H fail in
         # rounding, retry once with the damping floor of the shared loop (1e-12 diag H)
         for floor in (0.0, 1e-12):
-            ab = lin.system.copy()
-            ab[5] += np.maximum(damping, floor * lin.diagonal)
+            ab = lin.system.copy(order="F")
+            ab[0] += np.maximum(damping, floor * lin.diagonal)
             try:
-                return solveh_banded(ab, -lin.gradient, overwrite_ab=True, check_finite=False)
+                return _cholesky_solve(ab, -lin.gradient)
             except np.linalg.LinAlgError:
                 pass
         raise DivergenceError(
@@ -290,6 +341,18 @@ class _BatchProblem:
 
     def retract(self, x: Array, delta: Array) -> Array:
         return retract_chain(x, delta) if self.chain else retract_poses(x, delta)
+
+
+def _cholesky_solve(ab: Array, rhs: Array) -> Array:
+    """``H⁻¹ rhs`` for ``H`` in lower band storage ``ab`` (6, 3N), Fortran-ordered: LAPACK
+    ``pbsv`` in place (overwrites ``ab`` and ``rhs``; :func:`scipy.linalg.solveh_banded`
+    without its checks and copies). Raises ``LinAlgError`` if ``H`` is not positive definite."""
+    _, x, info = dpbsv(ab, rhs, lower=1, overwrite_ab=1, overwrite_b=1)
+    if info > 0:
+        raise np.linalg.LinAlgError(f"leading minor {int(info)} is not positive definite")
+    if info < 0:
+        raise ValueError(f"illegal value in argument {-int(info)} of pbsv")
+    return np.asarray(x, dtype=np.float64)
 
 
 def retract_chain(x: Array, delta: Array) -> Array:
@@ -323,17 +386,18 @@ def retract_chain(x: Array, delta: Array) -> Array:
     """
     step = delta.reshape(x.shape)
     phi = step[:, 2]
-    d = x[1:, :2] - x[:-1, :2]
-    a = d + (step[1:, :2] - step[:-1, :2])  # Δ + w
-    a[:, 0] += d[:, 1] * phi[:-1]
-    a[:, 1] -= d[:, 0] * phi[:-1]
-    c, s = np.cos(phi[:-1]), np.sin(phi[:-1])
-    inc = np.empty_like(d)
-    inc[:, 0] = (c * a[:, 0] - s * a[:, 1]) - d[:, 0]
-    inc[:, 1] = (s * a[:, 0] + c * a[:, 1]) - d[:, 1]
     out = np.empty_like(x)
-    out[:, :2] = x[:, :2] + step[0, :2]
-    out[1:, :2] += np.cumsum(inc, axis=0)
+    c, s = np.cos(phi[:-1]), np.sin(phi[:-1])
+    # one coordinate at a time on contiguous (N − 1,) arrays; the same operations as on the
+    # (N − 1, 2) blocks, so the same bits
+    dx, dy = x[1:, 0] - x[:-1, 0], x[1:, 1] - x[:-1, 1]  # Δ
+    ax = dx + (step[1:, 0] - step[:-1, 0])  # Δ + w
+    ax += dy * phi[:-1]
+    ay = dy + (step[1:, 1] - step[:-1, 1])
+    ay -= dx * phi[:-1]
+    for i, inc in ((0, (c * ax - s * ay) - dx), (1, (s * ax + c * ay) - dy)):
+        out[:, i] = x[:, i] + step[0, i]
+        out[1:, i] += np.cumsum(inc)
     out[:, 2] = se2.wrap_angle(x[:, 2] + phi)
     return out
 
@@ -367,7 +431,8 @@ def refine(
     -------
     BatchResult
     """
-    problem = _BatchProblem(inp, np.flatnonzero(used), weights)
+    reg = regularised_sigma(inp.sigma)  # shared by the weights and the covariance pass
+    problem = _BatchProblem(inp, np.flatnonzero(used), weights, regularised=reg)
     options = LMOptions(
         lambda_initial=LAMBDA_INITIAL,
         lambda_min=LAMBDA_MIN,
@@ -380,14 +445,24 @@ def refine(
     res = levenberg_marquardt(problem, np.array(start, dtype=np.float64), options)
     x = res.x
     x[:, 2] = se2.wrap_angle(x[:, 2])
-    covs = batch_covariances(inp, x, used, weights)
+    covs = batch_covariances(inp, x, used, weights, regularised=reg)
     return BatchResult(x, covs, res.iterations, float(res.costs[0]), float(res.costs[-1]))
 
 
 def batch_covariances(
-    inp: FilterInput, x: Array, used: NDArray[np.bool_], weights: Array | None = None
+    inp: FilterInput,
+    x: Array,
+    used: NDArray[np.bool_],
+    weights: Array | None = None,
+    *,
+    regularised: Array | None = None,
 ) -> Array:
-    """Diagonal blocks of ``H⁻¹`` at ``x``: filter + RTS covariance pass linearised at ``x``."""
-    reg = replace(inp, sigma=regularised_sigma(inp.sigma), map_covariance=None)
+    """Diagonal blocks of ``H⁻¹`` at ``x``: filter + RTS covariance pass linearised at ``x``.
+
+    ``regularised``: :func:`regularised_sigma` of ``inp.sigma`` when already computed. Only
+    covariances are smoothed (:func:`~recovery.smoother.smoothed_covariances`).
+    """
+    sigma = regularised_sigma(inp.sigma) if regularised is None else regularised
+    reg = replace(inp, sigma=sigma, map_covariance=None)
     fr = run_filter(reg, linearize_at=x, use=used, weights=weights, max_outlier_run=None)
-    return smooth(fr).covariances
+    return smoothed_covariances(fr)

@@ -29,7 +29,7 @@ from recovery.ekf import FilterResult
 from relation_metric.arrays import Array
 from relation_metric.se2 import shear
 
-__all__ = ["SmootherResult", "smooth"]
+__all__ = ["SmootherResult", "smooth", "smoothed_covariances"]
 
 
 @dataclass(frozen=True)
@@ -72,6 +72,22 @@ def smooth(fr: FilterResult) -> SmootherResult:
     -------
     SmootherResult
     """
+    poses, covs = _smooth(fr, with_poses=True)
+    return SmootherResult(poses=poses, covariances=covs)
+
+
+def smoothed_covariances(fr: FilterResult) -> Array:
+    """The covariances (N, 3, 3) of :func:`smooth`, bit for bit, without the poses.
+
+    The covariance recursion does not read the means, so this skips the mean half of the
+    epoch scan and of the fill between epochs (for the batch's covariance pass, whose
+    filter is linearised at given poses).
+    """
+    return _smooth(fr, with_poses=False)[1]
+
+
+def _smooth(fr: FilterResult, *, with_poses: bool) -> tuple[Array | None, Array]:
+    """Smoothed poses (or None without ``with_poses``) and covariances."""
     seg = fr.segments
     ep = seg.epochs
     n_e = ep.shape[0]
@@ -84,19 +100,22 @@ def smooth(fr: FilterResult) -> SmootherResult:
     if n_e > 1:
         step = w[ep[1:], :2]  # displacement epoch i -> i+1
         gain = post_p[:-1] @ shear(step).transpose(0, 2, 1) @ inv_pri[1:]
-        g = post_x[1:] - pri_x[1:]
+        g = post_x[1:] - pri_x[1:] if with_poses else np.zeros((n_e - 1, 3))
         gg = post_p[1:] - pri_p[1:]
         b = np.einsum("nij,nj->ni", gain, g)
         d = gain @ gg @ gain.transpose(0, 2, 1)
         delta_e[:-1], big_e[:-1] = _suffix_scan(gain, b, d)
-    sm_x_e = post_x + delta_e
     sm_p_e = post_p + big_e
-    poses = np.empty_like(fr.poses)
     covs = np.empty_like(fr.covariances)
-    poses[ep] = sm_x_e
     covs[ep] = sm_p_e
+    if not with_poses:
+        _between_epochs(fr, inv_pri, None, sm_p_e - pri_p, None, covs)
+        return None, covs
+    sm_x_e = post_x + delta_e
+    poses = np.empty_like(fr.poses)
+    poses[ep] = sm_x_e
     _between_epochs(fr, inv_pri, sm_x_e - pri_x, sm_p_e - pri_p, poses, covs)
-    return SmootherResult(poses=poses, covariances=covs)
+    return poses, covs
 
 
 def _between_epochs(  # type: ignore[no-untyped-def]
@@ -107,11 +126,12 @@ def _between_epochs(  # type: ignore[no-untyped-def]
     ``C_k = P_k S(p_j − p_k)ᵀ (P⁻_j)⁻¹`` towards the next epoch ``j``;
     ``x^s_k = x_k + C_k (x^s_j − x⁻_j)``, ``P^s_k = P_k + C_k (P^s_j − P⁻_j) C_kᵀ``
     (symmetrised). ``inv_pri`` (E, 3, 3): ``(P⁻)⁻¹`` of the epochs; ``corr_x`` (E, 3),
-    ``corr_p`` (E, 3, 3): ``x^s − x⁻`` and ``P^s − P⁻`` at the epochs.
+    ``corr_p`` (E, 3, 3): ``x^s − x⁻`` and ``P^s − P⁻`` at the epochs. ``poses`` None: the
+    covariances only (``corr_x`` is not read).
     """
     seg, w = fr.segments, fr.steps
     ep = seg.epochs
-    is_epoch = np.zeros(poses.shape[0], dtype=bool)
+    is_epoch = np.zeros(covs.shape[0], dtype=bool)
     is_epoch[ep] = True
     k = np.flatnonzero(~is_epoch)
     if not k.size:
@@ -124,7 +144,9 @@ def _between_epochs(  # type: ignore[no-untyped-def]
     m[:, :, 0] -= to_next[:, 1, None] * pk[:, :, 2]
     m[:, :, 1] += to_next[:, 0, None] * pk[:, :, 2]
     ck = m @ np.take(inv_pri, i, axis=0)
-    poses[k] = np.take(fr.poses, k, axis=0) + (ck @ np.take(corr_x, i, axis=0)[:, :, None])[:, :, 0]
+    if poses is not None:
+        step = (ck @ np.take(corr_x, i, axis=0)[:, :, None])[:, :, 0]
+        poses[k] = np.take(fr.poses, k, axis=0) + step
     corr = ck @ np.take(corr_p, i, axis=0) @ ck.transpose(0, 2, 1)
     corr += corr.transpose(0, 2, 1).copy()
     corr *= 0.5

@@ -9,17 +9,30 @@ retried factorisation against a direct banded solve with the floor damping.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.linalg import solveh_banded
 
-from recovery.batch import _BatchProblem, refine, retract_chain
+from recovery.batch import (
+    _band,
+    _BatchProblem,
+    _cholesky_solve,
+    _factors,
+    _weights,
+    batch_covariances,
+    refine,
+    regularised_sigma,
+    retract_chain,
+)
 from recovery.ekf import USED, run_filter
 from recovery.estimation.lm import LMOptions, levenberg_marquardt, retract_poses
 from recovery.recover import filter_input
 from recovery.simulation.bundles import simulate_bundle
-from recovery.smoother import smooth
+from recovery.smoother import smooth, smoothed_covariances
 from relation_metric import se2
 from relation_metric.errors import DivergenceError
 
@@ -141,22 +154,84 @@ def test_failed_factorisation_is_retried_with_the_damping_floor(monkeypatch) -> 
     fr = run_filter(inp)
     problem = _BatchProblem(inp, np.flatnonzero(fr.status == USED), None)
     lin = problem.linearise(smooth(fr).poses)
-    real, seen = batch.solveh_banded, []
+    real, seen = batch._cholesky_solve, []
 
-    def fails_first(ab, rhs, **kw):  # type: ignore[no-untyped-def]
-        seen.append(ab[5].copy())
+    def fails_first(ab, rhs):  # type: ignore[no-untyped-def]
+        seen.append(ab[0].copy())
         if len(seen) == 1:
             raise np.linalg.LinAlgError("not positive definite")
-        return real(ab, rhs, **kw)
+        return real(ab, rhs)
 
-    monkeypatch.setattr(batch, "solveh_banded", fails_first)
+    monkeypatch.setattr(batch, "_cholesky_solve", fails_first)
     damping = np.full_like(lin.diagonal, 1e-30)
     step = problem.solve(lin, damping)
-    np.testing.assert_array_equal(seen[0], lin.system[5] + damping)
-    np.testing.assert_array_equal(seen[1], lin.system[5] + 1e-12 * lin.diagonal)
+    np.testing.assert_array_equal(seen[0], lin.system[0] + damping)
+    np.testing.assert_array_equal(seen[1], lin.system[0] + 1e-12 * lin.diagonal)
     ab = lin.system.copy()
-    ab[5] += 1e-12 * lin.diagonal
-    np.testing.assert_allclose(step, real(ab, -lin.gradient), rtol=1e-12)
-    monkeypatch.setattr(batch, "solveh_banded", lambda *a, **k: real(-np.abs(a[0]), a[1]))
+    ab[0] += 1e-12 * lin.diagonal
+    np.testing.assert_allclose(step, solveh_banded(ab, -lin.gradient, lower=True), rtol=1e-12)
+    monkeypatch.setattr(batch, "_cholesky_solve", lambda ab, rhs: real(-np.abs(ab), rhs))
     with pytest.raises(DivergenceError, match="not positive definite"):
         problem.solve(lin, damping)
+
+
+def _small_problem(seed: int, steps: int = 200):  # type: ignore[no-untyped-def]
+    b = simulate_bundle(seed, steps=steps, measure_every=4)
+    inp = filter_input(b, map_mode="marginal")
+    fr = run_filter(inp)
+    return inp, np.flatnonzero(fr.status == USED), smooth(fr).poses
+
+
+def test_motion_residuals_are_between_bit_for_bit() -> None:
+    inp, used, x = _small_problem(21)
+    (_, rm, _, _, _, _), (c, s) = _factors(inp, x, used)
+    want = se2.between(x[:-1], x[1:]) - inp.u
+    want[:, 2] = se2.wrap_angle(want[:, 2])
+    np.testing.assert_array_equal(rm, want)
+    np.testing.assert_array_equal(c, np.cos(x[:-1, 2]))
+    np.testing.assert_array_equal(s, np.sin(x[:-1, 2]))
+
+
+def test_lower_band_is_the_dense_matrix_and_its_solve() -> None:
+    inp, used, x = _small_problem(22)
+    wp, wm = _weights(inp)
+    ab, g, _ = _band(inp, x, used, wp, wm)
+    assert ab.flags.f_contiguous and ab.shape == (6, g.size)
+    size = g.size
+    dense = np.zeros((size, size))  # the band read back entry by entry: ab[i − j, j] = H[i, j]
+    for d in range(6):
+        idx = np.arange(size - d)
+        dense[idx + d, idx] = ab[d, : size - d]
+        dense[idx, idx + d] = ab[d, : size - d]
+    rows = np.add.outer(np.arange(6), np.arange(size))  # ab[d, j] is H[j + d, j]
+    assert np.all(ab[rows >= size] == 0.0)  # past the last row: LAPACK's unused corner
+    rhs = np.random.default_rng(5).normal(size=size)
+    got = _cholesky_solve(ab.copy(order="F"), rhs.copy())
+    # backward stable: the residual is rounding of the (stiff, 1e11-sized) products
+    assert np.all(np.abs(dense @ got - rhs) <= 1e-12 * (np.abs(dense) @ np.abs(got)))
+    # SciPy's wrapper of the same LAPACK routine (with its checks and copies): bit for bit
+    np.testing.assert_array_equal(got, solveh_banded(ab, rhs, lower=True))
+    with pytest.raises(np.linalg.LinAlgError):
+        _cholesky_solve(-ab.copy(order="F"), rhs.copy())
+
+
+@pytest.mark.parametrize("seed", [23, 24])
+def test_covariance_only_smoother_is_the_full_one_bit_for_bit(seed: int) -> None:
+    inp, used, x = _small_problem(seed, steps=400)
+    fr = run_filter(inp)  # the filter's own run
+    np.testing.assert_array_equal(smoothed_covariances(fr), smooth(fr).covariances)
+    # and the batch's covariance pass: linearised at given poses, regularised noise
+    mask = fr.status == USED
+    got = batch_covariances(inp, x, mask, regularised=regularised_sigma(inp.sigma))
+    reg = replace(inp, sigma=regularised_sigma(inp.sigma), map_covariance=None)
+    full = run_filter(reg, linearize_at=x, use=mask, max_outlier_run=None)
+    np.testing.assert_array_equal(got, smooth(full).covariances)
+
+
+def test_weights_from_a_given_regularisation_are_the_plain_ones() -> None:
+    inp, _, _ = _small_problem(25)
+    wp, wm = _weights(inp, regularised=regularised_sigma(inp.sigma))
+    inv = np.linalg.inv(regularised_sigma(inp.sigma))
+    np.testing.assert_array_equal(wm, 0.5 * (inv + inv.transpose(0, 2, 1)))  # bit for bit
+    np.testing.assert_array_equal(wm, wm.transpose(0, 2, 1))
+    np.testing.assert_array_equal(wp, _weights(inp)[0])
