@@ -158,8 +158,8 @@ class GraphSolution:
     cost: Array
     iterations: int
     converged: bool
-    linear_solver: str = ""
-    faster_solver: str | None = None
+    linear_solver: str
+    faster_solver: str | None
 
 
 def initial_landmarks(
