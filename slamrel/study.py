@@ -138,7 +138,13 @@ def run_case(
                 spherical_information(graph.pp_info),
             )
             solution = type(solution)(
-                tree.poses, np.empty((0, 2)), tree.cost, tree.iterations, True
+                poses=tree.poses,
+                landmarks=np.empty((0, 2)),
+                cost=tree.cost,
+                iterations=tree.iterations,
+                converged=True,
+                linear_solver="none (TORO: stochastic gradient descent)",
+                faster_solver=None,
             )
         poses = np.asarray(solution.poses)
         full_cov = joint_covariance(graph, solution)

@@ -147,7 +147,8 @@ class GraphSolution:
     linear_solver : str
         The sparse Cholesky back-end that factorised the normal equations
         (:mod:`~recovery.estimation.sparse_cholesky`: ``"cholmod"``, ``"qdldl"``,
-        ``"superlu"``; of the last sub-problem for :func:`solve_graph_incremental`).
+        ``"superlu"``; of the last sub-problem for :func:`solve_graph_incremental`; a
+        description for solutions that no factorisation made, e.g. TORO's in the study).
     faster_solver : str or None
         A back-end that is not installed and would have been chosen for this graph (CHOLMOD
         without the ``fast`` extra on a graph with much fill), else None.
