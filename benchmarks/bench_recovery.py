@@ -33,6 +33,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from timing import best_wall_cpu  # noqa: E402
+
 from recovery.baseline import filterpy_localisation  # noqa: E402
 from recovery.batch import refine  # noqa: E402
 from recovery.ekf import USED, run_filter  # noqa: E402
@@ -64,21 +66,6 @@ def make_bundle(steps: int, measurements: int, seed: int = 7):  # type: ignore[n
     )
 
 
-CPU: dict[str, float] = {}  # best CPU time (process_time) of the last best_of per label
-
-
-def best_of(fn, repeat: int, label: str = "") -> tuple[float, object]:  # type: ignore[no-untyped-def]
-    """Best wall time of ``repeat`` calls and the last result; the best CPU time in ``CPU``."""
-    best, best_cpu, out = float("inf"), float("inf"), None
-    for _ in range(repeat):
-        t0, c0 = time.perf_counter(), time.process_time()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-        best_cpu = min(best_cpu, time.process_time() - c0)
-    CPU[label] = best_cpu
-    return best, out
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=100_000)
@@ -92,10 +79,9 @@ def main() -> int:
     n, j = inp.times.shape[0], inp.meas_grid.shape[0]
     print(f"grid poses {n}, control rows {args.steps}, measurements {j}")
 
-    t_ours, (fr, sm) = best_of(
-        lambda: (lambda f: (f, smooth(f)))(run_filter(inp)), args.repeat, "filter + smoother"
-    )
-    t_filter, _ = best_of(lambda: run_filter(inp), args.repeat)
+    ours = best_wall_cpu(lambda: (lambda f: (f, smooth(f)))(run_filter(inp)), args.repeat)
+    t_ours, (fr, sm) = ours.wall, ours.result
+    t_filter = best_wall_cpu(lambda: run_filter(inp), args.repeat).wall
     t0 = time.perf_counter()
     base_poses, base_covs, _ = filterpy_localisation(inp)
     t_base = time.perf_counter() - t0
@@ -122,16 +108,15 @@ def main() -> int:
     tracemalloc.stop()
     print(f"peak memory (tracemalloc) filter + smoother: {peak / 2**20:.1f} MiB")
 
-    t_batch, br = best_of(
-        lambda: refine(inp, sm.poses, used=fr.status == USED), args.repeat, "batch"
-    )
+    batch = best_wall_cpu(lambda: refine(inp, sm.poses, used=fr.status == USED), args.repeat)
+    t_batch, br = batch.wall, batch.result
     ratio_b = t_batch / t_ours
-    ratio_cpu = CPU["batch"] / CPU["filter + smoother"]
+    ratio_cpu = batch.cpu / ours.cpu
     print(
         f"batch refinement (LM, banded Cholesky): {t_batch:.3f} s, {br.iterations} iterations; "
         f"batch / (filter + smoother) = {ratio_b:.2f} (target <= 3: "
-        f"{'met' if ratio_b <= 3 else 'NOT met'}); CPU {CPU['batch']:.3f} s vs "
-        f"{CPU['filter + smoother']:.3f} s = {ratio_cpu:.2f}, cost {br.cost_final:.10f}"
+        f"{'met' if ratio_b <= 3 else 'NOT met'}); CPU {batch.cpu:.3f} s vs "
+        f"{ours.cpu:.3f} s = {ratio_cpu:.2f}, cost {br.cost_final:.10f}"
     )
     gt = bundle.groundtruth
     idx = np.searchsorted(inp.times, gt.timestamps)
@@ -144,11 +129,12 @@ def main() -> int:
 
 
 def time_batch(bundle, repeat: int):  # type: ignore[no-untyped-def]
-    """Best times of filter + smoother and of the batch refinement from its result."""
+    """Best times (:class:`timing.Timed`) of filter + smoother and of the batch refinement
+    from its result."""
     inp = filter_input(bundle, map_mode="marginal")
-    t_fs, (fr, sm) = best_of(lambda: (lambda f: (f, smooth(f)))(run_filter(inp)), repeat, "fs")
-    t_b, br = best_of(lambda: refine(inp, sm.poses, used=fr.status == USED), repeat, "b")
-    return t_fs, t_b, br
+    fs = best_wall_cpu(lambda: (lambda f: (f, smooth(f)))(run_filter(inp)), repeat)
+    fr, sm = fs.result
+    return fs, best_wall_cpu(lambda: refine(inp, sm.poses, used=fr.status == USED), repeat)
 
 
 def scaling(steps: int, repeat: int) -> None:
@@ -156,12 +142,13 @@ def scaling(steps: int, repeat: int) -> None:
     sizes = [int(round(steps / 10 ** (k / 2))) for k in (2, 1, 0)]
     rows = []
     for size in sizes:
-        t_fs, t_b, br = time_batch(make_bundle(size, size // 10), repeat)
+        fs, b = time_batch(make_bundle(size, size // 10), repeat)
+        t_fs, t_b, br = fs.wall, b.wall, b.result
         rows.append((size, t_fs, t_b, br.iterations))
         print(
             f"  steps {size:7d}: filter + smoother {t_fs:7.3f} s, batch {t_b:7.3f} s "
             f"({br.iterations} it, {1e3 * t_b / br.iterations:.1f} ms/it), ratio {t_b / t_fs:.2f}; "
-            f"CPU {CPU['fs']:.3f} / {CPU['b']:.3f} s, ratio {CPU['b'] / CPU['fs']:.2f}"
+            f"CPU {fs.cpu:.3f} / {b.cpu:.3f} s, ratio {b.cpu / fs.cpu:.2f}"
         )
     x = np.log([r[0] for r in rows])
     fit = {

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -34,21 +33,13 @@ sys.path.insert(0, str(HERE))
 
 from bench_least_squares import manhattan  # noqa: E402
 from bench_recovery import make_bundle  # noqa: E402
+from timing import best_of  # noqa: E402
 
 import recovery.simulation.worlds as worlds  # noqa: E402
 from recovery.estimation.ekfslam import ekf_slam_bundle  # noqa: E402
 from recovery.estimation.graph import solve_graph_incremental  # noqa: E402
 from recovery.recover import recover  # noqa: E402
 from recovery.simulation.bundles import world_bundle  # noqa: E402
-
-
-def best_of(fn, repeat: int) -> float:  # type: ignore[no-untyped-def]
-    best = float("inf")
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
 
 
 def exponent(sizes: list[float], times: list[float]) -> float:
