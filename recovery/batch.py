@@ -103,22 +103,16 @@ def regularised_sigma(sigma: Array) -> Array:
     return sigma + eps[:, None, None] * np.eye(3)
 
 
-def _residuals(  # type: ignore[no-untyped-def]
+def _factors(  # type: ignore[no-untyped-def]
     inp: FilterInput, x: Array, used: NDArray[np.int64], robust: Array | None = None
 ):
-    """Residuals, weights and Jacobians of all factors at ``x``.
+    """Residuals, weights and Jacobians of all factors at ``x``, ``(rp, rm, rz, wz, h_x, k)``,
+    and ``(cos θ_k, sin θ_k)`` (each (N − 1,)) of the motion factors, which :func:`_band`
+    reuses (``between`` written out with the same operations, so the same bits).
 
     ``robust`` (J,): the filter's robust weight per measurement; the measurement information
     ``(R + H_l Σ_l H_lᵀ)⁻¹`` is multiplied by it (the filter divides the same matrix by it).
     """
-    return _factors(inp, x, used, robust)[0]
-
-
-def _factors(  # type: ignore[no-untyped-def]
-    inp: FilterInput, x: Array, used: NDArray[np.int64], robust: Array | None = None
-):
-    """:func:`_residuals` and ``(cos θ_k, sin θ_k)`` (each (N − 1,)) of the motion factors,
-    which :func:`_band` reuses (``between`` written out with the same operations)."""
     rp = x[0] - inp.x0
     rp[2] = se2.wrap_angle(rp[2])
     c, s = np.cos(x[:-1, 2]), np.sin(x[:-1, 2])

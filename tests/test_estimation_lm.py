@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from recovery.batch import _residuals, _weights, normal_equations
+from recovery.batch import _factors, _weights, normal_equations
 from recovery.ekf import USED, run_filter
 from recovery.estimation.lm import (
     Linearisation,
@@ -165,10 +165,10 @@ def test_batch_normal_equations_equal_finite_difference_jacobian(motion: str) ->
     used = np.flatnonzero(run_filter(inp).status == USED)
     x = run_filter(inp).poses + np.random.default_rng(1).normal(0, 0.02, (inp.times.size, 3))
     wp, wm = _weights(inp)
-    _, _, _, wz, _, _ = _residuals(inp, x, used)  # measurement weights held at x
+    _, _, _, wz, _, _ = _factors(inp, x, used)[0]  # measurement weights held at x
 
     def r(xf: np.ndarray) -> np.ndarray:
-        rp, rm, rz, _, _, _ = _residuals(inp, xf.reshape(-1, 3), used)
+        rp, rm, rz, _, _, _ = _factors(inp, xf.reshape(-1, 3), used)[0]
         return np.concatenate((rp, rm.ravel(), rz.ravel()))
 
     n = x.size
