@@ -1,7 +1,7 @@
 """EKF-SLAM update speed (issue 15), against the update before it, measured in the same run.
 
 1. One update at n ≈ 2,335 state dimensions (1,166 landmarks): the symmetric in-place form
-   ``P −= W Wᵀ`` (``recovery.estimation.ekfslam._update``) vs the old full product +
+   ``P −= W Wᵀ`` (``slamrel.backends.ekf_slam._update``) vs the old full product +
    ``0.5·(P + Pᵀ)`` pass (a copy of it lives in ``tests/test_estimation_ekfslam.py``), on the
    same covariance; results compared. Target: ≥ 2× faster, equal to 1e-12.
 2. Whole EKF-SLAM runs (``ekf_slam_bundle``) on the built-in ``complex1`` world with 225
@@ -26,10 +26,10 @@ sys.path.insert(0, str(HERE.parent / "tests"))
 
 from test_estimation_ekfslam import _update_before_issue15 as old_update  # noqa: E402
 
-import recovery.estimation.ekfslam as ekfslam  # noqa: E402
-import recovery.simulation.worlds as worlds  # noqa: E402
-from recovery.estimation.ekfslam import ekf_slam_bundle  # noqa: E402
-from recovery.simulation.bundles import world_bundle  # noqa: E402
+import slamrel.backends.ekf_slam as ekfslam  # noqa: E402
+import slamrel.simulation.worlds as worlds  # noqa: E402
+from slamrel.backends.ekf_slam import ekf_slam_bundle  # noqa: E402
+from slamrel.simulation.bundles import world_bundle  # noqa: E402
 
 
 def bench_one_update(n: int = 2335, cap: int = 2400, repeat: int = 7) -> dict[str, float]:

@@ -25,10 +25,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from timing import best_of  # noqa: E402
 
-from landmark_graph.association import associate_auto  # noqa: E402
+from landmark_graph.landmark_association import associate_auto  # noqa: E402
 from landmark_graph.maps import LandmarkMap  # noqa: E402
 from landmark_graph.mesh import delaunay_mesh  # noqa: E402
-from landmark_graph.relations import mesh_errors  # noqa: E402
+from landmark_graph.mesh_relations import mesh_errors  # noqa: E402
 from relation_metric import se2  # noqa: E402
 from relation_metric.evaluate import error_summaries  # noqa: E402
 

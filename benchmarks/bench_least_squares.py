@@ -25,7 +25,7 @@ matrix (its error is the SE(2) log of the discrepancy; slamrel's is
 scored in slamrel's objective too (``cost(GTSAM)`` below), which is what "same minimum"
 means here.
 
-Also, in process: the solver as it was before issue 15 (``recovery/estimation/graph.py`` at
+Also, in process: the solver as it was before issue 15 (``slamrel/backends/least_squares.py`` at
 ``defa31f``, loaded from git) against the current one on both problems.
 
 Target (issue 15): no slower than GTSAM's LM where it converges (Manhattan), faster than
@@ -56,10 +56,10 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 
-from recovery.estimation.graph import PoseGraph, _residuals, _upper_sqrt  # noqa: E402
-from recovery.graph_formats.g2o import write_g2o_graph  # noqa: E402
 from relation_metric import se2  # noqa: E402
-from slamrel.importers.isam import read_isam  # noqa: E402
+from slamrel.backends.least_squares import PoseGraph, _residuals, _upper_sqrt  # noqa: E402
+from slamrel.formats.g2o import write_g2o_graph  # noqa: E402
+from slamrel.formats.isam import read_isam  # noqa: E402
 
 VP = Path("/work/shared/data/victoria_park/victoria_park.txt")
 GTSAM_VENV = HERE / ".venv-gtsam"
@@ -264,7 +264,7 @@ def old_solver():  # type: ignore[no-untyped-def]
 def in_process(label: str, fn, backends: tuple[str, ...] | None = None) -> None:  # type: ignore[no-untyped-def]
     """Time ``fn()``; with ``backends``, as if only those sparse Cholesky back-ends were
     installed (``("superlu",)``: the fallback, scipy alone)."""
-    from recovery.estimation import sparse_cholesky
+    from slamrel.backends import sparse_cholesky
 
     installed = sparse_cholesky.BACKENDS
     sparse_cholesky.BACKENDS = installed if backends is None else backends
@@ -403,7 +403,7 @@ def main() -> None:
             ours.update(label=label, landmarks=np.empty((0, 2)))
             gt = {"LM": _best_or_none(gt_runs)} if gtsam_too else {}
             report(f"Manhattan {args.poses}", g, ours, gt)
-        new = __import__("recovery.estimation.graph", fromlist=["solve_graph"])
+        new = __import__("slamrel.backends.least_squares", fromlist=["solve_graph"])
         if not args.no_before:
             old = old_solver()
             in_process(f"before issue 15 ({BEFORE}) solve_graph", lambda: old.solve_graph(g))

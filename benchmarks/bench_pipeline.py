@@ -15,10 +15,10 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from recovery.estimation.ekfslam import ekf_slam_bundle  # noqa: E402
-from recovery.simulation.bundles import world_bundle  # noqa: E402
-from recovery.simulation.worlds import NOISE_TYPES, WORLDS, make_world  # noqa: E402
+from slamrel.backends.ekf_slam import ekf_slam_bundle  # noqa: E402
 from slamrel.pipeline import run_pipeline, write_report  # noqa: E402
+from slamrel.simulation.bundles import world_bundle  # noqa: E402
+from slamrel.simulation.worlds import NOISE_TYPES, WORLDS, make_world  # noqa: E402
 
 
 def main() -> None:

@@ -39,9 +39,9 @@ from recovery.baseline import filterpy_localisation  # noqa: E402
 from recovery.batch import refine  # noqa: E402
 from recovery.ekf import USED, run_filter  # noqa: E402
 from recovery.recover import filter_input  # noqa: E402
-from recovery.simulation.bundles import simulate_bundle  # noqa: E402
 from recovery.smoother import smooth  # noqa: E402
 from relation_metric import se2  # noqa: E402
+from slamrel.simulation.bundles import simulate_bundle  # noqa: E402
 
 
 def make_bundle(steps: int, measurements: int, seed: int = 7):  # type: ignore[no-untyped-def]

@@ -36,9 +36,10 @@ from timing import best_of  # noqa: E402
 
 from relation_metric import se2  # noqa: E402
 from relation_metric.evaluate import evaluate  # noqa: E402
-from relation_metric.fastparse import read_decimal_table  # noqa: E402
-from relation_metric.relations import RelationSet, generate_relations, read_relations  # noqa: E402
+from relation_metric.relations import RelationSet, generate_relations  # noqa: E402
 from relation_metric.trajectory import Trajectory  # noqa: E402
+from slamrel.formats.fastparse import read_decimal_table  # noqa: E402
+from slamrel.formats.relations import read_relations  # noqa: E402
 
 EVO_VENV = HERE / ".venv-evo"
 

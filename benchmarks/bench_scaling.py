@@ -6,7 +6,7 @@ the exponent ``b`` of ``t ≈ a·size^b`` is fitted by least squares on the logs
 * ``recover`` (EKF localisation + RTS smoother, :func:`recovery.recover.recover`) on a
   simulated bundle (``bench_recovery.make_bundle``): 10⁴ … 10⁵ control steps, one
   measurement per 10 steps. Expected linear.
-* ``slam`` (the reference EKF-SLAM, :func:`recovery.estimation.ekfslam.ekf_slam_bundle`) on the built-in
+* ``slam`` (the reference EKF-SLAM, :func:`slamrel.backends.ekf_slam.ekf_slam_bundle`) on the built-in
   ``complex1`` world with 50 … 500 features. Each update is O(n²) in the state size
   n = 3 + 2L and the measurements grow with L too, so the time is expected to grow like
   L³ here; the constant printed is ns per covariance element per update.
@@ -35,11 +35,11 @@ from bench_least_squares import manhattan  # noqa: E402
 from bench_recovery import make_bundle  # noqa: E402
 from timing import best_of  # noqa: E402
 
-import recovery.simulation.worlds as worlds  # noqa: E402
-from recovery.estimation.ekfslam import ekf_slam_bundle  # noqa: E402
-from recovery.estimation.graph import solve_graph_incremental  # noqa: E402
+import slamrel.simulation.worlds as worlds  # noqa: E402
 from recovery.recover import recover  # noqa: E402
-from recovery.simulation.bundles import world_bundle  # noqa: E402
+from slamrel.backends.ekf_slam import ekf_slam_bundle  # noqa: E402
+from slamrel.backends.least_squares import solve_graph_incremental  # noqa: E402
+from slamrel.simulation.bundles import world_bundle  # noqa: E402
 
 
 def exponent(sizes: list[float], times: list[float]) -> float:

@@ -3,12 +3,12 @@
 The matrices: ``H + 1e-4 diag(H)`` at the initial guess (Levenberg–Marquardt's first trial
 step) of Victoria Park (``/work/shared/data/victoria_park``, 2.1·10⁴ unknowns) and of the
 generated Manhattan pose graphs of ``bench_least_squares.py`` (10³, 3.5·10³, 10⁴ poses).
-For each back-end of :mod:`recovery.estimation.sparse_cholesky` that is installed: the first
+For each back-end of :mod:`slamrel.backends.sparse_cholesky` that is installed: the first
 factorisation (QDLDL: ordering + symbolic + numeric) and the best of three later ones
 (QDLDL: numeric only, the symbolic factorisation reused), each with one solve, and the
 relative difference of the solution to SuperLU's (SuperLU as the fallback runs it: on the
 block minimum-degree pre-permutation). Also the expected work ``27 Σ c²`` from
-the block graph, which :func:`~recovery.estimation.sparse_cholesky.choose_backend` uses.
+the block graph, which :func:`~slamrel.backends.sparse_cholesky.choose_backend` uses.
 
 Run: ``python benchmarks/bench_sparse_cholesky.py`` (``--sizes 1000 10000`` to choose).
 """
@@ -29,14 +29,14 @@ sys.path.insert(0, str(HERE))
 
 from bench_least_squares import VP, manhattan  # noqa: E402
 
-from recovery.estimation import sparse_cholesky  # noqa: E402
-from recovery.estimation.graph import (  # noqa: E402
+from slamrel.backends import sparse_cholesky  # noqa: E402
+from slamrel.backends.least_squares import (  # noqa: E402
     PoseGraph,
     _linearise,
     _NormalEquations,
     _upper_sqrt,
 )
-from slamrel.importers.isam import read_isam  # noqa: E402
+from slamrel.formats.isam import read_isam  # noqa: E402
 
 
 def first_trial_matrix(g: PoseGraph) -> tuple[_NormalEquations, np.ndarray, np.ndarray]:

@@ -33,25 +33,25 @@ sys.path.insert(0, str(ROOT))
 
 from bench_relation_metric import ensure_evo, random_trajectory  # noqa: E402
 
-from relation_metric.formats import write_trajectory  # noqa: E402
 from relation_metric.trajectory import Trajectory  # noqa: E402
+from slamrel.formats.trajectories import write_trajectory  # noqa: E402
 
 # The library modules each command's run function imports (its work, not its parser).
 WORK_IMPORTS = {
     "run": "slamrel.pipeline",
-    "evaluate": "relation_metric.evaluate, relation_metric.formats, relation_metric.relations, "
-    "relation_metric.results",
-    "recover": "recovery.bundle, recovery.recover, relation_metric.formats, "
-    "relation_metric.results",
-    "relations": "relation_metric.relations, relation_metric.formats",
-    "map-compare": "landmark_graph.compare, landmark_graph.maps, landmark_graph.association",
-    "review": "landmark_graph.review, landmark_graph.maps, landmark_graph.association",
-    "simulate": "recovery.simulation.bundles, recovery.simulation.worlds, recovery.bundle",
-    "slam": "recovery.estimation.ekfslam, recovery.bundle, relation_metric.formats",
-    "compare": "slamrel.compare",
-    "solve": "recovery.estimation.graph, recovery.graph_formats.g2o, slamrel.importers.isam, "
-    "relation_metric.formats, relation_metric.landmarks",
-    "example": "recovery.simulation.example, relation_metric.relations, relation_metric.formats",
+    "evaluate": "relation_metric.evaluate, slamrel.formats.trajectories, relation_metric.relations, "
+    "slamrel.formats.results",
+    "recover": "recovery.bundle, recovery.recover, slamrel.formats.trajectories, "
+    "slamrel.formats.results",
+    "relations": "relation_metric.relations, slamrel.formats.trajectories",
+    "map-compare": "landmark_graph.map_compare, landmark_graph.maps, landmark_graph.landmark_association",
+    "review": "slamrel.review.page, landmark_graph.maps, landmark_graph.landmark_association",
+    "simulate": "slamrel.simulation.bundles, slamrel.simulation.worlds, recovery.bundle",
+    "slam": "slamrel.backends.ekf_slam, recovery.bundle, slamrel.formats.trajectories",
+    "compare": "slamrel.report.tables",
+    "solve": "slamrel.backends.least_squares, slamrel.formats.g2o, slamrel.formats.isam, "
+    "slamrel.formats.trajectories, slamrel.formats.landmark_csv",
+    "example": "slamrel.simulation.example, relation_metric.relations, slamrel.formats.trajectories",
 }
 HEAVY = ("matplotlib", "scipy.stats", "scipy.optimize", "scipy.spatial", "slamrel.pipeline")
 

@@ -1,6 +1,6 @@
 """Sweep throughput: 2 workers against 1 on the same study cases (issue 14 target ≥ 1.7×).
 
-Baseline: the same task list run by ``slamrel.sweep.run_sweep`` with one worker process, in
+Baseline: the same task list run by ``slamrel.studies.sweep.run_sweep`` with one worker process, in
 the same run. Measured: two worker processes, and a 2-worker Dask ``LocalCluster`` when
 ``dask[distributed]`` is installed. Each configuration runs into a fresh folder (nothing is
 skipped); the pool's start-up (spawning the workers, importing numpy/scipy) is included,
@@ -22,8 +22,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from slamrel.study import study_tasks  # noqa: E402
-from slamrel.sweep import run_sweep  # noqa: E402
+from slamrel.studies.pose_only import study_tasks  # noqa: E402
+from slamrel.studies.sweep import run_sweep  # noqa: E402
 
 
 def timed(tasks, **kwargs) -> float:  # type: ignore[no-untyped-def]

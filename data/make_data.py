@@ -16,9 +16,9 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))  # this checkout's code, also when not installed
 
-from recovery.bundle import write_bundle  # noqa: E402
-from recovery.simulation.bundles import simulate_bundle  # noqa: E402
 from slamrel.cli import main as slamrel  # noqa: E402
+from slamrel.formats.bundle import write_bundle  # noqa: E402
+from slamrel.simulation.bundles import simulate_bundle  # noqa: E402
 
 EXAMPLE_SEED = 0
 BUNDLE_SEED = 1

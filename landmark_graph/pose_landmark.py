@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from landmark_graph.association import Association
+from landmark_graph.landmark_association import Association
 from landmark_graph.maps import LandmarkMap
 from relation_metric import se2
 from relation_metric.covisibility import covisible_pairs
@@ -113,7 +113,7 @@ def pose_landmark_relations(
         The estimated-map landmark id the SLAM run associated each observation with.
     estimate, reference : LandmarkMap
     association : Association
-        Between ``estimate`` and ``reference`` (``landmark_graph.association``).
+        Between ``estimate`` and ``reference`` (``landmark_graph.landmark_association``).
 
     Returns
     -------

@@ -34,7 +34,7 @@ RELATION_METRIC = [
         "from relation_metric.relations import generate_relations\n"
         "from relation_metric.evaluate import evaluate\n"
         "from relation_metric.alignment import absolute_trajectory_error\n"
-        "from recovery.simulation.example import example_trajectories\n"
+        "from slamrel.simulation.example import example_trajectories\n"
         "reference, estimate = example_trajectories(seed=0)\n"
         "len(reference), reference.span()"
     ),
@@ -68,7 +68,7 @@ RELATION_METRIC = [
         "Where are the errors? The figure colours the estimate by the errors of the relations at each pose."
     ),
     new_code_cell(
-        "from relation_metric.plots import evaluation_figure\n"
+        "from slamrel.plots.relation_errors import evaluation_figure\n"
         "rel = generate_relations(reference, 'global', count=2000, seed=1)\n"
         "fig = evaluation_figure(evaluate(rel, estimate), estimate)"
     ),
@@ -77,8 +77,8 @@ RELATION_METRIC = [
         "The printed reference is `0.030205 ± 0.029165 m` over 1172 relations (translation)."
     ),
     new_code_cell(
-        "from relation_metric.formats import read_trajectory\n"
-        "from relation_metric.relations import read_relations\n"
+        "from slamrel.formats.trajectories import read_trajectory\n"
+        "from slamrel.formats.relations import read_relations\n"
         "data = Path(os.environ.get('SLAMREL_DATA', Path.cwd().parent.parent / 'shared' / 'data')) / 'freiburg'\n"
         "if (data / 'mit-csail.relations').exists():\n"
         "    with warnings.catch_warnings():\n"
@@ -106,9 +106,9 @@ RUN_WALKTHROUGH = [
     ),
     new_code_cell(
         "import numpy as np\n"
-        "from recovery.simulation.worlds import make_world\n"
-        "from recovery.estimation.ekfslam import ekf_slam_bundle\n"
-        "from recovery.simulation.bundles import world_bundle\n"
+        "from slamrel.simulation.worlds import make_world\n"
+        "from slamrel.backends.ekf_slam import ekf_slam_bundle\n"
+        "from slamrel.simulation.bundles import world_bundle\n"
         "from recovery.recover import recover\n"
         "from relation_metric.evaluate import evaluate\n"
         "from relation_metric.relations import generate_relations\n"
@@ -166,7 +166,7 @@ VALIDATION = [
     ),
     new_code_cell(
         "import numpy as np\n"
-        "from slamrel.validation import faithfulness_study\n"
+        "from slamrel.studies.faithfulness import faithfulness_study\n"
         "study = faithfulness_study('complex1')\n"
         "print('Kendall tau (global relations):', round(study.kendall_tau('global'), 3))\n"
         "print('Kendall tau (consecutive):     ', round(study.kendall_tau('consecutive'), 3))\n"
@@ -203,7 +203,7 @@ VALIDATION = [
         "reported)."
     ),
     new_code_cell(
-        "from slamrel.validation import tuning_study\n"
+        "from slamrel.studies.faithfulness import tuning_study\n"
         "grid = tuning_study('complex1')\n"
         "print(f\"{'scale':>6s} {'wrong':>6s} {'online':>8s} {'recovered':>9s} {'ratio':>6s} "
         "{'disagree':>8s}\")\n"
@@ -283,7 +283,7 @@ VALIDATION = [
         "import os\n"
         "from pathlib import Path\n"
         "from slamrel.importers.mrclam import mrclam_bundle\n"
-        "from slamrel.validation import RECOVERY_VARIANTS, recovery_variants_table\n"
+        "from slamrel.studies.faithfulness import RECOVERY_VARIANTS, recovery_variants_table\n"
         "data = Path(os.environ.get('SLAMREL_DATA', Path.cwd().parent.parent / 'shared' / "
         "'data')) / 'mrclam' / 'MRCLAM_Dataset7'\n"
         "keep = {k: RECOVERY_VARIANTS[k] for k in ('plain', 'gated', 'reentry', 'default', "
@@ -369,7 +369,7 @@ MRCLAM = [
     ),
     new_code_cell(
         "if HAVE_DATA:\n"
-        "    from recovery.estimation.ekfslam import ekf_slam_bundle\n"
+        "    from slamrel.backends.ekf_slam import ekf_slam_bundle\n"
         "    from recovery.recover import recover\n"
         "    from recovery.steps import build_steps\n"
         "    from relation_metric import se2\n"
@@ -445,9 +445,9 @@ MRCLAM = [
     new_code_cell(
         "if HAVE_DATA:\n"
         "    from IPython.display import display\n"
-        "    from landmark_graph.compare import compare_maps\n"
+        "    from landmark_graph.map_compare import compare_maps\n"
         "    from landmark_graph.maps import LandmarkMap\n"
-        "    from landmark_graph.plots import map_figure\n"
+        "    from slamrel.plots.maps import map_figure\n"
         "    mc = compare_maps(LandmarkMap(slam.map_ids, slam.map_xy), LandmarkMap(*bundle.landmarks_groundtruth))\n"
         "    edges = mc.mesh.edges\n"
         "    ids = mc.reference.ids[mc.association.reference_rows]\n"
@@ -468,7 +468,7 @@ MRCLAM = [
     ),
     new_code_cell(
         "if HAVE_DATA:\n"
-        "    from slamrel.compare import ResultErrors, compare_results\n"
+        "    from slamrel.report.tables import ResultErrors, compare_results\n"
         "    results, map_edges = [], {}\n"
         "    for r in range(1, 6):\n"
         "        b = mrclam_bundle(data, r)\n"
@@ -626,7 +626,7 @@ POSE_ONLY_STUDY = [
     ),
     new_code_cell(
         "import csv\n"
-        "from slamrel.study import findings\n"
+        "from slamrel.studies.pose_only import findings\n"
         "def load(path):\n"
         "    rows = list(csv.DictReader(path.open()))\n"
         "    num = lambda v: int(v) if v.isdigit() else float(v)\n"

@@ -15,7 +15,7 @@ Jacobian (its dependence on the pose through ``H_l`` is not differentiated), so 
 uncertain map the Gauss–Newton fixed point and the minimum of the evaluated cost differ
 slightly (measured 4·10⁻⁷ m on the simulated SLAM bundle of ``benchmarks/output_hashes.py``).
 
-The minimiser is the estimation layer's :func:`~recovery.estimation.lm.levenberg_marquardt`
+The minimiser is the estimation layer's :func:`~recovery.lm.levenberg_marquardt`
 (Marquardt's damping ``λ diag(H)``, ×10 on a rejected step, ÷10 on an accepted one, up to
 ``λ = 1e12``; stop when the relative cost decrease or the largest step component falls below
 ``tolerance``), with two problem-specific choices:
@@ -30,7 +30,7 @@ The minimiser is the estimation layer's :func:`~recovery.estimation.lm.levenberg
   undamped Gauss–Newton steps converge in 4 (quadratically at the end). Should the banded
   Cholesky of the nearly undamped ``H`` fail in rounding, the step is solved again with
   ``1e-12 diag(H)`` added.
-* *steps along the chain* (:meth:`Problem.retract <recovery.estimation.lm.Problem.retract>`
+* *steps along the chain* (:meth:`Problem.retract <recovery.lm.Problem.retract>`
   is :func:`retract_chain`): the step, computed in absolute poses, moves each motion
   increment by its linear model and the trajectory is recomposed from them, so the stiff
   motion residuals land exactly on their linearisation and only the soft measurement
@@ -72,7 +72,7 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dpbsv
 
 from recovery.ekf import FilterInput, run_filter
-from recovery.estimation.lm import Linearisation, LMOptions, levenberg_marquardt, retract_poses
+from recovery.lm import Linearisation, LMOptions, levenberg_marquardt, retract_poses
 from recovery.models import range_bearing
 from recovery.smoother import smoothed_covariances
 from relation_metric import se2
@@ -282,12 +282,12 @@ def normal_equations(
 
 
 class _BatchProblem:
-    """The batch objective as a :class:`~recovery.estimation.lm.Problem` on poses (N, 3).
+    """The batch objective as a :class:`~recovery.lm.Problem` on poses (N, 3).
 
     ``H`` is kept in band storage (:func:`_band`) and the damped normal equations are
     solved by a banded Cholesky (LAPACK ``pbsv``): O(N) for the block-tridiagonal ``H``.
     ``chain``: steps are applied along the chain (:func:`retract_chain`); False adds them to
-    the poses (:func:`~recovery.estimation.lm.retract_poses`, as before issue 15; tests).
+    the poses (:func:`~recovery.lm.retract_poses`, as before issue 15; tests).
     ``regularised``: :func:`regularised_sigma` of ``inp.sigma`` when already computed.
     """
 

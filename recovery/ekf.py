@@ -84,7 +84,7 @@ __all__ = [
 class MeasurementStatus(IntEnum):
     """What the recovery filter did with each measurement (:attr:`FilterResult.status`).
 
-    :mod:`recovery.estimation.ekfslam` marks an unassociated measurement with
+    :mod:`slamrel.backends.ekf_slam` marks an unassociated measurement with
     ``NO_LANDMARK = −1`` in its association array (a landmark row, not a status).
     """
 
@@ -414,7 +414,7 @@ class _ReentryRule:
     """The re-entry rule of :func:`run_filter`: runs of outlying innovations → inflation ``α``.
 
     Not to be confused with EKF-SLAM's ``max_rejected_run``
-    (:func:`recovery.estimation.ekfslam.ekf_slam`), which after a run of *gated* measurements
+    (:func:`slamrel.backends.ekf_slam.ekf_slam`), which after a run of *gated* measurements
     *force-accepts* the next one: there the filter stops rejecting, here it stops trusting
     its own covariance. Both end a run of disagreement; only this one changes ``P``.
     """
@@ -693,7 +693,7 @@ def run_filter(
         χ² bound without a gate). After this many consecutive outlying measurements the map and
         the log disagree and the filter is **re-entered** (see ``on_divergence``); ``None``
         never re-enters (the plain EKF). Not the twin of EKF-SLAM's ``max_rejected_run``
-        (:func:`recovery.estimation.ekfslam.ekf_slam`): that one *force-accepts* a measurement
+        (:func:`slamrel.backends.ekf_slam.ekf_slam`): that one *force-accepts* a measurement
         after a run of *gated* ones (the gate gives way); this one *inflates the covariance*
         after a run of *outlying* ones, gated or not (the filter's confidence gives way).
     on_divergence : {"reenter", "raise"}

@@ -41,9 +41,9 @@ from recovery.smoother import smooth
 from recovery.steps import Steps, build_steps
 from relation_metric import consistency
 from relation_metric.arrays import Array
-from relation_metric.association import match_nearest_times
 from relation_metric.consistency import chi2_quantile
 from relation_metric.errors import InputError
+from relation_metric.time_association import match_nearest_times
 from relation_metric.trajectory import Trajectory, readonly
 
 __all__ = [

@@ -16,10 +16,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se2, se3
-from relation_metric.association import nearest_index
 from relation_metric.errors import AssociationError, InputError
 from relation_metric.groups import SE3
 from relation_metric.stats import Summary, summarize
+from relation_metric.time_association import nearest_index
 from relation_metric.trajectory import Trajectory
 
 __all__ = ["Alignment", "umeyama", "ATEResult", "absolute_trajectory_error"]

@@ -25,8 +25,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from relation_metric.arrays import PathLike
 from relation_metric.errors import InputError
-from relation_metric.textio import PathLike
 
 __all__ = ["COV_RTOL", "check_covariances", "check_joint_covariance", "bad_covariances"]
 

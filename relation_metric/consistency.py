@@ -16,7 +16,7 @@ estimate at once, with its *joint* covariance, against the one-sided gate
 * **NEES2** (:func:`nees2`): the map, ``d = 2L`` for L landmarks.
 * **NEES3**: the map fitted to a pose-only trajectory with the poses held fixed, tested like
   NEES2 (the fit lives with the back-end:
-  :func:`recovery.estimation.pose_only.landmarks_given_poses`).
+  :func:`slamrel.backends.pose_only.landmarks_given_poses`).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ A SLAM log's observations are ``(pose, landmark)`` pairs. Two consumers need "wh
 share which landmarks": the landmark–pose graph scores trajectories on pose pairs that share
 landmarks (:func:`landmark_graph.pose_landmark.shared_landmark_relations`), and pose-only
 least squares builds a relative-pose constraint from the landmarks a pair shares
-(:mod:`recovery.estimation.pose_only`). Both go through this module; nothing here is
+(:mod:`slamrel.backends.pose_only`). Both go through this module; nothing here is
 quadratic in the number of poses or dense in poses × landmarks:
 
 * :func:`covisible_pairs` — all pairs ``i < j`` sharing at least ``min_common`` landmarks,

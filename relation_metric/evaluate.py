@@ -1,7 +1,7 @@
 """The relation metric as one run function: relations + estimate → :class:`Evaluation`.
 
-No I/O here (readers live in :mod:`relation_metric.formats` and
-:mod:`relation_metric.relations`, writers in :mod:`relation_metric.results`).
+No I/O here (readers live in :mod:`slamrel.formats.trajectories` and
+:mod:`relation_metric.relations`, writers in :mod:`slamrel.formats.results`).
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from relation_metric.association import REASONS, Association, associate
 from relation_metric.errors import AssociationError, InputError
 from relation_metric.groups import SE3
 from relation_metric.metric import Mode, RelationErrors, relation_errors
 from relation_metric.relations import RelationSet
 from relation_metric.stats import Summary, summarize_with_squares
+from relation_metric.time_association import REASONS, Association, associate
 from relation_metric.trajectory import Trajectory
 
 __all__ = [
@@ -122,7 +122,7 @@ def evaluate(
     estimate : Trajectory
         The evaluated trajectory.
     odometry, max_time_diff, interpolate, max_interpolation_gap :
-        Timestamp association, see :func:`relation_metric.association.associate`.
+        Timestamp association, see :func:`relation_metric.time_association.associate`.
     mode, weights :
         Error definition, see :func:`relation_metric.metric.relation_errors`.
     strict : bool

@@ -108,7 +108,7 @@ class Trajectory:
         The column count decides the group (:attr:`group`); finite.
 
     Both arrays are stored read-only. Construct from files with
-    :func:`relation_metric.formats.read_trajectory`.
+    :func:`slamrel.formats.trajectories.read_trajectory`.
     """
 
     timestamps: NDArray[np.float64]

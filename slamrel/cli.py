@@ -30,7 +30,7 @@ COMMAND_MODULES = (
     "slamrel.commands.simulate",
     "slamrel.commands.compare",
     "slamrel.commands.importers",
-    "slamrel.commands.graph",
+    "slamrel.commands.solve",
     "slamrel.commands.example",
     "slamrel.commands.study",
 )

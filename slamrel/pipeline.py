@@ -9,7 +9,7 @@ Three steps, the I/O at the ends (evo's ``main_ape``: load, a pure ``ape``, writ
   :class:`RunResult` (no I/O);
 * :func:`write_report` writes the result atomically into a report folder (``report.html``,
   ``metrics.json``, per-relation CSVs, figures); the page itself is built by
-  :mod:`slamrel.run_report`.
+  :mod:`slamrel.report.run_page`.
 
 The trajectory is scored on three relation sets generated from the ground truth — consecutive
 (local), loop-closing and global (far-apart) — because local relations alone cannot see
@@ -29,27 +29,28 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from landmark_graph.compare import MapComparison, compare_maps
+from landmark_graph.map_compare import MapComparison, compare_maps
 from landmark_graph.maps import LandmarkMap
-from recovery.bundle import Bundle, read_bundle, write_bundle
-from recovery.estimation.ekfslam import ekf_slam_bundle
+from recovery.bundle import Bundle
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, Recovery, Stretch, recover
-from recovery.simulation.bundles import world_bundle
-from recovery.simulation.worlds import make_world
 from recovery.steps import build_steps
 from relation_metric import se2
-from relation_metric.association import match_nearest_times, nearest_index
 from relation_metric.consistency import NeesSummary, pose_nees, summarize_nees
 from relation_metric.errors import InputError, SlamrelError
 from relation_metric.evaluate import Evaluation, UnassociatedRelationsWarning, evaluate
-from relation_metric.formats import read_trajectory
-from relation_metric.outputs import staged_directory, write_text_atomic
 from relation_metric.relations import RelationSet, generate_relations
-from relation_metric.results import write_json, write_per_relation_csv
+from relation_metric.time_association import match_nearest_times, nearest_index
 from relation_metric.trajectory import Trajectory
-from slamrel.report import render_html
-from slamrel.run_report import report_figures, report_sections
-from slamrel.verdict import run_verdict
+from slamrel.backends.ekf_slam import ekf_slam_bundle
+from slamrel.formats.bundle import read_bundle, write_bundle
+from slamrel.formats.results import write_json, write_per_relation_csv
+from slamrel.formats.trajectories import read_trajectory
+from slamrel.outputs import staged_directory, write_text_atomic
+from slamrel.report.html import render_html
+from slamrel.report.run_page import report_figures, report_sections
+from slamrel.report.verdict import run_verdict
+from slamrel.simulation.bundles import world_bundle
+from slamrel.simulation.worlds import make_world
 
 __all__ = [
     "Agreement",
@@ -287,7 +288,7 @@ def simulate_run_input(
 
     The input carries the filter's online estimate and covariances (for validation) and the
     world's odometry as dead reckoning. ``corrupt_fraction``, ``noise_scale`` and
-    ``process_noise_scale`` are passed to :func:`recovery.estimation.ekfslam.ekf_slam_bundle`.
+    ``process_noise_scale`` are passed to :func:`slamrel.backends.ekf_slam.ekf_slam_bundle`.
     """
     w = make_world(world, noise=noise, seed=seed, rate=rate)
     bundle, slam = ekf_slam_bundle(
@@ -519,7 +520,7 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
 
 def _write_review(path: Path, result: RunResult) -> tuple[str, str]:
     """Write the landmark-association review page; returns its ``(href, text)`` link."""
-    from landmark_graph.review import write_review
+    from slamrel.review.page import write_review
 
     mc = result.map_comparison
     assert mc is not None

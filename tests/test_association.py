@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from relation_metric import se2
-from relation_metric.association import associate, nearest_index
 from relation_metric.errors import AssociationError
 from relation_metric.evaluate import UnassociatedRelationsWarning, evaluate
 from relation_metric.relations import RelationSet
+from relation_metric.time_association import associate, nearest_index
 from relation_metric.trajectory import Trajectory
 
 

@@ -29,12 +29,12 @@ from recovery.batch import (
     retract_chain,
 )
 from recovery.ekf import USED, run_filter
-from recovery.estimation.lm import LMOptions, levenberg_marquardt, retract_poses
+from recovery.lm import LMOptions, levenberg_marquardt, retract_poses
 from recovery.recover import filter_input
-from recovery.simulation.bundles import simulate_bundle
 from recovery.smoother import smooth, smoothed_covariances
 from relation_metric import se2
 from relation_metric.errors import DivergenceError
+from slamrel.simulation.bundles import simulate_bundle
 
 
 def _looped_chain(x: np.ndarray, delta: np.ndarray) -> np.ndarray:

@@ -15,9 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from landmark_graph.maps import LandmarkMap, read_map, write_map
-from recovery.bundle import read_bundle, write_bundle
-from recovery.simulation.bundles import simulate_bundle
+from landmark_graph.maps import LandmarkMap
 from relation_metric.checks import (
     COV_RTOL,
     bad_covariances,
@@ -25,9 +23,12 @@ from relation_metric.checks import (
     check_joint_covariance,
 )
 from relation_metric.errors import InputError
-from relation_metric.landmarks import read_landmark_csv, write_landmark_csv
-from relation_metric.textio import TruncatedLineWarning
 from slamrel.cli import main
+from slamrel.formats.bundle import read_bundle, write_bundle
+from slamrel.formats.landmark_csv import read_landmark_csv, write_landmark_csv
+from slamrel.formats.landmark_maps import read_map, write_map
+from slamrel.formats.text import TruncatedLineWarning
+from slamrel.simulation.bundles import simulate_bundle
 
 
 def _rotated(eigenvalues, angles):

@@ -117,11 +117,11 @@ def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
 def test_choices_equal_the_owners() -> None:
     from recovery.ekf import DEFAULT_MAX_OUTLIER_RUN, ROBUST
     from recovery.recover import DEFAULT_ROBUST, MAP_MODES, METHODS
-    from recovery.simulation.worlds import NOISE_TYPES, PAPER_WORLDS, WORLDS
-    from relation_metric.formats import TRAJECTORY_FORMATS
     from relation_metric.metric import MODES
     from relation_metric.relations import STRATEGIES
-    from slamrel.study import METHODS as STUDY_METHODS
+    from slamrel.formats.trajectories import TRAJECTORY_FORMATS
+    from slamrel.simulation.worlds import NOISE_TYPES, PAPER_WORLDS, WORLDS
+    from slamrel.studies.pose_only import METHODS as STUDY_METHODS
 
     assert choices.TRAJECTORY_FORMATS == TRAJECTORY_FORMATS
     assert choices.MODES == MODES
@@ -147,7 +147,7 @@ def test_import_commands_have_their_own_module() -> None:
         for argv in (["import", "isam", "f", "-o", "g"], ["import", "mrclam", "d", "-o", "b"])
     }
     assert set(owners.values()) == {"slamrel.commands.importers"}
-    assert parser.parse_args(["solve", "g", "-o", "d"]).func.__module__ == "slamrel.commands.graph"
+    assert parser.parse_args(["solve", "g", "-o", "d"]).func.__module__ == "slamrel.commands.solve"
 
 
 ISAM = """ODOMETRY 0 1 1.0 0 0 0.01 0 0 0.01 0 0.0001

@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 
-from recovery.bundle import read_bundle
 from slamrel.cli import main
+from slamrel.formats.bundle import read_bundle
 
 
 def test_simulate_slam_evaluate(tmp_path):

@@ -7,7 +7,7 @@ import pytest
 
 from relation_metric.errors import InputError
 from slamrel.cli import main
-from slamrel.compare import ResultErrors, compare_results, holm
+from slamrel.report.tables import ResultErrors, compare_results, holm
 
 
 def result(ds, alg, keys, trans, rot):

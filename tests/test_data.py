@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from recovery.bundle import read_bundle
-from relation_metric.formats import read_trajectory
 from slamrel.cli import main
+from slamrel.formats.bundle import read_bundle
+from slamrel.formats.trajectories import read_trajectory
 
 DATA = Path(__file__).resolve().parent.parent / "data"
 MADE = ("example", "sim-bundle")  # the folders data/make_data.py writes

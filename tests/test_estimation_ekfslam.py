@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from recovery.estimation.ekfslam import ekf_slam, ekf_slam_bundle
 from recovery.models import SensorModel
-from recovery.simulation.bundles import world_bundle
-from recovery.simulation.worlds import make_world
 from recovery.steps import build_steps
 from relation_metric import se2
 from relation_metric.errors import DivergenceError, InputError
+from slamrel.backends.ekf_slam import ekf_slam, ekf_slam_bundle
+from slamrel.simulation.bundles import world_bundle
+from slamrel.simulation.worlds import make_world
 
 
 def run(world, **kw):
@@ -213,7 +213,7 @@ def _update_before_issue15(mu, cov, n, slot, meas, r_cov, t, m, gate=np.inf):
 @pytest.mark.parametrize("world, gate", [("complex1", None), ("simple2", 0.999)])
 def test_symmetric_update_equals_the_old_formula(monkeypatch, world, gate):
     """The in-place symmetric update gives the old formula's results to 1e-12 (seeded run)."""
-    import recovery.estimation.ekfslam as ekfslam
+    import slamrel.backends.ekf_slam as ekfslam
 
     b = world_bundle(make_world(world, noise="b", seed=7))
     new = ekf_slam_bundle(b, outlier_gate=gate)[1]
@@ -228,7 +228,7 @@ def test_symmetric_update_equals_the_old_formula(monkeypatch, world, gate):
 
 def test_symmetric_update_keeps_the_covariance_exactly_symmetric():
     """One update on a random symmetric P (in a larger buffer): P stays bit-symmetric."""
-    from recovery.estimation.ekfslam import _update
+    from slamrel.backends.ekf_slam import _update
 
     rng = np.random.default_rng(5)
     n, cap = 203, 240  # more rows than one block, a view into a larger buffer

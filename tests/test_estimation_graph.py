@@ -6,17 +6,17 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from recovery.estimation.graph import (
+from relation_metric import se2
+from relation_metric.errors import InputError
+from slamrel.backends.least_squares import (
     PoseGraph,
     _residuals_and_jacobian,
     _upper_sqrt,
     solve_graph,
     solve_graph_incremental,
 )
-from relation_metric import se2
-from relation_metric.errors import InputError
 from slamrel.cli import main
-from slamrel.importers.isam import read_isam
+from slamrel.formats.isam import read_isam
 
 
 def small_world(rng, n=30, m=8, noise=0.05):
@@ -127,7 +127,7 @@ def _drifted_loop():
     """Two laps of a 20 m circle whose odometry heading is biased by 0.02 rad a step (16 rad
     over the run), 40 landmarks seen within 8 m; the guess is the chained odometry.
     Returns the graph, the true landmarks and the dof (residuals minus unknowns)."""
-    from recovery.estimation.graph import initial_landmarks
+    from slamrel.backends.least_squares import initial_landmarks
 
     rng = np.random.default_rng(1)
     n, m, sd, sd_th = 400, 40, 0.02, 0.01
@@ -186,7 +186,7 @@ def test_geometric_growth_with_stall_check_reaches_the_fixed_step_minimum(batch,
 def test_normal_equations_equal_the_sparse_products(rng):
     """H and the gradient assembled block-wise (in the fill-reducing order) equal JᵀJ and
     Jᵀr from the sparse Jacobian; a solve equals a dense solve."""
-    from recovery.estimation.graph import _linearise, _NormalEquations
+    from slamrel.backends.least_squares import _linearise, _NormalEquations
 
     g, _, _ = small_world(rng, n=25, m=6)
     w_pp, w_pl = _upper_sqrt(g.pp_info), _upper_sqrt(g.pl_info)
@@ -291,7 +291,7 @@ def test_cli_solve_zero_isam_covariance_exit_3(tmp_path, capsys):
 
 def test_cli_solve_growth_option(tmp_path, capsys, rng):
     """--growth below 1 is a usage error (exit 2); a valid one solves to the minimum."""
-    from recovery.graph_formats.g2o import write_g2o_graph
+    from slamrel.formats.g2o import write_g2o_graph
 
     g, _, _ = small_world(rng, n=30, m=8)
     path = tmp_path / "g.g2o"
@@ -307,7 +307,7 @@ def test_cli_solve_growth_option(tmp_path, capsys, rng):
 
 
 def test_pose_covariances_equal_dense_inverse(rng):
-    from recovery.estimation.graph import pose_covariances
+    from slamrel.backends.least_squares import pose_covariances
 
     g, _, _ = small_world(rng, n=10, m=3)
     sol = solve_graph(g)
@@ -325,7 +325,7 @@ def test_pose_covariances_equal_dense_inverse(rng):
 
 
 def test_joint_covariance_blocks_are_the_marginal_pose_covariances(rng):
-    from recovery.estimation.graph import joint_covariance, pose_covariances
+    from slamrel.backends.least_squares import joint_covariance, pose_covariances
 
     n = 6
     truth = np.cumsum(np.column_stack((np.full(n, 1.0), rng.normal(0, 0.1, (n, 2)))), axis=0)
@@ -356,7 +356,7 @@ def test_joint_covariance_blocks_are_the_marginal_pose_covariances(rng):
 def test_cli_solve_tolerance_option(tmp_path, capsys, rng):
     """--tolerance is the LM's relative-decrease stopping rule: outside (0, 1) exit 2; a looser
     one stops no later, and both stop within the looser rule of solve_graph's minimum."""
-    from recovery.graph_formats.g2o import write_g2o_graph
+    from slamrel.formats.g2o import write_g2o_graph
 
     g, _, _ = small_world(rng, n=30, m=8)
     path = tmp_path / "g.g2o"
@@ -383,8 +383,8 @@ def test_cli_solve_names_its_sparse_cholesky_and_the_missing_faster_one(
 ):
     """``solve`` says which back-end factorised the graph; when CHOLMOD would have been chosen
     but is not installed (the ``fast`` extra), it says so once, and the answer is the same."""
-    from recovery.estimation import sparse_cholesky
-    from recovery.graph_formats.g2o import write_g2o_graph
+    from slamrel.backends import sparse_cholesky
+    from slamrel.formats.g2o import write_g2o_graph
 
     if "cholmod" in installed and "cholmod" not in sparse_cholesky.BACKENDS:
         pytest.skip("cvxopt (the `fast` extra) is not installed")

@@ -1,4 +1,4 @@
-"""recovery.estimation.lm: the one Levenberg–Marquardt, and batch recovery's normal equations.
+"""recovery.lm: the one Levenberg–Marquardt, and batch recovery's normal equations.
 
 Oracles: the linear least-squares solution (numpy lstsq), scipy.optimize.least_squares on
 nonlinear problems, hand-wrapped angles, and a finite-difference Jacobian.
@@ -14,16 +14,16 @@ from scipy.optimize import least_squares
 
 from recovery.batch import _factors, _weights, normal_equations
 from recovery.ekf import USED, run_filter
-from recovery.estimation.lm import (
+from recovery.lm import (
     Linearisation,
     LMOptions,
     levenberg_marquardt,
     retract_poses,
 )
 from recovery.recover import filter_input
-from recovery.simulation.bundles import simulate_bundle
 from relation_metric import se2
 from relation_metric.errors import DivergenceError
+from slamrel.simulation.bundles import simulate_bundle
 
 Residuals = Callable[[np.ndarray], np.ndarray]
 

@@ -5,8 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recovery.estimation.graph import joint_covariance, solve_graph
-from recovery.estimation.pose_only import (
+from relation_metric.consistency import nees1
+from relation_metric.errors import InputError
+from relation_metric.trajectory import Trajectory
+from slamrel.backends.least_squares import joint_covariance, solve_graph
+from slamrel.backends.pose_only import (
     METHOD1_INFLATION,
     LandmarkLog,
     cartesian_observations,
@@ -19,10 +22,7 @@ from recovery.estimation.pose_only import (
     pair_constraints,
     pose_only_least_squares,
 )
-from recovery.simulation.worlds import make_world
-from relation_metric.consistency import nees1
-from relation_metric.errors import InputError
-from relation_metric.trajectory import Trajectory
+from slamrel.simulation.worlds import make_world
 
 
 def log_of(world):
@@ -270,7 +270,7 @@ def test_ill_conditioned_pair_is_solved_by_the_damped_steps():
 
 
 def test_chained_start_fuses_odometry_and_adjacent_constraints():
-    from recovery.estimation.pose_only import PairConstraints, chained_start
+    from slamrel.backends.pose_only import PairConstraints, chained_start
 
     log = four_pose_log()  # odometry: unit steps along x, σ = (0.1, 0.1, 0.05)
     # a landmark constraint on 1-2 saying (1.2, 0, 0) with the odometry's own covariance:

@@ -1,4 +1,4 @@
-"""recovery.estimation.sparse_cholesky: every back-end against dense numpy solves, the
+"""slamrel.backends.sparse_cholesky: every back-end against dense numpy solves, the
 fixed-pattern refactorisation, singular matrices, the back-end choice and the fallback."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ import pytest
 import scipy.sparse as sp
 from test_estimation_graph import small_world
 
-from recovery.estimation import sparse_cholesky
-from recovery.estimation.graph import _NormalEquations, solve_graph
-from recovery.estimation.sparse_cholesky import SparseCholesky, choose_backend, factor_flops
 from relation_metric.errors import DivergenceError
+from slamrel.backends import sparse_cholesky
+from slamrel.backends.least_squares import _NormalEquations, solve_graph
+from slamrel.backends.sparse_cholesky import SparseCholesky, choose_backend, factor_flops
 
 BACKENDS = [b for b in ("qdldl", "cholmod", "superlu") if b in sparse_cholesky.BACKENDS]
 

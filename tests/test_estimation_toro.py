@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recovery.estimation.graph import PoseGraph, solve_graph
-from recovery.estimation.toro import spanning_tree, spherical_information, toro_optimize
-from recovery.graph_formats.g2o import read_g2o_graph, write_g2o_graph
-from recovery.graph_formats.toro import read_toro_graph, write_toro_graph
 from relation_metric import se2
 from relation_metric.errors import InputError
+from slamrel.backends.least_squares import PoseGraph, solve_graph
+from slamrel.backends.toro_optimiser import spanning_tree, spherical_information, toro_optimize
+from slamrel.formats.g2o import read_g2o_graph, write_g2o_graph
+from slamrel.formats.toro import read_toro_graph, write_toro_graph
 
 HAND = """# a TORO file written by hand
 VERTEX2 10 0 0 0

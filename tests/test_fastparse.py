@@ -1,4 +1,4 @@
-"""relation_metric.fastparse: bit-exact against Python's float(), refuses what it cannot do.
+"""slamrel.formats.fastparse: bit-exact against Python's float(), refuses what it cannot do.
 
 Oracles: ``float(token)`` per token (CPython's correctly rounded ``strtod``), a regular
 expression that states the accepted subset independently of the vectorised code, and the
@@ -16,11 +16,11 @@ from conftest import require_data
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-import relation_metric.fastparse as fastparse
+import slamrel.formats.fastparse as fastparse
 from relation_metric.errors import InputError
-from relation_metric.fastparse import parse_decimal_table, read_decimal_table
-from relation_metric.relations import read_relations
-from relation_metric.textio import TruncatedLineWarning, read_numeric_table, read_source
+from slamrel.formats.fastparse import parse_decimal_table, read_decimal_table
+from slamrel.formats.relations import read_relations
+from slamrel.formats.text import TruncatedLineWarning, read_numeric_table, read_source
 
 TOKEN = re.compile(r"-?(?P<int>[0-9]*)(?:\.(?P<frac>[0-9]*))?")
 REL_COLUMNS = ("t1", "t2", "x", "y", "z", "roll", "pitch", "yaw")

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from relation_metric.errors import InputError
-from relation_metric.formats import detect_trajectory_format, read_trajectory
 from slamrel.cli import main
+from slamrel.formats.trajectories import detect_trajectory_format, read_trajectory
 
 PLAIN = "0 0 0 0\n1 1 0 0\n2 2 0 0\n"
 EIGHT = "0 0 0 0 0 0 0 1\n1 1 0 0 0 0 0 1\n"

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from relation_metric.errors import InputError
-from relation_metric.formats import (
+from relation_metric.trajectory import Trajectory
+from slamrel.formats.text import TruncatedLineWarning
+from slamrel.formats.trajectories import (
     InvalidPoseWarning,
     detect_trajectory_format,
     quaternion_from_yaw,
@@ -17,8 +19,6 @@ from relation_metric.formats import (
     write_trajectory,
     yaw_from_quaternion,
 )
-from relation_metric.textio import TruncatedLineWarning
-from relation_metric.trajectory import Trajectory
 
 
 def write(tmp_path, name, text):

@@ -16,9 +16,9 @@ import pytest
 from conftest import require_data
 
 from relation_metric.evaluate import evaluate
-from relation_metric.formats import read_trajectory
-from relation_metric.relations import read_relations
 from slamrel.cli import main
+from slamrel.formats.relations import read_relations
+from slamrel.formats.trajectories import read_trajectory
 
 RUNS = {
     "08": ("mit-csail.relations", "mit-csail.clf"),

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recovery.estimation.graph import solve_graph
-from recovery.graph_formats.g2o import read_g2o_graph, write_g2o_graph
 from relation_metric.errors import InputError
-from slamrel.importers.isam import read_isam
+from slamrel.backends.least_squares import solve_graph
+from slamrel.formats.g2o import read_g2o_graph, write_g2o_graph
+from slamrel.formats.isam import read_isam
 
 ISAM = """ODOMETRY 0 1 1.0 0 0 0.01 0 0 0.01 0 0.0001
 LANDMARK 1 2 1.0 1.0 0.04 0 0.04

@@ -2,7 +2,7 @@
 
 GTSAM is the independent optimum: its ``LevenbergMarquardtOptimizer`` (its own linear algebra,
 ordering, damping and stopping rules) minimises the same objective as slamrel's
-:func:`~recovery.estimation.graph.solve_graph`, from the same initial guess, on seeded small
+:func:`~slamrel.backends.least_squares.solve_graph`, from the same initial guess, on seeded small
 planar graphs. The GTSAM graph is built to have exactly slamrel's objective:
 
 * pose–pose ``(i, j, z, Ω)``: ``e = [p.t − z_t, wrap(p.θ − z_θ)]`` with ``p = x_i⁻¹ ∘ x_j``
@@ -43,9 +43,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from recovery.estimation.graph import PoseGraph, initial_landmarks, solve_graph
-from recovery.estimation.toro import spherical_information, toro_optimize
 from relation_metric import se2
+from slamrel.backends.least_squares import PoseGraph, initial_landmarks, solve_graph
+from slamrel.backends.toro_optimiser import spherical_information, toro_optimize
 
 ROOT = Path(__file__).resolve().parent.parent
 VENV_PYTHON = ROOT / "benchmarks" / ".venv-gtsam" / "bin" / "python"

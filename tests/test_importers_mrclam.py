@@ -185,13 +185,13 @@ def test_dataset7_slam_and_recovery_beat_dead_reckoning():
 
     from scipy.stats import wilcoxon
 
-    from recovery.estimation.ekfslam import ekf_slam_bundle
     from recovery.recover import recover
     from recovery.steps import build_steps
     from relation_metric import se2
     from relation_metric.evaluate import evaluate
     from relation_metric.relations import generate_relations
     from relation_metric.trajectory import Trajectory
+    from slamrel.backends.ekf_slam import ekf_slam_bundle
     from slamrel.importers.mrclam import mrclam_bundle
 
     d = require_data("mrclam", "MRCLAM_Dataset7")

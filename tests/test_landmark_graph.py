@@ -9,14 +9,15 @@ import numpy as np
 import pytest
 from conftest import require_data
 
-from landmark_graph.association import associate_auto, gospa, ospa
-from landmark_graph.compare import compare_maps
-from landmark_graph.maps import LandmarkMap, read_map, write_map
+from landmark_graph.landmark_association import associate_auto, gospa, ospa
+from landmark_graph.map_compare import compare_maps
+from landmark_graph.maps import LandmarkMap
 from landmark_graph.mesh import delaunay_mesh
-from landmark_graph.relations import mesh_errors
+from landmark_graph.mesh_relations import mesh_errors
 from relation_metric import se2
 from relation_metric.errors import InputError
 from slamrel.cli import main
+from slamrel.formats.landmark_maps import read_map, write_map
 
 
 def rigid(xy, pose):
@@ -203,7 +204,7 @@ def test_cli_outputs(tmp_path):
 def test_sparse_assignment_equals_dense_padded_assignment(rng, power):
     from scipy.optimize import linear_sum_assignment
 
-    from landmark_graph.association import _sparse_assignment
+    from landmark_graph.landmark_association import _sparse_assignment
 
     c = 0.5
     for _ in range(5):
@@ -355,7 +356,7 @@ def test_auto_association_of_clustered_maps_equals_the_least_squares_oracle(rng)
     """Clusters of 3 landmarks within 0.3 m (as MRCLAM) above the exhaustive-search size:
     the result must equal the optimal assignment after the least-squares alignment on the
     true correspondences (which itself may swap landmarks a few mm apart)."""
-    from landmark_graph.association import _apply, _sparse_assignment
+    from landmark_graph.landmark_association import _apply, _sparse_assignment
     from relation_metric.alignment import umeyama
 
     for trial in range(10):

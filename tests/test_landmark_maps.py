@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 from conftest import require_data
 
-from landmark_graph.maps import MAP_FORMATS, LandmarkMap, read_map, write_map
+from landmark_graph.maps import LandmarkMap
 from relation_metric.errors import InputError
+from slamrel.formats.landmark_maps import MAP_FORMATS, read_map, write_map
 
 
 def random_map(rng, n=25, *, cov="full"):

@@ -8,7 +8,7 @@ import itertools
 import numpy as np
 import pytest
 
-from landmark_graph.association import associate_by_id
+from landmark_graph.landmark_association import associate_by_id
 from landmark_graph.maps import LandmarkMap
 from landmark_graph.pose_landmark import pose_landmark_relations, shared_landmark_relations
 from relation_metric import se2

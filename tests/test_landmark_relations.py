@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from conftest import require_data
 
-from landmark_graph.maps import read_map
 from landmark_graph.mesh import corner_angles, delaunay_mesh
-from landmark_graph.relations import mesh_errors
+from landmark_graph.mesh_relations import mesh_errors
 from relation_metric import se2
+from slamrel.formats.landmark_maps import read_map
 
 
 def test_corner_angles_equal_the_law_of_cosines(rng):

@@ -9,11 +9,11 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from relation_metric import se2
-from relation_metric.association import associate
 from relation_metric.groups import SE2
 from relation_metric.metric import relation_errors
 from relation_metric.relations import RelationSet
 from relation_metric.stats import summarize, summarize_with_squares
+from relation_metric.time_association import associate
 from relation_metric.trajectory import Trajectory
 
 
@@ -131,7 +131,7 @@ def test_index_association_gathers_the_poses(rng):
 
 @pytest.mark.parametrize("kind", ["uniform", "jitter", "ties", "gap", "short"])
 def test_insertion_points_equal_searchsorted(rng, kind):
-    from relation_metric.association import insertion_points
+    from relation_metric.time_association import insertion_points
 
     n = 5 if kind == "short" else 3000
     times = {

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import pytest
 
-from relation_metric import outputs
-from relation_metric.outputs import MANIFEST
+from slamrel import outputs
 from slamrel.cli import main
+from slamrel.outputs import MANIFEST
 
 ISAM = """ODOMETRY 0 1 1.0 0 0 0.01 0 0 0.01 0 0.0001
 LANDMARK 1 2 1.0 1.0 0.04 0 0.04
@@ -82,17 +82,17 @@ FILE: dict[str, Argv] = {
 # The function that does each command's first real work (reading inputs or computing).
 HEAVY = {  # the module that owns it: commands import the library inside their run functions
     "run": ("slamrel.pipeline", "read_run_input"),  # SOURCE is a bundle folder here
-    "simulate": ("recovery.simulation.worlds", "make_world"),
-    "slam": ("recovery.bundle", "read_bundle"),
-    "import-isam": ("slamrel.importers.isam", "read_isam"),
+    "simulate": ("slamrel.simulation.worlds", "make_world"),
+    "slam": ("slamrel.formats.bundle", "read_bundle"),
+    "import-isam": ("slamrel.formats.isam", "read_isam"),
     "import-mrclam": ("slamrel.importers.mrclam", "mrclam_bundle"),
-    "solve": ("slamrel.commands.graph", "_load"),
-    "compare": ("slamrel.compare", "read_per_relation"),
-    "example": ("recovery.simulation.example", "example_pair"),
-    "recover": ("recovery.bundle", "read_bundle"),
+    "solve": ("slamrel.commands.solve", "_load"),
+    "compare": ("slamrel.report.tables", "read_per_relation"),
+    "example": ("slamrel.simulation.example", "example_pair"),
+    "recover": ("slamrel.formats.bundle", "read_bundle"),
     "evaluate": ("slamrel.commands.evaluate_run", "load_reference"),
     "relations": ("slamrel.commands.relations", "load_trajectory_arg"),
-    "map-compare": ("landmark_graph.maps", "read_map"),
+    "map-compare": ("slamrel.formats.landmark_maps", "read_map"),
 }
 
 

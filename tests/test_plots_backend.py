@@ -1,4 +1,4 @@
-"""relation_metric.plots.pyplot must not take a backend the user (or Jupyter) chose."""
+"""slamrel.plots.relation_errors.pyplot must not take a backend the user (or Jupyter) chose."""
 
 from __future__ import annotations
 
@@ -13,7 +13,10 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _backend_after(prelude: str) -> str:
-    code = prelude + "\nfrom relation_metric.plots import pyplot\nprint(pyplot().get_backend())"
+    code = (
+        prelude
+        + "\nfrom slamrel.plots.relation_errors import pyplot\nprint(pyplot().get_backend())"
+    )
     env = {k: v for k, v in os.environ.items() if k != "MPLBACKEND"}
     env["PYTHONPATH"] = str(ROOT)
     out = subprocess.run(

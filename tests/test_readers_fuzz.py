@@ -25,17 +25,18 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from landmark_graph.association import read_association_csv
-from landmark_graph.maps import LandmarkMap, read_map
-from recovery.bundle import read_bundle
-from recovery.graph_formats.g2o import read_g2o_graph
+from landmark_graph.maps import LandmarkMap
 from relation_metric.errors import InputError
-from relation_metric.formats import read_trajectory
-from relation_metric.relations import read_relations
-from relation_metric.textio import TruncatedLineWarning, read_keyword_records
-from slamrel.compare import read_per_relation
-from slamrel.importers.isam import read_isam
+from slamrel.formats.associations import read_association_csv
+from slamrel.formats.bundle import read_bundle
+from slamrel.formats.g2o import read_g2o_graph
+from slamrel.formats.isam import read_isam
+from slamrel.formats.landmark_maps import read_map
+from slamrel.formats.relations import read_relations
+from slamrel.formats.text import TruncatedLineWarning, read_keyword_records
+from slamrel.formats.trajectories import read_trajectory
 from slamrel.importers.mrclam import read_mrclam_robot
+from slamrel.report.tables import read_per_relation
 
 # ----------------------------------------------------------------------- valid small files
 

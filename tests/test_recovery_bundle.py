@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from recovery.bundle import read_bundle, write_bundle
-from recovery.simulation.bundles import simulate_bundle
 from relation_metric.errors import InputError
 from slamrel.cli import main
+from slamrel.formats.bundle import read_bundle, write_bundle
+from slamrel.simulation.bundles import simulate_bundle
 
 
 @pytest.fixture
@@ -313,7 +313,7 @@ def test_velocity_model_needs_two_control_rows(good) -> None:  # type: ignore[no
 
 def test_in_memory_producers_are_checked(tmp_path: Path) -> None:
     """A producer's bad array no longer slips through: its own ``Bundle(...)`` raises."""
-    from slamrel.importers.isam import isam_log_bundle, read_isam
+    from slamrel.formats.isam import isam_log_bundle, read_isam
 
     # property: a producer's ordinary output passes ...
     b = simulate_bundle(2, steps=40, unassociated_fraction=0.3)

@@ -13,13 +13,13 @@ import pytest
 from scipy.stats import chi2
 
 from recovery.batch import normal_equations
-from recovery.bundle import read_bundle, write_bundle
 from recovery.ekf import GATED, REENTRY, ROBUST_C, USED, run_filter
 from recovery.recover import _runs, filter_input, recover
-from recovery.simulation.bundles import simulate_bundle
 from relation_metric.errors import DivergenceError
-from relation_metric.formats import read_trajectory
 from slamrel.cli import main
+from slamrel.formats.bundle import read_bundle, write_bundle
+from slamrel.formats.trajectories import read_trajectory
+from slamrel.simulation.bundles import simulate_bundle
 
 
 def _inject(b, t0: float, t1: float, seed: int):  # type: ignore[no-untyped-def]

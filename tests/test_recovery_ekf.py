@@ -12,9 +12,9 @@ import pytest
 
 from recovery import ekf
 from recovery.recover import filter_input
-from recovery.simulation.bundles import simulate_bundle
 from recovery.smoother import smooth
 from relation_metric.se2 import shear
+from slamrel.simulation.bundles import simulate_bundle
 
 
 def bits(x):

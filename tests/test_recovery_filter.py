@@ -12,14 +12,14 @@ import pytest
 
 from recovery.baseline import filterpy_localisation
 from recovery.batch import normal_equations, refine
-from recovery.bundle import read_bundle, write_bundle
 from recovery.ekf import GATED, USED, run_filter
 from recovery.models import process_noise, range_bearing
 from recovery.recover import filter_input, recover
-from recovery.simulation.bundles import simulate_bundle
 from recovery.smoother import smooth
 from relation_metric import se2
 from relation_metric.errors import DivergenceError
+from slamrel.formats.bundle import read_bundle, write_bundle
+from slamrel.simulation.bundles import simulate_bundle
 
 CASES = [
     {},

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from recovery.recover import recover
-from recovery.simulation.bundles import simulate_bundle
 from relation_metric.consistency import summarize_nees
+from slamrel.simulation.bundles import simulate_bundle
 
 RUNS = 50
 

@@ -7,14 +7,9 @@ import pytest
 
 from relation_metric import se2
 from relation_metric.errors import InputError
-from relation_metric.relations import (
-    STRATEGIES,
-    RelationSet,
-    generate_relations,
-    read_relations,
-    write_relations,
-)
+from relation_metric.relations import STRATEGIES, RelationSet, generate_relations
 from relation_metric.trajectory import Trajectory
+from slamrel.formats.relations import read_relations, write_relations
 
 
 @pytest.fixture

@@ -14,16 +14,12 @@ from hypothesis import strategies as st
 from relation_metric import se2, se3
 from relation_metric.errors import InputError
 from relation_metric.evaluate import evaluate
-from relation_metric.formats import PlanarProjectionWarning, read_trajectory
 from relation_metric.groups import SE2, SE3
-from relation_metric.relations import (
-    RelationSet,
-    generate_relations,
-    read_relations,
-    write_relations,
-)
+from relation_metric.relations import RelationSet, generate_relations
 from relation_metric.trajectory import Trajectory
 from slamrel.cli import main
+from slamrel.formats.relations import read_relations, write_relations
+from slamrel.formats.trajectories import PlanarProjectionWarning, read_trajectory
 
 
 def helix(n=200, seed=0):

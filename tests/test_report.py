@@ -6,8 +6,8 @@ import html.parser
 
 import pytest
 
-from relation_metric.outputs import MANIFEST, staged_directory
-from slamrel.report import Figure, Section, Table, render_html
+from slamrel.outputs import MANIFEST, staged_directory
+from slamrel.report.html import Figure, Section, Table, render_html
 
 PNG = b"\x89PNG\r\n\x1a\n" + b"\x00" * 16
 

@@ -12,10 +12,12 @@ import re
 import numpy as np
 import pytest
 
-from landmark_graph.association import Association, associate_by_id, read_association_csv
-from landmark_graph.maps import LandmarkMap, write_map
-from landmark_graph.review import implied_alignment, review_data, review_html
+from landmark_graph.landmark_association import Association, associate_by_id
+from landmark_graph.maps import LandmarkMap
 from slamrel.cli import main
+from slamrel.formats.associations import read_association_csv
+from slamrel.formats.landmark_maps import write_map
+from slamrel.review.page import implied_alignment, review_data, review_html
 
 
 def _rot(a):

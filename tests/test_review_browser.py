@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from landmark_graph.maps import LandmarkMap, write_map
+from landmark_graph.maps import LandmarkMap
 from slamrel.cli import main
+from slamrel.formats.landmark_maps import write_map
 
 
 def _missing(message: str) -> None:

@@ -131,7 +131,7 @@ def test_result_holds_the_map_once_and_reads_nothing(
 ) -> None:
     """``run_pipeline`` on a RunInput does no I/O; the map JSON is derived from the comparison."""
     import slamrel.pipeline as pipeline
-    from slamrel.run_report import RunSections
+    from slamrel.report.run_page import RunSections
 
     out, _, m = report
     inp = pipeline.read_run_input(out / "bundle")  # the report's bundle: map + ground truth

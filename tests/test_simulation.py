@@ -8,18 +8,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from recovery.estimation.ekfslam import corrupt_associations, ekf_slam, ekf_slam_bundle
-from recovery.simulation.bundles import simulate_bundle
-from recovery.simulation.example import example_pair
-from recovery.simulation.sensors import (
+from recovery.steps import build_steps
+from relation_metric import se2
+from relation_metric.errors import InputError
+from slamrel.backends.ekf_slam import corrupt_associations, ekf_slam, ekf_slam_bundle
+from slamrel.simulation.bundles import simulate_bundle
+from slamrel.simulation.example import example_pair
+from slamrel.simulation.sensors import (
     AllAroundSensor,
     FieldOfViewSensor,
     observe_all_around,
     observe_field_of_view,
 )
-from recovery.steps import build_steps
-from relation_metric import se2
-from relation_metric.errors import InputError
 
 
 def _scene(seed: int) -> tuple[np.ndarray, np.ndarray]:

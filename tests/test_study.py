@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from slamrel.cli import main
-from slamrel.sweep import Task, format_progress, load_results, run_sweep
+from slamrel.studies.sweep import Task, format_progress, load_results, run_sweep
 
 ROOT = Path(__file__).resolve().parent.parent
 SMALL = ["--worlds", "hu-simple1", "--noise", "a", "--methods", "full,m1,m2"]
@@ -192,7 +192,7 @@ def test_study_on_a_separately_started_dask_scheduler_and_worker(tmp_path):
 
 
 def test_findings_are_checked_per_group():
-    from slamrel.study import findings
+    from slamrel.studies.pose_only import findings
 
     def row(world, noise, method, nees1, under, rmse, nmap, gate=280.4):
         keys = ("world", "noise", "method", "nees1_mean", "nees1_under", "rmse_xy")

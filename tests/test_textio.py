@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from relation_metric.errors import InputError
-from relation_metric.textio import _fast_table, read_numeric_table
+from slamrel.formats.text import _fast_table, read_numeric_table
 
 decimal = st.decimals(
     min_value=-1e9, max_value=1e9, places=6, allow_nan=False, allow_infinity=False
@@ -70,7 +70,7 @@ def assert_error_at(read, where, msg):
 
 # --- the one header-CSV table reader --------------------------------------------------
 
-from relation_metric.textio import (  # noqa: E402
+from slamrel.formats.text import (  # noqa: E402
     SourceText,
     format_csv_table,
     read_csv_table,
@@ -124,7 +124,7 @@ cells = st.one_of(
 @given(st.lists(st.tuples(cells, cells), min_size=1, max_size=8))
 def test_csv_table_numpy_path_equals_line_by_line(tmp_path_factory, rows):
     """Whatever numpy's parser accepts, the exact line-by-line reader gives the same."""
-    from relation_metric.textio import _parse_csv_lines
+    from slamrel.formats.text import _parse_csv_lines
 
     p = tmp_path_factory.mktemp("c") / "a.csv"
     text = "a,b\n" + "".join(f"{x},{y}\n" for x, y in rows)
@@ -144,7 +144,7 @@ def test_csv_table_numpy_path_equals_line_by_line(tmp_path_factory, rows):
 
 
 def test_csv_table_bom_crlf_and_cut_off_line(tmp_path):
-    from relation_metric.textio import TruncatedLineWarning
+    from slamrel.formats.text import TruncatedLineWarning
 
     p = tmp_path / "a.csv"
     p.write_bytes(b"\xef\xbb\xbft,x\r\n1,2\r\n3,4")
@@ -171,7 +171,7 @@ def test_source_text_cut_off_line_rules():
 
 # --- keyword records (g2o, iSAM text): the one-pass path and the diagnosing fallback -------
 
-from relation_metric.textio import (  # noqa: E402
+from slamrel.formats.text import (  # noqa: E402
     _keyword_records_fast,
     read_keyword_records,
 )

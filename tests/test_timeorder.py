@@ -19,10 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_importers_mrclam import HEAD, make_dataset
 
-from recovery.bundle import write_bundle
-from recovery.simulation.bundles import simulate_bundle
 from relation_metric.errors import InputError
-from relation_metric.formats import read_trajectory
 from relation_metric.timeorder import (
     FILTER_TIME_TOLERANCE,
     TimeOrderWarning,
@@ -31,7 +28,10 @@ from relation_metric.timeorder import (
     steps_back,
 )
 from slamrel.cli import main
+from slamrel.formats.bundle import write_bundle
+from slamrel.formats.trajectories import read_trajectory
 from slamrel.importers.mrclam import read_mrclam_robot
+from slamrel.simulation.bundles import simulate_bundle
 
 # ------------------------------------------------------------------------------- the rule
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slamrel.validation import faithfulness_study
+from slamrel.studies.faithfulness import faithfulness_study
 
 
 @pytest.mark.slow
@@ -30,7 +30,7 @@ def test_recovered_ranks_runs_like_online(capsys):
 
 def test_tuning_study_on_a_small_grid():
     """The grid's bookkeeping on 2 × 2 runs of a small world (fast; the full grid is slow)."""
-    from slamrel.validation import tuning_study
+    from slamrel.studies.faithfulness import tuning_study
 
     s = tuning_study("simple1", noise="a", seeds=(0,), process_noise_scales=(0.1, 1.0),
                      corruptions=(0.0, 0.05))  # fmt: skip
@@ -55,7 +55,7 @@ def test_tuning_study_on_a_small_grid():
 def test_ate_at_reference_times_is_alignment_invariant():
     from relation_metric import se2
     from relation_metric.trajectory import Trajectory
-    from slamrel.validation import ate_at_reference_times
+    from slamrel.studies.faithfulness import ate_at_reference_times
 
     rng = np.random.default_rng(4)
     t = np.arange(0.0, 50.0, 0.1)
@@ -80,7 +80,7 @@ def test_robust_recovery_on_mrclam_robot5():
     from conftest import require_data
 
     from slamrel.importers.mrclam import mrclam_bundle
-    from slamrel.validation import RECOVERY_VARIANTS, recovery_variants_table
+    from slamrel.studies.faithfulness import RECOVERY_VARIANTS, recovery_variants_table
 
     d = require_data("mrclam", "MRCLAM_Dataset7")
     keep = {k: RECOVERY_VARIANTS[k] for k in ("plain", "gated", "reentry", "cauchy")}
@@ -108,7 +108,7 @@ def test_default_recovery_meets_issue_12_on_mrclam(robot: int) -> None:
     from conftest import require_data
 
     from slamrel.importers.mrclam import mrclam_bundle
-    from slamrel.validation import RECOVERY_VARIANTS, recovery_variants_table
+    from slamrel.studies.faithfulness import RECOVERY_VARIANTS, recovery_variants_table
 
     d = require_data("mrclam", "MRCLAM_Dataset7")
     keep = {k: RECOVERY_VARIANTS[k] for k in ("plain", "gated", "default")}
@@ -130,13 +130,13 @@ def test_robust_recovery_does_not_hide_a_broken_map():
     """DESIGN.md pitfall: on an EKF-SLAM run with 1% wrong associations, a 99.9% gate without
     re-entry makes the map look much better than the run was; the M-estimators (scale from a
     plain pass) and the re-entering default stay near the online error."""
-    from recovery.estimation.ekfslam import ekf_slam_bundle
     from recovery.recover import recover
-    from recovery.simulation.bundles import world_bundle
-    from recovery.simulation.worlds import make_world
     from relation_metric.evaluate import evaluate
     from relation_metric.relations import generate_relations
     from relation_metric.trajectory import Trajectory
+    from slamrel.backends.ekf_slam import ekf_slam_bundle
+    from slamrel.simulation.bundles import world_bundle
+    from slamrel.simulation.worlds import make_world
 
     world = make_world("complex1", noise="a", seed=0)
     truth = world.truth

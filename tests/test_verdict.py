@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slamrel.report import Section, _number, render_html
-from slamrel.verdict import run_verdict, stretches
+from slamrel.report.html import Section, _number, render_html
+from slamrel.report.verdict import run_verdict, stretches
 
 
 def _ev(mean: float, relations: int = 100) -> dict:

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from conftest import require_data
 
-from recovery.estimation.graph import solve_graph, solve_graph_incremental
-from slamrel.importers.isam import isam_log_bundle, read_isam
+from slamrel.backends.least_squares import solve_graph, solve_graph_incremental
+from slamrel.formats.isam import isam_log_bundle, read_isam
 
 pytestmark = pytest.mark.realdata
 
@@ -35,8 +35,8 @@ def least_squares(vp):
 
 @pytest.fixture(scope="module")
 def ekf(vp):
-    from recovery.estimation.ekfslam import ekf_slam_bundle
     from recovery.recover import recover
+    from slamrel.backends.ekf_slam import ekf_slam_bundle
 
     slam, _ = ekf_slam_bundle(isam_log_bundle(vp))
     return slam, recover(slam, method="smoother", max_outlier_run=None)

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recovery.simulation.worlds import (
+from relation_metric import se2
+from relation_metric.errors import InputError
+from slamrel.simulation.worlds import (
     NOISE_TYPES,
     SENSOR_MIN_RANGE,
     SENSOR_RANGE,
@@ -13,8 +15,6 @@ from recovery.simulation.worlds import (
     make_world,
     path_of,
 )
-from relation_metric import se2
-from relation_metric.errors import InputError
 
 
 @pytest.mark.parametrize("name", WORLDS)
@@ -121,7 +121,7 @@ def test_unknown_names():
 
 @pytest.mark.parametrize("name", ["hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2"])
 def test_paper_worlds_have_the_papers_size_steps_and_sensor(name):
-    from recovery.simulation.worlds import PAPER_POSES
+    from slamrel.simulation.worlds import PAPER_POSES
 
     w = make_world(name, noise="a", seed=2)
     p = w.truth.poses

@@ -8,7 +8,7 @@ owner's constant (named in the comment), so a change there fails the tests, not 
 
 from __future__ import annotations
 
-# relation_metric.formats.TRAJECTORY_FORMATS
+# slamrel.formats.trajectories.TRAJECTORY_FORMATS
 TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc")
 # relation_metric.metric.MODES
 MODES = ("paper", "metricevaluator")
@@ -17,7 +17,7 @@ STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs
 # recovery.recover.METHODS, recovery.recover.MAP_MODES
 METHODS = ("filter", "smoother", "batch")
 MAP_MODES = ("joint", "marginal", "ignore")
-# recovery.simulation.worlds.WORLDS, .PAPER_WORLDS, sorted(recovery.simulation.worlds.NOISE_TYPES)
+# slamrel.simulation.worlds.WORLDS, .PAPER_WORLDS, sorted(slamrel.simulation.worlds.NOISE_TYPES)
 WORLDS = ("simple1", "simple2", "complex1", "complex2")
 PAPER_WORLDS = ("hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2")
 NOISE_TYPES = ("a", "b", "c")
@@ -26,5 +26,5 @@ ROBUST_CHOICES = ("huber", "cauchy", "redescending")
 # recovery.recover.DEFAULT_ROBUST
 DEFAULT_ROBUST = "redescending"
 DEFAULT_MAX_OUTLIER_RUN = 10
-# slamrel.study.METHODS
+# slamrel.studies.pose_only.METHODS
 STUDY_METHODS = ("full", "m1", "m2", "toro")

@@ -20,10 +20,10 @@ from slamrel.commands.choices import (
 )
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
-    from relation_metric.formats import LoadedTrajectory
     from relation_metric.relations import RelationSet
     from relation_metric.stats import Summary
     from relation_metric.trajectory import Trajectory
+    from slamrel.formats.trajectories import LoadedTrajectory
 
 __all__ = [
     "errors_about",
@@ -146,8 +146,8 @@ def load_trajectory_arg(
     ``planar`` (``--planar``) projects them onto the plane with a warning that states the
     out-of-plane motion discarded. ``times`` is a KITTI times file.
     """
-    from relation_metric.formats import read_trajectory, without_repeated_times
     from relation_metric.timeorder import FILTER_TIME_TOLERANCE
+    from slamrel.formats.trajectories import read_trajectory, without_repeated_times
 
     p = Path(path)
     if p.is_dir():
@@ -193,12 +193,12 @@ def check_outputs(
 ) -> None:
     """Check a command's file ``outputs`` and folder outputs ``dirs`` before any work.
 
-    See :func:`relation_metric.outputs.check_outputs`: no output is an input, lies inside an
+    See :func:`slamrel.outputs.check_outputs`: no output is an input, lies inside an
     input folder or (for a folder) contains an input; parents are writable; no two outputs
     share a path; an existing non-empty folder is replaced only with ``force`` and only when
     slamrel wrote it.
     """
-    from relation_metric.outputs import check_outputs as _check_outputs
+    from slamrel.outputs import check_outputs as _check_outputs
 
     _check_outputs(outputs, dirs=dirs, inputs=inputs, force=force)
 

@@ -32,8 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
-    from relation_metric.outputs import staged_directory, write_text_atomic
-    from slamrel.compare import compare_results, read_per_relation
+    from slamrel.outputs import staged_directory, write_text_atomic
+    from slamrel.report.tables import compare_results, read_per_relation
 
     specs = []
     for spec in args.results:
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
 def _figure(comp, path: Path) -> None:  # type: ignore[no-untyped-def]
     import numpy as np
 
-    from relation_metric.plots import pyplot, save_figure
+    from slamrel.plots.relation_errors import pyplot, save_figure
 
     plt = pyplot()
     datasets = list(dict.fromkeys(ds for ds, _ in comp.stats))

@@ -12,19 +12,10 @@ from typing import Any
 import numpy as np
 
 from relation_metric.alignment import absolute_trajectory_error
-from relation_metric.association import synchronize
 from relation_metric.errors import InputError
 from relation_metric.evaluate import Evaluation, error_summaries, evaluate
-from relation_metric.formats import (
-    RELATIONS_EXTENSIONS,
-    TRAJECTORY_EXTENSIONS,
-    LoadedTrajectory,
-    PlanarProjectionWarning,
-    sniff_trajectory_format,
-)
-from relation_metric.relations import RelationSet, read_relations
-from relation_metric.results import write_evo_zip, write_json, write_per_relation_csv
-from relation_metric.textio import read_numeric_table, read_source
+from relation_metric.relations import RelationSet
+from relation_metric.time_association import synchronize
 from relation_metric.timeorder import RepeatedTimeWarning, zero_length
 from relation_metric.trajectory import Trajectory
 from slamrel.commands.common import (
@@ -32,6 +23,16 @@ from slamrel.commands.common import (
     load_trajectory_arg,
     relations_from_args,
     stats_table,
+)
+from slamrel.formats.relations import read_relations
+from slamrel.formats.results import write_evo_zip, write_json, write_per_relation_csv
+from slamrel.formats.text import read_numeric_table, read_source
+from slamrel.formats.trajectories import (
+    RELATIONS_EXTENSIONS,
+    TRAJECTORY_EXTENSIONS,
+    LoadedTrajectory,
+    PlanarProjectionWarning,
+    sniff_trajectory_format,
 )
 
 
@@ -308,7 +309,7 @@ def _write_outputs(
             degrees=args.degrees,
         )
     if args.plot:
-        from relation_metric.plots import evaluation_figure, save_figure
+        from slamrel.plots.relation_errors import evaluation_figure, save_figure
 
         save_figure(evaluation_figure(ev, ev_estimate, degrees=args.degrees), args.plot)
 

@@ -23,10 +23,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def run(args: argparse.Namespace) -> int:
     # the library is imported where it is used: start-up stays light
-    from recovery.simulation.example import example_pair
-    from relation_metric.formats import write_trajectory
-    from relation_metric.outputs import staged_directory
-    from relation_metric.relations import write_relations
+    from slamrel.formats.relations import write_relations
+    from slamrel.formats.trajectories import write_trajectory
+    from slamrel.outputs import staged_directory
+    from slamrel.simulation.example import example_pair
 
     check_outputs([], [], dirs=[args.output], force=args.force)
     out = Path(args.output)

@@ -70,21 +70,21 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run_import_isam(args: argparse.Namespace) -> int:
-    from recovery.graph_formats.g2o import write_g2o_graph
-    from slamrel.importers.isam import read_isam
+    from slamrel.formats.g2o import write_g2o_graph
+    from slamrel.formats.isam import read_isam
 
     check_outputs([args.output], [args.file], dirs=[args.bundle], force=args.force)
     data = read_isam(args.file, noise=args.noise)
     log = None
     if args.bundle:  # built before anything is written: a file that cannot be one writes nothing
-        from slamrel.importers.isam import isam_log_bundle
+        from slamrel.formats.isam import isam_log_bundle
 
         with errors_about(args.file):
             log = isam_log_bundle(data)
     # the file's ids are kept: landmark names then agree with the --bundle log's map.csv
     write_g2o_graph(args.output, data.graph, pose_ids=data.pose_ids, landmark_ids=data.landmark_ids)
     if log is not None:
-        from recovery.bundle import write_bundle
+        from slamrel.formats.bundle import write_bundle
 
         write_bundle(args.bundle, log, force=args.force)
     g = data.graph
@@ -97,9 +97,9 @@ def run_import_isam(args: argparse.Namespace) -> int:
 
 
 def run_import_mrclam(args: argparse.Namespace) -> int:
-    from recovery.bundle import write_bundle
-    from relation_metric.outputs import staged_directory
+    from slamrel.formats.bundle import write_bundle
     from slamrel.importers.mrclam import N_ROBOTS
+    from slamrel.outputs import staged_directory
 
     check_outputs([], [args.directory], dirs=[args.output], force=args.force)
     if args.robot is not None:

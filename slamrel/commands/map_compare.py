@@ -11,7 +11,7 @@ from slamrel.commands import options as opt
 from slamrel.commands.common import check_outputs, errors_about, stats_table
 
 if TYPE_CHECKING:
-    from landmark_graph.compare import MapComparison
+    from landmark_graph.map_compare import MapComparison
     from landmark_graph.maps import LandmarkMap
 
 
@@ -68,10 +68,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from landmark_graph.association import read_association_csv, write_association_csv
-    from landmark_graph.compare import compare_maps
-    from landmark_graph.maps import read_map
-    from relation_metric.textio import write_text_atomic
+    from landmark_graph.map_compare import compare_maps
+    from slamrel.formats.associations import read_association_csv, write_association_csv
+    from slamrel.formats.landmark_maps import read_map
+    from slamrel.formats.text import write_text_atomic
 
     assoc_file = None if args.associate in ("id", "auto") else args.associate
     check_outputs(
@@ -101,12 +101,12 @@ def run(args: argparse.Namespace) -> int:
     if args.write_association:
         write_association_csv(args.write_association, res.association, est, ref)
     if args.plot:
-        from landmark_graph.plots import map_figure
-        from relation_metric.plots import save_figure
+        from slamrel.plots.maps import map_figure
+        from slamrel.plots.relation_errors import save_figure
 
         save_figure(map_figure(res), Path(args.plot))
     if args.review:
-        from landmark_graph.review import write_review
+        from slamrel.review.page import write_review
 
         names = (Path(args.estimate).name, Path(args.reference).name)
         write_review(
@@ -122,7 +122,7 @@ def _write_per_edge(path: str, res: MapComparison, ref: LandmarkMap) -> None:
     """One CSV row per mesh edge: the two reference ids and the edge's three errors."""
     import numpy as np
 
-    from relation_metric.textio import write_text_atomic
+    from slamrel.formats.text import write_text_atomic
 
     ids = ref.ids[res.association.reference_rows]
     e = res.mesh.edges

@@ -72,12 +72,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from recovery.bundle import read_bundle
     from recovery.recover import recover
-    from relation_metric.formats import write_trajectory
-    from relation_metric.results import write_json
-    from relation_metric.textio import write_bytes_atomic
     from relation_metric.timeorder import FILTER_TIME_TOLERANCE
+    from slamrel.formats.bundle import read_bundle
+    from slamrel.formats.results import write_json
+    from slamrel.formats.text import write_bytes_atomic
+    from slamrel.formats.trajectories import write_trajectory
 
     check_outputs([args.output, args.covariances, args.report], [args.bundle])
     fmt = args.format or ("tum" if args.output.lower().endswith(".tum") else "plain")

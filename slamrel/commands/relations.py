@@ -38,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run_generate(args: argparse.Namespace) -> int:
-    from relation_metric.relations import write_relations
+    from slamrel.formats.relations import write_relations
 
     check_outputs([args.output], [args.reference])
     reference = load_trajectory_arg(

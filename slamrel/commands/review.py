@@ -10,7 +10,7 @@ from slamrel.commands import options as opt
 from slamrel.commands.common import check_outputs, errors_about
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
-    from landmark_graph.association import Association
+    from landmark_graph.landmark_association import Association
     from landmark_graph.maps import LandmarkMap
 
 
@@ -51,11 +51,8 @@ def proposal(
     mode: str, est: LandmarkMap, ref: LandmarkMap, *, cutoff: float, seed: int
 ) -> Association:
     """The association named by ``--associate id|auto|FILE``."""
-    from landmark_graph.association import (
-        associate_auto,
-        associate_by_id,
-        read_association_csv,
-    )
+    from landmark_graph.landmark_association import associate_auto, associate_by_id
+    from slamrel.formats.associations import read_association_csv
 
     if mode == "id":
         return associate_by_id(est, ref)
@@ -65,8 +62,8 @@ def proposal(
 
 
 def run(args: argparse.Namespace) -> int:
-    from landmark_graph.maps import read_map
-    from landmark_graph.review import write_review
+    from slamrel.formats.landmark_maps import read_map
+    from slamrel.review.page import write_review
 
     assoc_file = None if args.associate in ("id", "auto") else args.associate
     check_outputs([args.output], [args.estimate, args.reference, assoc_file])

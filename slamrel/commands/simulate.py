@@ -69,9 +69,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run_simulate(args: argparse.Namespace) -> int:
-    from recovery.bundle import write_bundle
-    from recovery.simulation.bundles import world_bundle
-    from recovery.simulation.worlds import make_world
+    from slamrel.formats.bundle import write_bundle
+    from slamrel.simulation.bundles import world_bundle
+    from slamrel.simulation.worlds import make_world
 
     check_outputs([], [], dirs=[args.output], force=args.force)
     world = make_world(args.world, noise=args.noise, seed=args.seed, rate=args.rate)
@@ -86,9 +86,9 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 
 def run_slam(args: argparse.Namespace) -> int:
-    from recovery.bundle import read_bundle, write_bundle
-    from recovery.estimation.ekfslam import ekf_slam_bundle
-    from relation_metric.formats import write_trajectory
+    from slamrel.backends.ekf_slam import ekf_slam_bundle
+    from slamrel.formats.bundle import read_bundle, write_bundle
+    from slamrel.formats.trajectories import write_trajectory
 
     check_outputs([], [args.bundle], dirs=[args.output], force=args.force)
     bundle = read_bundle(args.bundle)

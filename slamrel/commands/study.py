@@ -1,7 +1,7 @@
 """``slamrel study pose-only``: Hu, Huang & Dissanayake's study of pose-only SLAM, reproduced.
 
 Writes into the output folder, which is reused when the study is run again (finished cases
-are skipped; :func:`relation_metric.outputs.resumable_directory`: only an absent or empty
+are skipped; :func:`slamrel.outputs.resumable_directory`: only an absent or empty
 folder, or a study folder slamrel wrote, is accepted; each file is written atomically):
 
 * ``cases/`` — one JSON result per (world, noise, seed, method), the resumable state;
@@ -86,15 +86,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def run_study(args: argparse.Namespace) -> int:
 
-    from relation_metric.outputs import resumable_directory
-    from slamrel.study import (
+    from slamrel.outputs import resumable_directory
+    from slamrel.studies.pose_only import (
         study_tasks,
         summary_rows,
         write_figures,
         write_findings,
         write_tables,
     )
-    from slamrel.sweep import load_results, run_sweep
+    from slamrel.studies.sweep import load_results, run_sweep
 
     # the folder keeps finished cases (resume): reused when it is a study folder slamrel wrote
     out = resumable_directory(args.output, kind="pose-only-study")

@@ -1,0 +1,1 @@
+"""Every file format slamrel reads or writes, one module per format (one reader each)."""

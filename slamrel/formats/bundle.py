@@ -1,0 +1,447 @@
+"""The SLAM result bundle on disk (format ``slamrel-bundle/1``, docs/bundle.md): read and write."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import warnings
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from recovery.bundle import FORMAT, Bundle
+from recovery.models import MOTION_TYPES, SIGMA_NAMES, MotionModel, SensorModel
+from relation_metric.arrays import Array, PathLike
+from relation_metric.checks import check_covariances
+from relation_metric.errors import InputError
+from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
+from relation_metric.trajectory import Trajectory
+from slamrel.formats.landmark_csv import integer_ids, read_landmark_csv, write_landmark_csv
+from slamrel.formats.text import (
+    read_csv_table,
+    read_text,
+    write_bytes_atomic,
+    write_text_atomic,
+)
+from slamrel.formats.trajectories import read_trajectory
+from slamrel.outputs import staged_directory
+
+__all__ = ["read_bundle", "write_bundle"]
+
+
+def _shown(value: Any) -> str:
+    """A JSON value for a message (as JSON, shortened; odd characters as ``<U+XXXX>``)."""
+    text = f"'{value}'" if isinstance(value, str) else json.dumps(value, ensure_ascii=False)
+    text = text if len(text) <= 60 else text[:60] + "..."
+    return "".join(c if c.isprintable() else f"<U+{ord(c):04X}>" for c in text)
+
+
+def _line_of_key(text: str, key: str) -> int | None:
+    needle = f'"{key}"'
+    pos = text.find(needle)
+    return None if pos < 0 else text.count("\n", 0, pos) + 1
+
+
+def _number(
+    value: Any, *, what: str, path: str, line: int | None, minimum: float | None = 0.0
+) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise InputError(
+            f"{what}: expected a finite number, got {_shown(value)}", path=path, line=line
+        )
+    if minimum is not None and value < minimum:
+        raise InputError(
+            f"{what}: expected a number >= {minimum}, got {_shown(value)}", path=path, line=line
+        )
+    return float(value)
+
+
+def _numbers(
+    value: Any, n: int, *, what: str, path: str, line: int | None, minimum: float | None
+) -> tuple[float, ...]:
+    if not isinstance(value, list) or len(value) != n:
+        raise InputError(
+            f"{what}: expected a list of {n} numbers, got {_shown(value)}", path=path, line=line
+        )
+    return tuple(_number(v, what=what, path=path, line=line, minimum=minimum) for v in value)
+
+
+def _check_psd(cov: Array, *, what: str, path: str, line: int | None) -> None:
+    check_covariances(cov[None], path=path, lines=None if line is None else [line], what=what)
+
+
+def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
+    line = _line_of_key(text, "motion_model")
+    if not isinstance(spec, dict):
+        raise InputError("motion_model: expected an object", path=path, line=line)
+    kind = spec.get("type")
+    if kind not in MOTION_TYPES:
+        raise InputError(
+            f"motion_model: unknown type {_shown(kind)}; expected one of {', '.join(MOTION_TYPES)}",
+            path=path,
+            line=_line_of_key(text, "type") if kind is not None else line,
+        )
+    names = SIGMA_NAMES[kind]
+    if "alpha" in spec:
+        if any(n in spec for n in names):
+            raise InputError(
+                f"motion_model: give either alpha or {', '.join(names)}, not both",
+                path=path,
+                line=line,
+            )
+        alpha = _numbers(
+            spec["alpha"],
+            4,
+            what="motion_model.alpha",
+            path=path,
+            line=_line_of_key(text, "alpha"),
+            minimum=0.0,
+        )
+        return MotionModel(kind, alpha=alpha)
+    missing = [n for n in names if n not in spec]
+    if missing:
+        raise InputError(
+            f"motion_model ({kind}): missing {', '.join(missing)}; "
+            f"expected {', '.join(names)} or alpha",
+            path=path,
+            line=line,
+        )
+    sigma = tuple(
+        _number(spec[n], what=f"motion_model.{n}", path=path, line=_line_of_key(text, n))
+        for n in names
+    )
+    return MotionModel(kind, sigma=sigma)
+
+
+def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
+    line = _line_of_key(text, "sensor_model")
+    if not isinstance(spec, dict):
+        raise InputError("sensor_model: expected an object", path=path, line=line)
+    if spec.get("type") != "range_bearing":
+        raise InputError(
+            f"sensor_model: unknown type {_shown(spec.get('type'))}; expected range_bearing",
+            path=path,
+            line=line,
+        )
+    vals = []
+    for n in ("sigma_range", "sigma_bearing"):
+        if n not in spec:
+            raise InputError(f"sensor_model: missing {n}", path=path, line=line)
+        v = _number(spec[n], what=f"sensor_model.{n}", path=path, line=_line_of_key(text, n))
+        if v <= 0:
+            raise InputError(
+                f"sensor_model.{n}: expected a positive number, got {v}",
+                path=path,
+                line=_line_of_key(text, n),
+            )
+        vals.append(v)
+    return SensorModel(*vals)
+
+
+def _read_manifest(path: Path) -> dict[str, Any]:
+    name = str(path)
+    text = read_text(path)
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"not valid JSON: {exc.msg}", path=name, line=exc.lineno) from None
+    except RecursionError:
+        raise InputError("JSON nested too deeply; expected a bundle manifest", path=name) from None
+    if not isinstance(doc, dict):
+        raise InputError("expected a JSON object", path=name, line=1)
+    if doc.get("format") != FORMAT:
+        raise InputError(
+            f"format: expected {FORMAT!r}, got {_shown(doc.get('format'))}",
+            path=name,
+            line=_line_of_key(text, "format"),
+        )
+    for key in ("motion_model", "sensor_model"):
+        if key not in doc:
+            raise InputError(f"missing {key}", path=name)
+    out: dict[str, Any] = {
+        "motion": _parse_motion(doc["motion_model"], text, name),
+        "sensor": _parse_sensor(doc["sensor_model"], text, name),
+        "description": str(doc.get("description", "")),
+    }
+    pose = doc.get("initial_pose", [0.0, 0.0, 0.0])
+    out["initial_pose"] = np.array(
+        _numbers(
+            pose,
+            3,
+            what="initial_pose",
+            path=name,
+            line=_line_of_key(text, "initial_pose"),
+            minimum=None,
+        )
+    )
+    cov = doc.get("initial_covariance")
+    if cov is None:
+        out["initial_covariance"] = 1e-9 * np.eye(3)
+    else:
+        line = _line_of_key(text, "initial_covariance")
+        if not isinstance(cov, list) or len(cov) != 3:
+            raise InputError(
+                "initial_covariance: expected a 3 x 3 list of lists", path=name, line=line
+            )
+        rows = [
+            _numbers(r, 3, what="initial_covariance", path=name, line=line, minimum=None)
+            for r in cov
+        ]
+        mat = np.array(rows)
+        _check_psd(mat, what="initial_covariance", path=name, line=line)
+        out["initial_covariance"] = mat
+    return out
+
+
+def _read_csv(
+    path: Path,
+    *,
+    required: Sequence[str],
+    optional: Sequence[str] = (),
+    empty_ok: Sequence[str] = (),
+) -> tuple[dict[str, Array], NDArray[np.int64]]:
+    """Columns by name (empty cells of ``empty_ok`` columns are NaN) and each row's line."""
+    if not path.is_file():
+        raise InputError(f"missing required file; expected columns {','.join(required)}", path=path)
+    return read_csv_table(path, required=required, optional=optional, empty_ok=empty_ok)
+
+
+def _time_ordered(
+    cols: dict[str, Array], lines: NDArray[np.int64], path: Path, what: str
+) -> tuple[dict[str, Array], NDArray[np.int64], int]:
+    """The rows of a log in time order under the filter-log rule (``relation_metric.timeorder``).
+
+    Steps back of at most ``FILTER_TIME_TOLERANCE`` are stable-sorted, counted (returned)
+    and warned about; a larger one raises :class:`InputError` with the line and both times.
+    """
+    order, report = sort_by_time(
+        cols["t"], tolerance=FILTER_TIME_TOLERANCE, lines=lines, path=path, what=what
+    )
+    if not report.out_of_order:
+        return cols, lines, 0
+    warnings.warn(
+        f"{path}: {report.describe(what)}; put in time order", TimeOrderWarning, stacklevel=3
+    )
+    return {k: v[order] for k, v in cols.items()}, lines[order], report.out_of_order
+
+
+def _load_matrix(path: Path, n: int, *, what: str) -> Array:
+    """A float ``.npy`` matrix of shape (n, n), with a clear :class:`InputError` otherwise.
+
+    The header is checked before the data is read; pickled objects are never loaded.
+    """
+    expected = f"expected a NumPy .npy file with a float array of shape ({n}, {n}) {what}"
+    fmt = np.lib.format
+    try:
+        with open(path, "rb") as handle:
+            version = fmt.read_magic(handle)
+            if version == (1, 0):
+                shape, _, dtype = fmt.read_array_header_1_0(handle)
+            else:
+                shape, _, dtype = fmt.read_array_header_2_0(handle)
+    except Exception:  # noqa: BLE001 - any malformed header: say what was expected
+        raise InputError(f"not a readable .npy file; {expected}", path=path) from None
+    if dtype.hasobject or dtype.kind not in "fi" or dtype.fields is not None:
+        raise InputError(
+            f"holds a {dtype.name} array (pickled objects are never loaded); {expected}",
+            path=path,
+        )
+    if tuple(shape) != (n, n):
+        shown = " x ".join(str(d) for d in shape) or "a scalar"
+        raise InputError(f"holds an array of shape {shown}; {expected}", path=path)
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except Exception:  # noqa: BLE001 - a cut-off or corrupt body
+        raise InputError(f"cannot read the array (cut off?); {expected}", path=path) from None
+    return np.asarray(arr, dtype=np.float64)
+
+
+def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) -> Bundle:
+    """Read and validate a SLAM result bundle.
+
+    Parsing only: each file is read (with its own line-precise checks: columns, numbers,
+    time order, ids, landmark covariances), then the :class:`Bundle` constructor checks
+    the whole (shapes, ranges, known landmarks, covariances) and names the file and line.
+
+    Parameters
+    ----------
+    directory : str or PathLike
+        The bundle directory.
+    skip_unknown_landmarks : bool
+        Drop (and count in ``Bundle.skipped_unknown``) measurements whose landmark is not in
+        ``map.csv`` instead of raising.
+
+    Returns
+    -------
+    Bundle
+
+    Raises
+    ------
+    InputError
+        For every defect listed in ``BUNDLE.md``, naming file, line and what was expected.
+    """
+    root = Path(directory)
+    if not root.is_dir():
+        raise InputError("not a directory; expected a SLAM result bundle", path=root)
+    manifest = root / "bundle.json"
+    if not manifest.is_file():
+        raise InputError("missing required file bundle.json", path=manifest)
+    meta = _read_manifest(manifest)
+    reordered: dict[str, int] = {}
+    log = _read_motion_log(root, meta["motion"], reordered)
+    map_fields = _read_map(root)
+    meas = _read_measurements(root, reordered)
+    skipped = 0
+    if skip_unknown_landmarks:
+        unknown = meas["measurement_associated"] & ~np.isin(
+            meas["measurement_landmarks"], map_fields["map_ids"]
+        )
+        skipped = int(unknown.sum())
+        meas = {k: v[~unknown] for k, v in meas.items()}
+    return Bundle(
+        **meta,
+        **log,
+        **map_fields,
+        **meas,
+        **_read_truth(root, reordered),
+        skipped_unknown=skipped,
+        path=str(root),
+        reordered=reordered,
+    )
+
+
+def _read_motion_log(root: Path, motion: MotionModel, reordered: dict[str, int]) -> dict[str, Any]:
+    """``controls`` (velocity model) or ``odometry`` (odometry model), in time order."""
+    if motion.type == "velocity":
+        p = root / "controls.csv"
+        cols, lines = _read_csv(p, required=("t", "v", "omega"))
+        cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "control")
+        return {"controls": np.column_stack((cols["t"], cols["v"], cols["omega"]))}
+    p = root / "odometry.csv"
+    cols, lines = _read_csv(p, required=("t", "x", "y", "theta"))
+    cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "odometry pose")
+    poses = np.column_stack((cols["x"], cols["y"], cols["theta"]))
+    return {"odometry": Trajectory(cols["t"], poses)}
+
+
+def _read_map(root: Path) -> dict[str, Any]:
+    """``map.csv`` (ids, positions, marginals: zeros where none given) and the joint covariance."""
+    p_map = root / "map.csv"
+    if not p_map.is_file():
+        raise InputError("missing required file; expected columns landmark,x,y", path=p_map)
+    table = read_landmark_csv(p_map, describe="the bundle's map")
+    m = table.ids.shape[0]
+    marg = np.zeros((m, 2, 2)) if table.cov is None else np.nan_to_num(table.cov, nan=0.0)
+    p_cov = root / "map_covariance.npy"
+    cov = _load_matrix(p_cov, 2 * m, what=f"for {m} landmarks") if p_cov.exists() else None
+    return {"map_ids": table.ids, "map_xy": table.xy, "map_marginals": marg, "map_covariance": cov}
+
+
+def _read_measurements(root: Path, reordered: dict[str, int]) -> dict[str, NDArray[Any]]:
+    """``measurements.csv`` in time order: the five ``measurement*`` fields of the bundle."""
+    p = root / "measurements.csv"
+    cols, lines = _read_csv(
+        p, required=("t", "range", "bearing", "landmark"), empty_ok=("landmark",)
+    )
+    cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "measurement")
+    return {
+        "measurement_times": cols["t"],
+        "measurements": np.column_stack((cols["range"], cols["bearing"])),
+        "measurement_landmarks": integer_ids(cols["landmark"], lines, p, "landmark"),
+        "measurement_associated": ~np.isnan(cols["landmark"]),
+        "measurement_lines": lines,
+    }
+
+
+def _read_truth(root: Path, reordered: dict[str, int]) -> dict[str, Any]:
+    """``groundtruth.csv`` and ``landmarks_groundtruth.csv`` when present (else None)."""
+    out: dict[str, Any] = {"groundtruth": None, "landmarks_groundtruth": None}
+    if (root / "groundtruth.csv").exists():
+        loaded = read_trajectory(
+            root / "groundtruth.csv", format="csv", max_step_back=FILTER_TIME_TOLERANCE
+        )
+        out["groundtruth"] = loaded.trajectory
+        reordered["groundtruth.csv"] = loaded.out_of_order
+    p_lgt = root / "landmarks_groundtruth.csv"
+    if p_lgt.exists():
+        table = read_landmark_csv(p_lgt, covariance=False, describe="landmark ground truth")
+        out["landmarks_groundtruth"] = (table.ids, table.xy)
+    return out
+
+
+def _csv(header: str, columns: Sequence[Array], fmt: str = "%.17g") -> str:
+    if not columns or columns[0].shape[0] == 0:
+        return header + "\n"
+    buf = io.StringIO()
+    np.savetxt(buf, np.column_stack(columns), fmt=fmt, delimiter=",")
+    return header + "\n" + buf.getvalue()
+
+
+def write_bundle(
+    directory: PathLike,
+    bundle: Bundle,
+    *,
+    force: bool = True,
+    extra: Callable[[Path], None] | None = None,
+) -> None:
+    """Write ``bundle`` as a bundle directory, replaced as a whole (round-trips exactly).
+
+    The files are written into a hidden folder beside ``directory`` that is swapped in only
+    when complete (:func:`slamrel.outputs.staged_directory`): no file of an earlier
+    bundle survives (a stale ``groundtruth.csv`` or ``map_covariance.npy``), and an error or
+    Ctrl-C leaves the previous folder exactly as it was.
+
+    Parameters
+    ----------
+    directory : str or PathLike
+    bundle : Bundle
+    force : bool
+        May an existing non-empty folder that slamrel wrote be replaced (default yes)? A
+        folder slamrel did not write is never replaced (:class:`InputError`).
+    extra : callable, optional
+        Called with the staged folder to add more files (e.g. ``online.csv``) before the swap.
+    """
+    with staged_directory(directory, kind="bundle", force=force) as root:
+        _write_bundle_files(root, bundle)
+        if extra is not None:
+            extra(root)
+
+
+def _write_bundle_files(root: Path, bundle: Bundle) -> None:
+    """Write the files of ``bundle`` into the (new, empty) folder ``root``."""
+    meta = {
+        "format": FORMAT,
+        "motion_model": bundle.motion.as_dict(),
+        "sensor_model": bundle.sensor.as_dict(),
+        "initial_pose": [float(v) for v in bundle.initial_pose],
+        "initial_covariance": [[float(v) for v in row] for row in bundle.initial_covariance],
+        "description": bundle.description,
+    }
+    write_text_atomic(root / "bundle.json", json.dumps(meta, indent=2) + "\n")
+    if bundle.controls is not None:
+        c = bundle.controls
+        write_text_atomic(root / "controls.csv", _csv("t,v,omega", [c[:, 0], c[:, 1], c[:, 2]]))
+    if bundle.odometry is not None:
+        o = bundle.odometry
+        write_text_atomic(root / "odometry.csv", _csv("t,x,y,theta", [o.timestamps, *o.poses.T]))
+    t = bundle.measurement_times
+    rows = _csv(
+        "t,range,bearing", [t, bundle.measurements[:, 0], bundle.measurements[:, 1]]
+    ).splitlines()
+    ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks.astype(str), "")
+    text = "t,range,bearing,landmark\n" + "".join(f"{r},{i}\n" for r, i in zip(rows[1:], ids))
+    write_text_atomic(root / "measurements.csv", text)
+    write_landmark_csv(root / "map.csv", bundle.map_ids, bundle.map_xy, bundle.map_marginals)
+    if bundle.map_covariance is not None:
+        buf = io.BytesIO()
+        np.save(buf, np.asarray(bundle.map_covariance), allow_pickle=False)
+        write_bytes_atomic(root / "map_covariance.npy", buf.getvalue())
+    if bundle.groundtruth is not None:
+        g = bundle.groundtruth
+        write_text_atomic(root / "groundtruth.csv", _csv("t,x,y,theta", [g.timestamps, *g.poses.T]))
+    if bundle.landmarks_groundtruth is not None:
+        write_landmark_csv(root / "landmarks_groundtruth.csv", *bundle.landmarks_groundtruth)

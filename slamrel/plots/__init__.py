@@ -1,0 +1,1 @@
+"""Figures (matplotlib, Agg): relation errors, map comparisons, the run report's figures."""

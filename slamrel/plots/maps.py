@@ -1,0 +1,59 @@
+"""Figures of map comparisons: both maps, the reference mesh, edges coloured by error."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from landmark_graph.map_compare import MapComparison
+from slamrel.plots.relation_errors import pyplot
+
+__all__ = ["map_figure"]
+
+
+def map_figure(res: MapComparison) -> Any:
+    """Reference and estimated landmarks (the estimate moved by the automatic alignment, when
+    one was made), the reference mesh with each edge coloured by its length error, thin
+    triangles dotted, missed and spurious landmarks marked."""
+    plt = pyplot()
+    from matplotlib.collections import LineCollection
+
+    a = res.association
+    ref = res.reference.xy[a.reference_rows]
+    fig, ax = plt.subplots(figsize=(7, 7), constrained_layout=True)
+    segs = np.stack((ref[res.mesh.edges[:, 0]], ref[res.mesh.edges[:, 1]]), axis=1)
+    err = res.errors.edge_length
+    lc = LineCollection(list(segs), cmap="viridis", linewidths=2)
+    lc.set_array(err)
+    if err.size:
+        lc.set_clim(0, max(float(np.percentile(err, 99)), 1e-12))
+    ax.add_collection(lc)
+    fig.colorbar(lc, ax=ax, label="edge length error [m] (clipped at p99)")
+    ax.plot(res.reference.xy[:, 0], res.reference.xy[:, 1], "k+", ms=8, label="reference")
+    est = res.estimate.xy
+    if a.alignment is not None:
+        est = a.alignment.apply(np.column_stack((est, np.zeros(len(est)))))[:, :2]
+    ax.plot(est[:, 0], est[:, 1], "o", mfc="none", color="tab:red", label="estimate")
+    if a.missed.size:
+        m = res.reference.xy[a.missed]
+        ax.plot(m[:, 0], m[:, 1], "x", ms=9, color="tab:gray", label="missed (reference)")
+    if a.spurious.size:
+        s = est[a.spurious]
+        ax.plot(s[:, 0], s[:, 1], "s", mfc="none", color="tab:orange", label="spurious (estimate)")
+    if res.mesh.thin.any():
+        t = res.mesh.triangles[res.mesh.thin]
+        ring = ref[np.concatenate((t, t[:, :1]), axis=1)]  # (K, 4, 2) closed outlines
+        thin = LineCollection(list(ring), colors="tab:gray", linewidths=0.6, linestyles=":")
+        ax.add_collection(thin)
+        ax.plot([], [], ":", color="tab:gray", lw=0.6, label="thin triangle")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.legend(loc="best")
+    frame = "aligned" if a.alignment is not None else "as given"
+    ax.set_title(
+        f"{a.estimate_rows.size} matched, {a.missed.size} missed, {a.spurious.size} spurious; "
+        f"OSPA {res.ospa:.3g} m (c = {res.cutoff:g}, p = {res.order:g}, {frame})"
+    )
+    return fig

@@ -1,0 +1,198 @@
+"""Figures of relation errors: where along the trajectory the estimate is wrong.
+
+matplotlib is imported lazily (Agg unless the user or Jupyter chose a backend, see
+:func:`pyplot`); figures are written atomically. Statistics live in
+:mod:`relation_metric.stats`, not here.
+"""
+
+from __future__ import annotations
+
+import io
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from relation_metric.evaluate import Evaluation
+from relation_metric.trajectory import Trajectory
+from slamrel.formats.text import PathLike, write_bytes_atomic
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+__all__ = ["evaluation_figure", "save_figure", "pyplot"]
+
+
+def pyplot():  # type: ignore[no-untyped-def]
+    """``matplotlib.pyplot``, imported lazily.
+
+    The non-interactive Agg backend is chosen only when nobody chose before: not when pyplot
+    is already imported, not inside IPython/Jupyter (whose inline backend shows the
+    figures), not when ``MPLBACKEND`` is set. A library must not take the user's backend.
+    """
+    import os
+    import sys
+
+    import matplotlib
+
+    chosen = "matplotlib.pyplot" in sys.modules or "MPLBACKEND" in os.environ
+    if not chosen and "IPython" not in sys.modules:
+        matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def evaluation_figure(
+    evaluation: Evaluation,
+    estimate: Trajectory,
+    *,
+    degrees: bool = False,
+    title: str | None = None,
+) -> Figure:
+    """Errors over time (top) and the estimate with each relation coloured by its error.
+
+    A 3-D estimate is drawn from above (x, y) with a third panel of its height z over time.
+
+    The estimate is coloured pose by pose with the largest translational error of the
+    relations that touch each pose, and the ends of the ten worst relations are marked, so
+    that large errors point at the part of the map that is wrong. Unassociated relations are
+    counted in the title, not drawn.
+    """
+    plt = pyplot()
+    three_d = estimate.group.position_dim == 3
+    fig, axes = plt.subplots(
+        3 if three_d else 2,
+        1,
+        figsize=(8.0, 13.0 if three_d else 10.0),
+        gridspec_kw={"height_ratios": [1, 2, 1] if three_d else [1, 2]},
+        constrained_layout=True,
+    )
+    _errors_over_time(axes[0], evaluation, estimate, degrees)
+    pose_err, hit = _pose_errors(evaluation, len(estimate))
+    _coloured_estimate(fig, axes[1], evaluation, estimate, pose_err)
+    ax_xy = axes[1]
+    ax_xy.set_aspect("equal", adjustable="datalim")
+    ax_xy.set_xlabel("x [m]")
+    ax_xy.set_ylabel("y [m]")
+    ax_xy.set_title(title or ("estimate coloured by relation error" + (" (top view)" * three_d)))
+    if three_d:
+        _height_over_time(axes[2], estimate, pose_err, hit)
+    return fig
+
+
+def _errors_over_time(ax_t: Axes, ev: Evaluation, estimate: Trajectory, degrees: bool) -> None:
+    """Translational (left axis) and rotational (right axis) errors by relation mid-time."""
+    valid = ev.valid
+    a = ev.association
+    if ev.relations.key == "index":  # pose indices: the estimate's times of the two ends
+        t = estimate.timestamps
+        t_mid = 0.5 * (t[a.index_first[valid]] + t[a.index_second[valid]])
+    else:
+        t_mid = 0.5 * (ev.relations.first + ev.relations.second)[valid]
+    order = np.argsort(t_mid, kind="stable")
+    trans = ev.errors.translation[valid][order]
+    rot = ev.errors.rotation[valid][order]
+    if degrees:
+        rot = np.degrees(rot)
+    x_axis = t_mid[order] - (t_mid.min() if t_mid.size else 0.0)
+    ax_t.plot(x_axis, trans, ".", ms=3, color="tab:blue", label="translation [m]")
+    ax_t.set_xlabel("time of relation (mid-point) since start [s]")
+    ax_t.set_ylabel("translational error [m]", color="tab:blue")
+    ax_r = ax_t.twinx()
+    ax_r.plot(x_axis, rot, ".", ms=3, color="tab:red", alpha=0.6)
+    ax_r.set_ylabel(f"rotational error [{'deg' if degrees else 'rad'}]", color="tab:red")
+    s = ev.translation["abs"]
+    ax_t.set_title(
+        f"{s.count} relations scored, {int((~valid).sum())} unassociated; "
+        f"translation {s.mean:.4g} ± {s.std:.4g} m"
+    )
+
+
+def _pose_errors(ev: Evaluation, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Largest translational error of the relations touching each of ``n`` poses (NaN where
+    none does), shape (n,), and the mask of touched poses."""
+    valid = ev.valid
+    a = ev.association
+    err = ev.errors.translation[valid]
+    pose_err = np.full(n, np.nan)
+    idx = np.concatenate((a.index_first[valid], a.index_second[valid]))
+    touched = np.zeros(n)
+    np.maximum.at(touched, idx, np.concatenate((err, err)))
+    hit = np.zeros(n, dtype=bool)
+    hit[idx] = True
+    pose_err[hit] = touched[hit]
+    return pose_err, hit
+
+
+def _coloured_estimate(
+    fig: Figure, ax_xy: Axes, ev: Evaluation, estimate: Trajectory, pose_err: np.ndarray
+) -> None:
+    """The estimate in grey, each segment coloured by the larger error of its two poses (the
+    wrong part of the map lights up), and the ends of the ten worst relations marked."""
+    from matplotlib.collections import LineCollection
+
+    valid = ev.valid
+    a = ev.association
+    err = ev.errors.translation[valid]
+    xy = estimate.poses[:, :2]
+    ax_xy.plot(xy[:, 0], xy[:, 1], "-", color="0.8", lw=1.0, zorder=1)
+    if not (err.size and len(estimate) > 1):
+        return
+    seg_err = np.fmax(pose_err[:-1], pose_err[1:])
+    has = np.isfinite(seg_err)
+    segments = np.stack((xy[:-1], xy[1:]), axis=1)[has]
+    hi = max(float(np.percentile(err, 99)), 1e-12)
+    lc = LineCollection(segments, cmap="viridis", linewidths=2.0, zorder=2)  # type: ignore[arg-type]
+    lc.set_array(seg_err[has])
+    lc.set_clim(0.0, hi)
+    ax_xy.add_collection(lc)
+    worst = np.argsort(err)[-min(10, err.size) :]
+    ends = np.concatenate((a.pose_first[valid][worst, :2], a.pose_second[valid][worst, :2]))
+    ax_xy.plot(
+        ends[:, 0],
+        ends[:, 1],
+        "x",
+        color="tab:red",
+        ms=7,
+        zorder=3,
+        label="ends of the 10 worst relations",
+    )
+    fig.colorbar(
+        lc,
+        ax=ax_xy,
+        label="largest translational error of the relations at a pose [m] (clipped at p99)",
+    )
+    ax_xy.legend(loc="best")
+
+
+def _height_over_time(
+    ax_z: Axes, estimate: Trajectory, pose_err: np.ndarray, hit: np.ndarray
+) -> None:
+    """Height z of a 3-D estimate over time, the touched poses coloured by their error."""
+    t0 = float(estimate.timestamps[0]) if len(estimate) else 0.0
+    ax_z.plot(estimate.timestamps - t0, estimate.poses[:, 2], "-", color="0.5", lw=1.0)
+    if hit.any():
+        ax_z.scatter(
+            estimate.timestamps[hit] - t0,
+            estimate.poses[hit, 2],
+            c=pose_err[hit],
+            s=4,
+            cmap="viridis",
+            zorder=2,
+        )
+    ax_z.set_xlabel("time since start [s]")
+    ax_z.set_ylabel("z [m]")
+    ax_z.set_title("height of the estimate, coloured by relation error")
+
+
+def save_figure(fig: Figure, path: PathLike, *, dpi: int = 120) -> None:
+    """Save a figure atomically (PNG, SVG or PDF by the file extension) and close it."""
+    plt = pyplot()
+    fmt = str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else "png"
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format=fmt, dpi=dpi)
+    finally:
+        plt.close(fig)
+    write_bytes_atomic(path, buf.getvalue())

@@ -1,0 +1,1 @@
+"""The report of ``slamrel run``: the page, its verdict, comparison tables."""

@@ -1,0 +1,298 @@
+"""The page of ``slamrel run``: its figures and sections, named, built from a ``RunResult``.
+
+:func:`report_figures` draws the four figures (:class:`RunFigures`, one attribute each, the
+map figure only with a map comparison); :func:`report_sections` writes the four sections
+(:class:`RunSections`). Every number in a table is read from the same structures
+``metrics.json`` is written from (:meth:`slamrel.pipeline.RunResult.metrics`), so the page
+and the file cannot disagree. :func:`slamrel.pipeline.write_report` writes the folder.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+from slamrel.plots.maps import map_figure
+from slamrel.plots.relation_errors import evaluation_figure
+from slamrel.plots.run import (
+    mark_stretches_time,
+    mark_stretches_xy,
+    nees_figure,
+    trajectories_figure,
+)
+from slamrel.report.html import Figure, Section, Table, figure_png
+
+if TYPE_CHECKING:
+    from slamrel.pipeline import Agreement, RunResult
+
+__all__ = ["RunFigures", "RunSections", "MapSummary", "report_figures", "report_sections"]
+
+
+class RunFigures(NamedTuple):
+    """The figures of the run report, in page (and ``figure_<k>.png``) order."""
+
+    trajectories: Figure
+    errors: Figure
+    nees: Figure
+    map: Figure | None = None
+
+    def in_order(self) -> list[Figure]:
+        """The figures present, numbered 1, 2, … in the report folder."""
+        return [f for f in self if f is not None]
+
+
+class RunSections(NamedTuple):
+    """The sections of the run report, in page order (``map`` only with a map comparison)."""
+
+    summary: Section
+    consistency: Section
+    agreement: Section
+    map: Section | None = None
+
+    def in_order(self) -> list[Section]:
+        return [s for s in self if s is not None]
+
+
+class MapSummary(NamedTuple):
+    """The numbers of the map section, read from the map comparison's JSON in one place.
+
+    ``edge`` and ``corner``: ``(mean, std, max, count)`` of the absolute edge-length [m] and
+    corner-angle [rad] errors.
+    """
+
+    edge: tuple[Any, ...]
+    corner: tuple[Any, ...]
+    matched: int
+    missed: int
+    spurious: int
+    ospa: float
+    gospa: float
+    cutoff: float
+    order: float
+
+    @classmethod
+    def of(cls, mp: dict[str, Any]) -> MapSummary:
+        stats = ("mean", "std", "max", "count")
+        a = mp["association"]
+        return cls(
+            edge=tuple(mp["translation"]["abs"][k] for k in stats),
+            corner=tuple(mp["rotation"]["abs"][k] for k in stats),
+            matched=a["matched"],
+            missed=a["missed"],
+            spurious=a["spurious"],
+            ospa=mp["ospa"]["value"],
+            gospa=mp["gospa"]["value"],
+            cutoff=mp["ospa"]["c"],
+            order=mp["ospa"]["p"],
+        )
+
+
+def report_figures(result: RunResult) -> RunFigures:
+    """Draw the report's figures (matplotlib, closed after rendering to PNG)."""
+    truth = result.bundle.groundtruth
+    assert truth is not None
+    stretches = result.agreement.stretches if result.agreement is not None else ()
+    lgt = result.bundle.landmarks_groundtruth
+    trajectories = Figure(
+        "Estimates against the ground truth, with the true landmarks and the SLAM map",
+        figure_png(
+            mark_stretches_xy(
+                trajectories_figure(
+                    truth,
+                    result.estimates,
+                    landmarks=lgt[1] if lgt else None,
+                    mapped=result.bundle.map_xy,
+                ),
+                stretches,
+                result.estimates.get("recovered"),
+            )
+        ),
+    )
+    main = result.main_estimate
+    main_all = result.evaluations[main]["all"]
+    errors = Figure(
+        f"The {main} trajectory coloured by relation error (all relation sets), "
+        "and the errors over time",
+        figure_png(
+            mark_stretches_time(
+                evaluation_figure(main_all, result.estimates[main]), stretches, main_all
+            )
+        ),
+    )
+    nees = Figure(
+        "NEES over time with the 95% χ² band (3 dof)",
+        figure_png(
+            nees_figure(
+                truth.timestamps[1:],
+                {k: v.values for k, v in result.nees.items()},
+                {k: v.summary for k, v in result.nees.items()},
+            )
+        ),
+    )
+    return RunFigures(trajectories, errors, nees, _map_figure(result))
+
+
+def _map_figure(result: RunResult) -> Figure | None:
+    if result.map_comparison is None:
+        return None
+    return Figure(
+        "The SLAM map against the true landmarks: the Delaunay mesh of the true "
+        "landmarks, each edge coloured by its length error",
+        figure_png(map_figure(result.map_comparison)),
+    )
+
+
+def report_sections(
+    result: RunResult, figures: RunFigures, *, review: tuple[str, str] | None = None
+) -> RunSections:
+    """The report's sections; ``review``: the ``(href, text)`` link to ``review.html``."""
+    summary = Section(
+        f"slamrel run: {result.name}",
+        paragraphs=[
+            "Relation metric (Kümmerle et al. 2009): relative motions of each estimate "
+            "against ground-truth relations, ε = 1/N Σ ‖δ_ij ⊖ δ*_ij‖².",
+            *result.notes,
+        ],
+        tables=[_stats_table(result, "translation"), _stats_table(result, "rotation")],
+        figures=[figures.trajectories, figures.errors],
+    )
+    consistency = Section(
+        "Consistency",
+        tables=[
+            Table(
+                "NEES (3 dof) of the pose estimates",
+                ["estimate", "mean", "band low", "band high", "fraction inside"],
+                [
+                    [k, v.summary.mean, v.summary.band[0], v.summary.band[1], v.summary.inside]
+                    for k, v in result.nees.items()
+                ],
+            )
+        ],
+        figures=[figures.nees],
+    )
+    mp = result.map
+    map_section = None
+    if mp is not None:
+        map_section = _map_section(
+            MapSummary.of(mp),
+            [] if figures.map is None else [figures.map],
+            [] if review is None else [review],
+        )
+    return RunSections(summary, consistency, _agreement_section(result), map_section)
+
+
+def _stats_table(result: RunResult, part: str) -> Table:
+    """Mean, std, max of the absolute and mean of the squared errors, per estimate and set."""
+    rows = []
+    for name, evs in result.evaluations.items():
+        for set_name, ev in evs.items():
+            s = getattr(ev, part)["abs"]
+            q = getattr(ev, part)["sqr"]
+            rows.append([name, set_name, s.mean, s.std, q.mean, s.max, s.count])
+    u = "m" if part == "translation" else "rad"
+    return Table(
+        f"{part} relation error [{u}]",
+        ["estimate", "relations", f"abs mean [{u}]", f"abs std [{u}]", f"sqr mean [{u}²]",
+         f"abs max [{u}]", "count"],
+        rows,
+    )  # fmt: skip
+
+
+_STRETCH_COLUMNS = [
+    "t0", "t1", "duration", "measurements", "outlying", "NIS median", "NIS max", "re-entries",
+]  # fmt: skip
+
+
+def _agreement_section(result: RunResult) -> Section:
+    """Where the map and the log disagree (stretches, NIS), or why nothing was recovered."""
+    a = result.agreement
+    if a is None:
+        return Section(
+            "Map–log agreement",
+            paragraphs=[f"No trajectory was recovered: {result.recovery_error}"],
+        )
+    st = a.stretches
+    tables = [
+        Table(
+            "NIS of the recovery's innovations (2 dof)",
+            ["measurements", "mean", "median", "expected mean", "beyond 95%", "beyond bound"],
+            [
+                [
+                    a.nis.count,
+                    a.nis.mean,
+                    a.nis.median,
+                    2.0,
+                    a.nis.fraction_beyond_95,
+                    a.nis.fraction_beyond_bound,
+                ]
+            ],
+        ),  # fmt: skip
+    ]
+    if st:
+        rows = [
+            [s.t0, s.t1, s.t1 - s.t0, s.measurements, s.outlying, s.nis_median, s.nis_max,
+             s.reentries]
+            for s in st[:50]
+        ]  # fmt: skip
+        tables.append(
+            Table(
+                "stretches where the map and the log disagree (times in s)", _STRETCH_COLUMNS, rows
+            )
+        )
+    return Section("Map–log agreement", paragraphs=_agreement_paragraphs(a), tables=tables)
+
+
+def _agreement_paragraphs(a: Agreement) -> list[str]:
+    st = a.stretches
+    paragraphs = [
+        "EKF localisation in the final map checks every innovation against its covariance: "
+        f"a stretch is a run of at least {a.max_outlier_run or 'the default number of'} "
+        f"consecutive innovations with NIS beyond the χ² bound {a.outlier_bound:.2f}"
+        " (2 dof). Divergence is a finding about the map (or the models), not an error: "
+        "the filter was re-entered after each run (its pose covariance inflated) and went on, "
+        "and the scores above include these stretches.",
+        f"Rule: {a.rule}.",
+        (
+            f"{len(st)} stretch(es), {100 * a.fraction_of_log:.1f}% of the log, "
+            f"{100 * a.fraction_of_measurements:.1f}% of the measurements."
+            if st
+            else "The map and the log agree: no stretch of outlying innovations."
+        ),
+    ]
+    ns = a.nees_stretches
+    if ns:
+        paragraphs.append(
+            f"Against the ground truth, the recovered pose's NEES exceeds its 99.99% χ² bound "
+            f"(3 dof) on {len(ns)} stretch(es): "
+            + ", ".join(f"[{t0:.6g}, {t1:.6g}] s" for t0, t1 in ns[:10])
+            + (" …" if len(ns) > 10 else "")
+            + "."
+        )
+    if len(st) > 50:
+        paragraphs.append(f"The first 50 of {len(st)} stretches are listed; all in metrics.json.")
+    return paragraphs
+
+
+def _map_section(m: MapSummary, figures: list[Figure], links: list[tuple[str, str]]) -> Section:
+    """Relations of the landmark map (Delaunay mesh) and the association / set distances."""
+    return Section(
+        "Map",
+        paragraphs=[
+            "Relations of the landmark map: the Delaunay mesh over the true "
+            "landmarks; per edge the length error, per triangle corner the angle "
+            "error — local and independent of the map's frame.",
+        ],
+        tables=[
+            Table(
+                "landmark-map relation errors",
+                ["relation", "abs mean", "abs std", "abs max", "count"],
+                [["edge length [m]", *m.edge], ["corner angle [rad]", *m.corner]],
+            ),
+            Table(
+                "association and set distances",
+                ["matched", "missed", "spurious", "OSPA [m]", "GOSPA [m]", "c [m]", "p"],
+                [[m.matched, m.missed, m.spurious, m.ospa, m.gospa, m.cutoff, m.order]],
+            ),
+        ],
+        figures=figures,
+        links=links,
+    )

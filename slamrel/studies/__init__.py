@@ -1,0 +1,1 @@
+"""Studies over many runs: the pose-only SLAM study, recovery faithfulness, resumable sweeps."""

@@ -1,0 +1,449 @@
+"""The study of Hu, Huang & Dissanayake ("Evaluation of Pose Only SLAM", IROS 2010), reproduced.
+
+Worlds × noise types × Monte Carlo runs × methods, each case a pure function of
+``(world, noise, seed, method, options)`` (:func:`run_case`), run as a resumable sweep
+(:mod:`slamrel.studies.sweep`). Methods:
+
+* ``full`` — full least squares (poses and landmarks);
+* ``m1``, ``m2`` — pose-only least squares, Method 1 / Method 2
+  (:func:`slamrel.backends.pose_only.pose_only_least_squares`);
+* ``toro`` — the TORO-style optimiser (:mod:`slamrel.backends.toro_optimiser`) on the Method 2 pose
+  graph, its covariance that of the spherical graph at its estimate.
+
+Per case: NEES1 (trajectory, joint covariance, gate ``χ²₀.₉₅(3(N−1))``), the map's NEES
+(NEES2 for full LS; NEES3 — landmarks fitted to the fixed poses — for the others), RMS
+position and heading errors, run time. :func:`summary_rows` aggregates them into the
+analogues of the paper's Tables II/III, written as Markdown, CSV and LaTeX by
+:func:`write_tables`; :func:`write_figures` draws the Fig. 1 analogue (pose errors and 2σ
+bounds, Method 1 vs Method 2) and a Fig. 2 analogue (NEES1 of every run against its gate).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from relation_metric import se2
+from relation_metric.consistency import nees1, nees2
+from relation_metric.errors import InputError
+from slamrel.backends.least_squares import PoseGraph, joint_covariance, solve_graph
+from slamrel.backends.pose_only import (
+    LandmarkLog,
+    full_graph,
+    landmarks_given_poses,
+    pose_only_least_squares,
+)
+from slamrel.backends.toro_optimiser import spherical_information, toro_optimize
+from slamrel.formats.text import write_text_atomic
+from slamrel.simulation.worlds import make_world
+from slamrel.studies.sweep import Task
+
+__all__ = [
+    "METHODS",
+    "run_case",
+    "study_tasks",
+    "summary_rows",
+    "write_tables",
+    "write_figures",
+    "findings",
+    "write_findings",
+]
+
+METHODS = ("full", "m1", "m2", "toro")
+METHOD_NAMES = {
+    "full": "full LS",
+    "m1": "pose-only M1",
+    "m2": "pose-only M2",
+    "toro": "TORO-style (M2)",
+}
+
+
+def _errors(est: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    e = np.asarray(truth) - np.asarray(est)
+    e[:, 2] = se2.wrap_angle(e[:, 2])
+    return e
+
+
+def run_case(
+    world: str,
+    noise: str,
+    seed: int,
+    method: str,
+    *,
+    pair_start: str = "truth",
+    min_common: int = 5,
+    toro_iterations: int = 100,
+    details: bool = False,
+) -> dict[str, Any]:
+    """One case of the study (pure: the same inputs give the same numbers).
+
+    Parameters
+    ----------
+    world, noise, seed :
+        :func:`slamrel.simulation.worlds.make_world`.
+    method : {"full", "m1", "m2", "toro"}
+    pair_start : {"truth", "odometry", "align"}
+        Where the pose-only pair least squares starts (the paper: truth).
+    min_common : int
+        Method 2's ``k``.
+    toro_iterations : int
+    details : bool
+        Also return per-pose errors and standard deviations (for the Fig. 1 analogue).
+
+    Returns
+    -------
+    dict
+        ``nees1``, ``gate1``, ``nees_map``, ``gate_map``, ``rmse_xy``, ``rmse_theta``,
+        ``seconds``, ``poses``, ``constraints`` (and ``errors``, ``sigma`` with ``details``).
+    """
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
+    w = make_world(world, noise=noise, seed=seed)
+    log = LandmarkLog.from_world(w)
+    n = len(w.truth)
+    t0 = time.perf_counter()
+    constraints = 0
+    if method == "full":
+        g, ids = full_graph(log)
+        sol = solve_graph(g)
+        poses = np.asarray(sol.poses)
+        cov = joint_covariance(g, sol, poses=np.arange(n), landmarks=np.arange(ids.size))
+        pose_cov = cov[3:, 3:][: 3 * (n - 1), : 3 * (n - 1)]
+        lm, lm_cov = np.asarray(sol.landmarks), cov[3 * n :, 3 * n :]
+        constraints = int(g.pp_i.size + g.pl_k.size)
+    else:
+        po = pose_only_least_squares(
+            log,
+            method=1 if method == "m1" else 2,
+            min_common=min_common,
+            start=pair_start,  # type: ignore[arg-type]
+            truth=w.truth,
+        )
+        graph, solution = po.graph, po.solution
+        constraints = int(graph.pp_i.size)
+        if method == "toro":
+            tree = toro_optimize(graph, iterations=toro_iterations)
+            graph = PoseGraph(
+                tree.poses,
+                np.empty((0, 2)),
+                graph.pp_i,
+                graph.pp_j,
+                graph.pp_z,
+                spherical_information(graph.pp_info),
+            )
+            solution = type(solution)(
+                poses=tree.poses,
+                landmarks=np.empty((0, 2)),
+                cost=tree.cost,
+                iterations=tree.iterations,
+                converged=True,
+                linear_solver="none (TORO: stochastic gradient descent)",
+                faster_solver=None,
+            )
+        poses = np.asarray(solution.poses)
+        full_cov = joint_covariance(graph, solution)
+        pose_cov = full_cov[3:, 3:]
+        lm, lm_cov, ids = landmarks_given_poses(log, poses, full_cov)
+    seconds = time.perf_counter() - t0
+    t1 = nees1(poses, w.truth.poses, pose_cov)
+    t2 = nees2(lm, w.landmarks[ids], lm_cov)
+    e = _errors(poses, w.truth.poses)
+    out: dict[str, Any] = {
+        "world": world,
+        "noise": noise,
+        "seed": int(seed),
+        "method": method,
+        "poses": n,
+        "constraints": constraints,
+        "nees1": t1.value,
+        "gate1": t1.gate,
+        "nees_map": t2.value,
+        "gate_map": t2.gate,
+        "rmse_xy": float(np.sqrt(np.mean(np.sum(e[:, :2] ** 2, axis=1)))),
+        "rmse_theta": float(np.sqrt(np.mean(e[:, 2] ** 2))),
+        "seconds": seconds,
+    }
+    if details:
+        var = np.concatenate(([0.0, 0.0, 0.0], np.diag(pose_cov))).reshape(n, 3)
+        out["errors"] = e.tolist()
+        out["sigma"] = np.sqrt(np.maximum(var, 0.0)).tolist()
+    return out
+
+
+def study_tasks(
+    worlds: Sequence[str],
+    noises: Sequence[str],
+    runs: int,
+    methods: Sequence[str] = METHODS,
+    *,
+    pair_start: str = "truth",
+    min_common: int = 5,
+    toro_iterations: int = 100,
+) -> list[Task]:
+    """The sweep's tasks, in table order; run 0 of each world/noise keeps per-pose details."""
+    tasks = []
+    for world in worlds:
+        for noise in noises:
+            for seed in range(runs):
+                for method in methods:
+                    kwargs: dict[str, Any] = {
+                        "world": world,
+                        "noise": noise,
+                        "seed": seed,
+                        "method": method,
+                        "pair_start": pair_start,
+                        "min_common": min_common,
+                        "details": seed == 0,
+                    }
+                    if method == "toro":
+                        kwargs["toro_iterations"] = toro_iterations
+                    tasks.append(
+                        Task(
+                            f"{world}_{noise}_{seed:04d}_{method}",
+                            "slamrel.studies.pose_only:run_case",
+                            kwargs,
+                        )
+                    )
+    return tasks
+
+
+COLUMNS = (
+    ("world", "world"),
+    ("noise", "noise"),
+    ("method", "method"),
+    ("runs", "runs"),
+    ("nees1_mean", "NEES1 mean"),
+    ("nees1_std", "NEES1 std"),
+    ("gate1", "NEES1 gate"),
+    ("nees1_under", "runs under gate"),
+    ("nees_map_mean", "map NEES (2 / 3) mean"),
+    ("gate_map", "map gate"),
+    ("nees_map_under", "map runs under gate"),
+    ("rmse_xy", "RMS position error [m]"),
+    ("rmse_theta", "RMS heading error [rad]"),
+    ("seconds", "time [s]"),
+)
+
+
+def summary_rows(results: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per (world, noise, method), in the order first met (Tables II/III analogue)."""
+    groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
+    for r in results:
+        res = r["result"] if "result" in r else r
+        groups.setdefault((res["world"], res["noise"], res["method"]), []).append(res)
+    rows = []
+    for (world, noise, method), rs in groups.items():
+        n1 = np.array([r["nees1"] for r in rs])
+        nm = np.array([r["nees_map"] for r in rs])
+        rows.append(
+            {
+                "world": world,
+                "noise": noise,
+                "method": METHOD_NAMES.get(method, method),
+                "runs": len(rs),
+                "nees1_mean": float(n1.mean()),
+                "nees1_std": float(n1.std()),
+                "gate1": float(rs[0]["gate1"]),
+                "nees1_under": int(np.sum(n1 <= rs[0]["gate1"])),
+                "nees_map_mean": float(nm.mean()),
+                "gate_map": float(np.mean([r["gate_map"] for r in rs])),
+                "nees_map_under": int(sum(r["nees_map"] <= r["gate_map"] for r in rs)),
+                "rmse_xy": float(np.mean([r["rmse_xy"] for r in rs])),
+                "rmse_theta": float(np.mean([r["rmse_theta"] for r in rs])),
+                "seconds": float(np.mean([r["seconds"] for r in rs])),
+            }
+        )
+    return rows
+
+
+def _fmt(key: str, v: Any) -> str:
+    if isinstance(v, str):
+        return v
+    if isinstance(v, int):
+        return str(v)
+    if key.startswith("rmse"):
+        return f"{v:.3f}"
+    if key == "seconds":
+        return f"{v:.2f}"
+    return f"{v:.1f}"
+
+
+def write_tables(
+    directory: str | Path, rows: Sequence[dict[str, Any]], *, timing: bool = False
+) -> list[Path]:
+    """``table.md``, ``table.csv``, ``table.tex`` (atomic writes); time column with ``timing``.
+
+    Without ``timing`` the tables depend only on the cases' inputs, so a resumed study gives
+    the same files byte for byte as an uninterrupted one.
+    """
+    cols = [c for c in COLUMNS if timing or c[0] != "seconds"]
+    out = Path(directory)
+    cells = [[_fmt(k, row[k]) for k, _ in cols] for row in rows]
+    md = ["| " + " | ".join(h for _, h in cols) + " |", "|" + "---|" * len(cols)]
+    md += ["| " + " | ".join(c) + " |" for c in cells]
+    buf = io.StringIO()
+    wr = csv.writer(buf, lineterminator="\n")
+    wr.writerow([k for k, _ in cols])
+    wr.writerows(cells)
+
+    def tex(s: str) -> str:
+        return s.replace("_", r"\_").replace("%", r"\%").replace("&", r"\&")
+
+    lines = [
+        r"\begin{tabular}{" + "l" * 3 + "r" * (len(cols) - 3) + "}",
+        r"\hline",
+        " & ".join(tex(h) for _, h in cols) + r" \\",
+        r"\hline",
+    ]
+    lines += [" & ".join(tex(c) for c in row) + r" \\" for row in cells]
+    lines += [r"\hline", r"\end{tabular}"]
+    paths = [out / "table.md", out / "table.csv", out / "table.tex"]
+    for p, text in zip(paths, ("\n".join(md) + "\n", buf.getvalue(), "\n".join(lines) + "\n")):
+        write_text_atomic(p, text)
+    return paths
+
+
+def write_figures(directory: str | Path, results: Sequence[dict[str, Any]]) -> list[Path]:
+    """Fig. 1 analogue (errors and ±2σ of M1 vs M2, run 0) and Fig. 2 (NEES1 of every run)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from slamrel.formats.text import write_bytes_atomic
+    from slamrel.report.html import figure_png
+
+    res = [r["result"] if "result" in r else r for r in results]
+    out = Path(directory)
+    paths = []
+    detailed = [r for r in res if "errors" in r and r["method"] in ("m1", "m2")]
+    if detailed:
+        first = (detailed[0]["world"], detailed[0]["noise"])
+        pair = [r for r in detailed if (r["world"], r["noise"]) == first]
+        fig, axes = plt.subplots(3, len(pair), figsize=(5 * len(pair), 7), squeeze=False)
+        for c, r in enumerate(sorted(pair, key=lambda r: r["method"])):
+            e, s = np.asarray(r["errors"]), np.asarray(r["sigma"])
+            for k, label in enumerate(("x [m]", "y [m]", "θ [rad]")):
+                ax = axes[k, c]
+                ax.plot(e[:, k], lw=1, label="error")
+                ax.plot(2 * s[:, k], "r--", lw=0.8, label="±2σ")
+                ax.plot(-2 * s[:, k], "r--", lw=0.8)
+                ax.set_ylabel(label)
+            axes[0, c].set_title(f"{METHOD_NAMES[r['method']]} — {first[0]} / noise {first[1]}")
+            axes[-1, c].set_xlabel("pose")
+        axes[0, 0].legend(loc="upper left")
+        fig.tight_layout()
+        paths.append(out / "fig1_sigma_bounds.png")
+        write_bytes_atomic(paths[-1], figure_png(fig, dpi=90))
+    cases = sorted({(r["world"], r["noise"]) for r in res})
+    if cases:
+        fig, axes = plt.subplots(1, len(cases), figsize=(3.2 * len(cases), 3.5), squeeze=False)
+        methods = [m for m in METHODS if any(r["method"] == m for r in res)]
+        for c, case in enumerate(cases):
+            ax = axes[0, c]
+            sel = [r for r in res if (r["world"], r["noise"]) == case]
+            for k, m in enumerate(methods):
+                v = [r["nees1"] for r in sel if r["method"] == m]
+                ax.scatter(np.full(len(v), k), v, s=10)
+            ax.axhline(sel[0]["gate1"], color="r", ls="--", lw=0.8)
+            ax.set_yscale("log")
+            ax.set_xticks(range(len(methods)), methods)
+            ax.set_title(f"{case[0]} / {case[1]}", fontsize=9)
+        axes[0, 0].set_ylabel("NEES1 (gate dashed)")
+        fig.tight_layout()
+        paths.append(out / "fig2_nees1.png")
+        write_bytes_atomic(paths[-1], figure_png(fig, dpi=90))
+    return paths
+
+
+def findings(rows: Sequence[dict[str, Any]]) -> list[tuple[str, bool, str]]:
+    """The paper's qualitative findings checked on :func:`summary_rows`.
+
+    Returns
+    -------
+    list of (finding, holds, evidence)
+        Only findings whose methods are in ``rows``; ``holds`` is True when it holds for
+        every world/noise group (evidence lists the groups where it does not).
+    """
+    by: dict[tuple[str, str], dict[str, dict[str, Any]]] = {}
+    for r in rows:
+        by.setdefault((r["world"], r["noise"]), {})[r["method"]] = r
+    full, m1, m2, toro = (METHOD_NAMES[m] for m in METHODS)
+    out: list[tuple[str, bool, str]] = []
+
+    def check(title: str, needs: Sequence[str], test: Any, show: Any) -> None:
+        groups = {k: v for k, v in by.items() if all(m in v for m in needs)}
+        if not groups:
+            return
+        bad = [k for k, v in groups.items() if not test(v)]
+        ev = "; ".join(f"{w}/{n}: {show(groups[(w, n)])}" for w, n in groups)
+        head = "holds in all groups" if not bad else f"fails in {len(bad)}/{len(groups)} groups"
+        out.append((title, not bad, f"{head}. {ev}"))
+
+    def under(r: dict[str, Any]) -> str:
+        return f"{r['nees1_under']}/{r['runs']}"
+
+    check(
+        "full LS and pose-only M2 pass the NEES1 gate in most runs",
+        (full, m2),
+        lambda v: all(2 * v[m]["nees1_under"] > v[m]["runs"] for m in (full, m2)),
+        lambda v: f"full {under(v[full])}, M2 {under(v[m2])}",
+    )
+    check(
+        "pose-only M2 is far more accurate than M1 (RMS position error at most half)",
+        (m1, m2),
+        lambda v: v[m2]["rmse_xy"] <= 0.5 * v[m1]["rmse_xy"],
+        lambda v: f"M1 {v[m1]['rmse_xy']:.3f} m, M2 {v[m2]['rmse_xy']:.3f} m",
+    )
+    check(
+        "the TORO-style optimiser is less consistent than pose-only LS (higher mean NEES1)",
+        (m2, toro),
+        lambda v: v[toro]["nees1_mean"] > v[m2]["nees1_mean"],
+        lambda v: f"M2 {v[m2]['nees1_mean']:.0f}, TORO {v[toro]['nees1_mean']:.0f}",
+    )
+    worlds = sorted({w for w, _ in by})
+    if all((w, "c") in by and toro in by[(w, "c")] for w in worlds) and worlds:
+
+        def ratio(w: str, n: str) -> float:
+            r = by[(w, n)][toro]
+            return float(r["nees1_mean"] / r["gate1"])
+
+        noises = sorted({n for _, n in by})
+        bad = [w for w in worlds if max(noises, key=lambda n: ratio(w, n)) != "c"]
+        ev = "; ".join(
+            f"{w}: " + ", ".join(f"{n} {ratio(w, n):.2f}" for n in noises) for w in worlds
+        )
+        out.append(
+            (
+                "the TORO-style optimiser is least consistent under noise c (NEES1 / gate)",
+                not bad,
+                ("holds for every world. " if not bad else f"fails for {', '.join(bad)}. ") + ev,
+            )
+        )
+    check(
+        "the map fitted to the pose-only M2 trajectory (NEES3) is about as consistent as full "
+        "LS's map (NEES2): within 25 %",
+        (full, m2),
+        lambda v: (
+            abs(v[m2]["nees_map_mean"] - v[full]["nees_map_mean"])
+            <= 0.25 * v[full]["nees_map_mean"]
+        ),
+        lambda v: f"full {v[full]['nees_map_mean']:.0f}, M2 {v[m2]['nees_map_mean']:.0f}",
+    )
+    return out
+
+
+def write_findings(directory: str | Path, rows: Sequence[dict[str, Any]]) -> Path:
+    """``findings.md``: each finding, whether it holds, and the numbers behind it."""
+    lines = ["# Hu et al.'s findings, checked on this study", ""]
+    for title, holds, ev in findings(rows):
+        lines += [f"- **{'holds' if holds else 'does not hold'}** — {title}.", f"  {ev}", ""]
+    path = Path(directory) / "findings.md"
+    write_text_atomic(path, "\n".join(lines))
+    return path
