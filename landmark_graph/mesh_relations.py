@@ -125,7 +125,7 @@ def _local_rotation(
     """
     w = [(v >= 0).astype(np.float64) for v in vertices]
     k = [np.maximum(v, 0) for v in vertices]
-    count = sum(w)
+    count = sum(w[1:], start=w[0])  # = sum(w), but typed as an array (not array | 0)
     pm = sum(wv[:, None] * est[kv] for wv, kv in zip(w, k)) / count[:, None]
     qm = sum(wv[:, None] * ref[kv] for wv, kv in zip(w, k)) / count[:, None]
     cross = np.zeros(count.shape)

@@ -135,8 +135,10 @@ def pose_landmark_relations(
             f"{k.shape}, {lid.shape}"
         )
     if k.size and (k.min() < 0 or k.max() >= x.shape[0]):
-        bad = int(np.flatnonzero((k < 0) | (k >= x.shape[0]))[0])
-        raise InputError(f"observation {bad}: pose index {int(k[bad])} outside 0..{x.shape[0] - 1}")
+        bad_k = int(np.flatnonzero((k < 0) | (k >= x.shape[0]))[0])
+        raise InputError(
+            f"observation {bad_k}: pose index {int(k[bad_k])} outside 0..{x.shape[0] - 1}"
+        )
     row = rows_of(estimate.ids, lid)
     bad = first_missing(row)
     if bad is not None:

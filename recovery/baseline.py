@@ -23,6 +23,8 @@ __all__ = ["filterpy_localisation"]
 
 
 class _UnicycleEKF(ExtendedKalmanFilter):  # type: ignore[misc]
+    x: Array  # filterpy's state column (3, 1); filterpy has no type hints
+
     def predict_x(self, u: Array = 0) -> None:  # type: ignore[assignment]
         self.x = se2.compose(self.x.ravel(), u).reshape(3, 1)
 

@@ -185,6 +185,7 @@ def _check_models(b: Bundle) -> None:
 def _check_shapes(b: Bundle) -> None:
     """Every array has the shape the :class:`Bundle` docstring gives it."""
     j, m = b.measurement_times.shape[0], b.map_ids.shape[0]
+    assert b.measurement_lines is not None  # __post_init__ fills it before the checks
     expected = {
         "measurement_times": (b.measurement_times, (j,)),
         "measurements": (b.measurements, (j, 2)),
@@ -215,9 +216,11 @@ def _check_shapes(b: Bundle) -> None:
 def _check_values(b: Bundle) -> None:
     """Finite numbers, positive ranges, times in order, unique map ids, known landmarks."""
     src = _where(b, "measurements.csv")
+    lines = b.measurement_lines
+    assert lines is not None  # __post_init__ fills it before the checks
 
     def line(k: int) -> int | None:
-        return int(b.measurement_lines[k]) or None
+        return int(lines[k]) or None
 
     for name in ("measurement_times", "measurements", "map_xy", "initial_pose"):
         bad = np.flatnonzero(~np.isfinite(getattr(b, name)).reshape(len(getattr(b, name)), -1))

@@ -420,6 +420,7 @@ class _ReentryRule:
     """
 
     __slots__ = ("bound", "max_run", "raise_", "ext2", "inp", "run", "start", "nis", "reacquiring")
+    nis: list[float]  # the NIS values of the current run
 
     def __init__(  # type: ignore[no-untyped-def]
         self, bound: float, max_run: int | None, raise_: bool, ext2: float, inp
@@ -846,7 +847,9 @@ _SKIPPED = {
 }
 
 
-def _skip(inp: FilterInput, setup: _Setup, rules: _Rules, k: int, j: int, kind: int) -> None:
+def _skip(
+    inp: FilterInput, setup: _Setup, rules: _Rules, k: int, j: int, kind: FilterEvent
+) -> None:
     """A measurement whose ``S`` or posterior is not positive definite: skipped (counted as
     gated) and recorded, or :class:`DivergenceError` (``raise`` mode, covariance-only pass)."""
     if rules.raise_ or rules.fixed:
@@ -870,7 +873,7 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
     in place.
     """
     lm_xy, lm_c, r, zz, lmk = setup.lm_xy, setup.lm_c, setup.r, setup.z, setup.landmark
-    pxm, mapcov, lin, w_fixed = setup.pxm, inp.map_covariance, setup.lin, setup.w_fixed
+    pxm, mapcov, w_fixed = setup.pxm, inp.map_covariance, setup.w_fixed
     nis, wts, times = setup.nis, setup.weights, inp.times
     pose = tuple(float(v) for v in inp.x0)
     p = tuple(float(inp.p0[i, j]) for i, j in SYM6)
@@ -886,6 +889,10 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
         setup.active,
     )
     fixed = rules.fixed
+    lin: list[list[float]] = []  # read only when fixed
+    if fixed:
+        assert setup.lin is not None  # fixed and setup.lin both mean: linearize_at given
+        lin = setup.lin
     for e in bar:
         k = epochs[e]
         if e > 0:
@@ -921,6 +928,7 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
                     if not fixed:
                         pose = (pose[0] + dx[0], pose[1] + dx[1], pose[2] + dx[2])
                     if pxm is not None:
+                        assert mapcov is not None  # pxm is set exactly with a map covariance
                         _schmidt_correct(pxm, h, gain, mapcov[2 * li : 2 * li + 2])
             if alpha:  # the re-entry: right after the run's last measurement
                 p = _inflate(p, pxm, alpha)

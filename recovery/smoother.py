@@ -73,6 +73,7 @@ def smooth(fr: FilterResult) -> SmootherResult:
     SmootherResult
     """
     poses, covs = _smooth(fr, with_poses=True)
+    assert poses is not None  # with_poses=True
     return SmootherResult(poses=poses, covariances=covs)
 
 
@@ -94,7 +95,8 @@ def _smooth(fr: FilterResult, *, with_poses: bool) -> tuple[Array | None, Array]
     w = fr.steps  # pose k relative to its base epoch, world frame
     post_x, post_p = fr.post_poses, fr.post_covariances
     pri_x, pri_p = fr.prior_poses, fr.prior_covariances
-    inv_pri = np.linalg.inv(pri_p)
+    # float64 already (returned as is); the stubs type inv() as floating[Any]
+    inv_pri = np.asarray(np.linalg.inv(pri_p), dtype=np.float64)
     delta_e = np.zeros((n_e, 3))
     big_e = np.zeros((n_e, 3, 3))
     if n_e > 1:
@@ -119,7 +121,7 @@ def _smooth(fr: FilterResult, *, with_poses: bool) -> tuple[Array | None, Array]
 
 
 def _between_epochs(  # type: ignore[no-untyped-def]
-    fr: FilterResult, inv_pri: Array, corr_x: Array, corr_p: Array, poses, covs
+    fr: FilterResult, inv_pri: Array, corr_x: Array | None, corr_p: Array, poses, covs
 ) -> None:
     """Smoothed poses and covariances of every pose between two epochs, in place.
 
@@ -145,6 +147,7 @@ def _between_epochs(  # type: ignore[no-untyped-def]
     m[:, :, 1] += to_next[:, 0, None] * pk[:, :, 2]
     ck = m @ np.take(inv_pri, i, axis=0)
     if poses is not None:
+        assert corr_x is not None  # given with the poses
         step = (ck @ np.take(corr_x, i, axis=0)[:, :, None])[:, :, 0]
         poses[k] = np.take(fr.poses, k, axis=0) + step
     corr = ck @ np.take(corr_p, i, axis=0) @ ck.transpose(0, 2, 1)

@@ -127,7 +127,9 @@ class _SE2(PoseGroup):
         out[..., 5] = se2.wrap_angle(e[..., 2])
         return out
 
-    parameters = error_components
+    def parameters(self, d: ArrayLike) -> Array:
+        # SE(2): the parameters are the error components (x, y, 0, 0, 0, yaw).
+        return self.error_components(d)
 
     def rotation_angle(self, e: ArrayLike) -> Array:
         return np.abs(se2.wrap_angle(np.asarray(e, dtype=np.float64)[..., 2]))

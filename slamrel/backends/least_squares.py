@@ -413,7 +413,8 @@ class _NormalEquations:
                 (lin.jp.T @ lin.jp).ravel(),
             ]
         )
-        h = np.bincount(self.slot, weights=vals, minlength=self.nnz)
+        # numpy's stubs type bincount as NDArray[intp] always; with weights it is float64.
+        h: Array = np.bincount(self.slot, weights=vals, minlength=self.nnz)  # type: ignore[assignment]
         r_pp = lin.r[: 3 * e_n].reshape(e_n, 3)
         r_pl = lin.r[3 * e_n : 3 * e_n + 2 * f_n].reshape(f_n, 2)
         r_pr = lin.r[3 * e_n + 2 * f_n :]
@@ -426,7 +427,7 @@ class _NormalEquations:
                 lin.jp.T @ r_pr,
             ]
         )
-        grad = np.bincount(self.grad_index, weights=gvals, minlength=self.size)
+        grad: Array = np.bincount(self.grad_index, weights=gvals, minlength=self.size)  # type: ignore[assignment]
         return h, grad
 
     def solve(self, h: Array, damping: Array, rhs: Array) -> Array:

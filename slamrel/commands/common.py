@@ -7,7 +7,7 @@ import os
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 from relation_metric.errors import InputError, SlamrelError
 from slamrel.commands import options as opt
@@ -100,7 +100,7 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
 
 
 def relations_from_args(
-    reference: Trajectory, args: argparse.Namespace, *, key: str = "time"
+    reference: Trajectory, args: argparse.Namespace, *, key: Literal["time", "index"] = "time"
 ) -> RelationSet:
     """Generate relations from ``reference`` with the strategy options in ``args``."""
     from relation_metric.relations import generate_relations

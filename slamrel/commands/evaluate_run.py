@@ -144,6 +144,7 @@ def load_reference(
             )
             relations = relations.subset(~zero)
         if relations.has_out_of_plane and args.planar:
+            assert relations.out_of_plane is not None  # has_out_of_plane: there are some
             oop = np.abs(relations.out_of_plane)
             warnings.warn(
                 f"{args.reference}: 6-DoF relations scored in 2-D (--planar): discarding "
@@ -269,7 +270,9 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(
                 "--ate needs a reference trajectory, not a .relations file", path=args.reference
             )
-        result["ate"] = _ate(*ate_pair, args.max_time_diff)
+        ate_estimate, ate_reference = ate_pair
+        assert ate_reference is not None  # the reference (just checked) or its synchronised copy
+        result["ate"] = _ate(ate_estimate, ate_reference, args.max_time_diff)
     _write_outputs(args, ev, ev_estimate, result)
     if not args.quiet:
         print(summary_text(ev, result, degrees=args.degrees))

@@ -126,6 +126,7 @@ def _mrclam_robot(args: argparse.Namespace, robot: int, out: Path) -> Bundle:
             motion_noise=args.motion_noise,
         )
     if not args.quiet:
+        assert bundle.controls is not None  # MRCLAM bundles use the velocity model
         print(
             f"robot {robot}: {bundle.controls.shape[0]} controls, "
             f"{bundle.measurements.shape[0]} landmark measurements -> {out}\n  "

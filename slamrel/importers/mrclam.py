@@ -356,7 +356,8 @@ def fit_noise(
 
     def per_window(x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Sums of ``x`` over each window's rows, shape (nw,)."""
-        return np.bincount(w_id[keep], weights=x[keep], minlength=nw)
+        # numpy's stubs type bincount as NDArray[intp] always; with weights it is float64.
+        return np.bincount(w_id[keep], weights=x[keep], minlength=nw)  # type: ignore[return-value]
 
     dist = per_window(c[:, 1] * dt)
     turn = per_window(c[:, 2] * dt)

@@ -84,7 +84,8 @@ def simulate_bundle(
     if motion not in ("velocity", "odometry"):
         raise InputError(f"motion must be 'velocity' or 'odometry', got {motion!r}")
     rng = np.random.default_rng(seed)
-    t = dt * np.arange(steps)
+    # float64 arange: the same numbers (float × int arange is floating[Any] to the stubs)
+    t = dt * np.arange(steps, dtype=np.float64)
     sigma = (sigma_v, sigma_omega) if motion == "velocity" else sigma_odometry
     model = MotionModel(motion, alpha=alpha) if alpha else MotionModel(motion, sigma=sigma)
     u_true, controls, odometry = _drive(model, rng, t, dt)
@@ -99,7 +100,8 @@ def simulate_bundle(
     obs = observe_all_around(
         truth, lm_true, at, sensor, rng, increments=u_true, offset=measurement_offset
     )
-    assoc = rng.random(obs.pose.shape[0]) >= unassociated_fraction
+    # len, not shape[0]: the stubs' Any shape[0] picks random()'s scalar overload
+    assoc = rng.random(len(obs.pose)) >= unassociated_fraction
     ids = np.arange(landmarks, dtype=np.int64) + 100
     map_xy, cov = _perturbed_map(lm_true, map_sigma, rng)
     return Bundle(
@@ -177,7 +179,7 @@ def world_bundle(world: World) -> Bundle:
     o = world.observations
     if world.controls is None:
         motion = MotionModel("odometry", sigma=(nt.sigma_dx, nt.sigma_dy, nt.sigma_dtheta))
-        extra = {"odometry": world.odometry}
+        odometry: Trajectory | None = world.odometry
     else:
         rate = world.rate
         dt = (
@@ -189,7 +191,7 @@ def world_bundle(world: World) -> Bundle:
         sv = nt.sigma_dx * np.sqrt(rate) / (dt * rate)
         sw = nt.sigma_dtheta * np.sqrt(rate) / (dt * rate)
         motion = MotionModel("velocity", sigma=(float(sv), float(sw)))
-        extra = {"controls": world.controls}
+        odometry = None
     ids = np.arange(world.landmarks.shape[0], dtype=np.int64)
     return Bundle(
         motion=motion,
@@ -209,5 +211,6 @@ def world_bundle(world: World) -> Bundle:
             f"slamrel simulated world {world.name}, noise type {world.noise}, seed "
             f"{world.seed}, rate {world.rate}; map = true landmarks (perfect map)"
         ),
-        **extra,  # type: ignore[arg-type]
+        controls=world.controls,  # None when odometry-driven
+        odometry=odometry,
     )

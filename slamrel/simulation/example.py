@@ -59,7 +59,8 @@ def example_trajectories(
     steps = se2.between(ref[:-1], ref[1:])
     noisy = steps + rng.normal(0.0, [0.02, 0.02, 0.005], size=steps.shape)
     est = se2.cumulative_compose(noisy, start=ref[0])
-    t = dt * np.arange(n)
+    # float64 arange: the same numbers (float × int arange is floating[Any] to the stubs)
+    t = dt * np.arange(n, dtype=np.float64)
     return Trajectory(t, ref), Trajectory(t, est)
 
 

@@ -167,6 +167,7 @@ def observe_all_around(
         raise InputError("observe_all_around: an offset needs the increments")
     pose_k, lm_k = _candidates(truth, landmarks, at, sensor.max_range + 1.0)
     if offset:
+        assert increments is not None  # checked on entry: an offset needs the increments
         pose_m = se2.compose(truth[pose_k], se2.exp(offset * se2.log(increments[pose_k])))
     else:
         pose_m = truth[pose_k]

@@ -193,12 +193,12 @@ def run_sweep(
             finished(t, *_guarded(t.function, t.kwargs))
     else:
         ctx = multiprocessing.get_context("spawn")
-        pool_args = {
-            "mp_context": ctx,
-            "initializer": _exit_with_parent,
-            "initargs": (os.getpid(),),
-        }
-        with _single_threaded_blas_env(), ProcessPoolExecutor(workers, **pool_args) as pool:
+        with (
+            _single_threaded_blas_env(),
+            ProcessPoolExecutor(
+                workers, mp_context=ctx, initializer=_exit_with_parent, initargs=(os.getpid(),)
+            ) as pool,
+        ):
             futures = {pool.submit(_guarded, t.function, t.kwargs): t for t in todo}
             for fut in as_completed(futures):
                 finished(futures[fut], *fut.result())
