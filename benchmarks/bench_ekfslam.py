@@ -1,4 +1,4 @@
-"""EKF-SLAM update speed (issue 15), against the update before it, measured in the same run.
+"""EKF-SLAM update speed, against the update before its blocked in-place form, in the same run.
 
 1. One update at n ≈ 2,335 state dimensions (1,166 landmarks): the symmetric in-place form
    ``P −= W Wᵀ`` (``slamrel.backends.ekf_slam._update``) vs the old full product +
@@ -24,7 +24,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE.parent / "tests"))
 
-from test_estimation_ekfslam import _update_before_issue15 as old_update  # noqa: E402
+from test_estimation_ekfslam import _update_full_product as old_update  # noqa: E402
 
 import slamrel.backends.ekf_slam as ekfslam  # noqa: E402
 import slamrel.simulation.worlds as worlds  # noqa: E402

@@ -1,4 +1,4 @@
-"""Full least squares vs GTSAM (issue 15), both as whole processes, in the same run.
+"""Full least squares vs GTSAM, both as whole processes, in the same run.
 
 Problems:
 
@@ -14,7 +14,7 @@ GTSAM (in its own venv ``benchmarks/.venv-gtsam``, ``pip install gtsam numpy`` o
 ``LevenbergMarquardtOptimizer`` from the same initial guess (default parameters), and on
 Victoria Park also iSAM2 pose by pose followed by a final LM (GTSAM's best route there,
 since its batch LM from odometry stops in a local minimum, as slamrel's does), and the
-driver slamrel used before issue 15 (grown 500 poses at a time, LM on each). GTSAM gets
+driver slamrel used until ``defa31f`` (grown 500 poses at a time, LM on each). GTSAM gets
 the graph as arrays (``.npz``: no text parsing in its time); slamrel reads the text file.
 
 Objectives: pose–pose factors are GTSAM's ``BetweenFactorPose2`` with the same information
@@ -25,10 +25,10 @@ matrix (its error is the SE(2) log of the discrepancy; slamrel's is
 scored in slamrel's objective too (``cost(GTSAM)`` below), which is what "same minimum"
 means here.
 
-Also, in process: the solver as it was before issue 15 (``slamrel/backends/least_squares.py`` at
+Also, in process: the solver as it was before the speed-up (``slamrel/backends/graph.py`` at
 ``defa31f``, loaded from git) against the current one on both problems.
 
-Target (issue 15): no slower than GTSAM's LM where it converges (Manhattan), faster than
+Target: no slower than GTSAM's LM where it converges (Manhattan), faster than
 GTSAM's best route on Victoria Park, same minimum.
 
 Every process is timed in wall and CPU seconds (the machine may be shared), ``--repeat``
@@ -106,7 +106,7 @@ GTSAM_SCRIPT = textwrap.dedent(
         opt = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
         result = opt.optimize()
         out["iterations"] = opt.iterations()
-    elif route == "grow":  # the driver slamrel had before issue 15: 500 poses at a time
+    elif route == "grow":  # the driver slamrel had until defa31f: 500 poses at a time
         pp_i, pp_j, pl_k, pl_l = d["pp_i"], d["pp_j"], d["pl_k"], d["pl_l"]
         est = gtsam.Values()
         iterations = 0
@@ -239,11 +239,11 @@ def run_slamrel(path: Path, out: Path, extra: list[str]) -> dict[str, float]:
     return {"wall_s": wall, "cpu_s": cpu, "iterations": int(m.group(1)), "poses": poses}
 
 
-BEFORE = "defa31f"  # main before issue 15
+BEFORE = "defa31f"  # main before the least-squares speed-up
 
 
 def old_solver():  # type: ignore[no-untyped-def]
-    """``slamrel.backends.graph`` as it was before issue 15 (from git), as a module."""
+    """``slamrel.backends.graph`` as it was at ``BEFORE`` (from git), as a module."""
     import importlib.util
 
     text = subprocess.run(
@@ -252,9 +252,9 @@ def old_solver():  # type: ignore[no-untyped-def]
         text=True,
         check=True,
     ).stdout
-    path = Path(tempfile.mkdtemp()) / "graph_before_issue15.py"
+    path = Path(tempfile.mkdtemp()) / "graph_before.py"
     path.write_text(text)
-    spec = importlib.util.spec_from_file_location("graph_before_issue15", path)
+    spec = importlib.util.spec_from_file_location("graph_before", path)
     module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
     sys.modules[spec.name] = module  # type: ignore[union-attr]
     spec.loader.exec_module(module)  # type: ignore[union-attr]
@@ -378,7 +378,7 @@ def main() -> None:
     parser.add_argument(
         "--repeat", type=int, default=3, help="processes per variant, ours and GTSAM alternating"
     )
-    parser.add_argument("--no-before", action="store_true", help="skip the pre-issue-15 solver")
+    parser.add_argument("--no-before", action="store_true", help="skip the solver of defa31f")
     args = parser.parse_args()
     python = None if args.no_gtsam else ensure_gtsam()
     with tempfile.TemporaryDirectory() as tmpdir:
@@ -406,7 +406,7 @@ def main() -> None:
         new = __import__("slamrel.backends.least_squares", fromlist=["solve_graph"])
         if not args.no_before:
             old = old_solver()
-            in_process(f"before issue 15 ({BEFORE}) solve_graph", lambda: old.solve_graph(g))
+            in_process(f"before ({BEFORE}) solve_graph", lambda: old.solve_graph(g))
         in_process("now solve_graph", lambda: new.solve_graph(g))
         for only in (("qdldl", "superlu"), ("superlu",)):
             in_process("now solve_graph", lambda: new.solve_graph(g), only)
@@ -437,7 +437,7 @@ def main() -> None:
             report("Victoria Park", vp, ours, gt)
             if not args.no_before:
                 in_process(
-                    f"before issue 15 ({BEFORE}) incremental(batch=500)",
+                    f"before ({BEFORE}) incremental(batch=500)",
                     lambda: old.solve_graph_incremental(vp, batch=500),
                 )
             for only in (None, ("superlu",)):

@@ -1,6 +1,6 @@
 """``slamrel run`` on every built-in world × noise type: it finishes, and how long it takes.
 
-Target (issue 5): the default run (``slamrel run``: simple1, noise a) < 30 s on this machine.
+Target: the default run (``slamrel run``: simple1, noise a) < 30 s on this machine.
 Baseline printed beside it: the EKF-SLAM alone on the same world, measured in the same run.
 Run: ``python benchmarks/bench_pipeline.py``.
 """

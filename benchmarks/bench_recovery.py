@@ -16,8 +16,8 @@ rows). Measured in the same run:
   over filter + smoother's, and — with ``--scaling`` — both at three sizes a factor √10 apart
   (``steps/10 … steps``) with the exponent ``b`` of ``t ≈ a·steps^b`` fitted on the logs.
 
-Targets: ours ≤ 1/20 of the baseline's time; batch ≤ 3× filter + smoother, and linear
-(issue 15). Prints the ratios and checks that both filters agree.
+Targets: ours ≤ 1/20 of the baseline's time; batch ≤ 3× filter + smoother, and linear.
+Prints the ratios and checks that both filters agree.
 """
 
 from __future__ import annotations

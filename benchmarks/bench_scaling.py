@@ -1,4 +1,4 @@
-"""Scaling of ``recover``, ``slam`` and ``solve`` over sizes spanning 10× (issue 15).
+"""Scaling of ``recover``, ``slam`` and ``solve`` over sizes spanning 10×.
 
 Each stage is timed (in process, best of ``--repeat``) at three sizes a factor √10 apart and
 the exponent ``b`` of ``t ≈ a·size^b`` is fitted by least squares on the logs.

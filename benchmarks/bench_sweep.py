@@ -1,4 +1,4 @@
-"""Sweep throughput: 2 workers against 1 on the same study cases (issue 14 target ≥ 1.7×).
+"""Sweep throughput: 2 workers against 1 on the same study cases (target ≥ 1.7×).
 
 Baseline: the same task list run by ``slamrel.studies.sweep.run_sweep`` with one worker process, in
 the same run. Measured: two worker processes, and a 2-worker Dask ``LocalCluster`` when

@@ -40,7 +40,7 @@ RELATION_METRIC = [
     ),
     new_markdown_cell(
         "Local (consecutive) relations see the odometry-like error; loop-closing and global "
-        "relations see the accumulated drift. DESIGN.md's measured pitfall: local relations "
+        "relations see the accumulated drift. docs/design.md's measured pitfall: local relations "
         "alone cannot see global breakage."
     ),
     new_code_cell(
@@ -179,7 +179,7 @@ VALIDATION = [
         "never worse than the online one by more than a few percent, and up to ~1.6× better for "
         "healthy runs. The reason is that the recovery localises in the *final* map, which is "
         "better than the map the filter had early in the run; the recovered score measures the "
-        "final map, not the filter's online estimate (DESIGN.md)."
+        "final map, not the filter's online estimate (docs/design.md)."
     ),
     new_code_cell(
         "import matplotlib.pyplot as plt\n"
@@ -259,7 +259,7 @@ VALIDATION = [
         "fig.colorbar(sc, label='log10 process-noise scale'); fig.tight_layout()"
     ),
     new_markdown_cell(
-        "## The default on real data (issue 12's acceptance)\n\n"
+        "## The default on real data: why it is the default\n\n"
         "MRCLAM dataset 7, robots 1–5, with the fitted noise and the surveyed map (whose frame "
         "is Vicon's). Error measures: position ATE after SE(2) alignment at the Vicon times "
         "(`filter`, `smoother`), the same without alignment (`_raw`), and the mean "

@@ -42,20 +42,19 @@ The normal equations are block tridiagonal in time order (each measurement touch
 the map is fixed), so ``H`` is assembled straight into LAPACK's band storage (bandwidth 5)
 and each damped step is one banded Cholesky solve (LAPACK ``pbsv``): O(N) per iteration, no
 fill, no ordering. The band is stored *lower* and Fortran-ordered, so ``pbsv`` factorises in
-place: at 10⁵ control steps (3·10⁵ unknowns) 15 ms per solve against 22 ms for the upper
-form and 25 ms through ``scipy.linalg.solveh_banded`` (which copied the C-ordered band);
-LAPACK's unblocked band Cholesky walks columns, contiguous in the lower form, strided in the
-upper. The two forms round differently (steps ~10⁻¹⁰ relative apart; the same minimum, poses
-7·10⁻¹² m apart at 10⁵ steps). SuperLU in the natural order took 0.4 s, ``spsolve``'s
-default (COLAMD with pivoting) 0.7 s. A block Thomas recursion would be linear too but
-sequential (a Python loop per pose).
+place, faster than the upper form and than ``scipy.linalg.solveh_banded`` (which copied the
+C-ordered band): LAPACK's unblocked band Cholesky walks columns, contiguous in the lower form,
+strided in the upper. The two forms round differently (steps ~10⁻¹⁰ relative apart; the same
+minimum, poses 7·10⁻¹² m apart at 10⁵ steps). SuperLU in the natural order and ``spsolve``'s
+default (COLAMD with pivoting) are far slower (timings in benchmarks/README.md). A block
+Thomas recursion would be linear too but sequential (a Python loop per pose).
 
 Per-pose covariances are the diagonal blocks of ``H⁻¹`` at the solution, computed by the
 extended filter/RTS covariance recursion linearised at the solution (exact for a
 block-tridiagonal information matrix, and vectorised like the smoother; about as long as one
 filter + smoother pass, the smoother's mean half skipped:
 :func:`~recovery.smoother.smoothed_covariances`). A vectorised block cyclic reduction of
-``H`` itself was measured faster (0.15 against 0.23–0.28 s at 10⁵ steps) but inaccurate: the
+``H`` itself was measured faster (benchmarks/README.md) but inaccurate: the
 Schur complements of the information form cancel the stiff terms, leaving relative errors up
 to 4·10⁻² in the covariances at 3·10³ steps (the covariance-form recursion: 3·10⁻⁷, against
 a sparse LU solve).
@@ -158,7 +157,7 @@ def _weights(
         regularised = regularised_sigma(inp.sigma if sigma is None else sigma)
     wm = np.asarray(np.linalg.inv(regularised), dtype=np.float64)
     # ½ (W + Wᵀ) in place, bit for bit: the diagonal is unchanged (½ (a + a) = a exactly),
-    # so only the three off-diagonal pairs are averaged (3.4 → 0.7 ms at 10⁵ steps)
+    # so only the three off-diagonal pairs are averaged (measured in benchmarks/README.md)
     for i, j in ((0, 1), (0, 2), (1, 2)):
         mean = (wm[:, i, j] + wm[:, j, i]) * 0.5
         wm[:, i, j] = mean
@@ -206,8 +205,8 @@ def _band(  # type: ignore[no-untyped-def]
     ``J_a = −J_b K`` with the shear ``K = I + u e₃ᵀ``, ``u = [−Δy, Δx, 0]``
     (``Δ = t_{k+1} − t_k``). With ``G = J_bᵀ W J_b`` (the information rotated into the
     world frame): ``H_{k+1,k+1} += G``, ``H_kk += Kᵀ G K``, ``H_{k,k+1} = −Kᵀ G``, written out
-    entry by entry on (N,) arrays (a batched 3 × 3 matrix product costs ~10 ms at 10⁵ poses;
-    these ~40 element-wise operations cost less than two of them).
+    entry by entry on (N,) arrays: these ~40 element-wise operations cost less than two
+    batched 3 × 3 matrix products (measured in benchmarks/README.md).
     """
     n = x.shape[0]
     (rp, rm, rz, wz, h_x, k), (c, s) = factors or _factors(inp, x, used, robust)
@@ -287,7 +286,7 @@ class _BatchProblem:
     ``H`` is kept in band storage (:func:`_band`) and the damped normal equations are
     solved by a banded Cholesky (LAPACK ``pbsv``): O(N) for the block-tridiagonal ``H``.
     ``chain``: steps are applied along the chain (:func:`retract_chain`); False adds them to
-    the poses (:func:`~recovery.lm.retract_poses`, as before issue 15; tests).
+    the poses (:func:`~recovery.lm.retract_poses`, the step before the chain; tests).
     ``regularised``: :func:`regularised_sigma` of ``inp.sigma`` when already computed.
     """
 

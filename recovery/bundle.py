@@ -1,4 +1,4 @@
-"""The SLAM result bundle (format ``slamrel-bundle/1``, see ``BUNDLE.md``): read and write.
+"""The SLAM result bundle (format ``slamrel-bundle/1``, see ``docs/bundle.md``): read and write.
 
 A bundle is a directory of comma-separated files (one header line, ``#`` comment lines) and a
 JSON manifest ``bundle.json``. The reader is strict: a missing required file or column, a

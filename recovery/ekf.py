@@ -268,7 +268,7 @@ def prepare_segments(
     dth = heading - heading[base]
     h_e = heading[epochs]
     c, s = np.cos(h_e)[epoch_of], np.sin(h_e)[epoch_of]  # = cos, sin of heading[base]
-    dp = position - np.take(position, base, axis=0)  # (np.take: 3-6x numpy's row indexing)
+    dp = position - np.take(position, base, axis=0)  # (np.take: faster than numpy's row indexing)
     local = np.column_stack((c * dp[:, 0] + s * dp[:, 1], -s * dp[:, 0] + c * dp[:, 1], dth))
     q = np.zeros((6, n))
     if n < 2:

@@ -394,8 +394,8 @@ def recover(
         smoother (through the filter's gains) and the batch (``refine(weights=...)``) use the
         same weights. The down-weighted fraction is reported in ``counts``. ``None`` (or
         ``"none"``) is the plain EKF. Default :data:`DEFAULT_ROBUST` (``"redescending"``,
-        ``c = 1.75``), chosen on MRCLAM dataset 7 and the validation grid (issue 12; numbers
-        in notebooks/validation.ipynb): its filter's position ATE after SE(2) alignment at
+        ``c = 1.75``), chosen on MRCLAM dataset 7 and the validation grid (numbers in
+        notebooks/validation.ipynb): its filter's position ATE after SE(2) alignment at
         the Vicon times is 0.87–1.03 × min(plain EKF, 99.9%-gated EKF) on robots 1–5 and its
         smoother is below its filter on the 1 s relations of all five (on the aligned ATE of
         four: robot 4's biased measurements), while broken maps keep their error (grid:

@@ -139,7 +139,7 @@ def _between_epochs(  # type: ignore[no-untyped-def]
     if not k.size:
         return
     i = seg.epoch_of[k] + 1  # the next epoch
-    # np.take: rows gathered 3-6x faster than numpy's fancy indexing
+    # np.take: rows gathered faster than by numpy's fancy indexing (benchmarks/README.md)
     to_next = np.take(w, ep[i], axis=0)[:, :2] - np.take(w, k, axis=0)[:, :2]
     pk = np.take(fr.covariances, k, axis=0)
     m = pk.copy()  # P_k S(Δ)ᵀ, with S(Δ)ᵀ = [[1, 0, 0], [0, 1, 0], [−Δy, Δx, 1]]

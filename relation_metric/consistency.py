@@ -134,11 +134,12 @@ def summarize_nees(values: ArrayLike, *, dof: int, probability: float = 0.95) ->
 def chi2_quantile(probability: float, dof: int) -> float:
     """``χ²⁻¹(probability; dof)``, the one home of χ² thresholds (gates, outlier bounds).
 
-    Without scipy.stats (whose import costs ~0.4 s of start-up) for the dof the recovery
-    uses: 2 dof (range-bearing innovations) ``−2 ln(1 − p)`` exactly; 3 dof (SE(2) poses)
-    Newton on the closed-form CDF ``erf(√(x/2)) − √(2x/π) e^{−x/2}`` (or its tail) from the
-    Wilson–Hilferty start, agreeing with scipy's to 1e-14 relative for ``1e-3 ≤ p < 1``
-    (1e-8 down to ``p = 1e-12``). Other dof use ``scipy.stats.chi2.ppf``, imported on use.
+    Without scipy.stats (whose import would dominate a command's start-up:
+    benchmarks/README.md) for the dof the recovery uses: 2 dof (range-bearing innovations)
+    ``−2 ln(1 − p)`` exactly; 3 dof (SE(2) poses) Newton on the closed-form CDF
+    ``erf(√(x/2)) − √(2x/π) e^{−x/2}`` (or its tail) from the Wilson–Hilferty start,
+    agreeing with scipy's to 1e-14 relative for ``1e-3 ≤ p < 1`` (1e-8 down to
+    ``p = 1e-12``). Other dof use ``scipy.stats.chi2.ppf``, imported on use.
     """
     if dof < 1 or not 0 < probability < 1:
         raise InputError(f"need dof >= 1 and 0 < probability < 1; got {dof}, {probability}")

@@ -1,4 +1,4 @@
-"""Id lookup: the row of each wanted id in an id column (one home, issue 13).
+"""Id lookup: the row of each wanted id in an id column (one home for every table).
 
 Landmark maps, pose graphs, bundles and importers all name things by integer ids and need
 the row holding each id that another table refers to. :func:`rows_of` is that lookup,

@@ -90,8 +90,8 @@ def wrap_angle(angle: ArrayLike) -> Array:
 def wrap_angle_float(angle: float) -> float:
     """:func:`wrap_angle` of one Python float, bit for bit, without numpy.
 
-    For scalar loops (the EKF's per-measurement code), where numpy's per-call overhead
-    (several µs) is many times the arithmetic (0.1 µs). Same formula: Python's ``%`` on
+    For scalar loops (the EKF's per-measurement code), where numpy's per-call overhead is
+    many times the arithmetic (benchmarks/README.md). Same formula: Python's ``%`` on
     floats folds C's ``fmod`` onto the divisor's sign like ``np.mod``; non-finite angles go
     to :func:`wrap_angle`.
 

@@ -13,7 +13,7 @@ Three steps, the I/O at the ends (evo's ``main_ape``: load, a pure ``ape``, writ
 
 The trajectory is scored on three relation sets generated from the ground truth — consecutive
 (local), loop-closing and global (far-apart) — because local relations alone cannot see
-global breakage (DESIGN.md, measured pitfalls). Dead reckoning is scored the same way as the
+global breakage (docs/design.md, measured pitfalls). Dead reckoning is scored the same way as the
 baseline everyone understands; the SLAM run's online estimate is scored *for validation only*
 (a filter-based SLAM system does not keep it).
 """
@@ -262,7 +262,7 @@ def _evaluate_sets(sets: dict[str, RelationSet], est: Trajectory) -> dict[str, E
 def read_run_input(directory: str | Path) -> RunInput:
     """Read a SLAM result bundle directory to score (the I/O end of ``slamrel run``).
 
-    The bundle (``../shared/BUNDLE.md``) is scored against its ``groundtruth.csv`` (required by
+    The bundle (``docs/bundle.md``) is scored against its ``groundtruth.csv`` (required by
     :func:`score_bundle`) and, when present, ``landmarks_groundtruth.csv``; an ``online.csv``
     beside it (written by ``slamrel slam --store-online``) is scored too.
     """

@@ -1,4 +1,4 @@
-"""Start-up cost: what each entry point imports (issue 15).
+"""Start-up cost: what each entry point imports (a command pays only for what it uses).
 
 Each check runs a fresh interpreter (``sys.modules`` of the test process already holds
 everything) and lists the heavy modules it ended up with. The oracle is the rule itself:
@@ -60,7 +60,7 @@ def test_recovery_modules_import_no_scipy_stats(module: str) -> None:
 
 
 def test_recover_with_ground_truth_imports_no_scipy_stats(tmp_path: Path) -> None:
-    """Issue 15: NIS and NEES bounds (2 and 3 dof) and the NEES band are computed without
+    """NIS and NEES bounds (2 and 3 dof) and the NEES band are computed without
     scipy.stats, so a whole ``slamrel recover`` of a bundle with ground truth needs none."""
     from slamrel.cli import main
 

@@ -189,8 +189,9 @@ def test_bad_input():
         )
 
 
-def _update_before_issue15(mu, cov, n, slot, meas, r_cov, t, m, gate=np.inf):
-    """The update as it was before issue 15 (full ``K Hᵀ`` product + ``0.5·(P + Pᵀ)`` pass)."""
+def _update_full_product(mu, cov, n, slot, meas, r_cov, t, m, gate=np.inf):
+    """The update as it was before the blocked in-place form (full ``K Hᵀ`` product +
+    ``0.5·(P + Pᵀ)`` pass)."""
     from recovery.models import range_bearing
 
     h, hx, hl = range_bearing(mu[:3], mu[slot : slot + 2])
@@ -217,7 +218,7 @@ def test_symmetric_update_equals_the_old_formula(monkeypatch, world, gate):
 
     b = world_bundle(make_world(world, noise="b", seed=7))
     new = ekf_slam_bundle(b, outlier_gate=gate)[1]
-    monkeypatch.setattr(ekfslam, "_update", _update_before_issue15)
+    monkeypatch.setattr(ekfslam, "_update", _update_full_product)
     old = ekf_slam_bundle(b, outlier_gate=gate)[1]
     np.testing.assert_array_equal(new.association, old.association)
     np.testing.assert_allclose(new.map_xy, old.map_xy, rtol=0, atol=1e-12)
@@ -240,7 +241,7 @@ def test_symmetric_update_keeps_the_covariance_exactly_symmetric():
     ref_mu, ref_cov = mu.copy(), cov.copy()
     r_cov = np.diag([0.1, 0.01])
     assert _update(mu, cov, n, 41, np.array([5.0, 0.3]), r_cov, 0.0, 0)
-    _update_before_issue15(ref_mu, ref_cov, n, 41, np.array([5.0, 0.3]), r_cov, 0.0, 0)
+    _update_full_product(ref_mu, ref_cov, n, 41, np.array([5.0, 0.3]), r_cov, 0.0, 0)
     p = cov[:n, :n]
     assert np.array_equal(p, p.T)
     np.testing.assert_allclose(p, ref_cov[:n, :n], rtol=0, atol=1e-12)

@@ -1,4 +1,4 @@
-"""Parity with evo's RPE and APE on the TUM RGB-D sequences (issue 17), to 1e-9.
+"""Parity with evo's RPE and APE on the TUM RGB-D sequences to 1e-9.
 
 slamrel is driven through its CLI (``evaluate --sync --max-time-diff 0.01``: evo's
 nearest-time association with ``t_max_diff = 0.01``; ``--strategy consecutive --step D

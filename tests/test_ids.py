@@ -1,4 +1,4 @@
-"""relation_metric.ids.rows_of: the one id lookup (issue 13), against a dict oracle."""
+"""relation_metric.ids.rows_of: the one id lookup, against a dict oracle."""
 
 from __future__ import annotations
 

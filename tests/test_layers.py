@@ -1,47 +1,236 @@
 """The import layers README.md's Layout section promises, read from the source (every import
-statement, also those inside functions and under ``TYPE_CHECKING``)."""
+statement, also those inside functions and under ``TYPE_CHECKING``).
+
+A *layer* is one of the three libraries, or one sub-package or top-level module of
+``slamrel`` (``slamrel.formats``, ``slamrel.pipeline``, ...). :data:`ALLOWED` says which
+layers of ours each layer may import besides itself; an entry narrower than a layer (a
+module, such as ``slamrel.backends.least_squares``) allows that module only.
+:data:`TYPE_ONLY` adds imports made only for annotations (under ``if TYPE_CHECKING:``),
+which never run. The same rules, in words, are in README.md ("Who may import whom").
+"""
 
 from __future__ import annotations
 
 import ast
 from pathlib import Path
+from typing import NamedTuple
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-OURS = ("relation_metric", "recovery", "landmark_graph", "slamrel")
-# package -> the packages of ours it may import (itself always)
-ALLOWED = {
-    "relation_metric": set(),
-    "recovery": {"relation_metric"},
-    "landmark_graph": {"relation_metric"},
-    "slamrel": {"relation_metric", "recovery", "landmark_graph"},
+LIBRARIES = ("relation_metric", "recovery", "landmark_graph")
+OURS = (*LIBRARIES, "slamrel")
+
+# The package ``slamrel`` itself (its __init__.py: the public API), as an import target.
+TOP = "slamrel.__init__"
+OUTPUTS, FORMATS, BACKENDS, SIMULATION = (
+    "slamrel.outputs",
+    "slamrel.formats",
+    "slamrel.backends",
+    "slamrel.simulation",
+)
+PLOTS, REVIEW, REPORT, IMPORTERS = (
+    "slamrel.plots",
+    "slamrel.review",
+    "slamrel.report",
+    "slamrel.importers",
+)
+PIPELINE, STUDIES, COMMANDS, CLI, MAIN = (
+    "slamrel.pipeline",
+    "slamrel.studies",
+    "slamrel.commands",
+    "slamrel.cli",
+    "slamrel.__main__",
+)
+
+# layer -> what of ours it may import at run time (itself always)
+ALLOWED: dict[str, tuple[str, ...]] = {
+    "relation_metric": (),
+    "recovery": ("relation_metric",),
+    "landmark_graph": ("relation_metric",),
+    OUTPUTS: ("relation_metric",),
+    # back-ends and the simulator are maths on records: the libraries only, no file I/O
+    BACKENDS: LIBRARIES,
+    SIMULATION: LIBRARIES,
+    # the pose-graph files (g2o, TORO, iSAM) are read into least_squares.PoseGraph
+    FORMATS: (*LIBRARIES, OUTPUTS, "slamrel.backends.least_squares"),
+    IMPORTERS: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS),
+    PLOTS: (*LIBRARIES, OUTPUTS, FORMATS),
+    REVIEW: (*LIBRARIES, OUTPUTS, FORMATS),
+    REPORT: (*LIBRARIES, OUTPUTS, FORMATS, PLOTS),
+    PIPELINE: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REVIEW, REPORT),
+    STUDIES: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REPORT, PIPELINE),
+    COMMANDS: (
+        *LIBRARIES,
+        OUTPUTS,
+        FORMATS,
+        BACKENDS,
+        SIMULATION,
+        IMPORTERS,
+        PLOTS,
+        REVIEW,
+        REPORT,
+        PIPELINE,
+        STUDIES,
+    ),
+    CLI: (*LIBRARIES, COMMANDS, TOP),  # TOP: __version__
+    MAIN: (CLI,),
+    # the public API re-exports from everywhere; its imports are lazy (made on first use)
+    TOP: OURS,
+}
+# layer -> what of ours it may import for annotations only (``if TYPE_CHECKING:``)
+TYPE_ONLY: dict[str, tuple[str, ...]] = {
+    BACKENDS: (SIMULATION,),  # pose_only's functions take a simulation.worlds.World
+    REPORT: (PIPELINE,),  # run_page's builders take the pipeline's RunResult, Agreement
 }
 
 
-def _imports(path: Path) -> list[tuple[int, str]]:
-    """(line, top-level package) of every absolute import in ``path``."""
+class Import(NamedTuple):
+    line: int
+    module: str  # dotted name of the module imported (``from p import m``: ``p.m``)
+    type_only: bool  # under ``if TYPE_CHECKING:``
+    relative: bool = False
+
+
+def _is_module(dotted: str) -> bool:
+    """Is ``dotted`` a module or package of this repository?"""
+    base = ROOT.joinpath(*dotted.split("."))
+    return base.with_suffix(".py").is_file() or (base / "__init__.py").is_file()
+
+
+def _type_checking_nodes(tree: ast.AST) -> set[int]:
+    """``id`` of every node inside the body of an ``if TYPE_CHECKING:`` block."""
+    inside: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If):
+            test = node.test
+            name = test.attr if isinstance(test, ast.Attribute) else getattr(test, "id", None)
+            if name == "TYPE_CHECKING":
+                inside.update(id(n) for stmt in node.body for n in ast.walk(stmt))
+    return inside
+
+
+def _imports(path: Path) -> list[Import]:
+    """Every import statement of ``path``, with the module it brings in."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    typed = _type_checking_nodes(tree)
     found = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in ast.walk(tree):
+        only = id(node) in typed
         if isinstance(node, ast.Import):
-            found += [(node.lineno, a.name.split(".")[0]) for a in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            found.append((node.lineno, node.module.split(".")[0]))
-    return found
+            found += [Import(node.lineno, a.name, only) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                found.append(Import(node.lineno, node.module or "", only, relative=True))
+                continue
+            assert node.module is not None
+            for a in node.names:
+                sub = f"{node.module}.{a.name}"
+                found.append(Import(node.lineno, sub if _is_module(sub) else node.module, only))
+    return sorted(found)
 
 
-def test_import_scan_sees_nested_imports(tmp_path: Path) -> None:
+def _layer(path: Path) -> str:
+    """The layer a source file belongs to."""
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    if parts[0] != "slamrel":
+        return parts[0]
+    return "slamrel." + parts[1]
+
+
+def _target(module: str) -> str:
+    """An imported module as :func:`_is_allowed` compares it (the package slamrel: TOP)."""
+    return TOP if module == "slamrel" else module
+
+
+def _within(module: str, prefix: str) -> bool:
+    return module == prefix or module.startswith(prefix + ".")
+
+
+def _is_allowed(layer: str, imp: Import) -> bool:
+    target = _target(imp.module)
+    if target.split(".")[0] not in OURS or _within(target, layer):
+        return True
+    allowed = ALLOWED[layer] + (TYPE_ONLY.get(layer, ()) if imp.type_only else ())
+    return any(_within(target, a) for a in allowed)
+
+
+def _sources(package: str) -> list[Path]:
+    return sorted((ROOT / package).rglob("*.py"))
+
+
+def test_import_scan_sees_nested_and_type_only_imports(tmp_path: Path) -> None:
     src = tmp_path / "m.py"
-    src.write_text("import os\nif 0:\n    def f():\n        from slamrel.cli import main\n")
-    assert _imports(src) == [(1, "os"), (4, "slamrel")]
+    src.write_text(
+        "import os\n"
+        "from typing import TYPE_CHECKING\n"
+        "if 0:\n"
+        "    def f():\n"
+        "        from slamrel.cli import main\n"
+        "if TYPE_CHECKING:\n"
+        "    from slamrel.pipeline import RunResult\n"
+        "from slamrel import commands, __version__\n"
+        "from . import sibling\n"
+    )
+    assert _imports(src) == [
+        Import(1, "os", False),
+        Import(2, "typing", False),
+        Import(5, "slamrel.cli", False),
+        Import(7, "slamrel.pipeline", True),
+        Import(8, "slamrel", False),
+        Import(8, "slamrel.commands", False),
+        Import(9, "", False, relative=True),
+    ]
+    assert not _is_allowed(SIMULATION, Import(1, "slamrel.backends.pose_only", False))
+    assert _is_allowed(FORMATS, Import(1, "slamrel.backends.least_squares", False))
+    assert not _is_allowed(FORMATS, Import(1, "slamrel.backends.ekf_slam", False))
+    assert not _is_allowed(REPORT, Import(1, "slamrel.pipeline", False))
+    assert _is_allowed(REPORT, Import(1, "slamrel.pipeline", True))
+    assert not _is_allowed(COMMANDS, Import(1, "slamrel", False))
+    assert _is_allowed(CLI, Import(1, "slamrel", False))
+
+
+def test_every_layer_has_a_rule() -> None:
+    """A new sub-package or top-level module of slamrel needs its line in ALLOWED."""
+    layers = {_layer(p) for package in OURS for p in _sources(package)}
+    assert layers - ALLOWED.keys() == set()
+    assert ALLOWED.keys() - layers == set()
+
+
+def test_the_rules_are_layers() -> None:
+    """No layer imports itself through others: the rules order the layers (lazy TOP aside)."""
+
+    def layer_of(entry: str) -> str:
+        return max((k for k in ALLOWED if _within(entry, k)), key=len)
+
+    below = {
+        layer: {layer_of(a) for a in allowed} - {layer, TOP}
+        for layer, allowed in ALLOWED.items()
+        if layer != TOP
+    }
+    done: set[str] = set()
+    while len(done) < len(below):
+        ready = {k for k, v in below.items() if k not in done and v <= done}
+        assert ready, f"import cycle among {sorted(below.keys() - done)}"
+        done |= ready
+
+
+def test_only_the_cli_imports_the_commands_and_nothing_the_cli() -> None:
+    may_import = {k for k, v in ALLOWED.items() if any(_within(COMMANDS, a) for a in v)}
+    assert may_import - {TOP} == {CLI}
+    assert {k for k, v in ALLOWED.items() if CLI in v} - {TOP} == {MAIN}
+    assert all(_within(a, "relation_metric") for a in ALLOWED["recovery"])
+    assert all(_within(a, "relation_metric") for a in ALLOWED["landmark_graph"])
 
 
 @pytest.mark.parametrize("package", OURS)
 def test_package_imports_only_the_layers_below(package: str) -> None:
     wrong = [
-        f"{path.relative_to(ROOT)}:{line} imports {top}"
-        for path in sorted((ROOT / package).rglob("*.py"))
-        for line, top in _imports(path)
-        if top in OURS and top != package and top not in ALLOWED[package]
+        f"{path.relative_to(ROOT)}:{imp.line} ({_layer(path)}) imports "
+        + ("relatively (use absolute imports)" if imp.relative else imp.module)
+        + (" (type only)" if imp.type_only else "")
+        for path in _sources(package)
+        for imp in _imports(path)
+        if imp.relative or not _is_allowed(_layer(path), imp)
     ]
     assert wrong == []

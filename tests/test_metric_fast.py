@@ -1,4 +1,4 @@
-"""The metric's fast paths (issue 15) give the bits of the plain computations they replace."""
+"""The metric's fast paths give the bits of the plain computations they replace."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The output rule of every command, driven through the CLI (issue 11, "outputs").
+"""The output rule of every command, driven through the CLI (README.md, "Outputs").
 
 One test per class, parametrised over the commands: outputs that are, lie inside or contain an
 input are refused and nothing on disk changes; a foreign folder is never replaced; a slamrel

@@ -1,4 +1,4 @@
-"""recovery.bundle: exact round trip, and every rejection of BUNDLE.md with file and line;
+"""recovery.bundle: exact round trip, and every rejection of docs/bundle.md with file and line;
 the CLI's exit code 3 on bad bundles; ``slamrel evaluate`` with a bundle as REFERENCE."""
 
 from __future__ import annotations
@@ -213,7 +213,7 @@ def test_evaluate_accepts_bundle_as_reference(bundle_dir: Path, tmp_path: Path) 
     assert res["translation"]["abs"]["max"] < 1e-8
 
 
-# ------------------------------------------------- the checks live in the type (issue 13)
+# ------------------------------ the checks live in the type (every producer is checked)
 
 
 @pytest.fixture(scope="module")

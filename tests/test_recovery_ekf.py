@@ -1,4 +1,4 @@
-"""The filter's and smoother's fast paths (issue 15) give the bits of the plain computations
+"""The filter's and smoother's fast paths give the bits of the plain computations
 they replace: the scalar angle wrap, the composed predictions (per-epoch values repeated over
 the segments, the rotated step noise without its zero terms), the fill of every grid pose and
 the smoother between epochs. Each oracle is the plain version the fast path replaced."""
@@ -22,7 +22,7 @@ def bits(x):
 
 
 def plain_segments(sigma, heading, position, epochs):
-    """prepare_segments before issue 15: searched bases, gathered angles, full predict6."""
+    """prepare_segments before its fast path: searched bases, gathered angles, full predict6."""
     n = heading.shape[0]
     base = np.zeros(n, dtype=np.int64)
     base[1:] = epochs[np.searchsorted(epochs, np.arange(n - 1), side="right") - 1]
@@ -56,7 +56,7 @@ def plain_segments(sigma, heading, position, epochs):
 
 
 def plain_fill(seg, psi, post_x, post_p):
-    """fill before issue 15: searched epochs, cos/sin of the repeated angles."""
+    """fill before its fast path: searched epochs, cos/sin of the repeated angles."""
     e_of = np.searchsorted(seg.epochs, seg.base)
     ps = psi[e_of]
     c, s = np.cos(ps), np.sin(ps)
@@ -71,7 +71,7 @@ def plain_fill(seg, psi, post_x, post_p):
 
 
 def plain_smooth(fr):
-    """smooth before issue 15: Hillis–Steele scan, then every pose between epochs gathered."""
+    """smooth before its fast path: Hillis–Steele scan, then every pose between epochs gathered."""
     ep = fr.segments.epochs
     w = plain_fill(fr.segments, fr.psi, fr.post_poses, fr.post_covariances)[0]
     post_x, post_p, pri_x, pri_p = (

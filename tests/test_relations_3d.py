@@ -1,4 +1,4 @@
-"""The relation metric on SE(3): readers, relations, errors, the CLI (issue 17)."""
+"""The relation metric on SE(3): readers, relations, errors, the CLI."""
 
 from __future__ import annotations
 

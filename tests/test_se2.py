@@ -117,7 +117,7 @@ def test_cumulative_compose_equals_loop(rng):
     np.testing.assert_allclose(fast, np.array(slow), atol=1e-9)
 
 
-# --- derivatives (issue 13: one home in se2) -------------------------------------------------
+# --- derivatives (one home: se2) ----------------------------------------------------------
 
 
 def _fd(f, x: np.ndarray, h: float = 1e-6) -> np.ndarray:

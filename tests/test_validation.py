@@ -1,4 +1,4 @@
-"""Recovery is faithful: it ranks SLAM runs as their online trajectories do (issue 5, item 5)."""
+"""Recovery is faithful: it ranks SLAM runs as their online trajectories do."""
 
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ def test_tuning_study_on_a_small_grid():
     assert summ["runs"] == 4 and -1.0 <= summ["kendall_tau_global"] <= 1.0
 
 
-# The full 5 × 5 grid (issue 12: broken runs ≥ 0.5× online, healthy ≤ 1.5×, τ ≥ 0.8 on
+# The full 5 × 5 grid (acceptance: broken runs ≥ 0.5× online, healthy ≤ 1.5×, τ ≥ 0.8 on
 # far-apart relations, separation 1) is asserted in notebooks/validation.ipynb, which
 # tests/test_notebooks.py executes: running it twice would add a minute to the suite.
 
@@ -93,7 +93,7 @@ def test_robust_recovery_on_mrclam_robot5():
 
 @pytest.mark.parametrize("robot", [1, 2, 3, 4, 5])
 def test_default_recovery_meets_issue_12_on_mrclam(robot: int) -> None:
-    """Issue 12's acceptance (MRCLAM dataset 7, fitted noise, surveyed map): the default
+    """The default's acceptance (MRCLAM dataset 7, fitted noise, surveyed map): the default
     filter's position ATE after SE(2) alignment at the Vicon times is ≤ 1.05 × min(plain EKF,
     99.9%-gated EKF), nothing gated, the down-weighted share reported; the smoother is below
     the filter on the 1 s relations and on the unaligned ATE (the map is in Vicon's frame).
@@ -116,7 +116,7 @@ def test_default_recovery_meets_issue_12_on_mrclam(robot: int) -> None:
     r = {row["variant"]: row for row in rows}["default"]
     assert r["filter_ratio"] <= 1.05 and r["filter_1s_ratio"] <= 1.05
     assert r["smoother_1s"] < r["filter_1s"] and r["smoother_raw"] < r["filter_raw"]
-    # the issue's relation measure: 1 s and loop relations (revisits within 0.5 m, 30 s apart)
+    # measured with relations too: 1 s and loop relations (revisits within 0.5 m, 30 s apart)
     assert r["filter_loops_ratio"] <= 1.05 and r["smoother_loops"] < r["filter_loops"]
     if robot != 4:
         assert r["smoother"] < r["filter"]
@@ -127,7 +127,7 @@ def test_default_recovery_meets_issue_12_on_mrclam(robot: int) -> None:
 
 
 def test_robust_recovery_does_not_hide_a_broken_map():
-    """DESIGN.md pitfall: on an EKF-SLAM run with 1% wrong associations, a 99.9% gate without
+    """docs/design.md pitfall: on an EKF-SLAM run with 1% wrong associations, a 99.9% gate without
     re-entry makes the map look much better than the run was; the M-estimators (scale from a
     plain pass) and the re-entering default stay near the online error."""
     from recovery.recover import recover

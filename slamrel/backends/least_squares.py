@@ -293,7 +293,7 @@ def _residuals_and_jacobian(
 
 def _half_sum_sq(r: Array) -> float:
     """``½ rᵀr``, without BLAS: OpenBLAS runs a long ``ddot`` on two threads and leaves the
-    second one spinning for ~0.1 s of CPU after it (measured: 90,000 residuals)."""
+    second one spinning after it, burning CPU (measured in benchmarks/README.md)."""
     return 0.5 * float(np.einsum("i,i->", r, r))
 
 
@@ -345,7 +345,7 @@ class _NormalEquations:
     * SuperLU fallback: the variables are stored pre-permuted by a symmetric minimum-degree
       ordering of the block graph (:func:`_block_order_permutation`), computed once.
       SuperLU's own ordering on top of it breaks ties far better than on the natural order
-      (10⁴-pose Manhattan graph: 0.65 s against 1.5 s per factorisation for the same fill).
+      (factorisations about twice as fast for the same fill: benchmarks/README.md).
     """
 
     def __init__(self, g: PoseGraph, n: int, m: int) -> None:
@@ -591,7 +591,7 @@ def solve_graph_incremental(
        odometry poses are added at once); it is undone and retried with the step divided
        by ``growth²`` (not below ``batch``, where it is accepted as it is).
 
-    Why this scheme (issue 15): a fixed step (``growth=1``) is robust but solves ``N/batch``
+    Why this scheme: a fixed step (``growth=1``) is robust but solves ``N/batch``
     ever larger problems, O(N²/batch) work (14 solves on Victoria Park); one batch is
     fastest where it works (7 iterations on a 10⁴-pose Manhattan graph against 34 grown)
     but falls into the wrong minimum on Victoria Park (68 iterations to cost 2.5e5). So the

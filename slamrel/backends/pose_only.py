@@ -29,7 +29,7 @@ more accurate than Method 1, which throws away the information between non-adjac
 pose-only LS is somewhat less accurate than full LS; and the map fitted to the pose-only
 trajectory (NEES3) is about as consistent as full LS's map (NEES2). Without the inflation
 (``inflate=False``) Method 2 reuses information and is over-confident (measured on simple1:
-whole-trajectory NEES ≈ 1000 against a gate ≈ 280; see ``../shared/DESIGN.md``).
+whole-trajectory NEES ≈ 1000 against a gate ≈ 280; see ``docs/design.md``).
 
 Where the per-pair least squares starts (``start``): the paper starts it at the ground
 truth (``"truth"``, pass ``truth=``), which a reader with real data does not have. The default

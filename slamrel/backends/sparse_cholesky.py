@@ -9,18 +9,19 @@ Back-ends, chosen when the object is built:
     QDLDL's LDLᵀ with an AMD ordering. The ordering and the symbolic factorisation are
     computed on the first :meth:`SparseCholesky.factor` and *reused* by every later one
     (``Solver.update``: numeric factorisation only). No supernodes, so its time grows with
-    the flops: the right choice for graphs with little fill (a pose chain with landmarks:
-    Victoria Park, 2.1·10⁴ unknowns, 2 ms per factorisation against 21 ms for SuperLU).
+    the flops: the right choice for graphs with little fill (a pose chain with landmarks,
+    such as Victoria Park: an order of magnitude faster than SuperLU).
 ``"cholmod"`` (optional extra ``fast``: the ``cvxopt`` wheel)
     CHOLMOD's supernodal Cholesky (BLAS-3 on dense supernodes) through ``cvxopt.cholmod``:
     the ordering (CHOLMOD's AMD) and the symbolic analysis once per pattern
     (``cholmod.symbolic``), then a numeric factorisation only per call (``cholmod.numeric``).
     On graphs with much fill (2-D loop structure: a 10⁴-pose Manhattan grid, 3.6·10⁶
-    entries in L) it is 20× QDLDL (46 ms against 1.04 s);
-    on low-fill graphs QDLDL is as fast or faster (Victoria Park: 4 ms against 2 ms).
+    entries in L) it is an order of magnitude faster than QDLDL;
+    on low-fill graphs QDLDL is as fast or faster (Victoria Park).
     cvxopt is GPL-3.0 and bundles CHOLMOD's GPL-2.0+ Supernodal module, so it is an extra,
     not a core dependency of this BSD-3 package. (Before: the ``cholespy`` wheel, which
-    re-ran the analysis at every factorisation and took no ordering: 0.21-0.26 s there.)
+    re-ran the analysis at every factorisation and took no ordering: slower there.)
+    Timings of all three: benchmarks/README.md.
 ``"superlu"`` (fallback: scipy only)
     scipy's SuperLU in symmetric mode, no pivoting, minimum-degree ordering on ``A + Aᵀ``
     (an LU with a Cholesky's fill); no reuse between factorisations. Used when neither
@@ -57,12 +58,11 @@ __all__ = [
 
 #: Expected flops (``Σ_j c_j²`` over the columns of the Cholesky factor) above which CHOLMOD's
 #: supernodal numeric factorisation beats QDLDL's (both reuse their analysis). Measured per
-#: factorisation + solve (``benchmarks/bench_sparse_cholesky.py``; flops as
-#: :mod:`~slamrel.backends.least_squares` estimates them from the block graph): Manhattan 10³
-#: poses 6.7·10⁵ (QDLDL 0.6 ms, CHOLMOD 1.0 ms), Victoria Park 4.9·10⁶ (8.1 and 7.2 ms,
-#: loaded run), Manhattan 2·10³ 5.8·10⁶ (3.1 and 2.5 ms), 3.5·10³ 2.8·10⁷ (13.8 and
-#: 9.7 ms), 10⁴ 1.35·10⁹ (509 and 54 ms): the crossover lies near 5·10⁶; above 10⁷
-#: CHOLMOD is clearly ahead (below, QDLDL keeps Victoria Park's results as they were).
+#: factorisation + solve (``benchmarks/bench_sparse_cholesky.py``, timings in
+#: benchmarks/README.md; flops as :mod:`~slamrel.backends.least_squares` estimates them from
+#: the block graph) on Manhattan graphs of 10³–10⁴ poses (6.7·10⁵–1.35·10⁹ flops) and
+#: Victoria Park (4.9·10⁶): the crossover lies near 5·10⁶; above 10⁷ CHOLMOD is clearly
+#: ahead (below, QDLDL keeps Victoria Park's results as they were).
 CHOLMOD_MIN_FLOPS = 1e7
 
 _SINGULAR = "the normal equations are singular (unobserved states?)"

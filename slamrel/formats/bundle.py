@@ -282,7 +282,7 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     Raises
     ------
     InputError
-        For every defect listed in ``BUNDLE.md``, naming file, line and what was expected.
+        For every defect listed in ``docs/bundle.md``, naming file, line and what was expected.
     """
     root = Path(directory)
     if not root.is_dir():

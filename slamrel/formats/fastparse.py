@@ -40,8 +40,8 @@ Method
     layout, so its tokens need not be split into short and long ones).
 
 Speed
-    A 10^6-line, 91 MB ``.relations`` file: about 0.4 s CPU on the 2-core development
-    machine (``np.loadtxt``: 1.0–1.5 s; pandas' C reader: 0.4 s). The table is allocated
+    A 10^6-line, 91 MB ``.relations`` file is read faster than by ``np.loadtxt`` and about
+    as fast as by pandas' C reader (timings in benchmarks/README.md). The table is allocated
     column by column (an F-ordered ``(N, ncols)`` array): each column is written and later
     read contiguously. This module needs numpy only, and its
     exactness follows from the argument above. See ``benchmarks/bench_relation_metric.py``.
@@ -187,8 +187,9 @@ def _prime_allocator() -> None:
     trims the heap above twice that; it raises both to the size of the largest mapped block
     freed so far (up to 32 MiB). The parser's per-block temporaries (1–3 MiB) would
     otherwise be mapped, faulted in and unmapped again block after block on the first call
-    in a process: ~1.3·10^5 page faults, 0.5 s of system time for a 91 MB file (0.07 s after
-    this). The array's pages are never touched; elsewhere than glibc this costs nothing.
+    in a process: page faults by the hundred thousand for a 91 MB file, most of the first
+    call's system time (measured in benchmarks/README.md). The array's pages are never
+    touched; elsewhere than glibc this costs nothing.
     """
     global _primed
     if not _primed:

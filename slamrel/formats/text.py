@@ -578,8 +578,9 @@ def _keyword_records_fast(
     src: SourceText, fields: dict[str, int]
 ) -> dict[str, tuple[NDArray[np.float64], NDArray[np.int64]]] | None:
     """:func:`read_keyword_records` for a well-formed file, one ``float`` per token without
-    per-token checks (≈ 8× faster); ``None`` at the first thing :func:`parse_float` or the
-    record checks would reject, so the caller can report it."""
+    per-token checks (several times faster: benchmarks/README.md); ``None`` at the first
+    thing :func:`parse_float` or the record checks would reject, so the caller can report
+    it."""
     tokens: dict[str, list[str]] = {k: [] for k in fields}
     lines: dict[str, list[int]] = {k: [] for k in fields}
     for number, text in src.data_lines():

@@ -168,7 +168,7 @@ class NoiseFit:
     Attributes
     ----------
     sigma_v, sigma_omega : float
-        Per-row standard deviations of the velocity-model controls (BUNDLE.md ``velocity``
+        Per-row standard deviations of the velocity-model controls (docs/bundle.md ``velocity``
         model), from odometry vs. ground-truth motion over ``window`` seconds.
     bias_v, bias_omega : float
         Mean control errors (reported, not modelled).

@@ -7,7 +7,9 @@ relation metric of the trajectory the filter estimated online does.
 :func:`faithfulness_study` runs the pipeline for every configuration with the CLI's default
 recovery (no innovation gate; stretches of disagreement re-entered and reported) and returns
 both scores per run; Kendall's τ measures the agreement of the two rankings.
-:func:`tuning_study` is the grid over process-noise scale × wrong associations (issue 12).
+:func:`tuning_study` is the grid over process-noise scale × wrong associations: a broken
+map must keep its error however the filter was tuned, and a healthy but mis-tuned run must
+not look broken.
 
 Two scores, two questions: the online error is what the filter estimated while it ran; the
 recovered error is how well the *final map* (with the run's models and associations)
@@ -15,7 +17,7 @@ localises the log. For a healthy, well-tuned run the final map is better than th
 filter had early on, so the recovered error is lower; for a mis-tuned filter the recovery
 inherits the tuning (it uses the same models), so the two can differ either way without the
 map being broken. A broken map (wrong associations) must never look healthy: its recovered
-error stays of the order of its online error (DESIGN.md, measured pitfalls).
+error stays of the order of its online error (docs/design.md, measured pitfalls).
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ __all__ = [
     "recovery_variants_table",
 ]
 
-#: The grid of issue 12: process-noise scale of the EKF-SLAM filter × wrong associations.
+#: The validation grid: process-noise scale of the EKF-SLAM filter × wrong associations.
 PROCESS_NOISE_SCALES = (0.03, 0.1, 0.3, 1.0, 10.0)
 WRONG_ASSOCIATIONS = (0.0, 0.002, 0.005, 0.01, 0.02)
 
@@ -172,7 +174,7 @@ def tuning_study(
     corruptions: Sequence[float] = WRONG_ASSOCIATIONS,
     recovery: dict[str, Any] | None = None,
 ) -> FaithfulnessStudy:
-    """Faithfulness over the filter's tuning as well as association errors (issue 12).
+    """Faithfulness over the filter's tuning as well as association errors.
 
     EKF-SLAM runs over process-noise scale × wrong associations (default: the 5 × 5 grid
     :data:`PROCESS_NOISE_SCALES` × :data:`WRONG_ASSOCIATIONS`), recovered with the CLI's
@@ -190,7 +192,7 @@ def tuning_study(
 
 #: Recovery variants compared on real data (keyword arguments of ``recover``): the plain EKF
 #: and the 99.9%-gated EKF as they were (no re-entry, no weights), the plain EKF with
-#: re-entry (the default before issue 12's acceptance), the CLI default (redescending
+#: re-entry (the default before the redescending weights), the CLI default (redescending
 #: weights + re-entry), and the iterated M-estimators.
 RECOVERY_VARIANTS: dict[str, dict[str, Any]] = {
     "plain": {"max_outlier_run": None, "robust": None},

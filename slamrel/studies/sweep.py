@@ -14,9 +14,8 @@ a Dask cluster (``scheduler=ADDRESS``, or ``"local"`` for a ``LocalCluster``; ne
 
 The processes this module starts run single-threaded BLAS (``OPENBLAS_NUM_THREADS=1`` and
 the like, unless the environment sets them): the tasks are many small linear-algebra calls,
-for which BLAS threads only contend. Measured on this 2-core machine (shared, load ≈ 3):
-24 study cases (hu-simple1, full LS and pose-only M2) took 29.4 s in one process with
-OpenBLAS's default threads and 2.4 s with one thread.
+for which BLAS threads only contend: with OpenBLAS's default threads a study ran an order of
+magnitude slower than with one thread (measured in benchmarks/README.md).
 """
 
 from __future__ import annotations
