@@ -856,19 +856,21 @@ def _check_finite(
 ) -> tuple[Array, int]:
     """Non-finite poses raise; a non-PSD smoothed/batch covariance is repaired or raises.
 
-    The RTS recursion subtracts covariances that, after a re-entry's inflation, differ by
-    orders of magnitude; rounding can leave a slightly indefinite result. With ``repair`` each
-    such covariance is replaced by its projection onto the PSD cone (symmetrised, negative
-    eigenvalues set to zero) and the number of repaired poses is returned.
+    Non-PSD is the one covariance check of :mod:`relation_metric.checks` (asymmetric, or an
+    eigenvalue below ``−COV_RTOL · max |C_ij|``). The RTS recursion subtracts covariances
+    that, after a re-entry's inflation, differ by orders of magnitude; rounding can leave a
+    slightly indefinite result. With ``repair`` each such covariance is replaced by its
+    projection onto the PSD cone (symmetrised, negative eigenvalues set to zero) and the
+    number of repaired poses is returned.
     """
+    from relation_metric.checks import bad_covariances
     from relation_metric.errors import DivergenceError
 
     bad = ~(np.isfinite(poses).all(axis=1) & np.isfinite(covs).all(axis=(1, 2)))
     n_rep = 0
     if not bad.any():
-        ev = np.linalg.eigvalsh(covs)
-        scale = np.maximum(np.abs(ev).max(axis=1), 1e-300)
-        neg = ev[:, 0] < -1e-9 * scale
+        neg = np.zeros(covs.shape[0], dtype=bool)
+        neg[bad_covariances(covs)[0]] = True
         if neg.any() and repair:
             sym = 0.5 * (covs[neg] + covs[neg].transpose(0, 2, 1))
             w, v = np.linalg.eigh(sym)

@@ -316,6 +316,24 @@ def test_indefinite_smoothed_covariance_is_repaired_not_an_error() -> None:
         _check_finite(np.zeros((6, 3)), covs, np.arange(6.0))
 
 
+def test_smoothed_covariance_check_is_the_one_of_relation_metric_checks() -> None:
+    from recovery.recover import _check_finite
+
+    # all-ones (eigenvalues 3, 0, 0) shifted by −2e-9: the smallest eigenvalue −2e-9 is below
+    # −COV_RTOL · max |C_ij| = −1e-9 (though above −1e-9 × the largest eigenvalue, 3)
+    c = np.ones((3, 3)) - 2e-9 * np.eye(3)
+    ok = np.eye(3)
+    fixed, n = _check_finite(np.zeros((2, 3)), np.stack([ok, c]), np.arange(2.0), repair=True)
+    assert n == 1 and np.linalg.eigvalsh(fixed[1])[0] >= -1e-15
+    np.testing.assert_array_equal(fixed[0], ok)
+    # and an asymmetric one is symmetrised
+    a = ok.copy()
+    a[0, 1] = 1e-6
+    fixed, n = _check_finite(np.zeros((1, 3)), a[None], np.arange(1.0), repair=True)
+    assert n == 1 and fixed[0][0, 1] == pytest.approx(0.5e-6, rel=1e-9)
+    assert fixed[0][1, 0] == pytest.approx(0.5e-6, rel=1e-9)
+
+
 def test_nees_blowups_against_ground_truth() -> None:
     from recovery.recover import nees_blowups
 
