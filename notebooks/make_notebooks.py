@@ -141,7 +141,7 @@ RUN_WALKTHROUGH = [
         "    r = recover(broken, method='smoother', gate=gate, max_outlier_run=None)\n"
         "    k = np.searchsorted(r.trajectory.timestamps, truth.timestamps)\n"
         "    e = evaluate(rel, Trajectory(truth.timestamps, r.trajectory.poses[k])).translation['abs'].mean\n"
-        "    print(f\"gate {gate}: global error {e:.3f} m, gated {100 * r.counts['gated_fraction']:.1f}% of the measurements\")"
+        '    print(f"gate {gate}: global error {e:.3f} m, gated {100 * r.counts.gated_fraction:.1f}% of the measurements")'
     ),
     new_markdown_cell(
         "The whole chain, with its report, is one call (`slamrel run` on the command line):"

@@ -56,7 +56,7 @@ from tqdm import tqdm
 
 from relation_metric import se2
 from relation_metric.arrays import Array
-from relation_metric.consistency import chi2_quantile
+from relation_metric.consistency import OUTLIER_PROBABILITY, chi2_quantile
 from relation_metric.errors import DivergenceError
 from relation_metric.se2 import wrap_angle_float
 from relation_metric.trajectory import readonly
@@ -691,8 +691,9 @@ def run_filter(
         χ² probability of the innovation gate (2 dof); ``None`` uses every measurement.
     max_outlier_run : int, optional
         A measurement is *outlying* when its NIS ``yᵀ S⁻¹ y`` exceeds the gate (or the 99.99%
-        χ² bound without a gate). After this many consecutive outlying measurements the map and
-        the log disagree and the filter is **re-entered** (see ``on_divergence``); ``None``
+        χ² bound without a gate, :data:`~relation_metric.consistency.OUTLIER_PROBABILITY`).
+        After this many consecutive outlying measurements the map and the log disagree and
+        the filter is **re-entered** (see ``on_divergence``); ``None``
         never re-enters (the plain EKF). Not the twin of EKF-SLAM's ``max_rejected_run``
         (:func:`slamrel.backends.ekf_slam.ekf_slam`): that one *force-accepts* a measurement
         after a run of *gated* ones (the gate gives way); this one *inflates the covariance*
@@ -759,7 +760,7 @@ def run_filter(
         )
     setup = _setup(inp, linearize_at, use, weights)
     gate_thr = chi2_quantile(gate, 2) if gate is not None else math.inf
-    outlier = gate_thr if gate is not None else chi2_quantile(0.9999, 2)
+    outlier = gate_thr if gate is not None else chi2_quantile(OUTLIER_PROBABILITY, 2)
     c = float(robust_threshold) if robust_threshold is not None else ROBUST_C
     rules = _Rules(
         gate=gate_thr,

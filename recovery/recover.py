@@ -13,12 +13,20 @@ a non-positive-definite covariance) the filter is re-entered by the documented r
 stretches afterwards and :meth:`Recovery.report` reports them (intervals ``[t0, t1]``, the
 fraction of the log, NIS statistics) next to the score. ``on_divergence="raise"`` restores
 the error.
+
+**Typed results.** A :class:`Recovery` holds its findings as frozen records —
+:class:`RecoveryCounts`, :class:`Divergence` (its :class:`Stretch` es and, with ground truth,
+its :class:`NeesBlowup` s), :class:`NisStats`, :class:`NeesStats`, :class:`RobustSettings`,
+:class:`BatchCosts` — each with an ``as_dict()`` giving its part of the JSON report
+(:meth:`Recovery.report`, ``slamrel recover --report``, ``metrics.json`` of ``slamrel run``).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,7 +49,7 @@ from recovery.smoother import smooth
 from recovery.steps import Steps, build_steps
 from relation_metric import consistency
 from relation_metric.arrays import Array
-from relation_metric.consistency import chi2_quantile
+from relation_metric.consistency import OUTLIER_PROBABILITY, chi2_quantile, flag_runs
 from relation_metric.errors import InputError
 from relation_metric.time_association import match_nearest_times
 from relation_metric.trajectory import Trajectory, readonly
@@ -51,10 +59,18 @@ __all__ = [
     "METHODS",
     "MAP_MODES",
     "DEFAULT_MAX_OUTLIER_RUN",
+    "BatchCosts",
+    "Divergence",
+    "NeesBlowup",
+    "NeesStats",
+    "NisStats",
     "Recovery",
+    "RecoveryCounts",
+    "RobustSettings",
     "Stretch",
     "disagreement_stretches",
     "filter_input",
+    "nees_blowups",
     "recover",
 ]
 
@@ -66,7 +82,7 @@ MAP_MODES = ("joint", "marginal", "ignore")
 
 @dataclass(frozen=True)
 class Stretch:
-    """A stretch of the log where the map and the log disagree.
+    """A stretch of the log where the map and the log disagree (:func:`disagreement_stretches`).
 
     Attributes
     ----------
@@ -77,6 +93,7 @@ class Stretch:
     outlying : int
         Of those, with NIS beyond the outlier bound.
     nis_median, nis_max : float
+        Median and largest NIS of those measurements (χ², 2 dof).
     reentries : int
         Filter re-entries inside it.
     """
@@ -100,26 +117,6 @@ class Stretch:
             "nis_max": self.nis_max,
             "reentries": self.reentries,
         }
-
-
-def _runs(
-    flags: NDArray[np.bool_], min_len: int, bridge: int
-) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Maximal runs of True of length ≥ ``min_len``, merged across fewer than ``bridge`` False.
-
-    Returns inclusive ``(start, end)`` index arrays (vectorised).
-    """
-    f = np.concatenate(([0], flags.astype(np.int8), [0]))
-    d = np.diff(f)
-    st = np.flatnonzero(d == 1)
-    en = np.flatnonzero(d == -1) - 1
-    keep = en - st + 1 >= min_len
-    st, en = st[keep], en[keep]
-    if st.size > 1:
-        new = np.concatenate(([True], st[1:] - en[:-1] - 1 >= bridge))
-        first = np.flatnonzero(new)
-        st, en = st[first], np.maximum.reduceat(en, first)
-    return st, en
 
 
 def disagreement_stretches(
@@ -148,7 +145,8 @@ def disagreement_stretches(
     ok = np.isfinite(v)
     order, v = order[ok], v[ok]
     out = v > fr.outlier_bound
-    st, en = _runs(out, max(1, int(min_run)), max(1, int(min_run)))
+    m = max(1, int(min_run))
+    st, en = flag_runs(out, m, max_gap=m - 1)
     t = inp.times[inp.meas_grid[order]]
     ev = fr.events
     t_re = inp.times[ev.grid[ev.kind == REENTRY]]
@@ -170,41 +168,377 @@ def disagreement_stretches(
     return res
 
 
-def nees_stretches(
+@dataclass(frozen=True)
+class NeesBlowup:
+    """A NEES blow-up: a run of poses whose NEES against ground truth is outlying.
+
+    Found by :func:`nees_blowups`: at least ``min_run`` consecutive poses (of those with
+    ground truth) whose NEES exceeds ``χ²⁻¹(OUTLIER_PROBABILITY; 3)`` (the single-pose
+    bound, 3 dof; :data:`~relation_metric.consistency.OUTLIER_PROBABILITY`), runs fewer than
+    ``min_run`` poses apart merged. Not the report verdict's NEES excursions (95 % band,
+    short runs, no merging: :func:`slamrel.report.verdict.nees_excursions`).
+
+    Attributes
+    ----------
+    t0, t1 : float
+        Times of its first and last pose [s].
+    poses : int
+        Poses with ground truth in ``[t0, t1]`` (merged gaps included).
+    nees_max : float
+        The largest NEES in it (χ², 3 dof).
+    """
+
+    t0: float
+    t1: float
+    poses: int
+    nees_max: float
+
+    def as_dict(self) -> dict[str, float | int]:
+        return {"t0": self.t0, "t1": self.t1, "poses": self.poses, "nees_max": self.nees_max}
+
+
+def nees_blowups(
     times: Array, nees: Array, *, min_run: int = DEFAULT_MAX_OUTLIER_RUN
-) -> list[dict[str, float | int]]:
-    """NEES blow-ups against ground truth: runs of at least ``min_run`` consecutive poses (with
-    ground truth) whose NEES exceeds the 99.99% χ² bound (3 dof), merged across fewer than
-    ``min_run`` poses; ``[t0, t1]``, pose count and the largest NEES of each."""
+) -> list[NeesBlowup]:
+    """The :class:`NeesBlowup` s of a NEES curve ``nees`` (N,) at ``times`` (N,) [s].
+
+    Poses without ground truth (non-finite NEES) are left out before the runs are found, so
+    a run goes on across them.
+    """
     ok = np.flatnonzero(np.isfinite(nees))
     v = nees[ok]
-    st, en = _runs(v > chi2_quantile(0.9999, 3), max(1, min_run), max(1, min_run))
+    m = max(1, min_run)
+    st, en = flag_runs(v > chi2_quantile(OUTLIER_PROBABILITY, 3), m, max_gap=m - 1)
     return [
-        {
-            "t0": float(times[ok[a]]),
-            "t1": float(times[ok[b]]),
-            "poses": int(b - a + 1),
-            "nees_max": float(v[a : b + 1].max()),
-        }
+        NeesBlowup(
+            t0=float(times[ok[a]]),
+            t1=float(times[ok[b]]),
+            poses=int(b - a + 1),
+            nees_max=float(v[a : b + 1].max()),
+        )
         for a, b in zip(st.tolist(), en.tolist())
     ]
 
 
-def nis_summary(fr: FilterResult) -> dict[str, float | int | None]:
-    """NIS statistics of the measurements that reached the update (2 dof; mean 2 expected)."""
-    v = np.asarray(fr.nis)
-    v = v[np.isfinite(v)]
-    if not v.size:
-        return {"count": 0, "mean": None, "median": None}
-    return {
-        "count": int(v.size),
-        "mean": float(v.mean()),
-        "median": float(np.median(v)),
-        "expected_mean": 2.0,
-        "fraction_beyond_95": float((v > chi2_quantile(0.95, 2)).mean()),
-        "outlier_bound": float(fr.outlier_bound),
-        "fraction_beyond_bound": float((v > fr.outlier_bound).mean()),
-    }
+@dataclass(frozen=True)
+class NisStats:
+    """NIS of the measurements that reached the filter's update (χ², 2 dof).
+
+    A consistent filter's NIS has mean :attr:`EXPECTED_MEAN` (= 2, the dof) and exceeds the
+    95 % quantile ``χ²⁻¹(0.95; 2)`` for 5 % of the measurements.
+
+    Attributes
+    ----------
+    count : int
+        Measurements with a (finite) NIS.
+    mean, median : float or None
+        Of their NIS; ``None`` without any.
+    fraction_beyond_95 : float or None
+        Fraction with NIS above ``χ²⁻¹(0.95; 2)``.
+    outlier_bound : float
+        The filter's outlier bound on the NIS (the gate, or ``χ²⁻¹(OUTLIER_PROBABILITY; 2)``).
+    fraction_beyond_bound : float or None
+        Fraction with NIS above ``outlier_bound``.
+    """
+
+    EXPECTED_MEAN: ClassVar[float] = 2.0
+
+    count: int
+    mean: float | None
+    median: float | None
+    fraction_beyond_95: float | None
+    outlier_bound: float
+    fraction_beyond_bound: float | None
+
+    @classmethod
+    def of(cls, fr: FilterResult) -> NisStats:
+        """The statistics of a filter run's NIS."""
+        v = np.asarray(fr.nis)
+        v = v[np.isfinite(v)]
+        bound = float(fr.outlier_bound)
+        if not v.size:
+            return cls(0, None, None, None, bound, None)
+        return cls(
+            count=int(v.size),
+            mean=float(v.mean()),
+            median=float(np.median(v)),
+            fraction_beyond_95=float((v > chi2_quantile(0.95, 2)).mean()),
+            outlier_bound=bound,
+            fraction_beyond_bound=float((v > bound).mean()),
+        )
+
+    def as_dict(self) -> dict[str, float | int | None]:
+        """The report's ``nis``; without measurements only ``count``, ``mean``, ``median``."""
+        if not self.count:
+            return {"count": 0, "mean": None, "median": None}
+        return {
+            "count": self.count,
+            "mean": self.mean,
+            "median": self.median,
+            "expected_mean": self.EXPECTED_MEAN,
+            "fraction_beyond_95": self.fraction_beyond_95,
+            "outlier_bound": self.outlier_bound,
+            "fraction_beyond_bound": self.fraction_beyond_bound,
+        }
+
+
+@dataclass(frozen=True)
+class NeesStats:
+    """Pose NEES of the recovery against ground truth (χ², 3 dof), at the grid poses with one.
+
+    Attributes
+    ----------
+    mean : float or None
+        Mean NEES; ``None`` when no grid pose has ground truth.
+    poses : int
+        Grid poses with ground truth.
+    band95 : tuple of float
+        Two-sided 95 % band of one pose's NEES, ``(χ²⁻¹(0.025; 3), χ²⁻¹(0.975; 3))``.
+    bound : float
+        The single-pose outlier bound ``χ²⁻¹(OUTLIER_PROBABILITY; 3)`` (of :class:`NeesBlowup`).
+    fraction_beyond_bound : float or None
+        Fraction of the poses with NEES above ``bound``.
+    """
+
+    mean: float | None
+    poses: int
+    band95: tuple[float, float]
+    bound: float
+    fraction_beyond_bound: float | None
+
+    @classmethod
+    def of(cls, nees: Array) -> NeesStats:
+        """From the per-grid-pose NEES (N,), NaN where there is no ground truth."""
+        ok = np.isfinite(nees)
+        bound = chi2_quantile(OUTLIER_PROBABILITY, 3)
+        return cls(
+            mean=float(np.mean(nees[ok])) if ok.any() else None,
+            poses=int(ok.sum()),
+            band95=consistency.nees_band(3, 1, 0.95),
+            bound=bound,
+            fraction_beyond_bound=float((nees[ok] > bound).mean()) if ok.any() else None,
+        )
+
+    def as_dict(self) -> dict[str, object]:
+        """The report's ``nees`` (keys ``band95_single_pose``, ``bound9999_single_pose``)."""
+        return {
+            "mean": self.mean,
+            "poses": self.poses,
+            "band95_single_pose": list(self.band95),
+            "bound9999_single_pose": self.bound,
+            "fraction_beyond_bound": self.fraction_beyond_bound,
+        }
+
+
+@dataclass(frozen=True)
+class RecoveryCounts:
+    """What became of the bundle's measurements.
+
+    The fractions are of the *associated measurements inside the control span*,
+    ``used + gated`` (0 when there are none).
+
+    Attributes
+    ----------
+    measurements : int
+        All of the bundle's measurements, ``skipped_unknown`` included.
+    used : int
+        Reached the filter's update (status ``USED``).
+    gated : int
+        Rejected by the innovation gate (``GATED``).
+    unassociated : int
+        Without a landmark association (``UNASSOCIATED``).
+    outside : int
+        Outside the control span (``OUTSIDE``).
+    skipped_unknown : int
+        Dropped by the reader: landmark not in the map.
+    gated_fraction : float
+        ``gated / (used + gated)``.
+    downweighted : int
+        Used measurements whose robust weight is below 1 (0 without a robust update).
+    downweighted_fraction : float
+        ``downweighted / (used + gated)``.
+    downweight_loss : float
+        ``Σ (1 − w) / (used + gated)`` over the used measurements: the share of the
+        associated measurements' information the robust weights took away.
+    """
+
+    measurements: int
+    used: int
+    gated: int
+    unassociated: int
+    outside: int
+    skipped_unknown: int
+    gated_fraction: float
+    downweighted: int
+    downweighted_fraction: float
+    downweight_loss: float
+
+    @classmethod
+    def of(
+        cls, status: NDArray[np.int64], skipped: int, weights: Array | None = None
+    ) -> RecoveryCounts:
+        """From the per-measurement status (J,), the reader's skip count and the weights (J,)."""
+        used = int((status == USED).sum())
+        gated = int((status == GATED).sum())
+        assoc = used + gated
+        down = 0 if weights is None else int(((weights < 1.0) & (status == USED)).sum())
+        loss = 0.0 if weights is None else float((1.0 - weights[status == USED]).sum())
+        return cls(
+            measurements=int(status.shape[0]) + skipped,
+            used=used,
+            gated=gated,
+            unassociated=int((status == UNASSOCIATED).sum()),
+            outside=int((status == OUTSIDE).sum()),
+            skipped_unknown=skipped,
+            gated_fraction=gated / assoc if assoc else 0.0,
+            downweighted=down,
+            downweighted_fraction=down / assoc if assoc else 0.0,
+            downweight_loss=loss / assoc if assoc else 0.0,
+        )
+
+    def as_dict(self) -> dict[str, float]:
+        """The report's ``measurements`` (the counts as int, the fractions as float)."""
+        return {
+            "measurements": self.measurements,
+            "used": self.used,
+            "gated": self.gated,
+            "unassociated": self.unassociated,
+            "outside": self.outside,
+            "skipped_unknown": self.skipped_unknown,
+            "gated_fraction": self.gated_fraction,
+            "downweighted": self.downweighted,
+            "downweighted_fraction": self.downweighted_fraction,
+            "downweight_loss": self.downweight_loss,
+        }
+
+
+@dataclass(frozen=True)
+class Divergence:
+    """Where the map and the log disagree, and what the filter did about it.
+
+    Attributes
+    ----------
+    rule : str
+        The rule that found the stretches and re-entered the filter, in words.
+    max_outlier_run : int or None
+        :func:`recover`'s ``max_outlier_run`` (``None``: the filter never re-entered).
+    outlier_bound : float
+        NIS (χ², 2 dof) beyond which an innovation is outlying.
+    stretches : tuple of Stretch
+        :func:`disagreement_stretches`, in time order.
+    fraction_of_log : float
+        :attr:`duration` over the log's span (first to last grid time).
+    fraction_of_measurements : float
+        Measurements inside the stretches over the measurements with a NIS.
+    events : mapping of str → int
+        How many filter events of each kind (keys: the descriptions in
+        :data:`recovery.ekf.EVENT_KINDS`).
+    event_times : tuple of float
+        Time of each event [s], in the filter's order.
+    covariances_repaired : int
+        Smoothed/batch pose covariances projected onto the PSD cone (rounding after a
+        re-entry's inflation).
+    nees_blowups : tuple of NeesBlowup or None
+        With ground truth, the NEES blow-ups (:func:`nees_blowups`); ``None`` without.
+    """
+
+    rule: str
+    max_outlier_run: int | None
+    outlier_bound: float
+    stretches: tuple[Stretch, ...]
+    fraction_of_log: float
+    fraction_of_measurements: float
+    events: Mapping[str, int]
+    event_times: tuple[float, ...]
+    covariances_repaired: int = 0
+    nees_blowups: tuple[NeesBlowup, ...] | None = None
+
+    @property
+    def diverged(self) -> bool:
+        """Whether any stretch of disagreement was found or any filter event happened."""
+        return bool(self.stretches) or bool(self.event_times)
+
+    @property
+    def count(self) -> int:
+        """Number of stretches."""
+        return len(self.stretches)
+
+    @property
+    def duration(self) -> float:
+        """Total duration of the stretches, ``Σ (t1 − t0)`` [s]."""
+        return sum(s.t1 - s.t0 for s in self.stretches)
+
+    @property
+    def event_count(self) -> int:
+        """Filter events of all kinds (re-entries and skipped updates)."""
+        return sum(self.events.values())
+
+    def as_dict(self) -> dict[str, object]:
+        """The report's ``divergence`` (``nees_stretches``: the blow-ups, with ground truth)."""
+        out: dict[str, object] = {
+            "diverged": self.diverged,
+            "rule": self.rule,
+            "max_outlier_run": self.max_outlier_run,
+            "outlier_bound": self.outlier_bound,
+            "stretches": [s.as_dict() for s in self.stretches],
+            "count": self.count,
+            "duration": self.duration,
+            "fraction_of_log": self.fraction_of_log,
+            "fraction_of_measurements": self.fraction_of_measurements,
+            "events": dict(self.events),
+            "event_times": list(self.event_times),
+            "covariances_repaired": self.covariances_repaired,
+        }
+        if self.nees_blowups is not None:
+            out["nees_stretches"] = [b.as_dict() for b in self.nees_blowups]
+        return out
+
+
+@dataclass(frozen=True)
+class RobustSettings:
+    """The robust (M-estimator) update the recovery used.
+
+    Attributes
+    ----------
+    kind : str
+        ``redescending``, ``huber`` or ``cauchy``.
+    threshold : float
+        ``c``, on the standardised Mahalanobis distance ``d / ŝ`` of an innovation.
+    scale : float
+        ``ŝ`` (estimated from a plain pass with ``robust_scale="auto"``).
+    effective : float
+        ``c ŝ``, the threshold on ``d`` the filter used.
+    """
+
+    kind: str
+    threshold: float
+    scale: float
+    effective: float
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "kind": self.kind,
+            "threshold": self.threshold,
+            "scale": self.scale,
+            "effective": self.effective,
+        }
+
+
+@dataclass(frozen=True)
+class BatchCosts:
+    """The batch refinement's cost ``½ Σ rᵀ W r`` over its factors (:mod:`recovery.batch`).
+
+    Attributes
+    ----------
+    cost_initial, cost_final : float
+        At the smoothed trajectory it starts from, and at the refined one.
+    """
+
+    cost_initial: float
+    cost_final: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {"cost_initial": self.cost_initial, "cost_final": self.cost_final}
 
 
 @dataclass(frozen=True)
@@ -217,12 +551,8 @@ class Recovery:
     trajectory : Trajectory
         One pose per grid time (control/odometry times and measurement times).
     covariances : ndarray, shape (N, 3, 3)
-    counts : dict
-        ``measurements``, ``used``, ``gated``, ``unassociated``, ``outside`` (of the control
-        span), ``skipped_unknown`` (dropped by the reader), and ``gated_fraction`` (of the
-        associated measurements inside the span); with a robust update ``downweighted`` (weight
-        below 1), ``downweighted_fraction`` and ``downweight_loss`` (``Σ (1 − w)`` over the
-        associated measurements, the share of their information the weights took away).
+    counts : RecoveryCounts
+        What became of the measurements (used, gated, down-weighted, ...).
     status : ndarray of int, shape (J,)
         Per measurement: 0 used, 1 gated, 2 unassociated, 3 outside.
     nis : ndarray, shape (J,)
@@ -231,12 +561,19 @@ class Recovery:
         Pose NEES against ground truth at grid times that have one (NaN elsewhere).
     map_mode : str
         How the map's uncertainty entered: ``joint`` (Schmidt), ``marginal`` or ``ignore``.
-    stretches : tuple of Stretch
-        Where the map and the log disagree (:func:`disagreement_stretches`).
-    divergence : dict
-        Summary of the stretches and of the filter's re-entries (JSON-ready).
-    nis_stats : dict
-        :func:`nis_summary`.
+    divergence : Divergence
+        Where the map and the log disagree (its stretches, the filter's events, with ground
+        truth the NEES blow-ups).
+    nis_stats : NisStats
+        NIS of the filter's innovations.
+    nees_stats : NeesStats or None
+        Summary of ``nees`` (``None`` without ground truth).
+    iterations : int
+        Batch iterations (0 for the filter and the smoother).
+    robust : RobustSettings or None
+        The robust update (``None``: the plain EKF).
+    batch : BatchCosts or None
+        The batch refinement's costs (``method="batch"`` only).
     weights : ndarray, shape (J,)
         Robust weight per measurement (all 1 without a robust update).
     """
@@ -244,48 +581,47 @@ class Recovery:
     method: str
     trajectory: Trajectory
     covariances: Array
-    counts: dict[str, float]
+    counts: RecoveryCounts
     status: NDArray[np.int64]
     nis: Array
     nees: Array | None
     map_mode: str
+    divergence: Divergence
+    nis_stats: NisStats
+    nees_stats: NeesStats | None = None
     iterations: int = 0
-    extra: dict[str, object] = field(default_factory=dict)
-    stretches: tuple[Stretch, ...] = ()
-    divergence: dict[str, object] = field(default_factory=dict)
-    nis_stats: dict[str, object] = field(default_factory=dict)
+    robust: RobustSettings | None = None
+    batch: BatchCosts | None = None
     weights: Array | None = None
+
+    @property
+    def stretches(self) -> tuple[Stretch, ...]:
+        """Where the map and the log disagree (``divergence.stretches``)."""
+        return self.divergence.stretches
 
     @property
     def diverged(self) -> bool:
         """Whether any stretch of disagreement or filter re-entry was found."""
-        return bool(self.divergence.get("diverged", False))
+        return self.divergence.diverged
 
     def report(self) -> dict[str, object]:
-        """A JSON-ready summary."""
+        """A JSON-ready summary: the ``as_dict()`` of each part, under its key."""
         out: dict[str, object] = {
             "method": self.method,
             "map_uncertainty": self.map_mode,
             "poses": len(self.trajectory),
-            "measurements": dict(self.counts),
-            "divergence": dict(self.divergence),
-            "nis": dict(self.nis_stats),
+            "measurements": self.counts.as_dict(),
+            "divergence": self.divergence.as_dict(),
+            "nis": self.nis_stats.as_dict(),
         }
-        if self.nees is not None:
-            ok = np.isfinite(self.nees)
-            bound = chi2_quantile(0.9999, 3)
-            out["nees"] = {
-                "mean": float(np.mean(self.nees[ok])) if ok.any() else None,
-                "poses": int(ok.sum()),
-                "band95_single_pose": list(consistency.nees_band(3, 1, 0.95)),
-                "bound9999_single_pose": bound,
-                "fraction_beyond_bound": float((self.nees[ok] > bound).mean())
-                if ok.any()
-                else None,
-            }
+        if self.nees_stats is not None:
+            out["nees"] = self.nees_stats.as_dict()
         if self.method == "batch":
             out["iterations"] = self.iterations
-        out.update(self.extra)
+        if self.robust is not None:
+            out["robust"] = self.robust.as_dict()
+        if self.batch is not None:
+            out["batch"] = self.batch.as_dict()
         return out
 
 
@@ -303,6 +639,7 @@ def filter_input(
     marg = bundle.map_marginals if map_mode != "ignore" else np.zeros_like(bundle.map_marginals)
     joint = bundle.map_covariance if map_mode == "joint" else None
     lines = bundle.measurement_lines
+    assert lines is not None  # Bundle.__post_init__ fills it
     src = "measurements.csv"
     labels = tuple(
         f"measurement {j} ({src}:{int(lines[j])})" if lines[j] > 0 else f"measurement {j}"
@@ -323,29 +660,6 @@ def filter_input(
         r=bundle.sensor.covariance,
         meas_labels=labels,
     )
-
-
-def _counts(
-    status: NDArray[np.int64], skipped: int, weights: Array | None = None
-) -> dict[str, float]:
-    used = int((status == USED).sum())
-    gated = int((status == GATED).sum())
-    c: dict[str, float] = {
-        "measurements": int(status.shape[0]) + skipped,
-        "used": used,
-        "gated": gated,
-        "unassociated": int((status == UNASSOCIATED).sum()),
-        "outside": int((status == OUTSIDE).sum()),
-        "skipped_unknown": skipped,
-    }
-    c["gated_fraction"] = gated / (used + gated) if used + gated else 0.0
-    down = 0 if weights is None else int(((weights < 1.0) & (status == USED)).sum())
-    c["downweighted"] = down
-    c["downweighted_fraction"] = down / (used + gated) if used + gated else 0.0
-    # the information the weights took away: Σ (1 − w) over the associated measurements
-    loss = 0.0 if weights is None else float((1.0 - weights[status == USED]).sum())
-    c["downweight_loss"] = loss / (used + gated) if used + gated else 0.0
-    return c
 
 
 def pose_nees_against(truth: Trajectory, times: Array, poses: Array, covs: Array) -> Array:
@@ -392,7 +706,8 @@ def recover(
     robust : {"redescending", "huber", "cauchy", None}
         M-estimator weights of the innovations (:func:`recovery.ekf.run_filter`); the
         smoother (through the filter's gains) and the batch (``refine(weights=...)``) use the
-        same weights. The down-weighted fraction is reported in ``counts``. ``None`` (or
+        same weights. The down-weighted fraction is reported in ``counts``
+        (:class:`RecoveryCounts`). ``None`` (or
         ``"none"``) is the plain EKF. Default :data:`DEFAULT_ROBUST` (``"redescending"``,
         ``c = 1.75``), chosen on MRCLAM dataset 7 and the validation grid (numbers in
         notebooks/validation.ipynb): its filter's position ATE after SE(2) alignment at
@@ -425,7 +740,7 @@ def recover(
         raise InputError(f"gate probability must be in (0, 1), got {gate}")
     inp = filter_input(bundle, map_mode=map_mode)
     kw = dict(gate=gate, max_outlier_run=max_outlier_run, on_divergence=on_divergence)
-    extra: dict[str, object] = {}
+    settings = None
     c_eff = None
     robust = None if robust == "none" else robust
     if robust is not None:
@@ -435,7 +750,7 @@ def recover(
         else:
             scale = float(robust_scale)
         c_eff = c * scale
-        extra["robust"] = {"kind": robust, "threshold": c, "scale": scale, "effective": c_eff}
+        settings = RobustSettings(kind=robust, threshold=c, scale=scale, effective=c_eff)
     fr: FilterResult = run_filter(
         inp,
         robust=robust,
@@ -445,6 +760,7 @@ def recover(
     )
     weights = None if robust is None else fr.weights
     iterations = 0
+    costs = None
     if method == "filter":
         poses, covs = fr.poses, fr.covariances
     else:
@@ -455,7 +771,7 @@ def recover(
 
             br = refine(inp, poses, used=fr.status == USED, weights=weights)
             poses, covs, iterations = br.poses, br.covariances, br.iterations
-            extra["batch"] = {"cost_initial": br.cost_initial, "cost_final": br.cost_final}
+            costs = BatchCosts(cost_initial=br.cost_initial, cost_final=br.cost_final)
     covs, n_repaired = _check_finite(poses, covs, inp.times, repair=on_divergence != "raise")
     traj = Trajectory(inp.times, poses)
     nees = None
@@ -464,24 +780,25 @@ def recover(
     mode = map_mode if (map_mode != "joint" or bundle.map_covariance is not None) else "marginal"
     min_run = max_outlier_run if max_outlier_run else DEFAULT_MAX_OUTLIER_RUN
     stretches = disagreement_stretches(fr, inp, min_run=min_run)
-    divergence = divergence_summary(fr, inp, stretches, max_outlier_run=max_outlier_run)
-    divergence["covariances_repaired"] = n_repaired
-    if nees is not None:
-        divergence["nees_stretches"] = nees_stretches(inp.times, nees, min_run=min_run)
+    divergence = divergence_summary(
+        fr, inp, stretches, max_outlier_run=max_outlier_run, covariances_repaired=n_repaired,
+        nees_blowups=None if nees is None else nees_blowups(inp.times, nees, min_run=min_run),
+    )  # fmt: skip
     return Recovery(
         method=method,
         trajectory=traj,
         covariances=readonly(covs),
-        counts=_counts(np.asarray(fr.status), bundle.skipped_unknown, weights),
+        counts=RecoveryCounts.of(np.asarray(fr.status), bundle.skipped_unknown, weights),
         status=fr.status,
         nis=fr.nis,
         nees=None if nees is None else readonly(nees),
         map_mode=mode,
-        iterations=iterations,
-        extra=extra,
-        stretches=tuple(stretches),
         divergence=divergence,
-        nis_stats=nis_summary(fr),
+        nis_stats=NisStats.of(fr),
+        nees_stats=None if nees is None else NeesStats.of(nees),
+        iterations=iterations,
+        robust=settings,
+        batch=costs,
         weights=None if weights is None else readonly(weights),
     )
 
@@ -500,16 +817,17 @@ def divergence_summary(
     stretches: list[Stretch],
     *,
     max_outlier_run: int | None,
-) -> dict[str, object]:
-    """JSON-ready summary of the stretches of disagreement and of the filter's events."""
+    covariances_repaired: int = 0,
+    nees_blowups: list[NeesBlowup] | None = None,
+) -> Divergence:
+    """The :class:`Divergence` of a filter run: its stretches of disagreement and events."""
     span = float(inp.times[-1] - inp.times[0])
     dur = sum(s.t1 - s.t0 for s in stretches)
     n_proc = int(np.isfinite(np.asarray(fr.nis)).sum())
     ev = fr.events
     kinds = {EVENT_KINDS[k]: int((ev.kind == k).sum()) for k in EVENT_KINDS}
-    return {
-        "diverged": bool(stretches) or bool(ev.kind.size),
-        "rule": (
+    return Divergence(
+        rule=(
             "a stretch is a run of at least max_outlier_run consecutive measurements with NIS "
             "beyond the outlier bound (runs fewer than max_outlier_run measurements apart "
             "merged); the filter is re-entered after each such run by inflating the pose "
@@ -519,18 +837,18 @@ def divergence_summary(
             else "stretches reported with runs of "
             f"{DEFAULT_MAX_OUTLIER_RUN} outliers; the filter is never re-entered"
         ),
-        "max_outlier_run": max_outlier_run,
-        "outlier_bound": float(fr.outlier_bound),
-        "stretches": [s.as_dict() for s in stretches],
-        "count": len(stretches),
-        "duration": dur,
-        "fraction_of_log": dur / span if span > 0 else 0.0,
-        "fraction_of_measurements": (
+        max_outlier_run=max_outlier_run,
+        outlier_bound=float(fr.outlier_bound),
+        stretches=tuple(stretches),
+        fraction_of_log=dur / span if span > 0 else 0.0,
+        fraction_of_measurements=(
             sum(s.measurements for s in stretches) / n_proc if n_proc else 0.0
         ),
-        "events": kinds,
-        "event_times": inp.times[ev.grid].tolist(),
-    }
+        events=kinds,
+        event_times=tuple(inp.times[ev.grid].tolist()),
+        covariances_repaired=covariances_repaired,
+        nees_blowups=None if nees_blowups is None else tuple(nees_blowups),
+    )
 
 
 def _check_finite(
@@ -538,19 +856,21 @@ def _check_finite(
 ) -> tuple[Array, int]:
     """Non-finite poses raise; a non-PSD smoothed/batch covariance is repaired or raises.
 
-    The RTS recursion subtracts covariances that, after a re-entry's inflation, differ by
-    orders of magnitude; rounding can leave a slightly indefinite result. With ``repair`` each
-    such covariance is replaced by its projection onto the PSD cone (symmetrised, negative
-    eigenvalues set to zero) and the number of repaired poses is returned.
+    Non-PSD is the one covariance check of :mod:`relation_metric.checks` (asymmetric, or an
+    eigenvalue below ``−COV_RTOL · max |C_ij|``). The RTS recursion subtracts covariances
+    that, after a re-entry's inflation, differ by orders of magnitude; rounding can leave a
+    slightly indefinite result. With ``repair`` each such covariance is replaced by its
+    projection onto the PSD cone (symmetrised, negative eigenvalues set to zero) and the
+    number of repaired poses is returned.
     """
+    from relation_metric.checks import bad_covariances
     from relation_metric.errors import DivergenceError
 
     bad = ~(np.isfinite(poses).all(axis=1) & np.isfinite(covs).all(axis=(1, 2)))
     n_rep = 0
     if not bad.any():
-        ev = np.linalg.eigvalsh(covs)
-        scale = np.maximum(np.abs(ev).max(axis=1), 1e-300)
-        neg = ev[:, 0] < -1e-9 * scale
+        neg = np.zeros(covs.shape[0], dtype=bool)
+        neg[bad_covariances(covs)[0]] = True
         if neg.any() and repair:
             sym = 0.5 * (covs[neg] + covs[neg].transpose(0, 2, 1))
             w, v = np.linalg.eigh(sym)

@@ -30,7 +30,17 @@ from numpy.typing import ArrayLike, NDArray
 from relation_metric import se2
 from relation_metric.errors import InputError
 
+OUTLIER_PROBABILITY = 0.9999
+"""χ² probability of the single-value outlier bound ``χ²⁻¹(0.9999; d)``.
+
+One innovation's NIS (``d = 2``, :func:`recovery.ekf.run_filter`'s outlier bound without a
+gate) or one pose's NEES (``d = 3``, the recovery's NEES blow-ups) beyond it is *outlying*:
+a consistent estimator exceeds it once in 10 000 values.
+"""
+
 __all__ = [
+    "OUTLIER_PROBABILITY",
+    "flag_runs",
     "nees",
     "pose_nees",
     "nees_band",
@@ -129,6 +139,42 @@ def summarize_nees(values: ArrayLike, *, dof: int, probability: float = 0.95) ->
     avg = v.mean(axis=0)
     inside = float(np.mean((avg >= band[0]) & (avg <= band[1]))) if avg.size else float("nan")
     return NeesSummary(float(v.mean()), band, inside, runs, dof)
+
+
+def flag_runs(
+    flags: ArrayLike, min_length: int = 1, *, max_gap: int = 0
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Runs of True in ``flags`` of at least ``min_length``, bridged across short gaps.
+
+    First the maximal runs of consecutive True of length ``≥ min_length`` are found (shorter
+    runs are dropped); then consecutive kept runs separated by at most ``max_gap`` False are
+    merged into one run spanning both (``max_gap = 0``: no bridging; the gap's False values
+    are then inside the merged run). Vectorised.
+
+    Parameters
+    ----------
+    flags : array_like of bool, shape (n,)
+    min_length : int
+        Shortest run kept, ``≥ 1``.
+    max_gap : int
+        Longest gap bridged, ``≥ 0``.
+
+    Returns
+    -------
+    start, end : ndarray of int, shape (R,)
+        Inclusive index bounds of each run, in increasing order (length ``end − start + 1``).
+    """
+    f = np.concatenate(([0], np.asarray(flags, dtype=bool).astype(np.int8), [0]))
+    d = np.diff(f)
+    st = np.flatnonzero(d == 1).astype(np.int64)
+    en = np.flatnonzero(d == -1).astype(np.int64) - 1
+    keep = en - st + 1 >= max(1, int(min_length))
+    st, en = st[keep], en[keep]
+    if st.size > 1 and max_gap > 0:
+        new = np.concatenate(([True], st[1:] - en[:-1] - 1 > max_gap))
+        first = np.flatnonzero(new)
+        st, en = st[first], np.maximum.reduceat(en, first)
+    return st, en
 
 
 def chi2_quantile(probability: float, dof: int) -> float:

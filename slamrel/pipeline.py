@@ -32,13 +32,19 @@ from numpy.typing import NDArray
 from landmark_graph.map_compare import MapComparison, compare_maps
 from landmark_graph.maps import LandmarkMap
 from recovery.bundle import Bundle
-from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, Recovery, Stretch, recover
+from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, Divergence, Recovery, recover
 from recovery.steps import build_steps
 from relation_metric import se2
 from relation_metric.consistency import NeesSummary, pose_nees, summarize_nees
 from relation_metric.errors import InputError, SlamrelError
-from relation_metric.evaluate import Evaluation, UnassociatedRelationsWarning, evaluate
+from relation_metric.evaluate import (
+    Evaluation,
+    UnassociatedRelationsWarning,
+    error_summaries,
+    evaluate,
+)
 from relation_metric.relations import RelationSet, generate_relations
+from relation_metric.stats import Summary
 from relation_metric.time_association import match_nearest_times, nearest_index
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.ekf_slam import ekf_slam_bundle
@@ -48,12 +54,12 @@ from slamrel.formats.trajectories import read_trajectory
 from slamrel.outputs import staged_directory, write_text_atomic
 from slamrel.report.html import render_html
 from slamrel.report.run_page import report_figures, report_sections
-from slamrel.report.verdict import run_verdict
+from slamrel.report.verdict import RunFacts, run_verdict
 from slamrel.simulation.bundles import world_bundle
 from slamrel.simulation.worlds import make_world
 
 __all__ = [
-    "Agreement",
+    "MapSummary",
     "NeesCurve",
     "RunInput",
     "RunResult",
@@ -131,45 +137,51 @@ class NeesCurve(NamedTuple):
     values: NDArray[np.float64]
 
 
-class NisStats(NamedTuple):
-    """NIS of the recovery's innovations (:func:`recovery.recover.nis_summary`)."""
+@dataclass(frozen=True)
+class MapSummary:
+    """The numbers of a landmark-map comparison that the report's map section and the verdict
+    show, read once from the :class:`~landmark_graph.map_compare.MapComparison`.
 
-    count: int | None
-    mean: float | None
-    median: float | None
-    fraction_beyond_95: float | None
-    fraction_beyond_bound: float | None
-
-
-class Agreement(NamedTuple):
-    """Where the map and the log disagree: a recovery's divergence summary, typed.
-
-    Built once from :class:`recovery.recover.Recovery` (its JSON-ready ``divergence`` and
-    ``nis_stats``), read by the notes, the report and the command's summary line.
+    Attributes
+    ----------
+    edge : Summary
+        Absolute edge-length errors of the Delaunay mesh [m] (``metrics.json``
+        ``map.translation.abs``).
+    corner : Summary
+        Absolute corner-angle errors of its triangles [rad] (``map.rotation.abs``).
+    matched, missed, spurious : int
+        Associated landmark pairs; true landmarks without, SLAM landmarks without a partner.
+    ospa, gospa : float
+        OSPA and GOSPA distances of the two maps [m].
+    cutoff : float
+        Their cut-off ``c`` [m] (the association's).
+    order : float
+        Their order ``p``.
     """
 
-    rule: str
-    max_outlier_run: int | None
-    outlier_bound: float
-    fraction_of_log: float
-    fraction_of_measurements: float
-    stretches: tuple[Stretch, ...]
-    nees_stretches: tuple[tuple[float, float], ...]
-    nis: NisStats
+    edge: Summary
+    corner: Summary
+    matched: int
+    missed: int
+    spurious: int
+    ospa: float
+    gospa: float
+    cutoff: float
+    order: float
 
     @classmethod
-    def of(cls, rec: Recovery) -> Agreement:
-        d: dict[str, Any] = dict(rec.divergence)
-        nis = rec.nis_stats
+    def of(cls, mc: MapComparison) -> MapSummary:
+        a = mc.association
         return cls(
-            rule=str(d.get("rule", "")),
-            max_outlier_run=d.get("max_outlier_run"),
-            outlier_bound=float(d.get("outlier_bound", 0.0)),
-            fraction_of_log=float(d.get("fraction_of_log", 0.0)),
-            fraction_of_measurements=float(d.get("fraction_of_measurements", 0.0)),
-            stretches=tuple(rec.stretches),
-            nees_stretches=tuple((s["t0"], s["t1"]) for s in d.get("nees_stretches") or ()),
-            nis=NisStats(*(nis.get(k) for k in NisStats._fields)),  # type: ignore[arg-type]
+            edge=error_summaries(mc.errors.edge_length)["abs"],
+            corner=error_summaries(mc.errors.corner_angle.ravel())["abs"],
+            matched=int(a.estimate_rows.size),
+            missed=int(a.missed.size),
+            spurious=int(a.spurious.size),
+            ospa=mc.ospa,
+            gospa=mc.gospa,
+            cutoff=mc.cutoff,
+            order=mc.order,
         )
 
 
@@ -196,7 +208,8 @@ class RunResult:
         input); the report then scores dead reckoning (and the online estimate).
 
     Derived (computed once, on first use): ``recovery`` and ``map``, the JSON of the recovery
-    and of the map comparison (``metrics.json``); ``agreement``, the typed divergence summary.
+    and of the map comparison (``metrics.json``); ``agreement``, the recovery's
+    :class:`~recovery.recover.Divergence`; ``map_summary``, the :class:`MapSummary`.
     """
 
     name: str
@@ -224,10 +237,15 @@ class RunResult:
         """The map comparison's JSON (``slamrel map-compare``), when there is one."""
         return None if self.map_comparison is None else self.map_comparison.as_dict()
 
-    @cached_property
-    def agreement(self) -> Agreement | None:
+    @property
+    def agreement(self) -> Divergence | None:
         """Where the map and the log disagree (``None`` when no recovery ran)."""
-        return None if self.recovery_result is None else Agreement.of(self.recovery_result)
+        return None if self.recovery_result is None else self.recovery_result.divergence
+
+    @cached_property
+    def map_summary(self) -> MapSummary | None:
+        """The map comparison's numbers the report shows, when there is one."""
+        return None if self.map_comparison is None else MapSummary.of(self.map_comparison)
 
     def metrics(self) -> dict[str, Any]:
         """The ``metrics.json`` structure."""
@@ -250,12 +268,11 @@ class RunResult:
 def _evaluate_sets(sets: dict[str, RelationSet], est: Trajectory) -> dict[str, Evaluation]:
     # estimates are sampled at ground-truth times where they can be (exact association);
     # otherwise (real logs) the nearest pose within 0.1 s, or SE(2) interpolation
-    kw = {"max_time_diff": 0.1, "interpolate": True}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UnassociatedRelationsWarning)  # counted in the JSON
-        out = {"all": evaluate(_merge(sets), est, **kw)}  # type: ignore[arg-type]
+        out = {"all": evaluate(_merge(sets), est, max_time_diff=0.1, interpolate=True)}
         for k, rel in sets.items():
-            out[k] = evaluate(rel, est, **kw)  # type: ignore[arg-type]
+            out[k] = evaluate(rel, est, max_time_diff=0.1, interpolate=True)
     return out
 
 
@@ -446,24 +463,24 @@ def _recovery_notes(rec: Recovery, method: str) -> list[str]:
         f"The recovered trajectory is EKF localisation in the SLAM run's final map with its "
         f"data associations and models, then smoothed ({method}); it scores the final map, "
         "not the estimate the filter had online.",
-        f"Recovery used {int(counts['used'])} of {int(counts['measurements'])} measurements; "
-        f"{int(counts['gated'])} were gated ({100 * counts['gated_fraction']:.1f}%), "
-        f"{int(counts['unassociated'])} were unassociated. A large gated fraction is a finding "
+        f"Recovery used {counts.used} of {counts.measurements} measurements; "
+        f"{counts.gated} were gated ({100 * counts.gated_fraction:.1f}%), "
+        f"{counts.unassociated} were unassociated. A large gated fraction is a finding "
         "about the map, not noise.",
     ]
-    if counts.get("downweighted"):
+    if counts.downweighted:
         notes.append(
-            f"The robust update down-weighted {int(counts['downweighted'])} measurements "
-            f"({100 * counts['downweighted_fraction']:.1f}%, weight lost "
-            f"{100 * counts['downweight_loss']:.1f}%); like a gated fraction, a large loss is a "
+            f"The robust update down-weighted {counts.downweighted} measurements "
+            f"({100 * counts.downweighted_fraction:.1f}%, weight lost "
+            f"{100 * counts.downweight_loss:.1f}%); like a gated fraction, a large loss is a "
             "finding about the map."
         )
-    a = Agreement.of(rec)
-    if a.stretches:
+    d = rec.divergence
+    if d.stretches:
         notes.append(
-            f"The map and the log DISAGREE on {len(a.stretches)} stretch(es) covering "
-            f"{100 * a.fraction_of_log:.1f}% of the log (runs of innovations beyond the "
-            f"χ² bound {a.outlier_bound:.2f}; mean NIS {a.nis.mean:.3g}, 2 "
+            f"The map and the log DISAGREE on {len(d.stretches)} stretch(es) covering "
+            f"{100 * d.fraction_of_log:.1f}% of the log (runs of innovations beyond the "
+            f"χ² bound {d.outlier_bound:.2f}; mean NIS {rec.nis_stats.mean:.3g}, 2 "
             "expected). Divergence is a finding: the recovery was re-entered after each run "
             "and went on; the score includes these stretches (see the section below)."
         )
@@ -512,7 +529,7 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
             render_html(
                 f"slamrel report — {result.name}",
                 sections.in_order(),
-                verdict=run_verdict(metrics, {k: v.values for k, v in result.nees.items()}),
+                verdict=run_verdict(RunFacts.of(result)),
             ),
         )
     return target / "report.html"

@@ -14,7 +14,8 @@ from scipy.stats import chi2
 
 from recovery.batch import normal_equations
 from recovery.ekf import GATED, REENTRY, ROBUST_C, USED, run_filter
-from recovery.recover import _runs, filter_input, recover
+from recovery.recover import NeesBlowup, filter_input, recover
+from relation_metric.consistency import flag_runs
 from relation_metric.errors import DivergenceError
 from slamrel.cli import main
 from slamrel.formats.bundle import read_bundle, write_bundle
@@ -60,7 +61,7 @@ def test_injected_two_second_disagreement_is_found_and_reentered(seed: int) -> N
     assert len(r.stretches) == 1
     s = r.stretches[0]
     assert s.t0 == pytest.approx(20.0) and 21.5 <= s.t1 <= 24.5
-    assert s.reentries >= 1 and r.divergence["fraction_of_log"] == pytest.approx(
+    assert s.reentries >= 1 and r.divergence.fraction_of_log == pytest.approx(
         (s.t1 - s.t0) / (clean.controls[-1, 0] - clean.controls[0, 0])
     )
     # re-entered: after the stretch the filter is back on the clean run's track
@@ -98,11 +99,11 @@ def test_reentry_inflates_by_the_median_nis_of_the_run() -> None:
 
 def test_runs_bridges_short_gaps() -> None:
     f = np.array([0, 1, 1, 1, 0, 1, 1, 1, 0, 0, 0, 1, 1, 1, 1, 0, 1], dtype=bool)
-    st, en = _runs(f, 3, 2)
+    st, en = flag_runs(f, 3, max_gap=1)
     assert st.tolist() == [1, 11] and en.tolist() == [7, 14]
-    st, en = _runs(f, 4, 2)
+    st, en = flag_runs(f, 4, max_gap=1)
     assert st.tolist() == [11] and en.tolist() == [14]
-    assert [a.tolist() for a in _runs(np.zeros(5, dtype=bool), 1, 1)] == [[], []]
+    assert [a.tolist() for a in flag_runs(np.zeros(5, dtype=bool), 1)] == [[], []]
 
 
 def test_diverging_bundle_exits_0_with_trajectory_and_intervals(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
@@ -154,7 +155,7 @@ def test_raise_mode_and_plain_mode_agree_with_reenter_before_the_first_run(tmp_p
     with pytest.raises(DivergenceError, match=r"t=.*consecutive"):
         recover(bad, method="filter", on_divergence="raise")
     a = recover(bad, method="filter", max_outlier_run=None)
-    assert a.divergence["events"] and not any(a.divergence["events"].values())
+    assert a.divergence.events and not any(a.divergence.events.values())
     assert a.stretches  # reported even without re-entry
 
 
@@ -268,8 +269,8 @@ def test_robust_weights_reach_filter_counts_and_batch() -> None:
     assert c_one_w - c_none == pytest.approx(w[one[0]] * (c_one - c_none), rel=1e-6)
     r = recover(bad, method="batch", robust="huber", max_outlier_run=None,
                 robust_threshold=ROBUST_C, robust_scale=1.0)  # fmt: skip
-    assert r.counts["downweighted"] == int(((w < 1) & (fr.status == USED)).sum())
-    assert 0.0 < r.counts["downweighted_fraction"] < 1.0
+    assert r.counts.downweighted == int(((w < 1) & (fr.status == USED)).sum())
+    assert 0.0 < r.counts.downweighted_fraction < 1.0
     assert (r.status != GATED).all()
 
 
@@ -280,9 +281,10 @@ def test_robust_scale_is_estimated_from_a_plain_pass() -> None:
     v = np.asarray(plain.nis)
     v = v[np.isfinite(v)]
     scale = np.sqrt(np.median(v) / chi2.ppf(0.5, 2))
-    rb = r.extra["robust"]
-    assert rb["scale"] == pytest.approx(scale) and rb["threshold"] == 1.5  # type: ignore[index]
-    assert rb["effective"] == pytest.approx(1.5 * scale)  # type: ignore[index]
+    rb = r.robust
+    assert rb is not None and rb.kind == "cauchy"
+    assert rb.scale == pytest.approx(scale) and rb.threshold == 1.5
+    assert rb.effective == pytest.approx(1.5 * scale)
     # a uniformly mis-scaled filter (all covariances × 100) gets the same weights: the scale
     # absorbs the tuning, so a mis-tuned healthy run is not mistaken for one with outliers
     k = 100.0
@@ -314,8 +316,26 @@ def test_indefinite_smoothed_covariance_is_repaired_not_an_error() -> None:
         _check_finite(np.zeros((6, 3)), covs, np.arange(6.0))
 
 
-def test_nees_blowup_stretches_against_ground_truth() -> None:
-    from recovery.recover import nees_stretches
+def test_smoothed_covariance_check_is_the_one_of_relation_metric_checks() -> None:
+    from recovery.recover import _check_finite
+
+    # all-ones (eigenvalues 3, 0, 0) shifted by −2e-9: the smallest eigenvalue −2e-9 is below
+    # −COV_RTOL · max |C_ij| = −1e-9 (though above −1e-9 × the largest eigenvalue, 3)
+    c = np.ones((3, 3)) - 2e-9 * np.eye(3)
+    ok = np.eye(3)
+    fixed, n = _check_finite(np.zeros((2, 3)), np.stack([ok, c]), np.arange(2.0), repair=True)
+    assert n == 1 and np.linalg.eigvalsh(fixed[1])[0] >= -1e-15
+    np.testing.assert_array_equal(fixed[0], ok)
+    # and an asymmetric one is symmetrised
+    a = ok.copy()
+    a[0, 1] = 1e-6
+    fixed, n = _check_finite(np.zeros((1, 3)), a[None], np.arange(1.0), repair=True)
+    assert n == 1 and fixed[0][0, 1] == pytest.approx(0.5e-6, rel=1e-9)
+    assert fixed[0][1, 0] == pytest.approx(0.5e-6, rel=1e-9)
+
+
+def test_nees_blowups_against_ground_truth() -> None:
+    from recovery.recover import nees_blowups
 
     t = np.arange(40.0)
     nees = np.full(40, 1.0)
@@ -323,9 +343,9 @@ def test_nees_blowup_stretches_against_ground_truth() -> None:
     nees[12] = 2.0  # one pose inside: bridged
     nees[30:33] = 1e4  # too short a run
     nees[25] = np.nan  # no ground truth there
-    out = nees_stretches(t, nees, min_run=5)
-    assert out == [{"t0": 5.0, "t1": 19.0, "poses": 15, "nees_max": 1e3}]
+    out = nees_blowups(t, nees, min_run=5)
+    assert out == [NeesBlowup(t0=5.0, t1=19.0, poses=15, nees_max=1e3)]
     bad, _ = _inject(simulate_bundle(4, steps=600), 20.0, 22.0, 4)
     r = recover(bad, method="filter")
-    ns = r.divergence["nees_stretches"]
-    assert len(ns) == 1 and 19.0 <= ns[0]["t0"] <= 21.0 and ns[0]["t1"] <= 26.0  # type: ignore[index]
+    ns = r.divergence.nees_blowups
+    assert ns is not None and len(ns) == 1 and 19.0 <= ns[0].t0 <= 21.0 and ns[0].t1 <= 26.0

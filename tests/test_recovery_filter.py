@@ -63,8 +63,8 @@ def test_gating_equals_filterpy_and_is_counted() -> None:
     d[:, 2] = se2.wrap_angle(d[:, 2])
     assert np.abs(d).max() < 1e-9 and np.abs(fr.covariances - covs).max() < 1e-9
     r = recover(b, method="filter", gate=0.99, max_outlier_run=None, robust=None)
-    assert r.counts["gated"] == (status == GATED).sum()
-    assert r.counts["used"] + r.counts["gated"] == b.measurement_times.shape[0]
+    assert r.counts.gated == (status == GATED).sum()
+    assert r.counts.used + r.counts.gated == b.measurement_times.shape[0]
 
 
 def _per_step_rts(inp):  # type: ignore[no-untyped-def]
@@ -191,7 +191,7 @@ def test_divergence_names_time_and_measurement(tmp_path: Path) -> None:
     assert "t=" in msg and "measurements.csv:" in msg and "consecutive" in msg
     # without the run limit it completes, and says how far off it is
     r = recover(bad, method="filter", max_outlier_run=None, gate=0.99)
-    assert r.counts["gated_fraction"] > 0.5
+    assert r.counts.gated_fraction > 0.5
     from slamrel.cli import main
 
     assert (

@@ -148,3 +148,32 @@ def test_result_holds_the_map_once_and_reads_nothing(
     # the same bundle scored again: the same map numbers as the first report
     assert result.metrics()["map"] == m["map"]
     assert set(RunSections._fields) == {"summary", "consistency", "agreement", "map"}
+
+
+def test_verdict_reads_the_numbers_metrics_holds(
+    report: tuple[Path, _Page, dict[str, Any]],
+) -> None:
+    """The verdict judges the typed results; each is the number ``metrics.json`` writes."""
+    import slamrel.pipeline as pipeline
+    from slamrel.report.verdict import RunFacts
+
+    out, _, _ = report
+    result = pipeline.run_pipeline(pipeline.read_run_input(out / "bundle"))
+    m = json.loads(json.dumps(result.metrics()))
+    f = RunFacts.of(result)
+    assert f.main == m["trajectory_source"] == "recovered"
+    for name, err in f.translation_errors.items():
+        key = "trajectory" if name == f.main else name
+        assert err == m[key]["translation"]["abs"]["mean"]
+    assert f.relations == m["trajectory"]["relations"]
+    assert f.nees is not None and f.nees.as_dict() == m["nees"]["recovered"]
+    assert f.counts is not None and f.counts.as_dict() == m["recovery"]["measurements"]
+    assert f.poses == m["recovery"]["poses"]
+    mp, ms = m["map"], f.map
+    assert ms is not None
+    assert ms.edge.as_dict() == mp["translation"]["abs"]
+    assert ms.corner.as_dict() == mp["rotation"]["abs"]
+    a = mp["association"]
+    assert (ms.matched, ms.missed, ms.spurious) == (a["matched"], a["missed"], a["spurious"])
+    assert (ms.ospa, ms.gospa) == (mp["ospa"]["value"], mp["gospa"]["value"])
+    assert (ms.cutoff, ms.order) == (mp["ospa"]["c"], mp["ospa"]["p"])

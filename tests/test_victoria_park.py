@@ -78,7 +78,7 @@ def test_two_starts_reach_one_minimum(vp, least_squares, ekf):
 def test_ekf_slam_and_recovery_run(ekf):
     slam, rec = ekf
     assert slam.map_ids.size == 151 and np.isfinite(slam.map_xy).all()
-    assert len(rec.trajectory) == 6969 and rec.counts["used"] == 3640
+    assert len(rec.trajectory) == 6969 and rec.counts.used == 3640
 
 
 def test_cli_chain_and_map_compare(vp, tmp_path, capsys):

@@ -110,10 +110,10 @@ def run(args: argparse.Namespace) -> int:
         c = result.counts
         print(
             f"{args.method}: {len(result.trajectory)} poses -> {args.output}; measurements "
-            f"{c['measurements']}: used {c['used']}, gated {c['gated']} "
-            f"({100 * c['gated_fraction']:.1f}% of associated), unassociated "
-            f"{c['unassociated']}, outside the log {c['outside']}, unknown landmark "
-            f"{c['skipped_unknown']}; map uncertainty: {result.map_mode}"
+            f"{c.measurements}: used {c.used}, gated {c.gated} "
+            f"({100 * c.gated_fraction:.1f}% of associated), unassociated "
+            f"{c.unassociated}, outside the log {c.outside}, unknown landmark "
+            f"{c.skipped_unknown}; map uncertainty: {result.map_mode}"
         )
         moved = {name: n for name, n in bundle.reordered.items() if n}
         if moved:
@@ -124,57 +124,58 @@ def run(args: argparse.Namespace) -> int:
             )
         if args.robust != "none":
             print(
-                f"robust ({args.robust}): {c['downweighted']} measurements down-weighted "
-                f"({100 * c['downweighted_fraction']:.1f}% of associated; weight lost "
-                f"{100 * c['downweight_loss']:.1f}%)"
+                f"robust ({args.robust}): {c.downweighted} measurements down-weighted "
+                f"({100 * c.downweighted_fraction:.1f}% of associated; weight lost "
+                f"{100 * c.downweight_loss:.1f}%)"
             )
         print(divergence_summary_text(result))
-        if c["gated_fraction"] > 0.05:
+        if c.gated_fraction > 0.05:
             print(
                 "note: a large gated fraction is a finding about the map (wrong associations "
                 "or an inconsistent map), not noise"
             )
-        if result.nees is not None and "nees" in report:
-            print(f"mean pose NEES vs ground truth: {report['nees']['mean']:.3f} (3 dof)")  # type: ignore[index]
+        ns = result.nees_stats
+        if ns is not None and ns.mean is not None:
+            print(f"mean pose NEES vs ground truth: {ns.mean:.3f} (3 dof)")
     return 0
 
 
 def divergence_summary_text(result: Recovery, *, limit: int = 5) -> str:
     """Console lines about the stretches where the map and the log disagree (no numpy reprs)."""
+    from relation_metric.consistency import OUTLIER_PROBABILITY
+
     d = result.divergence
     nis = result.nis_stats
     nis_txt = (
-        f"NIS mean {float(nis['mean']):.3g} (2 expected), median {float(nis['median']):.3g}, "
-        f"{100 * float(nis['fraction_beyond_95']):.1f}% beyond the 95% bound"  # type: ignore[arg-type]
-        if nis.get("mean") is not None
+        f"NIS mean {nis.mean:.3g} (2 expected), median {nis.median:.3g}, "
+        f"{100 * (nis.fraction_beyond_95 or 0.0):.1f}% beyond the 95% bound"
+        if nis.mean is not None and nis.median is not None
         else "no measurement reached the filter"
     )
-    st = d.get("stretches") or []
-    ns = d.get("nees_stretches") or []
+    st = d.stretches
+    ns = d.nees_blowups or ()
     nees_txt = (
-        f"\nNEES vs ground truth beyond its 99.99% bound on {len(ns)} stretch(es), the first "  # type: ignore[arg-type]
-        f"[{float(ns[0]['t0']):.3f}, {float(ns[0]['t1']):.3f}] s"  # type: ignore[index]
+        f"\nNEES vs ground truth blows up (beyond its {100 * OUTLIER_PROBABILITY:g}% bound) "
+        f"{len(ns)} time(s), the first over [{ns[0].t0:.3f}, {ns[0].t1:.3f}] s"
         if ns
         else ""
     )
     if not st:
         return f"map and log agree: no stretch of outlying innovations; {nis_txt}{nees_txt}"
-    ev = d.get("events", {})
-    n_re = sum(int(v) for v in ev.values())  # type: ignore[union-attr]
     lines = [
-        f"map and log DISAGREE on {len(st)} stretch(es), "  # type: ignore[arg-type]
-        f"{100 * float(d['fraction_of_log']):.1f}% of the log "  # type: ignore[arg-type]
-        f"({100 * float(d['fraction_of_measurements']):.1f}% of the measurements); "  # type: ignore[arg-type]
-        f"filter re-entered {n_re} time(s); {nis_txt}"
+        f"map and log DISAGREE on {len(st)} stretch(es), "
+        f"{100 * d.fraction_of_log:.1f}% of the log "
+        f"({100 * d.fraction_of_measurements:.1f}% of the measurements); "
+        f"filter re-entered {d.event_count} time(s); {nis_txt}"
     ]
-    for s in st[:limit]:  # type: ignore[index]
+    for s in st[:limit]:
         lines.append(
-            f"  [{float(s['t0']):.3f}, {float(s['t1']):.3f}] s: {int(s['outlying'])} of "
-            f"{int(s['measurements'])} measurements outlying, median NIS "
-            f"{float(s['nis_median']):.3g}"
+            f"  [{s.t0:.3f}, {s.t1:.3f}] s: {s.outlying} of "
+            f"{s.measurements} measurements outlying, median NIS "
+            f"{s.nis_median:.3g}"
         )
-    if len(st) > limit:  # type: ignore[arg-type]
-        lines.append(f"  ... {len(st) - limit} more in the --report JSON")  # type: ignore[arg-type]
+    if len(st) > limit:
+        lines.append(f"  ... {len(st) - limit} more in the --report JSON")
     if nees_txt:
         lines.append(nees_txt.strip())
     lines.append(

@@ -9,8 +9,10 @@ and the file cannot disagree. :func:`slamrel.pipeline.write_report` writes the f
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
+from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, NisStats
+from relation_metric.consistency import OUTLIER_PROBABILITY
 from slamrel.plots.maps import map_figure
 from slamrel.plots.relation_errors import evaluation_figure
 from slamrel.plots.run import (
@@ -22,9 +24,10 @@ from slamrel.plots.run import (
 from slamrel.report.html import Figure, Section, Table, figure_png
 
 if TYPE_CHECKING:
-    from slamrel.pipeline import Agreement, RunResult
+    from recovery.recover import Divergence
+    from slamrel.pipeline import MapSummary, RunResult
 
-__all__ = ["RunFigures", "RunSections", "MapSummary", "report_figures", "report_sections"]
+__all__ = ["RunFigures", "RunSections", "report_figures", "report_sections"]
 
 
 class RunFigures(NamedTuple):
@@ -50,40 +53,6 @@ class RunSections(NamedTuple):
 
     def in_order(self) -> list[Section]:
         return [s for s in self if s is not None]
-
-
-class MapSummary(NamedTuple):
-    """The numbers of the map section, read from the map comparison's JSON in one place.
-
-    ``edge`` and ``corner``: ``(mean, std, max, count)`` of the absolute edge-length [m] and
-    corner-angle [rad] errors.
-    """
-
-    edge: tuple[Any, ...]
-    corner: tuple[Any, ...]
-    matched: int
-    missed: int
-    spurious: int
-    ospa: float
-    gospa: float
-    cutoff: float
-    order: float
-
-    @classmethod
-    def of(cls, mp: dict[str, Any]) -> MapSummary:
-        stats = ("mean", "std", "max", "count")
-        a = mp["association"]
-        return cls(
-            edge=tuple(mp["translation"]["abs"][k] for k in stats),
-            corner=tuple(mp["rotation"]["abs"][k] for k in stats),
-            matched=a["matched"],
-            missed=a["missed"],
-            spurious=a["spurious"],
-            ospa=mp["ospa"]["value"],
-            gospa=mp["gospa"]["value"],
-            cutoff=mp["ospa"]["c"],
-            order=mp["ospa"]["p"],
-        )
 
 
 def report_figures(result: RunResult) -> RunFigures:
@@ -169,11 +138,11 @@ def report_sections(
         ],
         figures=[figures.nees],
     )
-    mp = result.map
+    ms = result.map_summary
     map_section = None
-    if mp is not None:
+    if ms is not None:
         map_section = _map_section(
-            MapSummary.of(mp),
+            ms,
             [] if figures.map is None else [figures.map],
             [] if review is None else [review],
         )
@@ -204,12 +173,13 @@ _STRETCH_COLUMNS = [
 
 def _agreement_section(result: RunResult) -> Section:
     """Where the map and the log disagree (stretches, NIS), or why nothing was recovered."""
-    a = result.agreement
-    if a is None:
+    rec = result.recovery_result
+    if rec is None:
         return Section(
             "Map–log agreement",
             paragraphs=[f"No trajectory was recovered: {result.recovery_error}"],
         )
+    a, nis = rec.divergence, rec.nis_stats
     st = a.stretches
     tables = [
         Table(
@@ -217,12 +187,12 @@ def _agreement_section(result: RunResult) -> Section:
             ["measurements", "mean", "median", "expected mean", "beyond 95%", "beyond bound"],
             [
                 [
-                    a.nis.count,
-                    a.nis.mean,
-                    a.nis.median,
-                    2.0,
-                    a.nis.fraction_beyond_95,
-                    a.nis.fraction_beyond_bound,
+                    nis.count,
+                    nis.mean,
+                    nis.median,
+                    NisStats.EXPECTED_MEAN,
+                    nis.fraction_beyond_95,
+                    nis.fraction_beyond_bound,
                 ]
             ],
         ),  # fmt: skip
@@ -241,7 +211,7 @@ def _agreement_section(result: RunResult) -> Section:
     return Section("Map–log agreement", paragraphs=_agreement_paragraphs(a), tables=tables)
 
 
-def _agreement_paragraphs(a: Agreement) -> list[str]:
+def _agreement_paragraphs(a: Divergence) -> list[str]:
     st = a.stretches
     paragraphs = [
         "EKF localisation in the final map checks every innovation against its covariance: "
@@ -258,12 +228,14 @@ def _agreement_paragraphs(a: Agreement) -> list[str]:
             else "The map and the log agree: no stretch of outlying innovations."
         ),
     ]
-    ns = a.nees_stretches
+    ns = a.nees_blowups or ()
     if ns:
         paragraphs.append(
-            f"Against the ground truth, the recovered pose's NEES exceeds its 99.99% χ² bound "
-            f"(3 dof) on {len(ns)} stretch(es): "
-            + ", ".join(f"[{t0:.6g}, {t1:.6g}] s" for t0, t1 in ns[:10])
+            f"Against the ground truth, the recovered pose's NEES blows up {len(ns)} time(s): "
+            f"runs of at least {a.max_outlier_run or DEFAULT_MAX_OUTLIER_RUN} poses beyond "
+            f"its {100 * OUTLIER_PROBABILITY:g}% χ² bound (3 dof), shorter gaps merged — "
+            "not the verdict's NEES excursions above the 95% band: "
+            + ", ".join(f"[{b.t0:.6g}, {b.t1:.6g}] s" for b in ns[:10])
             + (" …" if len(ns) > 10 else "")
             + "."
         )
@@ -285,7 +257,10 @@ def _map_section(m: MapSummary, figures: list[Figure], links: list[tuple[str, st
             Table(
                 "landmark-map relation errors",
                 ["relation", "abs mean", "abs std", "abs max", "count"],
-                [["edge length [m]", *m.edge], ["corner angle [rad]", *m.corner]],
+                [
+                    [what, s.mean, s.std, s.max, s.count]
+                    for what, s in (("edge length [m]", m.edge), ("corner angle [rad]", m.corner))
+                ],
             ),
             Table(
                 "association and set distances",

@@ -325,11 +325,11 @@ def recovery_variants_table(
                 row[f"{key}_1s"] = relation_error_1s(t, x, gt)
                 row[f"{key}_loops"] = relation_error_loops(t, x, gt)
             row.update(
-                gated_fraction=c["gated_fraction"],
-                downweighted_fraction=c["downweighted_fraction"],
-                downweight_loss=c["downweight_loss"],
-                stretches=f.divergence["count"],
-                fraction_of_log=f.divergence["fraction_of_log"],
+                gated_fraction=c.gated_fraction,
+                downweighted_fraction=c.downweighted_fraction,
+                downweight_loss=c.downweight_loss,
+                stretches=f.divergence.count,
+                fraction_of_log=f.divergence.fraction_of_log,
             )
             part.append(row)
         best = {r["variant"]: r for r in part}
