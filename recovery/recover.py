@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recovery.bundle import Bundle
+from recovery.constants import DEFAULT_ROBUST, MAP_MODES, METHODS
 from recovery.ekf import (
     DEFAULT_MAX_OUTLIER_RUN,
     EVENT_KINDS,
@@ -57,11 +58,6 @@ __all__ = [
     "filter_input",
     "recover",
 ]
-
-METHODS = ("filter", "smoother", "batch")
-#: The default robust update of :func:`recover` (its ``c`` is ``ROBUST_DEFAULTS[kind]``).
-DEFAULT_ROBUST = "redescending"
-MAP_MODES = ("joint", "marginal", "ignore")
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se3
+from relation_metric.constants import STRATEGIES
 from relation_metric.errors import InputError
 from relation_metric.groups import SE2, SE3, PoseGroup, group_of
 from relation_metric.trajectory import Trajectory, readonly, readonly_fresh
@@ -34,8 +35,6 @@ __all__ = [
     "generate_relations",
     "STRATEGIES",
 ]
-
-STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs")
 
 
 @dataclass(frozen=True)

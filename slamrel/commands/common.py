@@ -9,15 +9,11 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from recovery.constants import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, ROBUST
+from relation_metric.constants import STRATEGIES
 from relation_metric.errors import InputError, SlamrelError
 from slamrel.commands import options as opt
-from slamrel.commands.choices import (
-    DEFAULT_MAX_OUTLIER_RUN,
-    DEFAULT_ROBUST,
-    ROBUST_CHOICES,
-    STRATEGIES,
-    TRAJECTORY_FORMATS,
-)
+from slamrel.constants import TRAJECTORY_FORMATS
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from relation_metric.relations import RelationSet
@@ -218,7 +214,7 @@ def add_recovery_arguments(parser: argparse.ArgumentParser, *, fail_help: str) -
     parser.add_argument("--fail-on-divergence", action="store_true", help=fail_help)
     parser.add_argument(
         "--robust",
-        choices=(*ROBUST_CHOICES, "none"),
+        choices=(*(r for r in ROBUST if r), "none"),
         default=DEFAULT_ROBUST,
         help="M-estimator weights on outlying innovations (smoother and batch use the same "
         "weights; the down-weighted fraction is reported; none: the plain EKF; "

@@ -56,6 +56,7 @@ from numpy.typing import NDArray
 from relation_metric.errors import InputError
 from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import OutOfPlane, Trajectory, check_coordinates
+from slamrel.constants import TRAJECTORY_FORMATS
 from slamrel.formats.text import (
     PathLike,
     SourceText,
@@ -83,7 +84,6 @@ __all__ = [
     "quaternion_from_yaw",
 ]
 
-TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc")
 DIMENSIONS = ("auto", "2d", "3d")
 _EUROC_COLUMNS = (
     "timestamp",
