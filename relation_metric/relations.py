@@ -323,7 +323,7 @@ def _random_pairs(
     if count > MAX_SAMPLED_RELATIONS:
         raise InputError(
             f"count {count} is more than the {MAX_SAMPLED_RELATIONS} relations slamrel draws; "
-            "use --strategy all-pairs on a short trajectory, or a smaller count"
+            'use strategy="all-pairs" on a short trajectory, or a smaller count'
         )
     total = n * (n - 1) // 2
     if xy is None and count >= total:

@@ -155,3 +155,134 @@ def test_errors_are_one_family() -> None:
     assert issubclass(slamrel.DivergenceError, slamrel.SlamrelError)
     with pytest.raises(slamrel.InputError, match="no-such-file"):
         slamrel.read_trajectory(ROOT / "no-such-file.txt")
+
+
+# --- library messages in library words; the CLI adds its option words ------------------------
+
+LIBRARIES = ("relation_metric", "recovery", "landmark_graph")
+LIBRARY_DIRS = [ROOT / p for p in LIBRARIES] + [
+    ROOT / "slamrel" / p for p in ("formats", "backends", "simulation")
+]
+
+
+def test_library_messages_name_no_command_line_option() -> None:
+    """Every string of the library code that is not a docstring (messages, warnings) is free
+    of ``--option`` words: a Python caller has parameters, the CLI says its own options."""
+    option = re.compile(r"(?<![\w-])--[a-z]")
+    found = []
+    for directory in LIBRARY_DIRS:
+        for path in sorted(directory.glob("*.py")):
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            docstrings = {
+                id(node.body[0].value)
+                for node in ast.walk(tree)
+                if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef)
+                and node.body
+                and isinstance(node.body[0], ast.Expr)
+                and isinstance(node.body[0].value, ast.Constant)
+            }
+            for node in ast.walk(tree):
+                if (
+                    isinstance(node, ast.Constant)
+                    and isinstance(node.value, str)
+                    and id(node) not in docstrings
+                    and option.search(node.value)
+                ):
+                    found.append(f"{path.relative_to(ROOT)}:{node.lineno}: {node.value!r}")
+    assert not found, "\n".join(found)
+
+
+def _cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    from slamrel.cli import main
+
+    capsys.readouterr()
+    code = main(argv)
+    return code, capsys.readouterr().err
+
+
+RELATIONS = "0 1 1 0 0 0 0 0\n1 2 1 0 0 0 0 0\n"
+PLAIN = "0 0 0 0\n1 1 0 0\n2 2 0 0\n"
+
+
+def test_map_compare_without_common_ids(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import slamrel
+
+    est, ref = tmp_path / "e.csv", tmp_path / "r.csv"
+    est.write_text("landmark,x,y\n1,0,0\n2,1,0\n3,0,1\n")
+    ref.write_text("landmark,x,y\n11,0,0\n12,1,0\n13,0,1\n")
+    with pytest.raises(slamrel.InputError) as exc:
+        slamrel.compare_maps(slamrel.read_map(est), slamrel.read_map(ref))
+    assert exc.value.message == (
+        "no landmark of the estimate matches the reference by id; "
+        'associate="auto" matches them by position, an association of your own by hand'
+    )
+    code, err = _cli(["map-compare", str(est), str(ref)], capsys)
+    assert code == 3
+    assert err == (
+        f"slamrel map-compare: error: {est}: no landmark of the estimate matches the "
+        "reference by id; --associate auto matches them by position, an association file by "
+        "hand\n"
+    )
+
+
+def test_relations_file_given_as_a_trajectory(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import slamrel
+
+    (tmp_path / "r.relations").write_text(RELATIONS)
+    (tmp_path / "e.rel").write_text(RELATIONS)
+    with pytest.raises(slamrel.InputError, match=r"; pass format=\.\.\. to read it as a"):
+        slamrel.read_trajectory(tmp_path / "e.rel")
+    code, err = _cli(["evaluate", str(tmp_path / "r.relations"), str(tmp_path / "e.rel")], capsys)
+    assert code == 3
+    assert "not a trajectory; pass --format to read it as a trajectory anyway" in err
+
+
+def test_unrecognised_reference_trajectory_names_its_own_option(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--format`` is the estimate's: a reference is given its format with --reference-format."""
+    (tmp_path / "r.txt").write_text("0 1 2\n1 2 3\n")
+    (tmp_path / "e.txt").write_text(PLAIN)
+    argv = ["evaluate", str(tmp_path / "r.txt"), str(tmp_path / "e.txt"), "--strategy", "random"]
+    code, err = _cli(argv, capsys)
+    assert code == 3 and "cannot recognise the trajectory format" in err
+    assert err.rstrip().endswith("; pass --reference-format")
+
+
+def test_non_finite_carmen_pose(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import slamrel
+
+    log = tmp_path / "e.log"
+    log.write_text("".join(f"ODOM {x} 0 0 0 0 0 {t} h 0\n" for t, x in enumerate((0, "nan", 2))))
+    (tmp_path / "r.relations").write_text(RELATIONS)
+    with pytest.raises(slamrel.InputError, match=r"\(skip_invalid=True skips such records and "):
+        slamrel.read_trajectory(log)
+    code, err = _cli(["evaluate", str(tmp_path / "r.relations"), str(log)], capsys)
+    assert code == 3 and f"{log}:2: ODOM record with a non-finite pose" in err
+    assert "(the metricevaluator mode, or --skip-invalid-poses, skips such records and" in err
+
+
+def test_planar_projection_warning(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import slamrel
+
+    tum = tmp_path / "t.tum"
+    rows = [f"{k} {0.5 * k} 0 {0.3 * k} 0 0 0 1" for k in range(5)]
+    tum.write_text("\n".join(rows) + "\n")
+    with pytest.warns(UserWarning, match=r'scored in 2-D \(dimension="2d"\): discarding'):
+        slamrel.read_trajectory(tum, dimension="2d")
+    argv = ["evaluate", str(tum), str(tum), "--planar", "-q"]
+    code, err = _cli(argv, capsys)
+    assert code == 0
+    assert f"warning: {tum}: 3-D trajectory scored in 2-D (--planar): discarding its" in err
+
+
+def test_strict_evaluation(capsys: pytest.CaptureFixture[str]) -> None:
+    import slamrel
+
+    est = slamrel.Trajectory(np.array([0.0, 1.0]), np.zeros((2, 3)))
+    rel = slamrel.RelationSet(np.array([0.0, 0.0]), np.array([1.0, 5.0]), np.zeros((2, 3)))
+    with pytest.raises(slamrel.AssociationError) as exc:
+        slamrel.evaluate(rel, est, strict=True)
+    assert exc.value.message.endswith("(strict=True)") and "--" not in exc.value.message

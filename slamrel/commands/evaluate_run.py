@@ -20,6 +20,7 @@ from relation_metric.timeorder import RepeatedTimeWarning, zero_length
 from relation_metric.trajectory import Trajectory
 from slamrel.commands.common import (
     check_outputs,
+    in_option_words,
     load_trajectory_arg,
     relations_from_args,
     stats_table,
@@ -163,6 +164,7 @@ def load_reference(
         role="reference",
         planar=args.planar,
         times=args.reference_times,
+        format_option="--reference-format",
     )
     ref = Path(args.reference)
     _refuse_if_strict(args, loaded, str(ref / "groundtruth.csv" if ref.is_dir() else ref))
@@ -251,19 +253,20 @@ def score(args: argparse.Namespace) -> tuple[Evaluation, Trajectory, dict[str, A
         relations = relations_from_args(ref_sync, args, key="index")
         scored = est_sync
         ate_pair = _same_times(est_sync, ref_sync)
-    ev = evaluate(
-        relations,
-        scored,
-        odometry=odometry,
-        mode=args.mode,
-        weights=args.weights,
-        max_time_diff=args.max_time_diff,
-        interpolate=args.interpolate,
-        max_interpolation_gap=args.max_interpolation_gap,
-        strict=args.strict,
-        estimate_name=args.estimate,
-        relations_name=args.reference,
-    )
+    with in_option_words({"strict=True": "--strict"}):
+        ev = evaluate(
+            relations,
+            scored,
+            odometry=odometry,
+            mode=args.mode,
+            weights=args.weights,
+            max_time_diff=args.max_time_diff,
+            interpolate=args.interpolate,
+            max_interpolation_gap=args.max_interpolation_gap,
+            strict=args.strict,
+            estimate_name=args.estimate,
+            relations_name=args.reference,
+        )
     if args.sync:  # name the pose pairs by the reference's times in the outputs (CSV, zip, plot)
         i = ev.relations.first.astype(np.int64)
         j = ev.relations.second.astype(np.int64)
@@ -361,6 +364,7 @@ def _load_odometry(args: argparse.Namespace, skip: bool, notes: dict[str, Any]) 
         skip_invalid=skip,
         role="odometry",
         planar=args.planar,
+        format_option="--odometry-format",
     )
     _refuse_if_strict(args, loaded, args.odometry)
     notes["odometry_out_of_order"] = loaded.time_order.as_dict()
