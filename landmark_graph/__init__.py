@@ -1,1 +1,78 @@
-"""landmark_graph: relations for landmark maps (Delaunay mesh, pose-landmark links)."""
+"""landmark_graph: relations for landmark maps (Delaunay mesh, pose-landmark links).
+
+The main names are importable from the package (``from landmark_graph import compare_maps``);
+each is imported from its module on first use (PEP 562), so ``import landmark_graph`` imports
+no numpy or scipy.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: Public name → the module that defines it (imported on first use).
+_EXPORTS: dict[str, str] = {
+    "LandmarkMap": "landmark_graph.maps",
+    "compare_maps": "landmark_graph.map_compare",
+    "MapComparison": "landmark_graph.map_compare",
+    "Association": "landmark_graph.landmark_association",
+    "associate_by_id": "landmark_graph.landmark_association",
+    "associate_auto": "landmark_graph.landmark_association",
+    "ospa": "landmark_graph.landmark_association",
+    "gospa": "landmark_graph.landmark_association",
+    "Mesh": "landmark_graph.mesh",
+    "delaunay_mesh": "landmark_graph.mesh",
+    "MeshErrors": "landmark_graph.mesh_relations",
+    "mesh_errors": "landmark_graph.mesh_relations",
+    "PoseLandmarkErrors": "landmark_graph.pose_landmark",
+    "pose_landmark_errors": "landmark_graph.pose_landmark",
+    "pose_landmark_relations": "landmark_graph.pose_landmark",
+}
+
+__all__ = [
+    "LandmarkMap",
+    "compare_maps",
+    "MapComparison",
+    "Association",
+    "associate_by_id",
+    "associate_auto",
+    "ospa",
+    "gospa",
+    "Mesh",
+    "delaunay_mesh",
+    "MeshErrors",
+    "mesh_errors",
+    "PoseLandmarkErrors",
+    "pose_landmark_errors",
+    "pose_landmark_relations",
+]
+
+if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on first use
+    from landmark_graph.landmark_association import (
+        Association,
+        associate_auto,
+        associate_by_id,
+        gospa,
+        ospa,
+    )
+    from landmark_graph.map_compare import MapComparison, compare_maps
+    from landmark_graph.maps import LandmarkMap
+    from landmark_graph.mesh import Mesh, delaunay_mesh
+    from landmark_graph.mesh_relations import MeshErrors, mesh_errors
+    from landmark_graph.pose_landmark import (
+        PoseLandmarkErrors,
+        pose_landmark_errors,
+        pose_landmark_relations,
+    )
+else:
+
+    def __getattr__(name: str) -> Any:
+        """Import a public name from its module on first use (then it is a plain global)."""
+        if name not in _EXPORTS:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+        globals()[name] = value
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(globals()) | set(__all__))

@@ -137,7 +137,7 @@ def compare_maps(
         )
     if assoc.estimate_rows.size == 0:
         how = (
-            " by id; --associate auto matches them by position, an association file by hand"
+            ' by id; associate="auto" matches them by position, an association of your own by hand'
             if associate == "id"
             else "; check the association or the cut-off"
         )

@@ -1,1 +1,63 @@
-"""recovery: trajectory recovery from an EKF-SLAM result (offline EKF localisation + smoothing)."""
+"""recovery: trajectory recovery from an EKF-SLAM result (offline EKF localisation + smoothing).
+
+The main names are importable from the package (``from recovery import Bundle``); each is
+imported from its module on first use (PEP 562), so ``import recovery`` imports no numpy.
+The run function ``recover`` is not among them: ``recovery.recover`` is its module; use
+``from recovery.recover import recover`` (or ``slamrel.recover``).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: Public name → the module that defines it (imported on first use).
+_EXPORTS: dict[str, str] = {
+    "Bundle": "recovery.bundle",
+    "MotionModel": "recovery.models",
+    "SensorModel": "recovery.models",
+    "Recovery": "recovery.recover",
+    "Stretch": "recovery.recover",
+    "FilterInput": "recovery.ekf",
+    "FilterResult": "recovery.ekf",
+    "run_filter": "recovery.ekf",
+    "SmootherResult": "recovery.smoother",
+    "smooth": "recovery.smoother",
+    "BatchResult": "recovery.batch",
+    "refine": "recovery.batch",
+}
+
+__all__ = [
+    "Bundle",
+    "MotionModel",
+    "SensorModel",
+    "Recovery",
+    "Stretch",
+    "FilterInput",
+    "FilterResult",
+    "run_filter",
+    "SmootherResult",
+    "smooth",
+    "BatchResult",
+    "refine",
+]
+
+if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on first use
+    from recovery.batch import BatchResult, refine
+    from recovery.bundle import Bundle
+    from recovery.ekf import FilterInput, FilterResult, run_filter
+    from recovery.models import MotionModel, SensorModel
+    from recovery.recover import Recovery, Stretch
+    from recovery.smoother import SmootherResult, smooth
+else:
+
+    def __getattr__(name: str) -> Any:
+        """Import a public name from its module on first use (then it is a plain global)."""
+        if name not in _EXPORTS:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+        globals()[name] = value
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(globals()) | set(__all__))

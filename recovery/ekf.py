@@ -54,6 +54,7 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm import tqdm
 
+from recovery.constants import DEFAULT_MAX_OUTLIER_RUN, ROBUST
 from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.consistency import OUTLIER_PROBABILITY, chi2_quantile
@@ -95,13 +96,8 @@ class MeasurementStatus(IntEnum):
 
 
 USED, GATED, UNASSOCIATED, OUTSIDE = MeasurementStatus
-#: Robust weights of :func:`run_filter` (``None``: the plain EKF).
-ROBUST = (None, "huber", "cauchy", "redescending")
 #: Default ``c`` of each M-estimator on the standardised distance (see ``recover``).
 ROBUST_DEFAULTS = {"huber": 1.5, "cauchy": 1.5, "redescending": 1.75}
-#: Consecutive outlying innovations after which the filter is re-entered (and a stretch of
-#: disagreement between map and log is reported).
-DEFAULT_MAX_OUTLIER_RUN = 10
 
 
 class FilterEvent(IntEnum):

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recovery.bundle import Bundle
+from recovery.constants import DEFAULT_ROBUST, MAP_MODES, METHODS
 from recovery.ekf import (
     DEFAULT_MAX_OUTLIER_RUN,
     EVENT_KINDS,
@@ -73,11 +74,6 @@ __all__ = [
     "nees_blowups",
     "recover",
 ]
-
-METHODS = ("filter", "smoother", "batch")
-#: The default robust update of :func:`recover` (its ``c`` is ``ROBUST_DEFAULTS[kind]``).
-DEFAULT_ROBUST = "redescending"
-MAP_MODES = ("joint", "marginal", "ignore")
 
 
 @dataclass(frozen=True)

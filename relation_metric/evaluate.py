@@ -171,7 +171,7 @@ def evaluate(
     if n_bad:
         message = _describe_unassociated(relations, assoc, max_time_diff, of_relations)
         if strict:
-            raise AssociationError(message + " (--strict)", path=estimate_name)
+            raise AssociationError(message + " (strict=True)", path=estimate_name)
         where = f"{estimate_name}: " if estimate_name else ""
         warnings.warn(where + message, UnassociatedRelationsWarning, stacklevel=2)
     with np.errstate(over="ignore", invalid="ignore"):

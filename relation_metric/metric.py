@@ -39,12 +39,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se2
+from relation_metric.constants import MODES
 from relation_metric.errors import InputError
 from relation_metric.groups import SE2, common_group, group_of
 
 __all__ = ["RelationErrors", "relation_errors", "MODES", "parse_weights"]
 
-MODES = ("paper", "metricevaluator")
 Mode = Literal["paper", "metricevaluator"]
 _UNIT_WEIGHTS = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
 

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se3
+from relation_metric.constants import STRATEGIES
 from relation_metric.errors import InputError
 from relation_metric.groups import SE2, SE3, PoseGroup, group_of
 from relation_metric.trajectory import Trajectory, readonly, readonly_fresh
@@ -34,8 +35,6 @@ __all__ = [
     "generate_relations",
     "STRATEGIES",
 ]
-
-STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs")
 
 
 @dataclass(frozen=True)
@@ -324,7 +323,7 @@ def _random_pairs(
     if count > MAX_SAMPLED_RELATIONS:
         raise InputError(
             f"count {count} is more than the {MAX_SAMPLED_RELATIONS} relations slamrel draws; "
-            "use --strategy all-pairs on a short trajectory, or a smaller count"
+            'use strategy="all-pairs" on a short trajectory, or a smaller count'
         )
     total = n * (n - 1) // 2
     if xy is None and count >= total:

@@ -35,7 +35,7 @@ def test_tolerance_and_unassociated_are_counted():
         ev = evaluate(rel, est)
     assert ev.translation["abs"].count == 1
     assert ev.as_dict()["unassociated"] == 2
-    with pytest.raises(AssociationError, match="--strict"):
+    with pytest.raises(AssociationError, match=r"\(strict=True\)$"):
         evaluate(rel, est, strict=True)
 
 

@@ -12,6 +12,11 @@ by ``python benchmarks/evo_reference.py`` (its API equivalent of
 --pose_relation {trans_part,angle_rad}`` and ``evo_ape tum GT EST --t_max_diff 0.01 [-a|-as]
 --pose_relation {trans_part,angle_rad}``). When the evo venv of the benchmarks
 (``benchmarks/.venv-evo``) exists, evo is also run live and every error is compared.
+
+The cases and the live evo run are this file's own copy of ``benchmarks/evo_reference.py``,
+on purpose: the stored numbers were made by that script, and the test keeps the definition
+of its oracle beside them, so that editing or removing a benchmark cannot change what is
+checked here (tests import nothing from ``benchmarks/``).
 """
 
 from __future__ import annotations
@@ -19,7 +24,9 @@ from __future__ import annotations
 import io
 import json
 import math
-import sys
+import subprocess
+import tempfile
+import textwrap
 import zipfile
 from pathlib import Path
 
@@ -29,10 +36,86 @@ from conftest import ROOT, require_data
 
 from slamrel.cli import main
 
-sys.path.insert(0, str(ROOT / "benchmarks"))
-import evo_reference  # noqa: E402
-
 TOL = 1e-9
+
+SEQUENCES = {
+    "fr1_xyz": ("freiburg1_xyz-groundtruth.txt", "freiburg1_xyz-rgbdslam.txt"),
+    "fr2_desk": ("fr2_desk_groundtruth.txt", "fr2_desk_ORB.txt"),
+}
+# (name, sequence, metric, delta, unit, align) — align: "" | "se3" | "sim3" (APE only)
+CASES = [
+    ("fr1_xyz/rpe/1f", "fr1_xyz", "rpe", 1, "frames", ""),
+    ("fr1_xyz/rpe/10f", "fr1_xyz", "rpe", 10, "frames", ""),
+    ("fr1_xyz/rpe/0.2m", "fr1_xyz", "rpe", 0.2, "meters", ""),
+    ("fr1_xyz/ape", "fr1_xyz", "ape", 0, "", ""),
+    ("fr1_xyz/ape/se3", "fr1_xyz", "ape", 0, "", "se3"),
+    ("fr2_desk/rpe/1f", "fr2_desk", "rpe", 1, "frames", ""),
+    ("fr2_desk/rpe/1m", "fr2_desk", "rpe", 1.0, "meters", ""),
+    ("fr2_desk/ape/se3", "fr2_desk", "ape", 0, "", "se3"),
+    ("fr2_desk/ape/sim3", "fr2_desk", "ape", 0, "", "sim3"),
+]
+EVO_PYTHON = ROOT / "benchmarks" / ".venv-evo" / "bin" / "python"
+# evo's API run of every case (evo_rpe/evo_ape with --t_max_diff 0.01, see the module doc):
+# statistics and count by case, and each error array saved as <arrays>/<case>_<part>.npy.
+EVO_SCRIPT = textwrap.dedent(
+    """
+    import copy, json, sys
+    import numpy as np
+    import evo
+    from evo.core import metrics, sync
+    from evo.core.metrics import PoseRelation, Unit
+    from evo.tools import file_interface
+    data, cases, arrays = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3]
+    out = {"evo_version": evo.__version__}
+    for name, (gt, est), metric, delta, unit, align in cases:
+        ref = file_interface.read_tum_trajectory_file(data + "/" + gt)
+        e = file_interface.read_tum_trajectory_file(data + "/" + est)
+        ref, e = sync.associate_trajectories(ref, e, max_diff=0.01)
+        if align:
+            e = copy.deepcopy(e)
+            e.align(ref, correct_scale=(align == "sim3"))
+        res = {}
+        for part, rel in (("trans", PoseRelation.translation_part),
+                          ("rot", PoseRelation.rotation_angle_rad)):
+            if metric == "rpe":
+                m = metrics.RPE(rel, delta=delta, delta_unit=Unit[unit], all_pairs=False,
+                                pairs_from_reference=True)
+            else:
+                m = metrics.APE(rel)
+            m.process_data((ref, e))
+            res[part] = {k: float(v) for k, v in m.get_all_statistics().items()}
+            res[part]["count"] = int(m.error.size)
+            np.save(arrays + "/" + name.replace("/", "_") + "_" + part + ".npy", m.error)
+        out[name] = res
+    print(json.dumps(out))
+    """
+)
+
+
+def _evo_python() -> Path | None:
+    """The benchmarks' evo venv python when it exists and imports evo (never creates it)."""
+    if not EVO_PYTHON.exists():
+        return None
+    ok = subprocess.run([str(EVO_PYTHON), "-c", "import evo"], capture_output=True, check=False)
+    return EVO_PYTHON if ok.returncode == 0 else None
+
+
+def _run_evo(python: Path, data: Path, arrays: Path) -> dict:
+    """evo's results by case (:data:`EVO_SCRIPT` run with the evo venv's ``python``)."""
+    cases = [(n, SEQUENCES[s], m, d, u, a) for n, s, m, d, u, a in CASES]
+    with tempfile.TemporaryDirectory() as tmp:
+        script = Path(tmp) / "evo_run.py"
+        script.write_text(EVO_SCRIPT)
+        r = subprocess.run(
+            [str(python), str(script), str(data), json.dumps(cases), str(arrays)],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+    if r.returncode:
+        raise RuntimeError("evo failed: " + r.stderr.strip()[-2000:])
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
 
 EVO = {
     "fr1_xyz/rpe/1f": {
@@ -282,10 +365,10 @@ def _check_stats(ours: dict, theirs: dict, *, population_std: bool) -> None:
     assert std == pytest.approx(theirs["std"], abs=TOL)
 
 
-@pytest.mark.parametrize("case", [c for c in evo_reference.CASES])
+@pytest.mark.parametrize("case", CASES)
 def test_matches_stored_evo_numbers(tmp_path, case):
     name, seq, metric, delta, unit, align = case
-    gt_name, est_name = evo_reference.SEQUENCES[seq]
+    gt_name, est_name = SEQUENCES[seq]
     gt = require_data("tum_rgbd", gt_name)
     est = require_data("tum_rgbd", est_name)
     stored = EVO[name]
@@ -305,20 +388,20 @@ def test_matches_stored_evo_numbers(tmp_path, case):
 
 @pytest.fixture(scope="module")
 def live_evo(tmp_path_factory):
-    python = evo_reference.evo_python()
+    python = _evo_python()
     if python is None:
         pytest.skip("evo venv not installed (run python benchmarks/evo_reference.py once)")
-    require_data("tum_rgbd")
+    data = require_data("tum_rgbd")
     arrays = tmp_path_factory.mktemp("evo_arrays")
-    return evo_reference.run_evo(python, evo_reference.DATA, arrays), arrays
+    return _run_evo(python, data, arrays), arrays
 
 
 def test_live_evo_agrees_error_by_error(tmp_path, live_evo):
     results, arrays = live_evo
-    for name, seq, metric, delta, unit, _align in evo_reference.CASES:
+    for name, seq, metric, delta, unit, _align in CASES:
         if metric != "rpe":
             continue
-        gt_name, est_name = evo_reference.SEQUENCES[seq]
+        gt_name, est_name = SEQUENCES[seq]
         gt = require_data("tum_rgbd", gt_name)
         est = require_data("tum_rgbd", est_name)
         ours = _slamrel_rpe(tmp_path, gt, est, delta, unit)

@@ -4,20 +4,17 @@ from __future__ import annotations
 
 import argparse
 import os
-from collections.abc import Iterator, Sequence
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
+from recovery.constants import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, ROBUST
+from relation_metric.constants import STRATEGIES
 from relation_metric.errors import InputError, SlamrelError
 from slamrel.commands import options as opt
-from slamrel.commands.choices import (
-    DEFAULT_MAX_OUTLIER_RUN,
-    DEFAULT_ROBUST,
-    ROBUST_CHOICES,
-    STRATEGIES,
-    TRAJECTORY_FORMATS,
-)
+from slamrel.constants import TRAJECTORY_FORMATS
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from relation_metric.relations import RelationSet
@@ -27,6 +24,7 @@ if TYPE_CHECKING:  # the library is imported where it is used: start-up stays li
 
 __all__ = [
     "errors_about",
+    "in_option_words",
     "add_strategy_arguments",
     "relations_from_args",
     "stats_table",
@@ -53,6 +51,36 @@ def errors_about(path: str | os.PathLike[str]) -> Iterator[None]:
         raise type(exc)(exc.message, path=path, line=exc.line) from None
     except SlamrelError as exc:
         raise InputError(str(exc), path=path) from None
+
+
+@contextmanager
+def in_option_words(words: Mapping[str, str]) -> Iterator[None]:
+    """Say the library's parameters in the command's options, in errors and warnings.
+
+    The libraries name what would change an outcome by the parameter of their call
+    (``strict=True``, ``pass format=...``); the command knows which of its options sets it.
+    Inside the block each phrase of ``words`` (``{"strict=True": "--strict"}``) is replaced
+    by its option words in the message of an :class:`InputError` (re-raised with the same
+    file and line) and of every warning (shown when the block ends, in order).
+    """
+
+    def say(text: str) -> str:
+        for phrase, option in words.items():
+            text = text.replace(phrase, option)
+        return text
+
+    caught: list[warnings.WarningMessage] = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            yield
+    except InputError as exc:
+        said = say(exc.message)
+        if said == exc.message:
+            raise
+        raise type(exc)(said, path=exc.path, line=exc.line) from None
+    finally:
+        for w in caught:
+            warnings.warn_explicit(say(str(w.message)), w.category, w.filename, w.lineno)
 
 
 def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | None) -> None:
@@ -130,6 +158,7 @@ def load_trajectory_arg(
     role: str = "reference",
     planar: bool = False,
     times: str | None = None,
+    format_option: str = "--format",
 ) -> LoadedTrajectory:
     """Read a trajectory given on the command line.
 
@@ -144,7 +173,8 @@ def load_trajectory_arg(
     Poses out of time order are sorted and counted (``LoadedTrajectory.time_order``).
     3-D formats (TUM, KITTI, EuRoC) are read as SE(3) when their motion leaves the plane;
     ``planar`` (``--planar``) projects them onto the plane with a warning that states the
-    out-of-plane motion discarded. ``times`` is a KITTI times file.
+    out-of-plane motion discarded. ``times`` is a KITTI times file. The reader's messages
+    name the command's options (``format_option`` for its ``format``).
     """
     from relation_metric.timeorder import FILTER_TIME_TOLERANCE
     from slamrel.formats.trajectories import read_trajectory, without_repeated_times
@@ -171,14 +201,20 @@ def load_trajectory_arg(
         return without_repeated_times(loaded, gt)
     if fmt is not None and fmt not in TRAJECTORY_FORMATS:
         raise InputError(f"unknown format {fmt!r}", path=path)
-    loaded = read_trajectory(
-        path,
-        format=fmt,
-        pose=pose,  # type: ignore[arg-type]
-        skip_invalid=skip_invalid,
-        dimension="2d" if planar else "auto",
-        times=times,
-    )
+    words = {
+        "format=...": format_option,
+        "skip_invalid=True": "the metricevaluator mode, or --skip-invalid-poses,",
+        'dimension="2d"': "--planar",
+    }
+    with in_option_words(words):
+        loaded = read_trajectory(
+            path,
+            format=fmt,
+            pose=pose,  # type: ignore[arg-type]
+            skip_invalid=skip_invalid,
+            dimension="2d" if planar else "auto",
+            times=times,
+        )
     if role == "reference":
         loaded = without_repeated_times(loaded, path)
     return loaded
@@ -218,7 +254,7 @@ def add_recovery_arguments(parser: argparse.ArgumentParser, *, fail_help: str) -
     parser.add_argument("--fail-on-divergence", action="store_true", help=fail_help)
     parser.add_argument(
         "--robust",
-        choices=(*ROBUST_CHOICES, "none"),
+        choices=(*(r for r in ROBUST if r), "none"),
         default=DEFAULT_ROBUST,
         help="M-estimator weights on outlying innovations (smoother and batch use the same "
         "weights; the down-weighted fraction is reported; none: the plain EKF; "

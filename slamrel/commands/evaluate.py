@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import argparse
 
+from relation_metric.constants import MODES
 from slamrel.commands import options as opt
-from slamrel.commands.choices import MODES, TRAJECTORY_FORMATS
 from slamrel.commands.common import add_strategy_arguments
+from slamrel.constants import TRAJECTORY_FORMATS
 
 HELP = "score an estimated trajectory against reference relations"
 

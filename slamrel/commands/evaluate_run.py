@@ -20,6 +20,7 @@ from relation_metric.timeorder import RepeatedTimeWarning, zero_length
 from relation_metric.trajectory import Trajectory
 from slamrel.commands.common import (
     check_outputs,
+    in_option_words,
     load_trajectory_arg,
     relations_from_args,
     stats_table,
@@ -164,6 +165,7 @@ def load_reference(
         role="reference",
         planar=args.planar,
         times=args.reference_times,
+        format_option="--reference-format",
     )
     ref = Path(args.reference)
     _refuse_if_strict(args, loaded, str(ref / "groundtruth.csv" if ref.is_dir() else ref))
@@ -208,9 +210,22 @@ def _warn_same_file(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-
+    """``slamrel evaluate``: outputs checked, then :func:`score`, then written and printed."""
     outputs = [args.json, args.per_relation, args.plot, args.evo_zip]
     check_outputs(outputs, [args.reference, args.estimate, args.odometry])
+    ev, ev_estimate, result = score(args)
+    _write_outputs(args, ev, ev_estimate, result)
+    if not args.quiet:
+        print(summary_text(ev, result, degrees=args.degrees))
+    return 0
+
+
+def score(args: argparse.Namespace) -> tuple[Evaluation, Trajectory, dict[str, Any]]:
+    """Read REFERENCE and ESTIMATE as ``slamrel evaluate`` does and score the estimate.
+
+    Returns the evaluation, the estimate it scored (lifted to SE(3) for 3-D relations) and
+    the JSON of ``--json`` (the evaluation, what was dropped or reordered, the ATE).
+    """
     _warn_same_file(args)
     notes: dict[str, Any] = {}
     relations, reference = load_reference(args, notes)
@@ -239,19 +254,20 @@ def run(args: argparse.Namespace) -> int:
         relations = relations_from_args(ref_sync, args, key="index")
         scored = est_sync
         ate_pair = _same_times(est_sync, ref_sync)
-    ev = evaluate(
-        relations,
-        scored,
-        odometry=odometry,
-        mode=args.mode,
-        weights=args.weights,
-        max_time_diff=args.max_time_diff,
-        interpolate=args.interpolate,
-        max_interpolation_gap=args.max_interpolation_gap,
-        strict=args.strict,
-        estimate_name=args.estimate,
-        relations_name=args.reference,
-    )
+    with in_option_words({"strict=True": "--strict"}):
+        ev = evaluate(
+            relations,
+            scored,
+            odometry=odometry,
+            mode=args.mode,
+            weights=args.weights,
+            max_time_diff=args.max_time_diff,
+            interpolate=args.interpolate,
+            max_interpolation_gap=args.max_interpolation_gap,
+            strict=args.strict,
+            estimate_name=args.estimate,
+            relations_name=args.reference,
+        )
     if args.sync:  # name the pose pairs by the reference's times in the outputs (CSV, zip, plot)
         i = ev.relations.first.astype(np.int64)
         j = ev.relations.second.astype(np.int64)
@@ -273,10 +289,73 @@ def run(args: argparse.Namespace) -> int:
         ate_estimate, ate_reference = ate_pair
         assert ate_reference is not None  # the reference (just checked) or its synchronised copy
         result["ate"] = _ate(ate_estimate, ate_reference, args.max_time_diff)
-    _write_outputs(args, ev, ev_estimate, result)
-    if not args.quiet:
-        print(summary_text(ev, result, degrees=args.degrees))
-    return 0
+    return ev, ev_estimate, result
+
+
+#: The options of ``slamrel evaluate`` that change what is scored, by their Python names
+#: (``--max-time-diff`` is ``max_time_diff``); the others only choose outputs.
+SCORING_OPTIONS = (
+    "format",
+    "reference_format",
+    "times",
+    "reference_times",
+    "odometry",
+    "odometry_format",
+    "max_time_diff",
+    "interpolate",
+    "max_interpolation_gap",
+    "mode",
+    "weights",
+    "strict",
+    "skip_invalid_poses",
+    "planar",
+    "sync",
+    "strategy",
+    "step",
+    "distance",
+    "radius",
+    "min_separation_time",
+    "min_separation_distance",
+    "count",
+    "min_distance",
+    "seed",
+    "chained",
+)
+
+
+def evaluate_files(
+    reference: str | os.PathLike[str], estimate: str | os.PathLike[str], **options: Any
+) -> Evaluation:
+    """``slamrel evaluate REFERENCE ESTIMATE [options]`` as a function: its evaluation.
+
+    The files are read and scored exactly as the command does (REFERENCE a ``.relations``
+    file, a reference trajectory or a bundle directory; the time-order rule; repeated
+    reference times and zero-length relations dropped; see the README), with each option of
+    :data:`SCORING_OPTIONS` given under its Python name and with the command's default when
+    omitted, e.g. ``evaluate_files(ref, est, strategy="loops", radius=2.0,
+    max_time_diff=0.05)``. What is dropped or reordered on the way is said in warnings.
+    Values are taken as given (a ``weights`` string as ``"1,1,0,0,0,0"``); the library
+    checks them where the command's parser would.
+
+    Raises
+    ------
+    TypeError
+        For an option that is not in :data:`SCORING_OPTIONS`.
+    InputError
+        For anything wrong with the files (file and line named), as the command.
+    """
+    unknown = sorted(set(options) - set(SCORING_OPTIONS))
+    if unknown:
+        raise TypeError(
+            f"evaluate_files() got unknown options {', '.join(unknown)}; expected some of "
+            + ", ".join(SCORING_OPTIONS)
+        )
+    from slamrel.cli import build_parser
+
+    args = build_parser().parse_args(["evaluate", "--", os.fspath(reference), os.fspath(estimate)])
+    for name, value in options.items():
+        setattr(args, name, value)
+    return score(args)[0]
 
 
 def _load_odometry(args: argparse.Namespace, skip: bool, notes: dict[str, Any]) -> Trajectory:
@@ -288,6 +367,7 @@ def _load_odometry(args: argparse.Namespace, skip: bool, notes: dict[str, Any]) 
         skip_invalid=skip,
         role="odometry",
         planar=args.planar,
+        format_option="--odometry-format",
     )
     _refuse_if_strict(args, loaded, args.odometry)
     notes["odometry_out_of_order"] = loaded.time_order.as_dict()

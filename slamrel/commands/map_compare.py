@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from slamrel.commands import options as opt
-from slamrel.commands.common import check_outputs, errors_about, stats_table
+from slamrel.commands.common import check_outputs, errors_about, in_option_words, stats_table
 
 if TYPE_CHECKING:
     from landmark_graph.map_compare import MapComparison
@@ -83,7 +83,11 @@ def run(args: argparse.Namespace) -> int:
     assoc = args.associate
     if assoc not in ("id", "auto"):
         assoc = read_association_csv(assoc, est, ref)
-    with errors_about(args.estimate):
+    words = {
+        'associate="auto"': "--associate auto",
+        "an association of your own": "an association file",
+    }
+    with errors_about(args.estimate), in_option_words(words):
         res = compare_maps(
             est,
             ref,

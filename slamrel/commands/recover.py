@@ -7,8 +7,8 @@ import io
 import sys
 from typing import TYPE_CHECKING
 
+from recovery.constants import MAP_MODES, METHODS
 from slamrel.commands import options as opt
-from slamrel.commands.choices import MAP_MODES, METHODS
 from slamrel.commands.common import add_recovery_arguments, check_outputs, errors_about
 
 if TYPE_CHECKING:

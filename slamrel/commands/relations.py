@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import argparse
 
-from slamrel.commands.choices import TRAJECTORY_FORMATS
 from slamrel.commands.common import (
     add_strategy_arguments,
     check_outputs,
     load_trajectory_arg,
     relations_from_args,
 )
+from slamrel.constants import TRAJECTORY_FORMATS
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]

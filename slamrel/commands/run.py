@@ -8,8 +8,8 @@ from pathlib import Path
 
 from relation_metric.errors import InputError
 from slamrel.commands import options as opt
-from slamrel.commands.choices import NOISE_TYPES, WORLDS
 from slamrel.commands.common import add_force_argument, add_recovery_arguments, check_outputs
+from slamrel.constants import NOISE_NAMES, WORLDS
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -21,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("source", nargs="?", default="simple1", metavar="SOURCE")
     p.add_argument("-o", "--output", default="slamrel-report", metavar="DIR")
-    p.add_argument("--noise", choices=NOISE_TYPES, default="a")
+    p.add_argument("--noise", choices=NOISE_NAMES, default="a")
     p.add_argument("--seed", type=opt.seed, default=0)
     p.add_argument(
         "--rate", type=opt.nonnegative_int, default=0, help="control steps per measurement step"

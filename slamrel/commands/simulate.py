@@ -6,8 +6,8 @@ import argparse
 from pathlib import Path
 
 from slamrel.commands import options as opt
-from slamrel.commands.choices import NOISE_TYPES, WORLDS
 from slamrel.commands.common import add_force_argument, check_outputs, errors_about
+from slamrel.constants import NOISE_NAMES, WORLDS
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -16,7 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="write a simulated world (Hu et al.) as a bundle: log, true map, ground truth",
     )
     s.add_argument("world", choices=WORLDS, metavar="WORLD", help=", ".join(WORLDS))
-    s.add_argument("--noise", choices=NOISE_TYPES, default="a")
+    s.add_argument("--noise", choices=NOISE_NAMES, default="a")
     s.add_argument("--seed", type=opt.seed, default=0)
     s.add_argument(
         "--rate",

@@ -16,7 +16,7 @@ import argparse
 import sys
 
 from slamrel.commands import options as opt
-from slamrel.commands.choices import NOISE_TYPES, PAPER_WORLDS, STUDY_METHODS, WORLDS
+from slamrel.constants import NOISE_NAMES, PAPER_WORLDS, POSE_ONLY_METHODS, WORLDS
 
 STUDIES = ("pose-only",)
 
@@ -51,17 +51,17 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     s.add_argument(
         "--noise",
-        type=_names(NOISE_TYPES, "noise types"),
-        default=list(NOISE_TYPES),
+        type=_names(NOISE_NAMES, "noise types"),
+        default=list(NOISE_NAMES),
         metavar="LIST",
         help="comma-separated noise types (default a,b,c)",
     )
     s.add_argument(
         "--methods",
-        type=_names(STUDY_METHODS, "methods"),
-        default=list(STUDY_METHODS),
+        type=_names(POSE_ONLY_METHODS, "methods"),
+        default=list(POSE_ONLY_METHODS),
         metavar="LIST",
-        help="comma-separated methods: " + ", ".join(STUDY_METHODS),
+        help="comma-separated methods: " + ", ".join(POSE_ONLY_METHODS),
     )
     s.add_argument(
         "--pair-start",

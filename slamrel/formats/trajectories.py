@@ -56,6 +56,7 @@ from numpy.typing import NDArray
 from relation_metric.errors import InputError
 from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import OutOfPlane, Trajectory, check_coordinates
+from slamrel.constants import TRAJECTORY_FORMATS
 from slamrel.formats.text import (
     PathLike,
     SourceText,
@@ -83,7 +84,6 @@ __all__ = [
     "quaternion_from_yaw",
 ]
 
-TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc")
 DIMENSIONS = ("auto", "2d", "3d")
 _EUROC_COLUMNS = (
     "timestamp",
@@ -201,7 +201,7 @@ def detect_trajectory_format(path: PathLike, source: SourceText | None = None) -
         return TRAJECTORY_EXTENSIONS[ext]
     if ext in RELATIONS_EXTENSIONS:
         raise InputError(
-            f"a {ext} file holds relations between poses, not a trajectory; pass --format "
+            f"a {ext} file holds relations between poses, not a trajectory; pass format=... "
             "to read it as a trajectory anyway",
             path=path,
         )
@@ -211,7 +211,7 @@ def detect_trajectory_format(path: PathLike, source: SourceText | None = None) -
         raise InputError(
             "cannot recognise the trajectory format (expected CARMEN records, VERTEX_SE2 "
             "lines, a t,x,y,theta CSV header, 8 columns (TUM) or 4 columns (t x y theta)); "
-            "pass --format",
+            "pass format=...",
             path=src.path,
         )
     return fmt
@@ -322,7 +322,7 @@ def read_trajectory(
     if src.cut_off_line() is not None:
         skipped["truncated last line"] += 1
     if t.shape[0] == 0:
-        hint = "" if format else "; pass --format if that is not its format"
+        hint = "" if format else "; pass format=... if that is not its format"
         raise InputError(f"no poses found (read as {fmt}){hint}", path=src.path)
     positions = poses[:, :3] if poses.shape[1] == 7 else poses[:, :2]
     check_coordinates(positions, what="pose", path=src.path, line_of=lines)
@@ -475,8 +475,8 @@ def _poses_of_dimension(
     if not planar:
         discarded.append(oop)
         warnings.warn(
-            f"{src.path}: 3-D trajectory scored in 2-D (--planar): discarding its out-of-plane "
-            f"motion ({oop.describe()})",
+            f'{src.path}: 3-D trajectory scored in 2-D (dimension="2d"): discarding its '
+            f"out-of-plane motion ({oop.describe()})",
             PlanarProjectionWarning,
             stacklevel=4,
         )
@@ -536,8 +536,8 @@ def _read_carmen(
             if not skip_invalid:
                 raise InputError(
                     f"{kind} record with a non-finite pose or time ({' '.join(map(str, p))} "
-                    f"at {t}); expected finite numbers (the metricevaluator mode, or "
-                    "--skip-invalid-poses, skips such records and counts them)",
+                    f"at {t}); expected finite numbers (skip_invalid=True skips such records and "
+                    "counts them)",
                     path=src.path,
                     line=number,
                 )

@@ -47,6 +47,7 @@ from recovery.models import velocity_increment
 from relation_metric import se2
 from relation_metric.errors import InputError
 from relation_metric.trajectory import Trajectory, readonly
+from slamrel.constants import NOISE_NAMES, PAPER_WORLDS, WORLDS
 from slamrel.simulation.sensors import FieldOfViewSensor, observe_field_of_view
 
 __all__ = [
@@ -89,11 +90,18 @@ class NoiseType(NamedTuple):
         return self.sigma_observation / NOMINAL_RANGE
 
 
-NOISE_TYPES: dict[str, NoiseType] = {
-    "a": NoiseType(0.1, 0.1, 0.05, 0.1),
-    "b": NoiseType(0.2, 0.2, 0.2, 0.1),
-    "c": NoiseType(0.1, 0.1, 0.05, 0.3),
-}
+#: The noise type of each of :data:`~slamrel.constants.NOISE_NAMES`, in its order (a, b, c).
+NOISE_TYPES: dict[str, NoiseType] = dict(
+    zip(
+        NOISE_NAMES,
+        (
+            NoiseType(0.1, 0.1, 0.05, 0.1),  # a
+            NoiseType(0.2, 0.2, 0.2, 0.1),  # b
+            NoiseType(0.1, 0.1, 0.05, 0.3),  # c
+        ),
+        strict=True,
+    )
+)
 
 _Q = np.pi / 2  # quarter turn
 
@@ -131,8 +139,6 @@ def _segments(name: str) -> list[tuple[int, float]]:
     raise InputError(f"unknown world {name!r}; expected one of {', '.join(WORLDS)}")
 
 
-WORLDS = ("simple1", "simple2", "complex1", "complex2")
-PAPER_WORLDS = ("hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2")
 PAPER_POSES = {"simple": 82, "complex": 420}  # Hu et al.: poses of the simple / complex runs
 OBSERVATION_MODELS = ("range-bearing", "cartesian")
 

@@ -40,6 +40,7 @@ from slamrel.backends.pose_only import (
     pose_only_least_squares,
 )
 from slamrel.backends.toro_optimiser import spherical_information, toro_optimize
+from slamrel.constants import POSE_ONLY_METHODS as METHODS
 from slamrel.formats.text import write_text_atomic
 from slamrel.simulation.worlds import make_world
 from slamrel.studies.sweep import Task
@@ -55,7 +56,6 @@ __all__ = [
     "write_findings",
 ]
 
-METHODS = ("full", "m1", "m2", "toro")
 METHOD_NAMES = {
     "full": "full LS",
     "m1": "pose-only M1",

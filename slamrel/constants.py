@@ -1,0 +1,21 @@
+"""The named choices of slamrel's readers, worlds and studies, in a module without numpy.
+
+Defined here once; the modules that own them (named at each constant) import them, and the
+command-line parsers offer them as option choices without importing numpy (``slamrel
+--help`` stays light).
+"""
+
+from __future__ import annotations
+
+__all__ = ["TRAJECTORY_FORMATS", "WORLDS", "PAPER_WORLDS", "NOISE_NAMES", "POSE_ONLY_METHODS"]
+
+#: Trajectory file formats of :func:`slamrel.formats.trajectories.read_trajectory`.
+TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc")
+#: Built-in simulated worlds of :func:`slamrel.simulation.worlds.make_world` ...
+WORLDS = ("simple1", "simple2", "complex1", "complex2")
+#: ... and Hu et al.'s worlds to the letter (82 / 420 poses).
+PAPER_WORLDS = ("hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2")
+#: Hu et al.'s noise types (Table I), the keys of ``slamrel.simulation.worlds.NOISE_TYPES``.
+NOISE_NAMES = ("a", "b", "c")
+#: Methods of the pose-only study (:mod:`slamrel.studies.pose_only`, its ``METHODS``).
+POSE_ONLY_METHODS = ("full", "m1", "m2", "toro")
