@@ -43,11 +43,15 @@ PIPELINE, STUDIES, COMMANDS, CLI, MAIN = (
     "slamrel.__main__",
 )
 
+# named choices without numpy (format names, worlds, ...), importable by every slamrel layer
+CONSTANTS = "slamrel.constants"
+
 # layer -> what of ours it may import at run time (itself always)
 ALLOWED: dict[str, tuple[str, ...]] = {
     "relation_metric": (),
     "recovery": ("relation_metric",),
     "landmark_graph": ("relation_metric",),
+    CONSTANTS: (),
     OUTPUTS: ("relation_metric",),
     # back-ends and the simulator are maths on records: the libraries only, no file I/O
     BACKENDS: LIBRARIES,
@@ -78,6 +82,9 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     # the public API re-exports from everywhere; its imports are lazy (made on first use)
     TOP: OURS,
 }
+for _layer in ALLOWED:
+    if _layer.startswith("slamrel.") and _layer not in (CONSTANTS, TOP):
+        ALLOWED[_layer] = (*ALLOWED[_layer], CONSTANTS)
 # layer -> what of ours it may import for annotations only (``if TYPE_CHECKING:``)
 TYPE_ONLY: dict[str, tuple[str, ...]] = {
     BACKENDS: (SIMULATION,),  # pose_only's functions take a simulation.worlds.World

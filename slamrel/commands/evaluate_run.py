@@ -350,9 +350,11 @@ def evaluate_files(
             f"evaluate_files() got unknown options {', '.join(unknown)}; expected some of "
             + ", ".join(SCORING_OPTIONS)
         )
-    from slamrel.cli import build_parser
+    from slamrel.commands import evaluate as command
 
-    args = build_parser().parse_args(["evaluate", "--", os.fspath(reference), os.fspath(estimate)])
+    parser = argparse.ArgumentParser(prog="slamrel")
+    command.register(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["evaluate", "--", os.fspath(reference), os.fspath(estimate)])
     for name, value in options.items():
         setattr(args, name, value)
     return score(args)[0]
