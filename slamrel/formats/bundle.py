@@ -142,7 +142,7 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
                 line=_line_of_key(text, n),
             )
         vals.append(v)
-    return SensorModel(*vals)
+    return SensorModel(vals[0], vals[1])
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:
@@ -355,7 +355,7 @@ def _read_map(root: Path) -> dict[str, Any]:
     return {"map_ids": table.ids, "map_xy": table.xy, "map_marginals": marg, "map_covariance": cov}
 
 
-def _read_measurements(root: Path, reordered: dict[str, int]) -> dict[str, NDArray[Any]]:
+def _read_measurements(root: Path, reordered: dict[str, int]) -> dict[str, Any]:
     """``measurements.csv`` in time order: the five ``measurement*`` fields of the bundle."""
     p = root / "measurements.csv"
     cols, lines = _read_csv(

@@ -93,7 +93,7 @@ def _information(
             path=path,
             line=int(lines[bad[0]]),
         )
-    return info
+    return info.astype(np.float64, copy=False)
 
 
 def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamData:

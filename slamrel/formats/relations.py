@@ -48,9 +48,8 @@ def write_relations(path: PathLike, relations: RelationSet) -> None:
         delta, oop = p[:, [0, 1, 5]], p[:, 2:5]
     else:
         delta = relations.delta
-        oop = relations.out_of_plane
-        if oop is None:
-            oop = np.zeros((len(relations), 3))
+        given = relations.out_of_plane
+        oop = np.zeros((len(relations), 3)) if given is None else given
     rows = np.column_stack((relations.first, relations.second, delta[:, :2], oop, delta[:, 2]))
     fmt = " ".join([NUMBER_FORMAT] * 8) + "\n"
     text = "# t1 t2 x y z roll pitch yaw\n"

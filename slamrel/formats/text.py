@@ -450,7 +450,9 @@ def read_csv_table(
     maybe_empty = [c for c in wanted if c in empty_ok]
     values: NDArray[np.float64] | None = None
     if body:
-        conv = {header.index(c): _float_or_nan for c in maybe_empty}
+        conv: dict[int | str, Callable[[str], float]] = {
+            header.index(c): _float_or_nan for c in maybe_empty
+        }
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")

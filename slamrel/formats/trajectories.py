@@ -47,7 +47,7 @@ import math
 import os
 import warnings
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal, NamedTuple
 
@@ -369,6 +369,7 @@ def _read_3d(
     discarded: list[OutOfPlane],
 ) -> tuple[NDArray, NDArray, Any]:
     """TUM, KITTI or EuRoC: times, poses (``(N, 7)`` or ``(N, 3)``) and the row → line map."""
+    lines: Callable[[int], Any]
     if fmt == "tum":
         values, lines = read_numeric_table(
             path,
