@@ -86,8 +86,7 @@ def main() -> int:
     base_poses, base_covs, _ = filterpy_localisation(inp)
     t_base = time.perf_counter() - t0
 
-    d = fr.poses - base_poses
-    d[:, 2] = se2.wrap_angle(d[:, 2])
+    d = se2.minus(fr.poses, base_poses)
     print(
         f"max |pose - filterpy| {np.abs(d).max():.2e}, max |P - filterpy| "
         f"{np.abs(fr.covariances - base_covs).max():.2e}"

@@ -16,9 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from relation_metric.checks import check_covariances
-from relation_metric.errors import InputError
-from relation_metric.trajectory import check_coordinates, readonly
+from relation_metric.landmarks import check_landmarks
+from relation_metric.trajectory import readonly
 
 __all__ = ["LandmarkMap"]
 
@@ -36,6 +35,8 @@ class LandmarkMap:
     cov : array_like, shape (M, 2, 2), optional
         Symmetric positive semi-definite; a landmark whose file left its covariance empty
         has NaN in all four entries.
+
+    Checked by :func:`relation_metric.landmarks.check_landmarks` (the readers' rule).
     """
 
     ids: NDArray[np.int64]
@@ -43,29 +44,12 @@ class LandmarkMap:
     cov: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
-        ids = np.asarray(self.ids)
         xy = np.asarray(self.xy, dtype=np.float64).reshape(-1, 2)
-        if ids.shape != (xy.shape[0],):
-            raise InputError(f"ids must have shape ({xy.shape[0]},), got {ids.shape}")
-        if np.any(ids != np.round(ids)):
-            raise InputError("landmark ids must be integers")
-        if not np.isfinite(xy).all():
-            k = int(np.flatnonzero(~np.isfinite(xy).all(axis=1))[0])
-            raise InputError(f"landmark {int(ids[k])} has a non-finite position {xy[k].tolist()}")
-        check_coordinates(xy, what="landmark row")
-        uniq, counts = np.unique(ids, return_counts=True)
-        if (counts > 1).any():
-            raise InputError(f"duplicate landmark id {int(uniq[counts > 1][0])}")
+        ids = check_landmarks(self.ids, xy, self.cov)
         object.__setattr__(self, "ids", readonly(ids, np.int64))
         object.__setattr__(self, "xy", readonly(xy))
         if self.cov is not None:
-            cov = np.asarray(self.cov, dtype=np.float64)
-            if cov.shape != (xy.shape[0], 2, 2):
-                raise InputError(f"cov must have shape ({xy.shape[0]}, 2, 2), got {cov.shape}")
-            check_covariances(
-                cov, what=lambda k: f"landmark {int(ids[k])}: covariance", allow_unknown=True
-            )
-            object.__setattr__(self, "cov", readonly(cov))
+            object.__setattr__(self, "cov", readonly(np.asarray(self.cov, dtype=np.float64)))
 
     def __len__(self) -> int:
         return int(self.ids.shape[0])

@@ -26,6 +26,7 @@ from relation_metric.arrays import Array
 from relation_metric.checks import check_covariances, check_joint_covariance
 from relation_metric.errors import InputError
 from relation_metric.ids import rows_of
+from relation_metric.landmarks import check_landmarks
 from relation_metric.trajectory import Trajectory, readonly
 
 __all__ = ["FORMAT", "Bundle"]
@@ -79,8 +80,10 @@ class Bundle:
         Every bundle is checked when it is built, whether read from a directory or made in
         memory (simulators, importers, ``dataclasses.replace``): the model the log needs
         (controls or odometry, at least two rows), the shapes above, finite values, positive
-        ranges, measurement times in order, unique map ids, associated landmarks that are in
-        the map, and symmetric positive semi-definite covariances. The message names the
+        ranges, measurement times in order, the map and the landmark ground truth
+        (:func:`relation_metric.landmarks.check_landmarks`: integer unique ids, finite
+        positions, symmetric positive semi-definite marginals), associated landmarks that are
+        in the map, and symmetric positive semi-definite covariances. The message names the
         field; with ``path`` set (a bundle read from disk) also the file, and the line of a
         measurement.
     """
@@ -214,7 +217,7 @@ def _check_shapes(b: Bundle) -> None:
 
 
 def _check_values(b: Bundle) -> None:
-    """Finite numbers, positive ranges, times in order, unique map ids, known landmarks."""
+    """Finite numbers, positive ranges, times in order, the maps, known landmarks."""
     src = _where(b, "measurements.csv")
     lines = b.measurement_lines
     assert lines is not None  # __post_init__ fills it before the checks
@@ -245,14 +248,14 @@ def _check_values(b: Bundle) -> None:
             path=src,
             line=line(k),
         )
-    ids, first = np.unique(b.map_ids, return_index=True)
-    if ids.size != b.map_ids.size:
-        dup = int(np.setdiff1d(np.arange(b.map_ids.size), first)[0])
-        raise InputError(
-            f"map_ids: duplicate landmark id {int(b.map_ids[dup])}; expected unique ids",
-            path=_where(b, "map.csv"),
-        )
-    unknown = np.flatnonzero(b.measurement_associated & ~np.isin(b.measurement_landmarks, ids))
+    check_landmarks(
+        b.map_ids, b.map_xy, b.map_marginals, path=_where(b, "map.csv"), allow_unknown=False
+    )
+    if b.landmarks_groundtruth is not None:
+        check_landmarks(*b.landmarks_groundtruth, path=_where(b, "landmarks_groundtruth.csv"))
+    unknown = np.flatnonzero(
+        b.measurement_associated & ~np.isin(b.measurement_landmarks, b.map_ids)
+    )
     if unknown.size:
         k = int(unknown[0])
         raise InputError(
@@ -264,14 +267,10 @@ def _check_values(b: Bundle) -> None:
 
 
 def _check_covariance_fields(b: Bundle) -> None:
-    """Initial covariance, map marginals and joint map covariance: symmetric PSD."""
+    """Initial covariance and joint map covariance: symmetric PSD (the marginals are checked
+    with the map, :func:`relation_metric.landmarks.check_landmarks`)."""
     check_covariances(
         b.initial_covariance[None], path=_where(b, "bundle.json"), what="initial_covariance"
-    )
-    check_covariances(
-        b.map_marginals,
-        path=_where(b, "map.csv"),
-        what=lambda k: f"landmark {int(b.map_ids[k])}: covariance",
     )
     if b.map_covariance is not None:
         check_joint_covariance(

@@ -84,8 +84,7 @@ def nees(errors: ArrayLike, covariances: ArrayLike) -> NDArray[np.float64]:
 
 def pose_nees(estimate: ArrayLike, truth: ArrayLike, covariances: ArrayLike) -> NDArray[np.float64]:
     """NEES of SE(2) poses ``[x, y, θ]`` (angle difference wrapped), shape (N,)."""
-    e = np.asarray(truth, dtype=np.float64) - np.asarray(estimate, dtype=np.float64)
-    e[..., 2] = se2.wrap_angle(e[..., 2])
+    e = se2.minus(truth, estimate)
     return nees(e.reshape(-1, 3), np.asarray(covariances).reshape(-1, 3, 3))
 
 
@@ -304,8 +303,7 @@ def nees1(
         raise InputError(
             f"estimate and truth must both be (N >= 2, 3), got {est.shape}, {tru.shape}"
         )
-    e = tru[1:] - est[1:]
-    e[:, 2] = se2.wrap_angle(e[:, 2])
+    e = se2.minus(tru[1:], est[1:])
     dof = e.size
     return JointNees(joint_nees(e, covariance), dof, nees_gate(dof, probability), probability)
 

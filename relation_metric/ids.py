@@ -1,4 +1,4 @@
-"""Id lookup: the row of each wanted id in an id column (one home for every table).
+"""Integer ids: read from a float column (:func:`integer_ids`) and looked up (:func:`rows_of`).
 
 Landmark maps, pose graphs, bundles and importers all name things by integer ids and need
 the row holding each id that another table refers to. :func:`rows_of` is that lookup,
@@ -10,10 +10,58 @@ vectorised (a stable ``argsort`` when the ids are not already sorted, then one
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["rows_of", "first_missing"]
+from relation_metric.arrays import PathLike
+from relation_metric.errors import InputError
+
+__all__ = ["integer_ids", "rows_of", "first_missing"]
+
+_MAX_EXACT_ID = 2.0**53  # beyond it a double no longer holds every integer
+
+
+def integer_ids(
+    values: ArrayLike,
+    lines: Sequence[int] | NDArray[np.int64] | Callable[[int], int] | None,
+    path: PathLike | None,
+    column: str,
+) -> NDArray[np.int64]:
+    """``values`` as int64 ids; a non-integer (or out-of-range) value raises at its line.
+
+    Parameters
+    ----------
+    values : array_like, shape (N,)
+        Ids as read from a text file (floats); an integer array is taken as it is.
+    lines : sequence of int or callable, optional
+        ``lines[k]`` (or ``lines(k)``) is the 1-based file line of value ``k``.
+    path : str or PathLike, optional
+        The file, for the message.
+    column : str
+        The column's name: ``column 'landmark': expected an integer id, got 2.5``.
+
+    Returns
+    -------
+    ndarray of int64, shape (N,)
+        NaN entries (empty ``empty_ok`` cells) become 0 (the caller masks them).
+    """
+    raw = np.asarray(values)
+    if raw.dtype.kind in "iub":
+        return raw.astype(np.int64)
+    v = raw.astype(np.float64)
+    finite = np.isfinite(v)
+    bad = np.flatnonzero(finite & ((v != np.round(v)) | (np.abs(v) > _MAX_EXACT_ID)))
+    if bad.size:
+        k = int(bad[0])
+        line = None if lines is None else int(lines(k) if callable(lines) else lines[k])
+        raise InputError(
+            f"column '{column}': expected an integer id, got {float(v[k]):.17g}",
+            path=path,
+            line=line,
+        )
+    return np.where(finite, v, 0).astype(np.int64)
 
 
 def rows_of(ids: ArrayLike, wanted: ArrayLike) -> NDArray[np.int64]:

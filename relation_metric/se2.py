@@ -11,6 +11,7 @@ Conventions (used throughout slamrel):
 * ``between(a, b) = a⁻¹ ∘ b`` is the motion from ``a`` to ``b`` expressed in the frame of ``a``
   (Kümmerle et al. 2009 write it ``δ_ij = x_j ⊖ x_i``);
 * ``ominus(a, b) = b⁻¹ ∘ a`` is the error of ``a`` with respect to ``b`` in the frame of ``b``;
+  ``minus(a, b)`` is the plain vector difference ``a − b`` with the heading wrapped (not ⊖);
 * ``exp``/``log`` map between the tangent vector ``ξ = [ρ_x, ρ_y, φ]`` (translation part in
   the left-Jacobian coordinates) and the group, so ``exp(log(p)) == p`` for ``θ ∈ [−π, π)``;
 * all angles are wrapped to ``[−π, π)`` by :func:`wrap_angle`, the only place that does so.
@@ -41,6 +42,7 @@ __all__ = [
     "shear",
     "v_coefficients",
     "ominus",
+    "minus",
     "exp",
     "log",
     "transform_points",
@@ -282,6 +284,29 @@ def ominus(a: ArrayLike, b: ArrayLike) -> Array:
     ndarray, shape (..., 3)
     """
     return between(b, a)
+
+
+def minus(a: ArrayLike, b: ArrayLike) -> Array:
+    """The vector difference of poses with the heading wrapped: ``a − b``, shape (..., 3).
+
+    ``[x_a − x_b, y_a − y_b, wrap(θ_a − θ_b)]`` (:func:`wrap_angle`), a difference of
+    parameter vectors in the parent frame — an error against a truth, a residual taken in the
+    global frame, a tree parameter. It is **not** the group's ⊖: :func:`ominus` is
+    ``b⁻¹ ∘ a``, whose translation is expressed in the frame of ``b``; the two agree on the
+    heading and on the translation only when ``θ_b = 0``. Broadcasts like ``a − b``.
+
+    Parameters
+    ----------
+    a, b : array_like, shape (..., 3)
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        A new float64 array.
+    """
+    d = np.asarray(a, dtype=np.float64) - np.asarray(b, dtype=np.float64)
+    d[..., 2] = wrap_angle(d[..., 2])
+    return d
 
 
 def exp(xi: ArrayLike) -> Array:

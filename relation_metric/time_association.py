@@ -293,9 +293,9 @@ def match_nearest_times(
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """evo's nearest-time matching (``evo.core.sync.matching_time_indices``), vectorised.
 
-    For each ``query`` stamp, the ``times`` stamp nearest to it (ties: the earlier) when it
-    lies within ``max_diff`` seconds (``<=``); ``times`` must be sorted. Several queries may
-    match one time.
+    For each ``query`` stamp, the ``times`` stamp nearest to it (:func:`nearest_index`; ties:
+    the earlier) when ``|t_k − q| ≤ max_diff`` seconds — evo's test; ``times`` must be sorted.
+    Several queries may match one time.
 
     Returns
     -------
@@ -306,15 +306,9 @@ def match_nearest_times(
     t = np.asarray(times, dtype=np.float64)
     if t.size == 0 or q.size == 0:
         return np.empty(0, np.int64), np.empty(0, np.int64)
-    inside = (q >= t[0] - max_diff) & (q <= t[-1] + max_diff)
-    k = np.minimum(np.searchsorted(t, q, side="right"), t.size - 1)
-    diff_ub = t[k] - q
-    diff_lb = np.where(k > 0, q - t[np.maximum(k - 1, 0)], np.inf)
-    pick_ub = (diff_ub <= max_diff) & (diff_ub < diff_lb)
-    pick_lb = ~pick_ub & (diff_lb <= max_diff) & (diff_lb <= diff_ub)
-    ok = inside & (pick_ub | pick_lb)
-    best = np.where(pick_ub, k, k - 1)
-    return np.flatnonzero(ok).astype(np.int64), best[ok].astype(np.int64)
+    k = nearest_index(t, q)
+    ok = np.flatnonzero(np.abs(t[k] - q) <= max_diff)
+    return ok.astype(np.int64), k[ok]
 
 
 def synchronize(

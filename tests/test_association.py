@@ -85,3 +85,40 @@ def test_index_relations(rng):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert evaluate(rel, est).translation["abs"].count == 2
+
+
+def _evo_matching(query, times, max_diff):
+    """evo.core.sync.matching_time_indices, as evo writes it (a loop over argmin)."""
+    iq, it = [], []
+    for i, q in enumerate(query):
+        d = np.abs(times - q)
+        j = int(np.argmin(d))
+        if d[j] <= max_diff:
+            iq.append(i)
+            it.append(j)
+    return np.array(iq, dtype=np.int64), np.array(it, dtype=np.int64)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_match_nearest_times_is_evos_matching(seed):
+    from relation_metric.time_association import match_nearest_times
+
+    rng = np.random.default_rng(seed)
+    times = np.unique(np.round(rng.uniform(0, 10, rng.integers(1, 60)), 2))
+    query = np.concatenate((rng.uniform(-1, 11, 50), times[::3], times[:5] + 0.005))
+    for max_diff in (0.0, 0.005, 0.01, 0.3):
+        got = match_nearest_times(query, times, max_diff)
+        want = _evo_matching(query, times, max_diff)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+
+
+def test_match_nearest_times_ties_and_repeated_times():
+    from relation_metric.time_association import match_nearest_times
+
+    t = np.array([0.0, 1.0, 1.0, 2.0])
+    iq, it = match_nearest_times(np.array([0.5, 1.0, 0.875, 3.0]), t, 0.5)
+    np.testing.assert_array_equal(iq, [0, 1, 2])  # 3.0 is 1 s from the last time
+    # a tie goes to the earlier time; an exact hit and a query before repeated times to the
+    # first of them (as evo's argmin does)
+    np.testing.assert_array_equal(it, [0, 1, 1])

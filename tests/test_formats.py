@@ -50,6 +50,17 @@ def test_write_read_round_trip(tmp_path, traj, fmt):
     assert np.abs(dth).max() < 1e-6
 
 
+@pytest.mark.parametrize("fmt", ["plain", "csv", "g2o", "carmen"])
+def test_written_numbers_read_back_bit_for_bit(tmp_path, traj, fmt):
+    """Every writer spells doubles with NUMBER_FORMAT (%.17g): no rounding on the way."""
+    path = tmp_path / f"traj.{fmt}"
+    write_trajectory(path, traj, format=fmt)
+    got = read_trajectory(path).trajectory
+    np.testing.assert_array_equal(got.poses, traj.poses)
+    if fmt != "g2o":
+        np.testing.assert_array_equal(got.timestamps, traj.timestamps)
+
+
 def test_yaw_quaternion_hand_values():
     # rotation of 90° about z: q = (0, 0, sin 45°, cos 45°)
     q = np.array([0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)])

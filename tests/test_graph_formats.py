@@ -115,3 +115,83 @@ def test_cli_import_and_solve(tmp_path):
         main(["solve", str(p), "-o", str(tmp_path / "sol4"), "--batch", "-1"])
     assert usage.value.code == 2 and not (tmp_path / "sol4").exists()
     assert main(["import", "isam", str(p), "-o", str(p)]) == 3  # never over an input
+
+
+def test_written_graph_reads_back_bit_for_bit(tmp_path, rng):
+    """The g2o writer spells doubles with NUMBER_FORMAT (%.17g): an exact round trip."""
+    p = tmp_path / "a.txt"
+    p.write_text(ISAM)
+    g = read_isam(p).graph
+    poses = g.poses + rng.normal(0, 1e-3, g.poses.shape)  # digits beyond %.9g
+    lms = g.landmarks + rng.normal(0, 1e-3, g.landmarks.shape)
+    write_g2o_graph(tmp_path / "a.g2o", g, poses=poses, landmarks=lms)
+    back, _, _ = read_g2o_graph(tmp_path / "a.g2o")
+    np.testing.assert_array_equal(back.poses, poses)
+    np.testing.assert_array_equal(back.landmarks, lms)
+    for name in ("pp_z", "pp_info", "pl_z", "pl_info"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(g, name))
+
+
+@pytest.mark.parametrize(
+    "text,line,msg",
+    [
+        ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0\n", 2, "VERTEX_SE2: expected 5 fields (VERTEX_SE2 "),
+        ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 x 0\n", 2, "VERTEX_SE2 y: expected a number, got 'x'"),
+        ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0 inf\n", 2, "VERTEX_SE2 theta: expected a finite"),
+        ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1.5 0 0 0\n", 2, "column 'VERTEX_SE2 id': expected an "),
+        ("VERTEX_SE2 3 0 0 0\nVERTEX_SE2 3 1 0 0\n", 2, "vertex id 3 is defined twice (first on "),
+    ],
+)
+def test_g2o_pose_records_follow_one_rule_in_every_reader(tmp_path, text, line, msg):
+    """The graph reader and the trajectory reader read VERTEX_SE2 through one function."""
+    from slamrel.formats.trajectories import read_trajectory
+
+    p = tmp_path / "c.g2o"
+    p.write_text(text)
+    for read in (read_g2o_graph, read_trajectory):
+        with pytest.raises(InputError) as err:
+            read(p)
+        text = str(err.value)
+        assert text.startswith(f"{p}:{line}: ") and msg in text, text
+
+
+@pytest.mark.parametrize(
+    "text,line,msg",
+    [
+        ("VERTEX_XY 1 0 0\nVERTEX_XY 2 0\n", 2, "VERTEX_XY: expected 4 fields (VERTEX_XY id x y)"),
+        ("VERTEX_XY 1 0 0\nVERTEX_XY 2 0 _\n", 2, "VERTEX_XY y: expected a number, got '_'"),
+        ("VERTEX_XY 1 0 0\nVERTEX_XY 2.5 0 0\n", 2, "column 'VERTEX_XY id': expected an integer"),
+        ("VERTEX_XY 4 0 0\nVERTEX_XY 4 1 1\n", 2, "vertex id 4 is defined twice (first on line 2)"),
+    ],
+)
+def test_g2o_landmark_records_follow_one_rule_in_every_reader(tmp_path, text, line, msg):
+    """The graph reader and the landmark-map reader read VERTEX_XY through one function."""
+    from slamrel.formats.landmark_maps import read_map
+
+    p = tmp_path / "c.g2o"
+    p.write_text("VERTEX_SE2 0 0 0 0\n" + text)
+    for read in (read_g2o_graph, read_map):
+        with pytest.raises(InputError) as err:
+            read(p)
+        text = str(err.value)
+        assert text.startswith(f"{p}:{line + 1}: ") and msg in text, text
+
+
+def test_trajectory_and_map_readers_skip_and_count_other_records(tmp_path):
+    from slamrel.formats.landmark_maps import read_map
+    from slamrel.formats.trajectories import read_trajectory
+
+    p = tmp_path / "c.g2o"
+    p.write_text(
+        "VERTEX_SE2 1 1 0 0\nVERTEX_SE2 0 0 0 0\nVERTEX_XY 7 2 3\nFIX 0\n"
+        "EDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nVERTEX_SE3:QUAT 9 0 0 0 0 0 0 1\n"
+    )
+    loaded = read_trajectory(p)
+    np.testing.assert_array_equal(loaded.trajectory.timestamps, [0, 1])  # ids in id order
+    np.testing.assert_array_equal(loaded.trajectory.poses[:, 0], [0, 1])
+    assert loaded.skipped == {"VERTEX_XY": 1, "FIX": 1, "EDGE_SE2": 1, "VERTEX_SE3:QUAT": 1}
+    m = read_map(p)
+    np.testing.assert_array_equal(m.ids, [7])
+    np.testing.assert_array_equal(m.xy, [[2.0, 3.0]])
+    with pytest.raises(InputError, match="unknown record 'FIX'"):
+        read_g2o_graph(p)

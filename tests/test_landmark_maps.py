@@ -135,3 +135,62 @@ def test_landmark_map_checks_its_arrays():
         m.xy[0, 0] = 5.0  # read-only
     with pytest.raises(InputError, match="diagonal"):
         write_map("unused.dat", LandmarkMap([1], [[0, 0]], [[[1, 0.5], [0.5, 1]]]), format="mrclam")
+
+
+# ------------------------------------------- one landmark check: the same verdict everywhere
+
+
+def _message(f) -> str:  # type: ignore[no-untyped-def]
+    with pytest.raises(InputError) as err:
+        f()
+    return err.value.message
+
+
+LANDMARK_DEFECTS = {
+    # name: (ids, xy, cov or None, the words every taker says)
+    "duplicate": ([4, 2, 4], [[0, 0], [1, 1], [2, 2]], None, "duplicate landmark id 4"),
+    "non-integer": ([1, 2.5], [[0, 0], [1, 1]], None, "expected an integer id, got 2.5"),
+    "far": ([1, 2], [[0, 0], [1e31, 1]], None, "position (1e+31, 1) is beyond 1e+30 m"),
+    "not psd": ([1, 2], [[0, 0], [1, 1]], [np.eye(2), [[1, 2], [2, 1]]], "landmark 2: covariance"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(LANDMARK_DEFECTS))
+def test_every_landmark_taker_gives_the_same_verdict(tmp_path, name):
+    """The CSV reader, the 'id x y' reader, LandmarkMap and the Bundle's map all call
+    relation_metric.landmarks.check_landmarks: the same words (files add their lines)."""
+    from dataclasses import replace
+
+    from slamrel.simulation.bundles import simulate_bundle
+
+    ids, xy, cov, words = LANDMARK_DEFECTS[name]
+    c = None if cov is None else np.asarray(cov, dtype=np.float64)
+    rows = [f"{i},{x!r},{y!r}" for i, (x, y) in zip(ids, np.asarray(xy, float).tolist())]
+    if c is None:
+        text = "landmark,x,y\n" + "".join(r + "\n" for r in rows)
+    else:
+        cells = [",".join(repr(float(v)) for v in (k[0, 0], k[0, 1], k[1, 1])) for k in c]
+        text = "landmark,x,y,cxx,cxy,cyy\n" + "".join(f"{r},{q}\n" for r, q in zip(rows, cells))
+    (tmp_path / "m.csv").write_text(text)
+    said = {
+        "LandmarkMap": _message(lambda: LandmarkMap(np.asarray(ids, float), xy, c)),
+        "csv": _message(lambda: read_map(tmp_path / "m.csv")),
+    }
+    if c is None:
+        (tmp_path / "m.txt").write_text(text.replace(",", " ").split("\n", 1)[1])
+        said["id x y"] = _message(lambda: read_map(tmp_path / "m.txt"))
+    if name != "non-integer":  # a Bundle's ids are int64 by type
+        b = simulate_bundle(1, steps=10)
+        m = len(ids)
+        assert not np.isin(ids, b.map_ids[m:]).any()  # the defect is the only one
+        fields = {
+            "map_ids": np.concatenate((ids, b.map_ids[m:])).astype(np.int64),
+            "map_xy": np.concatenate((xy, b.map_xy[m:])),
+            "map_marginals": b.map_marginals
+            if c is None
+            else np.concatenate((c, b.map_marginals[m:])),
+            "map_covariance": None,
+        }
+        said["Bundle"] = _message(lambda: replace(b, **fields))
+    for who, message in said.items():
+        assert words in message, (who, message)

@@ -217,3 +217,30 @@ def test_scalar_wrap_is_wrap_angle_bit_for_bit(a):
     got, want = se2.wrap_angle_float(a), se2.wrap_angle(a)
     assert isinstance(got, float)
     assert np.float64(got).tobytes() == np.asarray(want, dtype=np.float64).tobytes()
+
+
+@settings(max_examples=200, deadline=None)
+@given(poses, poses)
+def test_minus_is_the_vector_difference_with_the_heading_wrapped(a, b):
+    d = se2.minus(a, b)
+    np.testing.assert_array_equal(d[:, :2], a[:, :2] - b[:, :2])  # exactly a − b
+    assert np.all(d[:, 2] >= -np.pi) and np.all(d[:, 2] < np.pi)
+    # the heading differs from θ_a − θ_b by a whole number of turns
+    turns = (a[:, 2] - b[:, 2] - d[:, 2]) / (2 * np.pi)
+    np.testing.assert_allclose(turns, np.round(turns), atol=1e-12)
+    # not the group's ⊖: same heading (bit for bit), translation rotated into b's frame
+    om = se2.ominus(a, b)
+    np.testing.assert_array_equal(d[:, 2], om[:, 2])
+    c, s = np.cos(b[:, 2]), np.sin(b[:, 2])
+    rotated = np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]))
+    np.testing.assert_allclose(rotated, om[:, :2], rtol=1e-12, atol=1e-9)
+
+
+def test_minus_by_hand_broadcasts_and_does_not_alias():
+    a = np.array([[1.0, 2.0, 3.0], [0.0, 0.0, -3.0]])
+    b = np.array([0.5, -1.0, -3.0])
+    d = se2.minus(a, b)
+    np.testing.assert_allclose(d, [[0.5, 3.0, 6.0 - 2 * np.pi], [-0.5, 1.0, 0.0]])
+    assert d is not a and not np.shares_memory(d, a)
+    one = se2.minus([0.0, 0.0, np.pi], [0.0, 0.0, 0.0])
+    assert one.shape == (3,) and one[2] == -np.pi  # π wraps to −π

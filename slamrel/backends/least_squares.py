@@ -227,8 +227,7 @@ def _residuals(
     e_pl[:, 0] = ck * d[:, 0] + sk * d[:, 1] - g.pl_z[:, 0]
     e_pl[:, 1] = -sk * d[:, 0] + ck * d[:, 1] - g.pl_z[:, 1]
     p_mean, p_w = prior
-    e_pr = x[0] - p_mean
-    e_pr[2] = se2.wrap_angle(e_pr[2])
+    e_pr = se2.minus(x[0], p_mean)
     wpp_e = np.einsum("eab,eb->ea", w_pp, e_pp)
     wpl_e = np.einsum("eab,eb->ea", w_pl, e_pl)
     r = np.concatenate((wpp_e.ravel(), wpl_e.ravel(), p_w @ e_pr))

@@ -513,8 +513,7 @@ def chained_start(log: LandmarkLog, constraints: PairConstraints) -> Array:
     if adj.any():
         i = pr[adj, 0]
         ci = np.linalg.inv(constraints.covariance[adj])
-        d = constraints.delta[adj] - ou[i]
-        d[:, 2] = se2.wrap_angle(d[:, 2])
+        d = se2.minus(constraints.delta[adj], ou[i])
         fused = np.linalg.solve(oinfo[i] + ci, np.einsum("eab,eb->ea", ci, d)[..., None])[..., 0]
         step[i] = ou[i] + fused
     return se2.cumulative_compose(step, log.odometry.poses[0])

@@ -6,12 +6,12 @@ Grzonka & Burgard, RSS 2007), not from TORO's code:
 * **Tree parameterisation** (Grisetti et al.). A spanning tree of the constraint graph is
   grown breadth-first from pose 0 (so tree paths are short, unlike Olson's incremental
   chain). Each pose's parameter is its difference from its parent in the global frame,
-  ``x_k = p_k − p_parent(k)`` (angle included), so ``p_k`` is the sum of the parameters on the
-  tree path from the root; the root is held fixed.
+  ``x_k = p_k − p_parent(k)`` (angle included and wrapped: ``se2.minus``), so ``p_k`` is the
+  sum of the parameters on the tree path from the root; the root is held fixed.
 * **Residual**. For a constraint ``(i, j)`` with measurement ``δ`` the residual is taken in the
-  global frame, ``r = (p_i ⊕ δ) − p_j`` (angle wrapped). It depends only on the parameters on
-  the tree path ``P_ij`` between ``i`` and ``j`` (below their lowest common ancestor), with
-  Jacobian blocks ``±I``.
+  global frame, ``r = (p_i ⊕ δ) − p_j`` (angle wrapped: ``se2.minus``). It depends only on
+  the parameters on the tree path ``P_ij`` between ``i`` and ``j`` (below their lowest common
+  ancestor), with Jacobian blocks ``±I``.
 * **Spherical covariances**. As in TORO, a constraint's information is replaced by
   ``diag(ω_t, ω_t, ω_θ)`` (``ω_t`` the mean of the translational diagonal, ``ω_θ`` the angular
   entry, cross terms dropped), which makes the global-frame residual's weight independent of
@@ -136,8 +136,7 @@ def _poses_from_parameters(
 
 
 def _cost(p: Array, g: PoseGraph, omega: Array) -> float:
-    r = se2.compose(p[g.pp_i], g.pp_z)[:, :3] - p[g.pp_j]
-    r[:, 2] = se2.wrap_angle(r[:, 2])
+    r = se2.minus(se2.compose(p[g.pp_i], g.pp_z), p[g.pp_j])
     return 0.5 * float(np.einsum("ea,eab,eb->", r, omega, r))
 
 
@@ -226,8 +225,7 @@ def toro_optimize(
     w = np.column_stack((omega[:, 0, 0], omega[:, 1, 1], omega[:, 2, 2]))
     p0 = np.array(graph.poses, dtype=np.float64)
     x = p0.copy()
-    x[1:] = p0[1:] - p0[parent[1:]]
-    x[1:, 2] = se2.wrap_angle(x[1:, 2])
+    x[1:] = se2.minus(p0[1:], p0[parent[1:]])
     e_n = graph.pp_i.size
     z = np.asarray(graph.pp_z)
     side_i, side_j = _constraint_sides(anc, graph.pp_i, graph.pp_j)
@@ -257,7 +255,7 @@ def toro_optimize(
             dx, dy = c * zx - s_ * zy, s_ * zx + c * zy  # R_i δ_t
             r0 = pi[0] + dx - pj[0]
             r1 = pi[1] + dy - pj[1]
-            r2 = math.remainder(pi[2] + zt - pj[2], 2 * math.pi)
+            r2 = se2.wrap_angle_float(pi[2] + zt - pj[2])
             w0, w1, w2 = ww[e]
             wr = np.array((w0 * r0, w1 * r1, w2 * r2))  # Ω r
             # Jacobians: i side [[I, S R_i δ_t], [0, 1]], j side −I; the step is capped so

@@ -126,7 +126,7 @@ def _write_per_edge(path: str, res: MapComparison, ref: LandmarkMap) -> None:
     """One CSV row per mesh edge: the two reference ids and the edge's three errors."""
     import numpy as np
 
-    from slamrel.formats.text import write_text_atomic
+    from slamrel.formats.text import NUMBER_FORMAT, write_text_atomic
 
     ids = ref.ids[res.association.reference_rows]
     e = res.mesh.edges
@@ -140,7 +140,8 @@ def _write_per_edge(path: str, res: MapComparison, ref: LandmarkMap) -> None:
         )
     )
     text = "landmark_i,landmark_j,length_error,displacement_triangle_frame,displacement_aligned\n"
-    text += ("%d,%d,%.9g,%.9g,%.9g\n" * rows.shape[0]) % tuple(rows.ravel().tolist())
+    line = "%d,%d" + f",{NUMBER_FORMAT}" * 3 + "\n"
+    text += line * rows.shape[0] % tuple(rows.ravel().tolist())
     write_text_atomic(path, text)
 
 

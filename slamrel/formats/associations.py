@@ -10,8 +10,7 @@ from numpy.typing import NDArray
 from landmark_graph.landmark_association import Association, _finish
 from landmark_graph.maps import LandmarkMap
 from relation_metric.errors import InputError
-from relation_metric.ids import first_missing, rows_of
-from slamrel.formats.landmark_csv import integer_ids
+from relation_metric.ids import first_missing, integer_ids, rows_of
 from slamrel.formats.text import PathLike, read_csv_table, write_text_atomic
 
 __all__ = ["read_association_csv", "write_association_csv"]

@@ -18,16 +18,19 @@ from recovery.models import MOTION_TYPES, SIGMA_NAMES, MotionModel, SensorModel
 from relation_metric.arrays import Array, PathLike
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
+from relation_metric.ids import integer_ids
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory
-from slamrel.formats.landmark_csv import integer_ids, read_landmark_csv, write_landmark_csv
+from slamrel.formats.landmark_csv import read_landmark_csv, write_landmark_csv
 from slamrel.formats.text import (
+    format_csv_table,
     read_csv_table,
     read_text,
     write_bytes_atomic,
+    write_csv_table,
     write_text_atomic,
 )
-from slamrel.formats.trajectories import read_trajectory
+from slamrel.formats.trajectories import CSV_HEADER, read_trajectory, write_trajectory
 from slamrel.outputs import staged_directory
 
 __all__ = ["read_bundle", "write_bundle"]
@@ -139,7 +142,7 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
                 line=_line_of_key(text, n),
             )
         vals.append(v)
-    return SensorModel(*vals)
+    return SensorModel(vals[0], vals[1])
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:
@@ -322,10 +325,21 @@ def _read_motion_log(root: Path, motion: MotionModel, reordered: dict[str, int])
         cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "control")
         return {"controls": np.column_stack((cols["t"], cols["v"], cols["omega"]))}
     p = root / "odometry.csv"
-    cols, lines = _read_csv(p, required=("t", "x", "y", "theta"))
-    cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "odometry pose")
-    poses = np.column_stack((cols["x"], cols["y"], cols["theta"]))
-    return {"odometry": Trajectory(cols["t"], poses)}
+    if not p.is_file():
+        raise InputError(f"missing required file; expected columns {CSV_HEADER}", path=p)
+    odometry, reordered[p.name] = _read_pose_log(p, "odometry pose")
+    return {"odometry": odometry}
+
+
+def _read_pose_log(path: Path, what: str) -> tuple[Trajectory, int]:
+    """A ``t,x,y,theta`` log (``odometry.csv``, ``groundtruth.csv``) under the filter-log rule.
+
+    The one reader of that CSV (``read_trajectory(format="csv")``), with steps back of at
+    most ``FILTER_TIME_TOLERANCE`` sorted, counted (returned) and warned about, larger ones an
+    :class:`InputError` (``relation_metric.timeorder``).
+    """
+    loaded = read_trajectory(path, format="csv", max_step_back=FILTER_TIME_TOLERANCE, what=what)
+    return loaded.trajectory, loaded.out_of_order
 
 
 def _read_map(root: Path) -> dict[str, Any]:
@@ -341,7 +355,7 @@ def _read_map(root: Path) -> dict[str, Any]:
     return {"map_ids": table.ids, "map_xy": table.xy, "map_marginals": marg, "map_covariance": cov}
 
 
-def _read_measurements(root: Path, reordered: dict[str, int]) -> dict[str, NDArray[Any]]:
+def _read_measurements(root: Path, reordered: dict[str, int]) -> dict[str, Any]:
     """``measurements.csv`` in time order: the five ``measurement*`` fields of the bundle."""
     p = root / "measurements.csv"
     cols, lines = _read_csv(
@@ -361,24 +375,14 @@ def _read_truth(root: Path, reordered: dict[str, int]) -> dict[str, Any]:
     """``groundtruth.csv`` and ``landmarks_groundtruth.csv`` when present (else None)."""
     out: dict[str, Any] = {"groundtruth": None, "landmarks_groundtruth": None}
     if (root / "groundtruth.csv").exists():
-        loaded = read_trajectory(
-            root / "groundtruth.csv", format="csv", max_step_back=FILTER_TIME_TOLERANCE
+        out["groundtruth"], reordered["groundtruth.csv"] = _read_pose_log(
+            root / "groundtruth.csv", "pose"
         )
-        out["groundtruth"] = loaded.trajectory
-        reordered["groundtruth.csv"] = loaded.out_of_order
     p_lgt = root / "landmarks_groundtruth.csv"
     if p_lgt.exists():
         table = read_landmark_csv(p_lgt, covariance=False, describe="landmark ground truth")
         out["landmarks_groundtruth"] = (table.ids, table.xy)
     return out
-
-
-def _csv(header: str, columns: Sequence[Array], fmt: str = "%.17g") -> str:
-    if not columns or columns[0].shape[0] == 0:
-        return header + "\n"
-    buf = io.StringIO()
-    np.savetxt(buf, np.column_stack(columns), fmt=fmt, delimiter=",")
-    return header + "\n" + buf.getvalue()
 
 
 def write_bundle(
@@ -424,13 +428,12 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
     write_text_atomic(root / "bundle.json", json.dumps(meta, indent=2) + "\n")
     if bundle.controls is not None:
         c = bundle.controls
-        write_text_atomic(root / "controls.csv", _csv("t,v,omega", [c[:, 0], c[:, 1], c[:, 2]]))
+        write_csv_table(root / "controls.csv", ["t", "v", "omega"], [c[:, 0], c[:, 1], c[:, 2]])
     if bundle.odometry is not None:
-        o = bundle.odometry
-        write_text_atomic(root / "odometry.csv", _csv("t,x,y,theta", [o.timestamps, *o.poses.T]))
+        write_trajectory(root / "odometry.csv", bundle.odometry, format="csv")
     t = bundle.measurement_times
-    rows = _csv(
-        "t,range,bearing", [t, bundle.measurements[:, 0], bundle.measurements[:, 1]]
+    rows = format_csv_table(
+        ["t", "range", "bearing"], [t, bundle.measurements[:, 0], bundle.measurements[:, 1]]
     ).splitlines()
     ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks.astype(str), "")
     text = "t,range,bearing,landmark\n" + "".join(f"{r},{i}\n" for r, i in zip(rows[1:], ids))
@@ -441,7 +444,6 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
         np.save(buf, np.asarray(bundle.map_covariance), allow_pickle=False)
         write_bytes_atomic(root / "map_covariance.npy", buf.getvalue())
     if bundle.groundtruth is not None:
-        g = bundle.groundtruth
-        write_text_atomic(root / "groundtruth.csv", _csv("t,x,y,theta", [g.timestamps, *g.poses.T]))
+        write_trajectory(root / "groundtruth.csv", bundle.groundtruth, format="csv")
     if bundle.landmarks_groundtruth is not None:
         write_landmark_csv(root / "landmarks_groundtruth.csv", *bundle.landmarks_groundtruth)

@@ -318,9 +318,20 @@ def _parse_fields(
     point += base
     # Column by column: a column's tokens usually share one layout (all short or all
     # long), which saves splitting them.
-    table = [a.reshape(nrows, ncols) for a in (ends, point, width, frac_len, has_point, negative)]
+    shape = (nrows, ncols)
+    e, pt, w, fl = (a.reshape(shape) for a in (ends, point, width, frac_len))
+    hp, neg = has_point.reshape(shape), negative.reshape(shape)
     for col in range(ncols):
-        if not _parse_chunk(words, *(a[:, col] for a in table), out=out[:, col]):
+        if not _parse_chunk(
+            words,
+            e[:, col],
+            pt[:, col],
+            w[:, col],
+            fl[:, col],
+            hp[:, col],
+            neg[:, col],
+            out=out[:, col],
+        ):
             return None
     return nrows
 

@@ -3,25 +3,146 @@
 ``VERTEX_SE2 id x y θ``; ``VERTEX_XY id x y``;
 ``EDGE_SE2 i j dx dy dθ I11 I12 I13 I22 I23 I33`` (measurement ``x_i⁻¹ ∘ x_j`` and the upper
 triangle of its information matrix, row-first); ``EDGE_SE2_XY i l x y I11 I12 I22`` (landmark
-``l`` in the frame of pose ``i``). Any other record (``FIX``, 3-D types, …) is an error
-naming its line: nothing is silently used or dropped.
+``l`` in the frame of pose ``i``).
+
+The one g2o reader and writer of slamrel. :func:`read_g2o_records` reads and checks the
+records (used by the graph reader here, the trajectory reader's ``g2o`` format and the
+landmark-map reader's ``VERTEX_XY`` maps); :func:`format_g2o_records` writes them (used by
+:func:`write_g2o_graph`, ``write_trajectory(format="g2o")`` and ``write_map(format="g2o")``).
+The record rules are the same for all: exactly the record's fields, finite numbers, integer
+ids (vertex ids and edge ends), vertex ids unique across the vertex kinds read. The graph
+reader refuses any other record (``FIX``, 3-D types, …) naming its line: nothing is silently
+used or dropped; the trajectory and map readers skip and count the records they do not use.
+Numbers are written with :data:`~slamrel.formats.text.NUMBER_FORMAT` (exact round trip).
 """
 
 from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
-from relation_metric.ids import first_missing, rows_of
-from slamrel.backends.least_squares import PoseGraph
-from slamrel.formats.landmark_csv import integer_ids
-from slamrel.formats.text import PathLike, read_keyword_records, write_text_atomic
+from relation_metric.ids import first_missing, integer_ids, rows_of
+from relation_metric.trajectory import check_coordinates
+from slamrel.formats.text import (
+    NUMBER_FORMAT,
+    PathLike,
+    Records,
+    SourceText,
+    read_keyword_records,
+    write_text_atomic,
+)
 
-__all__ = ["read_g2o_graph", "write_g2o_graph"]
+if TYPE_CHECKING:
+    from slamrel.backends.least_squares import PoseGraph
 
-_FIELDS = {"VERTEX_SE2": 5, "VERTEX_XY": 4, "EDGE_SE2": 12, "EDGE_SE2_XY": 8}
+__all__ = [
+    "G2O_RECORDS",
+    "read_g2o_records",
+    "format_g2o_records",
+    "read_g2o_graph",
+    "write_g2o_graph",
+]
+
+G2O_RECORDS: dict[str, tuple[str, ...]] = {
+    "VERTEX_SE2": ("id", "x", "y", "theta"),
+    "VERTEX_XY": ("id", "x", "y"),
+    "EDGE_SE2": ("i", "j", "dx", "dy", "dtheta", "I11", "I12", "I13", "I22", "I23", "I33"),
+    "EDGE_SE2_XY": ("i", "l", "x", "y", "I11", "I12", "I22"),
+}
+"""The planar g2o records: their field names after the keyword."""
+
+# Leading id columns of each record (vertex id; edge ends), written as integers.
+_ID_COLUMNS = {"VERTEX_SE2": 1, "VERTEX_XY": 1, "EDGE_SE2": 2, "EDGE_SE2_XY": 2}
+
+
+def read_g2o_records(
+    path: PathLike,
+    kinds: Sequence[str] = tuple(G2O_RECORDS),
+    *,
+    skipped: Counter[str] | None = None,
+    source: SourceText | None = None,
+) -> Records:
+    """The records of ``kinds`` of a planar g2o file, each checked (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or PathLike
+    kinds : sequence of str
+        Record names of :data:`G2O_RECORDS` to read.
+    skipped : Counter, optional
+        Other records are skipped and counted here by name; without it they are an error.
+    source : SourceText, optional
+        Already-read text of ``path``.
+
+    Returns
+    -------
+    dict of record name → (values (K, fields), line numbers (K,))
+        In file order; ids as (integer-valued) floats.
+
+    Raises
+    ------
+    InputError
+        At the first bad record: wrong number of fields (``VERTEX_XY: expected 4 fields
+        (VERTEX_XY id x y), got 3``), a field that is not a finite number (``VERTEX_SE2
+        theta: ...``), an id that is not an integer (``column 'VERTEX_XY id': ...``), a
+        vertex id defined twice (``vertex id 5 is defined twice (first on line 2)``, at the
+        second), an unknown record (without ``skipped``).
+    """
+    fields = {k: len(G2O_RECORDS[k]) + 1 for k in kinds}
+    recs = read_keyword_records(path, fields, names=G2O_RECORDS, skipped=skipped, source=source)
+    name = path if source is None else source.path
+    ids, id_lines = [], []
+    for kind in kinds:
+        vals, lines = recs[kind]
+        if _ID_COLUMNS[kind] == 1:
+            ids.append(integer_ids(vals[:, 0], lines, name, f"{kind} id"))
+            id_lines.append(lines)
+        else:
+            for col in (0, 1):
+                integer_ids(vals[:, col], lines, name, f"{kind} vertex {col + 1}")
+    if ids:
+        every, every_line = np.concatenate(ids), np.concatenate(id_lines)
+        order = np.lexsort((every_line, every))
+        dup = np.flatnonzero(np.diff(every[order]) == 0)
+        if dup.size:
+            first, k = int(order[dup[0]]), int(order[dup[0] + 1])
+            raise InputError(
+                f"vertex id {int(every[k])} is defined twice (first on line "
+                f"{int(every_line[first])})",
+                path=name,
+                line=int(every_line[k]),
+            )
+    return recs
+
+
+def format_g2o_records(kind: str, ids: ArrayLike, values: ArrayLike) -> str:
+    """Lines ``KIND id… v…`` of one record kind: ids as integers, values as ``NUMBER_FORMAT``.
+
+    Parameters
+    ----------
+    kind : str
+        A record name of :data:`G2O_RECORDS`.
+    ids : array_like of int, shape (K,) (vertices) or (K, 2) (edges: the two ends)
+    values : array_like, shape (K, fields − ids)
+    """
+    n_id = _ID_COLUMNS[kind]
+    v = np.asarray(values, dtype=np.float64)
+    n = v.shape[0]
+    if n == 0:
+        return ""
+    i = np.asarray(ids, dtype=np.int64).reshape(n, n_id)
+    if v.shape != (n, len(G2O_RECORDS[kind]) - n_id):
+        raise ValueError(f"{kind}: expected {len(G2O_RECORDS[kind]) - n_id} values a record")
+    # ids stay Python ints (exact beyond 2**53), values Python floats: one formatting pass
+    cells = np.column_stack((i.astype(object), v.astype(object)))
+    line = kind + " %d" * n_id + (" " + NUMBER_FORMAT) * v.shape[1] + "\n"
+    return line * n % tuple(cells.ravel().tolist())
 
 
 def _upper_to_full(upper: NDArray[np.float64], size: int) -> NDArray[np.float64]:
@@ -41,29 +162,21 @@ def read_g2o_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64], NDArra
     pose_ids, landmark_ids : ndarray of int
         The file's vertex ids of the graph's poses and landmarks.
     """
-    recs = read_keyword_records(path, _FIELDS)
+    from slamrel.backends.least_squares import PoseGraph
+
+    recs = read_g2o_records(path)
+    name = str(path)
     lines = {k: v[1] for k, v in recs.items()}
     vse2 = recs["VERTEX_SE2"][0]
     vxy = recs["VERTEX_XY"][0]
     if vse2.shape[0] == 0:
         raise InputError("no VERTEX_SE2 records", path=path)
-    pose_ids = integer_ids(vse2[:, 0], lines["VERTEX_SE2"], path, "VERTEX_SE2 id")
-    lm_ids = integer_ids(vxy[:, 0], lines["VERTEX_XY"], path, "VERTEX_XY id")
-    all_ids = np.concatenate((pose_ids, lm_ids))
-    all_lines = np.concatenate((lines["VERTEX_SE2"], lines["VERTEX_XY"]))
-    order = np.lexsort((all_lines, all_ids))
-    dup = np.flatnonzero(np.diff(all_ids[order]) == 0)
-    if dup.size:
-        first, k = int(order[dup[0]]), int(order[dup[0] + 1])
-        raise InputError(
-            f"vertex id {int(all_ids[k])} is defined twice (first on line {int(all_lines[first])})",
-            path=path,
-            line=int(all_lines[k]),
-        )
+    pose_ids = vse2[:, 0].astype(np.int64)
+    lm_ids = vxy[:, 0].astype(np.int64)
+    for vals, kind, what in ((vse2, "VERTEX_SE2", "pose"), (vxy, "VERTEX_XY", "landmark")):
+        check_coordinates(vals[:, 1:3], what=what, path=name, line_of=lines[kind].__getitem__)
     for kind, size, start in (("EDGE_SE2", 3, 5), ("EDGE_SE2_XY", 2, 4)):
         vals, ln = recs[kind]
-        for col in (0, 1):
-            integer_ids(vals[:, col], ln, path, f"{kind} vertex {col + 1}")
         check_covariances(
             _upper_to_full(vals[:, start:], size),
             path=path,
@@ -134,27 +247,19 @@ def write_g2o_graph(
         raise InputError("vertex ids must be distinct (poses and landmarks share one id space)")
     iu3 = np.triu_indices(3)
     iu2 = np.triu_indices(2)
-    parts = []
-    if n:
-        rows = np.column_stack((pid, p))
-        parts.append(("VERTEX_SE2 %d %.9g %.9g %.9g\n" * n) % tuple(rows.ravel().tolist()))
-    if lm.shape[0]:
-        rows = np.column_stack((lid, lm))
-        parts.append(("VERTEX_XY %d %.9g %.9g\n" * lm.shape[0]) % tuple(rows.ravel().tolist()))
-    if graph.pp_i.size:
-        rows = np.column_stack(
-            (pid[graph.pp_i], pid[graph.pp_j], graph.pp_z, graph.pp_info[:, iu3[0], iu3[1]])
+    parts = [format_g2o_records("VERTEX_SE2", pid, p), format_g2o_records("VERTEX_XY", lid, lm)]
+    parts.append(
+        format_g2o_records(
+            "EDGE_SE2",
+            np.column_stack((pid[graph.pp_i], pid[graph.pp_j])),
+            np.column_stack((graph.pp_z, graph.pp_info[:, iu3[0], iu3[1]])),
         )
-        parts.append(
-            ("EDGE_SE2 %d %d" + " %.9g" * 9 + "\n") * rows.shape[0] % tuple(rows.ravel().tolist())
+    )
+    parts.append(
+        format_g2o_records(
+            "EDGE_SE2_XY",
+            np.column_stack((pid[graph.pl_k], lid[graph.pl_l])),
+            np.column_stack((graph.pl_z, graph.pl_info[:, iu2[0], iu2[1]])),
         )
-    if graph.pl_k.size:
-        rows = np.column_stack(
-            (pid[graph.pl_k], lid[graph.pl_l], graph.pl_z, graph.pl_info[:, iu2[0], iu2[1]])
-        )
-        parts.append(
-            ("EDGE_SE2_XY %d %d" + " %.9g" * 5 + "\n")
-            * rows.shape[0]
-            % tuple(rows.ravel().tolist())
-        )
+    )
     write_text_atomic(path, "".join(parts))

@@ -25,10 +25,9 @@ from recovery.models import MotionModel, SensorModel
 from relation_metric import se2
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
-from relation_metric.ids import first_missing, rows_of
+from relation_metric.ids import first_missing, integer_ids, rows_of
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.least_squares import PoseGraph, initial_landmarks
-from slamrel.formats.landmark_csv import integer_ids
 from slamrel.formats.text import PathLike, read_keyword_records
 
 __all__ = ["IsamData", "read_isam", "isam_log_bundle"]
@@ -94,7 +93,7 @@ def _information(
             path=path,
             line=int(lines[bad[0]]),
         )
-    return info
+    return info.astype(np.float64, copy=False)
 
 
 def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamData:

@@ -4,30 +4,34 @@ Used for a SLAM result bundle's ``map.csv`` and ``landmarks_groundtruth.csv``, t
 ``map-compare`` and the ``landmarks.csv`` of ``solve``, so that the same file gets the same
 verdict everywhere. Rules (on top of :func:`slamrel.formats.text.read_csv_table`):
 
-* ids are integers and unique;
 * the covariance columns ``cxx,cxy,cyy`` come all three or none; a row leaves all three
   empty (unknown covariance, NaN) or gives all three;
-* a given covariance passes :func:`relation_metric.checks.check_covariances`.
+* the landmarks pass :func:`relation_metric.landmarks.check_landmarks` (integer, unique ids;
+  finite positions; symmetric positive semi-definite covariances), at their lines.
 
-The writer uses ``%d`` for ids and ``%.17g`` for numbers (an exact round trip); unknown
-(NaN) covariances are written as empty cells.
+The writer uses ``%d`` for ids and :data:`~slamrel.formats.text.NUMBER_FORMAT` (``%.17g``,
+an exact round trip) for numbers; unknown (NaN) covariances are written as empty cells.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
-from relation_metric.trajectory import check_coordinates
-from slamrel.formats.text import PathLike, SourceText, read_csv_table, write_csv_table
+from relation_metric.landmarks import check_landmarks
+from slamrel.formats.text import (
+    NUMBER_FORMAT,
+    PathLike,
+    SourceText,
+    read_csv_table,
+    write_csv_table,
+)
 
-__all__ = ["LandmarkTable", "read_landmark_csv", "write_landmark_csv", "integer_ids"]
+__all__ = ["LandmarkTable", "read_landmark_csv", "write_landmark_csv"]
 
 _COV = ("cxx", "cxy", "cyy")
 
@@ -49,30 +53,6 @@ class LandmarkTable(NamedTuple):
     xy: NDArray[np.float64]
     cov: NDArray[np.float64] | None
     lines: NDArray[np.int64]
-
-
-def integer_ids(
-    values: NDArray[np.float64],
-    lines: NDArray[np.int64] | Callable[[int], int],
-    path: PathLike,
-    column: str,
-) -> NDArray[np.int64]:
-    """``values`` as int64 ids; a non-integer (or out-of-range) value raises at its line.
-
-    ``lines[k]`` (or ``lines(k)``) is the line of value ``k``. NaN entries (empty
-    ``empty_ok`` cells) become 0 (the caller masks them).
-    """
-    v = np.asarray(values, dtype=np.float64)
-    finite = np.isfinite(v)
-    bad = np.flatnonzero(finite & ((v != np.round(v)) | (np.abs(v) > 2.0**53)))
-    if bad.size:
-        k = int(bad[0])
-        raise InputError(
-            f"column '{column}': expected an integer id, got {float(v[k]):.17g}",
-            path=path,
-            line=int(lines(k) if callable(lines) else lines[k]),
-        )
-    return np.where(finite, v, 0).astype(np.int64)
 
 
 def read_landmark_csv(
@@ -109,19 +89,7 @@ def read_landmark_csv(
     name = source.path if source is not None else path
     cols, lines = table
     id_name = next(c for c in id_columns if c in cols)
-    ids = integer_ids(cols[id_name], lines, name, id_name)
-    order = np.argsort(ids, kind="stable")
-    dup = np.flatnonzero(np.diff(ids[order]) == 0)
-    if dup.size:
-        first, k = int(order[dup[0]]), int(order[dup[0] + 1])
-        raise InputError(
-            f"duplicate landmark id {int(ids[k])} (first on line {int(lines[first])}); "
-            "expected unique ids",
-            path=name,
-            line=int(lines[k]),
-        )
     xy = np.column_stack((cols["x"], cols["y"]))
-    check_coordinates(xy, what="landmark", path=os.fspath(name), line_of=lambda k: int(lines[k]))
     present = [c for c in _COV if c in cols]
     cov = None
     if present and len(present) != 3:
@@ -139,15 +107,11 @@ def read_landmark_csv(
                 path=name,
                 line=int(lines[partial[0]]),
             )
-        cov = np.empty((ids.size, 2, 2))
+        cov = np.empty((xy.shape[0], 2, 2))
         cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 0], cov[:, 1, 1] = cxx, cxy, cxy, cyy
-        check_covariances(
-            cov,
-            path=name,
-            lines=lines,
-            what=lambda k: f"landmark {int(ids[k])}: covariance",
-            allow_unknown=True,
-        )
+    ids = check_landmarks(
+        cols[id_name], xy, cov, path=os.fspath(name), lines=lines, id_column=id_name
+    )
     return LandmarkTable(ids, xy, cov, lines)
 
 
@@ -157,7 +121,7 @@ def write_landmark_csv(
     xy: ArrayLike,
     cov: ArrayLike | None = None,
 ) -> None:
-    """Write a landmark CSV atomically (ids ``%d``, numbers ``%.17g``: exact round trip).
+    """Write a landmark CSV atomically (ids ``%d``, numbers ``NUMBER_FORMAT``: exact round trip).
 
     Parameters
     ----------
@@ -174,4 +138,4 @@ def write_landmark_csv(
         c = np.asarray(cov, dtype=np.float64).reshape(-1, 2, 2)
         header += list(_COV)
         columns += [c[:, 0, 0], c[:, 0, 1], c[:, 1, 1]]
-    write_csv_table(path, header, columns, ["%d"] + ["%.17g"] * (len(header) - 1))
+    write_csv_table(path, header, columns, ["%d"] + [NUMBER_FORMAT] * (len(header) - 1))

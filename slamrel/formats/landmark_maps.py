@@ -5,19 +5,21 @@ Read into and written from :class:`landmark_graph.maps.LandmarkMap`.
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from landmark_graph.maps import LandmarkMap
-from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
-from relation_metric.trajectory import check_coordinates
+from relation_metric.landmarks import Lines, check_landmarks
+from slamrel.formats.g2o import format_g2o_records, read_g2o_records
 from slamrel.formats.landmark_csv import read_landmark_csv, write_landmark_csv
 from slamrel.formats.text import (
+    NUMBER_FORMAT,
     PathLike,
-    parse_float,
+    SourceText,
     read_numeric_table,
     read_source,
     write_text_atomic,
@@ -67,39 +69,23 @@ def read_map(path: PathLike) -> LandmarkMap:
         cov = np.zeros((values.shape[0], 2, 2))
         cov[:, 0, 0] = sd[:, 0] ** 2
         cov[:, 1, 1] = sd[:, 1] ** 2
-    return _build(values[:, 0], values[:, 1:3], cov, src.path, lines)
+    return _build(values[:, 0], values[:, 1:3], cov, src.path, lines, cols[0])
 
 
-def _build(ids, xy, cov, path, line_of) -> LandmarkMap:  # type: ignore[no-untyped-def]
-    ids = np.asarray(ids)
-    check_coordinates(np.asarray(xy), what="landmark", path=path, line_of=line_of)
-    bad = np.flatnonzero((ids != np.round(ids)) | (np.abs(ids) > 2.0**53))
-    if bad.size:
-        raise InputError(
-            "landmark id must be an integer", path=path, line=int(line_of(int(bad[0])))
-        )
-    uniq, first, counts = np.unique(ids, return_index=True, return_counts=True)
-    if (counts > 1).any():
-        dup = uniq[counts > 1][0]
-        k = int(np.flatnonzero(ids == dup)[1])
-        before = int(line_of(int(first[uniq == dup][0])))
-        raise InputError(
-            f"duplicate landmark id {int(dup)} (first on line {before})",
-            path=path,
-            line=int(line_of(k)),
-        )
-    if cov is not None:
-        check_covariances(
-            cov,
-            path=path,
-            lines=line_of,
-            what=lambda k: f"landmark {int(ids[k])}: covariance",
-            allow_unknown=True,
-        )
-    return LandmarkMap(ids.astype(np.int64), xy, cov)
+def _build(
+    ids: NDArray[np.float64],
+    xy: NDArray[np.float64],
+    cov: NDArray[np.float64] | None,
+    path: str,
+    line_of: Lines,
+    id_column: str,
+) -> LandmarkMap:
+    """The map of a file's rows, checked at their lines (:func:`check_landmarks`)."""
+    checked = check_landmarks(ids, xy, cov, path=path, lines=line_of, id_column=id_column)
+    return LandmarkMap(checked, xy, cov)
 
 
-def _read_csv_map(src) -> LandmarkMap:  # type: ignore[no-untyped-def]
+def _read_csv_map(src: SourceText) -> LandmarkMap:
     t = read_landmark_csv(
         src.path, id_columns=("landmark", "id", "subject"), source=src, describe="a landmark map"
     )
@@ -109,25 +95,12 @@ def _read_csv_map(src) -> LandmarkMap:  # type: ignore[no-untyped-def]
     return LandmarkMap(t.ids, t.xy, cov)
 
 
-def _read_g2o_map(src) -> LandmarkMap:  # type: ignore[no-untyped-def]
-    ids, xy, lines = [], [], []
-    for number, text in src.data_lines():
-        f = text.split()
-        if f[0] != "VERTEX_XY":
-            continue
-        if len(f) != 4:
-            raise InputError(
-                f"VERTEX_XY: expected 4 fields, got {len(f)}", path=src.path, line=number
-            )
-        vals = [
-            parse_float(t, source=src, line=number, what=w) for t, w in zip(f[1:], ("id", "x", "y"))
-        ]
-        ids.append(vals[0])
-        xy.append(vals[1:])
-        lines.append(number)
-    return _build(
-        np.asarray(ids), np.asarray(xy).reshape(-1, 2), None, src.path, lambda k: lines[k]
-    )
+def _read_g2o_map(src: SourceText) -> LandmarkMap:
+    """``VERTEX_XY`` records (:func:`slamrel.formats.g2o.read_g2o_records`); others skipped."""
+    values, lines = read_g2o_records(src.path, ("VERTEX_XY",), skipped=Counter(), source=src)[
+        "VERTEX_XY"
+    ]
+    return _build(values[:, 0], values[:, 1:3], None, src.path, lines, "VERTEX_XY id")
 
 
 MAP_FORMATS = ("csv", "g2o", "mrclam")
@@ -142,14 +115,14 @@ def write_map(path: PathLike, m: LandmarkMap, *, format: str = "csv") -> None:
     * ``mrclam``: ``subject x y σx σy`` with a ``#`` header; needs diagonal covariances (or
       none: σ written as 0).
 
-    Numbers are written with 17 significant digits (exact round trip).
+    Numbers are written with :data:`~slamrel.formats.text.NUMBER_FORMAT` (exact round trip).
     """
     n = len(m)
     if format == "csv":
         write_landmark_csv(path, m.ids, m.xy, m.cov)
         return
     if format == "g2o":
-        text = ("VERTEX_XY %d %.17g %.17g\n" * n) % _flat(m.ids, m.xy)
+        text = format_g2o_records("VERTEX_XY", m.ids, m.xy)
     elif format == "mrclam":
         sd = np.zeros((n, 2))
         if m.cov is not None:
@@ -157,7 +130,7 @@ def write_map(path: PathLike, m: LandmarkMap, *, format: str = "csv") -> None:
                 raise InputError("the MRCLAM format holds only diagonal covariances", path=path)
             sd = np.sqrt(np.column_stack((m.cov[:, 0, 0], m.cov[:, 1, 1])))
         text = "# Subject #    x [m]    y [m]    x std-dev [m]    y std-dev [m]\n" + (
-            "%d\t%.17g\t%.17g\t%.17g\t%.17g\n" * n
+            ("%d" + f"\t{NUMBER_FORMAT}" * 4 + "\n") * n
         ) % _flat(m.ids, m.xy, sd)
     else:
         raise InputError(f"unknown map format {format!r}, expected one of {MAP_FORMATS}")

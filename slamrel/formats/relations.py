@@ -7,7 +7,7 @@ import numpy as np
 from relation_metric.errors import InputError
 from relation_metric.groups import SE3
 from relation_metric.relations import RelationSet
-from slamrel.formats.text import PathLike, read_numeric_table, write_text_atomic
+from slamrel.formats.text import NUMBER_FORMAT, PathLike, read_numeric_table, write_text_atomic
 
 _REL_COLUMNS = ("t1", "t2", "x", "y", "z", "roll", "pitch", "yaw")
 
@@ -35,7 +35,12 @@ def read_relations(path: PathLike) -> RelationSet:
 
 
 def write_relations(path: PathLike, relations: RelationSet) -> None:
-    """Write a Freiburg ``.relations`` file atomically (times with 6 decimals)."""
+    """Write a Freiburg ``.relations`` file atomically (numbers as ``NUMBER_FORMAT``).
+
+    17 significant digits (:data:`~slamrel.formats.text.NUMBER_FORMAT`): times and motions
+    read back bit for bit, so relations generated from a trajectory name its timestamps
+    exactly.
+    """
     if relations.key != "time":
         raise InputError("only time-stamped relations can be written as .relations", path=path)
     if relations.group is SE3:
@@ -43,11 +48,10 @@ def write_relations(path: PathLike, relations: RelationSet) -> None:
         delta, oop = p[:, [0, 1, 5]], p[:, 2:5]
     else:
         delta = relations.delta
-        oop = relations.out_of_plane
-        if oop is None:
-            oop = np.zeros((len(relations), 3))
+        given = relations.out_of_plane
+        oop = np.zeros((len(relations), 3)) if given is None else given
     rows = np.column_stack((relations.first, relations.second, delta[:, :2], oop, delta[:, 2]))
-    fmt = "%.6f %.6f %.9f %.9f %.9f %.9f %.9f %.9f\n"
+    fmt = " ".join([NUMBER_FORMAT] * 8) + "\n"
     text = "# t1 t2 x y z roll pitch yaw\n"
     if rows.shape[0]:
         text += fmt * rows.shape[0] % tuple(rows.ravel().tolist())

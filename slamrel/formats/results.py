@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from relation_metric.evaluate import Evaluation
-from slamrel.formats.text import PathLike, write_bytes_atomic, write_text_atomic
+from slamrel.formats.text import NUMBER_FORMAT, PathLike, write_bytes_atomic, write_text_atomic
 
 __all__ = ["write_json", "write_per_relation_csv", "write_evo_zip", "evo_stats"]
 
@@ -29,7 +29,8 @@ def write_per_relation_csv(
     """One row per relation: ``t1,t2,i,j,trans_error,rot_error,valid,via_odometry``.
 
     ``i``/``j`` are the estimate pose indices associated with the two ends (−1 when
-    unassociated); errors of unassociated relations are empty.
+    unassociated); errors of unassociated relations are empty. Numbers as
+    :data:`~slamrel.formats.text.NUMBER_FORMAT` (exact round trip).
     """
     ev = evaluation
     a = ev.association
@@ -40,12 +41,12 @@ def write_per_relation_csv(
         write_text_atomic(path, head)
         return
     cols = [
-        np.char.mod("%.6f", ev.relations.first),
-        np.char.mod("%.6f", ev.relations.second),
+        np.char.mod(NUMBER_FORMAT, ev.relations.first),
+        np.char.mod(NUMBER_FORMAT, ev.relations.second),
         a.index_first.astype(str),
         a.index_second.astype(str),
-        np.where(a.valid, np.char.mod("%.9g", np.nan_to_num(ev.errors.translation)), ""),
-        np.where(a.valid, np.char.mod("%.9g", np.nan_to_num(rot)), ""),
+        np.where(a.valid, np.char.mod(NUMBER_FORMAT, np.nan_to_num(ev.errors.translation)), ""),
+        np.where(a.valid, np.char.mod(NUMBER_FORMAT, np.nan_to_num(rot)), ""),
         a.valid.astype(np.int8).astype(str),
         a.via_odometry.astype(np.int8).astype(str),
     ]

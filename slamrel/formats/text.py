@@ -25,7 +25,8 @@ import math
 import os
 import re
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections import Counter
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -43,6 +44,7 @@ from slamrel.outputs import (
 )
 
 __all__ = [
+    "NUMBER_FORMAT",
     "TruncatedLineWarning",
     "SourceText",
     "read_source",
@@ -58,6 +60,11 @@ __all__ = [
     "write_text_atomic",
     "write_bytes_atomic",
 ]
+
+NUMBER_FORMAT = "%.17g"
+"""How the files slamrel writes spell a double: 17 significant digits, the fewest that read
+back bit for bit for every finite double (``float(NUMBER_FORMAT % x) == x``). Every writer of
+:mod:`slamrel.formats` uses it; a format whose tradition differs names its own constant."""
 
 
 class TruncatedLineWarning(UserWarning):
@@ -443,7 +450,9 @@ def read_csv_table(
     maybe_empty = [c for c in wanted if c in empty_ok]
     values: NDArray[np.float64] | None = None
     if body:
-        conv = {header.index(c): _float_or_nan for c in maybe_empty}
+        conv: dict[int | str, Callable[[str], float]] = {
+            header.index(c): _float_or_nan for c in maybe_empty
+        }
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -531,7 +540,7 @@ def _parse_csv_lines(
 def format_csv_table(
     header: Sequence[str],
     columns: Sequence[ArrayLike],
-    fmt: str | Sequence[str] = "%.17g",
+    fmt: str | Sequence[str] = NUMBER_FORMAT,
 ) -> str:
     """A header CSV table as text; NaN cells are left empty.
 
@@ -541,8 +550,9 @@ def format_csv_table(
         Column names.
     columns : sequence of array_like, each shape (N,)
     fmt : str or sequence of str
-        ``%`` formats, one for all or one per column. ``%.17g`` (the default) writes every
-        double so that :func:`read_csv_table` reads it back bit for bit; ``%d`` for ids.
+        ``%`` formats, one for all or one per column. :data:`NUMBER_FORMAT` (the default)
+        writes every double so that :func:`read_csv_table` reads it back bit for bit; ``%d``
+        for ids.
     """
     fmts = [fmt] * len(header) if isinstance(fmt, str) else list(fmt)
     if len(fmts) != len(header) or len(columns) != len(header):
@@ -568,25 +578,34 @@ def write_csv_table(
     path: PathLike,
     header: Sequence[str],
     columns: Sequence[ArrayLike],
-    fmt: str | Sequence[str] = "%.17g",
+    fmt: str | Sequence[str] = NUMBER_FORMAT,
 ) -> None:
     """Write :func:`format_csv_table` to ``path`` atomically."""
     write_text_atomic(path, format_csv_table(header, columns, fmt))
 
 
+Records = dict[str, tuple[NDArray[np.float64], NDArray[np.int64]]]
+
+
 def _keyword_records_fast(
-    src: SourceText, fields: dict[str, int]
-) -> dict[str, tuple[NDArray[np.float64], NDArray[np.int64]]] | None:
+    src: SourceText, fields: Mapping[str, int], *, skipped: Counter[str] | None = None
+) -> Records | None:
     """:func:`read_keyword_records` for a well-formed file, one ``float`` per token without
     per-token checks (several times faster: benchmarks/README.md); ``None`` at the first
     thing :func:`parse_float` or the record checks would reject, so the caller can report
-    it."""
+    it. With ``skipped`` (a counter), records of other kinds are counted there instead of
+    being rejected."""
     tokens: dict[str, list[str]] = {k: [] for k in fields}
     lines: dict[str, list[int]] = {k: [] for k in fields}
+    others: Counter[str] = Counter()
     for number, text in src.data_lines():
         f = text.split()
         kind = f[0]
-        if fields.get(kind) != len(f):
+        n = fields.get(kind)
+        if n is None and skipped is not None:
+            others[kind] += 1
+            continue
+        if n != len(f):
             return None
         tokens[kind] += f[1:]
         lines[kind].append(number)
@@ -602,52 +621,83 @@ def _keyword_records_fast(
         if not np.isfinite(values).all():
             return None
         out[kind] = (values.reshape(-1, n - 1), np.asarray(lines[kind], dtype=np.int64))
+    if skipped is not None:
+        skipped.update(others)
     return out
 
 
 def read_keyword_records(
-    path: PathLike, fields: dict[str, int]
-) -> dict[str, tuple[NDArray[np.float64], NDArray[np.int64]]]:
+    path: PathLike,
+    fields: Mapping[str, int],
+    *,
+    names: Mapping[str, Sequence[str]] | None = None,
+    skipped: Counter[str] | None = None,
+    source: SourceText | None = None,
+) -> Records:
     """Read a file of keyword records (``KIND v1 v2 …``, e.g. g2o or iSAM text).
 
     Parameters
     ----------
     path : str or PathLike
-    fields : dict of record name → number of fields (the keyword included)
-        Every record must be one of these, with exactly that many numeric fields.
+    fields : mapping of record name → number of fields (the keyword included)
+        Every record must be one of these (unless ``skipped`` is given), with exactly that
+        many numeric fields.
+    names : mapping of record name → field names (the keyword not included), optional
+        For messages: ``VERTEX_SE2 x: expected a number`` and ``VERTEX_SE2: expected 5
+        fields (VERTEX_SE2 id x y theta)`` instead of ``VERTEX_SE2 field 3``.
+    skipped : Counter, optional
+        Records of other kinds are skipped and counted here by name (not checked); without
+        it they are an error.
+    source : SourceText, optional
+        Already-read text of ``path``.
 
     Returns
     -------
     dict of record name → (values (K, n − 1), line numbers (K,))
         One entry per name in ``fields`` (empty arrays when absent).
     """
-    src = read_source(path)
-    fast = _keyword_records_fast(src, fields)
+    src = read_source(path) if source is None else source
+    fast = _keyword_records_fast(src, fields, skipped=skipped)
     if fast is not None:
         return fast
     # something is wrong: parse token by token to name the first bad record (in file order)
     rows: dict[str, list[list[float]]] = {k: [] for k in fields}
     lines: dict[str, list[int]] = {k: [] for k in fields}
+    others: Counter[str] = Counter()
     for number, text in src.data_lines():
         f = text.split()
         kind = f[0]
         if kind not in fields:
+            if skipped is not None:
+                others[kind] += 1
+                continue
             raise InputError(
                 f"unknown record {quote_token(kind)}; expected one of {', '.join(fields)}",
                 path=src.path,
                 line=number,
             )
+        what = list(names[kind]) if names and kind in names else None
         if len(f) != fields[kind]:
+            layout = f" ({kind} {' '.join(what)})" if what else ""
             raise InputError(
-                f"{kind}: expected {fields[kind]} fields, got {len(f)}", path=src.path, line=number
+                f"{kind}: expected {fields[kind]} fields{layout}, got {len(f)}",
+                path=src.path,
+                line=number,
             )
         rows[kind].append(
             [
-                parse_float(t, source=src, line=number, what=f"{kind} field {k + 2}")
+                parse_float(
+                    t,
+                    source=src,
+                    line=number,
+                    what=f"{kind} {what[k]}" if what else f"{kind} field {k + 2}",
+                )
                 for k, t in enumerate(f[1:])
             ]
         )
         lines[kind].append(number)
+    if skipped is not None:
+        skipped.update(others)
     return {
         k: (
             np.asarray(rows[k], dtype=np.float64).reshape(-1, n - 1),

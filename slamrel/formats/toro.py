@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from relation_metric.errors import InputError
 from relation_metric.ids import rows_of
 from slamrel.backends.least_squares import PoseGraph
-from slamrel.formats.text import PathLike, read_keyword_records, write_text_atomic
+from slamrel.formats.text import NUMBER_FORMAT, PathLike, read_keyword_records, write_text_atomic
 
 __all__ = ["read_toro_graph", "write_toro_graph", "TORO_INFO_ORDER"]
 
@@ -79,7 +79,7 @@ def write_toro_graph(
     poses: ArrayLike | None = None,
     pose_ids: ArrayLike | None = None,
 ) -> None:
-    """Write a pose graph as TORO ``VERTEX2``/``EDGE2`` records (atomically).
+    """Write a pose graph as TORO ``VERTEX2``/``EDGE2`` records (atomically, ``NUMBER_FORMAT``).
 
     Parameters
     ----------
@@ -100,14 +100,15 @@ def write_toro_graph(
         raise InputError(f"need ({n}, 3) poses and {n} ids, got {p.shape} and {pid.shape}")
     if np.unique(pid).size != n:
         raise InputError("vertex ids must be distinct")
+    num = " " + NUMBER_FORMAT
     parts = [
-        ("VERTEX2 %d %.9g %.9g %.9g\n" * n) % tuple(np.column_stack((pid, p)).ravel().tolist())
+        ("VERTEX2 %d" + num * 3 + "\n") * n % tuple(np.column_stack((pid, p)).ravel().tolist())
     ]
     if graph.pp_i.size:
         rows = np.column_stack(
             (pid[graph.pp_i], pid[graph.pp_j], graph.pp_z, graph.pp_info[:, _ROWS, _COLS])
         )
         parts.append(
-            ("EDGE2 %d %d" + " %.9g" * 9 + "\n") * rows.shape[0] % tuple(rows.ravel().tolist())
+            ("EDGE2 %d %d" + num * 9 + "\n") * rows.shape[0] % tuple(rows.ravel().tolist())
         )
     write_text_atomic(path, "".join(parts))

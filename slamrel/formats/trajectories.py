@@ -23,8 +23,9 @@ Formats
            the laser pose of FLASER/ROBOTLASER1 (what the Freiburg relations refer to),
            ``pose="odometry"`` the odometry pose of FLASER and the robot pose of ROBOTLASER1.
            Other record types are skipped and counted.
-``g2o``    ``VERTEX_SE2 id x y θ``; the vertex id becomes the timestamp. Other records are
-           skipped and counted.
+``g2o``    ``VERTEX_SE2 id x y θ`` (:func:`slamrel.formats.g2o.read_g2o_records`: integer,
+           unique ids); the vertex id becomes the timestamp. Other records are skipped and
+           counted.
 ``csv``    comma separated with the header ``t,x,y,theta`` (the SLAM result bundle's
            ``groundtruth.csv``); ``#`` comment lines allowed.
 ``kitti``  KITTI odometry poses: 12 numbers a line, the row-major 3×4 matrix ``[R | t]``.
@@ -46,7 +47,7 @@ import math
 import os
 import warnings
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal, NamedTuple
 
@@ -57,10 +58,11 @@ from relation_metric.errors import InputError
 from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import OutOfPlane, Trajectory, check_coordinates
 from slamrel.constants import TRAJECTORY_FORMATS
+from slamrel.formats.g2o import format_g2o_records, read_g2o_records
 from slamrel.formats.text import (
+    NUMBER_FORMAT,
     PathLike,
     SourceText,
-    parse_float,
     quote_token,
     read_csv_table,
     read_numeric_table,
@@ -75,6 +77,7 @@ __all__ = [
     "InvalidPoseWarning",
     "PlanarProjectionWarning",
     "DIMENSIONS",
+    "CSV_HEADER",
     "detect_trajectory_format",
     "sniff_trajectory_format",
     "without_repeated_times",
@@ -85,6 +88,9 @@ __all__ = [
 ]
 
 DIMENSIONS = ("auto", "2d", "3d")
+CSV_HEADER = "t,x,y,theta"
+"""The header of the ``csv`` trajectory format (a SLAM result bundle's ``groundtruth.csv``
+and ``odometry.csv``)."""
 _EUROC_COLUMNS = (
     "timestamp",
     "p_rs_r_x [m]",
@@ -255,6 +261,7 @@ def read_trajectory(
     max_step_back: float | None = None,
     dimension: str = "auto",
     times: PathLike | None = None,
+    what: str = "pose",
 ) -> LoadedTrajectory:
     """Read a trajectory file; its poses come back in time order.
 
@@ -282,6 +289,8 @@ def read_trajectory(
         The planar formats are always SE(2) (``"3d"`` lifts them).
     times : str or PathLike, optional
         KITTI: a file with one timestamp a line (``times.txt``).
+    what : str
+        What a row is, for the coordinate and time-order messages (e.g. ``"odometry pose"``).
 
     Returns
     -------
@@ -325,14 +334,12 @@ def read_trajectory(
         hint = "" if format else "; pass format=... if that is not its format"
         raise InputError(f"no poses found (read as {fmt}){hint}", path=src.path)
     positions = poses[:, :3] if poses.shape[1] == 7 else poses[:, :2]
-    check_coordinates(positions, what="pose", path=src.path, line_of=lines)
-    order, report = sort_by_time(
-        t, tolerance=max_step_back, lines=lines, path=src.path, what="pose"
-    )
+    check_coordinates(positions, what=what, path=src.path, line_of=lines)
+    order, report = sort_by_time(t, tolerance=max_step_back, lines=lines, path=src.path, what=what)
     if report.out_of_order:
         t, poses = t[order], poses[order]
         warnings.warn(
-            f"{src.path}: {report.describe('pose')}; put in time order",
+            f"{src.path}: {report.describe(what)}; put in time order",
             TimeOrderWarning,
             stacklevel=2,
         )
@@ -362,6 +369,7 @@ def _read_3d(
     discarded: list[OutOfPlane],
 ) -> tuple[NDArray, NDArray, Any]:
     """TUM, KITTI or EuRoC: times, poses (``(N, 7)`` or ``(N, 3)``) and the row → line map."""
+    lines: Callable[[int], Any]
     if fmt == "tum":
         values, lines = read_numeric_table(
             path,
@@ -512,7 +520,7 @@ def without_repeated_times(loaded: LoadedTrajectory, path: PathLike) -> LoadedTr
 
 def _read_csv_trajectory(src: SourceText) -> tuple[NDArray, NDArray, NDArray]:
     table = read_csv_table(
-        src.path, required=("t", "x", "y", "theta"), describe="a t,x,y,theta trajectory", source=src
+        src.path, required=CSV_HEADER.split(","), describe="a t,x,y,theta trajectory", source=src
     )
     c = table.columns
     return c["t"], np.column_stack((c["x"], c["y"], c["theta"])), table.lines
@@ -622,38 +630,12 @@ def _carmen_pose(
 
 
 def _read_g2o(src: SourceText, *, skipped: Counter[str]) -> tuple[NDArray, NDArray, NDArray]:
-    ids: list[float] = []
-    poses: list[tuple[float, float, float]] = []
-    numbers: list[int] = []
-    for number, text in src.data_lines():
-        fields = text.split()
-        if fields[0] != "VERTEX_SE2":
-            skipped[fields[0]] += 1
-            continue
-        if len(fields) != 5:
-            raise InputError(
-                f"VERTEX_SE2: expected 5 fields (VERTEX_SE2 id x y theta), got {len(fields)}",
-                path=src.path,
-                line=number,
-            )
-        vals = [
-            parse_float(tok, source=src, line=number, what=f"VERTEX_SE2 {name}")
-            for tok, name in zip(fields[1:], ("id", "x", "y", "theta"))
-        ]
-        ids.append(vals[0])
-        poses.append((vals[1], vals[2], vals[3]))
-        numbers.append(number)
-    order = np.argsort(np.asarray(ids), kind="stable")
-    t = np.asarray(ids, dtype=np.float64)[order]
-    if t.size > 1 and (np.diff(t) == 0).any():
-        k = int(np.flatnonzero(np.diff(t) == 0)[0])
-        raise InputError(
-            f"duplicate VERTEX_SE2 id {int(t[k])}",
-            path=src.path,
-            line=int(np.asarray(numbers)[order][k + 1]),
-        )
-    arr = np.asarray(poses, dtype=np.float64).reshape(-1, 3)[order]
-    return t, arr, np.asarray(numbers)[order]
+    """``VERTEX_SE2`` records (:func:`slamrel.formats.g2o.read_g2o_records`), in id order."""
+    values, lines = read_g2o_records(src.path, ("VERTEX_SE2",), skipped=skipped, source=src)[
+        "VERTEX_SE2"
+    ]
+    order = np.argsort(values[:, 0], kind="stable")
+    return values[order, 0], values[order, 1:4], lines[order]
 
 
 def write_trajectory(
@@ -664,8 +646,12 @@ def write_trajectory(
 ) -> None:
     """Write a trajectory atomically in one of :data:`TRAJECTORY_FORMATS`.
 
-    ``carmen`` writes ``FLASER 0`` records (laser pose = odometry pose), which the original
-    metricEvaluator reads; ``g2o`` writes ``VERTEX_SE2`` lines with the pose index as id.
+    Numbers are written with :data:`~slamrel.formats.text.NUMBER_FORMAT` (17 significant
+    digits: the file reads back bit for bit). ``plain`` and ``tum`` have a ``#`` header line;
+    ``csv`` the header :data:`CSV_HEADER` (the one writer of a bundle's ``groundtruth.csv``
+    and ``odometry.csv``); ``carmen`` writes ``FLASER 0`` records (laser pose = odometry
+    pose), which the original metricEvaluator reads; ``g2o`` writes ``VERTEX_SE2`` lines
+    (:func:`slamrel.formats.g2o.format_g2o_records`) with the pose index as id.
     """
     t = trajectory.timestamps
     p = trajectory.poses
@@ -673,28 +659,22 @@ def write_trajectory(
     if p.shape[1] == 7 and format != "tum":
         raise InputError(f"a 3-D trajectory can be written as tum only, not {format}", path=path)
     if format == "plain":
-        text = _rows(np.column_stack((t, p)), ("%.9f", "%.9f", "%.9f", "%.9f"))
-        text = "# t x y theta\n" + text
+        text = "# t x y theta\n" + _rows(np.column_stack((t, p)), [NUMBER_FORMAT] * 4)
     elif format == "tum":
         if p.shape[1] == 7:
             rows = np.column_stack((t, p))
         else:
             q = quaternion_from_yaw(p[:, 2])
             rows = np.column_stack((t, p[:, 0], p[:, 1], np.zeros(n), q))
-        text = "# t x y z qx qy qz qw\n" + _rows(rows, ["%.9f"] * 8)
+        text = "# t x y z qx qy qz qw\n" + _rows(rows, [NUMBER_FORMAT] * 8)
     elif format == "csv":
-        text = "t,x,y,theta\n" + _rows(np.column_stack((t, p)), ["%.9f"] * 4, ",")
+        text = CSV_HEADER + "\n" + _rows(np.column_stack((t, p)), [NUMBER_FORMAT] * 4, ",")
     elif format == "g2o":
-        body = _rows(np.column_stack((np.arange(n), p)), ("%d", "%.9f", "%.9f", "%.9f"))
-        text = "".join("VERTEX_SE2 " + line + "\n" for line in body.splitlines())
+        text = format_g2o_records("VERTEX_SE2", np.arange(n), p)
     elif format == "carmen":
-        rows = np.column_stack((p, p, t, t))
-        body = _rows(rows, ["%.6f"] * 6 + ["%.6f", "%.6f"])
-        lines = []
-        for line in body.splitlines():
-            f = line.split(" ")
-            lines.append(f"FLASER 0 {' '.join(f[:7])} slamrel {f[7]}\n")
-        text = "".join(lines)
+        # FLASER 0 (no readings) x y θ odom_x odom_y odom_θ ipc_timestamp hostname logger_timestamp
+        line = "FLASER 0" + f" {NUMBER_FORMAT}" * 7 + " slamrel " + NUMBER_FORMAT + "\n"
+        text = line * n % tuple(np.column_stack((p, p, t, t)).ravel().tolist())
     else:
         raise InputError(
             f"unknown trajectory format {format!r}; expected one of "
@@ -704,7 +684,7 @@ def write_trajectory(
     write_text_atomic(path, text)
 
 
-def _rows(values: NDArray[np.float64], fmt: tuple[str, ...] | list[str], sep: str = " ") -> str:
+def _rows(values: NDArray[np.float64], fmt: list[str], sep: str = " ") -> str:
     if values.shape[0] == 0:
         return ""
     line = sep.join(fmt)

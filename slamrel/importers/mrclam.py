@@ -26,10 +26,9 @@ from recovery.bundle import Bundle
 from recovery.models import MotionModel, SensorModel
 from relation_metric import se2
 from relation_metric.errors import InputError
-from relation_metric.ids import rows_of
+from relation_metric.ids import integer_ids, rows_of
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, readonly
-from slamrel.formats.landmark_csv import integer_ids
 from slamrel.formats.text import PathLike, RowLines, read_numeric_table
 
 __all__ = [

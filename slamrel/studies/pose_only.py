@@ -65,9 +65,7 @@ METHOD_NAMES = {
 
 
 def _errors(est: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    e = np.asarray(truth) - np.asarray(est)
-    e[:, 2] = se2.wrap_angle(e[:, 2])
-    return e
+    return se2.minus(truth, est)
 
 
 def run_case(
