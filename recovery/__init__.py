@@ -8,8 +8,9 @@ The run function ``recover`` is not among them: ``recovery.recover`` is its modu
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from relation_metric.lazy import lazy_exports
 
 #: Public name → the module that defines it (imported on first use).
 _EXPORTS: dict[str, str] = {
@@ -50,14 +51,4 @@ if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on 
     from recovery.recover import Recovery, Stretch
     from recovery.smoother import SmootherResult, smooth
 else:
-
-    def __getattr__(name: str) -> Any:
-        """Import a public name from its module on first use (then it is a plain global)."""
-        if name not in _EXPORTS:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        value = getattr(importlib.import_module(_EXPORTS[name]), name)
-        globals()[name] = value
-        return value
-
-    def __dir__() -> list[str]:
-        return sorted(set(globals()) | set(__all__))
+    __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)

@@ -1,8 +1,8 @@
 """relation_metric: the shared relation metric of slamrel (Kümmerle et al. 2009).
 
 SE(2) and SE(3) algebra (:mod:`relation_metric.se2`, :mod:`relation_metric.se3`) behind one
-pose-group interface (:mod:`relation_metric.groups`), trajectories, relation sets and their file
-formats, timestamp association, relation errors and their statistics, alignment (ATE),
+pose-group interface (:mod:`relation_metric.groups`), trajectories, relation sets and their
+generation, timestamp association, relation errors and their statistics, alignment (ATE),
 consistency (NEES). This package imports nothing else of slamrel.
 
 The main names are importable from the package (``from relation_metric import Trajectory``);
@@ -14,10 +14,10 @@ evaluate`` (or ``slamrel.evaluate``).
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from relation_metric.errors import AssociationError, DivergenceError, InputError, SlamrelError
+from relation_metric.lazy import lazy_exports
 
 #: Public name → the module that defines it (imported on first use).
 _EXPORTS: dict[str, str] = {
@@ -70,14 +70,4 @@ if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on 
     from relation_metric.time_association import associate
     from relation_metric.trajectory import Trajectory
 else:
-
-    def __getattr__(name: str) -> Any:
-        """Import a public name from its module on first use (then it is a plain global)."""
-        if name not in _EXPORTS:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        value = getattr(importlib.import_module(_EXPORTS[name]), name)
-        globals()[name] = value
-        return value
-
-    def __dir__() -> list[str]:
-        return sorted(set(globals()) | set(__all__))
+    __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)

@@ -13,8 +13,9 @@ Each name is imported from its module the first time it is used (PEP 562), so
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from relation_metric.lazy import lazy_exports
 
 __version__ = "0.1.0"
 
@@ -110,14 +111,4 @@ if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on 
     from slamrel.formats.relations import read_relations, write_relations
     from slamrel.formats.trajectories import LoadedTrajectory, read_trajectory, write_trajectory
 else:
-
-    def __getattr__(name: str) -> Any:
-        """Import a public name from its module on first use (then it is a plain global)."""
-        if name not in _EXPORTS:
-            raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-        value = getattr(importlib.import_module(_EXPORTS[name]), name)
-        globals()[name] = value
-        return value
-
-    def __dir__() -> list[str]:
-        return sorted(set(globals()) | set(__all__))
+    __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)

@@ -102,6 +102,7 @@ def test_help_imports_no_numpy() -> None:
     light = {
         "relation_metric",
         "relation_metric.errors",
+        "relation_metric.lazy",
         "relation_metric.constants",
         "recovery",
         "recovery.constants",
