@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from landmark_graph.covisibility import covisible_pairs
 from landmark_graph.landmark_association import Association
 from landmark_graph.maps import LandmarkMap
 from relation_metric import se2
-from relation_metric.covisibility import covisible_pairs
 from relation_metric.errors import InputError
 from relation_metric.evaluate import error_summaries
 from relation_metric.ids import first_missing, rows_of
@@ -176,7 +176,7 @@ def shared_landmark_relations(
         Refuse (with :class:`InputError`) when ``Σ_l C(n_l, 2)`` — ``n_l`` the poses that
         observed landmark ``l``, a bound on the pose pairs to examine — exceeds this: the
         sparse product ``S Sᵀ`` of the pose × landmark incidence matrix would not fit
-        (:func:`relation_metric.covisibility.covisible_pairs`).
+        (:func:`landmark_graph.covisibility.covisible_pairs`).
     """
     i, j, _ = covisible_pairs(
         pose, landmark, len(reference), min_common=min_common, min_gap=min_gap, max_pairs=max_pairs

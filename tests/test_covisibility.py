@@ -1,4 +1,4 @@
-"""relation_metric.covisibility against a dense pose × landmark incidence oracle."""
+"""landmark_graph.covisibility against a dense pose × landmark incidence oracle."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from relation_metric.covisibility import covisible_pairs, shared_observations
+from landmark_graph.covisibility import covisible_pairs, shared_observations
 from relation_metric.errors import InputError
 
 

@@ -53,10 +53,10 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from landmark_graph.covisibility import SharedObservations, covisible_pairs, shared_observations
 from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.consistency import JointNees, nees2
-from relation_metric.covisibility import SharedObservations, covisible_pairs, shared_observations
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import Trajectory, readonly
 from slamrel.backends.least_squares import (
@@ -215,7 +215,7 @@ def method1_pairs(log: LandmarkLog, *, close_loop: bool = True) -> NDArray[np.in
 def method2_pairs(log: LandmarkLog, *, min_common: int = METHOD2_MIN_COMMON) -> NDArray[np.int64]:
     """Method 2 pairs: every ``i < j`` sharing at least ``min_common`` landmarks, shape (E, 2).
 
-    Sorted by ``i``, then ``j`` (:func:`relation_metric.covisibility.covisible_pairs`).
+    Sorted by ``i``, then ``j`` (:func:`landmark_graph.covisibility.covisible_pairs`).
     """
     if min_common < _MIN_OBSERVABLE:
         raise InputError(f"min_common must be >= {_MIN_OBSERVABLE}, got {min_common}")
