@@ -1,12 +1,9 @@
-"""Landmark maps and their file formats.
+"""Landmark maps as a record: M landmarks with integer ids and optional covariances.
 
-Formats: the SLAM result bundle's ``map.csv`` (``landmark,x,y[cxx,cxy,cyy]``) and
-``landmarks_groundtruth.csv`` (``landmark,x,y``); MRCLAM ``Landmark_Groundtruth.dat``
-(``subject x y σx σy``, ``#`` headers, tabs and spaces); g2o ``VERTEX_XY id x y`` (other g2o
-records are skipped). Readers are strict: NaN coordinates, duplicate ids, a covariance that is
-not symmetric positive semi-definite and an empty map are errors naming the file (and line).
-Writers (:func:`write_map`) speak the same formats, with 17 significant digits, so that a
-written map reads back bit for bit.
+:class:`LandmarkMap` checks itself when it is built (unique integer ids, finite positions,
+symmetric positive semi-definite covariances; :func:`relation_metric.landmarks.
+check_landmarks`). Its files (the bundle's ``map.csv``, MRCLAM landmarks, g2o ``VERTEX_XY``)
+are read and written by :mod:`slamrel.formats.landmark_maps`.
 """
 
 from __future__ import annotations

@@ -1,15 +1,10 @@
-"""The SLAM result bundle (format ``slamrel-bundle/1``, see ``docs/bundle.md``): read and write.
+"""The SLAM result bundle as a record: what a filter-based SLAM run leaves behind.
 
-A bundle is a directory of comma-separated files (one header line, ``#`` comment lines) and a
-JSON manifest ``bundle.json``. The reader is strict: a missing required file or column, a
-non-finite number, times that go back more than ``FILTER_TIME_TOLERANCE`` (0.05 s; smaller
-steps back are put in time order and counted in ``Bundle.reordered``), an unknown model type,
-a measurement whose landmark is not in ``map.csv`` (unless ``skip_unknown_landmarks``, which
-counts them), and a covariance that is not symmetric positive semi-definite each raise
-:class:`~relation_metric.errors.InputError` naming the file, the line and what was expected.
-
-Landmark ids are integers. Manifest defaults: ``initial_pose`` ``[0, 0, 0]``,
-``initial_covariance`` ``1e-9 I``, ``description`` empty.
+:class:`Bundle` holds the models, the log, the data associations and the final map of one
+run (format ``slamrel-bundle/1``, docs/bundle.md) and checks itself when it is built: shapes,
+finite numbers, times in order, unique map ids, associated landmarks in the map, symmetric
+positive semi-definite covariances. Its files are read and written by
+:mod:`slamrel.formats.bundle`.
 """
 
 from __future__ import annotations
@@ -29,9 +24,7 @@ from relation_metric.ids import rows_of
 from relation_metric.landmarks import check_landmarks
 from relation_metric.trajectory import Trajectory, readonly
 
-__all__ = ["FORMAT", "Bundle"]
-
-FORMAT = "slamrel-bundle/1"
+__all__ = ["Bundle"]
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Reference relation sets, the Freiburg ``.relations`` format, and relation selection.
+"""Reference relation sets and relation selection (their file: :mod:`slamrel.formats.relations`).
 
 A relation is a pair of poses and the reference relative motion between them,
 ``δ*_ij = x*_i⁻¹ ∘ x*_j`` (Kümmerle et al. 2009, Eq. 1 and Sec. IV). A :class:`RelationSet`

@@ -1,4 +1,4 @@
-"""slamrel: the front door — CLI, pipelines, reports, importers, simulated worlds.
+"""slamrel: the front door — the Python API, file formats, back-ends, simulator, reports, CLI.
 
 For Python users ``import slamrel`` gives what a session needs, from one place::
 

@@ -7,8 +7,18 @@ command-line parsers offer them as option choices without importing numpy (``sla
 
 from __future__ import annotations
 
-__all__ = ["TRAJECTORY_FORMATS", "WORLDS", "PAPER_WORLDS", "NOISE_NAMES", "POSE_ONLY_METHODS"]
+__all__ = [
+    "BUNDLE_FORMAT",
+    "TRAJECTORY_FORMATS",
+    "WORLDS",
+    "PAPER_WORLDS",
+    "NOISE_NAMES",
+    "POSE_ONLY_METHODS",
+]
 
+#: The format id of the SLAM result bundle (``bundle.json``'s ``format``; docs/bundle.md),
+#: written by :func:`slamrel.formats.bundle.write_bundle` and required by its reader.
+BUNDLE_FORMAT = "slamrel-bundle/1"
 #: Trajectory file formats of :func:`slamrel.formats.trajectories.read_trajectory`.
 TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc")
 #: Built-in simulated worlds of :func:`slamrel.simulation.worlds.make_world` ...

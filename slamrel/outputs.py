@@ -35,10 +35,10 @@ from typing import IO
 
 from relation_metric.arrays import PathLike
 from relation_metric.errors import InputError
+from slamrel.constants import BUNDLE_FORMAT  # a bundle folder saying so is ours too
 
 __all__ = [
     "MANIFEST",
-    "BUNDLE_FORMAT",
     "current_umask",
     "file_mode",
     "dir_mode",
@@ -56,8 +56,6 @@ __all__ = [
 
 #: The manifest written into every folder output; ``--force`` replaces only such folders.
 MANIFEST = "slamrel-output.json"
-#: A bundle folder whose ``bundle.json`` says this format is also recognised as ours.
-BUNDLE_FORMAT = "slamrel-bundle/1"
 
 _UMASK_LOCK = threading.Lock()
 

@@ -1,4 +1,16 @@
-"""The SLAM result bundle on disk (format ``slamrel-bundle/1``, docs/bundle.md): read and write."""
+"""The SLAM result bundle on disk (format ``slamrel-bundle/1``, docs/bundle.md): read and write.
+
+A bundle is a directory of comma-separated files (one header line, ``#`` comment lines) and a
+JSON manifest ``bundle.json``. The reader is strict: a missing required file or column, a
+non-finite number, times that go back more than ``FILTER_TIME_TOLERANCE`` (0.05 s; smaller
+steps back are put in time order and counted in ``Bundle.reordered``), an unknown model type,
+a measurement whose landmark is not in ``map.csv`` (unless ``skip_unknown_landmarks``, which
+counts them), and a covariance that is not symmetric positive semi-definite each raise
+:class:`~relation_metric.errors.InputError` naming the file, the line and what was expected.
+
+Landmark ids are integers. Manifest defaults: ``initial_pose`` ``[0, 0, 0]``,
+``initial_covariance`` ``1e-9 I``, ``description`` empty.
+"""
 
 from __future__ import annotations
 
@@ -13,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from recovery.bundle import FORMAT, Bundle
+from recovery.bundle import Bundle
 from recovery.models import MOTION_TYPES, SIGMA_NAMES, MotionModel, SensorModel
 from relation_metric.arrays import Array, PathLike
 from relation_metric.checks import check_covariances
@@ -21,6 +33,7 @@ from relation_metric.errors import InputError
 from relation_metric.ids import integer_ids
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory
+from slamrel.constants import BUNDLE_FORMAT as FORMAT
 from slamrel.formats.landmark_csv import read_landmark_csv, write_landmark_csv
 from slamrel.formats.text import (
     format_csv_table,

@@ -1,6 +1,12 @@
-"""Landmark map files (landmark CSV, g2o ``VERTEX_XY``, MRCLAM landmarks): read and write.
+"""Landmark map files: read into and written from :class:`landmark_graph.maps.LandmarkMap`.
 
-Read into and written from :class:`landmark_graph.maps.LandmarkMap`.
+Formats: the SLAM result bundle's ``map.csv`` (``landmark,x,y[cxx,cxy,cyy]``) and
+``landmarks_groundtruth.csv`` (``landmark,x,y``); MRCLAM ``Landmark_Groundtruth.dat``
+(``subject x y σx σy``, ``#`` headers, tabs and spaces); g2o ``VERTEX_XY id x y`` (other g2o
+records are skipped). Readers are strict: NaN coordinates, duplicate ids, a covariance that is
+not symmetric positive semi-definite and an empty map are errors naming the file (and line).
+Writers (:func:`write_map`) speak the same formats, with 17 significant digits, so that a
+written map reads back bit for bit.
 """
 
 from __future__ import annotations
