@@ -35,6 +35,7 @@ PLOTS, REVIEW, REPORT, IMPORTERS = (
     "slamrel.report",
     "slamrel.importers",
 )
+EVALUATION_OPTIONS = "slamrel.evaluation_options"
 PIPELINE, STUDIES, COMMANDS, CLI, MAIN = (
     "slamrel.pipeline",
     "slamrel.studies",
@@ -53,6 +54,8 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "landmark_graph": ("relation_metric",),
     CONSTANTS: (),
     OUTPUTS: ("relation_metric",),
+    # the scoring options of a files-level evaluation, without numpy (the parser's defaults)
+    EVALUATION_OPTIONS: ("relation_metric",),
     # back-ends and the simulator are maths on records: the libraries only, no file I/O
     BACKENDS: LIBRARIES,
     SIMULATION: LIBRARIES,
@@ -68,6 +71,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         *LIBRARIES,
         OUTPUTS,
         FORMATS,
+        EVALUATION_OPTIONS,
         BACKENDS,
         SIMULATION,
         IMPORTERS,

@@ -15,6 +15,7 @@ from relation_metric.constants import STRATEGIES
 from relation_metric.errors import InputError, SlamrelError
 from slamrel.commands import options as opt
 from slamrel.constants import TRAJECTORY_FORMATS
+from slamrel.evaluation_options import EvaluateOptions
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from relation_metric.relations import RelationSet
@@ -84,7 +85,12 @@ def in_option_words(words: Mapping[str, str]) -> Iterator[None]:
 
 
 def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | None) -> None:
-    """Options of relation generation from a reference trajectory."""
+    """Options of relation generation from a reference trajectory.
+
+    Their defaults are those of :class:`~slamrel.evaluation_options.EvaluateOptions`
+    (``default`` is the strategy's).
+    """
+    d = EvaluateOptions
     g = parser.add_argument_group("relation generation (from a reference trajectory)")
     g.add_argument(
         "--strategy",
@@ -93,35 +99,43 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         help="how to select relations (default: %(default)s)",
     )
     g.add_argument(
-        "--step", type=opt.positive_int, default=1, help="consecutive: pose k with k+STEP"
+        "--step", type=opt.positive_int, default=d.step, help="consecutive: pose k with k+STEP"
     )
     g.add_argument(
-        "--distance", type=opt.positive_float, default=1.0, help="distance: metres of travel"
+        "--distance",
+        type=opt.positive_float,
+        default=d.distance,
+        help="distance: metres of travel",
     )
-    g.add_argument("--radius", type=opt.positive_float, default=1.0, help="loops: max distance [m]")
+    g.add_argument(
+        "--radius", type=opt.positive_float, default=d.radius, help="loops: max distance [m]"
+    )
     g.add_argument(
         "--min-separation-time",
         type=opt.nonnegative_float,
-        default=30.0,
+        default=d.min_separation_time,
         help="loops: min time between the two poses [s]",
     )
     g.add_argument(
         "--min-separation-distance",
         type=opt.nonnegative_float,
-        default=None,
+        default=d.min_separation_distance,
         help="loops: or min travel between the two poses [m]",
     )
-    g.add_argument("--count", type=opt.count, default=1000, help="global/random: number of pairs")
+    g.add_argument(
+        "--count", type=opt.count, default=d.count, help="global/random: number of pairs"
+    )
     g.add_argument(
         "--min-distance",
         type=opt.nonnegative_float,
-        default=None,
+        default=d.min_distance,
         help="global: min distance between the poses [m] (default: extent/4)",
     )
-    g.add_argument("--seed", type=opt.seed, default=0, help="global/random: seed")
+    g.add_argument("--seed", type=opt.seed, default=d.seed, help="global/random: seed")
     g.add_argument(
         "--chained",
         action="store_true",
+        default=d.chained,
         help="consecutive/distance: one chain of relations from pose 0, each starting where "
         "the previous ended (evo's RPE pairs) instead of one relation from every pose",
     )

@@ -1,4 +1,8 @@
-"""``slamrel evaluate``: score an estimate with the relation metric."""
+"""``slamrel evaluate``: score an estimate with the relation metric.
+
+The parser (built on every ``slamrel --help``: no numpy) takes its scoring defaults from
+:class:`~slamrel.evaluation_options.EvaluateOptions`.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +12,10 @@ from relation_metric.constants import MODES
 from slamrel.commands import options as opt
 from slamrel.commands.common import add_strategy_arguments
 from slamrel.constants import TRAJECTORY_FORMATS
+from slamrel.evaluation_options import EvaluateOptions
+
+#: The defaults of the scoring options, defined once (in EvaluateOptions).
+DEFAULT = EvaluateOptions
 
 HELP = "score an estimated trajectory against reference relations"
 
@@ -25,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     _association_arguments(p)
     _output_arguments(p)
     _view_arguments(p)
-    add_strategy_arguments(p, default=None)
+    add_strategy_arguments(p, default=DEFAULT.strategy)
     p.set_defaults(func=run)
 
 
@@ -52,9 +60,9 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--max-time-diff",
         type=opt.nonnegative_float,
-        default=0.1,
+        default=DEFAULT.max_time_diff,
         metavar="S",
-        help="nearest-pose tolerance [s] (default 0.1)",
+        help="nearest-pose tolerance [s] (default %(default)s)",
     )
     p.add_argument(
         "--interpolate", action="store_true", help="interpolate on SE(2)/SE(3) beyond the tolerance"
@@ -62,12 +70,15 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--max-interpolation-gap",
         type=opt.positive_float,
-        default=1.0,
+        default=DEFAULT.max_interpolation_gap,
         metavar="S",
         help="longest gap interpolated over [s]",
     )
     p.add_argument(
-        "--mode", choices=MODES, default="paper", help="error definition (default: paper)"
+        "--mode",
+        choices=MODES,
+        default=DEFAULT.mode,
+        help="error definition (default: %(default)s)",
     )
     p.add_argument(
         "--weights",

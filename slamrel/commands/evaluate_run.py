@@ -25,6 +25,7 @@ from slamrel.commands.common import (
     relations_from_args,
     stats_table,
 )
+from slamrel.evaluation_options import SCORING_OPTIONS
 from slamrel.formats.relations import read_relations
 from slamrel.formats.results import write_evo_zip, write_json, write_per_relation_csv
 from slamrel.formats.text import read_numeric_table, read_source
@@ -290,37 +291,6 @@ def score(args: argparse.Namespace) -> tuple[Evaluation, Trajectory, dict[str, A
         assert ate_reference is not None  # the reference (just checked) or its synchronised copy
         result["ate"] = _ate(ate_estimate, ate_reference, args.max_time_diff)
     return ev, ev_estimate, result
-
-
-#: The options of ``slamrel evaluate`` that change what is scored, by their Python names
-#: (``--max-time-diff`` is ``max_time_diff``); the others only choose outputs.
-SCORING_OPTIONS = (
-    "format",
-    "reference_format",
-    "times",
-    "reference_times",
-    "odometry",
-    "odometry_format",
-    "max_time_diff",
-    "interpolate",
-    "max_interpolation_gap",
-    "mode",
-    "weights",
-    "strict",
-    "skip_invalid_poses",
-    "planar",
-    "sync",
-    "strategy",
-    "step",
-    "distance",
-    "radius",
-    "min_separation_time",
-    "min_separation_distance",
-    "count",
-    "min_distance",
-    "seed",
-    "chained",
-)
 
 
 def evaluate_files(
