@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 from collections.abc import Sequence
 from typing import Any
 
@@ -144,6 +143,8 @@ def _path(name: str, value: Any) -> str:
 
 
 def _number(options: EvaluateOptions, name: str, ok: Any, what: str) -> None:
+    import numbers  # here, not at import: the parser's start-up stays light
+
     value = getattr(options, name)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{name}: expected {what}, got {value!r}")
@@ -153,6 +154,8 @@ def _number(options: EvaluateOptions, name: str, ok: Any, what: str) -> None:
 
 
 def _integer(options: EvaluateOptions, name: str, low: int, high: int | None, what: str) -> None:
+    import numbers
+
     value = getattr(options, name)
     ok = isinstance(value, numbers.Integral) and not isinstance(value, bool)
     if not ok or value < low or (high is not None and value > high):

@@ -143,6 +143,11 @@ def test_evaluate_files_takes_the_commands_options(tmp_path: Path) -> None:
     assert ev.rotation["abs"].max == cli["rotation"]["abs"]["max"]
     with pytest.raises(TypeError, match="json"):
         slamrel.evaluate_files(ref, est, json="x.json")
+    options = slamrel.EvaluateOptions(strategy="global", count=50, seed=3)
+    again = slamrel.evaluate_files(ref, est, options)
+    assert again.translation["sqr"].mean == ev.translation["sqr"].mean
+    moved = slamrel.evaluate_files(ref, est, options, seed=4)  # a keyword overrides options
+    assert moved.translation["sqr"].mean != ev.translation["sqr"].mean
 
 
 def test_evaluate_parser_defaults_are_the_options_defaults() -> None:
@@ -181,16 +186,16 @@ def test_evaluate_parser_defaults_are_the_options_defaults() -> None:
 )
 def test_evaluate_options_are_checked_in_library_words(option: str, value: object) -> None:
     """What the command's option types refuse, EvaluateOptions refuses too, naming it."""
-    from slamrel.evaluation_options import EvaluateOptions
+    import slamrel
 
     with pytest.raises(ValueError, match=f"^{option}[: ].*expected"):
-        EvaluateOptions(**{option: value})  # type: ignore[arg-type]
+        slamrel.EvaluateOptions(**{option: value})  # type: ignore[arg-type]
 
 
 def test_evaluate_options_normalise_their_values() -> None:
-    from slamrel.evaluation_options import EvaluateOptions
+    import slamrel
 
-    options = EvaluateOptions(weights="1,1,0,0,0,0", radius=2, times=Path("t.txt"))
+    options = slamrel.EvaluateOptions(weights="1,1,0,0,0,0", radius=2, times=Path("t.txt"))
     assert options.weights == (1.0, 1.0, 0.0, 0.0, 0.0, 0.0)
     assert options.radius == 2.0 and isinstance(options.radius, float)
     assert options.times == "t.txt"

@@ -35,7 +35,7 @@ PLOTS, REVIEW, REPORT, IMPORTERS = (
     "slamrel.report",
     "slamrel.importers",
 )
-EVALUATION_OPTIONS = "slamrel.evaluation_options"
+EVALUATION_OPTIONS, EVALUATION = "slamrel.evaluation_options", "slamrel.evaluation"
 PIPELINE, STUDIES, COMMANDS, CLI, MAIN = (
     "slamrel.pipeline",
     "slamrel.studies",
@@ -67,11 +67,14 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     REPORT: (*LIBRARIES, OUTPUTS, FORMATS, PLOTS),
     PIPELINE: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REVIEW, REPORT),
     STUDIES: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REPORT, PIPELINE),
+    # what ``slamrel evaluate`` scores, as a library (the command writes the outputs)
+    EVALUATION: (*LIBRARIES, FORMATS, EVALUATION_OPTIONS),
     COMMANDS: (
         *LIBRARIES,
         OUTPUTS,
         FORMATS,
         EVALUATION_OPTIONS,
+        EVALUATION,
         BACKENDS,
         SIMULATION,
         IMPORTERS,
