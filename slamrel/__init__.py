@@ -27,7 +27,8 @@ _EXPORTS: dict[str, str] = {
     "generate_relations": "relation_metric.relations",
     "evaluate": "relation_metric.evaluate",
     "Evaluation": "relation_metric.evaluate",
-    "evaluate_files": "slamrel.commands.evaluate_run",
+    "evaluate_files": "slamrel.evaluation",
+    "EvaluateOptions": "slamrel.evaluation_options",
     "absolute_trajectory_error": "relation_metric.alignment",
     "ATEResult": "relation_metric.alignment",
     "Alignment": "relation_metric.alignment",
@@ -67,6 +68,7 @@ __all__ = [
     "evaluate",
     "Evaluation",
     "evaluate_files",
+    "EvaluateOptions",
     "absolute_trajectory_error",
     "ATEResult",
     "Alignment",
@@ -105,7 +107,8 @@ if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on 
     from relation_metric.evaluate import Evaluation, evaluate
     from relation_metric.relations import RelationSet, generate_relations
     from relation_metric.trajectory import Trajectory
-    from slamrel.commands.evaluate_run import evaluate_files
+    from slamrel.evaluation import evaluate_files
+    from slamrel.evaluation_options import EvaluateOptions
     from slamrel.formats.bundle import read_bundle, write_bundle
     from slamrel.formats.landmark_maps import read_map, write_map
     from slamrel.formats.relations import read_relations, write_relations

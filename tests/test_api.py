@@ -143,6 +143,62 @@ def test_evaluate_files_takes_the_commands_options(tmp_path: Path) -> None:
     assert ev.rotation["abs"].max == cli["rotation"]["abs"]["max"]
     with pytest.raises(TypeError, match="json"):
         slamrel.evaluate_files(ref, est, json="x.json")
+    options = slamrel.EvaluateOptions(strategy="global", count=50, seed=3)
+    again = slamrel.evaluate_files(ref, est, options)
+    assert again.translation["sqr"].mean == ev.translation["sqr"].mean
+    moved = slamrel.evaluate_files(ref, est, options, seed=4)  # a keyword overrides options
+    assert moved.translation["sqr"].mean != ev.translation["sqr"].mean
+
+
+def test_evaluate_parser_defaults_are_the_options_defaults() -> None:
+    """The parser of ``slamrel evaluate`` takes every scoring default from EvaluateOptions."""
+    import dataclasses
+
+    from slamrel.cli import build_parser
+    from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
+
+    args = build_parser().parse_args(["evaluate", "r", "e"])
+    defaults = {f.name: f.default for f in dataclasses.fields(EvaluateOptions)}
+    assert tuple(defaults) == SCORING_OPTIONS
+    assert {name: getattr(args, name) for name in SCORING_OPTIONS} == defaults
+
+
+@pytest.mark.parametrize(
+    ("option", "value"),
+    [
+        ("max_time_diff", -0.1),
+        ("max_time_diff", float("nan")),
+        ("max_interpolation_gap", 0.0),
+        ("mode", "fast"),
+        ("format", "xyz"),
+        ("strategy", "nearest"),
+        ("step", 0),
+        ("step", 1.5),
+        ("radius", float("inf")),
+        ("min_separation_time", -1.0),
+        ("min_distance", -1.0),
+        ("count", 0),
+        ("count", 10**9),
+        ("seed", -1),
+        ("weights", "1,1"),
+        ("strict", "yes"),
+    ],
+)
+def test_evaluate_options_are_checked_in_library_words(option: str, value: object) -> None:
+    """What the command's option types refuse, EvaluateOptions refuses too, naming it."""
+    import slamrel
+
+    with pytest.raises(ValueError, match=f"^{option}[: ].*expected"):
+        slamrel.EvaluateOptions(**{option: value})  # type: ignore[arg-type]
+
+
+def test_evaluate_options_normalise_their_values() -> None:
+    import slamrel
+
+    options = slamrel.EvaluateOptions(weights="1,1,0,0,0,0", radius=2, times=Path("t.txt"))
+    assert options.weights == (1.0, 1.0, 0.0, 0.0, 0.0, 0.0)
+    assert options.radius == 2.0 and isinstance(options.radius, float)
+    assert options.times == "t.txt"
 
 
 def test_errors_are_one_family() -> None:

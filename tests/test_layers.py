@@ -35,6 +35,7 @@ PLOTS, REVIEW, REPORT, IMPORTERS = (
     "slamrel.report",
     "slamrel.importers",
 )
+EVALUATION_OPTIONS, EVALUATION = "slamrel.evaluation_options", "slamrel.evaluation"
 PIPELINE, STUDIES, COMMANDS, CLI, MAIN = (
     "slamrel.pipeline",
     "slamrel.studies",
@@ -53,6 +54,8 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     "landmark_graph": ("relation_metric",),
     CONSTANTS: (),
     OUTPUTS: ("relation_metric",),
+    # the scoring options of a files-level evaluation, without numpy (the parser's defaults)
+    EVALUATION_OPTIONS: ("relation_metric",),
     # back-ends and the simulator are maths on records: the libraries only, no file I/O
     BACKENDS: LIBRARIES,
     SIMULATION: LIBRARIES,
@@ -64,10 +67,14 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     REPORT: (*LIBRARIES, OUTPUTS, FORMATS, PLOTS),
     PIPELINE: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REVIEW, REPORT),
     STUDIES: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REPORT, PIPELINE),
+    # what ``slamrel evaluate`` scores, as a library (the command writes the outputs)
+    EVALUATION: (*LIBRARIES, FORMATS, EVALUATION_OPTIONS),
     COMMANDS: (
         *LIBRARIES,
         OUTPUTS,
         FORMATS,
+        EVALUATION_OPTIONS,
+        EVALUATION,
         BACKENDS,
         SIMULATION,
         IMPORTERS,

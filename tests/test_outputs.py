@@ -90,7 +90,7 @@ HEAVY = {  # the module that owns it: commands import the library inside their r
     "compare": ("slamrel.report.tables", "read_per_relation"),
     "example": ("slamrel.simulation.example", "example_pair"),
     "recover": ("slamrel.formats.bundle", "read_bundle"),
-    "evaluate": ("slamrel.commands.evaluate_run", "load_reference"),
+    "evaluate": ("slamrel.evaluation", "load_reference"),
     "relations": ("slamrel.commands.relations", "load_trajectory_arg"),
     "map-compare": ("slamrel.formats.landmark_maps", "read_map"),
 }

@@ -4,17 +4,15 @@ from __future__ import annotations
 
 import argparse
 import os
-import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 from recovery.constants import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, ROBUST
 from relation_metric.constants import STRATEGIES
 from relation_metric.errors import InputError, SlamrelError
 from slamrel.commands import options as opt
-from slamrel.constants import TRAJECTORY_FORMATS
+from slamrel.evaluation_options import EvaluateOptions
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from relation_metric.relations import RelationSet
@@ -57,34 +55,21 @@ def errors_about(path: str | os.PathLike[str]) -> Iterator[None]:
 def in_option_words(words: Mapping[str, str]) -> Iterator[None]:
     """Say the library's parameters in the command's options, in errors and warnings.
 
-    The libraries name what would change an outcome by the parameter of their call
-    (``strict=True``, ``pass format=...``); the command knows which of its options sets it.
-    Inside the block each phrase of ``words`` (``{"strict=True": "--strict"}``) is replaced
-    by its option words in the message of an :class:`InputError` (re-raised with the same
-    file and line) and of every warning (shown when the block ends, in order).
+    See :func:`slamrel.evaluation.in_option_words` (imported when used: start-up stays light).
     """
+    from slamrel.evaluation import in_option_words as say_in_option_words
 
-    def say(text: str) -> str:
-        for phrase, option in words.items():
-            text = text.replace(phrase, option)
-        return text
-
-    caught: list[warnings.WarningMessage] = []
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            yield
-    except InputError as exc:
-        said = say(exc.message)
-        if said == exc.message:
-            raise
-        raise type(exc)(said, path=exc.path, line=exc.line) from None
-    finally:
-        for w in caught:
-            warnings.warn_explicit(say(str(w.message)), w.category, w.filename, w.lineno)
+    with say_in_option_words(words):
+        yield
 
 
 def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | None) -> None:
-    """Options of relation generation from a reference trajectory."""
+    """Options of relation generation from a reference trajectory.
+
+    Their defaults are those of :class:`~slamrel.evaluation_options.EvaluateOptions`
+    (``default`` is the strategy's).
+    """
+    d = EvaluateOptions
     g = parser.add_argument_group("relation generation (from a reference trajectory)")
     g.add_argument(
         "--strategy",
@@ -93,35 +78,43 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         help="how to select relations (default: %(default)s)",
     )
     g.add_argument(
-        "--step", type=opt.positive_int, default=1, help="consecutive: pose k with k+STEP"
+        "--step", type=opt.positive_int, default=d.step, help="consecutive: pose k with k+STEP"
     )
     g.add_argument(
-        "--distance", type=opt.positive_float, default=1.0, help="distance: metres of travel"
+        "--distance",
+        type=opt.positive_float,
+        default=d.distance,
+        help="distance: metres of travel",
     )
-    g.add_argument("--radius", type=opt.positive_float, default=1.0, help="loops: max distance [m]")
+    g.add_argument(
+        "--radius", type=opt.positive_float, default=d.radius, help="loops: max distance [m]"
+    )
     g.add_argument(
         "--min-separation-time",
         type=opt.nonnegative_float,
-        default=30.0,
+        default=d.min_separation_time,
         help="loops: min time between the two poses [s]",
     )
     g.add_argument(
         "--min-separation-distance",
         type=opt.nonnegative_float,
-        default=None,
+        default=d.min_separation_distance,
         help="loops: or min travel between the two poses [m]",
     )
-    g.add_argument("--count", type=opt.count, default=1000, help="global/random: number of pairs")
+    g.add_argument(
+        "--count", type=opt.count, default=d.count, help="global/random: number of pairs"
+    )
     g.add_argument(
         "--min-distance",
         type=opt.nonnegative_float,
-        default=None,
+        default=d.min_distance,
         help="global: min distance between the poses [m] (default: extent/4)",
     )
-    g.add_argument("--seed", type=opt.seed, default=0, help="global/random: seed")
+    g.add_argument("--seed", type=opt.seed, default=d.seed, help="global/random: seed")
     g.add_argument(
         "--chained",
         action="store_true",
+        default=d.chained,
         help="consecutive/distance: one chain of relations from pose 0, each starting where "
         "the previous ended (evo's RPE pairs) instead of one relation from every pose",
     )
@@ -160,64 +153,19 @@ def load_trajectory_arg(
     times: str | None = None,
     format_option: str = "--format",
 ) -> LoadedTrajectory:
-    """Read a trajectory given on the command line.
+    """Read a trajectory given on the command line: :func:`slamrel.evaluation.load_trajectory`."""
+    from slamrel.evaluation import load_trajectory
 
-    ``role`` is what the trajectory is for:
-
-    - ``"reference"``: a bundle directory means its ``groundtruth.csv`` (read under the
-      filter-log time rule, as ``recover`` reads it); poses that repeat an earlier pose's
-      timestamp are dropped, counted and warned about (:func:`without_repeated_times`).
-    - ``"estimate"`` / ``"odometry"``: a bundle directory is refused (a bundle holds no
-      estimated trajectory; its ground truth would be scored against itself).
-
-    Poses out of time order are sorted and counted (``LoadedTrajectory.time_order``).
-    3-D formats (TUM, KITTI, EuRoC) are read as SE(3) when their motion leaves the plane;
-    ``planar`` (``--planar``) projects them onto the plane with a warning that states the
-    out-of-plane motion discarded. ``times`` is a KITTI times file. The reader's messages
-    name the command's options (``format_option`` for its ``format``).
-    """
-    from relation_metric.timeorder import FILTER_TIME_TOLERANCE
-    from slamrel.formats.trajectories import read_trajectory, without_repeated_times
-
-    p = Path(path)
-    if p.is_dir():
-        if role != "reference":
-            online = p / "online.csv"
-            also = f", or pass {online} (the filter's online estimate)" if online.is_file() else ""
-            raise InputError(
-                f"is a directory (a SLAM result bundle?), given as the {role.upper()}; a bundle "
-                "holds no estimated trajectory, only the ground truth: recover one with "
-                f"'slamrel recover {path} -o est.tum' and pass est.tum{also}",
-                path=path,
-            )
-        gt = p / "groundtruth.csv"
-        if not gt.is_file():
-            raise InputError(
-                "is a directory without groundtruth.csv; expected a trajectory file or a "
-                "SLAM result bundle with ground truth",
-                path=path,
-            )
-        loaded = read_trajectory(gt, format="csv", max_step_back=FILTER_TIME_TOLERANCE)
-        return without_repeated_times(loaded, gt)
-    if fmt is not None and fmt not in TRAJECTORY_FORMATS:
-        raise InputError(f"unknown format {fmt!r}", path=path)
-    words = {
-        "format=...": format_option,
-        "skip_invalid=True": "the metricevaluator mode, or --skip-invalid-poses,",
-        'dimension="2d"': "--planar",
-    }
-    with in_option_words(words):
-        loaded = read_trajectory(
-            path,
-            format=fmt,
-            pose=pose,  # type: ignore[arg-type]
-            skip_invalid=skip_invalid,
-            dimension="2d" if planar else "auto",
-            times=times,
-        )
-    if role == "reference":
-        loaded = without_repeated_times(loaded, path)
-    return loaded
+    return load_trajectory(
+        path,
+        fmt,
+        pose=pose,
+        skip_invalid=skip_invalid,
+        role=role,
+        planar=planar,
+        times=times,
+        format_option=format_option,
+    )
 
 
 def check_outputs(

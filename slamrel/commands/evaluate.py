@@ -1,13 +1,27 @@
-"""``slamrel evaluate``: score an estimate with the relation metric."""
+"""``slamrel evaluate``: score an estimate with the relation metric.
+
+The parser (built on every ``slamrel --help``: no numpy) takes its scoring defaults from
+:class:`~slamrel.evaluation_options.EvaluateOptions`; :func:`run` scores the files with
+:func:`slamrel.evaluation.score_files` and writes the outputs.
+"""
 
 from __future__ import annotations
 
 import argparse
+import os
+from typing import TYPE_CHECKING
 
 from relation_metric.constants import MODES
 from slamrel.commands import options as opt
-from slamrel.commands.common import add_strategy_arguments
+from slamrel.commands.common import add_strategy_arguments, check_outputs, stats_table
 from slamrel.constants import TRAJECTORY_FORMATS
+from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
+
+if TYPE_CHECKING:  # the library is imported in run(): start-up stays light
+    from slamrel.evaluation import FileEvaluation
+
+#: The defaults of the scoring options, defined once (in EvaluateOptions).
+DEFAULT = EvaluateOptions
 
 HELP = "score an estimated trajectory against reference relations"
 
@@ -25,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     _association_arguments(p)
     _output_arguments(p)
     _view_arguments(p)
-    add_strategy_arguments(p, default=None)
+    add_strategy_arguments(p, default=DEFAULT.strategy)
     p.set_defaults(func=run)
 
 
@@ -52,9 +66,9 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--max-time-diff",
         type=opt.nonnegative_float,
-        default=0.1,
+        default=DEFAULT.max_time_diff,
         metavar="S",
-        help="nearest-pose tolerance [s] (default 0.1)",
+        help="nearest-pose tolerance [s] (default %(default)s)",
     )
     p.add_argument(
         "--interpolate", action="store_true", help="interpolate on SE(2)/SE(3) beyond the tolerance"
@@ -62,12 +76,15 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--max-interpolation-gap",
         type=opt.positive_float,
-        default=1.0,
+        default=DEFAULT.max_interpolation_gap,
         metavar="S",
         help="longest gap interpolated over [s]",
     )
     p.add_argument(
-        "--mode", choices=MODES, default="paper", help="error definition (default: paper)"
+        "--mode",
+        choices=MODES,
+        default=DEFAULT.mode,
+        help="error definition (default: %(default)s)",
     )
     p.add_argument(
         "--weights",
@@ -131,7 +148,91 @@ def _view_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the command (the library is imported here, not when the parser is built)."""
-    from slamrel.commands.evaluate_run import run as run_evaluate
+    """``slamrel evaluate``: outputs checked, the files scored, the outputs written and printed.
 
-    return run_evaluate(args)
+    The library is imported here, not when the parser is built.
+    """
+    from slamrel.evaluation import score_files
+
+    outputs = [args.json, args.per_relation, args.plot, args.evo_zip]
+    check_outputs(outputs, [args.reference, args.estimate, args.odometry])
+    options = EvaluateOptions(**{name: getattr(args, name) for name in SCORING_OPTIONS})
+    scored = score_files(args.reference, args.estimate, options, degrees=args.degrees, ate=args.ate)
+    _write_outputs(args, scored)
+    if not args.quiet:
+        print(summary_text(scored, degrees=args.degrees))
+    return 0
+
+
+def _write_outputs(args: argparse.Namespace, scored: FileEvaluation) -> None:
+    """``--json``, ``--per-relation``, ``--evo-zip`` and ``--plot``, in that order."""
+    from slamrel.formats.results import write_evo_zip, write_json, write_per_relation_csv
+
+    ev = scored.evaluation
+    if args.json:
+        write_json(args.json, scored.result)
+    if args.per_relation:
+        write_per_relation_csv(args.per_relation, ev, degrees=args.degrees)
+    if args.evo_zip:
+        write_evo_zip(
+            args.evo_zip,
+            ev,
+            part=args.evo_part,
+            est_name=os.path.basename(args.estimate),
+            ref_name=os.path.basename(args.reference),
+            degrees=args.degrees,
+        )
+    if args.plot:
+        from slamrel.plots.relation_errors import evaluation_figure, save_figure
+
+        save_figure(evaluation_figure(ev, scored.estimate, degrees=args.degrees), args.plot)
+
+
+def summary_text(scored: FileEvaluation, *, degrees: bool) -> str:
+    """The console summary of an evaluation."""
+    import numpy as np
+
+    from relation_metric.evaluate import error_summaries
+
+    ev, result = scored.evaluation, scored.result
+    unit = "deg" if degrees else "rad"
+    rot_values = ev.errors.rotation[ev.valid]
+    rot = error_summaries(np.degrees(rot_values) if degrees else rot_values)
+    rows = [
+        ("translation abs [m]", ev.translation["abs"]),
+        ("translation sqr [m²]", ev.translation["sqr"]),
+        (f"rotation abs [{unit}]", rot["abs"]),
+        (f"rotation sqr [{unit}²]", rot["sqr"]),
+    ]
+    if ev.errors.mode == "metricevaluator":
+        rows.append(("weighted (metricEvaluator)", ev.combined["abs"]))
+    head = (
+        f"relations: {result['relations']} ({result['associated_by_odometry']} via odometry, "
+        f"{result['interpolated']} interpolated, {result['unassociated']} unassociated); "
+        f"mode: {ev.errors.mode}"
+        + (f"; {ev.relations.group.name}" if ev.relations.group.name == "SE3" else "")
+    )
+    text = head + "\n" + stats_table(rows)
+    for name in ("estimate", "odometry", "reference"):
+        order = result.get(f"{name}_out_of_order")
+        if order and order["count"]:
+            text += (
+                f"\n{name}: {order['count']} pose(s) out of time order (largest step back "
+                f"{order['max_step_back_s']:.6f} s, first at line {order['first_line']}); "
+                "put in time order"
+            )
+    if result.get("reference_repeated_times_dropped"):
+        text += (
+            f"\nreference: {result['reference_repeated_times_dropped']} pose(s) repeating an "
+            "earlier timestamp dropped"
+        )
+    if result.get("relations_zero_length_dropped"):
+        text += (
+            f"\nrelations: {result['relations_zero_length_dropped']} zero-length (t1 == t2) dropped"
+        )
+    if "ate" in result:
+        a = result["ate"]
+        text += "\nATE translation rmse [m]: " + ", ".join(
+            f"{k} {v['translation']['rmse']:.6f}" for k, v in a.items()
+        )
+    return text

@@ -1,0 +1,510 @@
+"""Files-level evaluation: what ``slamrel evaluate REFERENCE ESTIMATE`` scores, as a library.
+
+:func:`evaluate_files` reads REFERENCE (a Freiburg ``.relations`` file, a reference
+trajectory or a SLAM result bundle with ``groundtruth.csv``) and ESTIMATE as the command does
+and scores the estimate with the relation metric; :func:`score_files` also returns what the
+command writes (:class:`FileEvaluation`). The scoring options are an
+:class:`~slamrel.evaluation_options.EvaluateOptions`, whose defaults are the command's. What
+is dropped or reordered on the way is said in warnings and counted in the notes. Messages
+name the options of ``slamrel evaluate`` (``--strict``, ``--reference-format``, ...), whose
+Python names are the fields of :class:`EvaluateOptions`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import warnings
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from relation_metric.alignment import absolute_trajectory_error
+from relation_metric.errors import InputError
+from relation_metric.evaluate import Evaluation, evaluate
+from relation_metric.relations import RelationSet, generate_relations
+from relation_metric.time_association import synchronize
+from relation_metric.timeorder import FILTER_TIME_TOLERANCE, RepeatedTimeWarning, zero_length
+from relation_metric.trajectory import Trajectory
+from slamrel.constants import TRAJECTORY_FORMATS
+from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
+from slamrel.formats.relations import read_relations
+from slamrel.formats.text import read_numeric_table, read_source
+from slamrel.formats.trajectories import (
+    RELATIONS_EXTENSIONS,
+    TRAJECTORY_EXTENSIONS,
+    LoadedTrajectory,
+    PlanarProjectionWarning,
+    read_trajectory,
+    sniff_trajectory_format,
+    without_repeated_times,
+)
+
+__all__ = [
+    "EvaluateOptions",
+    "FileEvaluation",
+    "evaluate_files",
+    "score_files",
+    "load_reference",
+    "load_trajectory",
+    "in_option_words",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class FileEvaluation:
+    """An evaluation of files and what ``slamrel evaluate`` writes of it."""
+
+    #: The relation-metric evaluation (relations named by time, also with ``sync``).
+    evaluation: Evaluation
+    #: The estimate it scored (the synchronised poses with ``sync``; lifted to SE(3) for
+    #: 6-DoF relations), as the figure draws it.
+    estimate: Trajectory
+    #: The JSON of ``--json``: the evaluation (rotation in degrees when asked), its group,
+    #: what was skipped, dropped or reordered on the way, the ATE when asked.
+    result: dict[str, Any]
+
+
+def evaluate_files(
+    reference: str | os.PathLike[str],
+    estimate: str | os.PathLike[str],
+    options: EvaluateOptions | None = None,
+    **overrides: Any,
+) -> Evaluation:
+    """``slamrel evaluate REFERENCE ESTIMATE [options]`` as a function: its evaluation.
+
+    The files are read and scored exactly as the command does (REFERENCE a ``.relations``
+    file, a reference trajectory or a bundle directory; the time-order rule; repeated
+    reference times and zero-length relations dropped; see the README), with ``options``
+    (default: the command's defaults) and each field of :class:`EvaluateOptions` given as a
+    keyword overriding it, e.g. ``evaluate_files(ref, est, strategy="loops", radius=2.0,
+    max_time_diff=0.05)``. What is dropped or reordered on the way is said in warnings.
+
+    Raises
+    ------
+    TypeError
+        For a keyword that is not a field of :class:`EvaluateOptions`.
+    ValueError
+        For an option value out of its range (the parameter named).
+    InputError
+        For anything wrong with the files (file and line named), as the command.
+    """
+    unknown = sorted(set(overrides) - set(SCORING_OPTIONS))
+    if unknown:
+        raise TypeError(
+            f"evaluate_files() got unknown options {', '.join(unknown)}; expected some of "
+            + ", ".join(SCORING_OPTIONS)
+        )
+    chosen = dataclasses.replace(options or EvaluateOptions(), **overrides)
+    return score_files(reference, estimate, chosen).evaluation
+
+
+def score_files(
+    reference: str | os.PathLike[str],
+    estimate: str | os.PathLike[str],
+    options: EvaluateOptions,
+    *,
+    degrees: bool = False,
+    ate: bool = False,
+) -> FileEvaluation:
+    """Read REFERENCE and ESTIMATE as ``slamrel evaluate`` does and score the estimate.
+
+    ``degrees`` states the rotation of :attr:`FileEvaluation.result` in degrees; ``ate``
+    adds the aligned absolute trajectory error to it (needs a reference trajectory).
+    """
+    reference, estimate = os.fspath(reference), os.fspath(estimate)
+    _warn_same_file(reference, estimate)
+    notes: dict[str, Any] = {}
+    relations, ref_traj = load_reference(reference, options, notes)
+    skip = options.skip_invalid_poses or options.mode == "metricevaluator"
+    loaded = load_trajectory(
+        estimate,
+        options.format,
+        skip_invalid=skip,
+        role="estimate",
+        planar=options.planar,
+        times=options.times,
+    )
+    _refuse_if_strict(options, loaded, estimate)
+    _note_projection(notes, "estimate", loaded)
+    notes["estimate_out_of_order"] = loaded.time_order.as_dict()
+    odometry = _load_odometry(options, skip, notes) if options.odometry else None
+    scored = loaded.trajectory
+    ate_pair = (loaded.trajectory, ref_traj)
+    if options.sync:
+        if ref_traj is None:
+            raise InputError(
+                "--sync needs a reference trajectory, not a .relations file", path=reference
+            )
+        ref_sync, est_sync = synchronize(ref_traj, scored, max_diff=options.max_time_diff)
+        notes["synchronized_pairs"] = len(ref_sync)
+        relations = _generate(ref_sync, options, key="index")
+        scored = est_sync
+        ate_pair = _same_times(est_sync, ref_sync)
+    with in_option_words({"strict=True": "--strict"}):
+        ev = evaluate(
+            relations,
+            scored,
+            odometry=odometry,
+            mode=options.mode,  # type: ignore[arg-type]  # checked: one of MODES
+            weights=options.weights,  # type: ignore[arg-type]  # a tuple after the checks
+            max_time_diff=options.max_time_diff,
+            interpolate=options.interpolate,
+            max_interpolation_gap=options.max_interpolation_gap,
+            strict=options.strict,
+            estimate_name=estimate,
+            relations_name=reference,
+        )
+    if options.sync:  # name the pose pairs by the reference's times in the outputs
+        i = ev.relations.first.astype(np.int64)
+        j = ev.relations.second.astype(np.int64)
+        t = ref_sync.timestamps
+        ev = dataclasses.replace(
+            ev, relations=RelationSet(t[i], t[j], ev.relations.delta, key="time")
+        )
+    ev_estimate = scored.lifted() if ev.relations.group.name == "SE3" else scored
+    result = ev.as_dict(degrees=degrees)
+    result["group"] = ev.relations.group.name
+    if loaded.skipped:
+        result["estimate_records_skipped"] = dict(loaded.skipped)
+    result.update(notes)
+    if ate:
+        if ref_traj is None:
+            raise InputError(
+                "--ate needs a reference trajectory, not a .relations file", path=reference
+            )
+        ate_estimate, ate_reference = ate_pair
+        assert ate_reference is not None  # the reference (just checked) or its synchronised copy
+        result["ate"] = _ate(ate_estimate, ate_reference, options.max_time_diff)
+    return FileEvaluation(ev, ev_estimate, result)
+
+
+def _is_relations_file(path: str, options: EvaluateOptions) -> bool:
+    """Whether REFERENCE is read as a Freiburg .relations file: the extension decides first.
+
+    ``.relations``/``.rel`` → relations; an extension that names a trajectory format
+    (``.tum``, ``.csv``, ``.g2o``, ``.log``, ``.clf``), ``--reference-format``, ``--strategy``
+    or a directory → a reference trajectory. Other files are sniffed; 8 numeric columns fit
+    both readings and are told apart by their last four columns
+    (:func:`_eight_columns_are_relations`), the guess said in a warning.
+    """
+
+    p = Path(path)
+    if p.is_dir() or options.reference_format is not None:
+        return False
+    ext = p.suffix.lower()
+    if ext in RELATIONS_EXTENSIONS:
+        if options.strategy is not None:
+            raise InputError(
+                f"a {ext} file holds relations, but --strategy generates relations from a "
+                "reference trajectory; drop --strategy, or pass --reference-format to read "
+                "the file as a trajectory",
+                path=path,
+            )
+        return True
+    if ext in TRAJECTORY_EXTENSIONS or options.strategy is not None:
+        return False
+    fmt = sniff_trajectory_format(read_source(path))
+    if fmt == "tum":
+        return _eight_columns_are_relations(path)
+    if fmt is None:
+        raise InputError(
+            "cannot recognise the reference: expected a Freiburg .relations file (8 columns "
+            "t1 t2 x y z roll pitch yaw; name it *.relations) or a reference trajectory "
+            "(CARMEN records, VERTEX_SE2 lines, a t,x,y,theta CSV header, 8 columns (TUM) or "
+            "4 columns (t x y theta)); pass --reference-format or rename the file",
+            path=path,
+        )
+    return False
+
+
+def _eight_columns_are_relations(path: str) -> bool:
+    """Tell a TUM trajectory from Freiburg relations, both 8 numbers a line, by content.
+
+    A TUM file's last four columns are unit quaternions (its reader refuses any other); a
+    relations file's are ``z roll pitch yaw``, whose norm is 1 only by accident. Every row a
+    unit quaternion (≥ 2 rows) → TUM; otherwise relations. Either way the guess is said in a
+    warning with how to state it; a file that cannot be told apart (fewer than 2 rows, all
+    unit) is refused naming both readings.
+    """
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the reader proper warns (cut-off last line, …)
+        values, _ = read_numeric_table(
+            path, columns=("c1", "c2", "c3", "c4", "c5", "c6", "c7", "c8")
+        )
+    unit = np.abs(np.linalg.norm(values[:, 4:8], axis=1) - 1.0) <= 1e-3
+    if unit.all() and values.shape[0] < 2:
+        raise InputError(
+            "ambiguous reference: 8 numeric columns read either as a Freiburg .relations "
+            "file (t1 t2 x y z roll pitch yaw) or as a TUM trajectory (t x y z qx qy qz qw); "
+            "say which: rename it to *.relations (or *.rel) to read relations, or pass "
+            "--reference-format tum (or a --strategy) to generate relations from a TUM "
+            "reference trajectory",
+            path=path,
+        )
+    if unit.all():
+        warnings.warn(
+            f"{path}: read as a TUM trajectory (every row ends in a unit quaternion); rename it "
+            "to *.tum or pass --reference-format tum to say so",
+            UserWarning,
+            stacklevel=2,
+        )
+        return False
+    k = int(np.flatnonzero(~unit)[0])
+    warnings.warn(
+        f"{path}: read as Freiburg relations (t1 t2 x y z roll pitch yaw): row {k + 1} does "
+        "not end in a unit quaternion, so it is no TUM trajectory; rename it to *.relations "
+        "to say so",
+        UserWarning,
+        stacklevel=2,
+    )
+    return True
+
+
+def load_reference(
+    reference: str, options: EvaluateOptions, notes: dict[str, Any] | None = None
+) -> tuple[RelationSet, Trajectory | None]:
+    """Relations from a .relations file, or generated from a reference trajectory.
+
+    Returns the relations and the reference trajectory (None for a .relations file; with
+    ``sync`` the relations are empty, generated after the pose-by-pose association). What
+    was dropped or reordered on the way is added to ``notes`` (JSON-ready):
+    ``relations_zero_length_dropped`` for a .relations file; ``reference_out_of_order`` and
+    ``reference_repeated_times_dropped`` for a reference trajectory.
+    """
+
+    notes = {} if notes is None else notes
+    if _is_relations_file(reference, options):
+        relations = read_relations(reference)
+        zero = zero_length(relations.first, relations.second)
+        dropped = int(np.count_nonzero(zero))
+        notes["relations_zero_length_dropped"] = dropped
+        if dropped:
+            warnings.warn(
+                f"{reference}: dropped {dropped} relation(s) with t1 == t2 (zero-length "
+                "relations would score 0 and pull the mean down)",
+                RepeatedTimeWarning,
+                stacklevel=2,
+            )
+            relations = relations.subset(~zero)
+        if relations.has_out_of_plane and options.planar:
+            assert relations.out_of_plane is not None  # has_out_of_plane: there are some
+            oop = np.abs(relations.out_of_plane)
+            warnings.warn(
+                f"{reference}: 6-DoF relations scored in 2-D (--planar): discarding "
+                f"their out-of-plane parts (|z| up to {float(oop[:, 0].max()):.3g} m, |roll| up "
+                f"to {float(np.degrees(oop[:, 1].max())):.3g} deg, |pitch| up to "
+                f"{float(np.degrees(oop[:, 2].max())):.3g} deg)",
+                PlanarProjectionWarning,
+                stacklevel=2,
+            )
+            relations = RelationSet(
+                relations.first, relations.second, relations.delta, key=relations.key
+            )
+        return relations, None
+    loaded = load_trajectory(
+        reference,
+        options.reference_format,
+        role="reference",
+        planar=options.planar,
+        times=options.reference_times,
+        format_option="--reference-format",
+    )
+    ref = Path(reference)
+    _refuse_if_strict(options, loaded, str(ref / "groundtruth.csv" if ref.is_dir() else ref))
+    _note_projection(notes, "reference", loaded)
+    notes["reference_out_of_order"] = loaded.time_order.as_dict()
+    notes["reference_repeated_times_dropped"] = loaded.repeated_dropped
+    if options.sync:  # relations are generated after the pose-by-pose association
+        return RelationSet(np.empty(0), np.empty(0), np.empty((0, 3))), loaded.trajectory
+    return _generate(loaded.trajectory, options), loaded.trajectory
+
+
+def _generate(
+    reference: Trajectory, options: EvaluateOptions, *, key: Literal["time", "index"] = "time"
+) -> RelationSet:
+    """Relations generated from ``reference`` with the strategy options (default consecutive)."""
+    return generate_relations(
+        reference,
+        "consecutive" if options.strategy is None else options.strategy,  # type: ignore[arg-type]
+        step=options.step,
+        distance=options.distance,
+        radius=options.radius,
+        min_separation_time=options.min_separation_time,
+        min_separation_distance=options.min_separation_distance,
+        count=options.count,
+        min_distance=options.min_distance,
+        seed=options.seed,
+        chained=options.chained,
+        key=key,
+    )
+
+
+def _note_projection(notes: dict[str, Any], role: str, loaded: LoadedTrajectory) -> None:
+    """``--planar``: what the projection of a 3-D file discarded, for ``--json``."""
+    if loaded.discarded is not None:
+        notes.setdefault("planar_projection", {})[role] = dict(loaded.discarded._asdict())
+
+
+def _refuse_if_strict(options: EvaluateOptions, loaded: LoadedTrajectory, path: str) -> None:
+    """``--strict``: a trajectory that was not in time order is an error (file:line)."""
+    if options.strict and loaded.out_of_order:
+        raise InputError(
+            f"{loaded.time_order.describe('pose')}; --strict refuses a trajectory that is not "
+            "in time order (without --strict its poses are put in time order and counted)",
+            path=path,
+            line=loaded.time_order.first_line,
+        )
+
+
+def _warn_same_file(reference: str, estimate: str) -> None:
+    """The same file as REFERENCE and ESTIMATE scores every relation 0: say so."""
+    ref = Path(reference)
+    ref_file = ref / "groundtruth.csv" if ref.is_dir() else ref
+    if os.path.realpath(ref_file) == os.path.realpath(estimate):
+        warnings.warn(
+            f"{estimate}: given as both REFERENCE and ESTIMATE; the estimate is scored "
+            "against itself (every error 0)",
+            UserWarning,
+            stacklevel=2,
+        )
+
+
+def _load_odometry(options: EvaluateOptions, skip: bool, notes: dict[str, Any]) -> Trajectory:
+    """The ``--odometry`` log (refused with ``--strict`` when out of time order)."""
+    assert options.odometry is not None  # called only with an odometry log
+    loaded = load_trajectory(
+        options.odometry,
+        options.odometry_format,
+        pose="odometry",
+        skip_invalid=skip,
+        role="odometry",
+        planar=options.planar,
+        format_option="--odometry-format",
+    )
+    _refuse_if_strict(options, loaded, options.odometry)
+    notes["odometry_out_of_order"] = loaded.time_order.as_dict()
+    return loaded.trajectory
+
+
+def _same_times(est: Trajectory, ref: Trajectory) -> tuple[Trajectory, Trajectory]:
+    """Synchronised pairs with one time base, so the ATE's nearest-time match is the pairing."""
+    t = est.timestamps if np.all(np.diff(est.timestamps) > 0) else ref.timestamps
+    return Trajectory(t, est.poses), Trajectory(t, ref.poses)
+
+
+def _ate(estimate: Trajectory, reference: Trajectory, tol: float) -> dict[str, Any]:
+    """The ATE without, and with, rigid and similarity alignment (``--ate``)."""
+    out: dict[str, Any] = {}
+    three_d = estimate.group.name == "SE3" or reference.group.name == "SE3"
+    for align in ("none", "se3", "sim3") if three_d else ("none", "se2", "sim2"):
+        r = absolute_trajectory_error(estimate, reference, align=align, max_time_diff=tol)
+        out[align] = {
+            "translation": r.translation_stats.as_dict(),
+            "rotation": r.rotation_stats.as_dict(),
+            "scale": r.alignment.scale,
+            "matched": r.matched,
+        }
+    return out
+
+
+@contextmanager
+def in_option_words(words: Mapping[str, str]) -> Iterator[None]:
+    """Say the library's parameters in the command's options, in errors and warnings.
+
+    The libraries name what would change an outcome by the parameter of their call
+    (``strict=True``, ``pass format=...``); the command knows which of its options sets it.
+    Inside the block each phrase of ``words`` (``{"strict=True": "--strict"}``) is replaced
+    by its option words in the message of an :class:`InputError` (re-raised with the same
+    file and line) and of every warning (shown when the block ends, in order).
+    """
+
+    def say(text: str) -> str:
+        for phrase, option in words.items():
+            text = text.replace(phrase, option)
+        return text
+
+    caught: list[warnings.WarningMessage] = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            yield
+    except InputError as exc:
+        said = say(exc.message)
+        if said == exc.message:
+            raise
+        raise type(exc)(said, path=exc.path, line=exc.line) from None
+    finally:
+        for w in caught:
+            warnings.warn_explicit(say(str(w.message)), w.category, w.filename, w.lineno)
+
+
+def load_trajectory(
+    path: str,
+    fmt: str | None,
+    *,
+    pose: str = "laser",
+    skip_invalid: bool = False,
+    role: str = "reference",
+    planar: bool = False,
+    times: str | None = None,
+    format_option: str = "--format",
+) -> LoadedTrajectory:
+    """Read a trajectory given to ``slamrel evaluate`` (or another command).
+
+    ``role`` is what the trajectory is for:
+
+    - ``"reference"``: a bundle directory means its ``groundtruth.csv`` (read under the
+      filter-log time rule, as ``recover`` reads it); poses that repeat an earlier pose's
+      timestamp are dropped, counted and warned about (:func:`without_repeated_times`).
+    - ``"estimate"`` / ``"odometry"``: a bundle directory is refused (a bundle holds no
+      estimated trajectory; its ground truth would be scored against itself).
+
+    Poses out of time order are sorted and counted (``LoadedTrajectory.time_order``).
+    3-D formats (TUM, KITTI, EuRoC) are read as SE(3) when their motion leaves the plane;
+    ``planar`` (``--planar``) projects them onto the plane with a warning that states the
+    out-of-plane motion discarded. ``times`` is a KITTI times file. The reader's messages
+    name the command's options (``format_option`` for its ``format``).
+    """
+    p = Path(path)
+    if p.is_dir():
+        if role != "reference":
+            online = p / "online.csv"
+            also = f", or pass {online} (the filter's online estimate)" if online.is_file() else ""
+            raise InputError(
+                f"is a directory (a SLAM result bundle?), given as the {role.upper()}; a bundle "
+                "holds no estimated trajectory, only the ground truth: recover one with "
+                f"'slamrel recover {path} -o est.tum' and pass est.tum{also}",
+                path=path,
+            )
+        gt = p / "groundtruth.csv"
+        if not gt.is_file():
+            raise InputError(
+                "is a directory without groundtruth.csv; expected a trajectory file or a "
+                "SLAM result bundle with ground truth",
+                path=path,
+            )
+        loaded = read_trajectory(gt, format="csv", max_step_back=FILTER_TIME_TOLERANCE)
+        return without_repeated_times(loaded, gt)
+    if fmt is not None and fmt not in TRAJECTORY_FORMATS:
+        raise InputError(f"unknown format {fmt!r}", path=path)
+    words = {
+        "format=...": format_option,
+        "skip_invalid=True": "the metricevaluator mode, or --skip-invalid-poses,",
+        'dimension="2d"': "--planar",
+    }
+    with in_option_words(words):
+        loaded = read_trajectory(
+            path,
+            format=fmt,
+            pose=pose,  # type: ignore[arg-type]
+            skip_invalid=skip_invalid,
+            dimension="2d" if planar else "auto",
+            times=times,
+        )
+    if role == "reference":
+        loaded = without_repeated_times(loaded, path)
+    return loaded
