@@ -7,8 +7,11 @@ command-line parsers offer them as option choices without importing numpy (``sla
 
 from __future__ import annotations
 
+from typing import Any
+
 __all__ = [
     "BUNDLE_FORMAT",
+    "EVALUATE_DEFAULTS",
     "TRAJECTORY_FORMATS",
     "WORLDS",
     "PAPER_WORLDS",
@@ -29,3 +32,34 @@ PAPER_WORLDS = ("hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2")
 NOISE_NAMES = ("a", "b", "c")
 #: Methods of the pose-only study (:mod:`slamrel.studies.pose_only`, its ``METHODS``).
 POSE_ONLY_METHODS = ("full", "m1", "m2", "toro")
+
+#: The defaults of the scoring options of ``slamrel evaluate`` (the fields of
+#: :class:`slamrel.evaluation_options.EvaluateOptions`, which documents each), defined once:
+#: the dataclass's fields and the command's parser both read them from here.
+EVALUATE_DEFAULTS: dict[str, Any] = {
+    "format": None,
+    "reference_format": None,
+    "times": None,
+    "reference_times": None,
+    "odometry": None,
+    "odometry_format": None,
+    "max_time_diff": 0.1,
+    "interpolate": False,
+    "max_interpolation_gap": 1.0,
+    "mode": "paper",
+    "weights": None,
+    "strict": False,
+    "skip_invalid_poses": False,
+    "planar": False,
+    "sync": False,
+    "strategy": None,
+    "step": 1,
+    "distance": 1.0,
+    "radius": 1.0,
+    "min_separation_time": 30.0,
+    "min_separation_distance": None,
+    "count": 1000,
+    "min_distance": None,
+    "seed": 0,
+    "chained": False,
+}

@@ -1,8 +1,9 @@
 """The scoring options of a files-level evaluation, in a module without numpy.
 
-:class:`EvaluateOptions` is the one home of their defaults: :mod:`slamrel.evaluation` scores
-with it, and the ``slamrel evaluate`` parser takes its option defaults from its class
-attributes, so ``slamrel --help`` reads them without importing numpy. The values are checked
+:class:`EvaluateOptions` holds them; :mod:`slamrel.evaluation` scores with it. Their defaults
+are defined once, in :data:`slamrel.constants.EVALUATE_DEFAULTS`, which the fields and the
+``slamrel evaluate`` parser both read, so ``slamrel --help`` imports neither numpy nor
+:mod:`dataclasses` (whose import costs several milliseconds of start-up). The values are checked
 when an instance is made (:class:`ValueError` naming the parameter); the parser checks the
 command line's text first, in its own words.
 """
@@ -15,6 +16,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from relation_metric.constants import MODES, STRATEGIES
+from slamrel.constants import EVALUATE_DEFAULTS as _DEFAULT
 from slamrel.constants import TRAJECTORY_FORMATS
 
 __all__ = ["EvaluateOptions", "SCORING_OPTIONS"]
@@ -32,60 +34,60 @@ class EvaluateOptions:
     """
 
     #: Format of ESTIMATE (one of ``TRAJECTORY_FORMATS``); None: recognised from the file.
-    format: str | None = None
+    format: str | None = _DEFAULT["format"]
     #: Format of a reference trajectory; None: recognised from the file.
-    reference_format: str | None = None
+    reference_format: str | None = _DEFAULT["reference_format"]
     #: KITTI ESTIMATE: a file of timestamps [s], one a line.
-    times: str | None = None
+    times: str | None = _DEFAULT["times"]
     #: KITTI REFERENCE: a file of timestamps [s], one a line.
-    reference_times: str | None = None
+    reference_times: str | None = _DEFAULT["reference_times"]
     #: An odometry log that corrects far timestamps (a trajectory file), or None.
-    odometry: str | None = None
+    odometry: str | None = _DEFAULT["odometry"]
     #: Format of the odometry log; None: recognised from the file.
-    odometry_format: str | None = None
+    odometry_format: str | None = _DEFAULT["odometry_format"]
     #: Nearest-pose tolerance of the timestamp association [s], ≥ 0.
-    max_time_diff: float = 0.1
+    max_time_diff: float = _DEFAULT["max_time_diff"]
     #: Interpolate on SE(2)/SE(3) beyond ``max_time_diff``.
-    interpolate: bool = False
+    interpolate: bool = _DEFAULT["interpolate"]
     #: Longest gap interpolated over [s], > 0.
-    max_interpolation_gap: float = 1.0
+    max_interpolation_gap: float = _DEFAULT["max_interpolation_gap"]
     #: Error definition (one of ``MODES``: ``"paper"`` or ``"metricevaluator"``).
-    mode: str = "paper"
+    mode: str = _DEFAULT["mode"]
     #: The metricEvaluator's six weights wx,wy,wz,wroll,wpitch,wyaw (1/m, 1/rad; a string
     #: ``"1,1,0,0,0,0"`` or six numbers, kept as a tuple); None: all 1.
-    weights: Sequence[float] | str | None = None
+    weights: Sequence[float] | str | None = _DEFAULT["weights"]
     #: Unassociated relations, and trajectories not in time order, are an error.
-    strict: bool = False
+    strict: bool = _DEFAULT["strict"]
     #: Skip CARMEN pose records with non-finite values (counted; always in metricevaluator
     #: mode).
-    skip_invalid_poses: bool = False
+    skip_invalid_poses: bool = _DEFAULT["skip_invalid_poses"]
     #: Score 3-D inputs in 2-D: z, roll and pitch are discarded, with a warning.
-    planar: bool = False
+    planar: bool = _DEFAULT["planar"]
     #: Associate reference and estimate pose by pose first (as evo does), then generate the
     #: relations on the matched poses (needs a reference trajectory).
-    sync: bool = False
+    sync: bool = _DEFAULT["sync"]
     #: How relations are generated from a reference trajectory (one of ``STRATEGIES``);
     #: None: ``"consecutive"`` for a trajectory (and none for a .relations file).
-    strategy: str | None = None
+    strategy: str | None = _DEFAULT["strategy"]
     #: consecutive: pose k with pose k + step [poses], ≥ 1.
-    step: int = 1
+    step: int = _DEFAULT["step"]
     #: distance: metres of travel between the two poses [m], > 0.
-    distance: float = 1.0
+    distance: float = _DEFAULT["distance"]
     #: loops: largest distance between the two poses [m], > 0.
-    radius: float = 1.0
+    radius: float = _DEFAULT["radius"]
     #: loops: least time between the two poses [s], ≥ 0.
-    min_separation_time: float = 30.0
+    min_separation_time: float = _DEFAULT["min_separation_time"]
     #: loops: or least travel between the two poses [m], ≥ 0; None: time only.
-    min_separation_distance: float | None = None
+    min_separation_distance: float | None = _DEFAULT["min_separation_distance"]
     #: global/random: number of pairs [relations], 1 .. ``MAX_SAMPLED_RELATIONS``.
-    count: int = 1000
+    count: int = _DEFAULT["count"]
     #: global: least distance between the two poses [m], ≥ 0; None: a quarter of the extent.
-    min_distance: float | None = None
+    min_distance: float | None = _DEFAULT["min_distance"]
     #: global/random: seed of the draw, in [0, 2**63 - 1].
-    seed: int = 0
+    seed: int = _DEFAULT["seed"]
     #: consecutive/distance: one chain of relations from pose 0, each starting where the
     #: previous ended (evo's RPE pairs) instead of one relation from every pose.
-    chained: bool = False
+    chained: bool = _DEFAULT["chained"]
 
     def __post_init__(self) -> None:
         for name in ("format", "reference_format", "odometry_format"):
@@ -112,7 +114,7 @@ class EvaluateOptions:
         for name in ("min_separation_distance", "min_distance"):
             if getattr(self, name) is not None:
                 _number(self, name, lambda v: v >= 0.0, "a finite non-negative number")
-        if self.count != EvaluateOptions.count:
+        if self.count != _DEFAULT["count"]:
             from relation_metric.relations import MAX_SAMPLED_RELATIONS  # numpy, only when set
 
             top = MAX_SAMPLED_RELATIONS

@@ -6,13 +6,14 @@ import argparse
 import os
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from types import SimpleNamespace
 from typing import TYPE_CHECKING, Literal
 
 from recovery.constants import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, ROBUST
 from relation_metric.constants import STRATEGIES
 from relation_metric.errors import InputError, SlamrelError
 from slamrel.commands import options as opt
-from slamrel.evaluation_options import EvaluateOptions
+from slamrel.constants import EVALUATE_DEFAULTS
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from relation_metric.relations import RelationSet
@@ -66,10 +67,11 @@ def in_option_words(words: Mapping[str, str]) -> Iterator[None]:
 def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | None) -> None:
     """Options of relation generation from a reference trajectory.
 
-    Their defaults are those of :class:`~slamrel.evaluation_options.EvaluateOptions`
+    Their defaults are :data:`slamrel.constants.EVALUATE_DEFAULTS` (those of
+    :class:`~slamrel.evaluation_options.EvaluateOptions`)
     (``default`` is the strategy's).
     """
-    d = EvaluateOptions
+    d = SimpleNamespace(**EVALUATE_DEFAULTS)
     g = parser.add_argument_group("relation generation (from a reference trajectory)")
     g.add_argument(
         "--strategy",

@@ -9,19 +9,19 @@ from __future__ import annotations
 
 import argparse
 import os
+from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
 from relation_metric.constants import MODES
 from slamrel.commands import options as opt
 from slamrel.commands.common import add_strategy_arguments, check_outputs, stats_table
-from slamrel.constants import TRAJECTORY_FORMATS
-from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
+from slamrel.constants import EVALUATE_DEFAULTS, TRAJECTORY_FORMATS
 
 if TYPE_CHECKING:  # the library is imported in run(): start-up stays light
     from slamrel.evaluation import FileEvaluation
 
-#: The defaults of the scoring options, defined once (in EvaluateOptions).
-DEFAULT = EvaluateOptions
+#: The defaults of the scoring options (defined once: slamrel.constants.EVALUATE_DEFAULTS).
+DEFAULT = SimpleNamespace(**EVALUATE_DEFAULTS)
 
 HELP = "score an estimated trajectory against reference relations"
 
@@ -153,6 +153,7 @@ def run(args: argparse.Namespace) -> int:
     The library is imported here, not when the parser is built.
     """
     from slamrel.evaluation import score_files
+    from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
 
     outputs = [args.json, args.per_relation, args.plot, args.evo_zip]
     check_outputs(outputs, [args.reference, args.estimate, args.odometry])
