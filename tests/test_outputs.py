@@ -91,7 +91,7 @@ HEAVY = {  # the module that owns it: commands import the library inside their r
     "example": ("slamrel.simulation.example", "example_pair"),
     "recover": ("slamrel.formats.bundle", "read_bundle"),
     "evaluate": ("slamrel.evaluation", "load_reference"),
-    "relations": ("slamrel.commands.relations", "load_trajectory_arg"),
+    "relations": ("slamrel.evaluation", "load_trajectory"),
     "map-compare": ("slamrel.formats.landmark_maps", "read_map"),
 }
 

@@ -19,7 +19,6 @@ if TYPE_CHECKING:  # the library is imported where it is used: start-up stays li
     from relation_metric.relations import RelationSet
     from relation_metric.stats import Summary
     from relation_metric.trajectory import Trajectory
-    from slamrel.formats.trajectories import LoadedTrajectory
 
 __all__ = [
     "errors_about",
@@ -29,7 +28,6 @@ __all__ = [
     "stats_table",
     "check_outputs",
     "add_force_argument",
-    "load_trajectory_arg",
 ]
 
 
@@ -141,32 +139,6 @@ def relations_from_args(
         seed=args.seed,
         chained=getattr(args, "chained", False),
         key=key,
-    )
-
-
-def load_trajectory_arg(
-    path: str,
-    fmt: str | None,
-    *,
-    pose: str = "laser",
-    skip_invalid: bool = False,
-    role: str = "reference",
-    planar: bool = False,
-    times: str | None = None,
-    format_option: str = "--format",
-) -> LoadedTrajectory:
-    """Read a trajectory given on the command line: :func:`slamrel.evaluation.load_trajectory`."""
-    from slamrel.evaluation import load_trajectory
-
-    return load_trajectory(
-        path,
-        fmt,
-        pose=pose,
-        skip_invalid=skip_invalid,
-        role=role,
-        planar=planar,
-        times=times,
-        format_option=format_option,
     )
 
 

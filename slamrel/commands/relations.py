@@ -7,7 +7,6 @@ import argparse
 from slamrel.commands.common import (
     add_strategy_arguments,
     check_outputs,
-    load_trajectory_arg,
     relations_from_args,
 )
 from slamrel.constants import TRAJECTORY_FORMATS
@@ -38,10 +37,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run_generate(args: argparse.Namespace) -> int:
+    from slamrel.evaluation import load_trajectory
     from slamrel.formats.relations import write_relations
 
     check_outputs([args.output], [args.reference])
-    reference = load_trajectory_arg(
+    reference = load_trajectory(
         args.reference, args.format, planar=args.planar, times=args.times
     ).trajectory
     rel = relations_from_args(reference, args)
