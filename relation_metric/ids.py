@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from relation_metric.arrays import PathLike
 from relation_metric.errors import InputError
 
-__all__ = ["integer_ids", "rows_of", "first_missing"]
+__all__ = ["integer_ids", "rows_of", "first_missing", "first_repeat"]
 
 _MAX_EXACT_ID = 2.0**53  # beyond it a double no longer holds every integer
 
@@ -105,3 +105,18 @@ def first_missing(rows: NDArray[np.int64]) -> int | None:
     """Flat index of the first −1 in ``rows`` (the first unknown id), or ``None``."""
     missing = np.flatnonzero(np.asarray(rows).ravel() < 0)
     return int(missing[0]) if missing.size else None
+
+
+def first_repeat(
+    ids: NDArray[np.int64], *, tiebreak: NDArray[np.int64] | None = None
+) -> tuple[int, int] | None:
+    """The first repeated id: ``(earlier, later)`` positions of its first two occurrences.
+
+    "First" is the smallest repeated id; of its occurrences the earliest two in ``tiebreak``
+    order (e.g. line numbers), or in array order without it. ``None`` if all ids differ.
+    """
+    order = np.argsort(ids, kind="stable") if tiebreak is None else np.lexsort((tiebreak, ids))
+    dup = np.flatnonzero(np.diff(ids[order]) == 0)
+    if not dup.size:
+        return None
+    return int(order[dup[0]]), int(order[dup[0] + 1])

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from relation_metric.arrays import PathLike
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
-from relation_metric.ids import integer_ids
+from relation_metric.ids import first_repeat, integer_ids
 from relation_metric.trajectory import check_coordinates
 
 __all__ = ["check_landmarks"]
@@ -105,10 +105,9 @@ def check_landmarks(
         path=None if path is None else str(path),
         line_of=line_of,
     )
-    order = np.argsort(out, kind="stable")
-    dup = np.flatnonzero(np.diff(out[order]) == 0)
-    if dup.size:
-        first, k = int(order[dup[0]]), int(order[dup[0] + 1])
+    repeat = first_repeat(out)
+    if repeat is not None:
+        first, k = repeat
         where = "" if lines is None else f" (first on line {line(first)})"
         raise InputError(
             f"duplicate landmark id {int(out[k])}{where}; expected unique ids",

@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from relation_metric.ids import first_missing, rows_of
+from relation_metric.ids import first_missing, first_repeat, rows_of
 
 small_ids = st.lists(st.integers(-5, 20), max_size=30)
 
@@ -40,3 +40,13 @@ def test_rows_of_empty_and_first_missing():
     assert first_missing(np.array([0, 3, -1, -1])) == 2
     assert first_missing(np.array([[0, 1], [2, -1]])) == 3
     assert first_missing(np.array([1, 2])) is None
+
+
+def test_first_repeat_is_the_smallest_repeated_id_at_its_first_two_places():
+    assert first_repeat(np.array([5, 3, 9], dtype=np.int64)) is None
+    assert first_repeat(np.array([], dtype=np.int64)) is None
+    # 7 and 2 both repeat: 2 is the smaller; its occurrences are at positions 3 and 4
+    assert first_repeat(np.array([7, 1, 7, 2, 2, 2], dtype=np.int64)) == (3, 4)
+    # with a tiebreak (line numbers), the earliest two lines win, not array order
+    ids = np.array([4, 4, 4], dtype=np.int64)
+    assert first_repeat(ids, tiebreak=np.array([30, 10, 20], dtype=np.int64)) == (1, 2)

@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 from landmark_graph.landmark_association import Association, _finish
 from landmark_graph.maps import LandmarkMap
 from relation_metric.errors import InputError
-from relation_metric.ids import first_missing, integer_ids, rows_of
+from relation_metric.ids import first_missing, first_repeat, integer_ids, rows_of
 from slamrel.formats.text import PathLike, read_csv_table, write_text_atomic
 
 __all__ = ["read_association_csv", "write_association_csv"]
@@ -28,10 +28,9 @@ def read_association_csv(path: PathLike, est: LandmarkMap, ref: LandmarkMap) -> 
     er = _rows_of(est.ids, a, lines, name, "estimated")
     rr = _rows_of(ref.ids, b, lines, name, "reference")
     for rows, ids, what in ((er, a, "estimated"), (rr, b, "reference")):
-        order = np.argsort(rows, kind="stable")
-        dup = np.flatnonzero(np.diff(rows[order]) == 0)
-        if dup.size:
-            first, k = int(order[dup[0]]), int(order[dup[0] + 1])
+        repeat = first_repeat(rows)
+        if repeat is not None:
+            first, k = repeat
             raise InputError(
                 f"{what} landmark {int(ids[k])} is associated twice (first on line "
                 f"{int(lines[first])})",

@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
-from relation_metric.ids import first_missing, integer_ids, rows_of
+from relation_metric.ids import first_missing, first_repeat, integer_ids, rows_of
 from relation_metric.trajectory import check_coordinates
 from slamrel.formats.text import (
     NUMBER_FORMAT,
@@ -108,10 +108,9 @@ def read_g2o_records(
                 integer_ids(vals[:, col], lines, name, f"{kind} vertex {col + 1}")
     if ids:
         every, every_line = np.concatenate(ids), np.concatenate(id_lines)
-        order = np.lexsort((every_line, every))
-        dup = np.flatnonzero(np.diff(every[order]) == 0)
-        if dup.size:
-            first, k = int(order[dup[0]]), int(order[dup[0] + 1])
+        repeat = first_repeat(every, tiebreak=every_line)
+        if repeat is not None:
+            first, k = repeat
             raise InputError(
                 f"vertex id {int(every[k])} is defined twice (first on line "
                 f"{int(every_line[first])})",
