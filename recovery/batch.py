@@ -1,19 +1,38 @@
-"""Batch MAP refinement of a recovered trajectory with the map fixed (Gauss–Newton / LM).
+"""Batch MAP refinement of a recovered trajectory and its map correction (Gauss–Newton / LM).
 
-Minimises ``½ Σ rᵀ W r`` over all grid poses ``X`` (N × 3) with
+Minimises ``½ Σ rᵀ W r + ½ ηᵀ η`` over all grid poses ``X`` (N × 3) and the map coefficients
+``η`` (r,) of the landmarks ``m = m̂ + L η`` (``Σ_m = L Lᵀ``, the map uncertainty of
+:mod:`recovery.map_uncertainty`; ``r = 0`` for an exact map), with
 
 * a prior ``X₀ − x̄₀`` (angle wrapped), ``W = P₀⁻¹``;
 * one motion residual per step ``between(X_k, X_{k+1}) − u_k`` (angle wrapped),
   ``W = (Σ_k + ε_k I)⁻¹`` — the increment model of :mod:`recovery.models`; ``ε_k = 1e-6
   tr(Σ_k)/3 + 1e-14`` regularises the rank-2 covariance of the velocity model (a lateral
   slip with a standard deviation of 0.1% of the model's noise);
-* one range-bearing residual per measurement the filter used, ``z − h(X_k, l)`` (bearing
-  wrapped), ``W = (R + H_l Σ_l H_lᵀ)⁻¹`` (the landmark's marginal covariance).
+* one range-bearing residual per measurement the filter used, ``z − h(X_k, m̂_l + L_l η)``
+  (bearing wrapped), ``W = R⁻¹`` (times the filter's robust weight);
+* the map prior ``½ ηᵀ η``: the map error is one draw from ``N(0, Σ_m)``, the same at every
+  sighting.
 
-The weight ``W`` of a measurement is evaluated at the current poses and held fixed in the
-Jacobian (its dependence on the pose through ``H_l`` is not differentiated), so with an
-uncertain map the Gauss–Newton fixed point and the minimum of the evaluated cost differ
-slightly (measured 4·10⁻⁷ m on the simulated SLAM bundle of ``benchmarks/output_hashes.py``).
+**Why the map is in the state.** The map's error is fixed over the run, so the measurements
+of all poses share it: their noise is ``v + H_l δm``, correlated across sightings with
+covariance ``R ⊗ I + H_L Σ_m H_Lᵀ``. Generalised least squares on the poses with that
+noise and this problem with ``η`` marginalised out are the same (Woodbury), so estimating
+``η`` is how the map's *joint* uncertainty is used exactly — the same model as the filter's
+Schmidt update (:mod:`recovery.ekf`), without its restriction to the past. A map error along a
+direction the log does not see (the map's anchoring) stays at its prior and shows only in
+the covariance. ``η̂`` (as ``L η̂``, :attr:`BatchResult.map_correction`) is a by-product;
+the score of the recovery is that of its poses. When ``Σ_m`` is the posterior of a SLAM run on
+the same log (a real bundle), the log's information about the map is counted twice in the
+covariance (a lower bound then); to first order the poses are unaffected: the SLAM map is
+already the minimiser the prior is centred on.
+
+**The smoother** of :func:`recovery.recover.recover` is the first step of this problem (one
+Gauss–Newton step, from the extended RTS smoother of the filter run, which linearises along
+the run: :mod:`recovery.smoother`). For a linear-Gaussian model one Gauss–Newton step from
+any start is the exact minimum, i.e. the fixed-interval (RTS) smoother of the map-augmented
+state (poses plus a static map): this is that smoother in information form. ``method="batch"``
+iterates to convergence.
 
 The minimiser is the estimation layer's :func:`~recovery.lm.levenberg_marquardt`
 (Marquardt's damping ``λ diag(H)``, ×10 on a rejected step, ÷10 on an accepted one, up to
@@ -38,10 +57,11 @@ The minimiser is the estimation layer's :func:`~recovery.lm.levenberg_marquardt`
   iterations to 10; with the damping above both retractions need 3–4 iterations, the chain's
   first step leaving a lower cost (10,065 against 10,178 from 184,509); no step is rejected.
 
-The normal equations are block tridiagonal in time order (each measurement touches one pose,
-the map is fixed), so ``H`` is assembled straight into LAPACK's band storage (bandwidth 5)
-and each damped step is one banded Cholesky solve (LAPACK ``pbsv``): O(N) per iteration, no
-fill, no ordering. The band is stored *lower* and Fortran-ordered, so ``pbsv`` factorises in
+The poses' block ``A`` of the normal equations is block tridiagonal in time order (each
+measurement touches one pose), so it is assembled straight into LAPACK's band storage
+(bandwidth 5) and each damped step is one banded Cholesky solve (LAPACK ``pbsv``) with
+``1 + r`` right-hand sides, ``η`` eliminated by its Schur complement: O(N r) per iteration,
+no fill, no ordering. The band is stored *lower* and Fortran-ordered, so ``pbsv`` factorises in
 place, faster than the upper form and than ``scipy.linalg.solveh_banded`` (which copied the
 C-ordered band): LAPACK's unblocked band Cholesky walks columns, contiguous in the lower form,
 strided in the upper. The two forms round differently (steps ~10⁻¹⁰ relative apart; the same
@@ -49,15 +69,17 @@ minimum, poses 7·10⁻¹² m apart at 10⁵ steps). SuperLU in the natural orde
 default (COLAMD with pivoting) are far slower (timings in benchmarks/README.md). A block
 Thomas recursion would be linear too but sequential (a Python loop per pose).
 
-Per-pose covariances are the diagonal blocks of ``H⁻¹`` at the solution, computed by the
-extended filter/RTS covariance recursion linearised at the solution (exact for a
-block-tridiagonal information matrix, and vectorised like the smoother; about as long as one
-filter + smoother pass, the smoother's mean half skipped:
-:func:`~recovery.smoother.smoothed_covariances`). A vectorised block cyclic reduction of
-``H`` itself was measured faster (benchmarks/README.md) but inaccurate: the
-Schur complements of the information form cancel the stiff terms, leaving relative errors up
-to 4·10⁻² in the covariances at 3·10³ steps (the covariance-form recursion: 3·10⁻⁷, against
-a sparse LU solve).
+Per-pose covariances are the diagonal blocks of ``H⁻¹`` at the solution: with ``H = [[A, B],
+[Bᵀ, C]]`` (poses, map), ``(H⁻¹)_xx = A⁻¹ + Y S⁻¹ Yᵀ``, ``Y = A⁻¹ B``, ``S = C − Bᵀ Y``. The
+diagonal blocks of ``A⁻¹`` (the map taken as exact at ``m̂ + L η̂``) come from the extended
+filter/RTS covariance recursion linearised at the solution (exact for a block-tridiagonal
+information matrix, and vectorised like the smoother; about as long as one filter + smoother
+pass, the smoother's mean half skipped: :func:`~recovery.smoother.smoothed_covariances`); the
+map's term ``Y S⁻¹ Yᵀ`` from one banded solve with ``r`` right-hand sides (``3N r`` floats of
+memory). A vectorised block cyclic reduction of ``A`` itself was measured faster
+(benchmarks/README.md) but inaccurate: the Schur complements of the information form cancel the
+stiff terms, leaving relative errors up to 4·10⁻² in the covariances at 3·10³ steps (the
+covariance-form recursion: 3·10⁻⁷, against a sparse LU solve).
 """
 
 from __future__ import annotations
@@ -66,19 +88,29 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.linalg.lapack import dpbsv
 
 from recovery.ekf import FilterInput, run_filter
 from recovery.lm import Linearisation, LMOptions, levenberg_marquardt, retract_poses
+from recovery.map_uncertainty import block_factor, covariance_factor
 from recovery.models import range_bearing
 from recovery.smoother import smoothed_covariances
 from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError
 
-__all__ = ["BatchResult", "refine", "normal_equations", "retract_chain", "batch_covariances"]
+__all__ = [
+    "BatchResult",
+    "JointState",
+    "refine",
+    "map_factor_of",
+    "normal_equations",
+    "retract_chain",
+    "batch_covariances",
+]
 
 
 LAMBDA_INITIAL = 1e-14  # LM's first λ: nearly undamped (module doc)
@@ -87,13 +119,15 @@ LAMBDA_MIN = 1e-16  # and its floor
 
 @dataclass(frozen=True)
 class BatchResult:
-    """Refined poses (N, 3), covariances (N, 3, 3), iterations and costs (½ rᵀ W r)."""
+    """Refined poses (N, 3), covariances (N, 3, 3), iterations, costs (½ rᵀ W r + ½ ηᵀη)
+    and the map correction ``L η`` (M, 2) estimated with them."""
 
     poses: Array
     covariances: Array
     iterations: int
     cost_initial: float
     cost_final: float
+    map_correction: Array | None = None
 
 
 def regularised_sigma(sigma: Array) -> Array:
@@ -106,8 +140,9 @@ def _factors(  # type: ignore[no-untyped-def]
     inp: FilterInput, x: Array, used: NDArray[np.int64], robust: Array | None = None
 ):
     """Residuals, weights and Jacobians of all factors at ``x``, ``(rp, rm, rz, wz, h_x, k)``,
-    and ``(cos θ_k, sin θ_k)`` (each (N − 1,)) of the motion factors, which :func:`_band`
-    reuses (``between`` written out with the same operations, so the same bits).
+    ``(cos θ_k, sin θ_k)`` (each (N − 1,)) of the motion factors, which :func:`_band`
+    reuses (``between`` written out with the same operations, so the same bits), and the
+    measurements' landmark Jacobians ``H_l`` (J, 2, 2).
 
     ``robust`` (J,): the filter's robust weight per measurement; the measurement information
     ``(R + H_l Σ_l H_lᵀ)⁻¹`` is multiplied by it (the filter divides the same matrix by it).
@@ -131,7 +166,7 @@ def _factors(  # type: ignore[no-untyped-def]
     wz = np.linalg.inv(reff)
     if robust is not None:
         wz = wz * robust[used][:, None, None]
-    return (rp, rm, rz, wz, h_x, k), (c, s)
+    return (rp, rm, rz, wz, h_x, k), (c, s), h_l
 
 
 def _motion_wr(wm: Array, rm: Array) -> Array:
@@ -209,7 +244,7 @@ def _band(  # type: ignore[no-untyped-def]
     batched 3 × 3 matrix products (measured in benchmarks/README.md).
     """
     n = x.shape[0]
-    (rp, rm, rz, wz, h_x, k), (c, s) = factors or _factors(inp, x, used, robust)
+    (rp, rm, rz, wz, h_x, k), (c, s), _ = factors or _factors(inp, x, used, robust)
     u0, u1 = x[:-1, 1] - x[1:, 1], x[1:, 0] - x[:-1, 0]
     g00, g01, g11, g02, g12, g22 = _rotated_information(wm, c, s)
     gu0, gu1, gu2 = g00 * u0 + g01 * u1, g01 * u0 + g11 * u1, g02 * u0 + g12 * u1  # G u
@@ -395,6 +430,127 @@ def retract_chain(x: Array, delta: Array) -> Array:
     return out
 
 
+@dataclass(frozen=True)
+class JointState:
+    """A state of the batch: poses (N, 3) and map coefficients ``η`` (r,), ``m = m̂ + L η``."""
+
+    poses: Array
+    eta: Array
+
+
+class _JointProblem:
+    """The batch objective over poses and the map correction, as a :class:`~recovery.lm.Problem`.
+
+    ``½ Σ rᵀ W r`` of :class:`_BatchProblem` with the landmarks at ``m̂ + L η`` (the
+    measurements weighted by ``R⁻¹``: the map's uncertainty is in ``η``, not in ``W``), plus
+    the prior ``½ ηᵀ η``. The Gauss–Newton matrix is ``[[A, B], [Bᵀ, C]]``: ``A`` the band of
+    the poses (:func:`_band`), ``B`` (3N × r) and ``C`` (r × r) dense; each damped step
+    eliminates ``η`` by its Schur complement ``C − Bᵀ A⁻¹ B`` — one banded Cholesky of ``A``
+    with ``1 + r`` right-hand sides and one r × r Cholesky: O(N r) per step.
+    """
+
+    def __init__(
+        self,
+        inp: FilterInput,
+        used: NDArray[np.int64],
+        robust: Array | None,
+        factor: Array,
+        *,
+        regularised: Array,
+    ) -> None:
+        m = inp.map_xy.shape[0]
+        zero = np.zeros((m, 2, 2))
+        self.inp = replace(inp, map_marginals=zero, map_covariance=None)  # the map is in η
+        self.used, self.robust = used, robust
+        self.factor = np.asarray(factor, dtype=np.float64)
+        self.rank = int(self.factor.shape[1])
+        self.wp, self.wm = _weights(self.inp, regularised=regularised)
+        k = self.inp.meas_grid[used]
+        self.order = np.argsort(k, kind="stable")  # measurements grouped by pose
+        self.poses_seen, self.starts = np.unique(k[self.order], return_index=True)
+        self.l_rows = self.factor.reshape(m, 2, self.rank)[self.inp.meas_landmark[used]]
+
+    def map_inp(self, eta: Array) -> FilterInput:
+        """The filter input with the landmarks at ``m̂ + L η`` (exact)."""
+        if not self.rank:
+            return self.inp
+        shift = (self.factor @ eta).reshape(-1, 2)
+        return replace(self.inp, map_xy=self.inp.map_xy + shift)
+
+    def linearise(self, s: JointState) -> Linearisation:
+        inp = self.map_inp(s.eta)
+        fac = _factors(inp, s.poses, self.used, self.robust)
+        ab, g, cost = _band(inp, s.poses, self.used, self.wp, self.wm, self.robust, fac)
+        (_, _, rz, wz, h_x, _), _, h_l = fac
+        n, r = s.poses.shape[0], self.rank
+        je = h_l @ self.l_rows  # ∂h/∂η of each measurement, (J, 2, r)
+        wje = wz @ je
+        b = np.zeros((n, 3, r))
+        if r and self.order.size:
+            per = h_x.transpose(0, 2, 1) @ wje  # H_xᵀ W ∂h/∂η, (J, 3, r)
+            b[self.poses_seen] = np.add.reduceat(per[self.order], self.starts, axis=0)
+        c = np.eye(r) + np.einsum("jar,jas->rs", je, wje)
+        g_eta = s.eta - np.einsum("jar,ja->r", wje, rz)
+        cost += 0.5 * float(s.eta @ s.eta)
+        diag = np.concatenate((ab[0], np.diagonal(c)))
+        return Linearisation(cost, np.concatenate((g, g_eta)), diag, (ab, b.reshape(3 * n, r), c))
+
+    def cost(self, s: JointState) -> float:
+        inp = self.map_inp(s.eta)
+        (rp, rm, rz, wz, _, _), _, _ = _factors(inp, s.poses, self.used, self.robust)
+        return _cost(rp, self.wp, rm, _motion_wr(self.wm, rm), rz, wz) + 0.5 * float(s.eta @ s.eta)
+
+    def solve(self, lin: Linearisation, damping: Array) -> Array:
+        ab0, b, c = lin.system
+        nx = ab0.shape[1]
+        g_x, g_eta = lin.gradient[:nx], lin.gradient[nx:]
+        for floor in (0.0, 1e-12):
+            ab = ab0.copy(order="F")
+            ab[0] += np.maximum(damping[:nx], floor * lin.diagonal[:nx])
+            rhs = np.empty((nx, 1 + self.rank), order="F")
+            rhs[:, 0] = g_x
+            rhs[:, 1:] = b
+            try:
+                sol = _cholesky_solve(ab, rhs)
+                if not self.rank:
+                    return -sol[:, 0]
+                y0, y = sol[:, 0], sol[:, 1:]
+                schur = c + np.diag(damping[nx:]) - b.T @ y
+                d_eta = scipy.linalg.cho_solve(
+                    scipy.linalg.cho_factor(schur, lower=True), b.T @ y0 - g_eta
+                )
+            except np.linalg.LinAlgError:
+                continue
+            return np.concatenate((-y0 - y @ d_eta, d_eta))
+        raise DivergenceError(
+            "batch refinement: the normal equations are singular (not positive definite)"
+        )
+
+    def retract(self, s: JointState, delta: Array) -> JointState:
+        nx = s.poses.size
+        return JointState(retract_chain(s.poses, delta[:nx]), s.eta + delta[nx:])
+
+    def map_covariance_term(self, s: JointState) -> Array:
+        """``(Y S⁻¹ Yᵀ)_kk`` (N, 3, 3), ``Y = A⁻¹ B``, ``S = C − Bᵀ Y`` at ``s`` (undamped):
+        what the map's uncertainty adds to each pose's covariance ``(A⁻¹)_kk``."""
+        n = s.poses.shape[0]
+        if not self.rank:
+            return np.zeros((n, 3, 3))
+        ab0, b, c = self.linearise(s).system
+        y = _cholesky_solve(ab0.copy(order="F"), np.asfortranarray(b))
+        chol = scipy.linalg.cholesky(c - b.T @ y, lower=True)
+        v = scipy.linalg.solve_triangular(chol, y.T, lower=True).T.reshape(n, 3, self.rank)
+        return np.einsum("nar,nbr->nab", v, v)
+
+
+def map_factor_of(inp: FilterInput) -> Array:
+    """``L`` (2M, r) of the map uncertainty ``inp`` carries: its joint covariance when given,
+    else the block-diagonal of its marginals (:mod:`recovery.map_uncertainty`'s rule)."""
+    if inp.map_covariance is not None:
+        return covariance_factor(inp.map_covariance)
+    return block_factor(inp.map_marginals)
+
+
 def refine(
     inp: FilterInput,
     start: Array,
@@ -403,29 +559,35 @@ def refine(
     weights: Array | None = None,
     max_iterations: int = 50,
     tolerance: float = 1e-10,
+    map_factor: Array | None = None,
 ) -> BatchResult:
-    """Levenberg–Marquardt from ``start`` (N, 3) over all poses, map fixed (see module doc).
+    """Levenberg–Marquardt from ``start`` (N, 3) over all poses and the map correction.
 
     Parameters
     ----------
     inp : FilterInput
     start : ndarray, shape (N, 3)
-        Initial poses (the smoothed trajectory).
+        Initial poses (the filter's trajectory; the map correction starts at zero).
     used : ndarray of bool, shape (J,)
         Measurements that enter (those the filter used).
     weights : ndarray, shape (J,), optional
         The filter's robust weights (:attr:`recovery.ekf.FilterResult.weights`): the batch
-        uses the same robust model as the filter and the smoother.
+        uses the same robust model as the filter.
     max_iterations : int
+        1 is the smoother of :func:`recovery.recover.recover` (one Gauss–Newton step).
     tolerance : float
         Stop when the relative cost reduction or the largest step falls below it.
+    map_factor : ndarray, shape (2M, r), optional
+        ``L`` with ``L Lᵀ = Σ_m`` (:class:`recovery.map_uncertainty.MapUncertainty`); by
+        default from ``inp`` (:func:`map_factor_of`).
 
     Returns
     -------
     BatchResult
     """
+    factor = map_factor_of(inp) if map_factor is None else map_factor
     reg = regularised_sigma(inp.sigma)  # shared by the weights and the covariance pass
-    problem = _BatchProblem(inp, np.flatnonzero(used), weights, regularised=reg)
+    problem = _JointProblem(inp, np.flatnonzero(used), weights, factor, regularised=reg)
     options = LMOptions(
         lambda_initial=LAMBDA_INITIAL,
         lambda_min=LAMBDA_MIN,
@@ -435,11 +597,17 @@ def refine(
         ftol=tolerance,
         xtol=tolerance,
     )
-    res = levenberg_marquardt(problem, np.array(start, dtype=np.float64), options)
-    x = res.x
+    s0 = JointState(np.array(start, dtype=np.float64), np.zeros(problem.rank))
+    res = levenberg_marquardt(problem, s0, options)
+    x = res.x.poses
     x[:, 2] = se2.wrap_angle(x[:, 2])
-    covs = batch_covariances(inp, x, used, weights, regularised=reg)
-    return BatchResult(x, covs, res.iterations, float(res.costs[0]), float(res.costs[-1]))
+    state = JointState(x, res.x.eta)
+    covs = batch_covariances(problem.map_inp(state.eta), x, used, weights, regularised=reg)
+    covs = covs + problem.map_covariance_term(state)
+    shift = (factor @ state.eta).reshape(-1, 2) if problem.rank else np.zeros_like(inp.map_xy)
+    return BatchResult(
+        x, covs, res.iterations, float(res.costs[0]), float(res.costs[-1]), map_correction=shift
+    )
 
 
 def batch_covariances(

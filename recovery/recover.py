@@ -3,9 +3,10 @@
 Burgard et al. 2009 recover the trajectory of an EKF-SLAM run "by localisation: run EKF-based
 localisation given the landmark locations, data associations, and motion/sensor model used
 during SLAM". :func:`recover` does that (:mod:`recovery.ekf`), and, the recovery being
-offline, smooths it (:mod:`recovery.smoother`) or refines it as a batch MAP problem
-(:mod:`recovery.batch`). Gated measurements are counted and reported: a large gated fraction
-is a finding about the map, not noise.
+offline, smooths it or refines it as a batch MAP problem over the poses and a correction of
+the map (:mod:`recovery.batch`). The map's uncertainty enters all three by one rule
+(:mod:`recovery.map_uncertainty`), stated in every report. Gated measurements are counted
+and reported: a large gated fraction is a finding about the map, not noise.
 
 **Divergence is a finding.** Where the map and the log disagree (runs of outlying innovations,
 a non-positive-definite covariance) the filter is re-entered by the documented rule of
@@ -25,14 +26,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from recovery.bundle import Bundle
-from recovery.constants import DEFAULT_ROBUST, MAP_MODES, METHODS
+from recovery.constants import BATCH_MAX_ITERATIONS, DEFAULT_ROBUST, METHODS
 from recovery.ekf import (
     DEFAULT_MAX_OUTLIER_RUN,
     EVENT_KINDS,
@@ -46,6 +47,7 @@ from recovery.ekf import (
     FilterResult,
     run_filter,
 )
+from recovery.map_uncertainty import MapUncertainty, map_uncertainty
 from recovery.smoother import smooth
 from recovery.steps import Steps, build_steps
 from relation_metric import consistency
@@ -58,7 +60,6 @@ from relation_metric.trajectory import Trajectory, readonly
 __all__ = [
     "DEFAULT_ROBUST",
     "METHODS",
-    "MAP_MODES",
     "DEFAULT_MAX_OUTLIER_RUN",
     "BatchCosts",
     "Divergence",
@@ -556,7 +557,7 @@ class Recovery:
     nees : ndarray, shape (N,) or None
         Pose NEES against ground truth at grid times that have one (NaN elsewhere).
     map_mode : str
-        How the map's uncertainty entered: ``joint`` (Schmidt), ``marginal`` or ``ignore``.
+        The form of the map's uncertainty used: ``joint``, ``marginal`` or ``ignore``.
     divergence : Divergence
         Where the map and the log disagree (its stretches, the filter's events, with ground
         truth the NEES blow-ups).
@@ -572,6 +573,10 @@ class Recovery:
         The batch refinement's costs (``method="batch"`` only).
     weights : ndarray, shape (J,)
         Robust weight per measurement (all 1 without a robust update).
+    map_uncertainty : MapUncertainty or None
+        The map uncertainty every estimator used, with its rule in words.
+    map_correction : ndarray, shape (M, 2) or None
+        The smoother's or batch's estimate of the map's error ``L η`` (``map.csv`` order).
     """
 
     method: str
@@ -589,6 +594,8 @@ class Recovery:
     robust: RobustSettings | None = None
     batch: BatchCosts | None = None
     weights: Array | None = None
+    map_uncertainty: MapUncertainty | None = None
+    map_correction: Array | None = None
 
     @property
     def stretches(self) -> tuple[Stretch, ...]:
@@ -605,6 +612,9 @@ class Recovery:
         out: dict[str, object] = {
             "method": self.method,
             "map_uncertainty": self.map_mode,
+            "map_uncertainty_rule": (
+                self.map_uncertainty.rule if self.map_uncertainty is not None else None
+            ),
             "poses": len(self.trajectory),
             "measurements": self.counts.as_dict(),
             "divergence": self.divergence.as_dict(),
@@ -626,14 +636,13 @@ def filter_input(
 ) -> FilterInput:
     """Arrays for :func:`recovery.ekf.run_filter` from a bundle.
 
-    ``map_mode``: ``joint`` uses ``map_covariance.npy`` when present (else the marginals),
-    ``marginal`` the per-landmark covariances only, ``ignore`` treats the map as exact.
+    ``map_mode``: the map uncertainty's form, by the one rule of
+    :func:`recovery.map_uncertainty.map_uncertainty` (``joint``: ``map_covariance.npy``, else
+    the marginals as a block-diagonal joint covariance; ``marginal``: that block-diagonal
+    covariance; ``ignore``: the map exact).
     """
-    if map_mode not in MAP_MODES:
-        raise InputError(f"unknown map mode {map_mode!r}; expected one of {', '.join(MAP_MODES)}")
+    mu = map_uncertainty(bundle, map_mode)
     st = build_steps(bundle) if steps is None else steps
-    marg = bundle.map_marginals if map_mode != "ignore" else np.zeros_like(bundle.map_marginals)
-    joint = bundle.map_covariance if map_mode == "joint" else None
     lines = bundle.measurement_lines
     assert lines is not None  # Bundle.__post_init__ fills it
     src = "measurements.csv"
@@ -651,8 +660,8 @@ def filter_input(
         meas_z=bundle.measurements,
         meas_landmark=bundle.map_index(),
         map_xy=bundle.map_xy,
-        map_marginals=marg,
-        map_covariance=joint,
+        map_marginals=mu.marginals,
+        map_covariance=mu.covariance,
         r=bundle.sensor.covariance,
         meas_labels=labels,
     )
@@ -686,8 +695,11 @@ def recover(
     ----------
     bundle : Bundle
     method : {"filter", "smoother", "batch"}
-        EKF only; EKF + extended RTS smoother; smoother followed by Gauss–Newton/LM over all
-        poses with the map fixed.
+        EKF only (Schmidt update with the map uncertainty); the smoother: the extended RTS
+        smoother of the filter run, then one Gauss–Newton step over all poses and the map
+        correction (:mod:`recovery.batch`: the map-augmented fixed-interval smoother); the
+        batch: that problem iterated to convergence. All three use the one map uncertainty of
+        :func:`recovery.map_uncertainty.map_uncertainty`.
     gate : float, optional
         χ² probability of the innovation gate; ``None`` (default) gates nothing, so a broken
         map shows in the score instead of being filtered away.
@@ -734,6 +746,7 @@ def recover(
         raise InputError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
     if gate is not None and not 0.0 < gate < 1.0:
         raise InputError(f"gate probability must be in (0, 1), got {gate}")
+    mu = map_uncertainty(bundle, map_mode)
     inp = filter_input(bundle, map_mode=map_mode)
     kw = dict(gate=gate, max_outlier_run=max_outlier_run, on_divergence=on_divergence)
     settings = None
@@ -757,23 +770,31 @@ def recover(
     weights = None if robust is None else fr.weights
     iterations = 0
     costs = None
+    correction = None
     if method == "filter":
         poses, covs = fr.poses, fr.covariances
     else:
-        sm = smooth(fr)
-        poses, covs = sm.poses, sm.covariances
-        if method == "batch":
-            from recovery.batch import refine
+        from recovery.batch import refine
 
-            br = refine(inp, poses, used=fr.status == USED, weights=weights)
-            poses, covs, iterations = br.poses, br.covariances, br.iterations
+        br = refine(
+            reentry_relaxed(inp, fr),
+            smooth(fr).poses,  # the RTS smoother linearises along the run; then the map step
+            used=fr.status == USED,
+            weights=weights,
+            map_factor=mu.factor,
+            max_iterations=1 if method == "smoother" else BATCH_MAX_ITERATIONS,
+        )
+        poses, covs = br.poses, br.covariances
+        if br.map_correction is not None:
+            correction = readonly(br.map_correction)
+        if method == "batch":
+            iterations = br.iterations
             costs = BatchCosts(cost_initial=br.cost_initial, cost_final=br.cost_final)
     covs, n_repaired = _check_finite(poses, covs, inp.times, repair=on_divergence != "raise")
     traj = Trajectory(inp.times, poses)
     nees = None
     if bundle.groundtruth is not None:
         nees = pose_nees_against(bundle.groundtruth, inp.times, traj.poses, covs)
-    mode = map_mode if (map_mode != "joint" or bundle.map_covariance is not None) else "marginal"
     min_run = max_outlier_run if max_outlier_run else DEFAULT_MAX_OUTLIER_RUN
     stretches = disagreement_stretches(fr, inp, min_run=min_run)
     divergence = divergence_summary(
@@ -788,7 +809,8 @@ def recover(
         status=fr.status,
         nis=fr.nis,
         nees=None if nees is None else readonly(nees),
-        map_mode=mode,
+        map_mode=mu.mode,
+        map_uncertainty=mu,
         divergence=divergence,
         nis_stats=NisStats.of(fr),
         nees_stats=None if nees is None else NeesStats.of(nees),
@@ -796,7 +818,34 @@ def recover(
         robust=settings,
         batch=costs,
         weights=None if weights is None else readonly(weights),
+        map_correction=correction,
     )
+
+
+def reentry_relaxed(inp: FilterInput, fr: FilterResult) -> FilterInput:
+    """``inp`` with each filter re-entry's inflation as extra process noise, for the smoother
+    and the batch.
+
+    A re-entry at grid pose ``k`` set the filter's covariance to ``α P``; the smoother and
+    the batch see it as process noise ``(α − 1) P = (α − 1)/α · P_k`` (``P_k`` the filter's
+    covariance at ``k``) added to the step into ``k`` (rotated into the robot frame at the
+    filter's heading of ``k − 1``), or to the prior at ``k = 0``: where the map and the log
+    disagreed, the trajectory may jump as the filter's did.
+    """
+    ev = fr.events
+    sel = np.flatnonzero(ev.kind == REENTRY)
+    if not sel.size:
+        return inp
+    sigma, p0 = np.array(inp.sigma), np.array(inp.p0)
+    for k, alpha in zip(ev.grid[sel].tolist(), ev.inflation[sel].tolist()):
+        extra = (alpha - 1.0) / alpha * np.asarray(fr.covariances[k])
+        if k == 0:
+            p0 += extra
+            continue
+        c, s = math.cos(fr.poses[k - 1, 2]), math.sin(fr.poses[k - 1, 2])
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        sigma[k - 1] += rot.T @ extra @ rot
+    return replace(inp, sigma=sigma, p0=p0)
 
 
 def _nis_scale(fr: FilterResult) -> float:

@@ -127,7 +127,7 @@ def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
         ("relation_metric.metric", "MODES", "relation_metric.constants", None),
         ("relation_metric.relations", "STRATEGIES", "relation_metric.constants", None),
         ("recovery.recover", "METHODS", "recovery.constants", None),
-        ("recovery.recover", "MAP_MODES", "recovery.constants", None),
+        ("recovery.map_uncertainty", "MAP_MODES", "recovery.constants", None),
         ("recovery.recover", "DEFAULT_ROBUST", "recovery.constants", None),
         ("recovery.ekf", "ROBUST", "recovery.constants", None),
         ("recovery.ekf", "DEFAULT_MAX_OUTLIER_RUN", "recovery.constants", None),

@@ -41,8 +41,10 @@ def _corrupt(b, fraction: float, seed: int):  # type: ignore[no-untyped-def]
 
 @pytest.mark.parametrize("kw", CASES)
 def test_filter_equals_per_step_filterpy(kw: dict) -> None:  # type: ignore[type-arg]
+    # the marginals added to R at every sighting (FilterInput without a joint covariance): the
+    # textbook per-step filter's treatment
     b = simulate_bundle(11, steps=250, map_sigma=(0.02, 0.0), **kw)
-    inp = filter_input(b, map_mode="marginal")
+    inp = replace(filter_input(b, map_mode="marginal"), map_covariance=None)
     fr = run_filter(inp)
     poses, covs, status = filterpy_localisation(inp)
     d = fr.poses - poses
@@ -54,7 +56,7 @@ def test_filter_equals_per_step_filterpy(kw: dict) -> None:  # type: ignore[type
 
 def test_gating_equals_filterpy_and_is_counted() -> None:
     b = _corrupt(simulate_bundle(12, steps=300), 0.05, 1)
-    inp = filter_input(b, map_mode="marginal")
+    inp = replace(filter_input(b, map_mode="marginal"), map_covariance=None)
     fr = run_filter(inp, gate=0.99, max_outlier_run=None)
     poses, covs, status = filterpy_localisation(inp, gate=0.99)
     np.testing.assert_array_equal(fr.status, status)

@@ -198,9 +198,11 @@ def test_divergence_as_dict_from_its_stretches(broken: Recovery) -> None:
 def test_report_is_the_parts_in_order(broken: Recovery) -> None:
     rep = broken.report()
     assert list(rep) == [
-        "method", "map_uncertainty", "poses", "measurements", "divergence", "nis", "nees",
-        "iterations", "robust", "batch",
+        "method", "map_uncertainty", "map_uncertainty_rule", "poses", "measurements",
+        "divergence", "nis", "nees", "iterations", "robust", "batch",
     ]  # fmt: skip
+    assert broken.map_uncertainty is not None
+    assert rep["map_uncertainty_rule"] == broken.map_uncertainty.rule
     assert rep["measurements"] == broken.counts.as_dict()
     assert rep["divergence"] == broken.divergence.as_dict()
     rb, bc = broken.robust, broken.batch
@@ -220,7 +222,8 @@ def test_without_ground_truth_or_robust_update_the_keys_are_absent() -> None:
     assert r.nees is None and r.nees_stats is None and r.divergence.nees_blowups is None
     rep = r.report()
     assert list(rep) == [
-        "method", "map_uncertainty", "poses", "measurements", "divergence", "nis",
+        "method", "map_uncertainty", "map_uncertainty_rule", "poses", "measurements",
+        "divergence", "nis",
     ]  # fmt: skip
     assert "nees_stretches" not in rep["divergence"]  # type: ignore[operator]
     assert r.counts.downweighted == 0 and r.counts.downweight_loss == 0.0

@@ -129,7 +129,11 @@ def test_default_recovery_meets_issue_12_on_mrclam(robot: int) -> None:
 def test_robust_recovery_does_not_hide_a_broken_map():
     """docs/design.md pitfall: on an EKF-SLAM run with 1% wrong associations, a 99.9% gate without
     re-entry makes the map look much better than the run was; the M-estimators (scale from a
-    plain pass) and the re-entering default stay near the online error."""
+    plain pass) and the re-entering default stay near the online error.
+
+    "Near": the smoother and the batch weigh the map by its joint covariance (issue 23), which
+    makes them more accurate than the online filter on broken runs too (measured 0.87–0.88 ×
+    online for the default, Cauchy and Huber; the filter 0.97–0.98 ×); hiding is 0.57 ×."""
     from recovery.recover import recover
     from relation_metric.evaluate import evaluate
     from relation_metric.relations import generate_relations
@@ -152,4 +156,4 @@ def test_robust_recovery_does_not_hide_a_broken_map():
     assert hidden < 0.7 * online  # the oracle can tell hiding from faithfulness
     for kw in ({}, {"robust": "cauchy"}, {"robust": "huber"}):
         r = recover(broken, **kw)
-        assert score(r.trajectory) > 0.9 * online, kw
+        assert score(r.trajectory) > 0.8 * online, kw
