@@ -195,3 +195,34 @@ def write_velocity_euler_bundle(run: Run, directory: Path) -> Path:
         )
     )
     return root
+
+
+# ------------------------------------------------- what a user could write with today's keys
+
+
+def velocity_bundle(run: Run, *, shift: bool = True) -> Bundle:
+    """The run as today's ``velocity`` model (exact arc, row held from its ``t``), in memory.
+
+    ``Cx`` has no exact counterpart there (the velocity noise has no sideways slip): σ_v and
+    σ_ω are Cx's x and θ standard deviations over Δt. ``shift=True`` stamps the control of
+    ``(t_{k-1}, t_k]`` at ``t_{k-1}`` (today's convention); ``shift=False`` writes the
+    client's own stamps (``t_k``), the one-step lag a user gets by not converting them.
+    """
+    cx, dt = run.config.cx, run.config.dt
+    u = run.controls[1:]
+    rows = np.vstack((u, np.zeros((1, 2)))) if shift else run.controls
+    xy, marg, joint = run.client_map()
+    return Bundle(
+        motion=MotionModel("velocity", sigma=(cx[0] / dt, cx[2] / dt)),
+        sensor=sensor_model(run),
+        controls=np.column_stack((run.times, rows)),
+        map_ids=np.arange(xy.shape[0]),
+        map_xy=xy,
+        map_marginals=marg,
+        map_covariance=joint,
+        initial_pose=np.zeros(3),
+        initial_covariance=INITIAL_COVARIANCE,
+        description=f"textbook EKF-SLAM client as today's velocity model (shift={shift})",
+        **_measurement_fields(run),  # type: ignore[arg-type]
+        **_truth_fields(run),  # type: ignore[arg-type]
+    )
