@@ -34,7 +34,6 @@ from slamrel.formats.bundle import write_bundle
 from slamrel.formats.trajectories import write_trajectory
 
 TRUE_ID_OFFSET = 1000
-INITIAL_COVARIANCE = 1e-9 * np.eye(3)  # the client's P0 for the pose
 
 
 def groundtruth(run: Run) -> Trajectory:
@@ -79,7 +78,7 @@ def odometry_bundle(run: Run) -> Bundle:
         map_marginals=marg,
         map_covariance=joint,
         initial_pose=np.zeros(3),
-        initial_covariance=INITIAL_COVARIANCE,
+        initial_covariance=run.initial_covariance,
         description=(
             "textbook EKF-SLAM client (tests/clients/textbook_ekfslam.py), exported as the "
             "odometry model on its own dead reckoning; sigma from Cx "
@@ -152,7 +151,7 @@ def write_velocity_euler_bundle(run: Run, directory: Path) -> Path:
             "sigma_bearing": s.sigma_bearing,
         },
         "initial_pose": [0.0, 0.0, 0.0],
-        "initial_covariance": INITIAL_COVARIANCE.tolist(),
+        "initial_covariance": run.initial_covariance.tolist(),
         "description": "textbook EKF-SLAM client, its own motion model (Euler, stamp end, "
         "world-frame pose noise)",
     }
@@ -221,7 +220,7 @@ def velocity_bundle(run: Run, *, shift: bool = True) -> Bundle:
         map_marginals=marg,
         map_covariance=joint,
         initial_pose=np.zeros(3),
-        initial_covariance=INITIAL_COVARIANCE,
+        initial_covariance=run.initial_covariance,
         description=f"textbook EKF-SLAM client as today's velocity model (shift={shift})",
         **_measurement_fields(run),  # type: ignore[arg-type]
         **_truth_fields(run),  # type: ignore[arg-type]

@@ -19,6 +19,7 @@ from clients.export import (
     groundtruth,
     online,
     true_map_bundle,
+    velocity_bundle,
     write_odometry_bundle,
     write_velocity_euler_bundle,
 )
@@ -29,7 +30,7 @@ from relation_metric.errors import InputError
 from relation_metric.evaluate import evaluate
 from relation_metric.relations import generate_relations
 from relation_metric.trajectory import Trajectory
-from slamrel.formats.bundle import read_bundle
+from slamrel.formats.bundle import read_bundle, write_bundle
 
 METHODS = ("filter", "smoother", "batch")
 MAP_MODES = ("joint", "marginal", "ignore")
@@ -45,13 +46,16 @@ def velocity_euler_supported(bundle: Bundle) -> bool:
 
 
 def export(run: Run, directory: Path, exporter: str = "auto") -> tuple[Bundle, str]:
-    """Write the run as a bundle and read it back: ``("velocity-euler" | "odometry")``.
+    """Write the run as a bundle and read it back; returns the bundle and the exporter used.
 
-    ``"auto"``: the client's own motion model when the reader understands it, else the
-    odometry fallback.
+    ``exporter``: ``"odometry"`` (the fallback), ``"velocity"`` (today's velocity model,
+    stamps converted), ``"velocity-lag"`` (the client's stamps written as they are),
+    ``"velocity-euler"`` (the client's own model, wt-motion keys), or ``"auto"``: the client's
+    own model when the reader understands it, else the odometry fallback.
     """
+    root = Path(directory)
     if exporter in ("auto", "velocity-euler"):
-        path = write_velocity_euler_bundle(run, Path(directory) / "velocity-euler")
+        path = write_velocity_euler_bundle(run, root / "velocity-euler")
         try:
             bundle = read_bundle(path)
         except InputError:
@@ -60,8 +64,13 @@ def export(run: Run, directory: Path, exporter: str = "auto") -> tuple[Bundle, s
         else:
             if velocity_euler_supported(bundle) or exporter == "velocity-euler":
                 return bundle, "velocity-euler"
-    path = write_odometry_bundle(run, Path(directory) / "odometry")
-    return read_bundle(path), "odometry"
+        exporter = "odometry"
+    if exporter == "odometry":
+        return read_bundle(write_odometry_bundle(run, root / "odometry")), exporter
+    if exporter in ("velocity", "velocity-lag"):
+        write_bundle(root / exporter, velocity_bundle(run, shift=exporter == "velocity"))
+        return read_bundle(root / exporter), exporter
+    raise ValueError(f"unknown exporter {exporter!r}")
 
 
 def scorer(run: Run) -> Callable[[Trajectory], float]:
