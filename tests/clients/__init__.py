@@ -1,0 +1,1 @@
+"""Independent SLAM clients for testing slamrel's recovery on filters it was not tuned to."""
