@@ -8,8 +8,14 @@ a measurement whose landmark is not in ``map.csv`` (unless ``skip_unknown_landma
 counts them), and a covariance that is not symmetric positive semi-definite each raise
 :class:`~relation_metric.errors.InputError` naming the file, the line and what was expected.
 
+Measurement times within ``SNAP_TOLERANCE`` (1e-6 s) of a control/odometry time are set to
+that time (``Bundle.snapped``), and measurements outside the log's span are warned about
+(``TimeOrderWarning``, once each, with file and line); an anisotropic world-frame
+``pose_noise`` gives a ``MotionModelWarning``.
+
 Landmark ids are integers. Manifest defaults: ``initial_pose`` ``[0, 0, 0]``,
-``initial_covariance`` ``1e-9 I``, ``description`` empty.
+``initial_covariance`` ``1e-9 I``, ``description`` empty; velocity model ``integration``
+``"arc"``, ``control_stamp`` ``"start"``.
 """
 
 from __future__ import annotations
