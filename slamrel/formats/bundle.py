@@ -422,8 +422,10 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
         meas = {k: v[~unknown] for k, v in meas.items()}
     log_name = "controls.csv" if meta["motion"].type == "velocity" else "odometry.csv"
     log_t = log["controls"][:, 0] if "controls" in log else log["odometry"].timestamps
-    meas, snapped = _snap_measurements(meas, log_t, root / "measurements.csv", log_name)
-    _warn_outside(meas, log_t, meta["motion"], root / "measurements.csv", log_name)
+    snapped = 0
+    if log_t.shape[0] >= 2:  # else the Bundle refuses the log (at least two rows)
+        meas, snapped = _snap_measurements(meas, log_t, root / "measurements.csv", log_name)
+        _warn_outside(meas, log_t, meta["motion"], root / "measurements.csv", log_name)
     return Bundle(
         **meta,
         **log,
