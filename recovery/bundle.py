@@ -66,6 +66,11 @@ class Bundle:
         Rows of each time-stamped file (``controls.csv`` or ``odometry.csv``,
         ``measurements.csv``, ``groundtruth.csv``) that were out of time order by at most
         :data:`~relation_metric.timeorder.FILTER_TIME_TOLERANCE` and were put in order.
+    snapped : int
+        Measurements whose time lay within :data:`recovery.steps.SNAP_TOLERANCE` of a control
+        (or odometry) time without being equal to it and was set to that time by the reader
+        (float noise in the files; otherwise the recovery grid gets a second, almost
+        coincident pose).
 
     Raises
     ------
@@ -102,6 +107,7 @@ class Bundle:
     skipped_unknown: int = 0
     path: str | None = None
     reordered: Mapping[str, int] = field(default_factory=dict)
+    snapped: int = 0
 
     def __post_init__(self) -> None:
         ro = object.__setattr__

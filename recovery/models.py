@@ -12,6 +12,19 @@ Velocity model (Thrun, Burgard & Fox, *Probabilistic Robotics*, Sec. 5.3, exact 
     ``M = diag(σ_v², σ_ω²)`` or (Table 5.3) ``diag(α1 v² + α2 ω², α3 v² + α4 ω²)``, held over
     Δt, gives ``Σ = J_u M J_uᵀ`` with ``J_u = ∂u/∂(v, ω)`` (rank 2).
 
+Velocity model, forward Euler (``integration="euler"``, :func:`euler_increment`)
+    What textbook and popular code writes (``x += v cos θ Δt; y += v sin θ Δt; θ += ω Δt``):
+    a row's body increment is ``[v Δt, 0, ω Δt]``. A piece of the row starting ``s`` seconds
+    after the row's start and lasting ``a`` is ``[v a cos ωs, −v a sin ωs, ω a]`` (the
+    pieces compose to the row's Euler step exactly); its control noise maps through
+    ``∂u/∂(v, ω)`` of the piece.
+
+Pose noise (``pose_noise``, either model, instead of noise on the controls)
+    A 3 × 3 covariance ``C`` per control row or odometry step, in the robot's (``"body"``:
+    ``x ∘ (u + n)``, ``Σ = C``) or the map frame (``"world"``: ``x ∘ u + w``; turned into the
+    body-frame ``Σ = Rot(θ)ᵀ C Rot(θ)`` with the step's dead-reckoning heading ``θ``, exact
+    when :func:`world_noise_is_rotation_invariant`). A fraction ``f`` of a row gets ``f C``.
+
 Odometry model (Probabilistic Robotics, Sec. 5.4)
     ``u = o_k⁻¹ ∘ o_{k+1}``; ``δrot1 = atan2(u_y, u_x)``, ``δtrans = ‖u_xy‖``,
     ``δrot2 = wrap(u_θ − δrot1)`` (``δrot1 = 0`` when ``δtrans`` is 0). Noise either
@@ -36,12 +49,16 @@ from numpy.typing import ArrayLike
 
 from relation_metric import se2
 from relation_metric.arrays import Array
+from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
 
 __all__ = [
     "MotionModel",
+    "MotionModelWarning",
     "SensorModel",
     "velocity_increment",
+    "euler_increment",
+    "world_noise_is_rotation_invariant",
     "velocity_control_covariance",
     "odometry_deltas",
     "odometry_from_deltas",
@@ -52,11 +69,22 @@ __all__ = [
 ]
 
 MOTION_TYPES = ("velocity", "odometry")
+#: ``integration`` of the velocity model: the exact arc, or forward Euler.
+INTEGRATIONS = ("arc", "euler")
+#: ``control_stamp`` of the velocity model: a control row is stamped at the start of the
+#: interval it is held over (row k: ``[t_k, t_{k+1})``) or at its end (``(t_{k−1}, t_k]``).
+CONTROL_STAMPS = ("start", "end")
+#: ``pose_noise.frame``: noise on the body-frame increment, or added in the map frame.
+POSE_NOISE_FRAMES = ("body", "world")
 #: The ``sigma`` entries of each motion model, in order (``bundle.json`` keys).
 SIGMA_NAMES = {
     "velocity": ("sigma_v", "sigma_omega"),
     "odometry": ("sigma_x", "sigma_y", "sigma_theta"),
 }
+
+
+class MotionModelWarning(UserWarning):
+    """A motion model the recovery can state only approximately (e.g. anisotropic world noise)."""
 
 
 def _nonnegative_numbers(values: object, size: int, *, what: str) -> tuple[float, ...]:
@@ -73,6 +101,26 @@ def _nonnegative_numbers(values: object, size: int, *, what: str) -> tuple[float
     return out
 
 
+def _choice(value: object, allowed: tuple[str, ...], *, what: str) -> str:
+    """``value`` when it is one of ``allowed``, else :class:`InputError` naming ``what``."""
+    if not isinstance(value, str) or value not in allowed:
+        shown = repr(value) if isinstance(value, str) else f"{value!s:.60}"
+        raise InputError(f"{what}: unknown value {shown}; expected one of {', '.join(allowed)}")
+    return value
+
+
+def _covariance_3x3(values: object, *, what: str) -> tuple[tuple[float, ...], ...]:
+    """``values`` as three rows of 3 floats, finite, symmetric and PSD, else :class:`InputError`."""
+    try:
+        mat = np.array(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected a 3 x 3 matrix, got {values!s:.60}") from None
+    if mat.shape != (3, 3):
+        raise InputError(f"{what}: expected a 3 x 3 matrix, got shape {mat.shape}")
+    check_covariances(mat[None], what=what)
+    return tuple(tuple(float(v) for v in row) for row in mat)
+
+
 @dataclass(frozen=True)
 class MotionModel:
     """A motion model of the bundle.
@@ -84,21 +132,43 @@ class MotionModel:
         ``(σ_v, σ_ω)`` for velocity, ``(σ_x, σ_y, σ_θ)`` for odometry.
     alpha : tuple of float or None
         ``(α1, α2, α3, α4)`` of Probabilistic Robotics Table 5.3 / 5.6.
+    integration : {"arc", "euler"}
+        Velocity model only: the exact arc (default) or forward Euler (:func:`euler_increment`).
+    control_stamp : {"start", "end"}
+        Velocity model only: row ``k`` is held over ``[t_k, t_{k+1})`` (``"start"``, default;
+        the last row only closes the log) or over ``(t_{k−1}, t_k]`` (``"end"``; the first row
+        only opens the log).
+    pose_noise_frame : {"body", "world"} or None
+        The frame of ``pose_noise``.
+    pose_noise : tuple of 3 tuples of 3 floats, or None
+        Process noise ``C`` on the pose, once per control row (velocity) or odometry step,
+        instead of noise on the controls: ``x ∘ (u + n)`` (``"body"``) or ``x ∘ u + w``
+        (``"world"``), ``n, w ~ N(0, C)``.
 
-    Exactly one of ``sigma`` and ``alpha`` is set; each is stored as a tuple of float.
+    Exactly one of ``sigma``, ``alpha`` and ``pose_noise`` is set; ``sigma`` and ``alpha`` are
+    stored as tuples of float, ``pose_noise`` as a tuple of three rows of float.
 
     Raises
     ------
     InputError
         When ``type`` is not one of :data:`MOTION_TYPES` (``"Velocity"`` is refused, not run
-        as odometry), when neither or both of ``sigma`` and ``alpha`` are given, or when one of
-        them has the wrong length or a negative or non-finite entry; the message names the
-        field.
+        as odometry), when not exactly one of ``sigma``, ``alpha`` and ``pose_noise`` is given,
+        when one of them has the wrong length or a negative or non-finite entry, when
+        ``pose_noise`` is not a 3 × 3 symmetric positive semi-definite matrix
+        (:func:`relation_metric.checks.check_covariances`) or comes without its frame (or a
+        frame without it), when ``integration``, ``control_stamp`` or ``pose_noise_frame`` is
+        not one of its allowed values, or when the odometry model is given an ``integration``
+        or ``control_stamp`` other than the defaults (they are the velocity model's); the
+        message names the field.
     """
 
     type: str
     sigma: tuple[float, ...] | None = None
     alpha: tuple[float, ...] | None = None
+    integration: str = "arc"
+    control_stamp: str = "start"
+    pose_noise_frame: str | None = None
+    pose_noise: tuple[tuple[float, ...], ...] | None = None
 
     def __post_init__(self) -> None:
         if self.type not in MOTION_TYPES:
@@ -107,21 +177,58 @@ class MotionModel:
                 f"{', '.join(MOTION_TYPES)}"
             )
         names = SIGMA_NAMES[self.type]
-        if (self.sigma is None) == (self.alpha is None):
+        given = [f for f in ("sigma", "alpha", "pose_noise") if getattr(self, f) is not None]
+        if len(given) != 1:
             raise InputError(
-                f"motion_model ({self.type}): expected either sigma ({', '.join(names)}) or "
-                "alpha (alpha1..alpha4), exactly one of them"
+                f"motion_model ({self.type}): expected either sigma ({', '.join(names)}), "
+                "alpha (alpha1..alpha4) or pose_noise, exactly one of them"
+                + (f"; got {' and '.join(given)}" if given else "")
             )
+        _choice(self.integration, INTEGRATIONS, what="motion_model.integration")
+        _choice(self.control_stamp, CONTROL_STAMPS, what="motion_model.control_stamp")
+        if self.type == "odometry":
+            for name, default in (("integration", "arc"), ("control_stamp", "start")):
+                if getattr(self, name) != default:
+                    raise InputError(
+                        f"motion_model.{name}: applies to the velocity model only; expected "
+                        f"no {name} for the odometry model"
+                    )
+        if given == ["pose_noise"]:
+            if self.pose_noise_frame is None:
+                raise InputError(
+                    "motion_model.pose_noise.frame: missing; expected one of "
+                    + ", ".join(POSE_NOISE_FRAMES)
+                )
+            _choice(self.pose_noise_frame, POSE_NOISE_FRAMES, what="motion_model.pose_noise.frame")
+            cov = _covariance_3x3(self.pose_noise, what="motion_model.pose_noise.covariance")
+            object.__setattr__(self, "pose_noise", cov)
+            return
+        if self.pose_noise_frame is not None:
+            raise InputError("motion_model.pose_noise.frame: given without pose_noise.covariance")
         field_name, size = ("sigma", len(names)) if self.alpha is None else ("alpha", 4)
         values = _nonnegative_numbers(
             getattr(self, field_name), size, what=f"motion_model.{field_name} ({self.type})"
         )
         object.__setattr__(self, field_name, values)
 
+    @property
+    def pose_noise_matrix(self) -> Array | None:
+        """``pose_noise`` as a (3, 3) array (a new one each call), None without pose noise."""
+        return None if self.pose_noise is None else np.array(self.pose_noise, dtype=np.float64)
+
     def as_dict(self) -> dict[str, object]:
+        """The ``bundle.json`` object of the model: every key that applies to its type."""
         out: dict[str, object] = {"type": self.type}
+        if self.type == "velocity":
+            out["integration"] = self.integration
+            out["control_stamp"] = self.control_stamp
         if self.alpha is not None:
             out["alpha"] = list(self.alpha)
+        elif self.pose_noise is not None:
+            out["pose_noise"] = {
+                "frame": self.pose_noise_frame,
+                "covariance": [list(row) for row in self.pose_noise],
+            }
         else:
             out.update(zip(SIGMA_NAMES[self.type], self.sigma or ()))
         return out
@@ -191,6 +298,71 @@ def velocity_increment(v: ArrayLike, omega: ArrayLike, dt: ArrayLike) -> tuple[A
     j[..., 1, 1] = s * db * dt
     j[..., 2, 1] = dt
     return u, j
+
+
+def euler_increment(
+    v: ArrayLike, omega: ArrayLike, dt: ArrayLike, offset: ArrayLike = 0.0
+) -> tuple[Array, Array]:
+    """Body-frame increment of a piece of a forward-Euler velocity row, and its Jacobian.
+
+    The Euler row ``x += v cos θ Δt, y += v sin θ Δt, θ += ω Δt`` is the body increment
+    ``[v Δt, 0, ω Δt]``: the robot moves along the heading it had at the row's start. A piece
+    starting ``offset`` (``s``) seconds after the row's start, of duration ``dt`` (``a``), keeps
+    that: it moves along the row's initial heading, which is ``−ω s`` in the piece's own frame,
+
+    ``u = [v a cos ωs, −v a sin ωs, ω a]``,
+
+    so the pieces of a row compose to its Euler step exactly (in exact arithmetic).
+
+    Parameters
+    ----------
+    v, omega, dt, offset : array_like, shape (...)
+
+    Returns
+    -------
+    u : ndarray, shape (..., 3)
+    j_u : ndarray, shape (..., 3, 2)
+        ``∂u/∂(v, ω)``.
+    """
+    v, omega, dt, s = np.broadcast_arrays(
+        *(np.asarray(a, dtype=np.float64) for a in (v, omega, dt, offset))
+    )
+    c, n = np.cos(omega * s), np.sin(omega * s)
+    d = v * dt
+    u = np.stack((d * c, -d * n, omega * dt), axis=-1)
+    j = np.zeros(v.shape + (3, 2))
+    j[..., 0, 0] = dt * c
+    j[..., 1, 0] = -dt * n
+    j[..., 0, 1] = -d * s * n
+    j[..., 1, 1] = -d * s * c
+    j[..., 2, 1] = dt
+    return u, j
+
+
+def world_noise_is_rotation_invariant(cov: ArrayLike) -> bool:
+    """Is ``Rot(θ) C Rot(θ)ᵀ = C`` for every ``θ``? (``c_xx = c_yy``, ``c_xy = c_xθ = c_yθ = 0``).
+
+    Then a world-frame pose noise ``C`` is the body-frame ``Σ = C`` exactly, whatever the
+    heading; otherwise the recovery's conversion with the dead-reckoning heading is an
+    approximation. Within a relative ``1e-9`` of the largest entry (the covariance checks').
+    """
+    c = np.asarray(cov, dtype=np.float64)
+    tol = 1e-9 * float(np.abs(c).max(initial=0.0))
+    off = (c[0, 0] - c[1, 1], c[0, 1], c[1, 0], c[0, 2], c[2, 0], c[1, 2], c[2, 1])
+    return all(abs(float(x)) <= tol for x in off)
+
+
+def _rotation(theta: ArrayLike) -> Array:
+    """``Rot(θ)`` (..., 3, 3): the x, y block rotated by ``θ``, 1 for the heading."""
+    th = np.asarray(theta, dtype=np.float64)
+    c, s = np.cos(th), np.sin(th)
+    rot = np.zeros(th.shape + (3, 3))
+    rot[..., 0, 0] = c
+    rot[..., 0, 1] = -s
+    rot[..., 1, 0] = s
+    rot[..., 1, 1] = c
+    rot[..., 2, 2] = 1.0
+    return rot
 
 
 def velocity_control_covariance(
@@ -270,7 +442,9 @@ def odometry_delta_covariance(delta: ArrayLike, alpha: tuple[float, ...]) -> Arr
     return m
 
 
-def increment_covariance(model: MotionModel, u: ArrayLike, aux: ArrayLike) -> Array:
+def increment_covariance(
+    model: MotionModel, u: ArrayLike, aux: ArrayLike, *, heading: ArrayLike | None = None
+) -> Array:
     """Body-frame covariance ``Σ`` (..., 3, 3) of increments ``u``.
 
     Parameters
@@ -280,12 +454,33 @@ def increment_covariance(model: MotionModel, u: ArrayLike, aux: ArrayLike) -> Ar
         The increments.
     aux : array_like
         Velocity model: the ``(..., 4)`` array ``[v, ω, Δt, scale]`` each increment came from
-        (``scale`` multiplies ``M``); odometry model: ``(...,)`` scale on ``Σ``.
+        (``scale`` multiplies ``M``; a piece of a row of duration ``Δt_row`` has ``scale =
+        Δt_row / Δt``), or ``(..., 5)`` with the piece's ``offset`` into its row appended (forward
+        Euler; 0 when missing); odometry model: ``(...,)`` scale on ``Σ`` (the fraction of the
+        step). With ``pose_noise`` the piece's share of the row is ``1 / scale`` (velocity) or
+        the scale (odometry).
+    heading : array_like, shape (...), optional
+        The heading each increment starts from; needed (only) by world-frame ``pose_noise``,
+        which is turned into the body frame with it: ``Σ = Rot(θ)ᵀ f C Rot(θ)``.
     """
     aux = np.asarray(aux, dtype=np.float64)
+    if model.pose_noise is not None:
+        cov = np.asarray(model.pose_noise, dtype=np.float64)
+        frac = 1.0 / aux[..., 3] if model.type == "velocity" else aux
+        sig = frac[..., None, None] * cov
+        if model.pose_noise_frame == "world":
+            if heading is None:
+                raise ValueError("world-frame pose noise needs the heading of each increment")
+            rot = _rotation(np.broadcast_to(np.asarray(heading, float), frac.shape))
+            sig = np.einsum("...ai,...ab,...bj->...ij", rot, sig, rot)
+        return sig
     if model.type == "velocity":
-        v, w, dt, scale = np.moveaxis(aux, -1, 0)
-        _, j = velocity_increment(v, w, dt)
+        v, w, dt, scale = np.moveaxis(aux[..., :4], -1, 0)
+        if model.integration == "euler":
+            offset = aux[..., 4] if aux.shape[-1] > 4 else 0.0
+            _, j = euler_increment(v, w, dt, offset)
+        else:
+            _, j = velocity_increment(v, w, dt)
         m = velocity_control_covariance(v, w, sigma=model.sigma, alpha=model.alpha)
         m = m * scale[..., None, None]
         return np.einsum("...ia,...ab,...jb->...ij", j, m, j)
@@ -302,14 +497,7 @@ def increment_covariance(model: MotionModel, u: ArrayLike, aux: ArrayLike) -> Ar
 
 def process_noise(theta: ArrayLike, sigma_u: ArrayLike) -> Array:
     """World-frame process noise ``Q = Rot(θ) Σ Rot(θ)ᵀ`` (..., 3, 3) of ``x ∘ (u + n)``."""
-    th = np.asarray(theta, dtype=np.float64)
-    c, s = np.cos(th), np.sin(th)
-    rot = np.zeros(th.shape + (3, 3))
-    rot[..., 0, 0] = c
-    rot[..., 0, 1] = -s
-    rot[..., 1, 0] = s
-    rot[..., 1, 1] = c
-    rot[..., 2, 2] = 1.0
+    rot = _rotation(theta)
     return np.einsum("...ia,...ab,...jb->...ij", rot, np.asarray(sigma_u, float), rot)
 
 

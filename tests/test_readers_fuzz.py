@@ -233,9 +233,12 @@ def _same(a: Any, b: Any) -> bool:
     )
 
 
-def _read_quietly(reader: Reader, folder: Path) -> Any:
+def _read_quietly(reader: Reader, folder: Path, allow: str | None = None) -> Any:
+    """Read with every warning an error, except those whose message matches ``allow``."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
+        if allow is not None:
+            warnings.filterwarnings("ignore", message=allow)
         return reader.read(folder)
 
 
@@ -278,12 +281,15 @@ def test_cut_off_last_line_is_skipped_even_when_it_parses(tmp_path, name):
         cut = text[:-1]
         shorter = cut[: cut.rfind("\n") + 1]
         _write(tmp_path / "short", {**files, target: shorter})
-        expected = _read_quietly(reader, tmp_path / "short")
+        # a control row fewer can leave a measurement past the log: warned about, not an error
+        expected = _read_quietly(reader, tmp_path / "short", allow=".*outside the span")
         _write(tmp_path / "cut", {**files, target: cut})
         line = cut.count("\n") + 1
         where = f"{tmp_path / 'cut' / target}:{line}: no newline at the end: the last line looks"
         with pytest.warns(TruncatedLineWarning) as caught:
             got = reader.read(tmp_path / "cut")
+        # a cut-off last control row can leave a measurement past the log: warned about too
+        caught = [w for w in caught if "outside the span" not in str(w.message)]
         assert [str(w.message).startswith(where) for w in caught] == [True], (name, target)
         if hasattr(got, "skipped"):  # a trajectory counts what it left out
             assert got.skipped == {**expected.skipped, "truncated last line": 1}

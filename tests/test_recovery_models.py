@@ -146,7 +146,13 @@ def test_motion_and_sensor_models_store_floats_and_round_trip() -> None:
 
     m = MotionModel("velocity", sigma=[np.float64(0.1), 1])  # type: ignore[arg-type]
     assert m.sigma == (0.1, 1.0) and all(type(v) is float for v in m.sigma)
-    assert m.as_dict() == {"type": "velocity", "sigma_v": 0.1, "sigma_omega": 1.0}
+    assert m.as_dict() == {
+        "type": "velocity",
+        "integration": "arc",
+        "control_stamp": "start",
+        "sigma_v": 0.1,
+        "sigma_omega": 1.0,
+    }
     o = MotionModel("odometry", alpha=(0.1, 0.2, 0.3, 0.4))
     assert o.as_dict() == {"type": "odometry", "alpha": [0.1, 0.2, 0.3, 0.4]}
     assert SensorModel(0.0, 0.0).covariance.sum() == 0.0  # noise-free simulation allowed

@@ -558,11 +558,14 @@ def ekf_slam_bundle(
 
 
 def _scaled(motion: MotionModel, k: float) -> MotionModel:
-    """``motion`` with its standard deviations times ``k`` (``α`` times ``k²``)."""
+    """``motion`` with its standard deviations times ``k`` (``α``, ``pose_noise`` times ``k²``)."""
     if k == 1.0:
         return motion
     return replace(
         motion,
         sigma=None if motion.sigma is None else tuple(k * s for s in motion.sigma),
         alpha=None if motion.alpha is None else tuple(k**2 * a for a in motion.alpha),
+        pose_noise=None
+        if motion.pose_noise is None
+        else tuple(tuple(k**2 * c for c in row) for row in motion.pose_noise),
     )

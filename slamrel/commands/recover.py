@@ -73,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from recovery.recover import recover
+    from recovery.steps import SNAP_TOLERANCE
     from relation_metric.timeorder import FILTER_TIME_TOLERANCE
     from slamrel.formats.bundle import read_bundle
     from slamrel.formats.results import write_json
@@ -103,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
     report["gate"] = args.gate
     # rows put in time order under the filter-log rule (relation_metric.timeorder)
     report["reordered"] = dict(bundle.reordered)
+    if bundle.snapped:  # measurement times snapped to a control/odometry time (float noise)
+        report["snapped"] = bundle.snapped
     report.setdefault("robust", None)
     if args.report:
         write_json(args.report, report)
@@ -121,6 +124,11 @@ def run(args: argparse.Namespace) -> int:
                 "put in time order (steps back of at most "
                 f"{FILTER_TIME_TOLERANCE:g} s): "
                 + ", ".join(f"{n} row(s) of {name}" for name, n in moved.items())
+            )
+        if bundle.snapped:
+            print(
+                f"snapped to a control/odometry time (within {SNAP_TOLERANCE:g} s): "
+                f"{bundle.snapped} measurement time(s)"
             )
         if args.robust != "none":
             print(

@@ -8,8 +8,14 @@ a measurement whose landmark is not in ``map.csv`` (unless ``skip_unknown_landma
 counts them), and a covariance that is not symmetric positive semi-definite each raise
 :class:`~relation_metric.errors.InputError` naming the file, the line and what was expected.
 
+Measurement times within ``SNAP_TOLERANCE`` (1e-6 s) of a control/odometry time are set to
+that time (``Bundle.snapped``), and measurements outside the log's span are warned about
+(``TimeOrderWarning``, once each, with file and line); an anisotropic world-frame
+``pose_noise`` gives a ``MotionModelWarning``.
+
 Landmark ids are integers. Manifest defaults: ``initial_pose`` ``[0, 0, 0]``,
-``initial_covariance`` ``1e-9 I``, ``description`` empty.
+``initial_covariance`` ``1e-9 I``, ``description`` empty; velocity model ``integration``
+``"arc"``, ``control_stamp`` ``"start"``.
 """
 
 from __future__ import annotations
@@ -26,7 +32,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recovery.bundle import Bundle
-from recovery.models import MOTION_TYPES, SIGMA_NAMES, MotionModel, SensorModel
+from recovery.models import (
+    CONTROL_STAMPS,
+    INTEGRATIONS,
+    MOTION_TYPES,
+    POSE_NOISE_FRAMES,
+    SIGMA_NAMES,
+    MotionModel,
+    MotionModelWarning,
+    SensorModel,
+    world_noise_is_rotation_invariant,
+)
+from recovery.steps import SNAP_TOLERANCE, snap_times
 from relation_metric.arrays import Array, PathLike
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
@@ -101,14 +118,33 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
             path=path,
             line=_line_of_key(text, "type") if kind is not None else line,
         )
+    integration, stamp = _motion_options(spec, kind, text, path)
     names = SIGMA_NAMES[kind]
+    forms = [
+        form
+        for form, given in (
+            (", ".join(names), any(n in spec for n in names)),
+            ("alpha", "alpha" in spec),
+            ("pose_noise", "pose_noise" in spec),
+        )
+        if given
+    ]
+    if len(forms) > 1:
+        raise InputError(
+            f"motion_model: give either {' or '.join(forms)}, not both",
+            path=path,
+            line=line,
+        )
+    if "pose_noise" in spec:
+        frame, cov = _parse_pose_noise(spec["pose_noise"], text, path)
+        return MotionModel(
+            kind,
+            pose_noise_frame=frame,
+            pose_noise=cov,
+            integration=integration,
+            control_stamp=stamp,
+        )
     if "alpha" in spec:
-        if any(n in spec for n in names):
-            raise InputError(
-                f"motion_model: give either alpha or {', '.join(names)}, not both",
-                path=path,
-                line=line,
-            )
         alpha = _numbers(
             spec["alpha"],
             4,
@@ -117,12 +153,12 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
             line=_line_of_key(text, "alpha"),
             minimum=0.0,
         )
-        return MotionModel(kind, alpha=alpha)
+        return MotionModel(kind, alpha=alpha, integration=integration, control_stamp=stamp)
     missing = [n for n in names if n not in spec]
     if missing:
         raise InputError(
             f"motion_model ({kind}): missing {', '.join(missing)}; "
-            f"expected {', '.join(names)} or alpha",
+            f"expected {', '.join(names)}, alpha or pose_noise",
             path=path,
             line=line,
         )
@@ -130,7 +166,73 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
         _number(spec[n], what=f"motion_model.{n}", path=path, line=_line_of_key(text, n))
         for n in names
     )
-    return MotionModel(kind, sigma=sigma)
+    return MotionModel(kind, sigma=sigma, integration=integration, control_stamp=stamp)
+
+
+def _motion_options(spec: dict[str, Any], kind: str, text: str, path: str) -> tuple[str, str]:
+    """``integration`` and ``control_stamp`` (velocity model only; defaults when absent)."""
+    out = {"integration": "arc", "control_stamp": "start"}
+    for key, allowed in (("integration", INTEGRATIONS), ("control_stamp", CONTROL_STAMPS)):
+        if key not in spec:
+            continue
+        where = _line_of_key(text, key)
+        if kind != "velocity":
+            raise InputError(
+                f"motion_model.{key}: applies to the velocity model only; expected no {key} "
+                f"for the {kind} model",
+                path=path,
+                line=where,
+            )
+        value = spec[key]
+        if value not in allowed or not isinstance(value, str):
+            raise InputError(
+                f"motion_model.{key}: unknown value {_shown(value)}; expected one of "
+                f"{', '.join(allowed)}",
+                path=path,
+                line=where,
+            )
+        out[key] = value
+    return out["integration"], out["control_stamp"]
+
+
+def _parse_pose_noise(spec: Any, text: str, path: str) -> tuple[str, tuple[tuple[float, ...], ...]]:
+    """``pose_noise``: its ``frame`` and its 3 × 3 symmetric PSD ``covariance``."""
+    line = _line_of_key(text, "pose_noise")
+    if not isinstance(spec, dict):
+        raise InputError(
+            "motion_model.pose_noise: expected an object with frame and covariance",
+            path=path,
+            line=line,
+        )
+    for key in ("frame", "covariance"):
+        if key not in spec:
+            raise InputError(f"motion_model.pose_noise: missing {key}", path=path, line=line)
+    frame = spec["frame"]
+    if not isinstance(frame, str) or frame not in POSE_NOISE_FRAMES:
+        raise InputError(
+            f"motion_model.pose_noise.frame: unknown value {_shown(frame)}; expected one of "
+            f"{', '.join(POSE_NOISE_FRAMES)}",
+            path=path,
+            line=_line_of_key(text, "frame") or line,
+        )
+    what = "motion_model.pose_noise.covariance"
+    where = _line_of_key(text, "covariance") or line
+    cov = spec["covariance"]
+    if not isinstance(cov, list) or len(cov) != 3:
+        raise InputError(f"{what}: expected a 3 x 3 list of lists", path=path, line=where)
+    rows = tuple(_numbers(r, 3, what=what, path=path, line=where, minimum=None) for r in cov)
+    mat = np.array(rows)
+    _check_psd(mat, what=what, path=path, line=where)
+    if frame == "world" and not world_noise_is_rotation_invariant(mat):
+        warnings.warn(
+            f"{path}:{where}: {what}: a world-frame covariance that is not isotropic in x-y "
+            "with zero x-theta and y-theta terms; the recovery turns it into the robot frame "
+            "with the dead-reckoning heading of each step, an approximation where the "
+            "filter's heading differs (docs/bundle.md, Motion models)",
+            MotionModelWarning,
+            stacklevel=4,
+        )
+    return frame, rows
 
 
 def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
@@ -318,6 +420,12 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
         )
         skipped = int(unknown.sum())
         meas = {k: v[~unknown] for k, v in meas.items()}
+    log_name = "controls.csv" if meta["motion"].type == "velocity" else "odometry.csv"
+    log_t = log["controls"][:, 0] if "controls" in log else log["odometry"].timestamps
+    snapped = 0
+    if log_t.shape[0] >= 2:  # else the Bundle refuses the log (at least two rows)
+        meas, snapped = _snap_measurements(meas, log_t, root / "measurements.csv", log_name)
+        _warn_outside(meas, log_t, meta["motion"], root / "measurements.csv", log_name)
     return Bundle(
         **meta,
         **log,
@@ -327,6 +435,79 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
         skipped_unknown=skipped,
         path=str(root),
         reordered=reordered,
+        snapped=snapped,
+    )
+
+
+def _snap_measurements(
+    meas: dict[str, Any], log_t: Array, path: Path, log_name: str
+) -> tuple[dict[str, Any], int]:
+    """Measurement times within ``SNAP_TOLERANCE`` of a log time set to it, counted and warned.
+
+    Times written with a few decimals (``0.3``) next to times computed in float
+    (``0.30000000000000004``) would otherwise cut a control row into a piece of 10⁻¹⁷ s and
+    the rest: a second pose on the recovery grid for every such measurement.
+    """
+    t, moved = snap_times(meas["measurement_times"], log_t)
+    hit = np.flatnonzero(moved != 0.0)
+    if not hit.size:
+        return meas, 0
+    first = int(hit[0])
+    line = int(meas["measurement_lines"][first])
+    warnings.warn(
+        f"{path}:{line}: {hit.size} measurement time(s) within {SNAP_TOLERANCE:g} s of a "
+        f"{log_name} time but not equal to it (largest difference "
+        f"{float(np.abs(moved).max()):.3g} s; first t = {float(meas['measurement_times'][first])!r}"
+        f" vs {float(t[first])!r}); snapped to that time, so that float noise does not split "
+        "the recovery grid",
+        TimeOrderWarning,
+        stacklevel=3,
+    )
+    out = dict(meas, measurement_times=t)
+    if (np.diff(t) < 0).any():  # two log times closer than 2 SNAP_TOLERANCE: keep time order
+        order = np.argsort(t, kind="stable")
+        out = {k: v[order] for k, v in out.items()}
+    return out, int(hit.size)
+
+
+def _warn_outside(
+    meas: dict[str, Any], log_t: Array, motion: MotionModel, path: Path, log_name: str
+) -> None:
+    """Warn once about measurements before the first or after the last log row (never used)."""
+    t = meas["measurement_times"]
+    t0, t1 = float(log_t[0]), float(log_t[-1])
+    out = np.flatnonzero((t < t0) | (t > t1))
+    if not out.size:
+        return
+    first = int(out[0])
+    after = int((t > t1).sum())
+    why = []
+    if after:
+        why.append(
+            f"{after} after the last row of {log_name}"
+            + (
+                ' (with control_stamp "start" the last row only closes the log: its v, omega '
+                "are never used, so a log ends with a row at or after its last measurement)"
+                if motion.type == "velocity" and motion.control_stamp == "start"
+                else ""
+            )
+        )
+    if out.size > after:
+        why.append(
+            f"{out.size - after} before its first row"
+            + (
+                ' (with control_stamp "end" the first row only opens the log: its v, omega '
+                "are never used)"
+                if motion.type == "velocity" and motion.control_stamp == "end"
+                else ""
+            )
+        )
+    warnings.warn(
+        f"{path}:{int(meas['measurement_lines'][first])}: {out.size} measurement(s) outside the "
+        f"span [{t0:.17g}, {t1:.17g}] s of {log_name}, first at t = {float(t[first])!r}: "
+        f"{'; '.join(why)}; they are counted as outside and not used",
+        TimeOrderWarning,
+        stacklevel=3,
     )
 
 
