@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, NamedTuple
 
+import numpy as np
+
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, NisStats
 from relation_metric.consistency import OUTLIER_PROBABILITY
 from slamrel.plots.maps import map_figure
@@ -100,6 +102,22 @@ def report_figures(result: RunResult) -> RunFigures:
     return RunFigures(trajectories, errors, nees, _map_figure(result))
 
 
+def _anchoring_table(result: RunResult) -> list[Table]:
+    """The map's anchoring to the truth frame (the transform the NEES was computed after)."""
+    frame = result.nees_frame
+    a = None if frame is None else frame.anchoring
+    if a is None:
+        return []
+    dtheta_deg = float(np.degrees(a.dtheta))
+    return [
+        Table(
+            "Anchoring of the map frame in the truth frame (truth ← map, fitted on landmarks)",
+            ["dx [m]", "dy [m]", "dθ [deg]", "landmarks", "association", "rms residual [m]"],
+            [[a.dx, a.dy, dtheta_deg, a.landmarks, a.association, a.rms_residual]],
+        )
+    ]
+
+
 def _map_figure(result: RunResult) -> Figure | None:
     if result.map_comparison is None:
         return None
@@ -124,17 +142,35 @@ def report_sections(
         tables=[_stats_table(result, "translation"), _stats_table(result, "rotation")],
         figures=[figures.trajectories, figures.errors],
     )
+    frame = result.nees_frame
+    unaligned = result.nees_truth_frame
     consistency = Section(
         "Consistency",
+        paragraphs=[] if frame is None else [f"NEES frame: {frame.description}."],
         tables=[
             Table(
                 "NEES (3 dof) of the pose estimates",
-                ["estimate", "mean", "band low", "band high", "fraction inside"],
                 [
-                    [k, v.summary.mean, v.summary.band[0], v.summary.band[1], v.summary.inside]
+                    "estimate",
+                    "mean",
+                    "band low",
+                    "band high",
+                    "fraction inside",
+                    "mean in the truth frame (unaligned)",
+                ],
+                [
+                    [
+                        k,
+                        v.summary.mean,
+                        v.summary.band[0],
+                        v.summary.band[1],
+                        v.summary.inside,
+                        unaligned[k].mean if k in unaligned else None,
+                    ]
                     for k, v in result.nees.items()
                 ],
-            )
+            ),
+            *_anchoring_table(result),
         ],
         figures=[figures.nees],
     )
