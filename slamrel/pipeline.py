@@ -50,9 +50,8 @@ from relation_metric.stats import Summary
 from relation_metric.time_association import match_nearest_times, nearest_index
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.ekf_slam import ekf_slam_bundle
-from slamrel.formats.bundle import read_bundle, write_bundle
+from slamrel.formats.bundle import read_bundle, read_online, write_bundle
 from slamrel.formats.results import write_json, write_per_relation_csv
-from slamrel.formats.trajectories import read_trajectory
 from slamrel.outputs import staged_directory, write_text_atomic
 from slamrel.report.html import render_html
 from slamrel.report.run_page import report_figures, report_sections
@@ -294,14 +293,18 @@ def read_run_input(directory: str | Path) -> RunInput:
 
     The bundle (``docs/bundle.md``) is scored against its ``groundtruth.csv`` (required by
     :func:`score_bundle`) and, when present, ``landmarks_groundtruth.csv``; an ``online.csv``
-    beside it (written by ``slamrel slam --store-online``) is scored too.
+    beside it (written by ``slamrel slam --store-online``) is scored too, and with its
+    covariance columns gets an online NEES (:func:`slamrel.formats.bundle.read_online`).
     """
     bundle = read_bundle(directory)
     online_path = Path(directory) / "online.csv"
-    online = (
-        read_trajectory(online_path, format="csv").trajectory if online_path.is_file() else None
-    )
-    return RunInput(bundle, name=str(directory), online=online)
+    if not online_path.is_file():
+        return RunInput(bundle, name=str(directory))
+    online = read_online(online_path)
+    return RunInput(
+        bundle, name=str(directory), online=online.trajectory,
+        online_covariance=online.covariances,
+    )  # fmt: skip
 
 
 def simulate_run_input(
