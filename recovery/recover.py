@@ -32,6 +32,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from recovery.anchoring import Anchoring, NeesFrame, start_frame
 from recovery.bundle import Bundle
 from recovery.constants import BATCH_MAX_ITERATIONS, DEFAULT_ROBUST, METHODS
 from recovery.ekf import (
@@ -565,6 +566,12 @@ class Recovery:
         NIS of the filter's innovations.
     nees_stats : NeesStats or None
         Summary of ``nees`` (``None`` without ground truth).
+    nees_frame : NeesFrame or None
+        The frame ``nees`` is computed in (:mod:`recovery.anchoring`): the map frame anchored
+        to the truth on the landmarks, or the truth frame (``None`` without ground truth).
+    nees_stats_truth_frame : NeesStats or None
+        The NEES summary with the poses compared with the ground truth as they are, unaligned
+        (equal to ``nees_stats`` when the frame is the truth frame).
     iterations : int
         Batch iterations (0 for the filter and the smoother).
     robust : RobustSettings or None
@@ -596,6 +603,8 @@ class Recovery:
     weights: Array | None = None
     map_uncertainty: MapUncertainty | None = None
     map_correction: Array | None = None
+    nees_frame: NeesFrame | None = None
+    nees_stats_truth_frame: NeesStats | None = None
 
     @property
     def stretches(self) -> tuple[Stretch, ...]:
@@ -622,6 +631,10 @@ class Recovery:
         }
         if self.nees_stats is not None:
             out["nees"] = self.nees_stats.as_dict()
+        if self.nees_frame is not None:
+            out["nees_frame"] = self.nees_frame.as_dict()
+        if self.nees_stats_truth_frame is not None:
+            out["nees_truth_frame"] = self.nees_stats_truth_frame.as_dict()
         if self.method == "batch":
             out["iterations"] = self.iterations
         if self.robust is not None:
@@ -667,12 +680,19 @@ def filter_input(
     )
 
 
-def pose_nees_against(truth: Trajectory, times: Array, poses: Array, covs: Array) -> Array:
-    """NEES at the grid times that equal a ground-truth time (within 1 µs), NaN elsewhere."""
+def pose_nees_against(
+    truth: Trajectory, times: Array, poses: Array, covs: Array, anchoring: Anchoring | None = None
+) -> Array:
+    """NEES at the grid times that equal a ground-truth time (within 1 µs), NaN elsewhere.
+
+    With ``anchoring`` (truth ← map, :mod:`recovery.anchoring`) the poses and covariances
+    are first taken into the truth frame; without, they are compared as they are.
+    """
     at, gt = match_nearest_times(times, truth.timestamps, 1e-6)
     out = np.full(times.shape[0], np.nan)
     if at.size:
-        out[at] = consistency.pose_nees(poses[at], truth.poses[gt], covs[at])
+        p, c = (poses[at], covs[at]) if anchoring is None else anchoring.apply(poses[at], covs[at])
+        out[at] = consistency.pose_nees(p, truth.poses[gt], c)
     return out
 
 
@@ -688,6 +708,7 @@ def recover(
     robust_threshold: float | None = None,
     robust_scale: float | str = "auto",
     progress: bool = False,
+    nees_frame: NeesFrame | None = None,
 ) -> Recovery:
     """Recover the trajectory of a SLAM run by localisation in its final map.
 
@@ -737,6 +758,12 @@ def recover(
         weighted away. The filter then runs with ``c_eff = c ŝ``.
     progress : bool
         tqdm bar on the filter's epochs.
+    nees_frame : NeesFrame, optional
+        The frame of the NEES against ground truth. Default: the map frame anchored to the
+        truth on the landmarks the map shares by id with ``landmarks_groundtruth``
+        (:meth:`NeesFrame.by_id`; the truth frame when fewer than 2). Aligned, the first
+        grid pose (the prior) has no NEES. The unaligned NEES is kept beside it
+        (``nees_stats_truth_frame``).
 
     Returns
     -------
@@ -792,9 +819,22 @@ def recover(
             costs = BatchCosts(cost_initial=br.cost_initial, cost_final=br.cost_final)
     covs, n_repaired = _check_finite(poses, covs, inp.times, repair=on_divergence != "raise")
     traj = Trajectory(inp.times, poses)
-    nees = None
+    nees = frame = truth_stats = None
     if bundle.groundtruth is not None:
-        nees = pose_nees_against(bundle.groundtruth, inp.times, traj.poses, covs)
+        gt = bundle.groundtruth
+        frame = nees_frame
+        if frame is None:
+            by_id = NeesFrame.by_id(bundle.map_ids, bundle.map_xy, bundle.landmarks_groundtruth)
+            g0 = gt.poses_at(inp.times[:1])[0]
+            frame = start_frame(bundle.initial_pose, bundle.initial_covariance, g0, by_id.anchoring)
+        nees = pose_nees_against(gt, inp.times, traj.poses, covs, frame.anchoring)
+        if frame.anchoring is not None:
+            # the prior pose is exact in the map frame by definition: aligned, its NEES would
+            # measure the anchoring's error against the prior's covariance, not the recovery
+            nees[0] = np.nan
+        truth_stats = NeesStats.of(
+            nees if frame.anchoring is None else pose_nees_against(gt, inp.times, traj.poses, covs)
+        )
     min_run = max_outlier_run if max_outlier_run else DEFAULT_MAX_OUTLIER_RUN
     stretches = disagreement_stretches(fr, inp, min_run=min_run)
     divergence = divergence_summary(
@@ -819,6 +859,8 @@ def recover(
         batch=costs,
         weights=None if weights is None else readonly(weights),
         map_correction=correction,
+        nees_frame=frame,
+        nees_stats_truth_frame=truth_stats,
     )
 
 

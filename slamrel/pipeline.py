@@ -29,8 +29,10 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from landmark_graph.landmark_association import Association, associate_auto, associate_by_id
 from landmark_graph.map_compare import MapComparison, compare_maps
 from landmark_graph.maps import LandmarkMap
+from recovery.anchoring import Anchoring, NeesFrame, anchor_on_landmarks, start_frame
 from recovery.bundle import Bundle
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, Divergence, Recovery, recover
 from recovery.steps import build_steps
@@ -48,9 +50,8 @@ from relation_metric.stats import Summary
 from relation_metric.time_association import match_nearest_times, nearest_index
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.ekf_slam import ekf_slam_bundle
-from slamrel.formats.bundle import read_bundle, write_bundle
+from slamrel.formats.bundle import read_bundle, read_online, write_bundle
 from slamrel.formats.results import write_json, write_per_relation_csv
-from slamrel.formats.trajectories import read_trajectory
 from slamrel.outputs import staged_directory, write_text_atomic
 from slamrel.report.html import render_html
 from slamrel.report.run_page import report_figures, report_sections
@@ -64,6 +65,7 @@ __all__ = [
     "RunInput",
     "RunResult",
     "default_relations",
+    "landmark_frame",
     "read_run_input",
     "run_pipeline",
     "score_bundle",
@@ -198,6 +200,8 @@ class RunResult:
         ``"recovered"`` (when a recovery ran), ``"dead_reckoning"``, ``"online"``.
     evaluations : dict of name → dict of relation-set name → Evaluation
     nees : dict of name → NeesCurve
+        In the frame ``nees_frame`` (the map frame anchored to the truth on the landmarks,
+        when it can be).
     recovery_result : Recovery or None
         The recovery (``None`` when it failed: see ``recovery_error``).
     map_comparison : MapComparison or None
@@ -206,6 +210,10 @@ class RunResult:
     recovery_error : str or None
         Why no trajectory was recovered (``--fail-on-divergence``, or numerically impossible
         input); the report then scores dead reckoning (and the online estimate).
+    nees_frame : NeesFrame or None
+        The frame of ``nees`` (:mod:`recovery.anchoring`): its description, the anchoring.
+    nees_truth_frame : dict of name → NeesSummary
+        The same NEES with the poses compared with the ground truth as they are (unaligned).
 
     Derived (computed once, on first use): ``recovery`` and ``map``, the JSON of the recovery
     and of the map comparison (``metrics.json``); ``agreement``, the recovery's
@@ -221,6 +229,8 @@ class RunResult:
     map_comparison: MapComparison | None = None
     notes: list[str] = field(default_factory=list)
     recovery_error: str | None = None
+    nees_frame: NeesFrame | None = None
+    nees_truth_frame: dict[str, NeesSummary] = field(default_factory=dict)
 
     @property
     def main_estimate(self) -> str:
@@ -261,6 +271,8 @@ class RunResult:
         out["divergence"] = self.recovery.get("divergence")
         out["recovery_error"] = self.recovery_error
         out["nees"] = {k: v.summary.as_dict() for k, v in self.nees.items()}
+        out["nees_frame"] = None if self.nees_frame is None else self.nees_frame.as_dict()
+        out["nees_truth_frame"] = {k: v.as_dict() for k, v in self.nees_truth_frame.items()}
         out["notes"] = self.notes
         return out
 
@@ -281,14 +293,18 @@ def read_run_input(directory: str | Path) -> RunInput:
 
     The bundle (``docs/bundle.md``) is scored against its ``groundtruth.csv`` (required by
     :func:`score_bundle`) and, when present, ``landmarks_groundtruth.csv``; an ``online.csv``
-    beside it (written by ``slamrel slam --store-online``) is scored too.
+    beside it (written by ``slamrel slam --store-online``) is scored too, and with its
+    covariance columns gets an online NEES (:func:`slamrel.formats.bundle.read_online`).
     """
     bundle = read_bundle(directory)
     online_path = Path(directory) / "online.csv"
-    online = (
-        read_trajectory(online_path, format="csv").trajectory if online_path.is_file() else None
-    )
-    return RunInput(bundle, name=str(directory), online=online)
+    if not online_path.is_file():
+        return RunInput(bundle, name=str(directory))
+    online = read_online(online_path)
+    return RunInput(
+        bundle, name=str(directory), online=online.trajectory,
+        online_covariance=online.covariances,
+    )  # fmt: skip
 
 
 def simulate_run_input(
@@ -374,23 +390,27 @@ def score_bundle(
             "the bundle has no groundtruth.csv: nothing to score against", path=bundle.path
         )
     sets = default_relations(truth, seed=seed)
+    frame, landmark_pairs = landmark_frame(bundle)
     rec_error = None
     try:
         rec = recover(
             bundle, method=method, max_outlier_run=max_outlier_run,
-            on_divergence=on_divergence, robust=robust,
+            on_divergence=on_divergence, robust=robust, nees_frame=frame,
         )  # fmt: skip
     except SlamrelError as exc:  # DivergenceError with on_divergence="raise"
         if isinstance(exc, InputError):
             raise
         rec, rec_error = None, str(exc)
-    estimates, nees = _estimates_at_truth(inp, rec)
+    estimates, nees, nees_truth = _estimates_at_truth(inp, rec, frame)
     map_cmp = None
     if bundle.landmarks_groundtruth is not None:
         gt_ids, gt_xy = bundle.landmarks_groundtruth
         map_cmp = compare_maps(
-            LandmarkMap(bundle.map_ids, bundle.map_xy), LandmarkMap(gt_ids, gt_xy)
-        )
+            LandmarkMap(bundle.map_ids, bundle.map_xy), LandmarkMap(gt_ids, gt_xy),
+            associate="id" if landmark_pairs is None else landmark_pairs,
+        )  # fmt: skip
+    notes = _notes(rec, rec_error, method, has_online=inp.online is not None)
+    notes += _nees_notes(frame, nees, nees_truth, inp)
     return RunResult(
         name=inp.name,
         bundle=bundle,
@@ -399,15 +419,57 @@ def score_bundle(
         nees=nees,
         recovery_result=rec,
         map_comparison=map_cmp,
-        notes=_notes(rec, rec_error, method, has_online=inp.online is not None),
+        notes=notes,
         recovery_error=rec_error,
+        nees_frame=frame,
+        nees_truth_frame=nees_truth,
     )
 
 
+def landmark_frame(bundle: Bundle) -> tuple[NeesFrame, Association | None]:
+    """The frame to compute NEES in, and the landmark association it was anchored on.
+
+    The SLAM map is associated with ``landmarks_groundtruth`` by id when at least 2 ids are
+    shared, otherwise automatically (:func:`~landmark_graph.landmark_association.associate_auto`,
+    as ``slamrel map-compare --associate auto``); the truth ← map transform is fitted on the
+    pairs (:func:`recovery.anchoring.anchor_on_landmarks`). Without landmark ground truth, or
+    when fewer than 2 pairs are found, the NEES stays in the truth frame (the reason is in
+    the frame's description). The association is ``None`` when none was made.
+    """
+    if bundle.landmarks_groundtruth is None:
+        return _placed(bundle, None), None
+    est = LandmarkMap(bundle.map_ids, bundle.map_xy)
+    ref = LandmarkMap(*bundle.landmarks_groundtruth)
+    assoc, how = associate_by_id(est, ref), "id"
+    if assoc.estimate_rows.size < 2:
+        try:
+            assoc, how = associate_auto(est, ref), "auto"
+        except SlamrelError as exc:
+            del exc  # the map comparison reports it
+            return _placed(bundle, None), None
+    if assoc.estimate_rows.size < 2:
+        return _placed(bundle, None), assoc
+    pairs = (est.xy[assoc.estimate_rows], ref.xy[assoc.reference_rows])
+    return _placed(bundle, anchor_on_landmarks(*pairs, association=how)), assoc
+
+
+def _placed(bundle: Bundle, map_anchoring: Anchoring | None) -> NeesFrame:
+    """The frame placed by the run's start pose (:func:`recovery.anchoring.start_frame`), the
+    landmark fit reported beside it."""
+    assert bundle.groundtruth is not None
+    t0 = bundle.controls[0, 0] if bundle.controls is not None else bundle.odometry.timestamps[0]  # type: ignore[union-attr]
+    g0 = bundle.groundtruth.poses_at(np.array([t0]))[0]
+    return start_frame(bundle.initial_pose, bundle.initial_covariance, g0, map_anchoring)
+
+
 def _estimates_at_truth(
-    inp: RunInput, rec: Recovery | None
-) -> tuple[dict[str, Trajectory], dict[str, NeesCurve]]:
-    """Recovered, dead-reckoning and online estimates at the ground-truth times, and NEES."""
+    inp: RunInput, rec: Recovery | None, frame: NeesFrame
+) -> tuple[dict[str, Trajectory], dict[str, NeesCurve], dict[str, NeesSummary]]:
+    """Recovered, dead-reckoning and online estimates at the ground-truth times, and NEES.
+
+    The NEES in ``frame`` (the poses and covariances taken into the truth frame by its
+    anchoring first) and, unaligned, in the truth frame (summaries only).
+    """
     bundle, truth = inp.bundle, inp.bundle.groundtruth
     assert truth is not None
     dead_reckoning = inp.dead_reckoning
@@ -418,24 +480,61 @@ def _estimates_at_truth(
         )
     estimates: dict[str, Trajectory] = {}
     nees: dict[str, NeesCurve] = {}
+    unaligned: dict[str, NeesSummary] = {}
+
+    def score(name: str, est: Trajectory, covs: NDArray[np.float64]) -> None:
+        # the first pose is the prior (the start pose, known): left out
+        poses, covs, ref = est.poses[1:], covs[1:], _truth_at(truth, est.timestamps)[1:]
+        v0 = pose_nees(poses, ref, covs)
+        unaligned[name] = summarize_nees(v0, dof=3)
+        if frame.anchoring is not None:
+            poses, covs = frame.anchoring.apply(poses, covs)
+        v = v0 if frame.anchoring is None else pose_nees(poses, ref, covs)
+        nees[name] = NeesCurve(summarize_nees(v, dof=3), v)
+
     if rec is not None:
         recovered, rec_rows = _at_truth_times(rec.trajectory, truth)
         estimates["recovered"] = recovered
-        truth_at = _truth_at(truth, recovered.timestamps)
-        v = pose_nees(recovered.poses[1:], truth_at[1:], rec.covariances[rec_rows][1:])
-        nees["recovered"] = NeesCurve(summarize_nees(v, dof=3), v)
+        score("recovered", recovered, rec.covariances[rec_rows])
     estimates["dead_reckoning"] = _at_truth_times(dead_reckoning, truth)[0]
     if inp.online is not None:
         online_t, online_rows = _at_truth_times(inp.online, truth)
         estimates["online"] = online_t
         if inp.online_covariance is not None:
-            v = pose_nees(
-                online_t.poses[1:],
-                _truth_at(truth, online_t.timestamps)[1:],
-                inp.online_covariance[online_rows][1:],
+            score("online", online_t, inp.online_covariance[online_rows])
+    return estimates, nees, unaligned
+
+
+def _nees_notes(
+    frame: NeesFrame,
+    nees: dict[str, NeesCurve],
+    unaligned: dict[str, NeesSummary],
+    inp: RunInput,
+) -> list[str]:
+    """The report's notes on the NEES: its frame, the anchoring, and a missing online NEES."""
+    notes = []
+    a, m = frame.anchoring, frame.map_anchoring
+    if nees:
+        text = f"NEES is computed in the {frame.description}"
+        if a is not None:
+            text += (
+                f": the map frame sits at dx = {a.dx:.3g} m, dy = {a.dy:.3g} m, "
+                f"dθ = {np.degrees(a.dtheta):.3g}° in the truth frame; unplaced, the NEES "
+                "mean is " + ", ".join(f"{unaligned[k].mean:.3g} ({k})" for k in nees)
             )
-            nees["online"] = NeesCurve(summarize_nees(v, dof=3), v)
-    return estimates, nees
+        if m is not None:
+            text += (
+                f"; the map's landmarks sit dx = {m.dx:.3g} m, dy = {m.dy:.3g} m, "
+                f"dθ = {np.degrees(m.dtheta):.3g}° off the true ones ({m.landmarks} landmarks, "
+                f"rms residual {m.rms_residual:.3g} m): a map error, part of its uncertainty"
+            )
+        notes.append(text + ".")
+    if inp.online is not None and inp.online_covariance is None:
+        notes.append(
+            "The online estimate has no covariances (online.csv without the columns "
+            "cxx,cxy,cxt,cyy,cyt,ctt): there is no online NEES."
+        )
+    return notes
 
 
 def _notes(

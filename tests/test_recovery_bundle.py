@@ -181,7 +181,9 @@ def test_cli_recover_outputs(bundle_dir: Path, tmp_path: Path) -> None:
     report = json.loads(rep.read_text())
     m = report["measurements"]
     assert m["used"] + m["gated"] + m["unassociated"] + m["outside"] == m["measurements"]
-    assert m["unassociated"] > 0 and report["nees"]["poses"] == 120
+    assert m["unassociated"] > 0 and report["nees_truth_frame"]["poses"] == 120
+    # aligned on the landmarks, the prior pose has no NEES
+    assert report["nees_frame"]["aligned"] and report["nees"]["poses"] == 119
     # refuses to write over an input
     assert main(["recover", str(bundle_dir), "-o", str(bundle_dir / "map.csv"), "-q"]) == 3
 

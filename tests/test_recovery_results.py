@@ -199,11 +199,15 @@ def test_report_is_the_parts_in_order(broken: Recovery) -> None:
     rep = broken.report()
     assert list(rep) == [
         "method", "map_uncertainty", "map_uncertainty_rule", "poses", "measurements",
-        "divergence", "nis", "nees", "iterations", "robust", "batch",
+        "divergence", "nis", "nees", "nees_frame", "nees_truth_frame", "iterations", "robust",
+        "batch",
     ]  # fmt: skip
     assert broken.map_uncertainty is not None
     assert rep["map_uncertainty_rule"] == broken.map_uncertainty.rule
     assert rep["measurements"] == broken.counts.as_dict()
+    frame, unaligned = broken.nees_frame, broken.nees_stats_truth_frame
+    assert frame is not None and unaligned is not None
+    assert rep["nees_frame"] == frame.as_dict() and rep["nees_truth_frame"] == unaligned.as_dict()
     assert rep["divergence"] == broken.divergence.as_dict()
     rb, bc = broken.robust, broken.batch
     assert rb is not None and bc is not None

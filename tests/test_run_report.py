@@ -141,7 +141,7 @@ def test_result_holds_the_map_once_and_reads_nothing(
         raise AssertionError("run_pipeline read a file")
 
     monkeypatch.setattr(pipeline, "read_bundle", no_io)
-    monkeypatch.setattr(pipeline, "read_trajectory", no_io)
+    monkeypatch.setattr(pipeline, "read_online", no_io)
     result = pipeline.run_pipeline(inp)
     assert result.map == result.map_comparison.as_dict()  # type: ignore[union-attr]
     assert "map" not in {f.name for f in pipeline.RunResult.__dataclass_fields__.values()}

@@ -142,9 +142,12 @@ def run(args: argparse.Namespace) -> int:
                 "note: a large gated fraction is a finding about the map (wrong associations "
                 "or an inconsistent map), not noise"
             )
-        ns = result.nees_stats
-        if ns is not None and ns.mean is not None:
-            print(f"mean pose NEES vs ground truth: {ns.mean:.3f} (3 dof)")
+        ns, frame = result.nees_stats, result.nees_frame
+        if ns is not None and ns.mean is not None and frame is not None:
+            print(f"mean pose NEES vs ground truth: {ns.mean:.3f} (3 dof), {frame.description}")
+            unaligned = result.nees_stats_truth_frame
+            if frame.aligned and unaligned is not None and unaligned.mean is not None:
+                print(f"  unaligned, in the truth frame: {unaligned.mean:.3f}")
     return 0
 
 

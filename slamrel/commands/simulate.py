@@ -61,7 +61,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     m.add_argument(
         "--store-online",
         action="store_true",
-        help="also write online.csv, the filter's pose estimates (validation only)",
+        help="also write online.csv, the filter's pose estimates and their covariances "
+        "(validation only)",
     )
     add_force_argument(m)
     m.add_argument("-q", "--quiet", action="store_true")
@@ -87,8 +88,7 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 def run_slam(args: argparse.Namespace) -> int:
     from slamrel.backends.ekf_slam import ekf_slam_bundle
-    from slamrel.formats.bundle import read_bundle, write_bundle
-    from slamrel.formats.trajectories import write_trajectory
+    from slamrel.formats.bundle import read_bundle, write_bundle, write_online
 
     check_outputs([], [args.bundle], dirs=[args.output], force=args.force)
     bundle = read_bundle(args.bundle)
@@ -103,7 +103,7 @@ def run_slam(args: argparse.Namespace) -> int:
         )
 
     def online(folder: Path) -> None:
-        write_trajectory(folder / "online.csv", res.online, format="csv")
+        write_online(folder / "online.csv", res.online, res.online_covariance)
 
     write_bundle(args.output, out, force=args.force, extra=online if args.store_online else None)
     if not args.quiet:

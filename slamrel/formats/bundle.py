@@ -26,7 +26,7 @@ import math
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -49,12 +49,13 @@ from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
 from relation_metric.ids import integer_ids
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
-from relation_metric.trajectory import Trajectory
+from relation_metric.trajectory import Trajectory, check_coordinates
 from slamrel.constants import BUNDLE_FORMAT as FORMAT
 from slamrel.formats.landmark_csv import read_landmark_csv, write_landmark_csv
 from slamrel.formats.text import (
     format_csv_table,
     read_csv_table,
+    read_source,
     read_text,
     write_bytes_atomic,
     write_csv_table,
@@ -63,7 +64,18 @@ from slamrel.formats.text import (
 from slamrel.formats.trajectories import CSV_HEADER, read_trajectory, write_trajectory
 from slamrel.outputs import staged_directory
 
-__all__ = ["read_bundle", "write_bundle"]
+__all__ = [
+    "ONLINE_COVARIANCE_COLUMNS",
+    "OnlineEstimate",
+    "read_bundle",
+    "read_online",
+    "write_bundle",
+    "write_online",
+]
+
+#: The optional covariance columns of ``online.csv``: the upper triangle of the pose's 3 × 3
+#: covariance, rows and columns ``[x, y, θ]`` (``t`` for θ).
+ONLINE_COVARIANCE_COLUMNS = ("cxx", "cxy", "cxt", "cyy", "cyt", "ctt")
 
 
 def _shown(value: Any) -> str:
@@ -641,3 +653,111 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
         write_trajectory(root / "groundtruth.csv", bundle.groundtruth, format="csv")
     if bundle.landmarks_groundtruth is not None:
         write_landmark_csv(root / "landmarks_groundtruth.csv", *bundle.landmarks_groundtruth)
+
+
+class OnlineEstimate(NamedTuple):
+    """A bundle's ``online.csv``: the SLAM filter's own pose estimate (validation only).
+
+    Attributes
+    ----------
+    trajectory : Trajectory
+        In time order, in the map frame.
+    covariances : ndarray, shape (N, 3, 3), or None
+        One per pose of ``trajectory`` (rows ``[x, y, θ]``); ``None`` when the file has no
+        covariance columns.
+    """
+
+    trajectory: Trajectory
+    covariances: Array | None
+
+
+def read_online(path: PathLike) -> OnlineEstimate:
+    """Read an ``online.csv`` (docs/bundle.md): ``t,x,y,theta[,cxx,cxy,cxt,cyy,cyt,ctt]``.
+
+    The one reader of the file. Timed poses: sorted by time whatever the file order
+    (counted and warned about, :class:`~relation_metric.timeorder.TimeOrderWarning`).
+    The six covariance columns come all or none, every row gives all six, and each
+    covariance must be symmetric positive semi-definite (:mod:`relation_metric.checks`).
+
+    Raises
+    ------
+    InputError
+        Naming the file and the line: the CSV rules of the bundle, a coordinate beyond
+        10³⁰ m, some but not all covariance columns, an empty covariance cell, a covariance
+        that is not symmetric positive semi-definite.
+    """
+    src = read_source(path)
+    name = src.path
+    cols, lines = read_csv_table(
+        path,
+        required=CSV_HEADER.split(","),
+        optional=ONLINE_COVARIANCE_COLUMNS,
+        empty_ok=ONLINE_COVARIANCE_COLUMNS,
+        describe="the SLAM run's online estimate",
+        source=src,
+    )
+    t = cols["t"]
+    poses = np.column_stack((cols["x"], cols["y"], cols["theta"]))
+    if t.shape[0] == 0:
+        raise InputError("no poses found; expected rows t,x,y,theta", path=name)
+    check_coordinates(poses[:, :2], what="online pose", path=name, line_of=lines.__getitem__)
+    present = [c for c in ONLINE_COVARIANCE_COLUMNS if c in cols]
+    cov = None
+    if present and len(present) != len(ONLINE_COVARIANCE_COLUMNS):
+        head = next(iter(src.data_lines()))[0]
+        raise InputError(
+            f"covariance columns: expected all of {','.join(ONLINE_COVARIANCE_COLUMNS)} or "
+            f"none, got {','.join(present)}",
+            path=name,
+            line=head,
+        )
+    if present:
+        cxx, cxy, cxt, cyy, cyt, ctt = (cols[c] for c in ONLINE_COVARIANCE_COLUMNS)
+        empty = np.flatnonzero(np.isnan(np.column_stack((cxx, cxy, cxt, cyy, cyt, ctt))).any(1))
+        if empty.size:
+            raise InputError(
+                f"{', '.join(ONLINE_COVARIANCE_COLUMNS)}: expected all six numbers, got an "
+                "empty cell",
+                path=name,
+                line=int(lines[empty[0]]),
+            )
+        cov = np.stack(
+            (
+                np.column_stack((cxx, cxy, cxt)),
+                np.column_stack((cxy, cyy, cyt)),
+                np.column_stack((cxt, cyt, ctt)),
+            ),
+            axis=1,
+        )
+        check_covariances(cov, path=name, lines=lines, what="online pose covariance")
+    order, report = sort_by_time(t, tolerance=None, lines=lines, path=name, what="online pose")
+    if report.out_of_order:
+        warnings.warn(
+            f"{name}: {report.describe('online pose')}; put in time order",
+            TimeOrderWarning,
+            stacklevel=2,
+        )
+        t, poses = t[order], poses[order]
+        cov = None if cov is None else cov[order]
+    return OnlineEstimate(Trajectory(t, poses), cov)
+
+
+def write_online(path: PathLike, trajectory: Trajectory, covariances: Array | None = None) -> None:
+    """Write an ``online.csv`` atomically (``%.17g``: :func:`read_online` reads it back exactly).
+
+    ``covariances`` (N, 3, 3), one per pose, are written as ``cxx,cxy,cxt,cyy,cyt,ctt``
+    (the upper triangle; the file holds symmetric covariances).
+    """
+    t, p = trajectory.timestamps, trajectory.poses
+    header = CSV_HEADER.split(",")
+    columns: list[Array] = [t, p[:, 0], p[:, 1], p[:, 2]]
+    if covariances is not None:
+        c = np.asarray(covariances, dtype=np.float64).reshape(-1, 3, 3)
+        if c.shape[0] != t.shape[0]:
+            raise InputError(
+                f"online covariances: expected one per pose ({t.shape[0]}), got {c.shape[0]}",
+                path=path,
+            )
+        header += list(ONLINE_COVARIANCE_COLUMNS)
+        columns += [c[:, 0, 0], c[:, 0, 1], c[:, 0, 2], c[:, 1, 1], c[:, 1, 2], c[:, 2, 2]]
+    write_csv_table(path, header, columns)

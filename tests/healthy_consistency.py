@@ -1,6 +1,6 @@
 """Consistency and accuracy of the recovery on healthy-by-construction bundles (issue 23).
 
-Run: ``PYTHONPATH=. python benchmarks/healthy_consistency.py [--worlds simple1,complex1]
+Run: ``PYTHONPATH=. python tests/healthy_consistency.py [--worlds simple1,complex1]
 [--seeds 0-9] [--forms joint,marginal] [--scale 1] [--map-mode default] [--neff 100]``.
 
 Input: :func:`tests.healthy_bundles.healthy_bundle` — a simulated world's log and ground

@@ -1,0 +1,248 @@
+"""The frame a NEES is computed in: a SLAM map's anchoring to the truth frame (no I/O here).
+
+A SLAM run builds its map in its own frame, fixed by the start pose it assumed
+(``initial_pose``); a real map sits some decimetres and a degree or so off the frame of the
+ground truth. The NEES compares *absolute* poses with their covariances, so that offset is
+counted as pose error, at every pose, with the filter's (small) covariance: a consistent
+recovery then looks badly inconsistent. The fix is to take the poses into the truth frame
+first, by the rigid transform that takes the SLAM map's landmarks onto their true positions.
+
+Convention
+----------
+The **anchoring** ``A = (dx, dy, dθ)`` is the transform *truth ← map*: a point ``p`` of the
+map frame is ``R(dθ) p + [dx, dy]`` in the truth frame (``R`` the counter-clockwise
+rotation), i.e. ``A`` is the pose of the map frame's origin and x axis in the truth frame.
+It is the SE(2) least-squares fit ``min Σ_k ‖t_k − (R m_k + d)‖²`` over matched landmark
+pairs (map position ``m_k``, true position ``t_k``; Umeyama's closed form,
+:func:`relation_metric.alignment.umeyama`), at least 2 pairs. A pose ``[x, y, θ]`` and its
+covariance ``P`` (rows ``[x, y, θ]``) are taken into the truth frame as
+
+    [x', y'] = R(dθ) [x, y] + [dx, dy],   θ' = wrap(θ + dθ),   P' = J P Jᵀ,
+    J = blockdiag(R(dθ), 1)
+
+(only the x-y block rotates; the heading's variance and the rest follow by ``J``). The pose
+NEES ``eᵀ P⁻¹ e`` with the world-frame error ``e = truth − pose`` is unchanged by any rigid
+transform applied to both pose and truth, so the NEES after anchoring does not depend on the
+frame the SLAM run chose, only on how far its map (and trajectory) is from the truth.
+
+The anchoring is estimated from the map, not from the trajectory: aligning the trajectory on
+its own ground truth would remove a real error of the recovered poses; the map's offset is
+the frame the run chose. It is reported separately (``dx, dy, dθ``, the landmarks used and
+the rms residual of the fit, which is the map's own error left after the alignment).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from relation_metric import se2
+from relation_metric.alignment import Alignment, umeyama
+from relation_metric.arrays import Array
+
+__all__ = [
+    "ASSOCIATIONS",
+    "Anchoring",
+    "NeesFrame",
+    "anchor_on_landmarks",
+    "anchor_on_start",
+    "start_frame",
+    "shared_by_id",
+]
+
+#: How the landmark pairs of an anchoring were found: by equal id, or by
+#: :func:`landmark_graph.landmark_association.associate_auto` (``map-compare --associate auto``).
+ASSOCIATIONS = ("id", "auto", "start")
+
+
+@dataclass(frozen=True)
+class Anchoring:
+    """The truth ← map transform of a SLAM map, fitted on matched landmarks (module docstring).
+
+    Attributes
+    ----------
+    dx, dy : float
+        Position of the map frame's origin in the truth frame [m].
+    dtheta : float
+        Angle from the truth frame's x axis to the map frame's [rad], in ``[−π, π)``.
+    landmarks : int
+        Landmark pairs the transform was fitted on (≥ 2).
+    association : str
+        How the pairs were found (:data:`ASSOCIATIONS`).
+    rms_residual : float
+        ``√(1/K Σ ‖t_k − (R m_k + d)‖²)`` after the fit [m].
+    """
+
+    dx: float
+    dy: float
+    dtheta: float
+    landmarks: int
+    association: str
+    rms_residual: float
+
+    @property
+    def alignment(self) -> Alignment:
+        """As a :class:`~relation_metric.alignment.Alignment` (scale 1)."""
+        return Alignment(self.dtheta, np.array([self.dx, self.dy]), 1.0)
+
+    def apply(self, poses: ArrayLike, covariances: ArrayLike) -> tuple[Array, Array]:
+        """Poses ``(N, 3)`` and their covariances ``(N, 3, 3)`` in the truth frame."""
+        c, s = np.cos(self.dtheta), np.sin(self.dtheta)
+        j = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        p = np.asarray(covariances, dtype=np.float64)
+        return self.alignment.apply(poses), j @ p @ j.T
+
+    def as_dict(self) -> dict[str, object]:
+        """The report's ``anchoring`` (``dtheta`` in rad, also in degrees)."""
+        return {
+            "dx": self.dx,
+            "dy": self.dy,
+            "dtheta": self.dtheta,
+            "dtheta_deg": float(np.degrees(self.dtheta)),
+            "landmarks": self.landmarks,
+            "association": self.association,
+            "rms_residual": self.rms_residual,
+        }
+
+
+def anchor_on_landmarks(
+    map_xy: ArrayLike, truth_xy: ArrayLike, *, association: str = "id"
+) -> Anchoring:
+    """The :class:`Anchoring` of a map: the SE(2) least-squares fit of ``map_xy`` onto
+    ``truth_xy``, both ``(K, 2)``, row ``k`` of each the same landmark, ``K ≥ 2``.
+
+    Raises :class:`~relation_metric.errors.InputError` for fewer than 2 pairs or mismatched
+    shapes (:func:`~relation_metric.alignment.umeyama`).
+    """
+    m = np.asarray(map_xy, dtype=np.float64)
+    t = np.asarray(truth_xy, dtype=np.float64)
+    al = umeyama(m, t)
+    res = t - al.apply(np.column_stack((m, np.zeros(m.shape[0]))))[:, :2]
+    return Anchoring(
+        dx=float(al.translation[0]),
+        dy=float(al.translation[1]),
+        dtheta=float(se2.wrap_angle(al.angle)),
+        landmarks=int(m.shape[0]),
+        association=association,
+        rms_residual=float(np.sqrt(np.mean(np.sum(res * res, axis=1)))),
+    )
+
+
+def shared_by_id(
+    map_ids: ArrayLike, truth_ids: ArrayLike
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Rows ``(map_rows, truth_rows)`` of the landmarks whose ids appear in both, by id."""
+    _, a, b = np.intersect1d(np.asarray(map_ids), np.asarray(truth_ids), return_indices=True)
+    return a.astype(np.int64), b.astype(np.int64)
+
+
+@dataclass(frozen=True)
+class NeesFrame:
+    """The frame a NEES was computed in: the map frame anchored to the truth, or the truth frame.
+
+    Attributes
+    ----------
+    anchoring : Anchoring or None
+        The truth ← map transform applied to the poses and covariances first; ``None``: the
+        poses were compared with the ground truth as they are (the truth frame).
+    reason : str
+        Why there is no anchoring (empty with one).
+    """
+
+    anchoring: Anchoring | None
+    reason: str = ""
+    map_anchoring: Anchoring | None = None
+
+    @property
+    def aligned(self) -> bool:
+        return self.anchoring is not None
+
+    @property
+    def description(self) -> str:
+        """E.g. ``"map frame aligned to the truth on 47 landmarks (by id)"``."""
+        a = self.anchoring
+        if a is None:
+            return f"truth frame ({self.reason})" if self.reason else "truth frame"
+        if a.association == "start":
+            return "map frame placed in the truth frame by the run's start pose"
+        how = "by id" if a.association == "id" else "associated automatically"
+        return f"map frame aligned to the truth on {a.landmarks} landmarks ({how})"
+
+    def as_dict(self) -> dict[str, object]:
+        """The report's ``nees_frame``: ``frame`` (the description), ``aligned``, ``anchoring``."""
+        m = self.map_anchoring
+        return {
+            "frame": self.description,
+            "aligned": self.aligned,
+            "anchoring": None if self.anchoring is None else self.anchoring.as_dict(),
+            "map_anchoring": None if m is None else m.as_dict(),
+        }
+
+    @classmethod
+    def by_id(
+        cls,
+        map_ids: ArrayLike,
+        map_xy: ArrayLike,
+        truth: tuple[ArrayLike, ArrayLike] | None,
+    ) -> NeesFrame:
+        """Anchored on the landmarks a map shares by id with the landmark ground truth
+        ``truth = (ids, xy)``; the truth frame, with the reason, when fewer than 2 are shared."""
+        if truth is None:
+            return cls(None, "no landmark ground truth to align on")
+        rm, rt = shared_by_id(map_ids, truth[0])
+        if rm.size < 2:
+            return cls(
+                None, f"{rm.size} map landmark(s) share an id with the landmark ground truth"
+            )
+        xy, txy = np.asarray(map_xy), np.asarray(truth[1])
+        return cls(anchor_on_landmarks(xy[rm], txy[rt], association="id"))
+
+
+def anchor_on_start(
+    initial_pose: ArrayLike, initial_covariance: ArrayLike, truth_start: ArrayLike
+) -> Anchoring | None:
+    """The truth ← map transform fixed by the run's start pose, or ``None`` when there is none.
+
+    A filter-based SLAM run defines its map frame by the start pose it assumed
+    (``initial_pose``, docs/bundle.md): the transform ``T = g₀ ∘ x₀⁻¹`` takes that pose onto
+    the ground truth's pose ``g₀`` at the same time. ``None`` when the two agree within
+    ``initial_covariance`` (Mahalanobis distance² ≤ the 99.99 % χ²₃ bound, with a 1 µm /
+    1 µrad floor on the covariance): then the map frame *is* the truth frame, and the map's
+    own offset from the true landmarks is a map error the covariances account for, not a frame.
+    """
+    from relation_metric.consistency import OUTLIER_PROBABILITY, chi2_quantile
+
+    x0 = np.asarray(initial_pose, dtype=np.float64)
+    g0 = np.asarray(truth_start, dtype=np.float64)
+    e = g0 - x0
+    e[2] = float(se2.wrap_angle(e[2]))
+    p = np.asarray(initial_covariance, dtype=np.float64) + 1e-12 * np.eye(3)
+    if float(e @ np.linalg.solve(p, e)) <= chi2_quantile(OUTLIER_PROBABILITY, 3):
+        return None
+    t = se2.compose(g0, se2.inverse(x0))
+    return Anchoring(
+        dx=float(t[0]),
+        dy=float(t[1]),
+        dtheta=float(se2.wrap_angle(t[2])),
+        landmarks=0,
+        association="start",
+        rms_residual=0.0,
+    )
+
+
+def start_frame(
+    initial_pose: ArrayLike,
+    initial_covariance: ArrayLike,
+    truth_start: ArrayLike,
+    map_anchoring: Anchoring | None = None,
+) -> NeesFrame:
+    """The default :class:`NeesFrame`: placed by the start pose (:func:`anchor_on_start`).
+
+    ``map_anchoring`` (the landmark fit of :func:`anchor_on_landmarks`, in the map frame) is
+    reported beside it, not applied: it is how far the map sits off the true landmarks.
+    """
+    a = anchor_on_start(initial_pose, initial_covariance, truth_start)
+    reason = "" if a is not None else "the run's start pose is the ground truth's"
+    return NeesFrame(a, reason, map_anchoring)
