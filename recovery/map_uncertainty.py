@@ -108,17 +108,15 @@ def map_uncertainty(bundle: Bundle, mode: str = "joint") -> MapUncertainty:
     elif mode == "joint":
         assert bundle.map_covariance is not None
         cov = 0.5 * (bundle.map_covariance + bundle.map_covariance.T)
-        marg = (
-            np.stack([cov[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] for i in range(m)])
-            if m
-            else (np.zeros((0, 2, 2)))
-        )
+        ar = np.arange(m)
+        marg = cov.reshape(m, 2, m, 2)[ar, :, ar, :]  # the diagonal blocks, (M, 2, 2)
         factor = covariance_factor(cov)
     else:
         marg = 0.5 * (bundle.map_marginals + bundle.map_marginals.transpose(0, 2, 1))
-        cov = np.zeros((2 * m, 2 * m))
-        for i in range(m):
-            cov[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = marg[i]
+        blocks = np.zeros((m, 2, m, 2))
+        ar = np.arange(m)
+        blocks[ar, :, ar, :] = marg
+        cov = blocks.reshape(2 * m, 2 * m)
         factor = block_factor(marg)
     if factor.shape[1] == 0:
         cov = None

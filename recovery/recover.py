@@ -645,16 +645,21 @@ class Recovery:
 
 
 def filter_input(
-    bundle: Bundle, steps: Steps | None = None, *, map_mode: str = "joint"
+    bundle: Bundle,
+    steps: Steps | None = None,
+    *,
+    map_mode: str = "joint",
+    uncertainty: MapUncertainty | None = None,
 ) -> FilterInput:
     """Arrays for :func:`recovery.ekf.run_filter` from a bundle.
 
     ``map_mode``: the map uncertainty's form, by the one rule of
     :func:`recovery.map_uncertainty.map_uncertainty` (``joint``: ``map_covariance.npy``, else
     the marginals as a block-diagonal joint covariance; ``marginal``: that block-diagonal
-    covariance; ``ignore``: the map exact).
+    covariance; ``ignore``: the map exact). ``uncertainty``: that rule's result when already
+    computed (``map_mode`` is then not read).
     """
-    mu = map_uncertainty(bundle, map_mode)
+    mu = map_uncertainty(bundle, map_mode) if uncertainty is None else uncertainty
     st = build_steps(bundle) if steps is None else steps
     lines = bundle.measurement_lines
     assert lines is not None  # Bundle.__post_init__ fills it
@@ -774,7 +779,7 @@ def recover(
     if gate is not None and not 0.0 < gate < 1.0:
         raise InputError(f"gate probability must be in (0, 1), got {gate}")
     mu = map_uncertainty(bundle, map_mode)
-    inp = filter_input(bundle, map_mode=map_mode)
+    inp = filter_input(bundle, uncertainty=mu)
     kw = dict(gate=gate, max_outlier_run=max_outlier_run, on_divergence=on_divergence)
     settings = None
     c_eff = None
