@@ -465,10 +465,14 @@ class _JointProblem:
         self.factor = np.asarray(factor, dtype=np.float64)
         self.rank = int(self.factor.shape[1])
         self.wp, self.wm = _weights(self.inp, regularised=regularised)
+        self.n_map = m
         k = self.inp.meas_grid[used]
-        self.order = np.argsort(k, kind="stable")  # measurements grouped by pose
-        self.poses_seen, self.starts = np.unique(k[self.order], return_index=True)
-        self.l_rows = self.factor.reshape(m, 2, self.rank)[self.inp.meas_landmark[used]]
+        self.li = self.inp.meas_landmark[used]
+        # the sparsity of G = Σ_j H_xᵀ W H_l (3N × 2M): entry (a, b) of measurement j's
+        # block at row 3 k_j + a, column 2 l_j + b
+        a, b = np.meshgrid(np.arange(3), np.arange(2), indexing="ij")
+        self.g_rows = (3 * k[:, None, None] + a).ravel()
+        self.g_cols = (2 * self.li[:, None, None] + b).ravel()
 
     def map_inp(self, eta: Array) -> FilterInput:
         """The filter input with the landmarks at ``m̂ + L η`` (exact)."""
@@ -482,18 +486,25 @@ class _JointProblem:
         fac = _factors(inp, s.poses, self.used, self.robust)
         ab, g, cost = _band(inp, s.poses, self.used, self.wp, self.wm, self.robust, fac)
         (_, _, rz, wz, h_x, _), _, h_l = fac
-        n, r = s.poses.shape[0], self.rank
-        je = h_l @ self.l_rows  # ∂h/∂η of each measurement, (J, 2, r)
-        wje = wz @ je
-        b = np.zeros((n, 3, r))
-        if r and self.order.size:
-            per = h_x.transpose(0, 2, 1) @ wje  # H_xᵀ W ∂h/∂η, (J, 3, r)
-            b[self.poses_seen] = np.add.reduceat(per[self.order], self.starts, axis=0)
-        c = np.eye(r) + np.einsum("jar,jas->rs", je, wje)
-        g_eta = s.eta - np.einsum("jar,ja->r", wje, rz)
+        n, r, m = s.poses.shape[0], self.rank, self.n_map
+        # ∂h_j/∂η = H_l,j L_l: every product with η's r columns goes through the map's 2M
+        # coordinates — B = G L, C = I + Lᵀ D L, ∂/∂η = η − Lᵀ Σ_j H_lᵀ W r — never through
+        # per-measurement (J, 2, r) arrays (2J r² flops and J r memory for a dense L)
+        wh = wz @ h_l  # W H_l, (J, 2, 2)
+        g_map = sp.csr_matrix(
+            ((h_x.transpose(0, 2, 1) @ wh).ravel(), (self.g_rows, self.g_cols)),
+            shape=(3 * n, 2 * m),
+        )  # duplicates (one pose, one landmark, several sightings) are summed
+        d = np.zeros((m, 2, 2))
+        np.add.at(d, self.li, h_l.transpose(0, 2, 1) @ wh)
+        gz = np.zeros((m, 2))
+        np.add.at(gz, self.li, (wh.transpose(0, 2, 1) @ rz[..., None])[..., 0])
+        b = np.asarray(g_map @ self.factor)
+        c = np.eye(r) + self.factor.T @ (d @ self.factor.reshape(m, 2, r)).reshape(2 * m, r)
+        g_eta = s.eta - self.factor.T @ gz.reshape(-1)
         cost += 0.5 * float(s.eta @ s.eta)
         diag = np.concatenate((ab[0], np.diagonal(c)))
-        return Linearisation(cost, np.concatenate((g, g_eta)), diag, (ab, b.reshape(3 * n, r), c))
+        return Linearisation(cost, np.concatenate((g, g_eta)), diag, (ab, b, c))
 
     def cost(self, s: JointState) -> float:
         inp = self.map_inp(s.eta)
@@ -540,7 +551,7 @@ class _JointProblem:
         y = _cholesky_solve(ab0.copy(order="F"), np.asfortranarray(b))
         chol = scipy.linalg.cholesky(c - b.T @ y, lower=True)
         v = scipy.linalg.solve_triangular(chol, y.T, lower=True).T.reshape(n, 3, self.rank)
-        return np.einsum("nar,nbr->nab", v, v)
+        return v @ v.transpose(0, 2, 1)
 
 
 def map_factor_of(inp: FilterInput) -> Array:

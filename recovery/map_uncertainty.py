@@ -130,9 +130,23 @@ def map_uncertainty(bundle: Bundle, mode: str = "joint") -> MapUncertainty:
 
 
 def covariance_factor(cov: Array) -> Array:
-    """``L`` (2M, r) with ``L Lᵀ = cov`` from its eigendecomposition (small ones dropped)."""
+    """``L`` (2M, r) with ``L Lᵀ = cov``: its Cholesky factor (r = 2M) when ``cov`` is
+    positive definite with every pivot above :data:`RANK_TOLERANCE` of the largest diagonal
+    entry, else from its eigendecomposition with the small eigenvalues dropped (r < 2M).
+
+    Any ``L`` with ``L Lᵀ = Σ_m`` gives the same map error law ``L η``, ``η ~ N(0, I)``: the
+    factor only chooses the coordinates ``η`` (Cholesky is ~10× faster than ``eigh``).
+    """
     if cov.size == 0:
         return np.zeros((cov.shape[0], 0))
+    try:
+        chol = np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        chol = None
+    if chol is not None:
+        piv = np.diagonal(chol) ** 2
+        if piv.min() > RANK_TOLERANCE * float(np.diagonal(cov).max()):
+            return np.asarray(chol, dtype=np.float64)
     w, v = np.linalg.eigh(cov)
     top = float(w.max(initial=0.0))
     keep = w > RANK_TOLERANCE * top if top > 0.0 else np.zeros(w.shape, dtype=bool)
