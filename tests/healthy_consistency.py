@@ -3,7 +3,7 @@
 Run: ``PYTHONPATH=. python tests/healthy_consistency.py [--worlds simple1,complex1]
 [--seeds 0-9] [--forms joint,marginal] [--scale 1] [--map-mode default] [--neff 100]``.
 
-Input: :func:`tests.healthy_bundles.healthy_bundle` — a simulated world's log and ground
+Input: :func:`slamrel.simulation.healthy.healthy_bundle` — a simulated world's log and ground
 truth, the true associations, and a map = true landmarks + an error drawn from exactly the
 map covariance the bundle states (``joint``: a correlated ``map_covariance``; ``marginal``:
 independent landmarks, ``map_marginals`` only). ``--scale 3`` draws the error 3 × larger
@@ -42,7 +42,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from healthy_bundles import FORMS, healthy_bundle  # noqa: E402
+from slamrel.simulation.healthy import FORMS, healthy_bundle  # noqa: E402
 from test_recovery_healthy import N_EFF  # noqa: E402
 
 import slamrel  # noqa: E402

@@ -1,6 +1,6 @@
 """Issue 23, acceptance 1: on bundles healthy by construction the recovery is consistent.
 
-The bundles (``tests/healthy_bundles.py``) are what a correct SLAM run with exact models
+The bundles (:mod:`slamrel.simulation.healthy`) are what a correct SLAM run with exact models
 could leave behind: a simulated log, the true associations, and a map whose error is drawn
 from exactly the covariance it states — a correlated joint ``map_covariance`` (form
 ``joint``) or independent landmarks given only as marginals (form ``marginal``). On them,
@@ -65,7 +65,7 @@ from functools import cache
 
 import numpy as np
 import pytest
-from healthy_bundles import FORMS, healthy_bundle
+from slamrel.simulation.healthy import FORMS, healthy_bundle
 from scipy.linalg import block_diag
 
 import slamrel

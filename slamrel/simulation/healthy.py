@@ -98,8 +98,8 @@ def joint_covariance(xy: np.ndarray, **params: float) -> np.ndarray:
     g[:, 0, 0] = g[:, 1, 1] = 1.0
     g[:, 0, 2] = -rel[:, 1]
     g[:, 1, 2] = rel[:, 0]
-    g = g.reshape(2 * m, 3)
-    rigid = g @ np.diag([p["translation"] ** 2, p["translation"] ** 2, p["rotation"] ** 2]) @ g.T
+    g2 = g.reshape(2 * m, 3)
+    rigid = g2 @ np.diag([p["translation"] ** 2, p["translation"] ** 2, p["rotation"] ** 2]) @ g2.T
     d2 = np.sum((xy[:, None, :] - xy[None, :, :]) ** 2, axis=-1)
     smooth = np.kron(p["smooth"] ** 2 * np.exp(-d2 / (2.0 * p["length"] ** 2)), np.eye(2))
     cov = rigid + smooth + p["independent"] ** 2 * np.eye(2 * m)
