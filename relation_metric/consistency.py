@@ -52,6 +52,8 @@ __all__ = [
     "JointNees",
     "nees1",
     "nees2",
+    "effective_sample_size",
+    "mean_chi2_interval",
 ]
 
 
@@ -138,6 +140,61 @@ def summarize_nees(values: ArrayLike, *, dof: int, probability: float = 0.95) ->
     avg = v.mean(axis=0)
     inside = float(np.mean((avg >= band[0]) & (avg <= band[1]))) if avg.size else float("nan")
     return NeesSummary(float(v.mean()), band, inside, runs, dof)
+
+
+def effective_sample_size(values: ArrayLike) -> float:
+    """Effective number of independent values in a serially correlated sequence, shape (n,).
+
+    ``n_eff = n / τ`` with the integrated autocorrelation time ``τ = −1 + 2 Σ_{m=0}^{M} Γ_m``,
+    ``Γ_m = ρ_{2m} + ρ_{2m+1}`` (``ρ_k`` the sample autocorrelation at lag ``k``, by FFT) summed
+    up to the last ``M`` before the first non-positive ``Γ`` (Geyer's initial positive sequence,
+    Statist. Sci. 7, 1992). ``τ`` is floored at 1, so ``1 ≤ n_eff ≤ n``; non-finite values are
+    dropped; a constant sequence has ``n_eff = n``; fewer than 2 values give ``n``.
+
+    Why: the NEES of a recovered trajectory is strongly correlated in time (the map's error
+    is shared by every pose), so its time average is worth far fewer than ``n`` independent
+    χ² values (:func:`mean_chi2_interval`).
+
+    >>> effective_sample_size(np.arange(8) % 2 * 1.0)  # alternating: τ floored at 1
+    8.0
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    v = v[np.isfinite(v)]
+    n = v.size
+    if n < 2:
+        return float(n)
+    d = v - v.mean()
+    var = float(d @ d)
+    if var <= 0.0:
+        return float(n)
+    f = np.fft.rfft(d, 2 * n)
+    rho = np.fft.irfft(f * np.conj(f), 2 * n)[:n] / var
+    m = n // 2
+    gamma = rho[0 : 2 * m : 2] + rho[1 : 2 * m : 2]
+    nonpos = np.flatnonzero(gamma <= 0.0)
+    last = nonpos[0] if nonpos.size else gamma.size
+    tau = max(1.0, -1.0 + 2.0 * float(gamma[:last].sum()))
+    return float(n / tau)
+
+
+def mean_chi2_interval(dof: int, n: float, probability: float) -> tuple[float, float]:
+    """Two-sided ``probability`` interval of ``ε̄ / dof``, the mean of ``n`` independent
+    ``χ²(dof)`` values over their dof: ``[χ²⁻¹((1 − p)/2; n·dof), χ²⁻¹((1 + p)/2; n·dof)] /
+    (n·dof)`` (``n`` need not be an integer: the χ² of non-integer dof, a gamma law).
+
+    >>> lo, hi = mean_chi2_interval(3, 1, 0.95)
+    >>> round(lo * 3, 4), round(hi * 3, 4)  # the single-pose band of a 3-dof NEES
+    (0.2158, 9.3484)
+    """
+    if dof < 1 or not n > 0 or not 0 < probability < 1:
+        raise InputError(
+            f"need dof >= 1, n > 0 and 0 < probability < 1; got {dof}, {n}, {probability}"
+        )
+    from scipy.stats import chi2  # here, not at import: scipy.stats costs start-up
+
+    k = float(n) * dof
+    lo, hi = chi2.ppf([(1.0 - probability) / 2.0, (1.0 + probability) / 2.0], k)
+    return float(lo) / k, float(hi) / k
 
 
 def flag_runs(

@@ -118,7 +118,7 @@ figcaption { font-size: 0.9rem; color: #555; }
 .lamp { display: inline-block; padding: 0 0.5rem; border-radius: 4px; color: #fff;
   background: #777; font-weight: 600; }
 .lamp.green { background: #1a7f37; } .lamp.amber { background: #b7791f; }
-.lamp.red { background: #b42318; }
+.lamp.red { background: #b42318; } .lamp.info { background: #6b7280; }
 .verdict th, .verdict td { text-align: left; } td.rule { font-size: 0.85rem; color: #555; }
 nav ol { columns: 2; }
 """
