@@ -16,7 +16,7 @@ import base64
 import html
 import io
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +29,7 @@ __all__ = [
     "render_html",
     "verdict_html",
     "figure_png",
+    "format_intervals",
 ]
 
 
@@ -43,10 +44,13 @@ class Table:
 
 @dataclass(frozen=True)
 class Figure:
-    """A PNG image with a caption."""
+    """A PNG image with a caption; ``data``: numbers about what it draws (e.g. its x range),
+    written as ``data-*`` attributes of the ``<figure>`` element (keys: lower-case letters,
+    digits and ``-``), so that a test or a reader of the page can check them."""
 
     caption: str
     png: bytes
+    data: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,24 @@ def _number(value: float) -> str:
     if abs(value) >= 1000.0:
         return f"{value:.0f}"
     return f"{value:.3g}"
+
+
+def format_intervals(intervals: Sequence[tuple[float, float]], *, unit: str = "s") -> list[str]:
+    """Intervals ``(a, b)`` as ``"312.4–318.9 s"``: one decimal, or as many more (up to 3) as
+    it takes for distinct intervals to print distinctly (and for ``a < b`` to show).
+
+    The intervals are expected on a readable axis (seconds since the run's start, not Unix
+    time: :class:`slamrel.pipeline.TimeBase`).
+    """
+    iv = [(float(a), float(b)) for a, b in intervals]
+    for decimals in (1, 2, 3):
+        text = [f"{a:.{decimals}f}–{b:.{decimals}f} {unit}" for a, b in iv]
+        clash = len(set(text)) < len(set(iv)) or any(
+            a < b and f"{a:.{decimals}f}" == f"{b:.{decimals}f}" for a, b in iv
+        )
+        if not clash:
+            break
+    return text
 
 
 def verdict_html(verdict: Verdict) -> str:
@@ -159,12 +181,23 @@ def render_html(title: str, sections: Sequence[Section], *, verdict: Verdict | N
         for fig in sec.figures:
             data = base64.b64encode(fig.png).decode("ascii")
             out.append(
-                f'<figure><img alt="{html.escape(fig.caption)}" src="data:image/png;base64,{data}">'
+                f"<figure{_data_attributes(fig.data)}>"
+                f'<img alt="{html.escape(fig.caption)}" src="data:image/png;base64,{data}">'
                 f"<figcaption>{html.escape(fig.caption)}</figcaption></figure>"
             )
         out.append("</section>")
     out.append("</body></html>")
     return "\n".join(out)
+
+
+def _data_attributes(data: Mapping[str, float]) -> str:
+    """`` data-k="v"`` for each entry (``repr`` of the float: exact, machine-readable)."""
+    out = []
+    for k, v in data.items():
+        if not k or not all(c.islower() or c.isdigit() or c == "-" for c in k):
+            raise ValueError(f"figure data key {k!r}: lower-case letters, digits and '-' only")
+        out.append(f' data-{k}="{float(v)!r}"')
+    return "".join(out)
 
 
 def figure_png(fig: Any, *, dpi: int = 100) -> bytes:
