@@ -165,7 +165,10 @@ def test_verdict_reads_the_numbers_metrics_holds(
     for name, err in f.translation_errors.items():
         key = "trajectory" if name == f.main else name
         assert err == m[key]["translation"]["abs"]["mean"]
-    assert f.relations == m["trajectory"]["relations"]
+    # the evidence counts the relations scored, and the unassociated ones beside them
+    assert f.relations == m["trajectory"]["translation"]["abs"]["count"]
+    assert f.relations + f.unassociated == m["trajectory"]["relations"]
+    assert f.unassociated == m["trajectory"]["unassociated"]
     assert f.nees is not None and f.nees.as_dict() == m["nees"]["recovered"]
     assert f.counts is not None and f.counts.as_dict() == m["recovery"]["measurements"]
     assert f.poses == m["recovery"]["poses"]

@@ -98,7 +98,7 @@ class RunFacts:
     translation_errors : mapping of str → float
         Per estimate, the mean absolute translation relation error over all relation sets [m].
     relations : int
-        Relations the main estimate was scored on.
+        Relations the main estimate was scored on (associated: unassociated ones are not).
     nees : NeesSummary or None
         The main estimate's NEES summary (3 dof), when it has covariances.
     nees_values : ndarray, shape (steps,), or None
@@ -109,6 +109,9 @@ class RunFacts:
         The recovery's measurement counts (``None`` when no recovery ran).
     poses : int or None
         Poses of the recovered trajectory.
+    unassociated : int or None
+        Relations generated for the main estimate that could not be scored (no pose near an
+        end); ``None``: not known.
     """
 
     main: str
@@ -119,23 +122,26 @@ class RunFacts:
     map: MapSummary | None = None
     counts: RecoveryCounts | None = None
     poses: int | None = None
+    unassociated: int | None = None
 
     @classmethod
     def of(cls, result: RunResult) -> RunFacts:
         main = result.main_estimate
         rec = result.recovery_result
         curve = result.nees.get(main)
+        scored = result.evaluations[main]["all"]
         return cls(
             main=main,
             translation_errors={
                 k: evs["all"].translation["abs"].mean for k, evs in result.evaluations.items()
             },
-            relations=len(result.evaluations[main]["all"].relations),
+            relations=int(scored.valid.sum()),
             nees=None if curve is None else curve.summary,
             nees_values=None if curve is None else curve.values,
             map=result.map_summary,
             counts=None if rec is None else rec.counts,
             poses=None if rec is None else len(rec.trajectory),
+            unassociated=int((~scored.valid).sum()),
         )
 
 
@@ -256,8 +262,15 @@ def _measurement_lines(counts: RecoveryCounts) -> list[Judgement]:
 
 
 def _evidence(facts: RunFacts) -> str:
-    """The evidence sentence: relations, poses and matched landmarks counted."""
+    """The evidence sentence: relations (scored, and unassociated when known), poses and
+    matched landmarks counted."""
     evidence = [f"{facts.relations} relations"]
+    if facts.unassociated is not None:
+        evidence[0] = f"{facts.relations} scored relations" + (
+            f" ({facts.unassociated} more generated but unassociated, not scored)"
+            if facts.unassociated
+            else " (all generated relations associated)"
+        )
     if facts.poses:
         evidence.append(f"{facts.poses} poses")
     m = facts.map
