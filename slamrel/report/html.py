@@ -77,6 +77,14 @@ def _cell(value: Any) -> str:
     return html.escape(str(value))
 
 
+def _td(value: Any) -> str:
+    """A table cell: numbers and names right-aligned (the default), prose (text with a
+    space, e.g. a rule) left-aligned."""
+    if isinstance(value, str) and " " in value.strip():
+        return f'<td class="text">{_cell(value)}</td>'
+    return f"<td>{_cell(value)}</td>"
+
+
 def _number(value: float) -> str:
     """3 significant digits (``0.0565``, ``0.00182``), whole numbers from 1000 on (``2089``)."""
     if not math.isfinite(value):
@@ -130,7 +138,7 @@ h1 { font-size: 1.6rem; }
 h2 { font-size: 1.25rem; margin-top: 2rem; border-bottom: 1px solid #ccc; }
 table { border-collapse: collapse; margin: 1rem 0; font-variant-numeric: tabular-nums; }
 th, td { border: 1px solid #ccc; padding: 0.25rem 0.6rem; text-align: right; }
-th:first-child, td:first-child { text-align: left; }
+th:first-child, td:first-child, td.text { text-align: left; }
 caption { caption-side: top; text-align: left; font-weight: 600; padding-bottom: 0.3rem; }
 figure { margin: 1rem 0; } figure img { max-width: 100%; border: 1px solid #eee; }
 figcaption { font-size: 0.9rem; color: #555; }
@@ -176,7 +184,7 @@ def render_html(title: str, sections: Sequence[Section], *, verdict: Verdict | N
             out.extend(f"<th>{html.escape(str(c))}</th>" for c in tab.columns)
             out.append("</tr></thead><tbody>")
             for row in tab.rows:
-                out.append("<tr>" + "".join(f"<td>{_cell(v)}</td>" for v in row) + "</tr>")
+                out.append("<tr>" + "".join(_td(v) for v in row) + "</tr>")
             out.append("</tbody></table>")
         for fig in sec.figures:
             data = base64.b64encode(fig.png).decode("ascii")
