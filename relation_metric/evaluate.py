@@ -24,7 +24,9 @@ from relation_metric.trajectory import Trajectory
 
 __all__ = [
     "Evaluation",
+    "PoseErrors",
     "evaluate",
+    "pose_errors",
     "UnassociatedRelationsWarning",
     "error_summaries",
     "on_common_group",
@@ -87,6 +89,47 @@ class Evaluation:
             "combined": {k: v.as_dict() for k, v in self.combined.items()},
             "epsilon": _json_float(self.epsilon),
         }
+
+
+@dataclass(frozen=True)
+class PoseErrors:
+    """The errors of an evaluation gathered at the estimate's poses (:func:`pose_errors`).
+
+    Attributes
+    ----------
+    index : ndarray of int64, shape (K,)
+        The estimate poses at least one scored relation ends at (nearest pose), ascending.
+    mean : ndarray, shape (K,)
+        Mean error of the scored relations with an end at each of them.
+    relations : ndarray of int64, shape (K,)
+        How many scored relation ends lie there (a relation with both ends at one pose counts
+        twice).
+    """
+
+    index: NDArray[np.int64]
+    mean: NDArray[np.float64]
+    relations: NDArray[np.int64]
+
+    def quantile(self, q: float) -> float:
+        """The ``q`` quantile of ``mean`` (NaN when no pose is touched)."""
+        return float(np.quantile(self.mean, q)) if self.mean.size else math.nan
+
+
+def pose_errors(evaluation: Evaluation, n: int, *, part: str = "translation") -> PoseErrors:
+    """Per estimate pose (of ``n``), the mean ``part`` error (``"translation"`` [m] or
+    ``"rotation"`` [rad]) of the scored relations that have an end there: where along the
+    trajectory the errors of one relation set are."""
+    if part not in ("translation", "rotation"):
+        raise InputError(f"part must be 'translation' or 'rotation', got {part!r}")
+    ev = evaluation
+    valid = ev.valid
+    a = ev.association
+    err = getattr(ev.errors, part)[valid]
+    idx = np.concatenate((a.index_first[valid], a.index_second[valid]))
+    total = np.bincount(idx, weights=np.concatenate((err, err)), minlength=n)
+    count = np.bincount(idx, minlength=n)
+    touched = np.flatnonzero(count)
+    return PoseErrors(touched.astype(np.int64), total[touched] / count[touched], count[touched])
 
 
 def _json_float(x: float) -> float | None:

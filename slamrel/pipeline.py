@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from landmark_graph.landmark_association import Association, associate_auto, associate_by_id
 from landmark_graph.map_compare import MapComparison, compare_maps
@@ -37,6 +37,7 @@ from recovery.bundle import Bundle
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, Divergence, Recovery, recover
 from recovery.steps import build_steps
 from relation_metric import se2
+from relation_metric.alignment import Alignment, umeyama
 from relation_metric.consistency import NeesSummary, pose_nees, summarize_nees
 from relation_metric.errors import InputError, SlamrelError
 from relation_metric.evaluate import (
@@ -60,8 +61,11 @@ from slamrel.simulation.bundles import world_bundle
 from slamrel.simulation.worlds import make_world
 
 __all__ = [
+    "DefaultRelations",
+    "DisplayFrame",
     "MapSummary",
     "NeesCurve",
+    "RelationSetRule",
     "RunInput",
     "RunResult",
     "default_relations",
@@ -70,32 +74,132 @@ __all__ = [
     "run_pipeline",
     "score_bundle",
     "simulate_run_input",
+    "TimeBase",
     "write_report",
 ]
 
 
-def default_relations(reference: Trajectory, *, seed: int = 0) -> dict[str, RelationSet]:
+#: The relation sets ``slamrel run`` scores, and their parameters (:func:`default_relations`).
+RELATION_SPACING = 1.0  # s: the reference is thinned to one pose a second, consecutive pairs
+LOOP_RADIUS = 1.0  # m
+LOOP_MIN_SEPARATION = 20.0  # s
+MAX_LOOPS = 5000
+GLOBAL_COUNT = 2000
+
+
+@dataclass(frozen=True)
+class RelationSetRule:
+    """How one relation set of :func:`default_relations` was made, and how many it got.
+
+    Attributes
+    ----------
+    name : str
+        ``"consecutive"``, ``"loops"`` or ``"global"``.
+    rule : str
+        The rule in words, with its parameters (e.g. "pairs of poses within 1 m, at least
+        20 s apart, at most 5000 (a seeded subset)").
+    candidates : int
+        Pairs the rule found, before any subset was taken.
+    generated : int
+        Relations in the set (0: the set is absent).
+    absent : str
+        Why the set is absent (empty when it is not).
+    parameters : dict of str → float
+        The parameters the rule was run with (``metrics.json`` ``relation_sets``).
+    """
+
+    name: str
+    rule: str
+    candidates: int
+    generated: int
+    absent: str = ""
+    parameters: dict[str, float] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "rule": self.rule,
+            "candidates": self.candidates,
+            "generated": self.generated,
+            "absent": self.absent or None,
+            "parameters": dict(self.parameters),
+        }
+
+
+@dataclass(frozen=True)
+class DefaultRelations:
+    """The relation sets of :func:`default_relations` (the non-empty ones, by name) and how
+    each of the three was made (:class:`RelationSetRule`, absent sets included)."""
+
+    sets: dict[str, RelationSet]
+    rules: tuple[RelationSetRule, ...]
+
+
+def default_relations(reference: Trajectory, *, seed: int = 0) -> DefaultRelations:
     """Consecutive (1 s apart), loop-closing and global relations from the ground truth.
 
-    On the reference sampled at about one pose a second. Loops: poses within 1 m that are at
-    least 20 s apart (at most 5000, a seeded subset); global: 2000 random pairs at least a
-    quarter of the trajectory's extent apart.
+    On the reference thinned to about one pose a second (:data:`RELATION_SPACING`).
+    Consecutive: each pose with the next. Loops: poses within :data:`LOOP_RADIUS` that are at
+    least :data:`LOOP_MIN_SEPARATION` apart (at most :data:`MAX_LOOPS`, a seeded subset);
+    global: :data:`GLOBAL_COUNT` random pairs at least a quarter of the diagonal of the
+    reference's bounding box apart. Empty sets are left out of ``sets`` and say why in
+    ``rules``.
     """
     t = reference.timestamps
     dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
-    step = max(1, int(round(1.0 / dt)))
+    step = max(1, int(round(RELATION_SPACING / dt)))
     # one pose a second: dense ground truth (e.g. 100 Hz Vicon) would give millions of pairs
     coarse = Trajectory(t[::step], reference.poses[::step])
-    loops = generate_relations(coarse, "loops", radius=1.0, min_separation_time=20.0)
-    if len(loops) > 5000:  # a seeded, uniform subset keeps reports fast on long runs
-        pick = np.sort(np.random.default_rng(seed).choice(len(loops), 5000, replace=False))
+    thinned = (
+        f"on the ground truth thinned to one pose every {step * dt:.3g} s ({len(coarse)} poses)"
+    )
+    consecutive = generate_relations(coarse, "consecutive")
+    loops = generate_relations(
+        coarse, "loops", radius=LOOP_RADIUS, min_separation_time=LOOP_MIN_SEPARATION
+    )
+    found = len(loops)
+    if found > MAX_LOOPS:  # a seeded, uniform subset keeps reports fast on long runs
+        pick = np.sort(np.random.default_rng(seed).choice(found, MAX_LOOPS, replace=False))
         loops = loops.subset(pick)
-    sets = {
-        "consecutive": generate_relations(coarse, "consecutive"),
-        "loops": loops,
-        "global": generate_relations(coarse, "global", count=2000, seed=seed),
-    }
-    return {k: v for k, v in sets.items() if len(v)}
+    xy = coarse.positions
+    extent = float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0)))
+    far = generate_relations(
+        coarse, "global", count=GLOBAL_COUNT, min_distance=extent / 4.0, seed=seed
+    )
+    rules = (
+        RelationSetRule(
+            "consecutive", f"each pose with the next, {thinned}", len(consecutive),
+            len(consecutive), "" if len(consecutive) else "fewer than 2 poses",
+            {"spacing_s": step * dt},
+        ),
+        RelationSetRule(
+            "loops",
+            f"pairs of poses within {LOOP_RADIUS:g} m of each other and at least "
+            f"{LOOP_MIN_SEPARATION:g} s apart, at most {MAX_LOOPS}"
+            + (f" (a seeded subset of the {found} found)" if found > MAX_LOOPS else "")
+            + f", {thinned}",
+            found, len(loops),
+            "" if len(loops) else (
+                f"no two poses lie within {LOOP_RADIUS:g} m of each other at least "
+                f"{LOOP_MIN_SEPARATION:g} s apart: the run never comes back to where it was"
+            ),
+            {"radius_m": LOOP_RADIUS, "min_separation_s": LOOP_MIN_SEPARATION,
+             "max_relations": MAX_LOOPS},
+        ),
+        RelationSetRule(
+            "global",
+            f"{GLOBAL_COUNT} seeded random pairs at least {extent / 4.0:.3g} m apart (a quarter "
+            f"of the {extent:.3g} m diagonal of the ground truth's bounding box)"
+            + (f" — only {len(far)} distinct pairs lie that far apart" if len(far) < GLOBAL_COUNT
+               else "")
+            + f", {thinned}",
+            len(far), len(far),
+            "" if len(far) else f"no two poses lie {extent / 4.0:.3g} m or more apart",
+            {"count": GLOBAL_COUNT, "min_distance_m": extent / 4.0},
+        ),
+    )  # fmt: skip
+    sets = {"consecutive": consecutive, "loops": loops, "global": far}
+    return DefaultRelations({k: v for k, v in sets.items() if len(v)}, rules)
 
 
 def _merge(sets: dict[str, RelationSet]) -> RelationSet:
@@ -133,10 +237,77 @@ class RunInput:
 
 
 class NeesCurve(NamedTuple):
-    """The NEES of one estimate: its summary and the per-step values, shape (steps,)."""
+    """The NEES of one estimate: its summary, the per-step values, shape (steps,), and their
+    times [s] (the estimate's poses where the NEES exists; ``None``: not known)."""
 
     summary: NeesSummary
     values: NDArray[np.float64]
+    times: NDArray[np.float64] | None = None
+
+
+@dataclass(frozen=True)
+class TimeBase:
+    """The report's one time axis: seconds since the run's start (every timeline, interval
+    and stretch of the page is given on it).
+
+    Attributes
+    ----------
+    t0, t1 : float
+        Start and end of the run's log (first and last control, or odometry, time) [s, on
+        the log's own clock, e.g. Unix time].
+    """
+
+    t0: float
+    t1: float
+
+    @property
+    def duration(self) -> float:
+        """``t1 − t0`` [s]."""
+        return self.t1 - self.t0
+
+    def since_start(self, t: ArrayLike) -> NDArray[np.float64]:
+        """Times ``t`` [s, the log's clock] as seconds since the run's start."""
+        return np.asarray(t, dtype=np.float64) - self.t0
+
+    @classmethod
+    def of(cls, bundle: Bundle) -> TimeBase:
+        """The span of the bundle's log (``controls.csv``, else ``odometry.csv``)."""
+        if bundle.controls is not None:
+            t = bundle.controls[:, 0]
+        else:
+            assert bundle.odometry is not None  # a bundle has one or the other (Bundle checks)
+            t = bundle.odometry.timestamps
+        return cls(float(t[0]), float(t[-1]))
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"t0": self.t0, "t1": self.t1, "duration": self.duration,
+                "unit": "s since the run's start (t0 on the log's clock)"}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class DisplayFrame:
+    """How an estimate (or the SLAM map) is drawn over the ground truth in the figures.
+
+    Attributes
+    ----------
+    alignment : Alignment
+        Applied to its poses (or points) before drawing.
+    description : str
+        The alignment in words, with its numbers (for the captions).
+    short : str
+        A few words of it (for a legend), e.g. ``"landmark fit"``.
+    """
+
+    alignment: Alignment
+    description: str
+    short: str = ""
+
+    def apply(self, poses: ArrayLike) -> NDArray[np.float64]:
+        """Poses ``(N, 3)`` (or points ``(N, 2)``) in the drawing frame."""
+        p = np.asarray(poses, dtype=np.float64)
+        if p.shape[-1] == 2:
+            return self.alignment.apply(np.column_stack((p, np.zeros(len(p)))))[:, :2]
+        return self.alignment.apply(p)
 
 
 @dataclass(frozen=True)
@@ -214,10 +385,14 @@ class RunResult:
         The frame of ``nees`` (:mod:`recovery.anchoring`): its description, the anchoring.
     nees_truth_frame : dict of name → NeesSummary
         The same NEES with the poses compared with the ground truth as they are (unaligned).
+    relation_sets : tuple of RelationSetRule
+        How each relation set was made (:func:`default_relations`), absent sets included.
 
     Derived (computed once, on first use): ``recovery`` and ``map``, the JSON of the recovery
     and of the map comparison (``metrics.json``); ``agreement``, the recovery's
-    :class:`~recovery.recover.Divergence`; ``map_summary``, the :class:`MapSummary`.
+    :class:`~recovery.recover.Divergence`; ``map_summary``, the :class:`MapSummary`;
+    ``time_base``, the report's :class:`TimeBase`; ``display_frames``, how the figures draw
+    each estimate and the map over the ground truth (:class:`DisplayFrame`).
     """
 
     name: str
@@ -231,6 +406,66 @@ class RunResult:
     recovery_error: str | None = None
     nees_frame: NeesFrame | None = None
     nees_truth_frame: dict[str, NeesSummary] = field(default_factory=dict)
+    relation_sets: tuple[RelationSetRule, ...] = ()
+
+    @cached_property
+    def time_base(self) -> TimeBase:
+        """The report's time axis: seconds since the start of the run's log."""
+        return TimeBase.of(self.bundle)
+
+    @cached_property
+    def display_frames(self) -> dict[str, DisplayFrame]:
+        """How each estimate, and the SLAM map (``"map"``), is drawn over the ground truth.
+
+        The estimates in the SLAM map's frame (recovered, online) and the map itself are
+        moved by the landmark fit truth ← map (``nees_frame.map_anchoring``,
+        :func:`recovery.anchoring.anchor_on_landmarks`) when it places the map: its rms
+        residual at most the map comparison's cut-off ``c`` (1 m without one; a larger one
+        means wrong associations or a broken map, not a frame). Dead reckoning, which never
+        saw the map, and every estimate without a usable landmark fit, are moved by the SE(2)
+        least-squares fit of their positions on the ground truth's at the same times (the map
+        then follows the main estimate). Drawing only: every score is frame-free or says its
+        frame.
+        """
+        truth = self.bundle.groundtruth
+        assert truth is not None
+        m = None if self.nees_frame is None else self.nees_frame.map_anchoring
+        cutoff = 1.0 if self.map_comparison is None else self.map_comparison.cutoff
+        out: dict[str, DisplayFrame] = {}
+        landmark_fit, unused = None, ""
+        if m is not None and m.rms_residual <= cutoff:
+            landmark_fit = DisplayFrame(
+                m.alignment,
+                f"moved by the landmark fit truth ← map (dx = {m.dx:.3g} m, dy = {m.dy:.3g} m, "
+                f"dθ = {np.degrees(m.dtheta):.3g}°, on {m.landmarks} landmarks "
+                f"{'by id' if m.association == 'id' else 'associated automatically'})",
+                "landmark fit",
+            )
+        elif m is not None:
+            unused = (
+                f"; the landmark fit leaves {m.rms_residual:.3g} m rms, more than "
+                f"c = {cutoff:.3g} m: it does not place the map"
+            )
+        for name, est in self.estimates.items():
+            if landmark_fit is not None and name in ("recovered", "online"):
+                out[name] = landmark_fit
+                continue
+            ref = _truth_at(truth, est.timestamps)
+            try:
+                al = umeyama(est.positions, ref[:, :2])
+            except SlamrelError:  # fewer than 2 poses: drawn as they are
+                al = Alignment(0.0, np.zeros(2), 1.0)
+            out[name] = DisplayFrame(
+                al,
+                f"moved by its SE(2) fit on the ground truth (dx = {al.translation[0]:.3g} m, "
+                f"dy = {al.translation[1]:.3g} m, dθ = {np.degrees(al.angle):.3g}°"
+                + (unused if name in ("recovered", "online") else "")
+                + ")",
+                "SE(2) fit on the truth",
+            )
+        main = self.main_estimate
+        out["map"] = landmark_fit if landmark_fit is not None else out[main]
+        return out
 
     @property
     def main_estimate(self) -> str:
@@ -273,6 +508,8 @@ class RunResult:
         out["nees"] = {k: v.summary.as_dict() for k, v in self.nees.items()}
         out["nees_frame"] = None if self.nees_frame is None else self.nees_frame.as_dict()
         out["nees_truth_frame"] = {k: v.as_dict() for k, v in self.nees_truth_frame.items()}
+        out["time_base"] = self.time_base.as_dict()
+        out["relation_sets"] = [r.as_dict() for r in self.relation_sets]
         out["notes"] = self.notes
         return out
 
@@ -389,7 +626,8 @@ def score_bundle(
         raise InputError(
             "the bundle has no groundtruth.csv: nothing to score against", path=bundle.path
         )
-    sets = default_relations(truth, seed=seed)
+    relations = default_relations(truth, seed=seed)
+    sets = relations.sets
     frame, landmark_pairs = landmark_frame(bundle)
     rec_error = None
     try:
@@ -423,6 +661,7 @@ def score_bundle(
         recovery_error=rec_error,
         nees_frame=frame,
         nees_truth_frame=nees_truth,
+        relation_sets=relations.rules,
     )
 
 
@@ -457,8 +696,7 @@ def _placed(bundle: Bundle, map_anchoring: Anchoring | None) -> NeesFrame:
     """The frame placed by the run's start pose (:func:`recovery.anchoring.start_frame`), the
     landmark fit reported beside it."""
     assert bundle.groundtruth is not None
-    t0 = bundle.controls[0, 0] if bundle.controls is not None else bundle.odometry.timestamps[0]  # type: ignore[union-attr]
-    g0 = bundle.groundtruth.poses_at(np.array([t0]))[0]
+    g0 = bundle.groundtruth.poses_at(np.array([TimeBase.of(bundle).t0]))[0]
     return start_frame(bundle.initial_pose, bundle.initial_covariance, g0, map_anchoring)
 
 
@@ -490,7 +728,7 @@ def _estimates_at_truth(
         if frame.anchoring is not None:
             poses, covs = frame.anchoring.apply(poses, covs)
         v = v0 if frame.anchoring is None else pose_nees(poses, ref, covs)
-        nees[name] = NeesCurve(summarize_nees(v, dof=3), v)
+        nees[name] = NeesCurve(summarize_nees(v, dof=3), v, est.timestamps[1:])
 
     if rec is not None:
         recovered, rec_rows = _at_truth_times(rec.trajectory, truth)

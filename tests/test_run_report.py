@@ -100,15 +100,20 @@ def test_nees_nis_and_stretch_tables_equal_metrics(
     assert int(nis_row[0]) == nis["count"] and _close(nis_row[1], nis["mean"])
     assert _close(nis_row[2], nis["median"]) and _close(nis_row[4], nis["fraction_beyond_95"])
     stretches = m["divergence"]["stretches"]
-    rows = page.tables["stretches where the map and the log disagree (times in s)"]
+    rows = page.tables["stretches where the map and the log disagree"]
     assert len(rows) == min(len(stretches), 50) >= 1
+    t0 = m["time_base"]["t0"]  # the page's times are seconds since the run's start
     for row, s in zip(rows, stretches):
-        assert _close(row[0], s["t0"]) and _close(row[2], s["duration"])
-        assert [int(row[k]) for k in (3, 4, 7)] == [
+        a, b = row[0].removesuffix(" s").split("–")
+        assert float(a) == pytest.approx(s["t0"] - t0, abs=0.051)
+        assert float(b) == pytest.approx(s["t1"] - t0, abs=0.051)
+        assert _close(row[1], s["duration"])
+        assert [int(row[k]) for k in (2, 3, 6)] == [
             s["measurements"],
             s["outlying"],
             s["reentries"],
         ]
+    assert len({row[0] for row in rows}) == len(rows)  # no two intervals print alike
 
 
 def test_map_tables_equal_metrics(report: tuple[Path, _Page, dict[str, Any]]) -> None:
@@ -165,7 +170,10 @@ def test_verdict_reads_the_numbers_metrics_holds(
     for name, err in f.translation_errors.items():
         key = "trajectory" if name == f.main else name
         assert err == m[key]["translation"]["abs"]["mean"]
-    assert f.relations == m["trajectory"]["relations"]
+    # the evidence counts the relations scored, and the unassociated ones beside them
+    assert f.relations == m["trajectory"]["translation"]["abs"]["count"]
+    assert f.relations + f.unassociated == m["trajectory"]["relations"]
+    assert f.unassociated == m["trajectory"]["unassociated"]
     assert f.nees is not None and f.nees.as_dict() == m["nees"]["recovered"]
     assert f.counts is not None and f.counts.as_dict() == m["recovery"]["measurements"]
     assert f.poses == m["recovery"]["poses"]

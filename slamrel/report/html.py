@@ -16,7 +16,7 @@ import base64
 import html
 import io
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +29,7 @@ __all__ = [
     "render_html",
     "verdict_html",
     "figure_png",
+    "format_intervals",
 ]
 
 
@@ -43,10 +44,13 @@ class Table:
 
 @dataclass(frozen=True)
 class Figure:
-    """A PNG image with a caption."""
+    """A PNG image with a caption; ``data``: numbers about what it draws (e.g. its x range),
+    written as ``data-*`` attributes of the ``<figure>`` element (keys: lower-case letters,
+    digits and ``-``), so that a test or a reader of the page can check them."""
 
     caption: str
     png: bytes
+    data: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -73,6 +77,14 @@ def _cell(value: Any) -> str:
     return html.escape(str(value))
 
 
+def _td(value: Any) -> str:
+    """A table cell: numbers and names right-aligned (the default), prose (text with a
+    space, e.g. a rule) left-aligned."""
+    if isinstance(value, str) and " " in value.strip():
+        return f'<td class="text">{_cell(value)}</td>'
+    return f"<td>{_cell(value)}</td>"
+
+
 def _number(value: float) -> str:
     """3 significant digits (``0.0565``, ``0.00182``), whole numbers from 1000 on (``2089``)."""
     if not math.isfinite(value):
@@ -82,6 +94,24 @@ def _number(value: float) -> str:
     if abs(value) >= 1000.0:
         return f"{value:.0f}"
     return f"{value:.3g}"
+
+
+def format_intervals(intervals: Sequence[tuple[float, float]], *, unit: str = "s") -> list[str]:
+    """Intervals ``(a, b)`` as ``"312.4–318.9 s"``: one decimal, or as many more (up to 3) as
+    it takes for distinct intervals to print distinctly (and for ``a < b`` to show).
+
+    The intervals are expected on a readable axis (seconds since the run's start, not Unix
+    time: :class:`slamrel.pipeline.TimeBase`).
+    """
+    iv = [(float(a), float(b)) for a, b in intervals]
+    for decimals in (1, 2, 3):
+        text = [f"{a:.{decimals}f}–{b:.{decimals}f} {unit}" for a, b in iv]
+        clash = len(set(text)) < len(set(iv)) or any(
+            a < b and f"{a:.{decimals}f}" == f"{b:.{decimals}f}" for a, b in iv
+        )
+        if not clash:
+            break
+    return text
 
 
 def verdict_html(verdict: Verdict) -> str:
@@ -108,7 +138,7 @@ h1 { font-size: 1.6rem; }
 h2 { font-size: 1.25rem; margin-top: 2rem; border-bottom: 1px solid #ccc; }
 table { border-collapse: collapse; margin: 1rem 0; font-variant-numeric: tabular-nums; }
 th, td { border: 1px solid #ccc; padding: 0.25rem 0.6rem; text-align: right; }
-th:first-child, td:first-child { text-align: left; }
+th:first-child, td:first-child, td.text { text-align: left; }
 caption { caption-side: top; text-align: left; font-weight: 600; padding-bottom: 0.3rem; }
 figure { margin: 1rem 0; } figure img { max-width: 100%; border: 1px solid #eee; }
 figcaption { font-size: 0.9rem; color: #555; }
@@ -154,17 +184,28 @@ def render_html(title: str, sections: Sequence[Section], *, verdict: Verdict | N
             out.extend(f"<th>{html.escape(str(c))}</th>" for c in tab.columns)
             out.append("</tr></thead><tbody>")
             for row in tab.rows:
-                out.append("<tr>" + "".join(f"<td>{_cell(v)}</td>" for v in row) + "</tr>")
+                out.append("<tr>" + "".join(_td(v) for v in row) + "</tr>")
             out.append("</tbody></table>")
         for fig in sec.figures:
             data = base64.b64encode(fig.png).decode("ascii")
             out.append(
-                f'<figure><img alt="{html.escape(fig.caption)}" src="data:image/png;base64,{data}">'
+                f"<figure{_data_attributes(fig.data)}>"
+                f'<img alt="{html.escape(fig.caption)}" src="data:image/png;base64,{data}">'
                 f"<figcaption>{html.escape(fig.caption)}</figcaption></figure>"
             )
         out.append("</section>")
     out.append("</body></html>")
     return "\n".join(out)
+
+
+def _data_attributes(data: Mapping[str, float]) -> str:
+    """`` data-k="v"`` for each entry (``repr`` of the float: exact, machine-readable)."""
+    out = []
+    for k, v in data.items():
+        if not k or not all(c.islower() or c.isdigit() or c == "-" for c in k):
+            raise ValueError(f"figure data key {k!r}: lower-case letters, digits and '-' only")
+        out.append(f' data-{k}="{float(v)!r}"')
+    return "".join(out)
 
 
 def figure_png(fig: Any, *, dpi: int = 100) -> bytes:

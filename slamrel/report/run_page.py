@@ -9,21 +9,27 @@ and the file cannot disagree. :func:`slamrel.pipeline.write_report` writes the f
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, NisStats
 from relation_metric.consistency import OUTLIER_PROBABILITY
+from relation_metric.evaluate import pose_errors
+from relation_metric.trajectory import Trajectory
 from slamrel.plots.maps import map_figure
-from slamrel.plots.relation_errors import evaluation_figure
 from slamrel.plots.run import (
+    TIMELINE_LEGEND,
+    SetPanel,
+    TimeSpan,
     mark_stretches_time,
     mark_stretches_xy,
     nees_figure,
+    relation_sets_figure,
     trajectories_figure,
 )
-from slamrel.report.html import Figure, Section, Table, figure_png
+from slamrel.report.html import Figure, Section, Table, figure_png, format_intervals
 
 if TYPE_CHECKING:
     from recovery.recover import Divergence
@@ -58,48 +64,145 @@ class RunSections(NamedTuple):
 
 
 def report_figures(result: RunResult) -> RunFigures:
-    """Draw the report's figures (matplotlib, closed after rendering to PNG)."""
+    """Draw the report's figures (matplotlib, closed after rendering to PNG).
+
+    One time axis throughout: seconds since the run's start (:attr:`RunResult.time_base`);
+    trajectories and the map in the ground truth's frame (:attr:`RunResult.display_frames`,
+    said in the captions).
+    """
     truth = result.bundle.groundtruth
     assert truth is not None
     stretches = result.agreement.stretches if result.agreement is not None else ()
+    frames = result.display_frames
+    drawn = {
+        k: Trajectory(est.timestamps, frames[k].apply(est.poses))
+        for k, est in result.estimates.items()
+    }
     lgt = result.bundle.landmarks_groundtruth
+    map_xy = result.bundle.map_xy
     trajectories = Figure(
-        "Estimates against the ground truth, with the true landmarks and the SLAM map",
+        "Estimates against the ground truth, with the true landmarks and the SLAM map, in the "
+        f"ground truth's frame: {_frames_text(result)}. Red dots: recovered poses where the "
+        "map and the log disagree (if any).",
         figure_png(
             mark_stretches_xy(
                 trajectories_figure(
                     truth,
-                    result.estimates,
+                    drawn,
+                    labels={k: f"{k} ({frames[k].short})" for k in drawn if frames[k].short},
                     landmarks=lgt[1] if lgt else None,
-                    mapped=result.bundle.map_xy,
+                    mapped=frames["map"].apply(map_xy) if map_xy.size else None,
                 ),
                 stretches,
-                result.estimates.get("recovered"),
+                drawn.get("recovered"),
             )
         ),
     )
+    return RunFigures(
+        trajectories,
+        _errors_figure(result, drawn, stretches),
+        _nees_figure(result, stretches),
+        _map_figure(result),
+    )
+
+
+def _frames_text(result: RunResult) -> str:
+    """How each estimate and the map are drawn, estimates sharing a frame named together."""
+    by: dict[str, list[str]] = {}
+    for name, frame in result.display_frames.items():
+        by.setdefault(frame.description, []).append("the SLAM map" if name == "map" else name)
+    return "; ".join(f"{' and '.join(names)} {how}" for how, names in by.items())
+
+
+def _errors_figure(
+    result: RunResult, drawn: dict[str, Trajectory], stretches: Sequence[TimeSpan]
+) -> Figure:
+    """The main estimate's relation errors over time and, one panel per relation set, where
+    along the trajectory they are."""
     main = result.main_estimate
-    main_all = result.evaluations[main]["all"]
-    errors = Figure(
-        f"The {main} trajectory coloured by relation error (all relation sets), "
-        "and the errors over time",
-        figure_png(
-            mark_stretches_time(
-                evaluation_figure(main_all, result.estimates[main]), stretches, main_all
+    evs = result.evaluations[main]
+    tb = result.time_base
+    names = [(r.name, r.absent) for r in result.relation_sets] or [
+        (k, "") for k in evs if k != "all"
+    ]
+    est = drawn[main]
+    panels = []
+    for name, absent in names:
+        ev = evs.get(name)
+        if ev is None:
+            panels.append(SetPanel(name, *_EMPTY, high=0.0, absent=absent or "not generated"))
+            continue
+        valid = ev.valid
+        pe = pose_errors(ev, len(est))
+        panels.append(
+            SetPanel(
+                name,
+                tb.since_start(0.5 * (ev.relations.first + ev.relations.second)[valid]),
+                ev.errors.translation[valid],
+                ev.errors.rotation[valid],
+                est.poses[pe.index, :2],
+                pe.mean,
+                high=pe.quantile(COLOUR_QUANTILE),
+                high_label=f"p{100 * COLOUR_QUANTILE:g}",
+                unassociated=int((~valid).sum()),
             )
-        ),
+        )
+    truth = result.bundle.groundtruth
+    fig = relation_sets_figure(
+        panels, est.poses[:, :2], reference=None if truth is None else truth.positions,
+        span=(0.0, tb.duration),
+    )  # fmt: skip
+    fig = mark_stretches_time(fig, stretches, t0=tb.t0, axes=(0, 1), legend=TIMELINE_LEGEND)
+    return Figure(
+        f"Where the {main} trajectory is wrong, one panel per relation set: each pose a "
+        "relation of the set ends at, coloured by the mean translational error of the set's "
+        "relations ending there, on the set's own scale from 0 to its 95th percentile "
+        "(stated under each panel; larger errors in the top colour); the estimate "
+        f"{result.display_frames[main].description}, the ground truth in grey beneath. Above: "
+        "every scored relation's translational and rotational error at its mid-time, in "
+        "seconds since the run's start, by set"
+        + ("; shaded: stretches where the map and the log disagree." if stretches else "."),
+        figure_png(fig),
     )
-    nees = Figure(
-        "NEES over time with the 95% χ² band (3 dof)",
-        figure_png(
-            nees_figure(
-                truth.timestamps[1:],
-                {k: v.values for k, v in result.nees.items()},
-                {k: v.summary for k, v in result.nees.items()},
-            )
-        ),
+
+
+#: The top of each relation set's colour scale: this quantile of its per-pose errors.
+COLOUR_QUANTILE = 0.95
+_EMPTY = (np.empty(0), np.empty(0), np.empty(0), np.empty((0, 2)), np.empty(0))
+
+
+def _nees_figure(result: RunResult, stretches: Sequence[TimeSpan]) -> Figure:
+    """NEES of each estimate at its own times (the poses where it exists), over the run."""
+    tb = result.time_base
+    curves = {k: v for k, v in result.nees.items() if v.times is not None}
+    times = {k: tb.since_start(v.times) for k, v in curves.items()}  # type: ignore[arg-type]
+    span = (0.0, tb.duration)
+    fig = nees_figure(
+        times, {k: v.values for k, v in curves.items()},
+        {k: v.summary for k, v in curves.items()}, span=span,
+    )  # fmt: skip
+    fig = mark_stretches_time(fig, stretches, t0=tb.t0)
+    lo, hi = fig.axes[0].get_xlim()
+    covered = [float(t.min()) for t in times.values() if t.size], [
+        float(t.max()) for t in times.values() if t.size
+    ]
+    data = {"x-min": float(lo), "x-max": float(hi), "run-duration": tb.duration}
+    if covered[0]:
+        data |= {"data-min": min(covered[0]), "data-max": max(covered[1])}
+    where = ", ".join(
+        f"{k} at its {t.size} poses where the NEES exists"
+        + (f" ({format_intervals([(t.min(), t.max())])[0]})" if t.size else "")
+        for k, t in times.items()
     )
-    return RunFigures(trajectories, errors, nees, _map_figure(result))
+    frame = result.nees_frame
+    return Figure(
+        f"NEES over time with the 95% χ² band (3 dof), in seconds since the run's start "
+        f"(the run: {format_intervals([span])[0]}): {where or 'no estimate has a NEES'}"
+        + ("" if frame is None else f"; computed in the {frame.description}")
+        + ("; shaded: stretches where the map and the log disagree." if stretches else "."),
+        figure_png(fig),
+        data,
+    )
 
 
 def _anchoring_table(result: RunResult) -> list[Table]:
@@ -131,9 +234,11 @@ def _anchoring_table(result: RunResult) -> list[Table]:
 def _map_figure(result: RunResult) -> Figure | None:
     if result.map_comparison is None:
         return None
+    frame = (result.map or {}).get("ospa", {}).get("frame", "")
     return Figure(
         "The SLAM map against the true landmarks: the Delaunay mesh of the true "
-        "landmarks, each edge coloured by its length error",
+        "landmarks, each edge coloured by its length error"
+        + (f"; the SLAM map drawn {frame}" if frame else ""),
         figure_png(map_figure(result.map_comparison)),
     )
 
@@ -142,14 +247,22 @@ def report_sections(
     result: RunResult, figures: RunFigures, *, review: tuple[str, str] | None = None
 ) -> RunSections:
     """The report's sections; ``review``: the ``(href, text)`` link to ``review.html``."""
+    tb = result.time_base
     summary = Section(
         f"slamrel run: {result.name}",
         paragraphs=[
             "Relation metric (Kümmerle et al. 2009): relative motions of each estimate "
             "against ground-truth relations, ε = 1/N Σ ‖δ_ij ⊖ δ*_ij‖².",
+            f"Times on this page are seconds since the run's start (the first time of its "
+            f"log, {tb.t0:.3f} s on the log's own clock); the run lasts {tb.duration:.1f} s.",
+            *_relation_set_paragraphs(result),
             *result.notes,
         ],
-        tables=[_stats_table(result, "translation"), _stats_table(result, "rotation")],
+        tables=[
+            *_relation_sets_table(result),
+            _stats_table(result, "translation"),
+            _stats_table(result, "rotation"),
+        ],
         figures=[figures.trajectories, figures.errors],
     )
     frame = result.nees_frame
@@ -195,6 +308,42 @@ def report_sections(
     return RunSections(summary, consistency, _agreement_section(result), map_section)
 
 
+def _relation_set_paragraphs(result: RunResult) -> list[str]:
+    """What the relation sets are, and why a set is absent."""
+    if not result.relation_sets:
+        return []
+    absent = [r for r in result.relation_sets if r.absent]
+    return [
+        "The relations are generated from the ground truth in three sets (the table below): "
+        "consecutive relations see local errors, loop and global relations see the breakage "
+        "that local ones cannot. A relation is scored when the estimate has a pose within "
+        "0.1 s of both of its ends (or can be interpolated over a gap of at most 1 s); the "
+        "rest are unassociated and left out of every number.",
+        *(f"No {r.name} relations: {r.absent}." for r in absent),
+    ]
+
+
+def _relation_sets_table(result: RunResult) -> list[Table]:
+    """Per relation set: the rule, relations generated, scored and unassociated."""
+    if not result.relation_sets:
+        return []
+    main = result.main_estimate
+    evs = result.evaluations[main]
+    rows = []
+    for r in result.relation_sets:
+        ev = evs.get(r.name)
+        scored = None if ev is None else int(ev.valid.sum())
+        unassociated = None if ev is None else int((~ev.valid).sum())
+        rows.append([r.name, r.rule, r.generated, scored, unassociated, r.absent or None])
+    return [
+        Table(
+            f"relation sets (from the ground truth; scored for the {main} estimate)",
+            ["set", "rule", "generated", "scored", "unassociated", "absent because"],
+            rows,
+        )
+    ]
+
+
 def _stats_table(result: RunResult, part: str) -> Table:
     """Mean, std, max of the absolute and mean of the squared errors, per estimate and set."""
     rows = []
@@ -213,7 +362,8 @@ def _stats_table(result: RunResult, part: str) -> Table:
 
 
 _STRETCH_COLUMNS = [
-    "t0", "t1", "duration", "measurements", "outlying", "NIS median", "NIS max", "re-entries",
+    "interval (since the run's start)", "duration [s]", "measurements", "outlying",
+    "NIS median", "NIS max", "re-entries",
 ]  # fmt: skip
 
 
@@ -243,21 +393,22 @@ def _agreement_section(result: RunResult) -> Section:
             ],
         ),  # fmt: skip
     ]
+    tb = result.time_base
     if st:
+        shown = st[:50]
+        when = format_intervals([(s.t0 - tb.t0, s.t1 - tb.t0) for s in shown])
         rows = [
-            [s.t0, s.t1, s.t1 - s.t0, s.measurements, s.outlying, s.nis_median, s.nis_max,
-             s.reentries]
-            for s in st[:50]
-        ]  # fmt: skip
+            [w, s.t1 - s.t0, s.measurements, s.outlying, s.nis_median, s.nis_max, s.reentries]
+            for w, s in zip(when, shown)
+        ]
         tables.append(
-            Table(
-                "stretches where the map and the log disagree (times in s)", _STRETCH_COLUMNS, rows
-            )
+            Table("stretches where the map and the log disagree", _STRETCH_COLUMNS, rows)
         )
-    return Section("Map–log agreement", paragraphs=_agreement_paragraphs(a), tables=tables)
+    return Section("Map–log agreement", paragraphs=_agreement_paragraphs(a, tb.t0), tables=tables)
 
 
-def _agreement_paragraphs(a: Divergence) -> list[str]:
+def _agreement_paragraphs(a: Divergence, t0: float) -> list[str]:
+    """The rule and the counts; ``t0``: the run's start (intervals are printed since it)."""
     st = a.stretches
     paragraphs = [
         "EKF localisation in the final map checks every innovation against its covariance: "
@@ -280,9 +431,10 @@ def _agreement_paragraphs(a: Divergence) -> list[str]:
             f"Against the ground truth, the recovered pose's NEES blows up {len(ns)} time(s): "
             f"runs of at least {a.max_outlier_run or DEFAULT_MAX_OUTLIER_RUN} poses beyond "
             f"its {100 * OUTLIER_PROBABILITY:g}% χ² bound (3 dof), shorter gaps merged — "
-            "not the verdict's NEES excursions above the 95% band: "
-            + ", ".join(f"[{b.t0:.6g}, {b.t1:.6g}] s" for b in ns[:10])
-            + (" …" if len(ns) > 10 else "")
+            "not the verdict's NEES excursions above the 95% band; in seconds since the run's "
+            "start: "
+            + ", ".join(format_intervals([(b.t0 - t0, b.t1 - t0) for b in ns[:10]]))
+            + (f", … ({len(ns)} in all; every one in metrics.json)" if len(ns) > 10 else "")
             + "."
         )
     if len(st) > 50:

@@ -235,7 +235,7 @@ class RunFacts:
     translation_errors : mapping of str → float
         Per estimate, the mean absolute translation relation error over all relation sets [m].
     relations : int
-        Relations the main estimate was scored on.
+        Relations the main estimate was scored on (associated: unassociated ones are not).
     nees : NeesSummary or None
         The main estimate's NEES summary (3 dof), when it has covariances.
     nees_values : ndarray, shape (steps,), or None
@@ -255,6 +255,9 @@ class RunFacts:
     online_nees : NeesSummary or None
         The online estimate's NEES summary, when it came with covariances.
     online_nees_values : ndarray or None
+    unassociated : int or None
+        Relations generated for the main estimate that could not be scored (no pose near an
+        end); ``None``: not known.
     """
 
     main: str
@@ -270,6 +273,7 @@ class RunFacts:
     map_nees: MapNees | None = None
     online_nees: NeesSummary | None = None
     online_nees_values: NDArray[np.float64] | None = None
+    unassociated: int | None = None
 
     @classmethod
     def of(cls, result: RunResult) -> RunFacts:
@@ -277,12 +281,13 @@ class RunFacts:
         rec = result.recovery_result
         curve = result.nees.get(main)
         online = result.nees.get("online") if main != "online" else None
+        scored = result.evaluations[main]["all"]
         return cls(
             main=main,
             translation_errors={
                 k: evs["all"].translation["abs"].mean for k, evs in result.evaluations.items()
             },
-            relations=len(result.evaluations[main]["all"].relations),
+            relations=int(scored.valid.sum()),
             nees=None if curve is None else curve.summary,
             nees_values=None if curve is None else curve.values,
             map=result.map_summary,
@@ -293,6 +298,7 @@ class RunFacts:
             map_nees=_map_nees_of(result),
             online_nees=None if online is None else online.summary,
             online_nees_values=None if online is None else online.values,
+            unassociated=int((~scored.valid).sum()),
         )
 
 
@@ -593,8 +599,15 @@ def _map_lines(m: MapSummary) -> list[Judgement]:
 
 
 def _evidence(facts: RunFacts) -> str:
-    """The evidence sentence: relations, poses and matched landmarks counted."""
+    """The evidence sentence: relations (scored, and unassociated when known), poses and
+    matched landmarks counted."""
     evidence = [f"{facts.relations} relations"]
+    if facts.unassociated is not None:
+        evidence[0] = f"{facts.relations} scored relations" + (
+            f" ({facts.unassociated} more generated but unassociated, not scored)"
+            if facts.unassociated
+            else " (all generated relations associated)"
+        )
     if facts.poses:
         evidence.append(f"{facts.poses} poses")
     m = facts.map
