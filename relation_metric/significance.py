@@ -360,8 +360,8 @@ def paired_difference(
         else:
             why = "too few relations"
         reason = (
-            f"{n} relations make {block.blocks:.3g} blocks of {block.length}, fewer than "
-            f"{MIN_BLOCKS}: {why}"
+            f"{n} relations in blocks of {block.length} make {block.blocks:.3g} < {MIN_BLOCKS} "
+            f"blocks: {why}"
         )
         return PairedDifference(
             n, mean_a, mean_b, d_bar, nan, nan, confidence, nan, -1, resamples, block,

@@ -160,7 +160,10 @@ def test_too_few_blocks_is_no_test_and_says_why():
     r = paired_difference(t1, t1 + 500.0, np.full(100, 1.0), np.zeros(100))
     assert not r.tested and math.isnan(r.p_value) and math.isnan(r.ci_low)
     assert not r.p_at_floor and r.mean_difference == 1.0
-    assert f"fewer than {MIN_BLOCKS}" in r.reason and "overlaps 49.5 later ones" in r.reason
+    assert r.reason == (
+        f"100 relations in blocks of 100 make 1 < {MIN_BLOCKS} blocks: each relation "
+        "overlaps 49.5 later ones in time on average"
+    )
     # 30 relations apart from one another, (2k, 2k + 1): blocks of ⌈30^(1/3)⌉ = 4
     t1 = 2.0 * np.arange(30)
     few = paired_difference(t1, t1 + 1, np.ones(30), np.zeros(30))
