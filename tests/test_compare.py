@@ -138,7 +138,7 @@ def test_cli_end_to_end(tmp_path, capsys):
     # the test is explained in --help
     with pytest.raises(SystemExit):
         main(["compare", "--help"])
-    text = capsys.readouterr().out
+    text = " ".join(capsys.readouterr().out.split())
     assert "circular block bootstrap" in text and "never 0" in text and "Holm" in text
 
 

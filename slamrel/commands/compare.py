@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import textwrap
 from dataclasses import replace
 from pathlib import Path
 
@@ -22,36 +23,40 @@ DESCRIPTION = (
     "tests), table.tex and errors.png to -o."
 )
 
-EPILOG = f"""\
-the tests:
-  Every pair of algorithms of a dataset is compared on the relations both scored, one test
-  per relation set (the 'set' column the per-relation CSV has when slamrel run or
-  slamrel evaluate --strategy wrote it; without it all relations are one set 'all') and
-  per part (translation in m, rotation in rad or deg): the mean difference A - B of the
-  abs errors (negative: A is better), in the part's unit and in % of B's mean.
+_TESTS = (
+    "Every pair of algorithms of a dataset is compared on the relations both scored, one test "
+    "per relation set (the 'set' column the per-relation CSV has when slamrel run or slamrel "
+    "evaluate --strategy wrote it; without it all relations are one set 'all') and per part "
+    "(translation in m, rotation in rad or deg): the mean difference A - B of the abs errors "
+    "(negative: A is better), in the part's unit and in % of B's mean.",
+    "Relations that share a stretch of the run are not independent (drift enters all of "
+    "them), so the pairs are not resampled one by one: a circular block bootstrap resamples "
+    "blocks of L consecutive differences, the relations ordered by start time. It gives the "
+    "(1 - alpha) confidence interval of the mean difference and a two-sided p-value, (1 + "
+    "#resamples at least as far from 0) / (B + 1), which is never 0: at its floor it is "
+    f"printed '< 1/B'. L is the largest of {OVERLAP_FACTOR} x (1 + the mean number of later "
+    "relations a relation overlaps in time), the Politis-White length from the "
+    f"autocorrelation of the differences, and n^(1/3). With fewer than {MIN_BLOCKS} blocks "
+    "(loop and global relations, which overlap one another nearly everywhere) there is no "
+    "test: the table gives the difference and says why.",
+    "The p-values of all tests of the table are Holm-adjusted together; 'better' names the "
+    "algorithm with the smaller mean error when the adjusted p-value is below --alpha. "
+    "--seed makes the resampling repeatable (the same inputs and seed give the same table).",
+)
 
-  Relations that share a stretch of the run are not independent (drift enters all of
-  them), so the pairs are not resampled one by one: a circular block bootstrap resamples
-  blocks of L consecutive differences, the relations ordered by start time. It gives the
-  (1 - alpha) confidence interval of the mean difference and a two-sided p-value,
-  (1 + #resamples at least as far from 0) / (B + 1), which is never 0: at its floor it is
-  printed '< 1/B'. L is the largest of {OVERLAP_FACTOR} x (1 + the mean number of later
-  relations a relation overlaps in time), the Politis-White length from the
-  autocorrelation of the differences, and n^(1/3). With fewer than {MIN_BLOCKS} blocks
-  (loop and global relations, which overlap one another nearly everywhere) there is no
-  test: the table gives the difference and says why. The p-values of all tests of the
-  table are Holm-adjusted together; 'better' names the algorithm with the smaller mean
-  error when the adjusted p-value is below --alpha. --seed makes the resampling
-  repeatable (the same inputs and seed give the same table).
-"""
+
+def _paragraphs(*texts: str, indent: str = "") -> str:
+    return "\n\n".join(
+        textwrap.fill(t, 88, initial_indent=indent, subsequent_indent=indent) for t in texts
+    )
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(
         "compare",
         help="compare results (algorithms × datasets) with paired significance tests",
-        description=DESCRIPTION,
-        epilog=EPILOG,
+        description=_paragraphs(DESCRIPTION),
+        epilog="the tests:\n" + _paragraphs(*_TESTS, indent="  "),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("results", nargs="+", metavar="RESULT")
