@@ -221,6 +221,20 @@ def test_one_test_per_relation_set_and_holm_over_the_table(rng):
     assert "over the 6 tests of this table" in comp.markdown()
 
 
+def test_result_records_check_themselves():
+    with pytest.raises(InputError, match='keys must be "t1 t2"'):
+        result("d", "a", ["first second"], [0.1], [0.0])
+    with pytest.raises(InputError, match="relation times must be finite"):
+        ResultErrors("d", "a", np.array(["x"]), np.array([0.1]), np.array([0.0]), "rad",
+                     t1=np.array([np.nan]), t2=np.array([1.0]))  # fmt: skip
+    with pytest.raises(InputError, match="relation_set has shape"):
+        ResultErrors("d", "a", np.array(["0 1"]), np.array([0.1]), np.array([0.0]), "rad",
+                     relation_set=np.array(["a", "b"]))  # fmt: skip
+    twice = result("d", "a", ["0 1", "0 1"], [0.1, 0.2], [0.0, 0.0])
+    with pytest.raises(InputError, match="appears twice in relation set 'all'"):
+        compare_results([twice])
+
+
 def test_results_naming_different_sets_are_told_so():
     a = ResultErrors("d", "a", np.array(["0 1"]), np.array([0.1]), np.array([0.0]), "rad",
                      relation_set=np.array(["consecutive"]))  # fmt: skip

@@ -122,6 +122,10 @@ class ResultErrors:
                     f"{self.dataset}:{self.algorithm}{where}: {name} has shape {arr.shape}, "
                     f"expected ({m},) as the keys"
                 )
+        if not (np.isfinite(t1).all() and np.isfinite(t2).all()):
+            raise InputError(
+                f"{self.dataset}:{self.algorithm}{where}: relation times must be finite"
+            )
         object.__setattr__(self, "keys", keys)
         object.__setattr__(self, "t1", t1)
         object.__setattr__(self, "t2", t2)
