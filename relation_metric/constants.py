@@ -1,15 +1,24 @@
 """The named choices of the metric's parameters, in a module without numpy.
 
-Defined here once; :mod:`relation_metric.metric` and :mod:`relation_metric.relations` use
-them, and the command-line parsers offer them as option choices without importing numpy
-(``slamrel --help`` stays light).
+Defined here once; :mod:`relation_metric.metric`, :mod:`relation_metric.relations` and
+:mod:`relation_metric.significance` use them, and the command-line parsers offer them as
+option choices and defaults without importing numpy (``slamrel --help`` stays light).
 """
 
 from __future__ import annotations
 
-__all__ = ["MODES", "STRATEGIES"]
+__all__ = ["MODES", "STRATEGIES", "BOOTSTRAP_RESAMPLES", "MIN_BLOCKS", "OVERLAP_FACTOR"]
 
 #: Error definitions of :func:`relation_metric.metric.relation_errors` (``mode``).
 MODES = ("paper", "metricevaluator")
 #: Selection strategies of :func:`relation_metric.relations.generate_relations`.
 STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs")
+#: Bootstrap resamples B of :func:`relation_metric.significance.paired_difference`: the
+#: p-value's resolution is 1/(B + 1) = 10⁻⁴.
+BOOTSTRAP_RESAMPLES = 9999
+#: Fewest blocks (relations / block length) for a block-bootstrap test: with fewer, the
+#: bootstrap variance rests on too few independent stretches of the run.
+MIN_BLOCKS = 20
+#: Blocks are at least this many times the overlap range of the relations (1 + the mean
+#: number of later relations a relation overlaps in time).
+OVERLAP_FACTOR = 3

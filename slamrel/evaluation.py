@@ -66,6 +66,10 @@ class FileEvaluation:
     #: The JSON of ``--json``: the evaluation (rotation in degrees when asked), its group,
     #: what was skipped, dropped or reordered on the way, the ATE when asked.
     result: dict[str, Any]
+    #: The relation set: the strategy that generated the relations from a reference
+    #: trajectory (``consecutive`` by default); ``None`` for a .relations file, whose
+    #: relations may mix kinds. Written as the ``set`` column of ``--per-relation``.
+    relation_set: str | None = None
 
 
 def evaluate_files(
@@ -179,7 +183,8 @@ def score_files(
         ate_estimate, ate_reference = ate_pair
         assert ate_reference is not None  # the reference (just checked) or its synchronised copy
         result["ate"] = _ate(ate_estimate, ate_reference, options.max_time_diff)
-    return FileEvaluation(ev, ev_estimate, result)
+    generated = None if ref_traj is None else (options.strategy or "consecutive")
+    return FileEvaluation(ev, ev_estimate, result, relation_set=generated)
 
 
 def _is_relations_file(path: str, options: EvaluateOptions) -> bool:

@@ -525,6 +525,16 @@ def _evaluate_sets(sets: dict[str, RelationSet], est: Trajectory) -> dict[str, E
     return out
 
 
+def _set_labels(evs: dict[str, Evaluation]) -> NDArray[np.str_]:
+    """The relation set of each relation of ``evs["all"]`` (:func:`_evaluate_sets` merged
+    the sets in the order of ``evs``), for the ``set`` column of the per-relation CSV."""
+    names = [k for k in evs if k != "all"]
+    labels = np.repeat(np.array(names, dtype=np.str_), [len(evs[k].relations) for k in names])
+    if labels.size != len(evs["all"].relations):
+        raise RuntimeError("the merged relations are not the relation sets in order")
+    return labels
+
+
 def read_run_input(directory: str | Path) -> RunInput:
     """Read a SLAM result bundle directory to score (the I/O end of ``slamrel run``).
 
@@ -853,7 +863,9 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
         write_bundle(tmp / "bundle", result.bundle)
         write_json(tmp / "metrics.json", metrics)
         for name, evs in result.evaluations.items():
-            write_per_relation_csv(tmp / f"relations_{name}.csv", evs["all"])
+            write_per_relation_csv(
+                tmp / f"relations_{name}.csv", evs["all"], relation_sets=_set_labels(evs)
+            )
         figures = report_figures(result)
         for k, fig in enumerate(figures.in_order()):
             (tmp / f"figure_{k + 1}.png").write_bytes(fig.png)

@@ -35,6 +35,19 @@ def test_run_writes_a_consistent_report(tmp_path):
     # SLAM beats dead reckoning on global relations
     g = metrics["trajectory"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]
     assert g < metrics["dead_reckoning"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]
+    # the per-relation CSVs name each relation's set, and compare tests the sets one by one
+    from slamrel.report.tables import compare_results, read_per_relation
+
+    rec = read_per_relation(out / f"relations_{source}.csv", dataset="d", algorithm="slam")
+    dr = read_per_relation(out / "relations_dead_reckoning.csv", dataset="d", algorithm="dr")
+    by_set = metrics["trajectory"]["by_relation_set"]
+    assert {s: int((rec.sets == s).sum()) for s in by_set} == {
+        s: ev["translation"]["abs"]["count"] for s, ev in by_set.items()
+    }
+    tests = compare_results([rec, dr], resamples=199).tests
+    assert [(t.relation_set, t.part) for t in tests] == [
+        (s, p) for s in ("consecutive", "loops", "global") for p in ("translation", "rotation")
+    ]
 
 
 def test_interrupted_run_leaves_no_partial_report(tmp_path, monkeypatch):

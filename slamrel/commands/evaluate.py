@@ -114,7 +114,12 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
 def _output_arguments(p: argparse.ArgumentParser) -> None:
     """The files written besides the printed table."""
     p.add_argument("--json", metavar="FILE", help="write the results as JSON")
-    p.add_argument("--per-relation", metavar="FILE", help="write per-relation errors as CSV")
+    p.add_argument(
+        "--per-relation",
+        metavar="FILE",
+        help="write per-relation errors as CSV (for slamrel compare; relations generated "
+        "with --strategy carry its name in a column 'set')",
+    )
     p.add_argument(
         "--plot", type=opt.figure_file, metavar="FILE", help="write a figure (.png/.svg/.pdf)"
     )
@@ -173,7 +178,10 @@ def _write_outputs(args: argparse.Namespace, scored: FileEvaluation) -> None:
     if args.json:
         write_json(args.json, scored.result)
     if args.per_relation:
-        write_per_relation_csv(args.per_relation, ev, degrees=args.degrees)
+        sets = None
+        if scored.relation_set is not None:
+            sets = [scored.relation_set] * len(ev.relations)
+        write_per_relation_csv(args.per_relation, ev, degrees=args.degrees, relation_sets=sets)
     if args.evo_zip:
         write_evo_zip(
             args.evo_zip,

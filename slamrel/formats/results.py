@@ -11,7 +11,9 @@ import zipfile
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from relation_metric.errors import InputError
 from relation_metric.evaluate import Evaluation
 from slamrel.formats.text import NUMBER_FORMAT, PathLike, write_bytes_atomic, write_text_atomic
 
@@ -24,19 +26,43 @@ def write_json(path: PathLike, data: dict[str, Any]) -> None:
 
 
 def write_per_relation_csv(
-    path: PathLike, evaluation: Evaluation, *, degrees: bool = False
+    path: PathLike,
+    evaluation: Evaluation,
+    *,
+    degrees: bool = False,
+    relation_sets: ArrayLike | None = None,
 ) -> None:
-    """One row per relation: ``t1,t2,i,j,trans_error,rot_error,valid,via_odometry``.
+    """One row per relation: ``t1,t2,i,j,trans_error,rot_error,valid,via_odometry[,set]``.
 
     ``i``/``j`` are the estimate pose indices associated with the two ends (−1 when
     unassociated); errors of unassociated relations are empty. Numbers as
     :data:`~slamrel.formats.text.NUMBER_FORMAT` (exact round trip).
+
+    Parameters
+    ----------
+    path : str or PathLike
+    evaluation : Evaluation
+    degrees : bool
+        Rotation errors in degrees (column ``rot_error_deg``; else ``rot_error_rad``).
+    relation_sets : array_like of str, shape (M,), optional
+        The relation set each relation belongs to (e.g. ``consecutive``, ``loops``), written
+        as a last column ``set``; ``slamrel compare`` then tests each set on its own. Names
+        must be non-empty, without commas, line breaks or surrounding blanks.
+
+    Raises
+    ------
+    InputError
+        ``relation_sets`` of another length than the relations, or a name it cannot write.
     """
     ev = evaluation
     a = ev.association
-    rot = np.degrees(ev.errors.rotation) if degrees else ev.errors.rotation
-    head = f"t1,t2,i,j,trans_error,rot_error_{'deg' if degrees else 'rad'},valid,via_odometry\n"
     n = len(ev.relations)
+    sets = None if relation_sets is None else np.asarray(relation_sets, dtype=np.str_)
+    if sets is not None:
+        _check_set_names(sets, n)
+    rot = np.degrees(ev.errors.rotation) if degrees else ev.errors.rotation
+    head = f"t1,t2,i,j,trans_error,rot_error_{'deg' if degrees else 'rad'},valid,via_odometry"
+    head += ",set\n" if sets is not None else "\n"
     if n == 0:
         write_text_atomic(path, head)
         return
@@ -50,10 +76,29 @@ def write_per_relation_csv(
         a.valid.astype(np.int8).astype(str),
         a.via_odometry.astype(np.int8).astype(str),
     ]
+    if sets is not None:
+        cols.append(sets)
     rows = cols[0]
     for c in cols[1:]:
         rows = np.char.add(np.char.add(rows, ","), c)
     write_text_atomic(path, head + "\n".join(rows.tolist()) + "\n")
+
+
+def _check_set_names(sets: np.ndarray, n: int) -> None:
+    if sets.shape != (n,):
+        raise InputError(f"relation_sets must name one set per relation ({n}), got {sets.shape}")
+    for name in np.unique(sets).tolist():
+        bad = (
+            not name
+            or name != name.strip()
+            or "," in name
+            or any(not ch.isprintable() for ch in name)
+        )
+        if bad:
+            raise InputError(
+                f"relation set name {name!r}: expected a non-empty name without commas, line "
+                "breaks or surrounding blanks"
+            )
 
 
 def evo_stats(errors: np.ndarray) -> dict[str, float]:

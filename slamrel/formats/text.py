@@ -53,6 +53,7 @@ __all__ = [
     "RowLines",
     "CsvTable",
     "read_csv_table",
+    "read_csv_text_column",
     "format_csv_table",
     "write_csv_table",
     "parse_float",
@@ -480,6 +481,24 @@ def read_csv_table(
     else:
         values = np.empty((0, len(wanted)))
     return CsvTable({c: values[:, i] for i, c in enumerate(wanted)}, numbers)
+
+
+def read_csv_text_column(source: SourceText, name: str) -> NDArray[np.str_] | None:
+    """The cells of a text column ``name`` of a header CSV, row by row (``None`` if absent).
+
+    For a file that :func:`read_csv_table` has read (pass it the same ``source``): the rows
+    are the same (data lines after the header) and their field counts already checked.
+    Cells are stripped of surrounding blanks, as the header names are.
+    """
+    data = source.data_lines()
+    first = next(data, None)
+    if first is None:
+        return None
+    header = [h.strip().lower() for h in first[1].split(",")]
+    if name not in header:
+        return None
+    k = header.index(name)
+    return np.array([text.split(",")[k].strip() for _, text in data], dtype=np.str_)
 
 
 def _column_name(c: Column) -> str:
