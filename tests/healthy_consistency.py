@@ -42,12 +42,12 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from slamrel.simulation.healthy import FORMS, healthy_bundle  # noqa: E402
 from test_recovery_healthy import N_EFF  # noqa: E402
 
 import slamrel  # noqa: E402
 from recovery.recover import recover  # noqa: E402
 from relation_metric.consistency import nees_band  # noqa: E402
+from slamrel.simulation.healthy import FORMS, healthy_bundle  # noqa: E402
 
 METHODS = ("filter", "smoother", "batch")
 ROBUST = (None, "redescending")

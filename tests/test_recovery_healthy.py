@@ -65,13 +65,13 @@ from functools import cache
 
 import numpy as np
 import pytest
-from slamrel.simulation.healthy import FORMS, healthy_bundle
 from scipy.linalg import block_diag
 
 import slamrel
 from recovery.constants import DEFAULT_ROBUST
 from recovery.recover import recover
 from relation_metric.consistency import nees_band
+from slamrel.simulation.healthy import FORMS, healthy_bundle
 
 WORLDS = ("simple1", "complex1")  # 85 poses / 10 m and 391 poses / 25 m, ~220 landmarks
 SEEDS = (0, 1, 2, 3, 4, 5)
