@@ -1,4 +1,5 @@
-"""``slamrel study pose-only``: Hu, Huang & Dissanayake's study of pose-only SLAM, reproduced.
+"""``slamrel study pose-only``: Hu, Huang & Dissanayake's study of pose-only SLAM, reproduced;
+``slamrel study verdict-calibration``: the verdict's lamps on healthy and broken runs.
 
 Writes into the output folder, which is reused when the study is run again (finished cases
 are skipped; :func:`slamrel.outputs.resumable_directory`: only an absent or empty
@@ -8,6 +9,10 @@ folder, or a study folder slamrel wrote, is accepted; each file is written atomi
 * ``table.md``, ``table.csv``, ``table.tex`` — the Tables II/III analogue;
 * ``fig1_sigma_bounds.png``, ``fig2_nees1.png`` — the Fig. 1 / Fig. 2 analogues;
 * ``findings.md`` — the paper's findings, each checked (holds or not, with the numbers).
+
+``verdict-calibration`` (:mod:`slamrel.studies.calibration`) writes ``cases/`` and
+``calibration.md`` / ``calibration.json``: per lamp, how often it is green on runs healthy by
+construction and red on broken ones (``--runs`` seeds per world × noise × map form × fault).
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ import sys
 from slamrel.commands import options as opt
 from slamrel.constants import NOISE_NAMES, PAPER_WORLDS, POSE_ONLY_METHODS, WORLDS
 
-STUDIES = ("pose-only",)
+STUDIES = ("pose-only", "verdict-calibration")
 
 
 def _names(allowed: tuple[str, ...], what: str):  # type: ignore[no-untyped-def]
@@ -37,7 +42,8 @@ def _names(allowed: tuple[str, ...], what: str):  # type: ignore[no-untyped-def]
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     s = sub.add_parser(
         "study",
-        help="reproduce Hu et al.'s pose-only SLAM study: worlds x noise x runs x methods",
+        help="reproduce Hu et al.'s pose-only SLAM study (worlds x noise x runs x methods), or "
+        "calibrate the verdict on healthy and broken runs",
     )
     s.add_argument("study", choices=STUDIES, metavar="STUDY", help=", ".join(STUDIES))
     s.add_argument("-o", "--output", required=True, metavar="DIR")
@@ -69,6 +75,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default="truth",
         help="start of the pose-only pair least squares (truth: as the paper)",
     )
+    s.add_argument(
+        "--broken-runs",
+        type=opt.positive_int,
+        default=None,
+        metavar="N",
+        help="verdict-calibration: seeds of the broken runs (default: --runs)",
+    )
     s.add_argument("--min-common", type=opt.int_range(2, 1000), default=5, metavar="K")
     s.add_argument("--toro-iterations", type=opt.positive_int, default=100, metavar="N")
     s.add_argument("--workers", type=opt.positive_int, default=1, help="worker processes (1)")
@@ -85,6 +98,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run_study(args: argparse.Namespace) -> int:
+    if args.study == "verdict-calibration":
+        return _run_calibration(args)
 
     from slamrel.outputs import resumable_directory
     from slamrel.studies.pose_only import (
@@ -124,6 +139,53 @@ def run_study(args: argparse.Namespace) -> int:
         print(
             f"study pose-only: {len(tasks)} cases ({report.ran} run now, {report.skipped} "
             f"already done, {len(report.failed)} failed) -> " + ", ".join(str(p) for p in paths)
+        )
+        for key in report.failed:
+            print(f"failed: {out / 'cases' / (key + '.error.json')}")
+    return 0 if not report.failed else 3
+
+
+def _run_calibration(args: argparse.Namespace) -> int:
+    from slamrel.outputs import resumable_directory
+    from slamrel.studies.calibration import (
+        calibration_summary,
+        calibration_tasks,
+        write_calibration,
+    )
+    from slamrel.studies.sweep import load_results, run_sweep
+
+    if args.worlds == list(PAPER_WORLDS):
+        args.worlds = list(WORLDS)  # the default of pose-only is the paper's worlds
+    other = [w for w in args.worlds if w not in WORLDS]
+    if other:  # an option mistake: exit 2 like argparse
+        print(
+            f"slamrel study: error: --worlds: {', '.join(other)}: the verdict calibration runs "
+            f"on the built-in worlds ({', '.join(WORLDS)})",
+            file=sys.stderr,
+        )
+        return 2
+    worlds = args.worlds
+    out = resumable_directory(args.output, kind="verdict-calibration")
+    broken = args.runs if args.broken_runs is None else args.broken_runs
+    tasks = calibration_tasks(
+        worlds, args.noise, list(range(args.runs)), broken_seeds=list(range(broken))
+    )
+
+    def progress(line: str) -> None:
+        if not args.quiet:
+            print(f"study: {line}", file=sys.stderr, flush=True)
+
+    report = run_sweep(
+        tasks, out / "cases", workers=args.workers, scheduler=args.scheduler, progress=progress
+    )
+    summary = calibration_summary(load_results(out / "cases", tasks))
+    paths = write_calibration(out, summary)
+    if not args.quiet:
+        print("\n".join(summary.lines()))
+        print(
+            f"study verdict-calibration: {len(tasks)} cases ({report.ran} run now, "
+            f"{report.skipped} already done, {len(report.failed)} failed) -> "
+            + ", ".join(str(p) for p in paths)
         )
         for key in report.failed:
             print(f"failed: {out / 'cases' / (key + '.error.json')}")

@@ -41,6 +41,7 @@ __all__ = [
     "calibration_case",
     "calibration_summary",
     "calibration_tasks",
+    "write_calibration",
 ]
 
 #: The faults of the broken runs: name → (kind, parameter).
@@ -146,16 +147,22 @@ def calibration_tasks(
     noises: Sequence[str],
     seeds: Sequence[int],
     forms: Sequence[str] = ("joint", "marginal"),
-    faults: Sequence[str] = ("none", *FAULTS),
+    faults: Sequence[str] = tuple(FAULTS),
+    *,
+    broken_seeds: Sequence[int] | None = None,
 ) -> list[Task]:
-    """The study's sweep: every world × noise × seed × form × fault (``"none"``: healthy)."""
+    """The study's sweep: healthy runs for every world × noise × seed × form, and broken runs
+    for every world × noise × broken seed (default: ``seeds``) × form × fault."""
+    bs = seeds if broken_seeds is None else broken_seeds
+    cases = [(w, n, s, f, "none") for w, n, s, f in itertools.product(worlds, noises, seeds, forms)]
+    cases += list(itertools.product(worlds, noises, bs, forms, faults))
     return [
         Task(
             f"cal-{w}-{n}-{s}-{f}-{x.replace('%', 'pc')}",
             "slamrel.studies.calibration:calibration_case",
             {"world": w, "noise": n, "seed": s, "form": f, "fault": x},
         )
-        for w, n, s, f, x in itertools.product(worlds, noises, seeds, forms, faults)
+        for w, n, s, f, x in cases
     ]
 
 
@@ -235,3 +242,27 @@ def calibration_summary(records: Sequence[dict[str, Any]]) -> CalibrationSummary
         broken_red=red,
         red_by_lamp=red_lamp,
     )
+
+
+def write_calibration(directory: Any, summary: CalibrationSummary) -> list[Any]:
+    """``calibration.md`` (the rates as text) and ``calibration.json`` in ``directory``,
+    each written atomically; returns their paths."""
+    import json
+    from dataclasses import asdict
+    from pathlib import Path
+
+    from slamrel.formats.text import write_text_atomic
+
+    out = Path(directory)
+    md = out / "calibration.md"
+    js = out / "calibration.json"
+    write_text_atomic(
+        md,
+        "# Verdict calibration\n\n"
+        "Healthy: every lamp should be green; broken: a lamp among "
+        + ", ".join(RED_LAMPS)
+        + " should be red (slamrel.studies.calibration).\n\n"
+        + "".join(f"- {line}\n" for line in summary.lines()),
+    )
+    write_text_atomic(js, json.dumps(asdict(summary), indent=2, sort_keys=True) + "\n")
+    return [md, js]
