@@ -67,6 +67,9 @@ def test_calibration_study_separates_healthy_from_broken(tmp_path, capsys):
     assert red["noise-x0.1"]["consistency"] >= 0.95
     assert red["noise-x10"]["map_log"] >= 0.95
     assert red["map-x3"]["map_consistency"] >= 0.95
+    # the reference EKF-SLAM's own runs are reported as they are (no expectation)
+    assert s["reference_runs"] == 2 * 3 * 5
+    assert set(s["reference_q"]) >= {"consistency", "online_consistency", "map_log"}
 
 
 def _non_green(result) -> dict[str, str]:

@@ -24,13 +24,14 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from recovery.bundle import Bundle
 from recovery.models import MotionModel, SensorModel
+from slamrel.report.verdict import LEVELS
 from slamrel.studies.sweep import Task
 
 __all__ = [
@@ -41,6 +42,7 @@ __all__ = [
     "calibration_case",
     "calibration_summary",
     "calibration_tasks",
+    "reference_case",
     "write_calibration",
 ]
 
@@ -142,6 +144,21 @@ def calibration_case(
     }
 
 
+def reference_case(world: str, noise: str, seed: int) -> dict[str, Any]:
+    """One run of the reference EKF-SLAM (``slamrel run WORLD --noise N --seed S``), judged:
+    the same JSON as :func:`calibration_case`. No expectation: an EKF-SLAM can be genuinely
+    inconsistent, and the study reports what its lamps say."""
+    from slamrel.pipeline import run_pipeline
+    from slamrel.report.verdict import RunFacts, run_verdict
+
+    verdict = run_verdict(RunFacts.of(run_pipeline(world, noise=noise, seed=seed)))
+    return {
+        "overall": verdict.level,
+        "levels": {ln.key: ln.level for ln in verdict.lines},
+        "values": {ln.key: ln.measure for ln in verdict.lines},
+    }
+
+
 def calibration_tasks(
     worlds: Sequence[str],
     noises: Sequence[str],
@@ -151,9 +168,18 @@ def calibration_tasks(
     *,
     broken_seeds: Sequence[int] | None = None,
 ) -> list[Task]:
-    """The study's sweep: healthy runs for every world × noise × seed × form, and broken runs
-    for every world × noise × broken seed (default: ``seeds``) × form × fault."""
+    """The study's sweep: healthy runs for every world × noise × seed × form, broken runs
+    for every world × noise × broken seed (default: ``seeds``) × form × fault, and the
+    reference EKF-SLAM's own runs (:func:`reference_case`) for every world × noise × seed."""
     bs = seeds if broken_seeds is None else broken_seeds
+    reference = [
+        Task(
+            f"ref-{w}-{n}-{sd}",
+            "slamrel.studies.calibration:reference_case",
+            {"world": w, "noise": n, "seed": sd},
+        )
+        for w, n, sd in itertools.product(worlds, noises, seeds)
+    ]
     cases = [(w, n, s, f, "none") for w, n, s, f in itertools.product(worlds, noises, seeds, forms)]
     cases += list(itertools.product(worlds, noises, bs, forms, faults))
     return [
@@ -163,7 +189,7 @@ def calibration_tasks(
             {"world": w, "noise": n, "seed": s, "form": f, "fault": x},
         )
         for w, n, s, f, x in cases
-    ]
+    ] + reference
 
 
 @dataclass(frozen=True)
@@ -183,6 +209,13 @@ class CalibrationSummary:
         Per fault, the fraction of its runs with a red lamp among :data:`RED_LAMPS`.
     red_by_lamp : dict of str → dict of str → float
         Per fault, per lamp, the fraction of its runs where that lamp is red.
+    reference_runs : int
+        Runs of the reference EKF-SLAM.
+    reference_levels : dict of str → dict of str → float
+        Per lamp, the fraction of those runs at each level (no expectation: what it is).
+    reference_q : dict of str → list of float
+        Per NEES-type lamp (``consistency``, ``online_consistency``, ``map_log``,
+        ``map_consistency``), its ``q`` over the reference runs.
     """
 
     healthy_runs: int
@@ -191,6 +224,9 @@ class CalibrationSummary:
     broken_runs: dict[str, int]
     broken_red: dict[str, float]
     red_by_lamp: dict[str, dict[str, float]]
+    reference_runs: int = 0
+    reference_levels: dict[str, dict[str, float]] = field(default_factory=dict)
+    reference_q: dict[str, list[float]] = field(default_factory=dict)
 
     def lines(self) -> list[str]:
         """The summary as text, one line per rate."""
@@ -207,12 +243,25 @@ class CalibrationSummary:
             out.append(
                 f"{fault}: {n} runs, red {100 * self.broken_red[fault]:.0f} % ({lamps or 'none'})"
             )
+        if self.reference_runs:
+            parts = []
+            for lamp, lv in self.reference_levels.items():
+                shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in lv.items() if v > 0)
+                q = self.reference_q.get(lamp)
+                rng = f"; q {min(q):.2f}–{max(q):.2f}" if q else ""
+                parts.append(f"{lamp} ({shares}{rng})")
+            out.append(
+                f"reference EKF-SLAM: {self.reference_runs} runs, judged as they are: "
+                + "; ".join(parts)
+            )
         return out
 
 
 def calibration_summary(records: Sequence[dict[str, Any]]) -> CalibrationSummary:
     """The rates of the study from its stored records (:func:`slamrel.studies.sweep.
     load_results`: each has the task's ``kwargs`` and its ``result``)."""
+    refs = [r["result"] for r in records if r["function"].endswith(":reference_case")]
+    records = [r for r in records if not r["function"].endswith(":reference_case")]
     cases = [(r["kwargs"]["fault"], r["result"]) for r in records]
     healthy = [r for f, r in cases if f == "none"]
     lamps = list(dict.fromkeys(k for r in healthy for k in r["levels"] if r["levels"][k] != "info"))
@@ -241,6 +290,17 @@ def calibration_summary(records: Sequence[dict[str, Any]]) -> CalibrationSummary
         broken_runs=runs,
         broken_red=red,
         red_by_lamp=red_lamp,
+        reference_runs=len(refs),
+        reference_levels={
+            k: {lv: float(np.mean([r["levels"].get(k) == lv for r in refs])) for lv in LEVELS}
+            for k in dict.fromkeys(k for r in refs for k in r["levels"])
+            if any(r["levels"].get(k) in LEVELS for r in refs)
+        },
+        reference_q={
+            k: [float(r["values"][k]) for r in refs if k in r["values"]]
+            for k in ("consistency", "online_consistency", "map_log", "map_consistency")
+            if any(k in r["values"] for r in refs)
+        },
     )
 
 
