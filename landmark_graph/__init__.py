@@ -16,6 +16,11 @@ _EXPORTS: dict[str, str] = {
     "LandmarkMap": "landmark_graph.maps",
     "compare_maps": "landmark_graph.map_compare",
     "MapComparison": "landmark_graph.map_compare",
+    "MapAlignment": "landmark_graph.map_compare",
+    "choose_association": "landmark_graph.map_compare",
+    "fit_map_alignment": "landmark_graph.map_compare",
+    "SensorReach": "landmark_graph.observability",
+    "within_reach": "landmark_graph.observability",
     "Association": "landmark_graph.landmark_association",
     "associate_by_id": "landmark_graph.landmark_association",
     "associate_auto": "landmark_graph.landmark_association",
@@ -34,6 +39,11 @@ __all__ = [
     "LandmarkMap",
     "compare_maps",
     "MapComparison",
+    "MapAlignment",
+    "choose_association",
+    "fit_map_alignment",
+    "SensorReach",
+    "within_reach",
     "Association",
     "associate_by_id",
     "associate_auto",
@@ -56,10 +66,17 @@ if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on 
         gospa,
         ospa,
     )
-    from landmark_graph.map_compare import MapComparison, compare_maps
+    from landmark_graph.map_compare import (
+        MapAlignment,
+        MapComparison,
+        choose_association,
+        compare_maps,
+        fit_map_alignment,
+    )
     from landmark_graph.maps import LandmarkMap
     from landmark_graph.mesh import Mesh, delaunay_mesh
     from landmark_graph.mesh_relations import MeshErrors, mesh_errors
+    from landmark_graph.observability import SensorReach, within_reach
     from landmark_graph.pose_landmark import (
         PoseLandmarkErrors,
         pose_landmark_errors,

@@ -52,9 +52,10 @@ __all__ = [
     "shared_by_id",
 ]
 
-#: How the landmark pairs of an anchoring were found: by equal id, or by
-#: :func:`landmark_graph.landmark_association.associate_auto` (``map-compare --associate auto``).
-ASSOCIATIONS = ("id", "auto", "start")
+#: How the landmark pairs of an anchoring were found: by equal id, by
+#: :func:`landmark_graph.landmark_association.associate_auto` (``map-compare --associate auto``)
+#: or from an association file; ``"start"``: no landmarks, placed by the run's start pose.
+ASSOCIATIONS = ("id", "auto", "file", "start")
 
 
 @dataclass(frozen=True)
@@ -167,7 +168,9 @@ class NeesFrame:
             return f"truth frame ({self.reason})" if self.reason else "truth frame"
         if a.association == "start":
             return "map frame placed in the truth frame by the run's start pose"
-        how = "by id" if a.association == "id" else "associated automatically"
+        how = {"id": "by id", "file": "associated from a file"}.get(
+            a.association, "associated automatically"
+        )
         return f"map frame aligned to the truth on {a.landmarks} landmarks ({how})"
 
     def as_dict(self) -> dict[str, object]:

@@ -238,16 +238,23 @@ class MotionModel:
 class SensorModel:
     """Range-bearing sensor with independent Gaussian noise (standard deviations).
 
+    ``max_range`` [m] and ``fov`` [rad] (the full opening angle, centred on the heading) are
+    the sensor's reach when the bundle declares it (``None``: not declared); only the map
+    comparison reads them (which true landmarks the run could have seen).
+
     Raises
     ------
     InputError
-        When ``type`` is not ``"range_bearing"`` or a standard deviation is negative or not
-        finite (zero is allowed in memory: a noise-free simulation); the message names the field.
+        When ``type`` is not ``"range_bearing"``, a standard deviation is negative or not
+        finite (zero is allowed in memory: a noise-free simulation), ``max_range`` is not
+        positive or ``fov`` not in ``(0, 2π]``; the message names the field.
     """
 
     sigma_range: float
     sigma_bearing: float
     type: str = "range_bearing"
+    max_range: float | None = None
+    fov: float | None = None
 
     def __post_init__(self) -> None:
         if self.type != "range_bearing":
@@ -257,6 +264,15 @@ class SensorModel:
         for name in ("sigma_range", "sigma_bearing"):
             (value,) = _nonnegative_numbers((getattr(self, name),), 1, what=f"sensor_model.{name}")
             object.__setattr__(self, name, value)
+        for name, high in (("max_range", math.inf), ("fov", 2 * math.pi)):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            (value,) = _nonnegative_numbers((v,), 1, what=f"sensor_model.{name}")
+            if not 0.0 < value <= high:
+                bound = "a positive number" if name == "max_range" else "an angle in (0, 2π]"
+                raise InputError(f"sensor_model.{name}: expected {bound}, got {value:g}")
+            object.__setattr__(self, name, value)
 
     @property
     def covariance(self) -> Array:
@@ -264,11 +280,15 @@ class SensorModel:
         return np.diag([self.sigma_range**2, self.sigma_bearing**2])
 
     def as_dict(self) -> dict[str, object]:
-        return {
+        out: dict[str, object] = {
             "type": self.type,
             "sigma_range": self.sigma_range,
             "sigma_bearing": self.sigma_bearing,
         }
+        for name in ("max_range", "fov"):
+            if getattr(self, name) is not None:
+                out[name] = getattr(self, name)
+        return out
 
 
 def velocity_increment(v: ArrayLike, omega: ArrayLike, dt: ArrayLike) -> tuple[Array, Array]:

@@ -29,9 +29,11 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from landmark_graph.landmark_association import Association, associate_auto, associate_by_id
-from landmark_graph.map_compare import MapComparison, compare_maps
+from landmark_graph.constants import DEFAULT_ASSOCIATE
+from landmark_graph.landmark_association import Association
+from landmark_graph.map_compare import SOURCE_WORDS, MapComparison, compare_maps
 from landmark_graph.maps import LandmarkMap
+from landmark_graph.observability import SensorReach, within_reach
 from recovery.anchoring import Anchoring, NeesFrame, anchor_on_landmarks, start_frame
 from recovery.bundle import Bundle
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, Divergence, Recovery, recover
@@ -70,9 +72,11 @@ __all__ = [
     "RunResult",
     "default_relations",
     "landmark_frame",
+    "map_comparison",
     "read_run_input",
     "run_pipeline",
     "score_bundle",
+    "sensor_reach",
     "simulate_run_input",
     "TimeBase",
     "write_report",
@@ -323,13 +327,24 @@ class MapSummary:
     corner : Summary
         Absolute corner-angle errors of its triangles [rad] (``map.rotation.abs``).
     matched, missed, spurious : int
-        Associated landmark pairs; true landmarks without, SLAM landmarks without a partner.
+        Associated landmark pairs; true landmarks within the sensor's reach without a
+        partner, SLAM landmarks without a partner.
     ospa, gospa : float
-        OSPA and GOSPA distances of the two maps [m].
+        OSPA and GOSPA distances [m] of the SLAM map, moved onto the true landmarks by the fit
+        on the pairs, and the observable true landmarks (``map.ospa.value``).
     cutoff : float
         Their cut-off ``c`` [m] (the association's).
     order : float
         Their order ``p``.
+    unobserved : int
+        True landmarks never within the sensor's reach of the true trajectory (neither
+        matched nor missed).
+    ospa_all, gospa_all : float or None
+        The same on all true landmarks (``map.ospa.all_landmarks``).
+    frame : str
+        The frame of OSPA/GOSPA in words (``map.ospa.frame``).
+    association : str
+        How the pairs were found, in words (``"by id"``, ``"automatically"``, ``"from a file"``).
     """
 
     edge: Summary
@@ -341,6 +356,11 @@ class MapSummary:
     gospa: float
     cutoff: float
     order: float
+    unobserved: int = 0
+    ospa_all: float | None = None
+    gospa_all: float | None = None
+    frame: str = ""
+    association: str = ""
 
     @classmethod
     def of(cls, mc: MapComparison) -> MapSummary:
@@ -349,12 +369,17 @@ class MapSummary:
             edge=error_summaries(mc.errors.edge_length)["abs"],
             corner=error_summaries(mc.errors.corner_angle.ravel())["abs"],
             matched=int(a.estimate_rows.size),
-            missed=int(a.missed.size),
+            missed=int(mc.missed.size),
             spurious=int(a.spurious.size),
             ospa=mc.ospa,
             gospa=mc.gospa,
             cutoff=mc.cutoff,
             order=mc.order,
+            unobserved=int(mc.unobserved.size),
+            ospa_all=mc.ospa_all,
+            gospa_all=mc.gospa_all,
+            frame=mc.frame,
+            association=SOURCE_WORDS[mc.association_source],
         )
 
 
@@ -594,6 +619,8 @@ def run_pipeline(
     on_divergence: str = "reenter",
     robust: str | None = DEFAULT_ROBUST,
     process_noise_scale: float = 1.0,
+    associate: str | Association = DEFAULT_ASSOCIATE,
+    align: bool = True,
 ) -> RunResult:
     """Run the whole chain on a built-in world, or score a bundle read earlier (no I/O).
 
@@ -601,7 +628,7 @@ def run_pipeline(
     ``rate``, ``corrupt_fraction``, ``noise_scale``, ``process_noise_scale``), or a
     :class:`RunInput` (e.g. from :func:`read_run_input` for a bundle directory).
     ``max_outlier_run``, ``on_divergence`` and ``robust`` are passed to
-    :func:`recovery.recover.recover`.
+    :func:`recovery.recover.recover`, ``associate`` and ``align`` to :func:`map_comparison`.
     """
     inp = source
     if not isinstance(inp, RunInput):
@@ -611,7 +638,7 @@ def run_pipeline(
         )  # fmt: skip
     return score_bundle(
         inp, seed=seed, method=method, max_outlier_run=max_outlier_run,
-        on_divergence=on_divergence, robust=robust,
+        on_divergence=on_divergence, robust=robust, associate=associate, align=align,
     )  # fmt: skip
 
 
@@ -623,12 +650,16 @@ def score_bundle(
     max_outlier_run: int | None = DEFAULT_MAX_OUTLIER_RUN,
     on_divergence: str = "reenter",
     robust: str | None = DEFAULT_ROBUST,
+    associate: str | Association = DEFAULT_ASSOCIATE,
+    align: bool = True,
 ) -> RunResult:
     """Recover the trajectory from a SLAM result bundle and score it (and its baselines).
 
     When the recovery fails (``on_divergence="raise"`` on a run where map and log disagree,
     or numerically impossible input), the result still scores dead reckoning (and the online
-    estimate) and says why in ``recovery_error``: a report is always written.
+    estimate) and says why in ``recovery_error``: a report is always written. The map is
+    compared with the true landmarks by :func:`map_comparison` (``associate``, ``align``);
+    when no association can be made the report says why instead.
     """
     bundle = inp.bundle
     truth = bundle.groundtruth
@@ -638,7 +669,13 @@ def score_bundle(
         )
     relations = default_relations(truth, seed=seed)
     sets = relations.sets
-    frame, landmark_pairs = landmark_frame(bundle)
+    map_cmp, map_notes = None, []
+    try:
+        map_cmp = map_comparison(bundle, associate=associate, align=align)
+    except InputError as exc:  # no pair at all, or maps too small to associate: a finding
+        map_notes.append(f"No map comparison: {exc.message}.")
+    # the NEES frame's landmark fit on the comparison's pairs (none when it failed)
+    frame = _placed(bundle, None) if map_cmp is None else landmark_frame(bundle, map_cmp)[0]
     rec_error = None
     try:
         rec = recover(
@@ -650,15 +687,9 @@ def score_bundle(
             raise
         rec, rec_error = None, str(exc)
     estimates, nees, nees_truth = _estimates_at_truth(inp, rec, frame)
-    map_cmp = None
-    if bundle.landmarks_groundtruth is not None:
-        gt_ids, gt_xy = bundle.landmarks_groundtruth
-        map_cmp = compare_maps(
-            LandmarkMap(bundle.map_ids, bundle.map_xy), LandmarkMap(gt_ids, gt_xy),
-            associate="id" if landmark_pairs is None else landmark_pairs,
-        )  # fmt: skip
     notes = _notes(rec, rec_error, method, has_online=inp.online is not None)
     notes += _nees_notes(frame, nees, nees_truth, inp)
+    notes += map_notes if map_cmp is None else _map_notes(map_cmp)
     return RunResult(
         name=inp.name,
         bundle=bundle,
@@ -675,31 +706,112 @@ def score_bundle(
     )
 
 
-def landmark_frame(bundle: Bundle) -> tuple[NeesFrame, Association | None]:
+def sensor_reach(bundle: Bundle) -> SensorReach | None:
+    """How far the bundle's sensor sees: declared by its sensor model (``max_range``, ``fov``,
+    docs/bundle.md), else the largest range among its measurements, all around (``None``
+    without measurements)."""
+    s = bundle.sensor
+    if s.max_range is not None:
+        return SensorReach(s.max_range, s.fov, "declared")
+    if bundle.measurements.shape[0] == 0:
+        return None
+    return SensorReach(float(bundle.measurements[:, 0].max()), None, "largest measured range")
+
+
+def map_comparison(
+    bundle: Bundle,
+    *,
+    associate: str | Association = DEFAULT_ASSOCIATE,
+    align: bool = True,
+    cutoff: float = 1.0,
+    seed: int = 0,
+) -> MapComparison | None:
+    """The SLAM map against the bundle's true landmarks (``None`` when it has none).
+
+    :func:`landmark_graph.map_compare.compare_maps` with the frame rule (the map moved onto
+    the true landmarks by the fit on the pairs, unless ``align=False``) and ``associate``
+    (``"id-or-auto"``, ``"id"``, ``"auto"`` or an association; by id with no shared id, the
+    maps are associated automatically, and the notes say so). The true landmarks ever within
+    the sensor's reach (:func:`sensor_reach`) of the ground-truth trajectory
+    (:func:`landmark_graph.observability.within_reach`) are the observable ones; without
+    ground truth or measurements every true landmark is.
+    """
+    if bundle.landmarks_groundtruth is None:
+        return None
+    est = LandmarkMap(bundle.map_ids, bundle.map_xy)
+    ref = LandmarkMap(*bundle.landmarks_groundtruth)
+    reach = sensor_reach(bundle)
+    observable = None
+    if reach is not None and bundle.groundtruth is not None:
+        observable = within_reach(bundle.groundtruth.poses, ref.xy, reach)
+    return compare_maps(
+        est, ref, associate=associate, cutoff=cutoff, seed=seed, align=align,
+        observable=observable, reach=reach, fallback=True,
+    )  # fmt: skip
+
+
+def landmark_frame(
+    bundle: Bundle, comparison: MapComparison | None = None
+) -> tuple[NeesFrame, Association | None]:
     """The frame to compute NEES in, and the landmark association it was anchored on.
 
-    The SLAM map is associated with ``landmarks_groundtruth`` by id when at least 2 ids are
-    shared, otherwise automatically (:func:`~landmark_graph.landmark_association.associate_auto`,
-    as ``slamrel map-compare --associate auto``); the truth ← map transform is fitted on the
-    pairs (:func:`recovery.anchoring.anchor_on_landmarks`). Without landmark ground truth, or
-    when fewer than 2 pairs are found, the NEES stays in the truth frame (the reason is in
-    the frame's description). The association is ``None`` when none was made.
+    The SLAM map's landmark pairs with ``landmarks_groundtruth`` are those of the map
+    comparison (``comparison``; by default :func:`map_comparison` with its default
+    association: by id when the shared ids mostly match, else automatically); the truth ← map
+    transform is fitted on them (:func:`recovery.anchoring.anchor_on_landmarks`, the same
+    least-squares fit as the comparison's alignment) and reported beside the frame placed by
+    the start pose. Without landmark ground truth, or when fewer than 2 pairs are found, there
+    is no landmark fit. The association is ``None`` when none was made.
     """
     if bundle.landmarks_groundtruth is None:
         return _placed(bundle, None), None
-    est = LandmarkMap(bundle.map_ids, bundle.map_xy)
-    ref = LandmarkMap(*bundle.landmarks_groundtruth)
-    assoc, how = associate_by_id(est, ref), "id"
-    if assoc.estimate_rows.size < 2:
+    if comparison is None:
         try:
-            assoc, how = associate_auto(est, ref), "auto"
+            comparison = map_comparison(bundle)
         except SlamrelError as exc:
             del exc  # the map comparison reports it
             return _placed(bundle, None), None
+    assert comparison is not None
+    assoc = comparison.association
     if assoc.estimate_rows.size < 2:
         return _placed(bundle, None), assoc
-    pairs = (est.xy[assoc.estimate_rows], ref.xy[assoc.reference_rows])
+    pairs = (comparison.estimate.xy[assoc.estimate_rows],
+             comparison.reference.xy[assoc.reference_rows])  # fmt: skip
+    how = comparison.association_source
     return _placed(bundle, anchor_on_landmarks(*pairs, association=how)), assoc
+
+
+def _map_notes(mc: MapComparison) -> list[str]:
+    """The report's notes on the map comparison: association, frame, unobserved landmarks."""
+    al = mc.alignment
+    how = SOURCE_WORDS[mc.association_source]
+    text = (
+        f"The map is compared with the true landmarks associated {how} "
+        f"({mc.association.estimate_rows.size} pairs); OSPA, GOSPA and the map figure are in "
+        f"the frame: {mc.frame}"
+    )
+    if al.pairs:
+        text += (
+            f" (dx = {al.dx:.3g} m, dy = {al.dy:.3g} m, dθ = {np.degrees(al.dtheta):.3g}°, "
+            f"rms residual {al.rms_residual:.3g} m)"
+        )
+    notes = [text + "; the mesh errors do not depend on the frame."]
+    notes += [n[0].upper() + n[1:] + "." for n in mc.notes]
+    if mc.reach is not None:
+        u = mc.unobserved.size
+        text = f"OSPA and GOSPA are computed on {mc.observable_set}" + (
+            "; the bundle declares no sensor reach, so the largest range it measured stands in"
+            if mc.reach.source != "declared"
+            else ""
+        )
+        if u:
+            text += (
+                f"; {u} true landmark(s) never came within reach and count as unobserved, not "
+                f"missed (on all true landmarks OSPA {mc.ospa_all:.3g} m, GOSPA "
+                f"{mc.gospa_all:.3g} m)"
+            )
+        notes.append(text + ".")
+    return notes
 
 
 def _placed(bundle: Bundle, map_anchoring: Anchoring | None) -> NeesFrame:

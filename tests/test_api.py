@@ -267,12 +267,16 @@ def test_map_compare_without_common_ids(tmp_path: Path, capsys: pytest.CaptureFi
     est.write_text("landmark,x,y\n1,0,0\n2,1,0\n3,0,1\n")
     ref.write_text("landmark,x,y\n11,0,0\n12,1,0\n13,0,1\n")
     with pytest.raises(slamrel.InputError) as exc:
-        slamrel.compare_maps(slamrel.read_map(est), slamrel.read_map(ref))
+        slamrel.compare_maps(slamrel.read_map(est), slamrel.read_map(ref), associate="id")
     assert exc.value.message == (
         "no landmark of the estimate matches the reference by id; "
         'associate="auto" matches them by position, an association of your own by hand'
     )
-    code, err = _cli(["map-compare", str(est), str(ref)], capsys)
+    # the default (id-or-auto) falls back to the automatic association and says so
+    res = slamrel.compare_maps(slamrel.read_map(est), slamrel.read_map(ref))
+    assert res.association_source == "auto" and res.association.estimate_rows.size == 3
+    assert res.notes == ("the maps share 0 landmark id(s): associated automatically by position",)
+    code, err = _cli(["map-compare", str(est), str(ref), "--associate", "id"], capsys)
     assert code == 3
     assert err == (
         f"slamrel map-compare: error: {est}: no landmark of the estimate matches the "

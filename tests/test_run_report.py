@@ -126,9 +126,10 @@ def test_map_tables_equal_metrics(report: tuple[Path, _Page, dict[str, Any]]) ->
         assert int(row[4]) == s["count"]
     (assoc,) = page.tables["association and set distances"]
     a = mp["association"]
-    assert [int(c) for c in assoc[:3]] == [a["matched"], a["missed"], a["spurious"]]
-    assert _close(assoc[3], mp["ospa"]["value"]) and _close(assoc[4], mp["gospa"]["value"])
-    assert _close(assoc[5], mp["ospa"]["c"]) and _close(assoc[6], mp["ospa"]["p"])
+    counts = [a["matched"], a["missed"], a["unobserved"], a["spurious"]]
+    assert [int(c) for c in assoc[:4]] == counts
+    assert _close(assoc[4], mp["ospa"]["value"]) and _close(assoc[5], mp["gospa"]["value"])
+    assert _close(assoc[6], mp["ospa"]["c"]) and _close(assoc[7], mp["ospa"]["p"])
 
 
 def test_result_holds_the_map_once_and_reads_nothing(

@@ -534,7 +534,11 @@ def ekf_slam_bundle(
     marg = res.map_covariance.reshape(m, 2, m, 2)[np.arange(m), :, np.arange(m), :]
     sensor = bundle.sensor
     if noise_scale != 1.0:
-        sensor = SensorModel(noise_scale * sensor.sigma_range, noise_scale * sensor.sigma_bearing)
+        sensor = replace(
+            sensor,
+            sigma_range=noise_scale * sensor.sigma_range,
+            sigma_bearing=noise_scale * sensor.sigma_bearing,
+        )
     rejected = int(((res.association < 0) & bundle.measurement_associated).sum())
     out = replace(
         bundle,

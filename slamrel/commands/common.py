@@ -9,6 +9,7 @@ from contextlib import contextmanager
 from types import SimpleNamespace
 from typing import TYPE_CHECKING, Literal
 
+from landmark_graph.constants import ASSOCIATE_MODES, DEFAULT_ASSOCIATE
 from recovery.constants import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, ROBUST
 from relation_metric.constants import STRATEGIES
 from relation_metric.errors import InputError, SlamrelError
@@ -16,6 +17,8 @@ from slamrel.commands import options as opt
 from slamrel.constants import EVALUATE_DEFAULTS
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
+    from landmark_graph.landmark_association import Association
+    from landmark_graph.maps import LandmarkMap
     from relation_metric.relations import RelationSet
     from relation_metric.stats import Summary
     from relation_metric.trajectory import Trajectory
@@ -28,6 +31,9 @@ __all__ = [
     "stats_table",
     "check_outputs",
     "add_force_argument",
+    "add_association_arguments",
+    "association_file",
+    "association_choice",
 ]
 
 
@@ -182,6 +188,46 @@ def add_recovery_arguments(parser: argparse.ArgumentParser, *, fail_help: str) -
         "weights; the down-weighted fraction is reported; none: the plain EKF; "
         "default: %(default)s)",
     )
+
+
+def add_association_arguments(parser: argparse.ArgumentParser, *, align: bool = True) -> None:
+    """``--associate id-or-auto|id|auto|FILE`` (and, with ``align``, ``--no-align``): how a
+    landmark map is paired with its reference, shared by ``map-compare``, ``run`` and
+    ``review`` (:func:`landmark_graph.map_compare.choose_association`)."""
+    modes = "|".join(ASSOCIATE_MODES)
+    parser.add_argument(
+        "--associate",
+        default=DEFAULT_ASSOCIATE,
+        metavar=f"{modes}|FILE",
+        help="landmark association: id-or-auto (by id when more than half of the landmarks "
+        "shared by id lie within the cut-off c of each other after the alignment, else "
+        "automatic), id, auto (rigid alignment and optimal assignment within c) or an "
+        "'estimate,reference' CSV (default: %(default)s)",
+    )
+    if align:
+        parser.add_argument(
+            "--no-align",
+            dest="align",
+            action="store_false",
+            help="compare the maps as given; by default the estimate is moved onto the "
+            "reference by the SE(2) least-squares fit on the associated pairs first (OSPA, "
+            "GOSPA, figures), whatever --associate is",
+        )
+
+
+def association_file(value: str) -> str | None:
+    """The association file ``--associate`` names, or ``None`` for a mode."""
+    return None if value in ASSOCIATE_MODES else value
+
+
+def association_choice(value: str, est: LandmarkMap, ref: LandmarkMap) -> str | Association:
+    """``--associate``'s value for :func:`~landmark_graph.map_compare.compare_maps`: the mode,
+    or the association read from the file it names."""
+    if association_file(value) is None:
+        return value
+    from slamrel.formats.associations import read_association_csv
+
+    return read_association_csv(value, est, ref)
 
 
 def add_force_argument(parser: argparse.ArgumentParser) -> None:

@@ -8,7 +8,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from slamrel.commands import options as opt
-from slamrel.commands.common import check_outputs, errors_about, in_option_words, stats_table
+from slamrel.commands.common import (
+    add_association_arguments,
+    association_choice,
+    association_file,
+    check_outputs,
+    errors_about,
+    in_option_words,
+    stats_table,
+)
 
 if TYPE_CHECKING:
     from landmark_graph.map_compare import MapComparison
@@ -22,9 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("estimate", metavar="ESTIMATE_MAP")
     p.add_argument("reference", metavar="REFERENCE_MAP")
-    p.add_argument(
-        "--associate", default="id", metavar="id|auto|FILE", help="association (default: id)"
-    )
+    add_association_arguments(p)
     p.add_argument(
         "--cutoff",
         type=opt.positive_float,
@@ -69,20 +75,17 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from landmark_graph.map_compare import compare_maps
-    from slamrel.formats.associations import read_association_csv, write_association_csv
+    from slamrel.formats.associations import write_association_csv
     from slamrel.formats.landmark_maps import read_map
     from slamrel.formats.text import write_text_atomic
 
-    assoc_file = None if args.associate in ("id", "auto") else args.associate
     check_outputs(
         [args.json, args.per_edge, args.plot, args.write_association, args.review],
-        [args.estimate, args.reference, assoc_file],
+        [args.estimate, args.reference, association_file(args.associate)],
     )
     est = read_map(args.estimate)
     ref = read_map(args.reference)
-    assoc = args.associate
-    if assoc not in ("id", "auto"):
-        assoc = read_association_csv(assoc, est, ref)
+    assoc = association_choice(args.associate, est, ref)
     words = {
         'associate="auto"': "--associate auto",
         "an association of your own": "an association file",
@@ -96,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
             order=args.order,
             seed=args.seed,
             thin_angle=np.deg2rad(args.thin_angle),
+            align=args.align,
         )
     out = res.as_dict()
     if args.json:
@@ -147,9 +151,15 @@ def _write_per_edge(path: str, res: MapComparison, ref: LandmarkMap) -> None:
 
 def _print_summary(args: argparse.Namespace, res: MapComparison, out: dict[str, Any]) -> None:
     """The association counts, the error table, mesh notes and OSPA/GOSPA on stdout."""
+    import numpy as np
+
+    from landmark_graph.map_compare import SOURCE_WORDS
+
     a = out["association"]
     print(
-        f"matched {a['matched']}, missed {a['missed']}, spurious {a['spurious']}; "
+        f"matched {a['matched']}, missed {a['missed']}, spurious {a['spurious']}"
+        + (f", unobserved {a['unobserved']}" if a["unobserved"] else "")
+        + f" (associated {SOURCE_WORDS[res.association_source]}); "
         f"mesh {out['mesh']['edges']} edges, {out['mesh']['triangles']} triangles"
     )
     from relation_metric.evaluate import error_summaries
@@ -170,9 +180,17 @@ def _print_summary(args: argparse.Namespace, res: MapComparison, out: dict[str, 
             f"{m['duplicates']} duplicate reference positions {m['duplicate_ids']}, "
             f"collinear: {m['collinear']}"
         )
+    for note in res.choice.notes:  # the cautions are warnings (stderr)
+        print(f"note: {note}")
+    al = res.alignment
+    print(
+        f"alignment (reference = R(dθ) estimate + d): dx {al.dx:.4f} m, dy {al.dy:.4f} m, "
+        f"dθ {np.degrees(al.dtheta):.4f}°, {al.pairs} pairs ({res.association_source}), "
+        f"rms residual {al.rms_residual:.4f} m" + ("" if al.applied else "; not applied")
+    )
     print(
         f"OSPA {res.ospa:.4f} m, GOSPA {res.gospa:.4f} m "
-        f"(c = {res.cutoff}, p = {res.order}; {out['ospa']['frame']})"
+        f"(c = {res.cutoff}, p = {res.order}; {res.frame})"
     )
     if args.review:
         print(f"review the association: {args.review} (open it in a browser)")

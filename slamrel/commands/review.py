@@ -7,7 +7,13 @@ import os
 from typing import TYPE_CHECKING
 
 from slamrel.commands import options as opt
-from slamrel.commands.common import check_outputs, errors_about
+from slamrel.commands.common import (
+    add_association_arguments,
+    association_choice,
+    association_file,
+    check_outputs,
+    errors_about,
+)
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from landmark_graph.landmark_association import Association
@@ -29,13 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "-o", "--output", default="review.html", metavar="F.html", help="(default: review.html)"
     )
-    p.add_argument(
-        "--associate",
-        default="id",
-        metavar="id|auto|FILE",
-        help="the proposal to review, as in map-compare: by id, automatic (alignment and "
-        "optimal assignment within --cutoff) or an association CSV (default: id)",
-    )
+    add_association_arguments(p, align=False)  # the proposal to review, as in map-compare
     p.add_argument(
         "--cutoff",
         type=opt.positive_float,
@@ -50,23 +50,26 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def proposal(
     mode: str, est: LandmarkMap, ref: LandmarkMap, *, cutoff: float, seed: int
 ) -> Association:
-    """The association named by ``--associate id|auto|FILE``."""
+    """The association named by ``--associate id-or-auto|id|auto|FILE`` (as ``map-compare``
+    chooses it; by id, a proposal may be empty: pairs can be drawn on the page)."""
     from landmark_graph.landmark_association import associate_auto, associate_by_id
-    from slamrel.formats.associations import read_association_csv
+    from landmark_graph.map_compare import choose_association
 
-    if mode == "id":
+    how = association_choice(mode, est, ref)
+    if not isinstance(how, str):
+        return how
+    if how == "id":
         return associate_by_id(est, ref)
-    if mode == "auto":
+    if how == "auto":
         return associate_auto(est, ref, cutoff=cutoff, seed=seed)
-    return read_association_csv(mode, est, ref)
+    return choose_association(est, ref, how, cutoff=cutoff, seed=seed).association
 
 
 def run(args: argparse.Namespace) -> int:
     from slamrel.formats.landmark_maps import read_map
     from slamrel.review.page import write_review
 
-    assoc_file = None if args.associate in ("id", "auto") else args.associate
-    check_outputs([args.output], [args.estimate, args.reference, assoc_file])
+    check_outputs([args.output], [args.estimate, args.reference, association_file(args.associate)])
     est = read_map(args.estimate)
     ref = read_map(args.reference)
     with errors_about(args.estimate):

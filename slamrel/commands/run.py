@@ -5,11 +5,25 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from relation_metric.errors import InputError
 from slamrel.commands import options as opt
-from slamrel.commands.common import add_force_argument, add_recovery_arguments, check_outputs
+from slamrel.commands.common import (
+    add_association_arguments,
+    add_force_argument,
+    add_recovery_arguments,
+    association_choice,
+    association_file,
+    check_outputs,
+    errors_about,
+    in_option_words,
+)
 from slamrel.constants import NOISE_NAMES, WORLDS
+
+if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
+    from landmark_graph.landmark_association import Association
+    from recovery.bundle import Bundle
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -30,6 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--corrupt", type=opt.fraction, default=0.0, help="fraction of associations corrupted"
     )
     p.add_argument("--noise-scale", type=opt.positive_float, default=1.0)
+    add_association_arguments(p)
     add_force_argument(p)
     add_recovery_arguments(
         p,
@@ -41,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
-    from slamrel.pipeline import read_run_input, run_pipeline, write_report
+    from slamrel.pipeline import read_run_input, run_pipeline, simulate_run_input, write_report
 
     if args.source not in WORLDS and not Path(args.source).is_dir():
         raise InputError(
@@ -49,15 +64,26 @@ def run(args: argparse.Namespace) -> int:
             f"{', '.join(WORLDS)}"
         )
     is_dir = Path(args.source).is_dir()
-    check_outputs([], [args.source if is_dir else None], dirs=[args.output], force=args.force)
+    assoc_file = association_file(args.associate)
+    check_outputs(
+        [], [args.source if is_dir else None, assoc_file], dirs=[args.output], force=args.force
+    )
     start = time.perf_counter()
-    result = run_pipeline(
-        read_run_input(args.source) if is_dir else args.source,
-        noise=args.noise, seed=args.seed, rate=args.rate,
-        corrupt_fraction=args.corrupt, noise_scale=args.noise_scale,
-        max_outlier_run=args.max_outlier_run or None, robust=args.robust,
-        on_divergence="raise" if args.fail_on_divergence else "reenter",
-    )  # fmt: skip
+    if is_dir:
+        inp = read_run_input(args.source)
+    else:
+        inp = simulate_run_input(
+            args.source, noise=args.noise, seed=args.seed, rate=args.rate,
+            corrupt_fraction=args.corrupt, noise_scale=args.noise_scale,
+        )  # fmt: skip
+    associate = _association(args.associate, inp.bundle, assoc_file)
+    words = {'associate="auto"': "--associate auto", "align=False": "--no-align"}
+    with in_option_words(words):
+        result = run_pipeline(
+            inp, seed=args.seed, max_outlier_run=args.max_outlier_run or None,
+            robust=args.robust, on_divergence="raise" if args.fail_on_divergence else "reenter",
+            associate=associate, align=args.align,
+        )  # fmt: skip
     html = write_report(result, args.output, force=args.force)
     if not args.quiet:
         print(f"slamrel run {result.name} ({time.perf_counter() - start:.1f} s)")
@@ -69,6 +95,14 @@ def run(args: argparse.Namespace) -> int:
                     print(
                         f"{name:16s}{set_name:>13s}{ev.translation['abs'].mean:16.4f}{ev.rotation['abs'].mean:16.4f}"
                     )
+        ms = result.map_summary
+        if ms is not None:
+            extra = f", {ms.unobserved} never within reach" if ms.unobserved else ""
+            print(
+                f"map: {ms.matched} landmarks matched {ms.association}, {ms.missed} missed"
+                f"{extra}, {ms.spurious} spurious; OSPA {ms.ospa:.4f} m (c = {ms.cutoff:g}; "
+                f"{ms.frame})"
+            )
         a = result.agreement
         if a is not None and a.stretches:
             print(
@@ -82,3 +116,21 @@ def run(args: argparse.Namespace) -> int:
             f"written to {html}"
         )
     return 0
+
+
+def _association(value: str, bundle: Bundle, path: str | None) -> str | Association:
+    """``--associate`` for the run: the mode, or the file read against the bundle's maps."""
+    if path is None:
+        return value
+    from landmark_graph.maps import LandmarkMap
+
+    if bundle.landmarks_groundtruth is None:
+        raise InputError(
+            "the bundle has no landmarks_groundtruth.csv: an association file has nothing to "
+            "pair the map with",
+            path=path,
+        )
+    est = LandmarkMap(bundle.map_ids, bundle.map_xy)
+    with errors_about(path):
+        choice = association_choice(value, est, LandmarkMap(*bundle.landmarks_groundtruth))
+    return choice

@@ -269,7 +269,17 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
                 line=_line_of_key(text, n),
             )
         vals.append(v)
-    return SensorModel(vals[0], vals[1])
+    reach: dict[str, float] = {}
+    for n in ("max_range", "fov"):  # optional: the sensor's reach, when the writer knows it
+        if n in spec:
+            where = _line_of_key(text, n)
+            reach[n] = _number(spec[n], what=f"sensor_model.{n}", path=path, line=where)
+            if not 0 < reach[n] <= (2 * math.pi if n == "fov" else math.inf):
+                bound = "a positive number" if n == "max_range" else "an angle in (0, 2π]"
+                raise InputError(
+                    f"sensor_model.{n}: expected {bound}, got {reach[n]}", path=path, line=where
+                )
+    return SensorModel(vals[0], vals[1], max_range=reach.get("max_range"), fov=reach.get("fov"))
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:

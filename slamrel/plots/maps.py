@@ -13,9 +13,11 @@ __all__ = ["map_figure"]
 
 
 def map_figure(res: MapComparison) -> Any:
-    """Reference and estimated landmarks (the estimate moved by the automatic alignment, when
-    one was made), the reference mesh with each edge coloured by its length error, thin
-    triangles dotted, missed and spurious landmarks marked."""
+    """Reference and estimated landmarks in the comparison's frame (the estimate moved onto the
+    reference by the fit on the associated pairs, :mod:`landmark_graph.map_compare`, unless
+    the comparison was asked to be unaligned), the reference mesh with each edge coloured by
+    its length error, thin triangles dotted, missed, unobserved and spurious landmarks
+    marked."""
     plt = pyplot()
     from matplotlib.collections import LineCollection
 
@@ -31,13 +33,14 @@ def map_figure(res: MapComparison) -> Any:
     ax.add_collection(lc)
     fig.colorbar(lc, ax=ax, label="edge length error [m] (clipped at p99)")
     ax.plot(res.reference.xy[:, 0], res.reference.xy[:, 1], "k+", ms=8, label="reference")
-    est = res.estimate.xy
-    if a.alignment is not None:
-        est = a.alignment.apply(np.column_stack((est, np.zeros(len(est)))))[:, :2]
+    est = res.estimate_xy
     ax.plot(est[:, 0], est[:, 1], "o", mfc="none", color="tab:red", label="estimate")
-    if a.missed.size:
-        m = res.reference.xy[a.missed]
+    if res.missed.size:
+        m = res.reference.xy[res.missed]
         ax.plot(m[:, 0], m[:, 1], "x", ms=9, color="tab:gray", label="missed (reference)")
+    if res.unobserved.size:
+        u = res.reference.xy[res.unobserved]
+        ax.plot(u[:, 0], u[:, 1], ".", ms=5, color="tab:gray", label="never within reach")
     if a.spurious.size:
         s = est[a.spurious]
         ax.plot(s[:, 0], s[:, 1], "s", mfc="none", color="tab:orange", label="spurious (estimate)")
@@ -51,9 +54,12 @@ def map_figure(res: MapComparison) -> Any:
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.legend(loc="best")
-    frame = "aligned" if a.alignment is not None else "as given"
+    al = res.alignment
+    frame = f"aligned on {al.pairs} pairs" if al.applied else "as given"
+    unobserved = f", {res.unobserved.size} unobserved" if res.unobserved.size else ""
     ax.set_title(
-        f"{a.estimate_rows.size} matched, {a.missed.size} missed, {a.spurious.size} spurious; "
+        f"{a.estimate_rows.size} matched, {res.missed.size} missed{unobserved}, "
+        f"{a.spurious.size} spurious; "
         f"OSPA {res.ospa:.3g} m (c = {res.cutoff:g}, p = {res.order:g}, {frame})"
     )
     return fig

@@ -442,6 +442,9 @@ def _agreement_paragraphs(a: Divergence, t0: float) -> list[str]:
     return paragraphs
 
 
+_MAP_COUNTS = ("matched", "missed", "unobserved", "spurious")
+
+
 def _map_section(m: MapSummary, figures: list[Figure], links: list[tuple[str, str]]) -> Section:
     """Relations of the landmark map (Delaunay mesh) and the association / set distances."""
     return Section(
@@ -450,6 +453,15 @@ def _map_section(m: MapSummary, figures: list[Figure], links: list[tuple[str, st
             "Relations of the landmark map: the Delaunay mesh over the true "
             "landmarks; per edge the length error, per triangle corner the angle "
             "error — local and independent of the map's frame.",
+            f"Landmarks associated {m.association or 'by id'}; OSPA, GOSPA and the figure in "
+            f"the frame: {m.frame or 'as given'}. True landmarks that never came within the "
+            "sensor's reach of the true trajectory are unobserved, not missed; OSPA and GOSPA "
+            "are computed without them"
+            + (
+                f" (on all true landmarks: OSPA {m.ospa_all:.3g} m, GOSPA {m.gospa_all:.3g} m)."
+                if m.unobserved and m.ospa_all is not None and m.gospa_all is not None
+                else "."
+            ),
         ],
         tables=[
             Table(
@@ -462,8 +474,8 @@ def _map_section(m: MapSummary, figures: list[Figure], links: list[tuple[str, st
             ),
             Table(
                 "association and set distances",
-                ["matched", "missed", "spurious", "OSPA [m]", "GOSPA [m]", "c [m]", "p"],
-                [[m.matched, m.missed, m.spurious, m.ospa, m.gospa, m.cutoff, m.order]],
+                [*_MAP_COUNTS, "OSPA [m]", "GOSPA [m]", "c [m]", "p"],
+                [[*(getattr(m, k) for k in _MAP_COUNTS), m.ospa, m.gospa, m.cutoff, m.order]],
             ),
         ],
         figures=figures,

@@ -591,7 +591,8 @@ def _map_lines(m: MapSummary) -> list[Judgement]:
             "map OSPA",
             f"{_g(m.ospa)} m (c = {_g(c)} m)",
             INFO,
-            "OSPA of the whole maps; an accuracy, not a lamp",
+            "OSPA of the maps after the SE(2) fit on the associated pairs, over the reference "
+            "landmarks the sensor could see; an accuracy, not a lamp",
             "map_ospa",
             m.ospa,
         ),
@@ -612,5 +613,10 @@ def _evidence(facts: RunFacts) -> str:
         evidence.append(f"{facts.poses} poses")
     m = facts.map
     if m is not None:
-        evidence.append(f"{m.matched} matched landmarks ({m.missed} missed, {m.spurious} spurious)")
+        unseen = m.unobserved
+        evidence.append(
+            f"{m.matched} matched landmarks ({m.missed} missed, {m.spurious} spurious"
+            + (f", {unseen} never in the sensor's reach" if unseen else "")
+            + ")"
+        )
     return "Based on " + ", ".join(evidence) + "."

@@ -4,9 +4,10 @@ A person checks the association between an estimated and a reference landmark ma
 Burgard et al. check ground-truth relations: the machine proposes, the person accepts,
 rejects or corrects. :func:`review_data` computes, vectorised, everything the page needs:
 
-* the estimate moved into the reference frame by the alignment the association implies
-  (the automatic association's own alignment, else the least-squares rigid transform of the
-  matched pairs, Umeyama 1991; a translation for one pair, the identity for none);
+* the estimate moved into the reference frame by the alignment the association implies,
+  the frame rule of :mod:`landmark_graph.map_compare` whatever the association's source:
+  the least-squares rigid transform of the matched pairs (Umeyama 1991; a translation for
+  one pair, the identity for none) — the frame ``map-compare`` scores the maps in;
 * per proposed pair its **residual** ``d = ‖R e + t − r‖`` [m] and its **margin**
   ``d₂ − d`` [m], ``d₂`` the distance to the second-best candidate: the nearest *other*
   reference landmark to the moved estimate or the nearest *other* moved estimate to the
@@ -37,8 +38,9 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from landmark_graph.landmark_association import Association
+from landmark_graph.map_compare import fit_map_alignment
 from landmark_graph.maps import LandmarkMap
-from relation_metric.alignment import Alignment, umeyama
+from relation_metric.alignment import Alignment
 from slamrel.formats.text import PathLike, write_text_atomic
 
 __all__ = ["ReviewData", "review_data", "review_html", "write_review", "implied_alignment"]
@@ -131,16 +133,19 @@ class ReviewData:
 def implied_alignment(
     est: LandmarkMap, ref: LandmarkMap, assoc: Association
 ) -> tuple[Alignment, str]:
-    """The rigid alignment an association implies, and a phrase saying where it came from."""
-    if assoc.alignment is not None:
-        return assoc.alignment, "the automatic association's rigid alignment"
-    k = assoc.estimate_rows.size
-    e, r = est.xy[assoc.estimate_rows], ref.xy[assoc.reference_rows]
+    """The rigid alignment an association implies, and a phrase saying where it came from.
+
+    The frame rule of :mod:`landmark_graph.map_compare` (:func:`~landmark_graph.map_compare.
+    fit_map_alignment` on the pairs), whatever the association's source: the page shows the
+    maps in the frame ``map-compare`` scores them in.
+    """
+    fit = fit_map_alignment(est.xy[assoc.estimate_rows], ref.xy[assoc.reference_rows])
+    k = fit.pairs
     if k >= 2:
-        return umeyama(e, r), f"least-squares rigid fit of the {k} pairs"
+        return fit.alignment, f"least-squares rigid fit of the {k} pairs"
     if k == 1:
-        return Alignment(0.0, r[0] - e[0], 1.0), "translation of the one pair"
-    return Alignment(0.0, np.zeros(2), 1.0), "none (no pairs): the frames as given"
+        return fit.alignment, "translation of the one pair"
+    return fit.alignment, "none (no pairs): the frames as given"
 
 
 def _nearest_other(

@@ -34,7 +34,7 @@ from relation_metric import se2
 from relation_metric.errors import InputError
 from relation_metric.trajectory import Trajectory
 from slamrel.simulation.sensors import AllAroundSensor, observe_all_around
-from slamrel.simulation.worlds import World
+from slamrel.simulation.worlds import SENSOR_FOV, SENSOR_RANGE, World
 
 __all__ = ["simulate_bundle", "world_bundle"]
 
@@ -195,7 +195,10 @@ def world_bundle(world: World) -> Bundle:
     ids = np.arange(world.landmarks.shape[0], dtype=np.int64)
     return Bundle(
         motion=motion,
-        sensor=SensorModel(nt.sigma_range, nt.sigma_bearing),
+        # the world's sensor reach (its 0.5 m minimum range is not a reach)
+        sensor=SensorModel(
+            nt.sigma_range, nt.sigma_bearing, max_range=SENSOR_RANGE, fov=SENSOR_FOV
+        ),
         measurement_times=o.t,
         measurements=np.column_stack((o.range, o.bearing)),
         measurement_landmarks=o.landmark,
