@@ -58,7 +58,7 @@ from slamrel.formats.results import write_json, write_per_relation_csv
 from slamrel.outputs import staged_directory, write_text_atomic
 from slamrel.report.html import render_html
 from slamrel.report.run_page import report_figures, report_sections
-from slamrel.report.verdict import RunFacts, run_verdict
+from slamrel.report.verdict import RunFacts, expected_downweight_loss, run_verdict
 from slamrel.simulation.bundles import world_bundle
 from slamrel.simulation.worlds import make_world
 
@@ -931,8 +931,15 @@ def _recovery_notes(rec: Recovery, method: str) -> list[str]:
         notes.append(
             f"The robust update down-weighted {counts.downweighted} measurements "
             f"({100 * counts.downweighted_fraction:.1f}%, weight lost "
-            f"{100 * counts.downweight_loss:.1f}%); like a gated fraction, a large loss is a "
-            "finding about the map."
+            f"{100 * counts.downweight_loss:.1f}%)"
+            + (
+                f"; consistent innovations would lose "
+                f"{100 * expected_downweight_loss(rec.robust.threshold):.1f}% (a robust update "
+                "always down-weights some perfectly Gaussian ones): a loss well above that is a "
+                "finding about the map."
+                if rec.robust is not None and rec.robust.kind == "redescending"
+                else "; a large loss is a finding about the map."
+            )
         )
     d = rec.divergence
     if d.stretches:
