@@ -22,9 +22,12 @@ Association choice
 ``associate`` is ``"id-or-auto"`` (the default), ``"id"``, ``"auto"`` or a ready
 :class:`~landmark_graph.landmark_association.Association` (from a file). ``"id-or-auto"``
 takes the pairs of equal ids when at least 2 ids are shared and more than half of those
-pairs lie within the cut-off ``c`` of each other after the fit on them; otherwise (ids that
-differ, or coincide by accident — a SLAM run's own ``0 … N−1``) it associates automatically
-(:func:`~landmark_graph.landmark_association.associate_auto`) and says why (``notes``). By
+pairs lie within the cut-off ``c`` of each other after the fit on them, or, when not, the
+pairs keep the map's local shape (the distances to nearest paired neighbours agree to a
+median :data:`SHAPE_TOLERANCE`: a large map bent by drift, e.g. Victoria Park's); otherwise
+(ids that differ, or coincide by accident — a SLAM run's own ``0 … N−1``) it associates
+automatically (:func:`~landmark_graph.landmark_association.associate_auto`) and says why
+(``notes``). By
 id or from a file, pairs mostly farther apart than ``c`` after the fit raise an
 :class:`AssociationWarning` (kept as a caution) that suggests the automatic association.
 
@@ -189,6 +192,32 @@ def _pairs_within(
     return int((np.hypot(*(moved - r).T) <= cutoff).sum())
 
 
+#: Largest median relative error of the distances from each paired landmark to its nearest
+#: paired neighbour (:func:`_local_shape_error`) at which pairs are taken as the same
+#: landmarks even when a rigid fit leaves most of them beyond ``c``: a large map bent by its
+#: drift keeps its local shape; ids that coincide by accident pair unrelated landmarks,
+#: whose local distances differ by the order of themselves (median ≈ 0.5 and more).
+SHAPE_TOLERANCE = 0.25
+
+
+def _local_shape_error(estimate: LandmarkMap, reference: LandmarkMap, assoc: Association) -> float:
+    """Median over the pairs of ``|d̂ − d| / d``: ``d`` the distance from a paired reference
+    landmark to its nearest paired neighbour, ``d̂`` the distance between their partners in
+    the estimate (frame-free). ``inf`` for fewer than 2 pairs."""
+    from scipy.spatial import cKDTree
+
+    e, r = estimate.xy[assoc.estimate_rows], reference.xy[assoc.reference_rows]
+    if r.shape[0] < 2:
+        return float("inf")
+    d, j = cKDTree(r).query(r, k=2)
+    d_ref, nb = d[:, 1], j[:, 1]
+    ok = d_ref > 0
+    if not ok.any():
+        return float("inf")
+    d_est = np.hypot(*(e[ok] - e[nb[ok]]).T)
+    return float(np.median(np.abs(d_est - d_ref[ok]) / d_ref[ok]))
+
+
 #: ``source`` of an association in words.
 SOURCE_WORDS = {"id": "by id", "auto": "automatically", "file": "from a file"}
 
@@ -243,12 +272,21 @@ def choose_association(
         assoc, source = associate_by_id(estimate, reference), "id"
         k = int(assoc.estimate_rows.size)
         within = _pairs_within(estimate, reference, assoc, cutoff) if k >= 2 else k
-        by_accident = k >= 2 and 2 * within <= k
+        shape = _local_shape_error(estimate, reference, assoc) if 2 * within <= k else 0.0
+        by_accident = k >= 2 and 2 * within <= k and not shape <= SHAPE_TOLERANCE
+        if associate == "id-or-auto" and k >= 2 and 2 * within <= k and not by_accident:
+            notes.append(
+                f"of the {k} landmarks the maps share by id only {within} lie within "
+                f"c = {cutoff:g} m of each other after the alignment, but their local shape "
+                f"agrees (median relative error of nearest-neighbour distances {shape:.2g} ≤ "
+                f"{SHAPE_TOLERANCE:g}): a map bent by drift, associated by id"
+            )
         if associate == "id-or-auto" and (k < 2 or by_accident):
             why = (
                 f"of the {k} landmarks the maps share by id only {within} lie within "
-                f"c = {cutoff:g} m of each other after the alignment (ids that coincide by "
-                "accident)"
+                f"c = {cutoff:g} m of each other after the alignment and their local shape "
+                f"differs (median relative error of nearest-neighbour distances {shape:.2g}): "
+                "ids that coincide by accident"
                 if by_accident
                 else f"the maps share {k} landmark id(s)"
             )
@@ -284,7 +322,10 @@ def choose_association(
     cautions: list[str] = []
     if (source == "file" or requested == "id") and source != "auto" and k >= 2:
         within = _pairs_within(estimate, reference, assoc, cutoff)
-        if 2 * within <= k:
+        if (
+            2 * within <= k
+            and not _local_shape_error(estimate, reference, assoc) <= SHAPE_TOLERANCE
+        ):
             what = "by id" if source == "id" else "in the association file"
             cautions.append(
                 f"only {within} of the {k} pairs {what} lie within c = {cutoff:g} m of each "

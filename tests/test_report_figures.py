@@ -140,16 +140,39 @@ def test_trajectories_are_drawn_on_the_reference(simulated) -> None:
     def rms(xy, ref):
         return float(np.sqrt(np.mean(np.sum((xy - ref) ** 2, axis=1))))
 
-    for name, est in result.estimates.items():
-        drawn = frames[name].apply(est.poses)[:, :2]
-        ref = truth.poses_at(est.timestamps)[:, :2]
-        assert rms(drawn, ref) <= rms(est.poses[:, :2], ref) + 1e-9, name
     assert "in the ground truth&#x27;s frame" in page
-    # the corrupted map's landmark fit (wrong ids) leaves metres of residual: not used
+    # the corrupted map's ids pair mostly landmarks farther apart than c: the default
+    # (id-or-auto) associates automatically, whose fit is within c and places the map
+    m = result.nees_frame.map_anchoring
+    assert m.association == "auto" and m.rms_residual <= result.map_comparison.cutoff
+    assert frames["recovered"].short == "landmark fit"
+    # dead reckoning never saw the map: its own SE(2) fit, as close as a rigid motion gets
+    est = result.estimates["dead_reckoning"]
+    drawn = frames["dead_reckoning"].apply(est.poses)[:, :2]
+    ref = truth.poses_at(est.timestamps)[:, :2]
+    assert rms(drawn, ref) <= rms(est.poses[:, :2], ref) + 1e-9
+
+
+def test_a_landmark_fit_beyond_c_does_not_place_the_map() -> None:
+    """The same corrupted map paired by id (forced): its fit leaves metres of residual, so
+    every estimate is drawn by its own SE(2) fit on the reference, and the caption says why."""
+    from landmark_graph.map_compare import AssociationWarning
+    from slamrel.pipeline import run_pipeline
+    from slamrel.report.run_page import report_figures
+
+    with pytest.warns(AssociationWarning, match="coincide by accident"):
+        result = run_pipeline("simple1", noise="a", seed=0, corrupt_fraction=0.1, associate="id")
     m = result.nees_frame.map_anchoring
     assert m.rms_residual > result.map_comparison.cutoff
-    assert frames["recovered"].short == "SE(2) fit on the truth"
-    assert "it does not place the map" in page
+    frames = result.display_frames
+    truth = result.bundle.groundtruth
+    for name, est in result.estimates.items():
+        assert frames[name].short == "SE(2) fit on the truth", name
+        drawn = frames[name].apply(est.poses)[:, :2]
+        ref = truth.poses_at(est.timestamps)[:, :2]
+        before = np.sqrt(np.mean(np.sum((est.poses[:, :2] - ref) ** 2, axis=1)))
+        assert np.sqrt(np.mean(np.sum((drawn - ref) ** 2, axis=1))) <= before + 1e-9, name
+    assert "it does not place the map" in report_figures(result).trajectories.caption
 
 
 def test_a_good_landmark_fit_places_the_map_frame_estimates() -> None:

@@ -294,9 +294,13 @@ def test_report_opens_with_its_verdict_and_links_the_review(browser, tmp_path):
     # the verdict is the first thing under the title, inside the first screen
     assert verdict.location["y"] < 200, verdict.location
     levels = [e.text for e in verdict.find_elements("css selector", "td .lamp")]
-    assert levels and set(levels) <= {"green", "amber", "red"}, levels
+    assert levels and set(levels) <= {"green", "amber", "red", "info"}, levels
+    assert "info" in levels  # the map accuracies: information lines, grey
     # each judgement is shown in its own colour (Chrome reports rgba)
-    rgb = {"green": (26, 127, 55), "amber": (183, 121, 31), "red": (180, 35, 24)}
+    rgb = {
+        "green": (26, 127, 55), "amber": (183, 121, 31), "red": (180, 35, 24),
+        "info": (107, 114, 128),
+    }  # fmt: skip
     for lamp in verdict.find_elements("css selector", ".lamp"):
         r, g, b = rgb[lamp.text]
         assert lamp.value_of_css_property("background-color") == f"rgba({r}, {g}, {b}, 1)"
