@@ -224,6 +224,28 @@ def test_ids_that_coincide_by_accident(rng):
     assert forced.as_dict()["association"]["cautions"] == list(forced.choice.cautions)
 
 
+def test_a_map_bent_by_drift_keeps_its_ids(rng):
+    """A 200 m map bent along its length (heading drift 2° per 10 m, as an unclosed loop
+    leaves it): after one rigid fit most true pairs lie beyond c, yet the local shape is the
+    reference's, so the default keeps the ids (no silent re-pairing by position)."""
+    x = np.sort(rng.uniform(0, 200, 150))
+    ref = LandmarkMap(np.arange(150), np.column_stack((x, rng.uniform(-10, 10, 150))))
+    theta = np.radians(0.2) * ref.xy[:, 0]  # the heading error grows along x
+    c, s = np.cos(theta), np.sin(theta)
+    bent = np.column_stack(
+        (c * ref.xy[:, 0] - s * ref.xy[:, 1], s * ref.xy[:, 0] + c * ref.xy[:, 1])
+    )
+    est = LandmarkMap(np.arange(150), bent + rng.normal(0, 0.05, (150, 2)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # neither a caution nor a warning: the ids are right
+        chosen = compare_maps(est, ref)
+        forced = compare_maps(est, ref, associate="id")
+    moved = chosen.alignment.apply(est.xy)  # most pairs beyond c after the rigid fit
+    assert np.mean(np.hypot(*(moved - ref.xy).T) > chosen.cutoff) > 0.5
+    assert chosen.association_source == "id" and chosen.association.estimate_rows.size == 150
+    assert "local shape agrees" in chosen.notes[0] and not forced.choice.cautions
+
+
 def test_cli_warns_about_accidental_ids_in_option_words(tmp_path, rng, capsys):
     bad, _, ref = _accidental(rng)
     e, r = tmp_path / "est.csv", tmp_path / "ref.csv"
