@@ -2,8 +2,11 @@
 
 Exit codes: 0 success, 2 usage error (argparse, option values), 3 bad input (any
 :class:`relation_metric.errors.SlamrelError`, printed with file and line, or a file that
-cannot be read or written), 130 interrupted, 1 a bug in slamrel (one line, no traceback
-unless ``SLAMREL_DEBUG=1``).
+cannot be read or written), 130 interrupted (Ctrl-C, ``SIGINT``), 143 terminated
+(``SIGTERM``: ``kill``, ``timeout``, Docker, CI) and 129 hung up (``SIGHUP``), i.e.
+128 + the signal number as shells report it, 1 a bug in slamrel (one line, no traceback
+unless ``SLAMREL_DEBUG=1``). ``SIGTERM`` and ``SIGHUP`` are handled like Ctrl-C: the
+output being written is abandoned, its hidden work folder removed, earlier outputs kept.
 Each sub-command lives in its own module under :mod:`slamrel.commands` and exposes
 ``register(subparsers)``, which sets ``func(args) -> int`` on its parser.
 """
@@ -13,9 +16,13 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
+import threading
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from types import FrameType
 
 from relation_metric.errors import SlamrelError
 
@@ -55,6 +62,42 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """``SIGTERM`` or ``SIGHUP`` arrived: unwinds like Ctrl-C, so every cleanup runs."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+#: Signals handled like Ctrl-C (exit 128 + the signal number).
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
+def _stop(signum: int, frame: FrameType | None) -> None:
+    for s in STOP_SIGNALS:  # a second signal must not cut the cleanup short
+        signal.signal(s, signal.SIG_IGN)
+    raise Terminated(signum)
+
+
+@contextmanager
+def _stop_signals() -> Iterator[None]:
+    """Turn ``SIGTERM``/``SIGHUP`` into :class:`Terminated` while the command runs."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {}
+    for s in STOP_SIGNALS:
+        if signal.getsignal(s) is signal.SIG_IGN:
+            continue  # nohup: keep ignoring it
+        previous[s] = signal.signal(s, _stop)
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
     print(f"warning: {message}", file=sys.stderr)
 
@@ -71,9 +114,33 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     No input or option ends in a traceback: option mistakes exit 2 (argparse), bad input
     and failed reads/writes exit 3 with the file named, Ctrl-C exits 130 (also during
-    start-up). Anything else is a bug in slamrel: one line saying so, exit 1; set
-    ``SLAMREL_DEBUG=1`` to see the traceback.
+    start-up), ``SIGTERM``/``SIGHUP`` exit 143/129 after the same cleanup. Anything else
+    is a bug in slamrel: one line saying so, exit 1; set ``SLAMREL_DEBUG=1`` to see the
+    traceback.
     """
+    command = "slamrel"
+    try:
+        with _stop_signals():
+            try:
+                return _main(argv)
+            finally:
+                outputs = sys.modules.get("slamrel.outputs")  # imported by commands that write
+                if outputs is not None:
+                    outputs.release_claims()  # the lock files of folder outputs
+    except Terminated as exc:  # arrived between the command's end and the handlers' reset
+        return _terminated("slamrel", exc)
+    except KeyboardInterrupt:
+        print(f"{command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _terminated(command: str, exc: Terminated) -> int:
+    name = signal.Signals(exc.signum).name
+    print(f"{command}: stopped by {name}", file=sys.stderr)
+    return 128 + exc.signum
+
+
+def _main(argv: Sequence[str] | None) -> int:
     command = "slamrel"
     try:
         parser = build_parser()
@@ -89,6 +156,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SlamrelError as exc:
         print(f"{command}: error: {exc}", file=sys.stderr)
         return EXIT_INPUT
+    except Terminated as exc:
+        return _terminated(command, exc)
     except KeyboardInterrupt:
         print(f"{command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -14,24 +14,42 @@ The output rule of every ``slamrel`` command:
   (:func:`atomic_write`); a folder is built in a temporary folder beside the target and
   swapped in as a unit (:func:`staged_directory`): an error or Ctrl-C leaves the previous
   output exactly as it was and no temporary file behind;
-* files get ``0o666 & ~umask`` and folders ``0o777 & ~umask`` (the user's umask, read once).
+* files get ``0o666 & ~umask`` and folders ``0o777 & ~umask`` (the user's umask, read once);
+* a file output that is a stream is written in place, never replaced (:func:`output_target`):
+  ``/dev/stdout``, ``/dev/stderr``, ``/dev/fd/N`` go to that descriptor, a FIFO or a
+  character device (``/dev/null``) is opened and written; a symbolic link is written through
+  (its target is the output, with every rule above); a block device or socket is refused;
+* a folder output is claimed (:func:`claim_outputs`, a lock file ``.NAME.slamrel-lock``
+  beside it, held from the check to the swap): a second slamrel writing the same folder at
+  the same time is refused, or with ``force`` waits and then replaces it whole; the swap
+  re-checks the target, so a folder that appeared meanwhile is never replaced silently;
+* hidden work folders carry the writer's pid (``.NAME.PID-XXXXXXXX.partial``); one whose
+  process is gone (killed with ``SIGKILL``, a power cut) is removed by the next write of the
+  same output, with a warning.
 
 Every failure is an :class:`~relation_metric.errors.InputError` naming the output path.
 """
 
 from __future__ import annotations
 
+import atexit
 import errno
 import functools
+import io
 import json
 import os
+import re
 import shutil
+import stat
+import sys
 import tempfile
 import threading
+import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
+from typing import IO, Literal
 
 from relation_metric.arrays import PathLike
 from relation_metric.errors import InputError
@@ -48,6 +66,12 @@ __all__ = [
     "check_output_file",
     "check_output_dir",
     "check_outputs",
+    "output_target",
+    "OutputTarget",
+    "claim_outputs",
+    "release_claims",
+    "StaleOutputWarning",
+    "remove_stale_work",
     "is_slamrel_output",
     "staged_directory",
     "resumable_directory",
@@ -130,6 +154,126 @@ def _make_parent(parent: Path, target: PathLike) -> None:
         raise _os_error(exc, target, "cannot create its folder") from None
 
 
+_FD_LINK = re.compile(r"/dev/fd/(\d+)|/proc/(?:self|thread-self|(\d+))/fd/(\d+)")
+_STD_LINK = {"/dev/stdout": 1, "/dev/stderr": 2}
+
+
+@dataclass(frozen=True)
+class OutputTarget:
+    """Where a file output goes (see :func:`output_target`).
+
+    Attributes
+    ----------
+    kind : {"file", "descriptor", "stream"}
+        ``file``: a regular file written to a temporary file and renamed into place;
+        ``descriptor``: an open descriptor of this process (``/dev/stdout``, ``/dev/fd/N``),
+        written in place; ``stream``: an existing FIFO or character device, opened and
+        written in place (never created, never replaced).
+    path : Path
+        The file to write: for a symbolic link its resolved target.
+    fd : int or None
+        The descriptor of kind ``descriptor``.
+    """
+
+    kind: Literal["file", "descriptor", "stream"]
+    path: Path
+    fd: int | None = None
+
+    @property
+    def is_stream(self) -> bool:
+        """Written in place (a descriptor, FIFO or device), not replaced."""
+        return self.kind != "file"
+
+
+def _descriptor(path: PathLike) -> int | None:
+    """The descriptor ``path`` names (``/dev/stdout``, ``/dev/fd/N``, ``/proc/self/fd/N``)."""
+    name = os.path.abspath(os.fspath(path))
+    if name in _STD_LINK:
+        return _STD_LINK[name]
+    m = _FD_LINK.fullmatch(name)
+    if m is None:
+        return None
+    if m.group(1) is not None:
+        return int(m.group(1))
+    if m.group(2) is not None and int(m.group(2)) != os.getpid():
+        return None  # another process's descriptor: a path like any other
+    return int(m.group(3))
+
+
+def output_target(path: PathLike) -> OutputTarget:
+    """Classify the file output ``path``; touches nothing on disk.
+
+    * ``/dev/stdout``, ``/dev/stderr``, ``/dev/fd/N``, ``/proc/self/fd/N``: the descriptor
+      (whatever it is open on: a terminal, a pipe, a file at its current offset);
+    * an existing FIFO or character device (``/dev/null``, a terminal), also through a
+      symbolic link: a stream, opened for writing and written in place;
+    * a block device or a socket: refused (:class:`InputError`);
+    * a symbolic link (also a dangling one): its resolved target, a file like any other;
+    * anything else: itself.
+    """
+    fd = _descriptor(path)
+    if fd is not None:
+        return OutputTarget("descriptor", Path(path), fd)
+    try:
+        mode: int | None = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        mode = None  # absent, or a dangling link: a new file
+    except OSError as exc:
+        raise _os_error(exc, path, "cannot inspect the output") from None
+    if mode is not None:
+        if stat.S_ISFIFO(mode) or stat.S_ISCHR(mode):
+            return OutputTarget("stream", Path(path))
+        if stat.S_ISBLK(mode):
+            raise InputError(
+                "is a block device (a disk); refusing to write an output over it", path=path
+            )
+        if stat.S_ISSOCK(mode):
+            raise InputError("is a socket; cannot write an output to it", path=path)
+    if os.path.islink(path):
+        return OutputTarget("file", Path(_real(path)))
+    return OutputTarget("file", Path(path))
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view) :]
+
+
+@contextmanager
+def _stream_write(
+    target: OutputTarget, path: PathLike, mode: str, encoding: str | None
+) -> Iterator[IO[str] | IO[bytes]]:
+    """Collect the output in memory; on success write it to the stream in place."""
+    raw = io.BytesIO()
+    if "b" in mode:
+        yield raw
+        data = raw.getvalue()
+    else:
+        text = io.TextIOWrapper(raw, encoding=encoding or "utf-8", newline="")
+        yield text
+        text.flush()
+        data = raw.getvalue()
+        text.detach()
+    try:
+        if target.fd is not None:
+            for handle in (sys.stdout, sys.stderr):  # keep the order of what is printed
+                try:
+                    if handle is not None and handle.fileno() == target.fd:
+                        handle.flush()
+                except (OSError, ValueError, AttributeError):
+                    pass
+            _write_all(target.fd, data)
+        else:
+            fd = os.open(target.path, os.O_WRONLY | os.O_NOCTTY | os.O_CLOEXEC)
+            try:
+                _write_all(fd, data)
+            finally:
+                os.close(fd)
+    except OSError as exc:
+        raise _os_error(exc, path) from None
+
+
 @contextmanager
 def atomic_write(
     path: PathLike, mode: str = "w", *, encoding: str | None = "utf-8"
@@ -140,11 +284,22 @@ def atomic_write(
     rename. An exception (or an interrupt) inside the block leaves ``path`` untouched and
     removes the temporary file. A failed write (permission, read-only file system, no space)
     raises :class:`InputError` naming ``path``.
+
+    A stream (:func:`output_target`: ``/dev/stdout``, ``/dev/null``, a FIFO) is never
+    replaced: the output is collected and, on success, written to it in place. A symbolic
+    link is written through: its target gets the new file.
     """
-    target = Path(path)
+    where = output_target(path)
+    if where.is_stream:
+        with _stream_write(where, path, mode, encoding) as stream:
+            yield stream
+        return
+    target = where.path
     _make_parent(target.parent, path)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{target.name}.{os.getpid()}-", suffix=".tmp", dir=target.parent
+        )
     except OSError as exc:
         raise _os_error(exc, path) from None
     binary = "b" in mode
@@ -163,7 +318,7 @@ def atomic_write(
             os.unlink(tmp)
         except FileNotFoundError:
             pass
-        if isinstance(exc, OSError) and _is_our_error(exc, tmp, target):
+        if isinstance(exc, OSError) and _is_our_error(exc, tmp, target, path):
             raise _os_error(exc, path) from None
         raise
 
@@ -234,11 +389,28 @@ def check_output_file(
     (same real path, or the same file through a hard or symbolic link); a path inside an input
     folder; a parent that is not a folder or not writable. An existing regular file that is
     not an input is overwritten (atomically) later.
+
+    A stream (:func:`output_target`: a descriptor, a FIFO, a character device such as
+    ``/dev/null``) is written in place and destroys nothing, so only its descriptor is
+    checked; a block device or a socket is refused; a symbolic link is checked as its
+    target.
     """
     if os.fspath(path) == "":
         raise InputError(f"empty file name for the {what}")
     if os.path.isdir(path):
         raise InputError(f"is a folder; expected a file name for the {what}", path=path)
+    where = output_target(path)
+    if where.kind == "descriptor":
+        assert where.fd is not None
+        try:
+            os.fstat(where.fd)
+        except OSError:
+            raise InputError(
+                f"descriptor {where.fd} is not open; cannot write the {what} to it", path=path
+            ) from None
+        return
+    if where.kind == "stream":
+        return
     out = _real(path)
     for item in _inputs(inputs):
         if _same(path, item):
@@ -249,7 +421,7 @@ def check_output_file(
                 "into an input",
                 path=path,
             )
-    _check_parent(path)
+    _check_parent(where.path)
 
 
 def is_slamrel_output(path: PathLike) -> bool:
@@ -274,7 +446,9 @@ def _check_replaceable(path: PathLike, *, force: bool, what: str) -> None:
         return
     if not os.path.isdir(path):
         raise InputError(
-            f"exists and is not a folder; refusing to replace it with the {what}", path=path
+            f"exists and is {_describe(path)}, not a folder; refusing to replace it with the "
+            f"{what}",
+            path=path,
         )
     try:
         empty = not any(os.scandir(path))
@@ -294,6 +468,25 @@ def _check_replaceable(path: PathLike, *, force: bool, what: str) -> None:
             "even with --force: choose a new or empty folder",
             path=path,
         )
+
+
+def _describe(path: PathLike) -> str:
+    """What is at ``path`` (``a FIFO``, ``a symbolic link to a missing X``, …), for messages."""
+    if os.path.islink(path) and not os.path.exists(path):
+        return f"a symbolic link to the missing {_real(path)}"
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return "unreadable"
+    kinds = (
+        (stat.S_ISFIFO, "a FIFO (named pipe)"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISREG, "a file"),
+    )
+    kind = next((name for test, name in kinds if test(mode)), "a special file")
+    return f"a symbolic link to {kind}" if os.path.islink(path) else kind
 
 
 def _check_not_cwd(path: PathLike) -> None:
@@ -364,13 +557,18 @@ def check_outputs(
     folder is replaced as a whole and would drop it).
     """
     seen: dict[str, PathLike] = {}
+    streams = {os.fspath(f) for f in _inputs(files) if output_target(f).is_stream}
     for out in _inputs([*files, *dirs]):
+        if os.fspath(out) in streams:
+            continue  # /dev/null twice is fine: a stream is written in place
         key = _real(out)
         if key in seen:
             raise InputError("is given twice as an output", path=out)
         seen[key] = out
     folders = [_real(d) for d in _inputs(dirs)]
     for out in _inputs(files):
+        if os.fspath(out) in streams:
+            continue
         for d, name in zip(folders, _inputs(dirs)):
             if _inside(_real(out), d):
                 raise InputError(
@@ -386,6 +584,212 @@ def check_outputs(
         check_output_file(out, inputs=inputs)
     for out in _inputs(dirs):
         check_output_dir(out, inputs=inputs, force=force)
+
+
+# ------------------------------------------------------------------------------------ claims
+
+
+class StaleOutputWarning(UserWarning):
+    """A hidden work folder left by a slamrel that no longer runs was removed."""
+
+
+#: The lock files this process holds, by the real path of the output they claim.
+_CLAIMS: dict[str, tuple[int, Path, list[Path]]] = {}
+_CLAIMS_LOCK = threading.Lock()
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX: no claims, the swap still re-checks
+    fcntl = None  # type: ignore[assignment]
+
+
+def _lock_path(final: Path) -> Path:
+    return final.parent / f".{final.name}.slamrel-lock"
+
+
+def _owner(fd: int) -> str:
+    try:
+        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+    except OSError:
+        return ""
+    return f" (pid {text})" if text.isdigit() else ""
+
+
+def _acquire(final: Path, path: PathLike, *, wait: bool) -> int:
+    """Lock ``final``'s lock file (``flock``); returns its descriptor."""
+    assert fcntl is not None
+    lock = _lock_path(final)
+    warned = False
+    while True:
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, file_mode())
+        except OSError as exc:
+            raise _os_error(exc, path, "cannot create its lock file") from None
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                who = _owner(fd)
+                if not wait:
+                    raise InputError(
+                        f"another slamrel{who} is writing it right now; wait for it to "
+                        "finish or choose another folder (with --force this one waits and "
+                        "then replaces it)",
+                        path=path,
+                    ) from None
+                if not warned:
+                    warnings.warn(
+                        f"{os.fspath(path)}: another slamrel{who} is writing it; waiting for it "
+                        "to finish, then --force replaces its output",
+                        UserWarning,
+                        stacklevel=3,
+                    )
+                    warned = True
+                fcntl.flock(fd, fcntl.LOCK_EX)
+            try:
+                here = os.stat(lock)
+                mine = os.fstat(fd)
+                same = (here.st_dev, here.st_ino) == (mine.st_dev, mine.st_ino)
+            except FileNotFoundError:
+                same = False  # its holder removed it as we waited: take a new one
+        except BaseException:
+            os.close(fd)
+            raise
+        if same:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+            return fd
+        os.close(fd)
+
+
+def _release(fd: int, final: Path) -> None:
+    try:
+        os.unlink(_lock_path(final))  # still holding it: a waiter re-checks the name
+    except OSError:
+        pass
+    os.close(fd)
+
+
+def claim_outputs(paths: Iterable[PathLike | None], *, wait: bool = False) -> None:
+    """Claim the folder outputs ``paths`` for this process until :func:`release_claims`.
+
+    A lock file ``.NAME.slamrel-lock`` beside each folder is locked (``flock``, released by
+    the kernel when the process dies, whatever kills it). Another slamrel holding it: refused
+    with :class:`InputError` naming the folder, or with ``wait`` (``--force``) waited for.
+    A missing parent folder is created (and removed again by :func:`release_claims` when
+    nothing was written into it). Claims are taken in path order (no deadlock between two
+    commands with several outputs). Streams and symbolic links are claimed as what they
+    name.
+    """
+    if fcntl is None:
+        return
+    named = {_real(p): p for p in reversed(_inputs(paths))}
+    for key in sorted(named):
+        with _CLAIMS_LOCK:
+            if key in _CLAIMS:
+                continue
+        final = Path(key)
+        made = _missing_parents(final.parent)
+        _make_parent(final.parent, named[key])
+        try:
+            fd = _acquire(final, named[key], wait=wait)
+        except BaseException:
+            _remove_empty(made)
+            raise
+        with _CLAIMS_LOCK:
+            _CLAIMS[key] = (fd, final, made)
+
+
+def release_claims() -> None:
+    """Release every claim of this process and remove its lock files (also run at exit)."""
+    with _CLAIMS_LOCK:
+        held = list(_CLAIMS.values())
+        _CLAIMS.clear()
+    for fd, final, made in held:
+        _release(fd, final)
+        _remove_empty(made)
+
+
+atexit.register(release_claims)
+
+
+def _missing_parents(folder: Path) -> list[Path]:
+    """The folders from ``folder`` up that do not exist yet (deepest first)."""
+    out = []
+    p = Path(os.path.abspath(folder))
+    while not os.path.lexists(p) and p != p.parent:
+        out.append(p)
+        p = p.parent
+    return out
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    for f in folders:
+        try:
+            f.rmdir()
+        except OSError:
+            return
+
+
+@contextmanager
+def _swap_lock(final: Path) -> Iterator[None]:
+    """Hold the claim on ``final`` for a swap: this process's own, or one taken for it."""
+    with _CLAIMS_LOCK:
+        held = _real(final) in _CLAIMS
+    if held or fcntl is None:
+        yield
+        return
+    fd = _acquire(final, final, wait=True)
+    try:
+        yield
+    finally:
+        _release(fd, final)
+
+
+_WORK = re.compile(r"(\d+)-[a-z0-9_]+\.(?:partial|old)")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: it runs, as another user
+        return True
+    return True
+
+
+def remove_stale_work(final: Path) -> list[Path]:
+    """Remove the hidden work folders of ``final`` whose slamrel no longer runs.
+
+    Work folders are ``.NAME.PID-XXXXXXXX.partial`` (being built) and ``….old`` (the
+    previous output during a swap); one whose process ``PID`` is gone was left by a
+    slamrel killed with ``SIGKILL`` or a power cut. Each removal is announced with a
+    :class:`StaleOutputWarning`. Returns the removed paths.
+    """
+    prefix = f".{final.name}."
+    removed: list[Path] = []
+    try:
+        entries = [e.name for e in os.scandir(final.parent) if e.name.startswith(prefix)]
+    except OSError:
+        return removed
+    for name in entries:
+        m = _WORK.fullmatch(name[len(prefix) :])
+        if m is None:
+            continue
+        pid = int(m.group(1))
+        if pid == os.getpid() or _alive(pid):
+            continue
+        path = final.parent / name
+        _remove(path)
+        removed.append(path)
+        warnings.warn(
+            f"{path}: removed an unfinished output left by a slamrel that stopped "
+            f"(pid {pid}, no longer running)",
+            StaleOutputWarning,
+            stacklevel=3,
+        )
+    return removed
 
 
 # ---------------------------------------------------------------------------- staged folders
@@ -414,7 +818,8 @@ def staged_directory(target: PathLike, *, kind: str, force: bool = True) -> Iter
     Parameters
     ----------
     target : str or PathLike
-        The folder output. A symbolic link is followed (the linked folder is replaced).
+        The folder output. A symbolic link to a folder is followed (the linked folder is
+        replaced, the link stays); a link to anything else, or a dangling one, is refused.
     kind : str
         What the folder holds (``"report"``, ``"bundle"``, …), recorded in :data:`MANIFEST`.
     force : bool
@@ -423,15 +828,26 @@ def staged_directory(target: PathLike, *, kind: str, force: bool = True) -> Iter
 
     The new folder (mode ``0o777 & ~umask``) gets the manifest first. When the block ends
     normally the old ``target`` is renamed aside, the new folder renamed in and the old one
-    removed. On any exception or ``KeyboardInterrupt`` the new folder is removed and
-    ``target`` is left exactly as it was.
+    removed. On any exception or ``KeyboardInterrupt`` (the CLI turns ``SIGTERM`` and
+    ``SIGHUP`` into one) the new folder is removed and ``target`` is left exactly as it was.
+
+    The swap holds the claim on ``target`` (:func:`claim_outputs`; taken for the swap when
+    the caller holds none) and re-checks it: without ``force``, a folder that appeared while
+    this one was built is not replaced (:class:`InputError`). Work folders of a slamrel that
+    no longer runs are removed first (:func:`remove_stale_work`).
     """
     final = Path(_real(target))
     _check_not_cwd(final)
     _check_replaceable(final, force=force, what="output folder")
+    existed = _nonempty_dir(final)
     _make_parent(final.parent, target)
+    remove_stale_work(final)
     try:
-        tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
+        tmp = Path(
+            tempfile.mkdtemp(
+                prefix=f".{final.name}.{os.getpid()}-", suffix=".partial", dir=final.parent
+            )
+        )
     except OSError as exc:
         raise _os_error(exc, target) from None
     try:
@@ -441,16 +857,31 @@ def staged_directory(target: PathLike, *, kind: str, force: bool = True) -> Iter
             raise _os_error(exc, target) from None
         write_manifest(tmp, kind)
         yield tmp
-        try:
-            _swap(tmp, final)
-        except OSError as exc:
-            raise _os_error(exc, target, "cannot replace the folder") from None
+        with _swap_lock(final):
+            if not force and not existed and _nonempty_dir(final):
+                raise InputError(
+                    "appeared while this slamrel was writing it (another slamrel wrote it "
+                    "meanwhile?); left as it is: pass --force to replace it",
+                    path=target,
+                )
+            _check_replaceable(final, force=force, what="output folder")
+            try:
+                _swap(tmp, final)
+            except OSError as exc:
+                raise _os_error(exc, target, "cannot replace the folder") from None
     except InputError as exc:
         _remove(tmp)
         raise _renamed(exc, tmp, Path(target)) from None
     except BaseException:
         _remove(tmp)
         raise
+
+
+def _nonempty_dir(path: Path) -> bool:
+    try:
+        return path.is_dir() and any(os.scandir(path))
+    except OSError:
+        return False
 
 
 def _renamed(exc: InputError, tmp: Path, target: Path) -> InputError:
@@ -466,7 +897,9 @@ def _swap(new: Path, final: Path) -> None:
     if not os.path.lexists(final):
         os.replace(new, final)
         return
-    aside = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
+    aside = Path(
+        tempfile.mkdtemp(prefix=f".{final.name}.{os.getpid()}-", suffix=".old", dir=final.parent)
+    )
     moved = False
     try:
         os.replace(final, aside / final.name)
@@ -506,6 +939,7 @@ def resumable_directory(
                 path=path,
             )
     check_output_dir(path, inputs=list(inputs), force=True)
+    claim_outputs([path])  # a second job on the same folder at once is refused
     if root.is_dir() and any(os.scandir(root)):
         return root
     _make_parent(root.parent, path)

@@ -161,10 +161,18 @@ def check_outputs(
     input folder or (for a folder) contains an input; parents are writable; no two outputs
     share a path; an existing non-empty folder is replaced only with ``force`` and only when
     slamrel wrote it.
+
+    The folder outputs are then claimed for this process (:func:`slamrel.outputs.claim_outputs`,
+    released when the command ends): another slamrel writing one of them right now is
+    refused, or with ``force`` waited for; the checks are repeated once the claims are held.
     """
     from slamrel.outputs import check_outputs as _check_outputs
+    from slamrel.outputs import claim_outputs
 
     _check_outputs(outputs, dirs=dirs, inputs=inputs, force=force)
+    if any(d is not None for d in dirs):
+        claim_outputs(dirs, wait=force)
+        _check_outputs(outputs, dirs=dirs, inputs=inputs, force=force)
 
 
 def add_recovery_arguments(parser: argparse.ArgumentParser, *, fail_help: str) -> None:
