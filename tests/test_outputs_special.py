@@ -229,6 +229,16 @@ def test_concurrent_writers_one_wins_the_others_fail_clearly(tmp_path: Path) -> 
     assert _hidden(tmp_path, "cx") == []  # no partial, no lock file
 
 
+def test_two_concurrent_runs_one_wins(tmp_path: Path) -> None:
+    procs = [_cli("run", "simple1", "-o", "cc", "-q", cwd=tmp_path) for _ in range(2)]
+    results = [(p.wait(timeout=300), p.stderr.read() if p.stderr else "") for p in procs]
+    assert sorted(c for c, _ in results) == [0, 3], results
+    err = next(e for c, e in results if c == 3)
+    assert "cc: " in err and ("another slamrel" in err or "exists and is not empty" in err)
+    assert (tmp_path / "cc" / "report.html").is_file()
+    assert _hidden(tmp_path, "cc") == []
+
+
 def test_concurrent_force_writers_all_replace_whole(tmp_path: Path) -> None:
     assert main(["example", "-o", str(tmp_path / "cx"), "-q"]) == 0
     procs = [
