@@ -295,6 +295,8 @@ def _wait_for_partial(folder: Path, name: str, proc: subprocess.Popen[str]) -> N
 @pytest.mark.parametrize("signame", ["SIGTERM", "SIGHUP"])
 def test_signal_while_writing_leaves_no_partial(tmp_path: Path, signame: str) -> None:
     signum = getattr(signal, signame)
+    if signal.getsignal(signum) is signal.SIG_IGN:
+        pytest.skip(f"{signame} is ignored here (nohup): slamrel keeps ignoring it")
     proc = _cli("run", "simple1", "-o", "big", "-q", cwd=tmp_path)
     _wait_for_partial(tmp_path, "big", proc)
     proc.send_signal(signum)
@@ -321,3 +323,26 @@ def test_next_run_removes_work_folders_of_a_dead_slamrel(tmp_path: Path) -> None
     assert err.count("removed an unfinished output left by a slamrel that stopped") == 2, err
     assert not stale.exists() and not old.exists() and alive.exists()
     assert _hidden(tmp_path, "cx") == [alive.name]
+
+
+def test_socket_and_block_device_outputs_are_refused(
+    ex: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import socket
+
+    sock_path = tmp_path / "s"
+    with socket.socket(socket.AF_UNIX) as sock:
+        sock.bind(str(sock_path))
+        assert main(_evaluate(ex, "--json", str(sock_path))) == 3
+    assert "is a socket" in capsys.readouterr().err
+    assert stat.S_ISSOCK(os.lstat(sock_path).st_mode)
+    if os.geteuid() != 0:
+        return  # a block device node needs root
+    disk = tmp_path / "disk"  # a private node (loop0's numbers); refused before any open
+    try:
+        os.mknod(disk, stat.S_IFBLK | 0o600, os.makedev(7, 0))
+    except OSError:
+        return
+    assert main(_evaluate(ex, "--json", str(disk))) == 3
+    assert "is a block device" in capsys.readouterr().err
+    assert stat.S_ISBLK(os.lstat(disk).st_mode)
