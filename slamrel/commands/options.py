@@ -115,7 +115,7 @@ def length(text: str) -> float:
     return _option_type(
         _float,
         lambda v: 0.0 < v <= MAX_COORDINATE,
-        f"a positive length of at most {MAX_COORDINATE:.0e} m",
+        f"a finite positive number (a length of at most {MAX_COORDINATE:.0e} m)",
         "length",
     )(text)
 
