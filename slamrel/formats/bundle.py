@@ -134,8 +134,7 @@ def _numbers(
             f"{what}: expected a list of {n} numbers, got {_shown(value)}", path=path, line=line
         )
     return tuple(
-        _number(v, what=what, path=path, line=line, minimum=minimum, maximum=maximum)
-        for v in value
+        _number(v, what=what, path=path, line=line, minimum=minimum, maximum=maximum) for v in value
     )
 
 
