@@ -19,6 +19,7 @@ problem for ``p = 1``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +32,10 @@ from relation_metric.alignment import Alignment, umeyama
 from relation_metric.errors import InputError
 
 _MAX_SMALL_HYPOTHESES = 20_000
+#: OSPA and GOSPA solve the dense ``m × n`` assignment up to this many pairs (32 MB of
+#: distances; the results of all earlier versions, bit for bit) and the sparse one on the
+#: pairs within the cut-off beyond (20,000 landmarks a side: 3.2 GB dense per matrix).
+DENSE_ASSIGNMENT_PAIRS = 4_000_000
 
 __all__ = [
     "Association",
@@ -221,22 +226,45 @@ def _sparse_assignment(
     ``p = 2`` (the default) is the least-squares objective of the Umeyama alignment, so that
     alternating the two never increases ``Σ min(d, c)²``.
     """
+    er, rr, _ = _sparse_matching(
+        x, y, cutoff, power=power, cost_x=cutoff**power, cost_y=cutoff**power
+    )
+    return er, rr
+
+
+def _sparse_matching(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    cutoff: float,
+    *,
+    power: float,
+    cost_x: float,
+    cost_y: float,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    """Min-weight matching on the pairs closer than ``cutoff``: ``d^power`` per pair,
+    ``cost_x`` per unmatched ``x``, ``cost_y`` per unmatched ``y``; the matched rows and
+    their distances. The square augmentation ``[[D^p, cost_x I], [cost_y I, (D^p)ᵀ-pattern at
+    ~0]]`` always has a full matching (the two identities); the pair weights get a tiny
+    ``eps`` (and a zero cost is ``eps``) so that none is an implicit zero of the sparse
+    matrix."""
     import scipy.sparse as sp
     from scipy.sparse.csgraph import min_weight_full_bipartite_matching
 
     m, n = x.shape[0], y.shape[0]
     d = cKDTree(x).sparse_distance_matrix(cKDTree(y), cutoff, output_type="coo_matrix")
     keep = d.data < cutoff
-    i, j, w = d.row[keep], d.col[keep], d.data[keep] ** power
-    cutoff = cutoff**power
-    eps = 1e-9 * max(cutoff, 1e-300)
+    i, j, dist = d.row[keep], d.col[keep], d.data[keep]
+    w = dist**power
+    eps = 1e-9 * max(cutoff**power, 1e-300)
     rows = np.concatenate((i, np.arange(m), m + np.arange(n), m + j))
     cols = np.concatenate((j, n + np.arange(m), np.arange(n), n + i))
-    vals = np.concatenate((w + eps, np.full(m, cutoff), np.full(n, cutoff), np.full(i.size, eps)))
+    cx, cy = (cost if cost > 0 else eps for cost in (cost_x, cost_y))
+    vals = np.concatenate((w + eps, np.full(m, cx), np.full(n, cy), np.full(i.size, eps)))
     g = sp.csr_matrix((vals, (rows, cols)), shape=(m + n, m + n))
     left, right = min_weight_full_bipartite_matching(g)
     real = (left < m) & (right < n)
-    return left[real].astype(np.int64), right[real].astype(np.int64)
+    er, rr = left[real].astype(np.int64), right[real].astype(np.int64)
+    return er, rr, np.hypot(*(x[er] - y[rr]).T)
 
 
 def _apply(al: Alignment, xy: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -251,15 +279,41 @@ def _optimal_cost(
         raise InputError(f"the OSPA/GOSPA cut-off c must be a positive number, got {c}")
     if not (np.isfinite(p) and p >= 1):
         raise InputError(f"the OSPA/GOSPA order p must be a number ≥ 1, got {p}")
+    try:
+        cp = float(c) ** float(p)
+    except OverflowError:
+        cp = math.inf
+    if not math.isfinite(cp):
+        raise InputError(f"the OSPA/GOSPA cut-off to the order, c^p = {c:g}^{p:g}, leaves float64")
     if x.shape[0] > y.shape[0]:
         x, y = y, x
     m, n = x.shape[0], y.shape[0]
     if m == 0:
         return 0.0, m, n
-    d = np.hypot(x[:, None, 0] - y[None, :, 0], x[:, None, 1] - y[None, :, 1])
-    w = np.minimum(d, c) ** p
-    r, s = linear_sum_assignment(w)
-    return float(w[r, s].sum()), m, n
+    if m * n <= DENSE_ASSIGNMENT_PAIRS:
+        d = np.hypot(x[:, None, 0] - y[None, :, 0], x[:, None, 1] - y[None, :, 1])
+        w = np.minimum(d, c) ** p
+        r, s = linear_sum_assignment(w)
+        return float(w[r, s].sum()), m, n
+    # large sets: only pairs closer than c can cost less than c^p (see _within_cutoff_cost)
+    return _within_cutoff_cost(x, y, c, p), m, n
+
+
+def _within_cutoff_cost(
+    x: NDArray[np.float64], y: NDArray[np.float64], c: float, p: float
+) -> float:
+    """``min_π Σ min(d, c)^p`` (``|x| ≤ |y|``) from the pairs closer than ``c`` alone.
+
+    A full assignment's pairs at ``d ≥ c`` cost ``c^p`` each, as an unassigned ``x`` would;
+    and a partial matching on pairs closer than ``c`` completes (``|x| ≤ |y|``) to a full
+    assignment whose added pairs cost at most ``c^p`` each. So the optimum is the min-weight
+    partial matching on the within-``c`` pairs with ``d^p`` per pair and ``c^p`` per
+    unmatched ``x`` (an unmatched ``y`` costs nothing): a sparse problem of ``O(m + n +
+    pairs)`` memory, solved as the full matching of the square augmentation of
+    :func:`_sparse_assignment` by ``min_weight_full_bipartite_matching``.
+    """
+    er, rr, d = _sparse_matching(x, y, c, power=p, cost_x=c**p, cost_y=0.0)
+    return float((d**p).sum() + c**p * (x.shape[0] - er.size))
 
 
 def ospa(x: ArrayLike, y: ArrayLike, *, c: float, p: float = 2.0) -> float:

@@ -502,8 +502,28 @@ class MapComparison:
                     self.association.reference_rows[self.mesh.duplicates]
                 ].tolist(),
                 "collinear": self.mesh.collinear,
+                "not_computed": self.mesh_gap,
             },
         }
+
+    @property
+    def mesh_gap(self) -> str | None:
+        """What of the mesh comparison is not computed and why (None when it has triangles):
+        the Delaunay mesh needs 3 matched landmarks not on one line; OSPA and GOSPA need none
+        of it and are always computed."""
+        if self.mesh.triangles.shape[0]:
+            return None
+        k = int(self.association.reference_rows.size)
+        if k < 3:
+            edges = "one edge" if k == 2 else "no edge"
+            why = f"only {k} landmark(s) matched (a triangle needs 3): {edges}"
+        else:
+            why = f"the {k} matched landmarks lie on one line: edges only"
+        rest = "" if k == 2 or self.mesh.edges.shape[0] else ", no edge-length errors"
+        return (
+            f"no mesh triangles: {why}, so no corner-angle errors{rest} (OSPA and GOSPA are "
+            "computed on the landmarks themselves)"
+        )
 
 
 def compare_maps(

@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from relation_metric import se2
 from relation_metric.alignment import Alignment, umeyama
 from relation_metric.arrays import Array
+from relation_metric.trajectory import Trajectory
 
 __all__ = [
     "ASSOCIATIONS",
@@ -50,6 +51,7 @@ __all__ = [
     "anchor_on_start",
     "start_frame",
     "shared_by_id",
+    "truth_at_start",
 ]
 
 #: How the landmark pairs of an anchoring were found: by equal id, by
@@ -235,17 +237,37 @@ def anchor_on_start(
     )
 
 
+def truth_at_start(truth: Trajectory, t0: float, *, tolerance: float = 1e-6) -> Array | None:
+    """The ground truth's pose at the log's start time ``t0`` (interpolated), or ``None`` when
+    the ground truth does not cover ``t0`` (within ``tolerance`` [s]): then it says nothing
+    about the run's start pose (clamping to its first pose would invent one)."""
+    lo, hi = truth.span()
+    if not lo - tolerance <= t0 <= hi + tolerance:
+        return None
+    return truth.poses_at(np.array([t0]))[0]
+
+
 def start_frame(
     initial_pose: ArrayLike,
     initial_covariance: ArrayLike,
-    truth_start: ArrayLike,
+    truth_start: ArrayLike | None,
     map_anchoring: Anchoring | None = None,
 ) -> NeesFrame:
     """The default :class:`NeesFrame`: placed by the start pose (:func:`anchor_on_start`).
 
     ``map_anchoring`` (the landmark fit of :func:`anchor_on_landmarks`, in the map frame) is
     reported beside it, not applied: it is how far the map sits off the true landmarks.
+    ``truth_start`` ``None`` (the ground truth does not cover the log's start,
+    :func:`truth_at_start`): the start pose cannot be checked, and the poses are compared as
+    they are, which the reason says.
     """
+    if truth_start is None:
+        return NeesFrame(
+            None,
+            "the ground truth does not cover the log's start, so the run's start pose cannot "
+            "be checked against it; poses compared as they are",
+            map_anchoring,
+        )
     a = anchor_on_start(initial_pose, initial_covariance, truth_start)
     reason = "" if a is not None else "the run's start pose is the ground truth's"
     return NeesFrame(a, reason, map_anchoring)

@@ -225,7 +225,8 @@ def _check_values(b: Bundle) -> None:
         return int(lines[k]) or None
 
     for name in ("measurement_times", "measurements", "map_xy", "initial_pose"):
-        bad = np.flatnonzero(~np.isfinite(getattr(b, name)).reshape(len(getattr(b, name)), -1))
+        a = getattr(b, name)  # any row with a non-finite entry (empty arrays have none)
+        bad = np.flatnonzero(~np.isfinite(a).all(axis=tuple(range(1, a.ndim))))
         if bad.size:
             raise InputError(f"{name}: expected finite numbers (row {int(bad[0])})", path=b.path)
     if b.controls is not None and not np.isfinite(b.controls).all():

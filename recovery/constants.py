@@ -14,6 +14,8 @@ __all__ = [
     "ROBUST",
     "DEFAULT_ROBUST",
     "DEFAULT_MAX_OUTLIER_RUN",
+    "MAX_SIGMA",
+    "MAX_VARIANCE",
 ]
 
 #: ``method`` of :func:`recovery.recover.recover`: EKF only, EKF + RTS smoother, smoother
@@ -32,3 +34,11 @@ DEFAULT_ROBUST = "redescending"
 #: Consecutive outlying innovations after which the filter is re-entered (and a stretch of
 #: disagreement between map and log is reported).
 DEFAULT_MAX_OUTLIER_RUN = 10
+#: The largest standard deviation (and α) a motion or sensor model accepts. Its square, the
+#: variance, is at most 1e60, so the filter's products of covariances (``P Hᵀ S⁻¹ H P``, about
+#: 1e120) stay far inside float64; a σ of 1e200 squares to 1e400 = ``inf`` (``sigma_v`` 1e308
+#: in a bundle was an OverflowError, exit 1). Far beyond any physical noise in metres,
+#: radians or m/s.
+MAX_SIGMA = 1e30
+#: The largest covariance entry a model or an initial covariance accepts: ``MAX_SIGMA²``.
+MAX_VARIANCE = MAX_SIGMA**2

@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from recovery.constants import MAX_SIGMA, MAX_VARIANCE
 from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.checks import check_covariances
@@ -98,6 +99,12 @@ def _nonnegative_numbers(values: object, size: int, *, what: str) -> tuple[float
     bad = [v for v in out if not (math.isfinite(v) and v >= 0.0)]
     if bad:
         raise InputError(f"{what}: expected finite numbers >= 0, got {bad[0]:g}")
+    big = [v for v in out if v > MAX_SIGMA]
+    if big:
+        raise InputError(
+            f"{what}: expected at most {MAX_SIGMA:.0e} (its square must stay far inside "
+            f"float64), got {big[0]:g}"
+        )
     return out
 
 
@@ -118,6 +125,11 @@ def _covariance_3x3(values: object, *, what: str) -> tuple[tuple[float, ...], ..
     if mat.shape != (3, 3):
         raise InputError(f"{what}: expected a 3 x 3 matrix, got shape {mat.shape}")
     check_covariances(mat[None], what=what)
+    if np.abs(mat).max() > MAX_VARIANCE:
+        raise InputError(
+            f"{what}: expected entries of at most {MAX_VARIANCE:.0e} (products of covariances "
+            f"must stay inside float64), got {np.abs(mat).max():g}"
+        )
     return tuple(tuple(float(v) for v in row) for row in mat)
 
 

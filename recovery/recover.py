@@ -32,7 +32,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from recovery.anchoring import Anchoring, NeesFrame, start_frame
+from recovery.anchoring import Anchoring, NeesFrame, start_frame, truth_at_start
 from recovery.bundle import Bundle
 from recovery.constants import BATCH_MAX_ITERATIONS, DEFAULT_ROBUST, METHODS
 from recovery.ekf import (
@@ -394,6 +394,33 @@ class RecoveryCounts:
             downweight_loss=loss / assoc if assoc else 0.0,
         )
 
+    def dead_reckoning(self) -> str | None:
+        """Why the recovery is dead reckoning, when no measurement reached the filter (None
+        otherwise): the filter only predicts on the motion log (and the smoother or batch
+        smooths those predictions), so the trajectory and its covariances are the motion
+        model's alone."""
+        if self.used:
+            return None
+        if self.measurements == 0:
+            why = "the bundle has no measurements"
+        else:
+            parts = [
+                f"{n} {what}"
+                for n, what in (
+                    (self.unassociated, "unassociated"),
+                    (self.outside, "outside the log"),
+                    (self.skipped_unknown, "of landmarks not in the map"),
+                    (self.gated, "gated"),
+                )
+                if n
+            ]
+            why = f"none of its {self.measurements} measurements was used ({', '.join(parts)})"
+        return (
+            f"nothing was observed: {why}, so the recovered trajectory is dead reckoning (the "
+            "filter's prediction on the motion log alone, smoothed by the smoother and the "
+            "batch); it measures the motion log and its noise model, not the map"
+        )
+
     def as_dict(self) -> dict[str, float]:
         """The report's ``measurements`` (the counts as int, the fractions as float)."""
         return {
@@ -629,6 +656,9 @@ class Recovery:
             "divergence": self.divergence.as_dict(),
             "nis": self.nis_stats.as_dict(),
         }
+        dead = self.counts.dead_reckoning()
+        if dead is not None:  # only then: the reports of observed runs keep their bytes
+            out["dead_reckoning"] = dead
         if self.nees_stats is not None:
             out["nees"] = self.nees_stats.as_dict()
         if self.nees_frame is not None:
@@ -830,7 +860,7 @@ def recover(
         frame = nees_frame
         if frame is None:
             by_id = NeesFrame.by_id(bundle.map_ids, bundle.map_xy, bundle.landmarks_groundtruth)
-            g0 = gt.poses_at(inp.times[:1])[0]
+            g0 = truth_at_start(gt, float(inp.times[0]))
             frame = start_frame(bundle.initial_pose, bundle.initial_covariance, g0, by_id.anchoring)
         nees = pose_nees_against(gt, inp.times, traj.poses, covs, frame.anchoring)
         if frame.anchoring is not None:

@@ -34,7 +34,13 @@ from landmark_graph.landmark_association import Association
 from landmark_graph.map_compare import SOURCE_WORDS, MapComparison, compare_maps
 from landmark_graph.maps import LandmarkMap
 from landmark_graph.observability import SensorReach, within_reach
-from recovery.anchoring import Anchoring, NeesFrame, anchor_on_landmarks, start_frame
+from recovery.anchoring import (
+    Anchoring,
+    NeesFrame,
+    anchor_on_landmarks,
+    start_frame,
+    truth_at_start,
+)
 from recovery.bundle import Bundle
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, Divergence, Recovery, recover
 from recovery.steps import build_steps
@@ -667,6 +673,7 @@ def score_bundle(
         raise InputError(
             "the bundle has no groundtruth.csv: nothing to score against", path=bundle.path
         )
+    _check_truth_overlaps(bundle, truth)
     relations = default_relations(truth, seed=seed)
     sets = relations.sets
     map_cmp, map_notes = None, []
@@ -704,6 +711,20 @@ def score_bundle(
         nees_truth_frame=nees_truth,
         relation_sets=relations.rules,
     )
+
+
+def _check_truth_overlaps(bundle: Bundle, truth: Trajectory) -> None:
+    """InputError (before any work or output) when no ground-truth time lies in the log's
+    span: every score of ``run`` compares estimate poses at ground-truth times."""
+    tb = TimeBase.of(bundle)
+    lo, hi = truth.span()
+    if hi < tb.t0 - 1e-6 or lo > tb.t1 + 1e-6:
+        raise InputError(
+            f"the ground truth spans [{lo:.9g}, {hi:.9g}] s, the log [{tb.t0:.9g}, "
+            f"{tb.t1:.9g}] s: they do not overlap, so there is nothing to score; expected "
+            "groundtruth.csv in the time base of the log",
+            path=None if bundle.path is None else Path(bundle.path) / "groundtruth.csv",
+        )
 
 
 def sensor_reach(bundle: Bundle) -> SensorReach | None:
@@ -796,6 +817,8 @@ def _map_notes(mc: MapComparison) -> list[str]:
             f"rms residual {al.rms_residual:.3g} m)"
         )
     notes = [text + "; the mesh errors do not depend on the frame."]
+    if mc.mesh_gap is not None:
+        notes.append(mc.mesh_gap[0].upper() + mc.mesh_gap[1:] + ".")
     notes += [n[0].upper() + n[1:] + "." for n in mc.notes]
     if mc.reach is not None:
         u = mc.unobserved.size
@@ -818,7 +841,7 @@ def _placed(bundle: Bundle, map_anchoring: Anchoring | None) -> NeesFrame:
     """The frame placed by the run's start pose (:func:`recovery.anchoring.start_frame`), the
     landmark fit reported beside it."""
     assert bundle.groundtruth is not None
-    g0 = bundle.groundtruth.poses_at(np.array([TimeBase.of(bundle).t0]))[0]
+    g0 = truth_at_start(bundle.groundtruth, TimeBase.of(bundle).t0)
     return start_frame(bundle.initial_pose, bundle.initial_covariance, g0, map_anchoring)
 
 
@@ -927,6 +950,9 @@ def _recovery_notes(rec: Recovery, method: str) -> list[str]:
         f"{counts.unassociated} were unassociated. A large gated fraction is a finding "
         "about the map, not noise.",
     ]
+    dead = counts.dead_reckoning()
+    if dead is not None:
+        notes.append(dead[0].upper() + dead[1:] + ".")
     if counts.downweighted:
         notes.append(
             f"The robust update down-weighted {counts.downweighted} measurements "

@@ -33,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     add_association_arguments(p)
     p.add_argument(
         "--cutoff",
-        type=opt.positive_float,
+        type=opt.length,
         default=1.0,
         help="OSPA/GOSPA and auto-association cut-off c [m]",
     )

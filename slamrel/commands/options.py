@@ -28,6 +28,9 @@ __all__ = [
     "float_at_least",
     "weights",
     "figure_file",
+    "noise_scale",
+    "length",
+    "NOISE_SCALE_RANGE",
 ]
 
 _MAX_SEED = 2**63 - 1
@@ -89,6 +92,32 @@ triangle_angle = _option_type(
     "an angle in degrees in (0, 60] (the smallest corner of a triangle is at most 60°)",
     "triangle_angle",
 )
+
+
+#: ``--noise-scale``: the covariances the filter assumes are scaled by its square, so the
+#: range keeps that square, and the filter's products of such covariances, inside float64
+#: and well conditioned (1e300 squared is ``inf``: an OverflowError, exit 1, before the limit).
+NOISE_SCALE_RANGE = (1e-6, 1e6)
+noise_scale = _option_type(
+    _float,
+    lambda v: NOISE_SCALE_RANGE[0] <= v <= NOISE_SCALE_RANGE[1],
+    f"a noise scale in [{NOISE_SCALE_RANGE[0]:g}, {NOISE_SCALE_RANGE[1]:g}] (the filter's "
+    "covariances are scaled by its square)",
+    "noise_scale",
+)
+
+
+def length(text: str) -> float:
+    """A positive length in metres, at most ``relation_metric.trajectory.MAX_COORDINATE``
+    (beyond it squared distances leave float64)."""
+    from relation_metric.trajectory import MAX_COORDINATE
+
+    return _option_type(
+        _float,
+        lambda v: 0.0 < v <= MAX_COORDINATE,
+        f"a finite positive number (a length of at most {MAX_COORDINATE:.0e} m)",
+        "length",
+    )(text)
 
 
 def int_range(low: int, high: int) -> Callable[[str], int]:

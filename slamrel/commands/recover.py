@@ -118,6 +118,9 @@ def run(args: argparse.Namespace) -> int:
             f"{c.unassociated}, outside the log {c.outside}, unknown landmark "
             f"{c.skipped_unknown}; map uncertainty: {result.map_mode}"
         )
+        dead = c.dead_reckoning()
+        if dead is not None:
+            print(f"note: {dead}")
         moved = {name: n for name, n in bundle.reordered.items() if n}
         if moved:
             print(
@@ -143,6 +146,11 @@ def run(args: argparse.Namespace) -> int:
                 "or an inconsistent map), not noise"
             )
         ns, frame = result.nees_stats, result.nees_frame
+        if ns is not None and ns.mean is None:
+            print(
+                "note: no NEES: no recovered pose lies at a ground-truth time (within 1 µs; "
+                "is groundtruth.csv in the time base of the log?)"
+            )
         if ns is not None and ns.mean is not None and frame is not None:
             print(f"mean pose NEES vs ground truth: {ns.mean:.3f} (3 dof), {frame.description}")
             unaligned = result.nees_stats_truth_frame

@@ -38,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     add_association_arguments(p, align=False)  # the proposal to review, as in map-compare
     p.add_argument(
         "--cutoff",
-        type=opt.positive_float,
+        type=opt.length,
         default=1.0,
         help="auto-association cut-off c [m]; residual colours saturate at c (default: 1)",
     )

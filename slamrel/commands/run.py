@@ -43,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument(
         "--corrupt", type=opt.fraction, default=0.0, help="fraction of associations corrupted"
     )
-    p.add_argument("--noise-scale", type=opt.positive_float, default=1.0)
+    p.add_argument("--noise-scale", type=opt.noise_scale, default=1.0)
     add_association_arguments(p)
     add_force_argument(p)
     add_recovery_arguments(

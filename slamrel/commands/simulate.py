@@ -45,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     m.add_argument(
         "--noise-scale",
-        type=opt.positive_float,
+        type=opt.noise_scale,
         default=1.0,
         help="factor on the noise the filter assumes",
     )

@@ -142,6 +142,8 @@ def run_study(args: argparse.Namespace) -> int:
         )
         for key in report.failed:
             print(f"failed: {out / 'cases' / (key + '.error.json')}")
+        for path in report.damaged:
+            print(f"recomputed (the stored result was damaged): {path}")
     return 0 if not report.failed else 3
 
 
@@ -189,4 +191,6 @@ def _run_calibration(args: argparse.Namespace) -> int:
         )
         for key in report.failed:
             print(f"failed: {out / 'cases' / (key + '.error.json')}")
+        for path in report.damaged:
+            print(f"recomputed (the stored result was damaged): {path}")
     return 0 if not report.failed else 3

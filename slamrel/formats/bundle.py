@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recovery.bundle import Bundle
+from recovery.constants import MAX_SIGMA, MAX_VARIANCE
 from recovery.models import (
     CONTROL_STAMPS,
     INTEGRATIONS,
@@ -92,7 +93,13 @@ def _line_of_key(text: str, key: str) -> int | None:
 
 
 def _number(
-    value: Any, *, what: str, path: str, line: int | None, minimum: float | None = 0.0
+    value: Any,
+    *,
+    what: str,
+    path: str,
+    line: int | None,
+    minimum: float | None = 0.0,
+    maximum: float | None = None,
 ) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise InputError(
@@ -102,17 +109,33 @@ def _number(
         raise InputError(
             f"{what}: expected a number >= {minimum}, got {_shown(value)}", path=path, line=line
         )
+    if maximum is not None and abs(value) > maximum:
+        raise InputError(
+            f"{what}: expected a magnitude of at most {maximum:.0e} (squares and products of "
+            f"it must stay inside float64), got {_shown(value)}",
+            path=path,
+            line=line,
+        )
     return float(value)
 
 
 def _numbers(
-    value: Any, n: int, *, what: str, path: str, line: int | None, minimum: float | None
+    value: Any,
+    n: int,
+    *,
+    what: str,
+    path: str,
+    line: int | None,
+    minimum: float | None,
+    maximum: float | None = None,
 ) -> tuple[float, ...]:
     if not isinstance(value, list) or len(value) != n:
         raise InputError(
             f"{what}: expected a list of {n} numbers, got {_shown(value)}", path=path, line=line
         )
-    return tuple(_number(v, what=what, path=path, line=line, minimum=minimum) for v in value)
+    return tuple(
+        _number(v, what=what, path=path, line=line, minimum=minimum, maximum=maximum) for v in value
+    )
 
 
 def _check_psd(cov: Array, *, what: str, path: str, line: int | None) -> None:
@@ -164,6 +187,7 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
             path=path,
             line=_line_of_key(text, "alpha"),
             minimum=0.0,
+            maximum=MAX_SIGMA,
         )
         return MotionModel(kind, alpha=alpha, integration=integration, control_stamp=stamp)
     missing = [n for n in names if n not in spec]
@@ -175,7 +199,13 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
             line=line,
         )
     sigma = tuple(
-        _number(spec[n], what=f"motion_model.{n}", path=path, line=_line_of_key(text, n))
+        _number(
+            spec[n],
+            what=f"motion_model.{n}",
+            path=path,
+            line=_line_of_key(text, n),
+            maximum=MAX_SIGMA,
+        )
         for n in names
     )
     return MotionModel(kind, sigma=sigma, integration=integration, control_stamp=stamp)
@@ -232,7 +262,10 @@ def _parse_pose_noise(spec: Any, text: str, path: str) -> tuple[str, tuple[tuple
     cov = spec["covariance"]
     if not isinstance(cov, list) or len(cov) != 3:
         raise InputError(f"{what}: expected a 3 x 3 list of lists", path=path, line=where)
-    rows = tuple(_numbers(r, 3, what=what, path=path, line=where, minimum=None) for r in cov)
+    rows = tuple(
+        _numbers(r, 3, what=what, path=path, line=where, minimum=None, maximum=MAX_VARIANCE)
+        for r in cov
+    )
     mat = np.array(rows)
     _check_psd(mat, what=what, path=path, line=where)
     if frame == "world" and not world_noise_is_rotation_invariant(mat):
@@ -261,7 +294,13 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
     for n in ("sigma_range", "sigma_bearing"):
         if n not in spec:
             raise InputError(f"sensor_model: missing {n}", path=path, line=line)
-        v = _number(spec[n], what=f"sensor_model.{n}", path=path, line=_line_of_key(text, n))
+        v = _number(
+            spec[n],
+            what=f"sensor_model.{n}",
+            path=path,
+            line=_line_of_key(text, n),
+            maximum=MAX_SIGMA,
+        )
         if v <= 0:
             raise InputError(
                 f"sensor_model.{n}: expected a positive number, got {v}",
@@ -328,7 +367,15 @@ def _read_manifest(path: Path) -> dict[str, Any]:
                 "initial_covariance: expected a 3 x 3 list of lists", path=name, line=line
             )
         rows = [
-            _numbers(r, 3, what="initial_covariance", path=name, line=line, minimum=None)
+            _numbers(
+                r,
+                3,
+                what="initial_covariance",
+                path=name,
+                line=line,
+                minimum=None,
+                maximum=MAX_VARIANCE,
+            )
             for r in cov
         ]
         mat = np.array(rows)

@@ -317,12 +317,28 @@ def sensor_of(noise: NoiseType, name: str, observation: str) -> FieldOfViewSenso
     )
 
 
+#: The most control rows a velocity-driven world is built with: ``rate × (steps − 1)``. A row
+#: costs about 0.3 kB of memory while the world, its bundle and the filter's arrays are built
+#: and ~60 bytes in ``controls.csv``: ``--rate 1000000`` on simple1 (84 million rows) wrote a
+#: 4.4 GB bundle with more than 7 GB of memory. At the limit (complex2, rate 2262): 0.33 GB
+#: peak memory for `slamrel simulate`, a 56 MB bundle; refused, 32 MB in 0.6 s.
+MAX_CONTROL_ROWS = 1_000_000
+
+
 def _check(name: str, noise: str, rate: int, observation: str | None) -> str:
     """The observation model to use; InputError on an unknown noise type, model or rate."""
     if noise not in NOISE_TYPES:
         raise InputError(f"unknown noise type {noise!r}; expected one of a, b, c")
     if rate < 0:
         raise InputError(f"rate must be >= 0, got {rate}")
+    steps = path_of(name).shape[0] - 1 if name in WORLDS + PAPER_WORLDS else 0
+    if rate * steps > MAX_CONTROL_ROWS:
+        raise InputError(
+            f"rate {rate}: {rate} control steps per measurement step × {steps} measurement "
+            f"steps of {name} = {rate * steps} control rows, above the limit of "
+            f"{MAX_CONTROL_ROWS} (the world, its bundle and the filter grow with them); "
+            f"expected a rate of at most {MAX_CONTROL_ROWS // steps}"
+        )
     default = "cartesian" if name in PAPER_WORLDS else "range-bearing"
     model = observation if observation is not None else default
     if model not in OBSERVATION_MODELS:

@@ -71,6 +71,32 @@ class SweepReport:
     skipped: int
     failed: tuple[str, ...]
     seconds: float
+    #: Stored result files that were damaged (cut off, not JSON, not this task's record) and
+    #: were recomputed, by path.
+    damaged: tuple[str, ...] = ()
+
+
+def _stored_record(path: Path, task: Task) -> tuple[dict[str, Any] | None, str | None]:
+    """The stored record of ``task`` at ``path``: ``(record, None)``; ``(None, None)`` when
+    there is none; ``(None, why)`` when the file is damaged (a writer that was stopped before
+    the atomic rename cannot leave one, but a copy, a full disk or a hand edit can)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None, None
+    except (OSError, UnicodeDecodeError) as exc:
+        return None, f"unreadable ({exc})"
+    try:
+        record = json.loads(text)
+    except json.JSONDecodeError as exc:
+        return None, f"not valid JSON ({exc.msg}, line {exc.lineno})"
+    except RecursionError:
+        return None, "JSON nested too deeply"
+    if not isinstance(record, dict) or "result" not in record:
+        return None, "not a result record (expected a JSON object with a 'result')"
+    if record.get("key") != task.key:
+        return None, f"the record of another task (key {str(record.get('key'))[:60]!r})"
+    return record, None
 
 
 def _call(function: str, kwargs: dict[str, Any]) -> dict[str, Any]:
@@ -170,7 +196,17 @@ def run_sweep(
     keys = [t.key for t in tasks]
     if len(set(keys)) != len(keys):
         raise InputError("two tasks of the sweep have the same inputs (key)")
-    todo = [t for t in tasks if not (out / f"{t.key}.json").exists()]
+    todo, damaged = [], []
+    for t in tasks:
+        path = out / f"{t.key}.json"
+        record, why = _stored_record(path, t)
+        if record is not None:
+            continue
+        if why is not None:  # recomputed below, and said
+            damaged.append(str(path))
+            if progress is not None:
+                progress(f"damaged result {path}: {why}; recomputing it")
+        todo.append(t)
     skipped = len(tasks) - len(todo)
     failed: list[str] = []
     start = time.monotonic()
@@ -201,7 +237,9 @@ def run_sweep(
             futures = {pool.submit(_guarded, t.function, t.kwargs): t for t in todo}
             for fut in as_completed(futures):
                 finished(futures[fut], *fut.result())
-    return SweepReport(len(todo), skipped, tuple(sorted(failed)), time.monotonic() - start)
+    return SweepReport(
+        len(todo), skipped, tuple(sorted(failed)), time.monotonic() - start, tuple(damaged)
+    )
 
 
 def _run_dask(
@@ -237,10 +275,24 @@ def _run_dask(
 
 
 def load_results(directory: str | os.PathLike[str], tasks: Iterable[Task]) -> list[dict[str, Any]]:
-    """The stored records of ``tasks`` that finished, in the order of ``tasks``."""
+    """The stored records of ``tasks`` that finished, in the order of ``tasks``.
+
+    Raises
+    ------
+    InputError
+        When a stored result is damaged (:func:`run_sweep` recomputes such files; one found
+        here was damaged since), naming the file.
+    """
     out = []
     for t in tasks:
         p = Path(directory) / f"{t.key}.json"
-        if p.exists():
-            out.append(json.loads(p.read_text(encoding="utf-8")))
+        record, why = _stored_record(p, t)
+        if why is not None:
+            raise InputError(
+                f"damaged study result: {why}; expected the JSON record slamrel writes "
+                "(delete the file, or run the study again to recompute it)",
+                path=p,
+            )
+        if record is not None:
+            out.append(record)
     return out
