@@ -1,0 +1,139 @@
+"""Issue 25: the same file gets the same verdict from every command, and messages say what is
+wrong (file, line, what was expected) without tracebacks or raw numpy warnings."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from slamrel.cli import main
+
+# iSAM text in the format's own convention: square-root information (100 = 1/0.01)
+ISAM_SQRT = (
+    "ODOMETRY 0 1 1.0 0 0 100 0 0 100 0 500\n"
+    "ODOMETRY 1 2 1.0 0 1.5707963 100 0 0 100 0 500\n"
+    "LANDMARK 1 3 1.0 1.0 5 0 5\n"
+    "LANDMARK 2 3 1.0 0.0 5 0 5\n"
+)
+# the same problem with covariances in the same places (as GTSAM's copy of Victoria Park)
+ISAM_COV = (
+    "ODOMETRY 0 1 1.0 0 0 0.0001 0 0 0.0001 0 4e-06\n"
+    "ODOMETRY 1 2 1.0 0 1.5707963 0.0001 0 0 0.0001 0 4e-06\n"
+    "LANDMARK 1 3 1.0 1.0 0.04 0 0.04\n"
+    "LANDMARK 2 3 1.0 0.0 0.04 0 0.04\n"
+)
+
+
+def _verdicts(tmp_path: Path, src: Path, capsys: pytest.CaptureFixture[str], *extra: str):
+    """Exit codes and stderr of `import isam` and `solve` on ``src``."""
+    out = []
+    n = len(list(tmp_path.glob("solved*")))
+    for argv in (
+        ["import", "isam", str(src), "-o", str(tmp_path / f"i{n}.g2o"), "-q", *extra],
+        ["solve", str(src), "-o", str(tmp_path / f"solved{n or ''}"), "-q", *extra],
+    ):
+        rc = main(argv)
+        out.append((rc, capsys.readouterr().err))
+    return out
+
+
+# ---------------------------------------------------------------- 1. one iSAM reader
+
+
+@pytest.mark.parametrize(
+    "prefix",
+    [b"# an iSAM file\n", b"\xef\xbb\xbf", b"\xef\xbb\xbf# comment\n\n", b"\n  \n"],
+    ids=["comment", "bom", "bom+comment", "blank"],
+)
+def test_import_isam_and_solve_read_the_same_isam_file(tmp_path, capsys, prefix):
+    """`solve` used to sniff the first raw token: a comment or a BOM made it read the iSAM
+    file as g2o and refuse what `import isam` reads."""
+    src = tmp_path / "a.txt"
+    src.write_bytes(prefix + ISAM_SQRT.encode())
+    (imp_rc, imp_err), (solve_rc, solve_err) = _verdicts(tmp_path, src, capsys)
+    assert imp_rc == 0 and solve_rc == 0, imp_err + solve_err
+    assert "warning" not in imp_err + solve_err
+    lms = np.genfromtxt(tmp_path / "solved" / "landmarks.csv", delimiter=",", names=True)
+    assert int(lms["landmark"]) == 3
+
+
+@pytest.mark.parametrize("kind", ["directory", "missing", "bad-line", "unreadable"])
+def test_import_isam_and_solve_refuse_with_the_same_message(tmp_path, capsys, kind):
+    src = tmp_path / "a.txt"
+    if kind == "directory":
+        src.mkdir()
+        said = "is a directory, expected a text file"
+    elif kind == "missing":
+        said = "no such file"
+    elif kind == "unreadable":
+        src.write_text(ISAM_SQRT)
+        src.chmod(0)
+        if _can_read(src):
+            pytest.skip("running as a user who reads files without permission (root)")
+        said = "cannot read: permission denied"
+    else:
+        src.write_text("# head\n" + ISAM_SQRT.replace("1.0 0 0 100", "1.0 0 x 100", 1))
+        said = "a.txt:2: ODOMETRY field 6: expected a number"
+    (imp_rc, imp_err), (solve_rc, solve_err) = _verdicts(tmp_path, src, capsys)
+    assert imp_rc == solve_rc == 3
+    tail = lambda err: err.split(": error: ", 1)[1]  # noqa: E731
+    assert tail(imp_err) == tail(solve_err)
+    assert said in tail(imp_err).lower() if kind == "unreadable" else said in tail(imp_err)
+    assert "Traceback" not in imp_err + solve_err
+
+
+def _can_read(path: Path) -> bool:
+    try:
+        path.read_bytes()
+    except PermissionError:
+        return False
+    return True
+
+
+# ------------------------------------------------------- 2. the iSAM noise convention
+
+
+def test_isam_default_is_the_formats_square_root_information(tmp_path, capsys):
+    """iSAM's Loader reads the numbers as the upper-triangular R (RᵀR = Σ⁻¹): so does the
+    default, and a file in that convention raises no warning."""
+    from slamrel.formats.isam import read_isam
+
+    src = tmp_path / "a.txt"
+    src.write_text(ISAM_SQRT)
+    d = read_isam(src)
+    np.testing.assert_allclose(d.graph.pp_info[0], np.diag([1e4, 1e4, 2.5e5]))
+    cov = tmp_path / "c.txt"
+    cov.write_text(ISAM_COV)
+    np.testing.assert_allclose(
+        read_isam(cov, noise="covariance").graph.pp_info[0], d.graph.pp_info[0], rtol=1e-12
+    )
+    (imp_rc, imp_err), (solve_rc, solve_err) = _verdicts(tmp_path, src, capsys)
+    assert imp_rc == solve_rc == 0 and imp_err == solve_err == ""
+
+
+def test_isam_other_convention_is_warned_by_both_commands(tmp_path, capsys):
+    src = tmp_path / "c.txt"
+    src.write_text(ISAM_COV)
+    for rc, err in _verdicts(tmp_path, src, capsys):
+        assert rc == 0
+        assert err.count("warning:") == 1, err  # the ODOMETRY lines say it; once
+        assert "ODOMETRY noise read as sqrt-information" in err
+        assert "look like a covariance (pass --noise covariance" in err
+    for rc, err in _verdicts(tmp_path, src, capsys, "--noise", "covariance"):
+        assert rc == 0 and err == ""
+    # and the other way round: square-root information read as covariance
+    sq = tmp_path / "s.txt"
+    sq.write_text(ISAM_SQRT)
+    for rc, err in _verdicts(tmp_path, sq, capsys, "--noise", "covariance"):
+        assert rc == 0 and "look like a sqrt-information (pass --noise sqrt-information" in err
+
+
+@pytest.mark.parametrize("command", [["import", "isam"], ["solve"]])
+def test_isam_noise_convention_is_stated_in_the_help(capsys, command):
+    with pytest.raises(SystemExit):
+        main([*command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "sqrt-information (default, iSAM's own definition)" in text
+    assert "square-root information matrix R" in text
