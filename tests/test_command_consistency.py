@@ -137,3 +137,52 @@ def test_isam_noise_convention_is_stated_in_the_help(capsys, command):
     text = " ".join(capsys.readouterr().out.split())
     assert "sqrt-information (default, iSAM's own definition)" in text
     assert "square-root information matrix R" in text
+
+
+# ----------------------------------------- 3. what recover writes, evaluate reads back
+
+
+@pytest.fixture(scope="module")
+def sim_bundle(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sim") / "sim"
+    assert main(["simulate", "simple1", "--noise", "a", "--seed", "2", "-o", str(d), "-q"]) == 0
+    return d
+
+
+@pytest.mark.parametrize(
+    "name,fmt", [("a.tum", None), ("a.csv", None), ("a.log", None), ("a.clf", None),
+                 ("a.dat", "tum"), ("a.dat", "csv"), ("a.dat", "carmen"), ("a", None)]
+)  # fmt: skip
+def test_recover_output_reads_back_in_evaluate_with_the_same_numbers(
+    tmp_path, sim_bundle, name, fmt
+):
+    """`recover -o traj.csv` wrote plain text into a .csv file, which evaluate reads as CSV
+    and refused. Every format recover writes now reads back with the same poses and times."""
+    from slamrel.formats.trajectories import read_trajectory
+
+    ref = tmp_path / "ref.txt"
+    assert main(["recover", str(sim_bundle), "-o", str(ref), "-q"]) == 0
+    out = tmp_path / name
+    argv = ["recover", str(sim_bundle), "-o", str(out), "-q"]
+    assert main(argv + ([] if fmt is None else ["--format", fmt])) == 0
+    want, got = read_trajectory(ref).trajectory, read_trajectory(out).trajectory
+    np.testing.assert_array_equal(got.timestamps, want.timestamps)
+    np.testing.assert_allclose(got.poses, want.poses, rtol=0, atol=1e-12)  # TUM: a quaternion
+    assert main(["evaluate", str(sim_bundle), str(out), "--strategy", "consecutive", "-q"]) == 0
+
+
+@pytest.mark.parametrize(
+    "argv,said",
+    [
+        (["-o", "t.g2o"], "have no timestamps"),
+        (["-o", "t.relations"], "holds relations between poses, not a trajectory"),
+        (["-o", "t.csv", "--format", "plain"], "--format plain does not go with a .csv file"),
+        (["-o", "t.tum", "--format", "csv"], "--format csv does not go with a .tum file"),
+    ],
+)
+def test_recover_refuses_an_output_evaluate_would_misread(tmp_path, sim_bundle, capsys, argv, said):
+    argv = [a if not a.startswith("t.") else str(tmp_path / a) for a in argv]
+    assert main(["recover", str(sim_bundle), *argv, "-q"]) == 2  # an option mistake
+    err = capsys.readouterr().err
+    assert err.startswith("slamrel recover: error: argument -o/--output: ") and said in err
+    assert list(tmp_path.iterdir()) == []  # before any work
