@@ -186,3 +186,71 @@ def test_recover_refuses_an_output_evaluate_would_misread(tmp_path, sim_bundle, 
     err = capsys.readouterr().err
     assert err.startswith("slamrel recover: error: argument -o/--output: ") and said in err
     assert list(tmp_path.iterdir()) == []  # before any work
+
+
+# ----------------------------------------------- 4. compare's tables with odd names
+
+ODD_DATASET = 'run #1, "a|b" $x$ & 50% c_d \\e'
+ODD_ALGORITHMS = ("ekf|slam", "fast\nslam, #2 {x}~^")
+
+
+def _per_relation(path: Path, seed: int, scale: float) -> str:
+    rng = np.random.default_rng(seed)
+    n = 80
+    t = np.arange(n, dtype=float)
+    err = scale * np.abs(rng.normal(1.0, 0.3, n))
+    rows = ["t1,t2,i,j,trans_error,rot_error_rad,valid,via_odometry"]
+    rows += [f"{a},{a + 1},{k},{k + 1},{e},{e / 10},1,0" for k, (a, e) in enumerate(zip(t, err))]
+    path.write_text("\n".join(rows) + "\n")
+    return str(path)
+
+
+def _md_cells(line: str) -> list[str]:
+    """A Markdown table row split on its unescaped pipes, escapes undone."""
+    import re
+
+    inner = line.strip()[1:-1]
+    cells = re.split(r"(?<!\\)((?:\\\\)*)\|", inner)
+    # re.split keeps the even runs of backslashes before a real pipe: glue them back on
+    out, k = [], 0
+    while k < len(cells):
+        cell = cells[k] + (cells[k + 1] if k + 1 < len(cells) else "")
+        out.append(re.sub(r"\\(.)", r"\1", cell.strip()).replace("<br>", "\n"))
+        k += 2
+    return out
+
+
+def test_compare_tables_survive_names_with_specials(tmp_path):
+    import csv
+
+    a = _per_relation(tmp_path / "a.csv", 1, 1.0)
+    b = _per_relation(tmp_path / "b.csv", 2, 2.0)
+    out = tmp_path / "cmp"
+    argv = ["compare", f"{ODD_DATASET}:{ODD_ALGORITHMS[0]}={a}",
+            f"{ODD_DATASET}:{ODD_ALGORITHMS[1]}={b}", "-o", str(out), "-q",
+            "--resamples", "99"]  # fmt: skip
+    assert main(argv) == 0
+    # CSV: csv.reader gives the names back whole, every row as wide as the header
+    with (out / "table.csv").open(newline="") as f:
+        rows = list(csv.reader(f))
+    assert len({len(r) for r in rows}) == 1 and len(rows) == 3
+    assert [r[:2] for r in rows[1:]] == [[ODD_DATASET, alg] for alg in ODD_ALGORITHMS]
+    with (out / "tests.csv").open(newline="") as f:
+        tests = list(csv.DictReader(f))
+    assert tests and all(t["dataset"] == ODD_DATASET for t in tests)
+    assert {(t["a"], t["b"]) for t in tests} == {ODD_ALGORITHMS}
+    # Markdown: split on the unescaped pipes, every row has the header's cells
+    md = (out / "table.md").read_text().splitlines()
+    table = md[: md.index("")]
+    width = len(_md_cells(table[0]))
+    assert all(len(_md_cells(x)) == width for x in table)
+    assert [_md_cells(x)[:2] for x in table[2:]] == [[ODD_DATASET, a] for a in ODD_ALGORITHMS]
+    assert "\\$x\\$" in table[2] and "\\|" in table[2]  # no math, no cell break
+    test_rows = [x for x in md if x.startswith("| run")]
+    assert test_rows[2:] and all(len(_md_cells(x)) == 15 for x in test_rows[2:])
+    # LaTeX: every special escaped, one line per row
+    tex = (out / "table.tex").read_text()
+    body = [x for x in tex.splitlines() if x.startswith("run")]
+    assert len(body) == 2
+    assert body[0].startswith(r'run \#1, "a|b" \$x\$ \& 50\% c\_d \textbackslash{}e & ekf|slam & ')
+    assert r"fast slam, \#2 \{x\}\textasciitilde{}\textasciicircum{} & " in body[1]
