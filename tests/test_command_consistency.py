@@ -254,3 +254,37 @@ def test_compare_tables_survive_names_with_specials(tmp_path):
     assert len(body) == 2
     assert body[0].startswith(r'run \#1, "a|b" \$x\$ \& 50\% c\_d \textbackslash{}e & ekf|slam & ')
     assert r"fast slam, \#2 \{x\}\textasciitilde{}\textasciicircum{} & " in body[1]
+
+
+# ------------------------------------------------------------------------ 5. messages
+
+
+def test_complex_npy_says_complex_not_pickled(tmp_path, capsys):
+    """A complex map_covariance.npy was reported as "(pickled objects are never loaded)"."""
+    from slamrel.formats.bundle import write_bundle
+    from slamrel.simulation.bundles import simulate_bundle
+
+    b = simulate_bundle(2, steps=40, map_sigma=(0.02, 0.05), map_covariance=True)
+    write_bundle(tmp_path / "b", b)
+    p = tmp_path / "b" / "map_covariance.npy"
+    np.save(p, np.eye(2 * b.map_ids.size, dtype=np.complex128))
+    assert main(["recover", str(tmp_path / "b"), "-o", str(tmp_path / "t.txt"), "-q"]) == 3
+    err = capsys.readouterr().err
+    assert f"{p}: expected real float64, got complex128;" in err and "pickle" not in err
+
+
+def test_false_not_converged_at_a_cost_of_rounding_level(tmp_path, capsys):
+    """A cost of 9e-15 halved by the last allowed step was "NOT converged": the relative
+    decrease of a cost at the level of rounding compares noise with noise."""
+    src = tmp_path / "s.txt"
+    src.write_text(ISAM_SQRT)
+    argv = ["solve", str(src), "-o", str(tmp_path / "o"), "--batch", "0", "--max-iterations", "1"]
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    assert captured.out.startswith("converged after 1 iterations") and captured.err == ""
+
+
+def test_compare_spec_mistake_is_an_option_error(tmp_path, capsys):
+    assert main(["compare", "nonsense", "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("slamrel compare: error: argument RESULT: 'nonsense': expected ")

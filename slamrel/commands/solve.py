@@ -43,7 +43,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default=1e-9,
         metavar="R",
         help="stop when an accepted step lowers the cost by less than this fraction of it "
-        "(default 1e-9; GTSAM's LM default, relativeErrorTol, is 1e-5)",
+        "(default 1e-9; GTSAM's LM default, relativeErrorTol, is 1e-5), or by less than "
+        "1e-12 in all (chi2/2; a cost at the level of rounding has converged)",
     )
     s.add_argument(
         "--batch",
