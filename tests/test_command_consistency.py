@@ -288,3 +288,22 @@ def test_compare_spec_mistake_is_an_option_error(tmp_path, capsys):
     assert main(["compare", "nonsense", "-o", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("slamrel compare: error: argument RESULT: 'nonsense': expected ")
+
+
+def test_import_mrclam_fit_errors_name_the_file(tmp_path, capsys):
+    """The calibration's 'overlap too short' named only the dataset folder."""
+    d = tmp_path / "M"
+    d.mkdir()
+    (d / "Barcodes.dat").write_text("# subject barcode\n1 5\n2 14\n6 27\n")
+    (d / "Landmark_Groundtruth.dat").write_text("# subject x y sx sy\n6 1.0 2.0 0.001 0.001\n")
+    t = np.arange(0.0, 5.0, 0.02)
+    (d / "Robot1_Odometry.dat").write_text("".join(f"{x:.3f} 0.1 0.0\n" for x in t))
+    (d / "Robot1_Groundtruth.dat").write_text(
+        "".join(f"{x:.3f} {0.1 * x:.6f} 0.0 0.0\n" for x in t)
+    )
+    (d / "Robot1_Measurement.dat").write_text("1.000 27 1.5 0.1\n2.000 27 1.4 0.1\n")
+    rc = main(["import", "mrclam", str(d), "--robot", "1", "-o", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 3, err
+    assert f"{d / 'Robot1_Odometry.dat'}: odometry and ground truth overlap for" in err
+    assert "compared with Robot1_Groundtruth.dat" in err and "Traceback" not in err
