@@ -64,10 +64,8 @@ def commands(data: Path) -> list[list[str]]:
             + ["--covariances", f"recover_{m}.npy", "--report", f"recover_{m}.json", "-q"]
             for m in ("filter", "smoother", "batch")
         ),
-        [
-            "import", "isam", str(data / "victoria_park" / "victoria_park.txt"), "-o", "vp.g2o",
-            "--noise", "covariance",  # GTSAM's copy stores covariances
-        ]  # fmt: skip
+        ["import", "isam", str(data / "victoria_park" / "victoria_park.txt"), "-o", "vp.g2o"]
+        + ["--noise", "covariance"]  # GTSAM's copy stores covariances
         + ["-q"],
         ["solve", "vp.g2o", "-o", "vp_solve", "-q"],
         ["map-compare", "slam/map.csv", "slam/landmarks_groundtruth.csv", "--seed", "1"]
