@@ -65,6 +65,7 @@ def commands(data: Path) -> list[list[str]]:
             for m in ("filter", "smoother", "batch")
         ),
         ["import", "isam", str(data / "victoria_park" / "victoria_park.txt"), "-o", "vp.g2o"]
+        + ["--noise", "covariance"]  # GTSAM's copy stores covariances
         + ["-q"],
         ["solve", "vp.g2o", "-o", "vp_solve", "-q"],
         ["map-compare", "slam/map.csv", "slam/landmarks_groundtruth.csv", "--seed", "1"]

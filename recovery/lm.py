@@ -36,7 +36,8 @@ Stopping rules, checked in this order after each iteration:
   the cost — the state is a minimum to working precision (``converged``);
 * the caller's ``stop(c, c')`` returns True after an accepted step (``stopped``; e.g. the
   stall check of :func:`~slamrel.backends.least_squares.solve_graph_incremental`);
-* *relative decrease* ``(c − c') / c < ftol`` or *step* ``max |δ| < xtol`` (``converged``);
+* *relative decrease* ``(c − c') / c < ftol``, *absolute decrease* ``c − c' < atol`` or
+  *step* ``max |δ| < xtol`` (``converged``);
 * ``max_iterations`` (not converged).
 
 The state the loop ends at is not linearised again (nothing would read that linearisation):
@@ -133,6 +134,10 @@ class LMOptions:
         Stop when the relative cost decrease of an accepted step is below it.
     xtol : float
         Stop when the largest component of an accepted step is below it (0: never).
+    atol : float
+        Stop when an accepted step lowers the cost by less than this, in the cost's own units
+        (0: never; GTSAM's ``absoluteErrorTol``): a cost already at the level of rounding,
+        where the relative decrease ``ftol`` compares noise with noise, has converged.
     """
 
     lambda_initial: float = 1e-4
@@ -143,6 +148,7 @@ class LMOptions:
     max_iterations: int = 100
     ftol: float = 1e-9
     xtol: float = 0.0
+    atol: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -224,7 +230,11 @@ def levenberg_marquardt(
             break
         rel = (cost - new_cost) / max(cost, 1e-300)
         stopped = stop is not None and stop(cost, new_cost)
-        converged = rel < options.ftol or float(np.abs(delta).max(initial=0.0)) < options.xtol
+        converged = (
+            rel < options.ftol
+            or cost - new_cost < options.atol
+            or float(np.abs(delta).max(initial=0.0)) < options.xtol
+        )
         x = trial
         if stopped or converged or it == options.max_iterations:
             # the last state is not linearised (nothing reads it): its cost is the trial's

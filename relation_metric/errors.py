@@ -2,14 +2,15 @@
 
 Every error a user can cause with their input derives from :class:`SlamrelError`; the CLI
 maps :class:`InputError` (and its subclasses) to exit code 3 and prints ``str(error)``, which
-always names the file and, where one exists, the line.
+always names the file and, where one exists, the line. :class:`OptionError` (a command line
+that parses but does not make sense) exits 2, like argparse's usage errors.
 """
 
 from __future__ import annotations
 
 import os
 
-__all__ = ["SlamrelError", "InputError", "AssociationError", "DivergenceError"]
+__all__ = ["SlamrelError", "InputError", "OptionError", "AssociationError", "DivergenceError"]
 
 
 class SlamrelError(Exception):
@@ -49,6 +50,24 @@ class InputError(SlamrelError, ValueError):
         elif self.line is not None:
             where = f"line {self.line}: "
         return where + self.message
+
+
+class OptionError(SlamrelError, ValueError):
+    """A mistake in the command line itself (an option value, or options that do not go
+    together) found only after parsing: the CLI reports it like argparse, exit code 2.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong and what would be accepted.
+    option : str, optional
+        The option (``"-o/--output"``) or argument it is about.
+    """
+
+    def __init__(self, message: str, *, option: str | None = None) -> None:
+        self.message = message
+        self.option = option
+        super().__init__(message if option is None else f"argument {option}: {message}")
 
 
 class AssociationError(InputError):

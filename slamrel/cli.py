@@ -1,6 +1,7 @@
 """The ``slamrel`` command line.
 
-Exit codes: 0 success, 2 usage error (argparse, option values), 3 bad input (any
+Exit codes: 0 success, 2 usage error (argparse, option values, and
+:class:`~relation_metric.errors.OptionError` found after parsing), 3 bad input (any
 :class:`relation_metric.errors.SlamrelError`, printed with file and line, or a file that
 cannot be read or written), 130 interrupted (Ctrl-C, ``SIGINT``), 143 terminated
 (``SIGTERM``: ``kill``, ``timeout``, Docker, CI) and 129 hung up (``SIGHUP``), i.e.
@@ -24,7 +25,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from types import FrameType
 
-from relation_metric.errors import SlamrelError
+from relation_metric.errors import OptionError, SlamrelError
 
 # Sub-command modules, in the order ``slamrel --help`` lists them.
 COMMAND_MODULES = (
@@ -153,6 +154,9 @@ def _main(argv: Sequence[str] | None) -> int:
             warnings.simplefilter("always", UserWarning)
             warnings.showwarning = _show_warning
             return int(args.func(args) or EXIT_OK)
+    except OptionError as exc:  # a command line that parses but does not make sense
+        print(f"{command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except SlamrelError as exc:
         print(f"{command}: error: {exc}", file=sys.stderr)
         return EXIT_INPUT

@@ -183,7 +183,8 @@ def test_import_isam_through_the_cli(tmp_path: Path, capsys: pytest.CaptureFixtu
     src = tmp_path / "a.txt"
     src.write_text(ISAM)
     out, log = tmp_path / "a.g2o", tmp_path / "log"
-    assert main(["import", "isam", str(src), "-o", str(out), "--bundle", str(log)]) == 0
+    argv = ["import", "isam", str(src), "-o", str(out), "--bundle", str(log)]
+    assert main([*argv, "--noise", "covariance"]) == 0
     printed = capsys.readouterr().out
     assert "2 poses, 1 landmarks, 1 pose-pose and 1 pose-landmark factors" in printed
     lines = out.read_text().splitlines()

@@ -244,7 +244,7 @@ def test_results_naming_different_sets_are_told_so():
 
 
 def test_bad_specs(tmp_path, capsys):
-    assert main(["compare", "nonsense", "-o", str(tmp_path / "o")]) == 3
+    assert main(["compare", "nonsense", "-o", str(tmp_path / "o")]) == 2  # an option mistake
     assert "expected DATASET:ALGORITHM=PER_RELATION.csv" in capsys.readouterr().err
     bad = tmp_path / "x.csv"
     bad.write_text("a,b\n1,2\n")

@@ -16,7 +16,7 @@ from slamrel.backends.least_squares import (
     solve_graph_incremental,
 )
 from slamrel.cli import main
-from slamrel.formats.isam import read_isam
+from slamrel.formats.isam import NoiseConventionWarning, read_isam
 
 
 def small_world(rng, n=30, m=8, noise=0.05):
@@ -244,13 +244,14 @@ LANDMARK 3 2 1.0 0.0 0.04 0 0.04
 def test_isam_reader_hand_example(tmp_path):
     p = tmp_path / "a.txt"
     p.write_text(ISAM)
-    d = read_isam(p)
+    d = read_isam(p, noise="covariance")
     np.testing.assert_array_equal(d.pose_ids, [0, 1, 3])
     np.testing.assert_array_equal(d.landmark_ids, [2])
     np.testing.assert_allclose(d.graph.poses[2], [2.0, 0.0, 1.5707963], atol=1e-9)
     np.testing.assert_allclose(d.graph.landmarks[0], [2.0, 1.0])  # first sighting from pose 1
     np.testing.assert_allclose(d.graph.pp_info[0], np.diag([100, 100, 1e4]))
-    sq = read_isam(p, noise="sqrt-information")
+    with pytest.warns(NoiseConventionWarning, match="look like a covariance"):
+        sq = read_isam(p, noise="sqrt-information")
     np.testing.assert_allclose(sq.graph.pp_info[0], np.diag([1e-4, 1e-4, 1e-8]))
     sol = solve_graph(d.graph)
     # both sightings agree with a landmark at (2, 1): the solution keeps it there
@@ -276,14 +277,14 @@ def test_isam_bad_input(tmp_path, text, line, msg):
     p = tmp_path / "b.txt"
     p.write_text(text)
     with pytest.raises(InputError) as err:
-        read_isam(p)
+        read_isam(p, noise="covariance")
     assert f"b.txt:{line}:" in str(err.value) and msg in str(err.value), str(err.value)
 
 
 def test_cli_solve_zero_isam_covariance_exit_3(tmp_path, capsys):
     p = tmp_path / "z.txt"
     p.write_text("ODOMETRY 0 1 1 0 0 1e-4 0 0 1e-4 0 4e-6\nODOMETRY 1 2 1 0 0 0 0 0 0 0 0\n")
-    assert main(["solve", str(p), "-o", str(tmp_path / "out"), "-q"]) == 3
+    assert main(["solve", str(p), "-o", str(tmp_path / "out"), "-q", "--noise", "covariance"]) == 3
     err = capsys.readouterr().err
     assert f"{p}:2: ODOMETRY covariance: expected a positive definite" in err
     assert "Traceback" not in err and "np." not in err

@@ -20,7 +20,7 @@ LANDMARK 3 2 1.0 0.0 0.04 0 0.04
 def test_round_trip_through_g2o(tmp_path):
     p = tmp_path / "a.txt"
     p.write_text(ISAM)
-    g = read_isam(p).graph
+    g = read_isam(p, noise="covariance").graph
     out = tmp_path / "a.g2o"
     write_g2o_graph(out, g)
     back, pose_ids, lm_ids = read_g2o_graph(out)
@@ -36,7 +36,7 @@ def test_round_trip_through_g2o(tmp_path):
 def test_round_trip_keeps_given_ids(tmp_path):
     p = tmp_path / "a.txt"
     p.write_text(ISAM)
-    d = read_isam(p)
+    d = read_isam(p, noise="covariance")
     out = tmp_path / "a.g2o"
     write_g2o_graph(out, d.graph, pose_ids=d.pose_ids, landmark_ids=d.landmark_ids)
     back, pose_ids, lm_ids = read_g2o_graph(out)
@@ -99,7 +99,7 @@ def test_cli_import_and_solve(tmp_path):
     p = tmp_path / "a.txt"
     p.write_text(ISAM)
     g2o = tmp_path / "a.g2o"
-    assert main(["import", "isam", str(p), "-o", str(g2o), "-q"]) == 0
+    assert main(["import", "isam", str(p), "-o", str(g2o), "-q", "--noise", "covariance"]) == 0
     out = tmp_path / "sol"
     assert main(["solve", str(g2o), "-o", str(out), "-q"]) == 0
     lms = np.genfromtxt(out / "landmarks.csv", delimiter=",", names=True)
@@ -107,8 +107,25 @@ def test_cli_import_and_solve(tmp_path):
         1.0, abs=1e-6
     )
     assert int(lms["landmark"]) == 2  # the iSAM id survives the g2o file
-    assert main(["solve", str(p), "-o", str(tmp_path / "sol2"), "-q"]) == 0  # iSAM text directly
-    assert main(["solve", str(p), "-o", str(tmp_path / "sol3"), "-q", "--batch", "0"]) == 0
+    assert (
+        main(["solve", str(p), "-o", str(tmp_path / "sol2"), "-q", "--noise", "covariance"]) == 0
+    )  # iSAM text directly
+    assert (
+        main(
+            [
+                "solve",
+                str(p),
+                "-o",
+                str(tmp_path / "sol3"),
+                "-q",
+                "--batch",
+                "0",
+                "--noise",
+                "covariance",
+            ]
+        )
+        == 0
+    )
     one = np.genfromtxt(tmp_path / "sol3" / "landmarks.csv", delimiter=",", names=True)
     assert float(one["x"]) == pytest.approx(2.0, abs=1e-6)
     with pytest.raises(SystemExit) as usage:  # an option mistake: exit 2, before any work
@@ -121,7 +138,7 @@ def test_written_graph_reads_back_bit_for_bit(tmp_path, rng):
     """The g2o writer spells doubles with NUMBER_FORMAT (%.17g): an exact round trip."""
     p = tmp_path / "a.txt"
     p.write_text(ISAM)
-    g = read_isam(p).graph
+    g = read_isam(p, noise="covariance").graph
     poses = g.poses + rng.normal(0, 1e-3, g.poses.shape)  # digits beyond %.9g
     lms = g.landmarks + rng.normal(0, 1e-3, g.landmarks.shape)
     write_g2o_graph(tmp_path / "a.g2o", g, poses=poses, landmarks=lms)

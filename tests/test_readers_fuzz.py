@@ -178,7 +178,7 @@ READERS: dict[str, Reader] = {
     "per-relation": _one(
         "p.csv", PER_RELATION, lambda p: read_per_relation(p, dataset="d", algorithm="a")
     ),
-    "isam": _one("v.txt", ISAM, read_isam),
+    "isam": _one("v.txt", ISAM, lambda p: read_isam(p, noise="covariance")),
     "g2o-graph": _one("g.g2o", G2O_GRAPH, read_g2o_graph),
     "keyword-records": _one("k.txt", KEYWORDS, lambda p: read_keyword_records(p, {"A": 3, "B": 2})),
     "mrclam-robot": Reader(MRCLAM, lambda d: read_mrclam_robot(d, 1), tuple(MRCLAM), True),

@@ -25,7 +25,7 @@ pytestmark = pytest.mark.realdata
 
 @pytest.fixture(scope="module")
 def vp():
-    return read_isam(require_data("victoria_park", "victoria_park.txt"))
+    return read_isam(require_data("victoria_park", "victoria_park.txt"), noise="covariance")
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +88,10 @@ def test_cli_chain_and_map_compare(vp, tmp_path, capsys):
 
     src = str(require_data("victoria_park", "victoria_park.txt"))
     g2o, log, ls, slam = (str(tmp_path / n) for n in ("vp.g2o", "log", "ls", "slam"))
-    assert main(["import", "isam", src, "-o", g2o, "--bundle", log, "-q"]) == 0
+    assert (
+        main(["import", "isam", src, "-o", g2o, "--bundle", log, "-q", "--noise", "covariance"])
+        == 0
+    )
     assert main(["solve", g2o, "-o", ls, "-q"]) == 0
     assert main(["slam", log, "-o", slam, "-q"]) == 0
     out = tmp_path / "mc.json"

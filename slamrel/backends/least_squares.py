@@ -42,7 +42,11 @@ __all__ = [
     "initial_landmarks",
     "pose_covariances",
     "joint_covariance",
+    "ABSOLUTE_COST_TOLERANCE",
 ]
+
+ABSOLUTE_COST_TOLERANCE = 1e-12
+"""An accepted step lowering the cost (χ²/2) by less than this ends the solve as converged."""
 
 
 @dataclass(frozen=True)
@@ -535,7 +539,14 @@ def _levenberg_marquardt(
         return stall_chi2 is not None and rel < 0.5 and 2.0 * cost_new > stall_chi2 * dof > 0
 
     x0 = (np.array(graph.poses, dtype=np.float64), np.array(graph.landmarks, dtype=np.float64))
-    options = LMOptions(lambda_initial=1e-4, max_iterations=max_iterations, ftol=tolerance)
+    # a decrease below ABSOLUTE_COST_TOLERANCE changes no statistic of the solution (cost =
+    # chi2 / 2): converged, even where the relative decrease of a near-zero cost is large
+    options = LMOptions(
+        lambda_initial=1e-4,
+        max_iterations=max_iterations,
+        ftol=tolerance,
+        atol=ABSOLUTE_COST_TOLERANCE,
+    )
     problem = _GraphProblem(graph, prior_sigma)
     res = levenberg_marquardt(problem, x0, options, stop=stall)
     x, lm = res.x

@@ -31,6 +31,7 @@ __all__ = [
     "stats_table",
     "check_outputs",
     "add_force_argument",
+    "add_noise_argument",
     "add_association_arguments",
     "association_file",
     "association_choice",
@@ -236,6 +237,22 @@ def association_choice(value: str, est: LandmarkMap, ref: LandmarkMap) -> str | 
     from slamrel.formats.associations import read_association_csv
 
     return read_association_csv(value, est, ref)
+
+
+def add_noise_argument(parser: argparse.ArgumentParser) -> None:
+    """``--noise sqrt-information|covariance``: what an iSAM file's noise numbers are, shared
+    by ``import isam`` and ``solve`` (:func:`slamrel.formats.isam.read_isam`)."""
+    parser.add_argument(
+        "--noise",
+        choices=("sqrt-information", "covariance"),
+        default="sqrt-information",
+        help="iSAM text only: what the numbers after each ODOMETRY/LANDMARK measurement are. "
+        "sqrt-information (default, iSAM's own definition): the upper triangle, row-first, "
+        "of the square-root information matrix R (R^T R = inverse covariance; 100 means a "
+        "0.01 standard deviation); covariance: the upper triangle of the covariance (the "
+        "copy of Victoria Park shipped with GTSAM). A warning says when the numbers look "
+        "like the other convention",
+    )
 
 
 def add_force_argument(parser: argparse.ArgumentParser) -> None:

@@ -9,7 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from relation_metric.constants import BOOTSTRAP_RESAMPLES, MIN_BLOCKS, OVERLAP_FACTOR
-from relation_metric.errors import InputError
+from relation_metric.errors import OptionError
 from slamrel.commands import options as opt
 from slamrel.commands.common import add_force_argument, check_outputs
 
@@ -88,7 +88,9 @@ def run(args: argparse.Namespace) -> int:
     for spec in args.results:
         m = _SPEC.match(spec)
         if not m:
-            raise InputError(f"result {spec!r}: expected DATASET:ALGORITHM=PER_RELATION.csv")
+            raise OptionError(
+                f"{spec!r}: expected DATASET:ALGORITHM=PER_RELATION.csv", option="RESULT"
+            )
         specs.append(m)
     check_outputs([], [m["path"] for m in specs], dirs=[args.output], force=args.force)
     results = [

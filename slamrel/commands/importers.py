@@ -7,7 +7,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from slamrel.commands import options as opt
-from slamrel.commands.common import add_force_argument, check_outputs, errors_about
+from slamrel.commands.common import (
+    add_force_argument,
+    add_noise_argument,
+    check_outputs,
+    errors_about,
+)
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from recovery.bundle import Bundle
@@ -25,13 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     i.add_argument("file", metavar="FILE")
     i.add_argument("-o", "--output", required=True, metavar="OUT.g2o")
-    i.add_argument(
-        "--noise",
-        choices=("covariance", "sqrt-information"),
-        default="covariance",
-        help="what the noise numbers are "
-        "(GTSAM's copy: covariance; original iSAM: sqrt-information)",
-    )
+    add_noise_argument(i)
     i.add_argument(
         "--bundle",
         metavar="DIR",

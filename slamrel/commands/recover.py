@@ -14,6 +14,9 @@ from slamrel.commands.common import add_recovery_arguments, check_outputs, error
 if TYPE_CHECKING:
     from recovery.recover import Recovery
 
+# what recover writes: every one read back by evaluate's reader with the same poses and times
+WRITABLE_FORMATS = ("plain", "tum", "csv", "carmen")
+
 HELP = "recover the trajectory of an EKF-SLAM run by localisation in its final map"
 
 
@@ -26,11 +29,20 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument("bundle", metavar="BUNDLE", help="SLAM result bundle directory")
     p.add_argument("--method", choices=METHODS, default="smoother", help="(default: smoother)")
-    p.add_argument("-o", "--output", required=True, metavar="TRAJ", help="recovered trajectory")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="TRAJ",
+        help="recovered trajectory, in a format evaluate reads back with the same numbers: "
+        "*.tum TUM, *.csv t,x,y,theta CSV, *.log/*.clf CARMEN, else plain 't x y theta' "
+        "(not *.g2o: VERTEX_SE2 records have no timestamps)",
+    )
     p.add_argument(
         "--format",
-        choices=("plain", "tum"),
-        help="trajectory format (default: tum for *.tum, else plain 't x y theta')",
+        choices=WRITABLE_FORMATS,
+        help="trajectory format (default: from the extension of -o, else plain); must agree "
+        "with an extension that names a format",
     )
     p.add_argument("--covariances", metavar="F", help="write per-pose covariances (N,3,3) .npy")
     p.add_argument("--report", metavar="F", help="write counts, NEES and settings as JSON")
@@ -80,8 +92,8 @@ def run(args: argparse.Namespace) -> int:
     from slamrel.formats.text import write_bytes_atomic
     from slamrel.formats.trajectories import write_trajectory
 
+    fmt = output_format(args.output, args.format)
     check_outputs([args.output, args.covariances, args.report], [args.bundle])
-    fmt = args.format or ("tum" if args.output.lower().endswith(".tum") else "plain")
     bundle = read_bundle(args.bundle, skip_unknown_landmarks=args.skip_unknown_landmarks)
     with errors_about(args.bundle):
         result = recover(
@@ -157,6 +169,43 @@ def run(args: argparse.Namespace) -> int:
             if frame.aligned and unaligned is not None and unaligned.mean is not None:
                 print(f"  unaligned, in the truth frame: {unaligned.mean:.3f}")
     return 0
+
+
+def output_format(path: str, fmt: str | None) -> str:
+    """The trajectory format ``recover -o PATH [--format FMT]`` writes.
+
+    The extension decides how every reader reads the file back
+    (:data:`~slamrel.formats.trajectories.TRAJECTORY_EXTENSIONS`): ``--format`` must agree with
+    an extension that names a format, and an extension whose format cannot hold a recovered
+    trajectory (``.g2o``: no timestamps; ``.relations``) is refused. Either mistake is an
+    :class:`~relation_metric.errors.OptionError` (exit 2), before any work.
+    """
+    from pathlib import Path
+
+    from relation_metric.errors import OptionError
+    from slamrel.formats.trajectories import RELATIONS_EXTENSIONS, TRAJECTORY_EXTENSIONS
+
+    ext = Path(path).suffix.lower()
+    named = TRAJECTORY_EXTENSIONS.get(ext)
+    if ext in RELATIONS_EXTENSIONS:
+        raise OptionError(
+            f"a {ext} file holds relations between poses, not a trajectory; write *.txt, "
+            "*.tum, *.csv or *.log",
+            option="-o/--output",
+        )
+    if named is not None and named not in WRITABLE_FORMATS:
+        raise OptionError(
+            f"a {ext} file is read as {named} records, which have no timestamps (evaluate "
+            "would take the pose index for the time); write *.txt, *.tum, *.csv or *.log",
+            option="-o/--output",
+        )
+    if fmt is not None and named is not None and fmt != named:
+        raise OptionError(
+            f"--format {fmt} does not go with a {ext} file (read back as {named}); drop "
+            f"--format or give the file another extension",
+            option="-o/--output",
+        )
+    return fmt or named or "plain"
 
 
 def divergence_summary_text(result: Recovery, *, limit: int = 5) -> str:

@@ -7,9 +7,13 @@ import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from relation_metric.errors import InputError
 from slamrel.commands import options as opt
-from slamrel.commands.common import add_force_argument, check_outputs, errors_about
+from slamrel.commands.common import (
+    add_force_argument,
+    add_noise_argument,
+    check_outputs,
+    errors_about,
+)
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     import numpy as np
@@ -39,7 +43,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default=1e-9,
         metavar="R",
         help="stop when an accepted step lowers the cost by less than this fraction of it "
-        "(default 1e-9; GTSAM's LM default, relativeErrorTol, is 1e-5)",
+        "(default 1e-9; GTSAM's LM default, relativeErrorTol, is 1e-5), or by less than "
+        "1e-12 in all (chi2/2; a cost at the level of rounding has converged)",
     )
     s.add_argument(
         "--batch",
@@ -55,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="F",
         help="factor on the poses added per sub-problem (default 2; 1: a fixed step of --batch)",
     )
-    s.add_argument("--noise", choices=("covariance", "sqrt-information"), default="covariance")
+    add_noise_argument(s)
     add_force_argument(s)
     s.add_argument("-q", "--quiet", action="store_true")
     s.set_defaults(func=run_solve)
@@ -64,13 +69,16 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
     """The graph and its file's pose and landmark ids."""
     from slamrel.formats.g2o import read_g2o_graph
-    from slamrel.formats.isam import read_isam
+    from slamrel.formats.isam import is_isam, read_isam
+    from slamrel.formats.text import read_source
 
-    head = Path(path).read_text(errors="replace")[:4096].split()
-    if head and head[0] in ("ODOMETRY", "LANDMARK"):
-        data = read_isam(path, noise=noise)  # type: ignore[arg-type]
+    # the reader of `import isam`, and its rules (comments, byte order mark, missing file,
+    # a folder, no permission): the same file gets the same verdict from both commands
+    src = read_source(path)
+    if is_isam(src):
+        data = read_isam(path, noise=noise, source=src)  # type: ignore[arg-type]
         return data.graph, data.pose_ids, data.landmark_ids
-    return read_g2o_graph(path)
+    return read_g2o_graph(path, source=src)
 
 
 def run_solve(args: argparse.Namespace) -> int:
@@ -82,8 +90,6 @@ def run_solve(args: argparse.Namespace) -> int:
     from slamrel.outputs import staged_directory
 
     check_outputs([], [args.graph], dirs=[args.output], force=args.force)
-    if not Path(args.graph).is_file():
-        raise InputError("no such file", path=args.graph)
     graph, pose_ids, lm_ids = _load(args.graph, args.noise)
     with errors_about(args.graph):
         if args.batch == 0:

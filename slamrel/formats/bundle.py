@@ -432,11 +432,11 @@ def _load_matrix(path: Path, n: int, *, what: str) -> Array:
                 shape, _, dtype = fmt.read_array_header_2_0(handle)
     except Exception:  # noqa: BLE001 - any malformed header: say what was expected
         raise InputError(f"not a readable .npy file; {expected}", path=path) from None
-    if dtype.hasobject or dtype.kind not in "fi" or dtype.fields is not None:
-        raise InputError(
-            f"holds a {dtype.name} array (pickled objects are never loaded); {expected}",
-            path=path,
-        )
+    if dtype.hasobject:
+        raise InputError(f"holds Python objects (pickled; never loaded); {expected}", path=path)
+    if dtype.kind not in "fi" or dtype.fields is not None:
+        got = "a structured array" if dtype.fields is not None else dtype.name
+        raise InputError(f"expected real float64, got {got}; {expected}", path=path)
     if tuple(shape) != (n, n):
         shown = " x ".join(str(d) for d in shape) or "a scalar"
         raise InputError(f"holds an array of shape {shown}; {expected}", path=path)

@@ -151,8 +151,10 @@ def _upper_to_full(upper: NDArray[np.float64], size: int) -> NDArray[np.float64]
     return m + np.swapaxes(np.triu(m, 1), 1, 2)
 
 
-def read_g2o_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64], NDArray[np.int64]]:
-    """Read a planar g2o graph.
+def read_g2o_graph(
+    path: PathLike, *, source: SourceText | None = None
+) -> tuple[PoseGraph, NDArray[np.int64], NDArray[np.int64]]:
+    """Read a planar g2o graph (``source``: the already-read text of ``path``).
 
     Returns
     -------
@@ -163,7 +165,7 @@ def read_g2o_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64], NDArra
     """
     from slamrel.backends.least_squares import PoseGraph
 
-    recs = read_g2o_records(path)
+    recs = read_g2o_records(path, source=source)
     name = str(path)
     lines = {k: v[1] for k, v in recs.items()}
     vse2 = recs["VERTEX_SE2"][0]

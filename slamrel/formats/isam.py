@@ -6,14 +6,23 @@ triangle, row-first (``xx xy xθ yy yθ θθ``), of its noise matrix.
 frame (``x_k⁻¹ · l``) and ``xx xy yy`` of its noise matrix.
 
 Pose and landmark ids share one number space (Victoria Park: landmark 5 is seen from pose 4,
-pose 6 follows). The noise matrices are covariances in the copy of Victoria Park shipped with
-GTSAM (0.0001 m², a 0.01 m standard deviation); the original iSAM copy stores the
-square-root information matrix ``R`` (``Rᵀ R = Σ⁻¹``) in the same places — choose with
-``noise="covariance"`` or ``noise="sqrt-information"``.
+pose 6 follows).
+
+The format's own definition (iSAM's ``Loader::parse_line``) reads the noise numbers as the
+upper-triangular **square-root information** matrix ``R`` (``Rᵀ R = Σ⁻¹``, row-first): that
+is the default, ``noise="sqrt-information"``. Some copies store covariances in the same places
+instead (the copy of Victoria Park shipped with GTSAM: 0.0001 m², a 0.01 m standard
+deviation, where the original iSAM copy has 100 = 1/0.01): read those with
+``noise="covariance"``. The numbers alone cannot say which convention a file uses, so nothing
+is guessed; but when the standard deviations the chosen convention implies are implausible
+(odometry steps uncertain by kilometres or by more than π radians) and the other
+convention's are plausible, :func:`read_isam` warns (:class:`NoiseConventionWarning`) and
+names the other ``noise`` value.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Literal
 
@@ -28,11 +37,43 @@ from relation_metric.errors import InputError
 from relation_metric.ids import first_missing, integer_ids, rows_of
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.least_squares import PoseGraph, initial_landmarks
-from slamrel.formats.text import PathLike, read_keyword_records
+from slamrel.formats.text import PathLike, SourceText, read_keyword_records, read_source
 
-__all__ = ["IsamData", "read_isam", "isam_log_bundle"]
+__all__ = [
+    "IsamData",
+    "ISAM_RECORDS",
+    "DEFAULT_NOISE",
+    "NoiseConventionWarning",
+    "is_isam",
+    "read_isam",
+    "isam_log_bundle",
+]
 
 NoiseConvention = Literal["covariance", "sqrt-information"]
+NOISE_CONVENTIONS: tuple[NoiseConvention, ...] = ("sqrt-information", "covariance")
+DEFAULT_NOISE: NoiseConvention = "sqrt-information"
+"""iSAM's own definition of the noise numbers (see the module docstring)."""
+ISAM_RECORDS = ("ODOMETRY", "LANDMARK")
+"""The record names of the format; a file whose first data line is one of them is iSAM text."""
+
+# Plausibility of the standard deviations a convention implies (per record, the median over
+# the file): a translation beyond _MAX_SIGMA_XY metres or a rotation beyond π radians is not
+# a measurement's noise, it is the other convention read wrongly.
+_MAX_SIGMA_XY = 100.0
+_MAX_SIGMA_THETA = np.pi
+
+
+class NoiseConventionWarning(UserWarning):
+    """The noise numbers look like the other convention (see :func:`read_isam`)."""
+
+
+def is_isam(source: SourceText) -> bool:
+    """Whether ``source`` is iSAM text: its first data line (after comments, blank lines and
+    a byte order mark, by the rules of :class:`~slamrel.formats.text.SourceText`) starts
+    with one of :data:`ISAM_RECORDS`. The one test every command uses."""
+    for _, text in source.data_lines():
+        return text.split(None, 1)[0] in ISAM_RECORDS
+    return False
 
 
 @dataclass(frozen=True)
@@ -96,11 +137,59 @@ def _information(
     return info.astype(np.float64, copy=False)
 
 
-def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamData:
-    """Read an iSAM/GTSAM text file (see the module docstring)."""
-    if noise not in ("covariance", "sqrt-information"):
-        raise InputError(f"noise must be 'covariance' or 'sqrt-information', got {noise!r}")
-    recs = read_keyword_records(path, {"ODOMETRY": 12, "LANDMARK": 8})
+def _implied_sigmas(upper: NDArray[np.float64], size: int, convention: str) -> NDArray[np.float64]:
+    """Median over the records of the standard deviations ``convention`` implies, per axis
+    (from the diagonal: ``√Σ_ii`` for a covariance, ``1/|R_ii|`` for a square-root
+    information matrix, exact for a diagonal ``R``)."""
+    diag = upper[:, [k * size - k * (k - 1) // 2 for k in range(size)]]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sig = np.sqrt(np.abs(diag)) if convention == "covariance" else 1.0 / np.abs(diag)
+    return np.asarray(np.median(sig, axis=0), dtype=np.float64)
+
+
+def _plausible(sig: NDArray[np.float64]) -> bool:
+    limits = np.array([_MAX_SIGMA_XY, _MAX_SIGMA_XY, _MAX_SIGMA_THETA])[: sig.size]
+    return bool(np.all(np.isfinite(sig)) and np.all(sig <= limits))
+
+
+def _check_convention(
+    upper: NDArray[np.float64], size: int, noise: str, *, path: PathLike, kind: str
+) -> None:
+    """Warn when ``noise`` makes the records' noise implausible and the other convention
+    would not (see the module docstring)."""
+    if upper.shape[0] == 0:
+        return
+    other = "covariance" if noise == "sqrt-information" else "sqrt-information"
+    mine, theirs = _implied_sigmas(upper, size, noise), _implied_sigmas(upper, size, other)
+    if _plausible(mine) or not _plausible(theirs):
+        return
+    axes = ("x", "y", "theta")[:size]
+    said = ", ".join(f"{a} {v:.3g}" for a, v in zip(axes, mine))
+    warnings.warn(
+        f"{path}: {kind} noise read as {noise} implies median standard deviations of "
+        f"{said} (metres, radians): implausible; these numbers look like a {other} "
+        f"(pass --noise {other}, or noise={other!r})",
+        NoiseConventionWarning,
+        stacklevel=3,
+    )
+
+
+def read_isam(
+    path: PathLike,
+    *,
+    noise: NoiseConvention = DEFAULT_NOISE,
+    source: SourceText | None = None,
+) -> IsamData:
+    """Read an iSAM/GTSAM text file (see the module docstring).
+
+    ``noise`` is what the noise numbers are: ``"sqrt-information"`` (iSAM's definition, the
+    default) or ``"covariance"``. ``source`` is the already-read text of ``path``.
+    """
+    if noise not in NOISE_CONVENTIONS:
+        raise ValueError(f"noise must be 'sqrt-information' or 'covariance', got {noise!r}")
+    src = read_source(path) if source is None else source
+    path = src.path
+    recs = read_keyword_records(path, {"ODOMETRY": 12, "LANDMARK": 8}, source=src)
     o_vals, o_lines = recs["ODOMETRY"]
     z_vals, z_lines = recs["LANDMARK"]
     for vals, lines, kind in ((o_vals, o_lines, "ODOMETRY"), (z_vals, z_lines, "LANDMARK")):
@@ -119,6 +208,8 @@ def read_isam(path: PathLike, *, noise: NoiseConvention = "covariance") -> IsamD
         raise InputError(f"id {clash[0]} is used for a pose and a landmark", path=path, line=line)
     pi = np.searchsorted(pose_ids, o[:, 0].astype(np.int64))
     pj = np.searchsorted(pose_ids, o[:, 1].astype(np.int64))
+    _check_convention(o[:, 5:11], 3, noise, path=path, kind="ODOMETRY")
+    _check_convention(z[:, 4:7], 2, noise, path=path, kind="LANDMARK")
     info_pp = _information(o[:, 5:11], 3, noise, path=path, lines=o_lines, kind="ODOMETRY")
     # initial guess: chain the odometry edges k -> k+1 (in id order)
     chain = pj == pi + 1

@@ -15,6 +15,8 @@ dropped without being counted in :class:`MrclamRobot`.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -94,6 +96,18 @@ def _time_ordered(
         f"{path}: {report.describe(what)}; put in time order", TimeOrderWarning, stacklevel=3
     )
     return rows[order], report.out_of_order
+
+
+@contextmanager
+def _about(path: Path, also: str) -> Iterator[None]:
+    """Name ``path`` (and ``also``: the other files involved) in an :class:`InputError`
+    raised in the block that names no file."""
+    try:
+        yield
+    except InputError as exc:
+        if exc.path is not None:
+            raise
+        raise InputError(f"{exc.message} ({also})", path=path, line=exc.line) from None
 
 
 def read_barcodes(directory: PathLike) -> dict[int, int]:
@@ -473,10 +487,15 @@ def mrclam_bundle(
     lm, _ = read_numeric_table(
         lm_path, columns=("subject", "x", "y", "sx", "sy"), describe="MRCLAM landmarks"
     )
-    cal = calibrate_odometry(r) if calibrate else None
-    controls = r.controls if cal is None else cal.apply(r.controls)
-    r = replace(r, controls=readonly(resample_controls(controls)))
-    fit = fit_noise(r, lm[:, :3], window=window) if noise is None else noise
+    odo_path = d / f"Robot{robot}_Odometry.dat"
+    gt_name = f"Robot{robot}_Groundtruth.dat"
+    # the fits work on arrays: their errors name the files the arrays came from
+    with _about(odo_path, f"compared with {gt_name}"):
+        cal = calibrate_odometry(r) if calibrate else None
+        controls = r.controls if cal is None else cal.apply(r.controls)
+        r = replace(r, controls=readonly(resample_controls(controls)))
+    with _about(d / f"Robot{robot}_Measurement.dat", f"with {gt_name}, {lm_path.name}"):
+        fit = fit_noise(r, lm[:, :3], window=window) if noise is None else noise
     gt = r.groundtruth
     c = r.controls
     keep_c = (c[:, 0] >= gt.timestamps[0]) & (c[:, 0] <= gt.timestamps[-1])

@@ -18,11 +18,11 @@ there.
 
 from __future__ import annotations
 
-import csv
-import io
 import itertools
+import re
 import warnings
 import zlib
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
@@ -352,16 +352,16 @@ class Comparison:
 
     def markdown(self) -> str:
         """The table and the tests as GitHub Markdown."""
-        lines = ["| " + " | ".join(self.columns()) + " |", "|" + "---|" * len(self.columns())]
+        lines = [_md_row(self.columns()), "|" + "---|" * len(self.columns())]
         for row in self.rows():
-            lines.append("| " + " | ".join(_fmt(v) for v in row) + " |")
+            lines.append(_md_row(_fmt(v) for v in row))
         dropped = {k: n for k, n in self.left_out.items() if n}
         if dropped:
             lines += [
                 "",
                 "Relations not scored by every algorithm of a dataset are left out of its "
                 "statistics and tests: "
-                + ", ".join(f"{ds}:{alg} {n}" for (ds, alg), n in dropped.items())
+                + ", ".join(f"{_md(ds)}:{_md(alg)} {n}" for (ds, alg), n in dropped.items())
                 + ".",
             ]
         if not self.tests:
@@ -372,9 +372,9 @@ class Comparison:
             "A − B [% of B]", "p", "p (Holm)", "better", "test",
         ]  # fmt: skip
         lines += ["", self.test_description(), ""]
-        lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        lines += [_md_row(head), "|" + "---|" * len(head)]
         for t in self.tests:
-            lines.append("| " + " | ".join(self._test_cells(t)) + " |")
+            lines.append(_md_row(self._test_cells(t)))
         return "\n".join(lines) + "\n"
 
     def _test_cells(self, t: PairTest) -> list[str]:
@@ -407,32 +407,26 @@ class Comparison:
 
     def csv(self) -> str:
         """The statistics table as CSV."""
-        buf = io.StringIO()
-        buf.write(",".join(c.replace(",", ";") for c in self.columns()) + "\n")
-        for row in self.rows():
-            buf.write(",".join(_fmt(v) for v in row) + "\n")
-        return buf.getvalue()
+        return _csv_text([self.columns(), *([_fmt(v) for v in row] for row in self.rows())])
 
     def tests_csv(self) -> str:
         """The tests as CSV, one row per test (numbers to 6 digits; empty without a test)."""
-        buf = io.StringIO()
-        out = csv.writer(buf, lineterminator="\n")
-        out.writerow([
+        rows: list[list[Any]] = [[
             "dataset", "relation_set", "part", "unit", "a", "b", "n", "mean_a", "mean_b",
             "mean_difference", "ci_low", "ci_high", "confidence", "relative_difference_percent",
             "p_value", "p_below_1_over_B", "p_holm", "significant", "better", "block_length",
             "blocks", "resamples", "no_test_reason",
-        ])  # fmt: skip
+        ]]  # fmt: skip
         for t in self.tests:
             d = t.difference
-            out.writerow([
+            rows.append([
                 t.dataset, t.relation_set, t.part, t.unit, t.a, t.b, t.n,
                 _num(d.mean_a), _num(d.mean_b), _num(d.mean_difference), _num(d.ci_low),
                 _num(d.ci_high), _num(d.confidence), _num(d.relative_difference),
                 _num(d.p_value), int(d.p_at_floor), _num(t.p_holm), int(t.significant),
                 t.better or "", d.block.length, _num(d.block.blocks), d.resamples, d.reason,
             ])  # fmt: skip
-        return buf.getvalue()
+        return _csv_text(rows)
 
     def latex(self) -> str:
         """The table as a LaTeX tabular: mean ± std per part, like the paper's table."""
@@ -464,13 +458,58 @@ def _num(v: float) -> str:
     return f"{v:.6g}" if np.isfinite(v) else ""
 
 
+def _csv_field(v: Any) -> str:
+    """One CSV field (RFC 4180): quoted when it holds a separator, a quote or a line end, or
+    when it starts with ``#`` or white space (slamrel's CSV readers take a line starting with
+    ``#`` for a comment and strip cells); quotes doubled."""
+    s = str(v)
+    if any(c in s for c in ',"\r\n') or s[:1] in ("#", " ", "\t") or s[-1:] in (" ", "\t"):
+        return '"' + s.replace('"', '""') + '"'
+    return s
+
+
+def _csv_text(rows: Sequence[Sequence[Any]]) -> str:
+    """Rows as CSV text that :func:`csv.reader` reads back field for field."""
+    return "".join(",".join(_csv_field(v) for v in row) + "\n" for row in rows)
+
+
+# GitHub Markdown: a backslash escapes any ASCII punctuation; these would end a table cell
+# (|), start math ($), emphasis (* _) or code (`), or escape what follows (\); a < that
+# could open an HTML tag is written as &lt;
+_MD_SPECIAL = re.compile(r"([\\|$*_`])")
+_MD_TAG = re.compile(r"<(?=[A-Za-z/!?])")
+
+
+def _md(s: str) -> str:
+    """Text for a Markdown table cell: specials escaped, line ends as ``<br>``."""
+    text = _MD_TAG.sub("&lt;", _MD_SPECIAL.sub(r"\\\1", s))
+    return "<br>".join(text.splitlines()) if ("\n" in text or "\r" in text) else text
+
+
+def _md_row(cells: Iterable[str]) -> str:
+    return "| " + " | ".join(_md(c) for c in cells) + " |"
+
+
+_TEX_SPECIAL = {
+    "\\": r"\textbackslash{}",
+    "&": r"\&",
+    "%": r"\%",
+    "$": r"\$",
+    "#": r"\#",
+    "_": r"\_",
+    "{": r"\{",
+    "}": r"\}",
+    "~": r"\textasciitilde{}",
+    "^": r"\textasciicircum{}",
+    "\n": " ",
+    "\r": " ",
+}
+
+
 def _tex(s: str) -> str:
-    return (
-        s.replace("\\", "\\textbackslash{}")
-        .replace("_", "\\_")
-        .replace("&", "\\&")
-        .replace("%", "\\%")
-    )
+    """Text for a LaTeX table cell: every special character of LaTeX escaped (one pass, so a
+    replacement is never escaped again); line ends become spaces."""
+    return "".join(_TEX_SPECIAL.get(c, c) for c in s)
 
 
 def holm(p: NDArray[np.float64]) -> NDArray[np.float64]:
