@@ -183,9 +183,10 @@ def _nees_figure(result: RunResult, stretches: Sequence[TimeSpan]) -> Figure:
     )  # fmt: skip
     fig = mark_stretches_time(fig, stretches, t0=tb.t0)
     lo, hi = fig.axes[0].get_xlim()
-    covered = [float(t.min()) for t in times.values() if t.size], [
-        float(t.max()) for t in times.values() if t.size
-    ]
+    covered = (
+        [float(t.min()) for t in times.values() if t.size],
+        [float(t.max()) for t in times.values() if t.size],
+    )
     data = {"x-min": float(lo), "x-max": float(hi), "run-duration": tb.duration}
     if covered[0]:
         data |= {"data-min": min(covered[0]), "data-max": max(covered[1])}
@@ -401,9 +402,7 @@ def _agreement_section(result: RunResult) -> Section:
             [w, s.t1 - s.t0, s.measurements, s.outlying, s.nis_median, s.nis_max, s.reentries]
             for w, s in zip(when, shown)
         ]
-        tables.append(
-            Table("stretches where the map and the log disagree", _STRETCH_COLUMNS, rows)
-        )
+        tables.append(Table("stretches where the map and the log disagree", _STRETCH_COLUMNS, rows))
     return Section("Map–log agreement", paragraphs=_agreement_paragraphs(a, tb.t0), tables=tables)
 
 
