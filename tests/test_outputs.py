@@ -22,10 +22,10 @@ from slamrel import outputs
 from slamrel.cli import main
 from slamrel.outputs import MANIFEST
 
-ISAM = """ODOMETRY 0 1 1.0 0 0 0.01 0 0 0.01 0 0.0001
-LANDMARK 1 2 1.0 1.0 0.04 0 0.04
-ODOMETRY 1 3 1.0 0 1.5707963 0.01 0.001 0 0.01 0 0.0001
-LANDMARK 3 2 1.0 0.0 0.04 0 0.04
+ISAM = """ODOMETRY 0 1 1.0 0 0 10 0 0 10 0 100
+LANDMARK 1 2 1.0 1.0 5 0 5
+ODOMETRY 1 3 1.0 0 1.5707963 10 0.1 0 10 0 100
+LANDMARK 3 2 1.0 0.0 5 0 5
 """
 
 Argv = Callable[[Path, str], list[str]]
