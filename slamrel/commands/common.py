@@ -239,6 +239,13 @@ def association_choice(value: str, est: LandmarkMap, ref: LandmarkMap) -> str | 
     return read_association_csv(value, est, ref)
 
 
+#: The iSAM reader's parameter in ``import isam``'s and ``solve``'s option words.
+NOISE_WORDS = {
+    "pass noise='covariance'": "pass --noise covariance",
+    "pass noise='sqrt-information'": "pass --noise sqrt-information",
+}
+
+
 def add_noise_argument(parser: argparse.ArgumentParser) -> None:
     """``--noise sqrt-information|covariance``: what an iSAM file's noise numbers are, shared
     by ``import isam`` and ``solve`` (:func:`slamrel.formats.isam.read_isam`)."""

@@ -8,10 +8,12 @@ from typing import TYPE_CHECKING
 
 from slamrel.commands import options as opt
 from slamrel.commands.common import (
+    NOISE_WORDS,
     add_force_argument,
     add_noise_argument,
     check_outputs,
     errors_about,
+    in_option_words,
 )
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
@@ -73,7 +75,8 @@ def run_import_isam(args: argparse.Namespace) -> int:
     from slamrel.formats.isam import read_isam
 
     check_outputs([args.output], [args.file], dirs=[args.bundle], force=args.force)
-    data = read_isam(args.file, noise=args.noise)
+    with in_option_words(NOISE_WORDS):
+        data = read_isam(args.file, noise=args.noise)
     log = None
     if args.bundle:  # built before anything is written: a file that cannot be one writes nothing
         from slamrel.formats.isam import isam_log_bundle

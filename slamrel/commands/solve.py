@@ -9,10 +9,12 @@ from typing import TYPE_CHECKING
 
 from slamrel.commands import options as opt
 from slamrel.commands.common import (
+    NOISE_WORDS,
     add_force_argument,
     add_noise_argument,
     check_outputs,
     errors_about,
+    in_option_words,
 )
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
@@ -76,7 +78,8 @@ def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
     # a folder, no permission): the same file gets the same verdict from both commands
     src = read_source(path)
     if is_isam(src):
-        data = read_isam(path, noise=noise, source=src)  # type: ignore[arg-type]
+        with in_option_words(NOISE_WORDS):
+            data = read_isam(path, noise=noise, source=src)  # type: ignore[arg-type]
         return data.graph, data.pose_ids, data.landmark_ids
     return read_g2o_graph(path, source=src)
 

@@ -168,7 +168,7 @@ def _check_convention(
     warnings.warn(
         f"{path}: {kind} noise read as {noise} implies median standard deviations of "
         f"{said} (metres, radians): implausible; these numbers look like a {other} "
-        f"(pass --noise {other}, or noise={other!r})",
+        f"(pass noise={other!r})",
         NoiseConventionWarning,
         stacklevel=3,
     )
