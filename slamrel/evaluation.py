@@ -23,7 +23,7 @@ from typing import Any, Literal
 import numpy as np
 
 from relation_metric.alignment import absolute_trajectory_error
-from relation_metric.errors import InputError
+from relation_metric.errors import InputError, OptionError
 from relation_metric.evaluate import Evaluation, evaluate
 from relation_metric.relations import RelationSet, generate_relations
 from relation_metric.time_association import synchronize
@@ -140,8 +140,9 @@ def score_files(
     ate_pair = (loaded.trajectory, ref_traj)
     if options.sync:
         if ref_traj is None:
-            raise InputError(
-                "--sync needs a reference trajectory, not a .relations file", path=reference
+            raise OptionError(
+                f"needs a reference trajectory, not a .relations file ({reference})",
+                option="--sync",
             )
         ref_sync, est_sync = synchronize(ref_traj, scored, max_diff=options.max_time_diff)
         notes["synchronized_pairs"] = len(ref_sync)
@@ -177,8 +178,9 @@ def score_files(
     result.update(notes)
     if ate:
         if ref_traj is None:
-            raise InputError(
-                "--ate needs a reference trajectory, not a .relations file", path=reference
+            raise OptionError(
+                f"needs a reference trajectory, not a .relations file ({reference})",
+                option="--ate",
             )
         ate_estimate, ate_reference = ate_pair
         assert ate_reference is not None  # the reference (just checked) or its synchronised copy
@@ -203,11 +205,11 @@ def _is_relations_file(path: str, options: EvaluateOptions) -> bool:
     ext = p.suffix.lower()
     if ext in RELATIONS_EXTENSIONS:
         if options.strategy is not None:
-            raise InputError(
-                f"a {ext} file holds relations, but --strategy generates relations from a "
+            raise OptionError(
+                f"{path}: a {ext} file holds relations, but --strategy generates relations from a "
                 "reference trajectory; drop --strategy, or pass --reference-format to read "
                 "the file as a trajectory",
-                path=path,
+                option="--strategy",
             )
         return True
     if ext in TRAJECTORY_EXTENSIONS or options.strategy is not None:

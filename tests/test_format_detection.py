@@ -154,7 +154,7 @@ def test_relations_file_with_strategy_is_refused(tmp_path, capsys):
     (tmp_path / "r.relations").write_text("0 1 1 0 0 0 0 0\n")
     (tmp_path / "e.txt").write_text(PLAIN)
     argv = ["evaluate", str(tmp_path / "r.relations"), str(tmp_path / "e.txt")]
-    assert main(argv + ["--strategy", "consecutive"]) == 3
+    assert main(argv + ["--strategy", "consecutive"]) == 2  # a usage error
     assert "drop --strategy" in capsys.readouterr().err
 
 
