@@ -91,6 +91,50 @@ def _line_of_key(text: str, key: str) -> int | None:
     return None if pos < 0 else text.count("\n", 0, pos) + 1
 
 
+#: The keys each object of ``bundle.json`` may hold (docs/bundle.md); keys starting with
+#: ``x_`` are a writer's own and ignored. Any other key is refused, named, with the nearest
+#: known key: a misspelt ``initial_pos`` must not fall back to the default silently.
+_MANIFEST_KEYS = {
+    "": (
+        "format",
+        "motion_model",
+        "sensor_model",
+        "initial_pose",
+        "initial_covariance",
+        "description",
+    ),
+    "motion_model": (
+        "type",
+        "integration",
+        "control_stamp",
+        "alpha",
+        "pose_noise",
+        *sorted({n for names in SIGMA_NAMES.values() for n in names}),
+    ),
+    "motion_model.pose_noise": ("frame", "covariance"),
+    "sensor_model": ("type", "sigma_range", "sigma_bearing", "max_range", "fov"),
+}
+
+
+def _refuse_unknown_keys(doc: dict[str, Any], where: str, text: str, path: str) -> None:
+    """Refuse a key of ``doc`` (the object ``where``) that the format does not define."""
+    import difflib
+
+    known = _MANIFEST_KEYS[where]
+    for key in doc:
+        if key in known or (isinstance(key, str) and key.startswith("x_")):
+            continue
+        near = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+        hint = f"; did you mean {near[0]!r}?" if near else ""
+        inside = f" in {where}" if where else ""
+        raise InputError(
+            f"unknown key {_shown(key)}{inside}{hint} (expected some of {', '.join(known)}; "
+            "a writer's own keys start with x_)",
+            path=path,
+            line=_line_of_key(text, str(key)),
+        )
+
+
 def _number(
     value: Any, *, what: str, path: str, line: int | None, minimum: float | None = 0.0
 ) -> float:
@@ -123,6 +167,7 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
     line = _line_of_key(text, "motion_model")
     if not isinstance(spec, dict):
         raise InputError("motion_model: expected an object", path=path, line=line)
+    _refuse_unknown_keys(spec, "motion_model", text, path)
     kind = spec.get("type")
     if kind not in MOTION_TYPES:
         raise InputError(
@@ -216,6 +261,7 @@ def _parse_pose_noise(spec: Any, text: str, path: str) -> tuple[str, tuple[tuple
             path=path,
             line=line,
         )
+    _refuse_unknown_keys(spec, "motion_model.pose_noise", text, path)
     for key in ("frame", "covariance"):
         if key not in spec:
             raise InputError(f"motion_model.pose_noise: missing {key}", path=path, line=line)
@@ -251,6 +297,7 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
     line = _line_of_key(text, "sensor_model")
     if not isinstance(spec, dict):
         raise InputError("sensor_model: expected an object", path=path, line=line)
+    _refuse_unknown_keys(spec, "sensor_model", text, path)
     if spec.get("type") != "range_bearing":
         raise InputError(
             f"sensor_model: unknown type {_shown(spec.get('type'))}; expected range_bearing",
@@ -299,6 +346,7 @@ def _read_manifest(path: Path) -> dict[str, Any]:
             path=name,
             line=_line_of_key(text, "format"),
         )
+    _refuse_unknown_keys(doc, "", text, name)
     for key in ("motion_model", "sensor_model"):
         if key not in doc:
             raise InputError(f"missing {key}", path=name)
