@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from slamrel.cli import main
@@ -69,3 +70,42 @@ def test_misspelt_model_key_is_refused_and_writer_keys_are_allowed(
     meta["x_writer"] = {"version": 3}
     b = _write(tmp_path / "c", dict(BUNDLE, **{"bundle.json": json.dumps(meta, indent=2)}))
     assert main(["recover", str(b), "-o", str(tmp_path / "o.tum"), "-q"]) == 0
+
+
+# ------------------------------------------------------------------ shared trajectory files
+
+
+def _plain(path: Path, t: np.ndarray, poses: np.ndarray) -> Path:
+    rows = "".join(f"{a:.17g} {b[0]:.17g} {b[1]:.17g} {b[2]:.17g}\n" for a, b in zip(t, poses))
+    path.write_text("# t x y theta\n" + rows)
+    return path
+
+
+def _track(n: int = 40, dt: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    t = np.arange(n) * dt
+    yaw = 0.3 * t + 0.2 * np.sin(t)
+    poses = np.column_stack((np.cos(t) * t, np.sin(t), np.angle(np.exp(1j * yaw))))
+    return t, poses
+
+
+def _evaluate_json(argv: list[str], out: Path) -> dict:
+    assert main(["evaluate", *argv, "--json", str(out), "-q"]) == 0
+    return json.loads(out.read_text())
+
+
+# ------------------------------------------------- 5. quaternions normalised on every path
+
+
+def test_planar_tum_quaternions_are_normalised(tmp_path: Path) -> None:
+    t, poses = _track()
+    ref = _plain(tmp_path / "ref.txt", t, poses)
+    scale = 1.0 + 9e-4  # inside the 1e-3 norm tolerance
+    q = scale * np.column_stack(
+        (np.zeros_like(t), np.zeros_like(t), np.sin(poses[:, 2] / 2), np.cos(poses[:, 2] / 2))
+    )
+    rows = np.column_stack((t, poses[:, :2], np.zeros_like(t), q))
+    est = tmp_path / "est.tum"
+    est.write_text("".join(" ".join(f"{v:.17g}" for v in r) + "\n" for r in rows))
+    result = _evaluate_json([str(ref), str(est)], tmp_path / "r.json")
+    assert result["group"] == "SE2"
+    assert result["rotation"]["abs"]["max"] < 1e-9

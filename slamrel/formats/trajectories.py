@@ -378,7 +378,7 @@ def _read_3d(
             source=src,
         )
         t, xyz, q = values[:, 0], values[:, 1:4], values[:, 4:8]
-        _check_unit_quaternions(q, src, lines)
+        q = _check_unit_quaternions(q, src, lines)
     elif fmt == "euroc":
         first = next((k for k, line in enumerate(src.lines) if line.strip()), None)
         if first is None or not src.lines[first].lstrip().lower().startswith("#timestamp"):
@@ -402,7 +402,7 @@ def _read_3d(
         xyz = np.column_stack([c[k] for k in _EUROC_COLUMNS[1:4]])
         q = np.column_stack([c[k] for k in _EUROC_COLUMNS[5:8]] + [c[_EUROC_COLUMNS[4]]])
         lines = table.lines.__getitem__
-        _check_unit_quaternions(q, src, lines)
+        q = _check_unit_quaternions(q, src, lines)
     else:  # kitti
         values, lines = read_numeric_table(
             path,
@@ -431,7 +431,12 @@ def _read_3d(
     return t, _poses_of_dimension(t, xyz, q, src, dimension, discarded), lines
 
 
-def _check_unit_quaternions(q: NDArray, src: SourceText, lines: Any) -> None:
+def _check_unit_quaternions(q: NDArray, src: SourceText, lines: Any) -> NDArray:
+    """The quaternions divided by their norms; a norm off 1 by more than 1e-3 is refused.
+
+    Every accepted quaternion is normalised here, before any path uses it: the planar yaw
+    formula assumes ``‖q‖ = 1`` and is off by about ``2 (‖q‖ − 1)`` otherwise.
+    """
     with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
         norms = np.linalg.norm(q, axis=1)
     bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
@@ -442,6 +447,7 @@ def _check_unit_quaternions(q: NDArray, src: SourceText, lines: Any) -> None:
             path=src.path,
             line=lines(k),
         )
+    return q / norms[:, None]
 
 
 def _kitti_times(times: PathLike | None, n: int, pose_path: str) -> NDArray:
