@@ -109,3 +109,18 @@ def test_planar_tum_quaternions_are_normalised(tmp_path: Path) -> None:
     result = _evaluate_json([str(ref), str(est)], tmp_path / "r.json")
     assert result["group"] == "SE2"
     assert result["rotation"]["abs"]["max"] < 1e-9
+
+
+# ------------------------------------------------------- 6. OSPA/GOSPA for a large order p
+
+
+def test_ospa_does_not_underflow_for_a_large_order(tmp_path: Path) -> None:
+    (tmp_path / "ref.csv").write_text("landmark,x,y\n1,0,0\n2,5,0\n3,0,5\n4,5,5\n")
+    (tmp_path / "est.csv").write_text("landmark,x,y\n1,0.5,0\n2,5,0.5\n3,0,5.5\n4,5.5,5\n")
+    argv = ["map-compare", str(tmp_path / "est.csv"), str(tmp_path / "ref.csv")]
+    argv += ["--associate", "id", "--cutoff", "1", "--order", "2000", "-q"]
+    assert main([*argv, "--json", str(tmp_path / "r.json")]) == 0
+    result = json.loads((tmp_path / "r.json").read_text())
+    # every aligned residual is sqrt(2)/4 m: both distances are that for any order
+    assert result["ospa"]["value"] == pytest.approx(np.sqrt(2) / 4, rel=1e-12)
+    assert result["gospa"]["value"] == pytest.approx(np.sqrt(2) / 4 * 4 ** (1 / 2000), rel=1e-12)
