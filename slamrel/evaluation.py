@@ -284,7 +284,9 @@ def load_reference(
 
     notes = {} if notes is None else notes
     if _is_relations_file(reference, options):
-        relations = read_relations(reference)
+        report: dict[str, Any] = {}
+        relations = read_relations(reference, report=report)
+        relations = _without_duplicates(relations, report, reference, options, notes)
         zero = zero_length(relations.first, relations.second)
         dropped = int(np.count_nonzero(zero))
         notes["relations_zero_length_dropped"] = dropped
@@ -327,6 +329,48 @@ def load_reference(
     if options.sync:  # relations are generated after the pose-by-pose association
         return RelationSet(np.empty(0), np.empty(0), np.empty((0, 3))), loaded.trajectory
     return _generate(loaded.trajectory, options), loaded.trajectory
+
+
+class DuplicateRelationWarning(RepeatedTimeWarning):
+    """Lines of a .relations file that repeat an earlier line exactly (counted)."""
+
+
+def _without_duplicates(
+    relations: RelationSet,
+    report: dict[str, Any],
+    reference: str,
+    options: EvaluateOptions,
+    notes: dict[str, Any],
+) -> RelationSet:
+    """Relations without the lines that repeat an earlier line (kept in metricevaluator mode).
+
+    A repeated line is one measurement written twice; scored twice it weighs double. The
+    repeats are dropped, counted (``relations_duplicates``) and warned about; the
+    metricevaluator mode keeps them (the C++ tool scores every line) and says so.
+    """
+    repeat = report["duplicates"]
+    count = int(np.count_nonzero(repeat))
+    keep = options.mode == "metricevaluator"
+    lines = report["duplicate_lines"]
+    notes["relations_duplicates"] = {
+        "count": count,
+        "dropped": bool(count and not keep),
+        "first_line": None if lines is None else lines[1],
+    }
+    if not count:
+        return relations
+    what = (
+        "kept and scored twice, as the metricEvaluator does (--mode metricevaluator)"
+        if keep
+        else "dropped (a measurement written twice would weigh double)"
+    )
+    warnings.warn(
+        f"{reference}: {count} relation line(s) repeat an earlier line exactly (first line "
+        f"{lines[1]}, a repeat of line {lines[0]}); {what}",
+        DuplicateRelationWarning,
+        stacklevel=3,
+    )
+    return relations if keep else relations.subset(~repeat)
 
 
 def _generate(

@@ -124,3 +124,38 @@ def test_ospa_does_not_underflow_for_a_large_order(tmp_path: Path) -> None:
     # every aligned residual is sqrt(2)/4 m: both distances are that for any order
     assert result["ospa"]["value"] == pytest.approx(np.sqrt(2) / 4, rel=1e-12)
     assert result["gospa"]["value"] == pytest.approx(np.sqrt(2) / 4 * 4 ** (1 / 2000), rel=1e-12)
+
+
+# ------------------------------------------------------------ 8. duplicated relation lines
+
+
+def _relations_file(path: Path, t: np.ndarray, poses: np.ndarray, repeat: int = 0) -> Path:
+    from relation_metric.relations import RelationSet
+    from relation_metric.se2 import between
+    from slamrel.formats.relations import write_relations
+
+    delta = between(poses[:-1], poses[1:])
+    write_relations(path, RelationSet(t[:-1], t[1:], delta, key="time"))
+    if repeat:
+        lines = path.read_text().splitlines(keepends=True)
+        path.write_text("".join(lines + lines[repeat : repeat + 1]))
+    return path
+
+
+def test_duplicate_relation_lines_are_dropped_and_counted(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    t, poses = _track()
+    rel = _relations_file(tmp_path / "r.relations", t, poses, repeat=3)
+    bent = poses.copy()
+    bent[3:, 2] += 0.01  # the repeated relation carries the whole error
+    est = _plain(tmp_path / "est.txt", t, bent)
+    result = _evaluate_json([str(rel), str(est)], tmp_path / "a.json")
+    assert result["relations"] == len(t) - 1
+    assert result["relations_duplicates"] == {"count": 1, "dropped": True, "first_line": 41}
+    assert "repeat an earlier line exactly" in capsys.readouterr().err
+    kept = _evaluate_json(
+        [str(rel), str(est), "--mode", "metricevaluator"], tmp_path / "b.json"
+    )
+    assert kept["relations"] == len(t)
+    assert kept["relations_duplicates"]["dropped"] is False
