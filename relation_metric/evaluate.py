@@ -184,11 +184,14 @@ def evaluate(
         When no relation can be associated (the message shows both time spans), or with
         ``strict`` when any cannot.
     InputError
-        When the errors overflow float64 (coordinates near 1e150 and beyond): such poses
+        When the estimate has two different poses for one timestamp (relations by time);
+        when the errors overflow float64 (coordinates near 1e150 and beyond): such poses
         cannot be scored, and statistics of ``inf`` would be no score either.
     """
     of_relations = f" of {relations_name}" if relations_name else ""
     relations, estimate = on_common_group(relations, estimate, mode=mode)
+    if relations.key == "time":
+        _refuse_two_poses_at_one_time(estimate, estimate_name)
     with np.errstate(over="ignore", invalid="ignore"):
         assoc = associate(
             relations,
@@ -238,6 +241,20 @@ def evaluate(
         rotation=error_summaries(scored(errors.rotation)),
         combined=error_summaries(scored(errors.combined)),
     )
+
+
+def _refuse_two_poses_at_one_time(estimate: Trajectory, name: str | None) -> None:
+    """Two different estimate poses for one timestamp: the association would pick one."""
+    from relation_metric.timeorder import repeated_times
+
+    _, rep = repeated_times(estimate.timestamps, estimate.poses)
+    if rep.differing:
+        raise InputError(
+            f"the estimate has {rep.differing} timestamp(s) with two different poses (first "
+            f"at t = {rep.time:.9g} s); expected one pose per timestamp (the nearest-time "
+            "association would take whichever comes first)",
+            path=name,
+        )
 
 
 def on_common_group(

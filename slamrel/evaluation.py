@@ -40,6 +40,7 @@ from slamrel.formats.trajectories import (
     PlanarProjectionWarning,
     read_trajectory,
     sniff_trajectory_format,
+    without_exact_repeats,
     without_repeated_times,
 )
 
@@ -135,6 +136,7 @@ def score_files(
     _refuse_if_strict(options, loaded, estimate)
     _note_projection(notes, "estimate", loaded)
     notes["estimate_out_of_order"] = loaded.time_order.as_dict()
+    notes["estimate_repeated_times"] = loaded.repeated.as_dict()
     odometry = _load_odometry(options, skip, notes) if options.odometry else None
     scored = loaded.trajectory
     ate_pair = (loaded.trajectory, ref_traj)
@@ -400,7 +402,19 @@ def _note_projection(notes: dict[str, Any], role: str, loaded: LoadedTrajectory)
 
 
 def _refuse_if_strict(options: EvaluateOptions, loaded: LoadedTrajectory, path: str) -> None:
-    """``--strict``: a trajectory that was not in time order is an error (file:line)."""
+    """``--strict``: a trajectory not in time order, or with a timestamp repeated, is an
+    error (file:line)."""
+    rep = loaded.repeated
+    if options.strict and rep.count:
+        raise InputError(
+            f"{rep.count} pose(s) repeat the timestamp of the pose before them "
+            f"(t = {rep.time:.9g} s, line {rep.earlier_line} and this one); --strict refuses "
+            "repeated timestamps (without --strict exact repeats are dropped and counted, an "
+            "estimate with two different poses for one time is refused, a reference keeps the "
+            "first)",
+            path=path,
+            line=rep.first_line,
+        )
     if options.strict and loaded.out_of_order:
         raise InputError(
             f"{loaded.time_order.describe('pose')}; --strict refuses a trajectory that is not "
@@ -437,6 +451,7 @@ def _load_odometry(options: EvaluateOptions, skip: bool, notes: dict[str, Any]) 
     )
     _refuse_if_strict(options, loaded, options.odometry)
     notes["odometry_out_of_order"] = loaded.time_order.as_dict()
+    notes["odometry_repeated_times"] = loaded.repeated.as_dict()
     return loaded.trajectory
 
 
@@ -510,7 +525,9 @@ def load_trajectory(
       filter-log time rule, as ``recover`` reads it); poses that repeat an earlier pose's
       timestamp are dropped, counted and warned about (:func:`without_repeated_times`).
     - ``"estimate"`` / ``"odometry"``: a bundle directory is refused (a bundle holds no
-      estimated trajectory; its ground truth would be scored against itself).
+      estimated trajectory; its ground truth would be scored against itself); two different
+      poses for one timestamp are refused naming both lines, exact repeats dropped and
+      counted (:func:`without_exact_repeats`).
 
     Poses out of time order are sorted and counted (``LoadedTrajectory.time_order``).
     3-D formats (TUM, KITTI, EuRoC) are read as SE(3) when their motion leaves the plane;
@@ -556,4 +573,6 @@ def load_trajectory(
         )
     if role == "reference":
         loaded = without_repeated_times(loaded, path)
+    else:
+        loaded = without_exact_repeats(loaded, path, what=role)
     return loaded

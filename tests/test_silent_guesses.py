@@ -154,8 +154,43 @@ def test_duplicate_relation_lines_are_dropped_and_counted(
     assert result["relations"] == len(t) - 1
     assert result["relations_duplicates"] == {"count": 1, "dropped": True, "first_line": 41}
     assert "repeat an earlier line exactly" in capsys.readouterr().err
-    kept = _evaluate_json(
-        [str(rel), str(est), "--mode", "metricevaluator"], tmp_path / "b.json"
-    )
+    kept = _evaluate_json([str(rel), str(est), "--mode", "metricevaluator"], tmp_path / "b.json")
     assert kept["relations"] == len(t)
     assert kept["relations_duplicates"]["dropped"] is False
+
+
+# -------------------------------------------------- 1. two estimate poses at one timestamp
+
+
+def test_two_estimate_poses_at_one_time_are_refused_in_either_order(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    t, poses = _track()
+    ref = _plain(tmp_path / "ref.txt", t, poses)
+    other = poses[10] + np.array([0.2, -0.1, 0.05])
+    for name, rows in (("a", (poses[10], other)), ("b", (other, poses[10]))):
+        tt = np.insert(t, 11, t[10])
+        pp = np.insert(poses, 10, rows[0], axis=0)
+        pp[11] = rows[1]
+        est = _plain(tmp_path / f"{name}.txt", tt, pp)
+        _refused(
+            ["evaluate", str(ref), str(est)], capsys, f"{est}:13:", "two different estimate poses"
+        )
+
+
+def test_exact_estimate_repeats_are_dropped_counted_and_refused_by_strict(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    t, poses = _track()
+    ref = _plain(tmp_path / "ref.txt", t, poses)
+    est = _plain(tmp_path / "est.txt", np.insert(t, 5, t[5]), np.insert(poses, 5, poses[5], axis=0))
+    result = _evaluate_json([str(ref), str(est)], tmp_path / "r.json")
+    assert result["estimate_repeated_times"] == {"count": 1, "differing": 0, "first_line": 8}
+    assert result["unassociated"] == 0
+    assert "repeat the previous pose exactly" in capsys.readouterr().err
+    _refused(["evaluate", str(ref), str(est), "--strict"], capsys, f"{est}:8:", "--strict")
+    # the reference side: repeats are dropped (the first kept), and --strict refuses them
+    ref2 = _plain(
+        tmp_path / "ref2.txt", np.insert(t, 5, t[5]), np.insert(poses, 5, poses[6], axis=0)
+    )
+    _refused(["evaluate", str(ref2), str(est), "--strict"], capsys, f"{ref2}:8:")

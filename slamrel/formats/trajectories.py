@@ -55,7 +55,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric.errors import InputError
-from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
+from relation_metric.timeorder import (
+    RepeatedTimes,
+    TimeOrder,
+    TimeOrderWarning,
+    repeated_times,
+    sort_by_time,
+)
 from relation_metric.trajectory import OutOfPlane, Trajectory, check_coordinates
 from slamrel.constants import TRAJECTORY_FORMATS
 from slamrel.formats.g2o import format_g2o_records, read_g2o_records
@@ -81,6 +87,7 @@ __all__ = [
     "detect_trajectory_format",
     "sniff_trajectory_format",
     "without_repeated_times",
+    "without_exact_repeats",
     "read_trajectory",
     "write_trajectory",
     "yaw_from_quaternion",
@@ -161,6 +168,10 @@ class LoadedTrajectory(NamedTuple):
     discarded : OutOfPlane or None
         The out-of-plane motion a ``dimension="2d"`` read projected away (``None`` when
         nothing was projected).
+    repeated : RepeatedTimes
+        Poses whose time repeats the previous pose's (all are kept here; the caller decides:
+        a reference keeps the first, :func:`without_repeated_times`; an estimate refuses two
+        different poses for one time, :func:`without_exact_repeats`).
     """
 
     trajectory: Trajectory
@@ -169,6 +180,7 @@ class LoadedTrajectory(NamedTuple):
     time_order: TimeOrder = TimeOrder()
     repeated_dropped: int = 0
     discarded: OutOfPlane | None = None
+    repeated: RepeatedTimes = RepeatedTimes()
 
     @property
     def out_of_order(self) -> int:
@@ -346,8 +358,19 @@ def read_trajectory(
     trajectory = Trajectory(t, poses)
     if dimension == "3d":
         trajectory = trajectory.lifted()
+
+    def sorted_line(k: int) -> int:
+        row = int(order[k]) if report.out_of_order else k
+        return int(lines(row)) if callable(lines) else int(lines[row])
+
+    _, repeated = repeated_times(t, poses, sorted_line)
     return LoadedTrajectory(
-        trajectory, fmt, dict(skipped), report, discarded=discarded[0] if discarded else None
+        trajectory,
+        fmt,
+        dict(skipped),
+        report,
+        discarded=discarded[0] if discarded else None,
+        repeated=repeated,
     )
 
 
@@ -522,6 +545,41 @@ def without_repeated_times(loaded: LoadedTrajectory, path: PathLike) -> LoadedTr
         trajectory=Trajectory(traj.timestamps[keep], traj.poses[keep]),
         repeated_dropped=loaded.repeated_dropped + dropped,
     )
+
+
+def without_exact_repeats(
+    loaded: LoadedTrajectory, path: PathLike, *, what: str = "estimate"
+) -> LoadedTrajectory:
+    """An estimate (or odometry) with one pose per timestamp, or an :class:`InputError`.
+
+    Two different poses for one timestamp make the pose of that time a guess (the nearest-time
+    association took whichever came first, and the score depended on the row order): they are
+    refused, naming both lines. Exact repeats (the same row written twice) are dropped,
+    counted (``LoadedTrajectory.repeated``) and warned about (``RepeatedTimeWarning``).
+    """
+    from relation_metric.timeorder import RepeatedTimeWarning, first_of_each_time
+
+    rep = loaded.repeated
+    if not rep.count:
+        return loaded
+    if rep.differing:
+        earlier = "" if rep.earlier_line is None else f" (line {rep.earlier_line})"
+        raise InputError(
+            f"two different {what} poses at t = {rep.time:.9g} s: this line and the one before "
+            f"it in time{earlier}; {rep.differing} timestamp repeat(s) carry a different pose. "
+            f"Expected one pose per timestamp (which one is meant is a guess; remove one)",
+            path=path,
+            line=rep.first_line,
+        )
+    traj = loaded.trajectory
+    keep = first_of_each_time(traj.timestamps)
+    warnings.warn(
+        f"{os.fspath(path)}: dropped {rep.count} {what} pose(s) that repeat the previous "
+        f"pose exactly, timestamp and pose (first at line {rep.first_line})",
+        RepeatedTimeWarning,
+        stacklevel=2,
+    )
+    return loaded._replace(trajectory=Trajectory(traj.timestamps[keep], traj.poses[keep]))
 
 
 def _read_csv_trajectory(src: SourceText) -> tuple[NDArray, NDArray, NDArray]:
