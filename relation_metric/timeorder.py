@@ -21,9 +21,10 @@ nearest-time search took the first, so the score depended on the row order): two
 time that differ are refused with both lines; exact repeats are dropped and counted
 (:func:`repeated_times`, ``slamrel evaluate``'s ``estimate_repeated_times``); ``--strict``
 refuses either. **Repeated times** in a *reference* trajectory would give zero-length
-relations that score a perfect 0 and pull the mean down: poses sharing a timestamp with an earlier pose are dropped
-(the first in the file is kept), counted and warned about (:func:`first_of_each_time`);
-relations with ``t1 == t2`` in a ``.relations`` file likewise (:func:`zero_length`).
+relations that score a perfect 0 and pull the mean down: poses sharing a timestamp with an
+earlier pose are dropped (the first in the file is kept), counted and warned about
+(:func:`first_of_each_time`); relations with ``t1 == t2`` in a ``.relations`` file
+likewise (:func:`zero_length`).
 
 All checks are vectorised (one ``np.maximum.accumulate`` / stable ``argsort`` per input).
 """
