@@ -150,7 +150,7 @@ def score_files(
         relations = _generate(ref_sync, options, key="index")
         scored = est_sync
         ate_pair = _same_times(est_sync, ref_sync)
-    with in_option_words({"strict=True": "--strict"}):
+    with in_option_words({"strict=True": "--strict", "interpolate=True": "--interpolate"}):
         ev = evaluate(
             relations,
             scored,

@@ -194,3 +194,26 @@ def test_exact_estimate_repeats_are_dropped_counted_and_refused_by_strict(
         tmp_path / "ref2.txt", np.insert(t, 5, t[5]), np.insert(poses, 5, poses[6], axis=0)
     )
     _refused(["evaluate", str(ref2), str(est), "--strict"], capsys, f"{ref2}:8:")
+
+
+# ---------------------------------------- 2. both ends of a relation at one estimate pose
+
+
+def test_relations_collapsing_on_one_estimate_pose_are_not_scored_as_zero_motion(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    t, poses = _track(n=41, dt=0.25)
+    ref = _plain(tmp_path / "ref.txt", t, poses)
+    est = _plain(tmp_path / "est.txt", t[::2], poses[::2])  # half the reference rate
+    tol = ["--max-time-diff", "0.3"]
+    result = _evaluate_json([str(ref), str(est), *tol], tmp_path / "a.json")
+    same = result["same_estimate_pose"]
+    # 0.25 s relations, poses 0.5 s apart: the end at an odd time ties between two poses
+    # and takes the earlier; every relation starting at an even time collapses
+    assert same["count"] == 20 and same["unassociated"] == 20 and same["interpolated"] == 0
+    assert result["unassociated"] == 20
+    assert "both ends at one estimate pose" in capsys.readouterr().err
+    assert result["translation"]["abs"]["count"] == 20
+    inter = _evaluate_json([str(ref), str(est), *tol, "--interpolate"], tmp_path / "b.json")
+    assert inter["same_estimate_pose"]["interpolated"] == 20
+    assert inter["unassociated"] == 0 and inter["interpolated"] == 20
