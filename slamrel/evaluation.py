@@ -150,6 +150,8 @@ def score_files(
         relations = _generate(ref_sync, options, key="index")
         scored = est_sync
         ate_pair = _same_times(est_sync, ref_sync)
+    if len(relations) == 0:
+        raise InputError(_why_no_relations(reference, ref_traj, options, notes), path=reference)
     with in_option_words({"strict=True": "--strict", "interpolate=True": "--interpolate"}):
         ev = evaluate(
             relations,
@@ -187,6 +189,23 @@ def score_files(
         result["ate"] = _ate(ate_estimate, ate_reference, options.max_time_diff)
     generated = None if ref_traj is None else (options.strategy or "consecutive")
     return FileEvaluation(ev, ev_estimate, result, relation_set=generated)
+
+
+def _why_no_relations(
+    reference: str, ref_traj: Trajectory | None, options: EvaluateOptions, notes: dict[str, Any]
+) -> str:
+    """Why no relation is left to score (statistics of none would be a NaN table)."""
+    if ref_traj is None:
+        dropped = notes.get("relations_zero_length_dropped", 0)
+        dup = notes.get("relations_duplicates", {}).get("count", 0)
+        why = f"{dropped} zero-length (t1 == t2) and {dup} repeated line(s) were dropped"
+        return f"no relation left to score: {why}; expected at least one relation"
+    strategy = options.strategy or "consecutive"
+    return (
+        f"no relation was selected: --strategy {strategy} generated none from the "
+        f"{len(ref_traj)} reference poses; expected at least one (loosen the strategy's "
+        "options: --delta, --radius, --step, --count, ...)"
+    )
 
 
 def _is_relations_file(path: str, options: EvaluateOptions) -> bool:

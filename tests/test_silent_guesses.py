@@ -217,3 +217,40 @@ def test_relations_collapsing_on_one_estimate_pose_are_not_scored_as_zero_motion
     inter = _evaluate_json([str(ref), str(est), *tol, "--interpolate"], tmp_path / "b.json")
     assert inter["same_estimate_pose"]["interpolated"] == 20
     assert inter["unassociated"] == 0 and inter["interpolated"] == 20
+
+
+# ------------------------------------------------------------- 7. zero selected relations
+
+
+def test_no_selected_relation_is_refused_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    t, poses = _track()
+    ref = _plain(tmp_path / "ref.txt", t, poses)
+    est = _plain(tmp_path / "est.txt", t, poses)
+    outs = ["--json", str(tmp_path / "r.json"), "--evo-zip", str(tmp_path / "r.zip")]
+    _refused(
+        ["evaluate", str(ref), str(est), "--strategy", "loops", "--radius", "1e-9", *outs],
+        capsys,
+        "no relation was selected",
+        "--strategy loops",
+    )
+    zero = tmp_path / "zero.relations"
+    zero.write_text("0.5 0.5 0 0 0 0 0 0\n")
+    _refused(["evaluate", str(zero), str(est), *outs], capsys, "no relation left to score")
+    assert not (tmp_path / "r.json").exists() and not (tmp_path / "r.zip").exists()
+
+
+def test_evo_zip_of_no_scored_relation_is_refused(tmp_path: Path) -> None:
+    from relation_metric.errors import InputError
+    from relation_metric.evaluate import evaluate
+    from relation_metric.relations import RelationSet
+    from relation_metric.trajectory import Trajectory
+    from slamrel.formats.results import write_evo_zip
+
+    ev = evaluate(
+        RelationSet(np.empty(0), np.empty(0), np.empty((0, 3))), Trajectory([0.0], [[0, 0, 0]])
+    )
+    with pytest.raises(InputError, match="no zip written"):
+        write_evo_zip(tmp_path / "e.zip", ev)
+    assert not (tmp_path / "e.zip").exists()
