@@ -254,3 +254,25 @@ def test_evo_zip_of_no_scored_relation_is_refused(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="no zip written"):
         write_evo_zip(tmp_path / "e.zip", ev)
     assert not (tmp_path / "e.zip").exists()
+
+
+# ------------------------------------------------------------- 3. a disconnected pose graph
+
+
+def test_disconnected_pose_graph_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    info = "100 0 0 100 0 100"
+    lines = [f"VERTEX_SE2 {k} {k} 0 0" for k in range(6)]
+    lines += [f"EDGE_SE2 {k} {k + 1} 1 0 0 {info}" for k in (0, 1, 3, 4)]  # 0-1-2 | 3-4-5
+    g = tmp_path / "g.g2o"
+    g.write_text("\n".join(lines) + "\n")
+    for batch in ("0", "2"):
+        _refused(
+            ["solve", str(g), "-o", str(tmp_path / "out"), "--batch", batch],
+            capsys,
+            f"{g}",
+            "2 disconnected parts",
+            "pose #3",
+        )
+    assert not (tmp_path / "out").exists()
