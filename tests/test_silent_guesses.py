@@ -276,3 +276,56 @@ def test_disconnected_pose_graph_is_refused(
             "pose #3",
         )
     assert not (tmp_path / "out").exists()
+
+
+# ------------------------------------------- 10. self-loop edges and bearings out of range
+
+
+@pytest.mark.parametrize(
+    "name,text",
+    [
+        ("g.g2o", "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\n"),
+        ("t.graph", "VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0 0 1 0 1 1 0 0\n"),
+    ],
+)
+def test_self_loop_edges_are_refused_with_their_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, text: str
+) -> None:
+    from slamrel.formats.g2o import read_g2o_graph
+    from slamrel.formats.toro import read_toro_graph
+
+    path = tmp_path / name
+    loop = text.splitlines()[-1].replace(" 0 1 ", " 1 1 ", 1)
+    path.write_text(text + loop + "\n")
+    reader = read_g2o_graph if name.endswith(".g2o") else read_toro_graph
+    from relation_metric.errors import InputError
+
+    with pytest.raises(InputError, match="to itself") as err:
+        reader(path)
+    assert f"{path}:4:" in str(err.value)
+    if name.endswith(".g2o"):
+        _refused(["solve", str(path), "-o", str(tmp_path / "o")], capsys, f"{path}:4:")
+
+
+def test_bearings_outside_pi_are_wrapped_and_counted_or_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import math
+
+    meas = "t,range,bearing,landmark\n0.5,1.5,0.1,1\n1.5,2.0,{b},\n2.5,3.0,0.5,2\n"
+    wrapped = 2 * math.pi - 0.3
+    b = _write(tmp_path / "b", dict(BUNDLE, **{"measurements.csv": meas.format(b=wrapped)}))
+    report = tmp_path / "rep.json"
+    argv = ["recover", str(b), "-o", str(tmp_path / "o.tum"), "--report", str(report), "-q"]
+    assert main(argv) == 0
+    assert json.loads(report.read_text())["wrapped_bearings"] == 1
+    assert "measurements.csv:3: 1 bearing(s) outside [-pi, pi) wrapped" in capsys.readouterr().err
+    from slamrel.formats.bundle import read_bundle
+
+    with pytest.warns(UserWarning):
+        bundle = read_bundle(b)
+    assert bundle.measurements[1, 1] == pytest.approx(-0.3, abs=1e-12)
+    c = _write(tmp_path / "c", dict(BUNDLE, **{"measurements.csv": meas.format(b=45.0)}))
+    _refused(
+        ["recover", str(c), "-o", str(tmp_path / "p.tum")], capsys, "measurements.csv:3:", "degrees"
+    )

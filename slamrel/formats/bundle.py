@@ -482,7 +482,8 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     reordered: dict[str, int] = {}
     log = _read_motion_log(root, meta["motion"], reordered)
     map_fields = _read_map(root)
-    meas = _read_measurements(root, reordered)
+    wrapped: dict[str, int] = {}
+    meas = _read_measurements(root, reordered, wrapped)
     skipped = 0
     if skip_unknown_landmarks:
         unknown = meas["measurement_associated"] & ~np.isin(
@@ -506,6 +507,7 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
         path=str(root),
         reordered=reordered,
         snapped=snapped,
+        wrapped_bearings=wrapped["measurements.csv"],
     )
 
 
@@ -619,16 +621,53 @@ def _read_map(root: Path) -> dict[str, Any]:
     return {"map_ids": table.ids, "map_xy": table.xy, "map_marginals": marg, "map_covariance": cov}
 
 
-def _read_measurements(root: Path, reordered: dict[str, int]) -> dict[str, Any]:
+class BearingWrapWarning(UserWarning):
+    """Bearings outside [−π, π) were wrapped into it (and counted)."""
+
+
+def _wrapped_bearings(b: Array, lines: NDArray[np.int64], path: Path) -> tuple[Array, int]:
+    """Bearings wrapped into ``[−π, π)``; how many were outside; beyond ``[−2π, 2π]`` refused.
+
+    A bearing in ``[π, 2π]`` (a ``[0, 2π)`` convention) or ``[−2π, −π)`` names the same
+    direction: wrapped, counted, warned about. A larger magnitude is no bearing in radians
+    (degrees?) and is refused with its line.
+    """
+    far = np.flatnonzero(~(np.abs(b) <= 2 * math.pi))
+    if far.size:
+        k = int(far[0])
+        raise InputError(
+            f"bearing {float(b[k]):.9g}: expected an angle in radians in [-pi, pi) (values up "
+            "to 2 pi in magnitude are wrapped); is it in degrees?",
+            path=path,
+            line=int(lines[k]),
+        )
+    out = ~((b >= -math.pi) & (b < math.pi))
+    count = int(np.count_nonzero(out))
+    if not count:
+        return b, 0
+    k = int(np.flatnonzero(out)[0])
+    warnings.warn(
+        f"{path}:{int(lines[k])}: {count} bearing(s) outside [-pi, pi) wrapped into it (first "
+        f"{float(b[k]):.9g} rad)",
+        BearingWrapWarning,
+        stacklevel=4,
+    )
+    return np.where(out, np.mod(b + math.pi, 2 * math.pi) - math.pi, b), count
+
+
+def _read_measurements(
+    root: Path, reordered: dict[str, int], wrapped: dict[str, int]
+) -> dict[str, Any]:
     """``measurements.csv`` in time order: the five ``measurement*`` fields of the bundle."""
     p = root / "measurements.csv"
     cols, lines = _read_csv(
         p, required=("t", "range", "bearing", "landmark"), empty_ok=("landmark",)
     )
     cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "measurement")
+    bearing, wrapped[p.name] = _wrapped_bearings(cols["bearing"], lines, p)
     return {
         "measurement_times": cols["t"],
-        "measurements": np.column_stack((cols["range"], cols["bearing"])),
+        "measurements": np.column_stack((cols["range"], bearing)),
         "measurement_landmarks": integer_ids(cols["landmark"], lines, p, "landmark"),
         "measurement_associated": ~np.isnan(cols["landmark"]),
         "measurement_lines": lines,
