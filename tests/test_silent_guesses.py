@@ -329,3 +329,48 @@ def test_bearings_outside_pi_are_wrapped_and_counted_or_refused(
     _refused(
         ["recover", str(c), "-o", str(tmp_path / "p.tum")], capsys, "measurements.csv:3:", "degrees"
     )
+
+
+# --------------------------------------------------- 9. landmark ids read exactly as int64
+
+
+GTSAM_L = ord("l") << 56  # gtsam.symbol('l', 0): far beyond 2**53
+
+
+def test_landmark_ids_beyond_2_53_are_read_exactly(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    ids = [2**53, 2**53 + 1, GTSAM_L + 1, GTSAM_L + 2]
+    xy = [(0, 0), (5, 0), (0, 5), (5, 5)]
+    ref = tmp_path / "ref.csv"
+    est = tmp_path / "est.csv"
+    ref.write_text("landmark,x,y\n" + "".join(f"{i},{x},{y}\n" for i, (x, y) in zip(ids, xy)))
+    est.write_text("landmark,x,y\n" + "".join(f"{i},{x + 0.1},{y}\n" for i, (x, y) in zip(ids, xy)))
+    out = tmp_path / "a.csv"
+    argv = ["map-compare", str(est), str(ref), "--associate", "id", "-q"]
+    assert main([*argv, "--write-association", str(out)]) == 0
+    pairs = [tuple(map(int, ln.split(","))) for ln in out.read_text().splitlines()[3:]]
+    assert sorted(pairs) == sorted((i, i) for i in ids)
+    # the association CSV reads the ids exactly too
+    assert main(["map-compare", str(est), str(ref), "--associate", str(out), "-q"]) == 0
+    bad = tmp_path / "bad.csv"
+    bad.write_text("landmark,x,y\n1,0,0\n2.5,1,1\n")
+    _refused(["map-compare", str(bad), str(ref), "-q"], capsys, f"{bad}:3:", "integer id")
+
+
+def test_bundle_measurement_ids_are_read_exactly(tmp_path: Path) -> None:
+    from slamrel.formats.bundle import read_bundle
+
+    big = 2**53
+    files = dict(BUNDLE)
+    files["map.csv"] = (
+        f"landmark,x,y,cxx,cxy,cyy\n{big},1.5,0.2,0.01,0,0.01\n{big + 1},3,1,0.02,0.001,0.02\n"
+    )
+    files["measurements.csv"] = (
+        f"t,range,bearing,landmark\n0.5,1.5,0.1,{big + 1}\n1.5,2.0,-0.3,\n2.5,3.0,0.5,{big}\n"
+    )
+    files.pop("landmarks_groundtruth.csv")
+    b = read_bundle(_write(tmp_path / "b", files))
+    assert b.measurement_landmarks.tolist() == [big + 1, 0, big]
+    assert b.measurement_associated.tolist() == [True, False, True]
+    assert b.map_ids.tolist() == [big, big + 1]

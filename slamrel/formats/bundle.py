@@ -47,13 +47,13 @@ from recovery.steps import SNAP_TOLERANCE, snap_times
 from relation_metric.arrays import Array, PathLike
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
-from relation_metric.ids import integer_ids
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, check_coordinates
 from slamrel.constants import BUNDLE_FORMAT as FORMAT
 from slamrel.formats.landmark_csv import read_landmark_csv, write_landmark_csv
 from slamrel.formats.text import (
     format_csv_table,
+    read_csv_id_column,
     read_csv_table,
     read_source,
     read_text,
@@ -398,6 +398,23 @@ def _read_csv(
     return read_csv_table(path, required=required, optional=optional, empty_ok=empty_ok)
 
 
+def _read_csv_with_ids(
+    path: Path, *, required: Sequence[str], id_column: str
+) -> tuple[dict[str, Any], NDArray[np.int64]]:
+    """:func:`_read_csv` with ``id_column`` (may be empty) read as exact int64 ids.
+
+    The ids come from the text (:func:`~slamrel.formats.text.read_csv_id_column`), never
+    through float64; ``cols[id_column + "#"]`` says which cells are not empty.
+    """
+    if not path.is_file():
+        raise InputError(f"missing required file; expected columns {','.join(required)}", path=path)
+    src = read_source(path)
+    cols, lines = read_csv_table(path, required=required, empty_ok=(id_column,), source=src)
+    ids, present = read_csv_id_column(src, id_column, lines, empty_ok=True)
+    out: dict[str, Any] = {**cols, id_column: ids, id_column + "#": present}
+    return out, lines
+
+
 def _time_ordered(
     cols: dict[str, Array], lines: NDArray[np.int64], path: Path, what: str
 ) -> tuple[dict[str, Array], NDArray[np.int64], int]:
@@ -660,16 +677,16 @@ def _read_measurements(
 ) -> dict[str, Any]:
     """``measurements.csv`` in time order: the five ``measurement*`` fields of the bundle."""
     p = root / "measurements.csv"
-    cols, lines = _read_csv(
-        p, required=("t", "range", "bearing", "landmark"), empty_ok=("landmark",)
+    cols, lines = _read_csv_with_ids(
+        p, required=("t", "range", "bearing", "landmark"), id_column="landmark"
     )
     cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "measurement")
     bearing, wrapped[p.name] = _wrapped_bearings(cols["bearing"], lines, p)
     return {
         "measurement_times": cols["t"],
         "measurements": np.column_stack((cols["range"], bearing)),
-        "measurement_landmarks": integer_ids(cols["landmark"], lines, p, "landmark"),
-        "measurement_associated": ~np.isnan(cols["landmark"]),
+        "measurement_landmarks": cols["landmark"].astype(np.int64),
+        "measurement_associated": cols["landmark#"].astype(bool),
         "measurement_lines": lines,
     }
 
