@@ -374,3 +374,14 @@ def test_bundle_measurement_ids_are_read_exactly(tmp_path: Path) -> None:
     assert b.measurement_landmarks.tolist() == [big + 1, 0, big]
     assert b.measurement_associated.tolist() == [True, False, True]
     assert b.map_ids.tolist() == [big, big + 1]
+
+
+def test_float_path_ids_at_2_53_are_refused_not_rounded(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # g2o records are held as float64: 2**53 + 1 would silently become 2**53
+    g = tmp_path / "m.g2o"
+    g.write_text(f"VERTEX_XY 1 0 0\nVERTEX_XY {2**53 + 1} 1 1\n")
+    ref = tmp_path / "ref.csv"
+    ref.write_text("landmark,x,y\n1,0,0\n2,1,1\n")
+    _refused(["map-compare", str(g), str(ref), "-q"], capsys, f"{g}:2:", "below 2**53")
