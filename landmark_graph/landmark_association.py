@@ -19,7 +19,6 @@ problem for ``p = 1``.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -271,38 +270,43 @@ def _apply(al: Alignment, xy: NDArray[np.float64]) -> NDArray[np.float64]:
     return al.apply(np.column_stack((xy, np.zeros(xy.shape[0]))))[:, :2]
 
 
-def _optimal_cost(
+def _optimal_terms(
     x: NDArray[np.float64], y: NDArray[np.float64], c: float, p: float
-) -> tuple[float, int, int]:
-    """``min_π Σ min(d, c)^p`` with ``|x| = m ≤ n = |y|``, and ``m``, ``n``."""
+) -> tuple[NDArray[np.float64], int, int]:
+    """``p · log(min(d, c)/c)`` of the pairs of the optimal assignment, and ``m ≤ n``.
+
+    The distances are scaled by the cut-off, ``u = min(d, c)/c ∈ [0, 1]``: the assignment
+    minimises ``Σ (u/u_max)^p`` (``u_max`` the largest ``u`` of the matrix; the order of the
+    costs is that of ``Σ min(d, c)^p``, the factor ``(c u_max)^p`` is common), and the sums of
+    OSPA/GOSPA are formed from the logarithms (:func:`_log_sum_exp`). So a large order ``p``
+    does not underflow ``u^p`` to 0 and report two different maps as equal.
+    """
     if not (np.isfinite(c) and c > 0):
         raise InputError(f"the OSPA/GOSPA cut-off c must be a positive number, got {c}")
     if not (np.isfinite(p) and p >= 1):
         raise InputError(f"the OSPA/GOSPA order p must be a number ≥ 1, got {p}")
-    try:
-        cp = float(c) ** float(p)
-    except OverflowError:
-        cp = math.inf
-    if not math.isfinite(cp):
-        raise InputError(f"the OSPA/GOSPA cut-off to the order, c^p = {c:g}^{p:g}, leaves float64")
     if x.shape[0] > y.shape[0]:
         x, y = y, x
     m, n = x.shape[0], y.shape[0]
     if m == 0:
-        return 0.0, m, n
-    if m * n <= DENSE_ASSIGNMENT_PAIRS:
-        d = np.hypot(x[:, None, 0] - y[None, :, 0], x[:, None, 1] - y[None, :, 1])
-        w = np.minimum(d, c) ** p
-        r, s = linear_sum_assignment(w)
-        return float(w[r, s].sum()), m, n
-    # large sets: only pairs closer than c can cost less than c^p (see _within_cutoff_cost)
-    return _within_cutoff_cost(x, y, c, p), m, n
+        return np.empty(0), m, n
+    if m * n > DENSE_ASSIGNMENT_PAIRS:
+        # large sets: only pairs closer than c can cost less than c^p (_within_cutoff_terms)
+        return _within_cutoff_terms(x, y, c, p), m, n
+    d = np.hypot(x[:, None, 0] - y[None, :, 0], x[:, None, 1] - y[None, :, 1])
+    u = np.minimum(d, c) / c
+    top = float(u.max())
+    if top == 0.0:
+        return np.full(m, -np.inf), m, n
+    r, s = linear_sum_assignment((u / top) ** p)
+    with np.errstate(divide="ignore"):
+        return p * np.log(u[r, s]), m, n
 
 
-def _within_cutoff_cost(
+def _within_cutoff_terms(
     x: NDArray[np.float64], y: NDArray[np.float64], c: float, p: float
-) -> float:
-    """``min_π Σ min(d, c)^p`` (``|x| ≤ |y|``) from the pairs closer than ``c`` alone.
+) -> NDArray[np.float64]:
+    """The terms of :func:`_optimal_terms` (``|x| ≤ |y|``) from the pairs closer than ``c``.
 
     A full assignment's pairs at ``d ≥ c`` cost ``c^p`` each, as an unassigned ``x`` would;
     and a partial matching on pairs closer than ``c`` completes (``|x| ≤ |y|``) to a full
@@ -310,25 +314,45 @@ def _within_cutoff_cost(
     partial matching on the within-``c`` pairs with ``d^p`` per pair and ``c^p`` per
     unmatched ``x`` (an unmatched ``y`` costs nothing): a sparse problem of ``O(m + n +
     pairs)`` memory, solved as the full matching of the square augmentation of
-    :func:`_sparse_assignment` by ``min_weight_full_bipartite_matching``.
+    :func:`_sparse_assignment` by ``min_weight_full_bipartite_matching``. Each unmatched
+    ``x`` gives the term 0 (``u = 1``).
     """
-    er, rr, d = _sparse_matching(x, y, c, power=p, cost_x=c**p, cost_y=0.0)
-    return float((d**p).sum() + c**p * (x.shape[0] - er.size))
+    # in units of c: the costs u^p ≤ 1 and 1 per unmatched x cannot overflow for any p
+    er, rr, u = _sparse_matching(x / c, y / c, 1.0, power=p, cost_x=1.0, cost_y=0.0)
+    with np.errstate(divide="ignore"):
+        matched = p * np.log(np.minimum(u, 1.0))
+    return np.concatenate((matched, np.zeros(x.shape[0] - er.size)))
+
+
+def _log_sum_exp(terms: NDArray[np.float64]) -> float:
+    """``log Σ exp(terms)`` without overflow or underflow (−inf for no or only −inf terms)."""
+    if terms.size == 0:
+        return -np.inf
+    top = float(terms.max())
+    if not np.isfinite(top):
+        return top
+    return top + float(np.log(np.exp(terms - top).sum()))
 
 
 def ospa(x: ArrayLike, y: ArrayLike, *, c: float, p: float = 2.0) -> float:
-    """OSPA distance of two point sets (see the module docstring)."""
-    total, m, n = _optimal_cost(
+    """OSPA distance of two point sets (see the module docstring).
+
+    Computed as ``c · ((1/n) Σ u^p)^(1/p)`` with ``u = min(d, c)/c`` (1 for each unmatched
+    point) in logarithms: exact for any order ``p``, no underflow to 0.
+    """
+    terms, m, n = _optimal_terms(
         np.asarray(x, float).reshape(-1, 2), np.asarray(y, float).reshape(-1, 2), c, p
     )
     if n == 0:
         return 0.0
-    return float(((total + c**p * (n - m)) / n) ** (1.0 / p))
+    log_sum = _log_sum_exp(np.concatenate((terms, np.zeros(n - m))))
+    return float(c * np.exp((log_sum - np.log(n)) / p))
 
 
 def gospa(x: ArrayLike, y: ArrayLike, *, c: float, p: float = 2.0) -> float:
-    """GOSPA distance with α = 2 (see the module docstring)."""
-    total, m, n = _optimal_cost(
+    """GOSPA distance with α = 2 (see the module docstring), in logarithms as :func:`ospa`."""
+    terms, m, n = _optimal_terms(
         np.asarray(x, float).reshape(-1, 2), np.asarray(y, float).reshape(-1, 2), c, p
     )
-    return float((total + c**p / 2.0 * (n - m)) ** (1.0 / p))
+    log_sum = _log_sum_exp(np.concatenate((terms, np.full(n - m, -np.log(2.0)))))
+    return float(c * np.exp(log_sum / p))

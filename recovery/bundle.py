@@ -71,6 +71,9 @@ class Bundle:
         (or odometry) time without being equal to it and was set to that time by the reader
         (float noise in the files; otherwise the recovery grid gets a second, almost
         coincident pose).
+    wrapped_bearings : int
+        Measurements whose bearing lay outside ``[−π, π)`` (within ``2π`` in magnitude) and
+        was wrapped into it by the reader (counted, warned about).
 
     Raises
     ------
@@ -108,6 +111,7 @@ class Bundle:
     path: str | None = None
     reordered: Mapping[str, int] = field(default_factory=dict)
     snapped: int = 0
+    wrapped_bearings: int = 0
 
     def __post_init__(self) -> None:
         ro = object.__setattr__

@@ -19,7 +19,7 @@ from relation_metric.groups import SE3
 from relation_metric.metric import Mode, RelationErrors, relation_errors
 from relation_metric.relations import RelationSet
 from relation_metric.stats import Summary, summarize_with_squares
-from relation_metric.time_association import REASONS, Association, associate
+from relation_metric.time_association import REASONS, SAME_POSE, Association, associate
 from relation_metric.trajectory import Trajectory
 
 __all__ = [
@@ -81,6 +81,7 @@ class Evaluation:
             "associated_by_odometry": int(self.association.via_odometry.sum()),
             "interpolated": int(self.association.interpolated.sum()),
             "unassociated": int((~self.valid).sum()),
+            "same_estimate_pose": self._same_pose_dict(),
             "rotation_unit": "deg" if degrees else "rad",
             "mode": self.errors.mode,
             "weights": list(self.errors.weights),
@@ -88,6 +89,20 @@ class Evaluation:
             "rotation": {k: v.as_dict() for k, v in rot.items()},
             "combined": {k: v.as_dict() for k, v in self.combined.items()},
             "epsilon": _json_float(self.epsilon),
+        }
+
+    def _same_pose_dict(self) -> dict[str, Any]:
+        """Relations whose two times found one estimate pose, and what was done with them."""
+        a = self.association
+        same = a.same_pose if a.same_pose is not None else np.zeros(len(self.relations), bool)
+        interpolated = int(np.count_nonzero(same & a.valid))
+        count = int(np.count_nonzero(same))
+        return {
+            "count": count,
+            "interpolated": interpolated,
+            "unassociated": count - interpolated,
+            "rule": "both ends interpolated (interpolate=True) where the poses around them allow, "
+            "otherwise unassociated; never scored as zero motion",
         }
 
 
@@ -184,11 +199,14 @@ def evaluate(
         When no relation can be associated (the message shows both time spans), or with
         ``strict`` when any cannot.
     InputError
-        When the errors overflow float64 (coordinates near 1e150 and beyond): such poses
+        When the estimate has two different poses for one timestamp (relations by time);
+        when the errors overflow float64 (coordinates near 1e150 and beyond): such poses
         cannot be scored, and statistics of ``inf`` would be no score either.
     """
     of_relations = f" of {relations_name}" if relations_name else ""
     relations, estimate = on_common_group(relations, estimate, mode=mode)
+    if relations.key == "time":
+        _refuse_two_poses_at_one_time(estimate, estimate_name)
     with np.errstate(over="ignore", invalid="ignore"):
         assoc = associate(
             relations,
@@ -207,8 +225,7 @@ def evaluate(
         raise AssociationError(
             f"none of the {len(relations)} relations{of_relations} can be associated with the "
             f"estimate: the relations span {r0:.6f} .. {r1:.6f} {unit}, the estimate "
-            f"{e0:.6f} .. {e1:.6f} s ({len(estimate)} poses); are they in the same time "
-            "base?",
+            f"{e0:.6f} .. {e1:.6f} s ({len(estimate)} poses); " + _why_none(assoc),
             path=estimate_name,
         )
     if n_bad:
@@ -238,6 +255,20 @@ def evaluate(
         rotation=error_summaries(scored(errors.rotation)),
         combined=error_summaries(scored(errors.combined)),
     )
+
+
+def _refuse_two_poses_at_one_time(estimate: Trajectory, name: str | None) -> None:
+    """Two different estimate poses for one timestamp: the association would pick one."""
+    from relation_metric.timeorder import repeated_times
+
+    _, rep = repeated_times(estimate.timestamps, estimate.poses)
+    if rep.differing:
+        raise InputError(
+            f"the estimate has {rep.differing} timestamp(s) with two different poses (first "
+            f"at t = {rep.time:.9g} s); expected one pose per timestamp (the nearest-time "
+            "association would take whichever comes first)",
+            path=name,
+        )
 
 
 def on_common_group(
@@ -280,6 +311,18 @@ def _check_representable(
                 "are the coordinates in metres?",
                 path=name,
             )
+
+
+def _why_none(assoc: Association) -> str:
+    """The reasons no relation could be associated, most frequent first."""
+    codes, counts = np.unique(assoc.reason, return_counts=True)
+    parts = [f"{n} {REASONS[int(c)]}" for c, n in sorted(zip(codes, counts), key=lambda x: -x[1])]
+    hint = ""
+    if (assoc.reason == SAME_POSE).all():
+        hint = "; pass interpolate=True to score them between the estimate's poses"
+    elif not (assoc.reason == SAME_POSE).any():
+        hint = "; are they in the same time base?"
+    return "reasons: " + ", ".join(parts) + hint
 
 
 def _describe_unassociated(

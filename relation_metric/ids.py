@@ -20,7 +20,7 @@ from relation_metric.errors import InputError
 
 __all__ = ["integer_ids", "rows_of", "first_missing", "first_repeat"]
 
-_MAX_EXACT_ID = 2.0**53  # beyond it a double no longer holds every integer
+_MAX_EXACT_ID = 2.0**53  # from it on a double no longer holds every integer (2**53 + 1 rounds)
 
 
 def integer_ids(
@@ -52,12 +52,19 @@ def integer_ids(
         return raw.astype(np.int64)
     v = raw.astype(np.float64)
     finite = np.isfinite(v)
-    bad = np.flatnonzero(finite & ((v != np.round(v)) | (np.abs(v) > _MAX_EXACT_ID)))
+    bad = np.flatnonzero(finite & ((v != np.round(v)) | (np.abs(v) >= _MAX_EXACT_ID)))
     if bad.size:
         k = int(bad[0])
         line = None if lines is None else int(lines(k) if callable(lines) else lines[k])
+        beyond = ""
+        if v[k] == np.round(v[k]):
+            # 2**53 itself may be 2**53 + 1 rounded: refuse it rather than change an id
+            beyond = (
+                " below 2**53 in magnitude (this reader holds ids as float64, which rounds "
+                "larger ones: 2**53 + 1 would become 2**53)"
+            )
         raise InputError(
-            f"column '{column}': expected an integer id, got {float(v[k]):.17g}",
+            f"column '{column}': expected an integer id{beyond}, got {float(v[k]):.17g}",
             path=path,
             line=line,
         )

@@ -13,6 +13,13 @@ For a timestamp ``t`` the estimate pose is found as the Freiburg metricEvaluator
    ``x_k ∘ (o(t_k)⁻¹ ∘ o(t))``;
 4. otherwise the endpoint is unassociated, and so is its relation: it is counted, named
    and left out of the statistics — never silently dropped.
+
+A relation whose two (different) times both find the *same* estimate pose (an estimate at
+half the reference rate: both ends of a 0.1 s relation nearest to one pose) would be scored
+as zero motion. Such relations are counted (``Association.same_pose``): with
+``interpolate=True`` both ends are interpolated on the estimate's group (when the poses around
+each lie within ``max_interpolation_gap``); otherwise, or when they cannot be, the relation
+is unassociated with the reason ``SAME_POSE``.
 """
 
 from __future__ import annotations
@@ -38,12 +45,13 @@ __all__ = [
 ]
 
 # Why an endpoint could not be associated (codes of Association.reason).
-OK, OUTSIDE_SPAN, TOO_FAR, BAD_INDEX = 0, 1, 2, 3
+OK, OUTSIDE_SPAN, TOO_FAR, BAD_INDEX, SAME_POSE = 0, 1, 2, 3, 4
 REASONS = {
     OK: "associated",
     OUTSIDE_SPAN: "outside the estimate's time span",
     TOO_FAR: "no estimate pose within the time tolerance",
     BAD_INDEX: "pose index out of range",
+    SAME_POSE: "both ends at one estimate pose (the estimate is sparser than the relations)",
 }
 
 
@@ -65,6 +73,10 @@ class Association:
         At least one end was interpolated.
     reason : ndarray of int8, shape (M,)
         0 when valid, otherwise a key of :data:`REASONS` (the first failing end's).
+    same_pose : ndarray of bool, shape (M,), optional
+        Relations whose two different times found one nearest estimate pose: interpolated
+        (``interpolated``) or unassociated (reason ``SAME_POSE``). ``None``: none possible
+        (relations by index).
     """
 
     pose_first: NDArray[np.float64]
@@ -75,6 +87,7 @@ class Association:
     via_odometry: NDArray[np.bool_]
     interpolated: NDArray[np.bool_]
     reason: NDArray[np.int8]
+    same_pose: NDArray[np.bool_] | None = None
 
     @property
     def estimated_delta(self) -> NDArray[np.float64]:
@@ -265,6 +278,12 @@ def associate(
         poses, idx, reason, odo, interp = _associate_times(
             ends_t, estimate, odometry, max_time_diff, interpolate, max_interpolation_gap
         )
+    same = None
+    if relations.key == "time" and len(estimate):
+        same = _separate_same_pose(
+            relations, estimate, poses, idx, reason, odo, interp, interpolate,
+            max_interpolation_gap,
+        )  # fmt: skip
     r1, r2 = reason[:m], reason[m:]
     valid = (r1 == OK) & (r2 == OK)
     return Association(
@@ -276,7 +295,57 @@ def associate(
         via_odometry=(odo[:m] | odo[m:]) & valid,
         interpolated=(interp[:m] | interp[m:]) & valid,
         reason=np.where(r1 != OK, r1, r2).astype(np.int8),
+        same_pose=same,
     )
+
+
+def _separate_same_pose(
+    relations: RelationSet,
+    estimate: Trajectory,
+    poses: NDArray[np.float64],
+    idx: NDArray[np.int64],
+    reason: NDArray[np.int8],
+    odo: NDArray[np.bool_],
+    interp: NDArray[np.bool_],
+    interpolate: bool,
+    max_gap: float,
+) -> NDArray[np.bool_]:
+    """Relations whose two different times took one estimate pose: interpolated or refused.
+
+    Works in place on the per-end arrays (length 2M, first ends then second ends); returns
+    the mask (M,) of such relations.
+    """
+    m = len(relations)
+    own = odo | interp  # an end with a pose of its own time
+    same = (
+        (idx[:m] == idx[m:])
+        & (idx[:m] >= 0)
+        & (reason[:m] == OK)
+        & (reason[m:] == OK)
+        & ~own[:m]
+        & ~own[m:]
+        & (relations.first != relations.second)
+    )
+    if not same.any():
+        return same
+    rows = np.flatnonzero(same)
+    ends = np.concatenate((rows, rows + m))
+    t = estimate.timestamps
+    if interpolate and t.size > 1:
+        query = np.concatenate((relations.first[rows], relations.second[rows]))
+        a, s = estimate.bracket(query)
+        span = t[a + 1] - t[a]
+        ok = (query >= t[0]) & (query <= t[-1]) & (span <= max_gap) & (span > 0)
+        pair = ok[: rows.size] & ok[rows.size :]
+        both = np.concatenate((pair, pair))
+        if both.any():
+            p = estimate.poses
+            poses[ends[both]] = estimate.group.interpolate(p[a[both]], p[a[both] + 1], s[both])
+            interp[ends[both]] = True
+        ends = ends[~both]
+    poses[ends] = np.nan
+    reason[ends] = SAME_POSE
+    return same
 
 
 def _all_indices_in_range(relations: RelationSet, n: int) -> bool:

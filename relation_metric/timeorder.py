@@ -16,10 +16,15 @@ scored against; MRCLAM ``.dat`` files) are a *sequence*: a step back of at most
 broken log and raises :class:`~relation_metric.errors.InputError` with the file, the line
 and both times.
 
-**Repeated times** in a *reference* trajectory would give zero-length relations that score a
-perfect 0 and pull the mean down: poses sharing a timestamp with an earlier pose are dropped
-(the first in the file is kept), counted and warned about (:func:`first_of_each_time`);
-relations with ``t1 == t2`` in a ``.relations`` file likewise (:func:`zero_length`).
+**Repeated times** in an *estimate* (or odometry) make the pose of that time a guess (the
+nearest-time search took the first, so the score depended on the row order): two poses at one
+time that differ are refused with both lines; exact repeats are dropped and counted
+(:func:`repeated_times`, ``slamrel evaluate``'s ``estimate_repeated_times``); ``--strict``
+refuses either. **Repeated times** in a *reference* trajectory would give zero-length
+relations that score a perfect 0 and pull the mean down: poses sharing a timestamp with an
+earlier pose are dropped (the first in the file is kept), counted and warned about
+(:func:`first_of_each_time`); relations with ``t1 == t2`` in a ``.relations`` file
+likewise (:func:`zero_length`).
 
 All checks are vectorised (one ``np.maximum.accumulate`` / stable ``argsort`` per input).
 """
@@ -46,6 +51,8 @@ __all__ = [
     "check_in_order",
     "first_of_each_time",
     "zero_length",
+    "RepeatedTimes",
+    "repeated_times",
 ]
 
 FILTER_TIME_TOLERANCE = 0.05
@@ -229,3 +236,59 @@ def first_of_each_time(t: ArrayLike) -> NDArray[np.bool_]:
 def zero_length(first: ArrayLike, second: ArrayLike) -> NDArray[np.bool_]:
     """Mask of relations whose two ends carry the same time (``t1 == t2``), shape (M,)."""
     return np.asarray(first, dtype=np.float64) == np.asarray(second, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class RepeatedTimes:
+    """Rows of a time-ordered input whose time equals the previous row's.
+
+    Attributes
+    ----------
+    count : int
+        Rows repeating an earlier row's time.
+    differing : int
+        Of those, rows whose values differ from the previous row's (two poses for one time).
+    first_line : int or None
+        File line of the first repeating row (a differing one when there is one).
+    earlier_line : int or None
+        File line of the row it repeats.
+    time : float
+        Its time (NaN when there is none).
+    """
+
+    count: int = 0
+    differing: int = 0
+    first_line: int | None = None
+    earlier_line: int | None = None
+    time: float = float("nan")
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``{"count", "differing", "first_line"}``."""
+        return {"count": self.count, "differing": self.differing, "first_line": self.first_line}
+
+
+def repeated_times(
+    t: ArrayLike, values: ArrayLike, lines: Lines = None
+) -> tuple[NDArray[np.bool_], RepeatedTimes]:
+    """Rows that repeat the previous row's time, in time-ordered ``t`` (shape (N,)).
+
+    ``values`` (shape (N, K)) are compared with the previous row's to tell exact repeats from
+    two different rows for one time; ``lines`` gives the file line of (time-ordered) row
+    ``k``. Returns the mask of repeating rows (the first of each time is not one) and the
+    :class:`RepeatedTimes` report.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    v = np.asarray(values, dtype=np.float64).reshape(t.shape[0], -1)
+    repeat = np.zeros(t.shape[0], dtype=bool)
+    if t.shape[0] < 2:
+        return repeat, RepeatedTimes()
+    repeat[1:] = t[1:] == t[:-1]
+    if not repeat.any():
+        return repeat, RepeatedTimes()
+    differ = np.zeros_like(repeat)
+    differ[1:] = repeat[1:] & (v[1:] != v[:-1]).any(axis=1)
+    where = np.flatnonzero(differ if differ.any() else repeat)
+    k = int(where[0])
+    return repeat, RepeatedTimes(
+        int(repeat.sum()), int(differ.sum()), _line(lines, k), _line(lines, k - 1), float(t[k])
+    )

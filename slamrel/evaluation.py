@@ -40,6 +40,7 @@ from slamrel.formats.trajectories import (
     PlanarProjectionWarning,
     read_trajectory,
     sniff_trajectory_format,
+    without_exact_repeats,
     without_repeated_times,
 )
 
@@ -135,6 +136,7 @@ def score_files(
     _refuse_if_strict(options, loaded, estimate)
     _note_projection(notes, "estimate", loaded)
     notes["estimate_out_of_order"] = loaded.time_order.as_dict()
+    notes["estimate_repeated_times"] = loaded.repeated.as_dict()
     odometry = _load_odometry(options, skip, notes) if options.odometry else None
     scored = loaded.trajectory
     ate_pair = (loaded.trajectory, ref_traj)
@@ -149,7 +151,9 @@ def score_files(
         relations = _generate(ref_sync, options, key="index")
         scored = est_sync
         ate_pair = _same_times(est_sync, ref_sync)
-    with in_option_words({"strict=True": "--strict"}):
+    if len(relations) == 0:
+        raise InputError(_why_no_relations(reference, ref_traj, options, notes), path=reference)
+    with in_option_words({"strict=True": "--strict", "interpolate=True": "--interpolate"}):
         ev = evaluate(
             relations,
             scored,
@@ -187,6 +191,23 @@ def score_files(
         result["ate"] = _ate(ate_estimate, ate_reference, options.max_time_diff)
     generated = None if ref_traj is None else (options.strategy or "consecutive")
     return FileEvaluation(ev, ev_estimate, result, relation_set=generated)
+
+
+def _why_no_relations(
+    reference: str, ref_traj: Trajectory | None, options: EvaluateOptions, notes: dict[str, Any]
+) -> str:
+    """Why no relation is left to score (statistics of none would be a NaN table)."""
+    if ref_traj is None:
+        dropped = notes.get("relations_zero_length_dropped", 0)
+        dup = notes.get("relations_duplicates", {}).get("count", 0)
+        why = f"{dropped} zero-length (t1 == t2) and {dup} repeated line(s) were dropped"
+        return f"no relation left to score: {why}; expected at least one relation"
+    strategy = options.strategy or "consecutive"
+    return (
+        f"no relation was selected: --strategy {strategy} generated none from the "
+        f"{len(ref_traj)} reference poses; expected at least one (loosen the strategy's "
+        "options: --delta, --radius, --step, --count, ...)"
+    )
 
 
 def _is_relations_file(path: str, options: EvaluateOptions) -> bool:
@@ -286,7 +307,9 @@ def load_reference(
 
     notes = {} if notes is None else notes
     if _is_relations_file(reference, options):
-        relations = read_relations(reference)
+        report: dict[str, Any] = {}
+        relations = read_relations(reference, report=report)
+        relations = _without_duplicates(relations, report, reference, options, notes)
         zero = zero_length(relations.first, relations.second)
         dropped = int(np.count_nonzero(zero))
         notes["relations_zero_length_dropped"] = dropped
@@ -331,6 +354,48 @@ def load_reference(
     return _generate(loaded.trajectory, options), loaded.trajectory
 
 
+class DuplicateRelationWarning(RepeatedTimeWarning):
+    """Lines of a .relations file that repeat an earlier line exactly (counted)."""
+
+
+def _without_duplicates(
+    relations: RelationSet,
+    report: dict[str, Any],
+    reference: str,
+    options: EvaluateOptions,
+    notes: dict[str, Any],
+) -> RelationSet:
+    """Relations without the lines that repeat an earlier line (kept in metricevaluator mode).
+
+    A repeated line is one measurement written twice; scored twice it weighs double. The
+    repeats are dropped, counted (``relations_duplicates``) and warned about; the
+    metricevaluator mode keeps them (the C++ tool scores every line) and says so.
+    """
+    repeat = report["duplicates"]
+    count = int(np.count_nonzero(repeat))
+    keep = options.mode == "metricevaluator"
+    lines = report["duplicate_lines"]
+    notes["relations_duplicates"] = {
+        "count": count,
+        "dropped": bool(count and not keep),
+        "first_line": None if lines is None else lines[1],
+    }
+    if not count:
+        return relations
+    what = (
+        "kept and scored twice, as the metricEvaluator does (--mode metricevaluator)"
+        if keep
+        else "dropped (a measurement written twice would weigh double)"
+    )
+    warnings.warn(
+        f"{reference}: {count} relation line(s) repeat an earlier line exactly (first line "
+        f"{lines[1]}, a repeat of line {lines[0]}); {what}",
+        DuplicateRelationWarning,
+        stacklevel=3,
+    )
+    return relations if keep else relations.subset(~repeat)
+
+
 def _generate(
     reference: Trajectory, options: EvaluateOptions, *, key: Literal["time", "index"] = "time"
 ) -> RelationSet:
@@ -358,7 +423,19 @@ def _note_projection(notes: dict[str, Any], role: str, loaded: LoadedTrajectory)
 
 
 def _refuse_if_strict(options: EvaluateOptions, loaded: LoadedTrajectory, path: str) -> None:
-    """``--strict``: a trajectory that was not in time order is an error (file:line)."""
+    """``--strict``: a trajectory not in time order, or with a timestamp repeated, is an
+    error (file:line)."""
+    rep = loaded.repeated
+    if options.strict and rep.count:
+        raise InputError(
+            f"{rep.count} pose(s) repeat the timestamp of the pose before them "
+            f"(t = {rep.time:.9g} s, line {rep.earlier_line} and this one); --strict refuses "
+            "repeated timestamps (without --strict exact repeats are dropped and counted, an "
+            "estimate with two different poses for one time is refused, a reference keeps the "
+            "first)",
+            path=path,
+            line=rep.first_line,
+        )
     if options.strict and loaded.out_of_order:
         raise InputError(
             f"{loaded.time_order.describe('pose')}; --strict refuses a trajectory that is not "
@@ -395,6 +472,7 @@ def _load_odometry(options: EvaluateOptions, skip: bool, notes: dict[str, Any]) 
     )
     _refuse_if_strict(options, loaded, options.odometry)
     notes["odometry_out_of_order"] = loaded.time_order.as_dict()
+    notes["odometry_repeated_times"] = loaded.repeated.as_dict()
     return loaded.trajectory
 
 
@@ -468,7 +546,9 @@ def load_trajectory(
       filter-log time rule, as ``recover`` reads it); poses that repeat an earlier pose's
       timestamp are dropped, counted and warned about (:func:`without_repeated_times`).
     - ``"estimate"`` / ``"odometry"``: a bundle directory is refused (a bundle holds no
-      estimated trajectory; its ground truth would be scored against itself).
+      estimated trajectory; its ground truth would be scored against itself); two different
+      poses for one timestamp are refused naming both lines, exact repeats dropped and
+      counted (:func:`without_exact_repeats`).
 
     Poses out of time order are sorted and counted (``LoadedTrajectory.time_order``).
     3-D formats (TUM, KITTI, EuRoC) are read as SE(3) when their motion leaves the plane;
@@ -514,4 +594,6 @@ def load_trajectory(
         )
     if role == "reference":
         loaded = without_repeated_times(loaded, path)
+    else:
+        loaded = without_exact_repeats(loaded, path, what=role)
     return loaded

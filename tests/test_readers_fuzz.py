@@ -495,3 +495,52 @@ CASES = [(name, target) for name, r in sorted(READERS.items()) for target in r.m
 @given(data=st.data())
 def test_mutated_input_gives_a_result_or_one_input_error(name, target, data):
     _fuzz(name, target, data)
+
+
+# ------------------------------------------------ duplicated timestamps on the estimate side
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    repeats=st.lists(st.tuples(st.integers(0, 7), st.booleans()), min_size=1, max_size=4),
+    seed=st.integers(0, 2**16),
+)
+def test_estimate_with_repeated_timestamps_scores_the_clean_estimate_or_is_refused(
+    repeats: list[tuple[int, bool]], seed: int
+) -> None:
+    """Rows repeated (exactly or with another pose) and shuffled: the score is that of the
+    clean estimate whatever the row order, or one InputError naming the file and a line."""
+    from slamrel.evaluation import evaluate_files
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(8) * 0.5
+    poses = np.column_stack((t, 0.1 * t**2, 0.2 * t))
+    rows = np.column_stack((t, poses))
+    extra = []
+    for k, differ in repeats:
+        row = rows[k].copy()
+        if differ:
+            row[1 + int(rng.integers(0, 3))] += 0.25
+        extra.append(row)
+    noisy = rows + np.column_stack((np.zeros(8), 0.01 * rng.standard_normal((8, 3))))
+    table = np.vstack(
+        (noisy, [r + (noisy[int(r[0] / 0.5)] - rows[int(r[0] / 0.5)]) for r in extra])
+    )
+    table = table[rng.permutation(table.shape[0])]
+    folder = Path(tempfile.mkdtemp(dir=_SCRATCH))
+    ref = folder / "ref.txt"
+    ref.write_text("".join(" ".join(f"{v:.17g}" for v in r) + "\n" for r in rows))
+    clean, est = folder / "clean.txt", folder / "est.txt"
+    clean.write_text("".join(" ".join(f"{v:.17g}" for v in r) + "\n" for r in noisy))
+    est.write_text("".join(" ".join(f"{v:.17g}" for v in r) + "\n" for r in table))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        expected = evaluate_files(ref, clean).translation["abs"].mean
+        if any(differ for _, differ in repeats):
+            with pytest.raises(InputError) as err:
+                evaluate_files(ref, est)
+            assert f"{est}:" in str(err.value) and "two different estimate poses" in str(err.value)
+        else:
+            assert evaluate_files(ref, est).translation["abs"].mean == expected
+            with pytest.raises(InputError, match="--strict|strict"):
+                evaluate_files(ref, est, strict=True)

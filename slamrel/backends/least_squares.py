@@ -441,6 +441,47 @@ class _NormalEquations:
         return self.cholesky.solve(rhs)[self.perm]
 
 
+def check_connected(graph: PoseGraph) -> None:
+    """Refuse a graph whose poses and landmarks are not one connected component.
+
+    The gauge prior holds pose 0 only: a component without it has no prior, its placement
+    is whatever the damping leaves (a silent wrong number). The components are found with
+    :func:`scipy.sparse.csgraph.connected_components` over poses and landmarks joined by
+    the pose–pose and pose–landmark factors.
+
+    Raises
+    ------
+    InputError
+        Naming how many components there are, their sizes and a pose (or landmark) of
+        the first that does not hold pose 0.
+    """
+    from scipy.sparse.csgraph import connected_components
+
+    n, m = graph.n_poses, graph.n_landmarks
+    if n + m <= 1:
+        return
+    a = np.concatenate((graph.pp_i, graph.pl_k))
+    b = np.concatenate((graph.pp_j, n + graph.pl_l))
+    adj = sp.coo_matrix((np.ones(a.size), (a, b)), shape=(n + m, n + m))
+    count, label = connected_components(adj, directed=False)
+    if count == 1:
+        return
+    sizes = np.bincount(label)
+    other = np.flatnonzero(label != label[0])
+    k = int(other[0])
+    node = f"pose #{k}" if k < n else f"landmark #{k - n}"
+    poses_out = int(np.count_nonzero(label[:n] != label[0]))
+    lms_out = int(np.count_nonzero(label[n:] != label[0]))
+    raise InputError(
+        f"the graph falls into {count} disconnected parts (sizes "
+        f"{', '.join(str(int(x)) for x in sizes[:6])}{' ...' if count > 6 else ''}); "
+        f"{poses_out} pose(s) and {lms_out} landmark(s), e.g. {node} (0-based, in file order), "
+        "share no factor with pose 0, which holds the gauge: their placement would be the "
+        "damping's guess. Expected one connected graph (add the missing edges, or solve each "
+        "part as its own file)"
+    )
+
+
 def solve_graph(
     graph: PoseGraph,
     *,
@@ -475,6 +516,7 @@ def solve_graph(
     DivergenceError
         When the cost becomes non-finite or the normal equations are singular.
     """
+    check_connected(graph)
     return _levenberg_marquardt(
         graph, max_iterations=max_iterations, tolerance=tolerance, prior_sigma=prior_sigma
     )[0]
@@ -642,6 +684,7 @@ def solve_graph_incremental(
         raise InputError(f"batch must be >= 1, got {batch}")
     if not growth >= 1.0:
         raise InputError(f"growth must be >= 1, got {growth:g}")
+    check_connected(graph)
     n = graph.n_poses
     r0, _ = _residuals(graph, graph.poses, graph.landmarks, *_whitening(graph, prior_sigma))
     x = np.array(graph.poses, dtype=np.float64)

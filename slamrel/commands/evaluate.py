@@ -235,6 +235,13 @@ def summary_text(scored: FileEvaluation, *, degrees: bool) -> str:
             f"\nreference: {result['reference_repeated_times_dropped']} pose(s) repeating an "
             "earlier timestamp dropped"
         )
+    dup = result.get("relations_duplicates")
+    if dup and dup["count"]:
+        done = "dropped" if dup["dropped"] else "kept (metricevaluator mode)"
+        text += (
+            f"\nrelations: {dup['count']} line(s) repeating an earlier line exactly {done}, "
+            f"first at line {dup['first_line']}"
+        )
     if result.get("relations_zero_length_dropped"):
         text += (
             f"\nrelations: {result['relations_zero_length_dropped']} zero-length (t1 == t2) dropped"

@@ -118,6 +118,8 @@ def run(args: argparse.Namespace) -> int:
     report["reordered"] = dict(bundle.reordered)
     if bundle.snapped:  # measurement times snapped to a control/odometry time (float noise)
         report["snapped"] = bundle.snapped
+    if bundle.wrapped_bearings:  # bearings outside [-pi, pi) wrapped by the reader
+        report["wrapped_bearings"] = bundle.wrapped_bearings
     report.setdefault("robust", None)
     if args.report:
         write_json(args.report, report)

@@ -2,29 +2,35 @@
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 from numpy.typing import NDArray
 
 from landmark_graph.landmark_association import Association, _finish
 from landmark_graph.maps import LandmarkMap
 from relation_metric.errors import InputError
-from relation_metric.ids import first_missing, first_repeat, integer_ids, rows_of
-from slamrel.formats.text import PathLike, read_csv_table, write_text_atomic
+from relation_metric.ids import first_missing, first_repeat, rows_of
+from slamrel.formats.text import (
+    PathLike,
+    read_csv_id_column,
+    read_csv_table,
+    read_source,
+    write_text_atomic,
+)
 
 __all__ = ["read_association_csv", "write_association_csv"]
 
 
 def read_association_csv(path: PathLike, est: LandmarkMap, ref: LandmarkMap) -> Association:
     """``estimate,reference`` id pairs (header line required); unknown ids are errors."""
+    src = read_source(path)
     table = read_csv_table(
-        path, required=("estimate", "reference"), describe="a landmark association"
+        path, required=("estimate", "reference"), describe="a landmark association", source=src
     )
-    name = os.fspath(path)
+    name = src.path
     lines = table.lines
-    a = integer_ids(table.columns["estimate"], lines, name, "estimate")
-    b = integer_ids(table.columns["reference"], lines, name, "reference")
+    # ids as written: int64 from the text, never through float64
+    a = read_csv_id_column(src, "estimate", lines)[0]
+    b = read_csv_id_column(src, "reference", lines)[0]
     er = _rows_of(est.ids, a, lines, name, "estimated")
     rr = _rows_of(ref.ids, b, lines, name, "reference")
     for rows, ids, what in ((er, a, "estimated"), (rr, b, "reference")):

@@ -48,13 +48,13 @@ from recovery.steps import SNAP_TOLERANCE, snap_times
 from relation_metric.arrays import Array, PathLike
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
-from relation_metric.ids import integer_ids
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, check_coordinates
 from slamrel.constants import BUNDLE_FORMAT as FORMAT
 from slamrel.formats.landmark_csv import read_landmark_csv, write_landmark_csv
 from slamrel.formats.text import (
     format_csv_table,
+    read_csv_id_column,
     read_csv_table,
     read_source,
     read_text,
@@ -90,6 +90,50 @@ def _line_of_key(text: str, key: str) -> int | None:
     needle = f'"{key}"'
     pos = text.find(needle)
     return None if pos < 0 else text.count("\n", 0, pos) + 1
+
+
+#: The keys each object of ``bundle.json`` may hold (docs/bundle.md); keys starting with
+#: ``x_`` are a writer's own and ignored. Any other key is refused, named, with the nearest
+#: known key: a misspelt ``initial_pos`` must not fall back to the default silently.
+_MANIFEST_KEYS = {
+    "": (
+        "format",
+        "motion_model",
+        "sensor_model",
+        "initial_pose",
+        "initial_covariance",
+        "description",
+    ),
+    "motion_model": (
+        "type",
+        "integration",
+        "control_stamp",
+        "alpha",
+        "pose_noise",
+        *sorted({n for names in SIGMA_NAMES.values() for n in names}),
+    ),
+    "motion_model.pose_noise": ("frame", "covariance"),
+    "sensor_model": ("type", "sigma_range", "sigma_bearing", "max_range", "fov"),
+}
+
+
+def _refuse_unknown_keys(doc: dict[str, Any], where: str, text: str, path: str) -> None:
+    """Refuse a key of ``doc`` (the object ``where``) that the format does not define."""
+    import difflib
+
+    known = _MANIFEST_KEYS[where]
+    for key in doc:
+        if key in known or (isinstance(key, str) and key.startswith("x_")):
+            continue
+        near = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+        hint = f"; did you mean {near[0]!r}?" if near else ""
+        inside = f" in {where}" if where else ""
+        raise InputError(
+            f"unknown key {_shown(key)}{inside}{hint} (expected some of {', '.join(known)}; "
+            "a writer's own keys start with x_)",
+            path=path,
+            line=_line_of_key(text, str(key)),
+        )
 
 
 def _number(
@@ -146,6 +190,7 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
     line = _line_of_key(text, "motion_model")
     if not isinstance(spec, dict):
         raise InputError("motion_model: expected an object", path=path, line=line)
+    _refuse_unknown_keys(spec, "motion_model", text, path)
     kind = spec.get("type")
     if kind not in MOTION_TYPES:
         raise InputError(
@@ -246,6 +291,7 @@ def _parse_pose_noise(spec: Any, text: str, path: str) -> tuple[str, tuple[tuple
             path=path,
             line=line,
         )
+    _refuse_unknown_keys(spec, "motion_model.pose_noise", text, path)
     for key in ("frame", "covariance"):
         if key not in spec:
             raise InputError(f"motion_model.pose_noise: missing {key}", path=path, line=line)
@@ -284,6 +330,7 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
     line = _line_of_key(text, "sensor_model")
     if not isinstance(spec, dict):
         raise InputError("sensor_model: expected an object", path=path, line=line)
+    _refuse_unknown_keys(spec, "sensor_model", text, path)
     if spec.get("type") != "range_bearing":
         raise InputError(
             f"sensor_model: unknown type {_shown(spec.get('type'))}; expected range_bearing",
@@ -338,6 +385,7 @@ def _read_manifest(path: Path) -> dict[str, Any]:
             path=name,
             line=_line_of_key(text, "format"),
         )
+    _refuse_unknown_keys(doc, "", text, name)
     for key in ("motion_model", "sensor_model"):
         if key not in doc:
             raise InputError(f"missing {key}", path=name)
@@ -395,6 +443,23 @@ def _read_csv(
     if not path.is_file():
         raise InputError(f"missing required file; expected columns {','.join(required)}", path=path)
     return read_csv_table(path, required=required, optional=optional, empty_ok=empty_ok)
+
+
+def _read_csv_with_ids(
+    path: Path, *, required: Sequence[str], id_column: str
+) -> tuple[dict[str, Any], NDArray[np.int64]]:
+    """:func:`_read_csv` with ``id_column`` (may be empty) read as exact int64 ids.
+
+    The ids come from the text (:func:`~slamrel.formats.text.read_csv_id_column`), never
+    through float64; ``cols[id_column + "#"]`` says which cells are not empty.
+    """
+    if not path.is_file():
+        raise InputError(f"missing required file; expected columns {','.join(required)}", path=path)
+    src = read_source(path)
+    cols, lines = read_csv_table(path, required=required, empty_ok=(id_column,), source=src)
+    ids, present = read_csv_id_column(src, id_column, lines, empty_ok=True)
+    out: dict[str, Any] = {**cols, id_column: ids, id_column + "#": present}
+    return out, lines
 
 
 def _time_ordered(
@@ -481,7 +546,8 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     reordered: dict[str, int] = {}
     log = _read_motion_log(root, meta["motion"], reordered)
     map_fields = _read_map(root)
-    meas = _read_measurements(root, reordered)
+    wrapped: dict[str, int] = {}
+    meas = _read_measurements(root, reordered, wrapped)
     skipped = 0
     if skip_unknown_landmarks:
         unknown = meas["measurement_associated"] & ~np.isin(
@@ -505,6 +571,7 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
         path=str(root),
         reordered=reordered,
         snapped=snapped,
+        wrapped_bearings=wrapped["measurements.csv"],
     )
 
 
@@ -618,18 +685,55 @@ def _read_map(root: Path) -> dict[str, Any]:
     return {"map_ids": table.ids, "map_xy": table.xy, "map_marginals": marg, "map_covariance": cov}
 
 
-def _read_measurements(root: Path, reordered: dict[str, int]) -> dict[str, Any]:
+class BearingWrapWarning(UserWarning):
+    """Bearings outside [−π, π) were wrapped into it (and counted)."""
+
+
+def _wrapped_bearings(b: Array, lines: NDArray[np.int64], path: Path) -> tuple[Array, int]:
+    """Bearings wrapped into ``[−π, π)``; how many were outside; beyond ``[−2π, 2π]`` refused.
+
+    A bearing in ``[π, 2π]`` (a ``[0, 2π)`` convention) or ``[−2π, −π)`` names the same
+    direction: wrapped, counted, warned about. A larger magnitude is no bearing in radians
+    (degrees?) and is refused with its line.
+    """
+    far = np.flatnonzero(~(np.abs(b) <= 2 * math.pi))
+    if far.size:
+        k = int(far[0])
+        raise InputError(
+            f"bearing {float(b[k]):.9g}: expected an angle in radians in [-pi, pi) (values up "
+            "to 2 pi in magnitude are wrapped); is it in degrees?",
+            path=path,
+            line=int(lines[k]),
+        )
+    out = ~((b >= -math.pi) & (b < math.pi))
+    count = int(np.count_nonzero(out))
+    if not count:
+        return b, 0
+    k = int(np.flatnonzero(out)[0])
+    warnings.warn(
+        f"{path}:{int(lines[k])}: {count} bearing(s) outside [-pi, pi) wrapped into it (first "
+        f"{float(b[k]):.9g} rad)",
+        BearingWrapWarning,
+        stacklevel=4,
+    )
+    return np.where(out, np.mod(b + math.pi, 2 * math.pi) - math.pi, b), count
+
+
+def _read_measurements(
+    root: Path, reordered: dict[str, int], wrapped: dict[str, int]
+) -> dict[str, Any]:
     """``measurements.csv`` in time order: the five ``measurement*`` fields of the bundle."""
     p = root / "measurements.csv"
-    cols, lines = _read_csv(
-        p, required=("t", "range", "bearing", "landmark"), empty_ok=("landmark",)
+    cols, lines = _read_csv_with_ids(
+        p, required=("t", "range", "bearing", "landmark"), id_column="landmark"
     )
     cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "measurement")
+    bearing, wrapped[p.name] = _wrapped_bearings(cols["bearing"], lines, p)
     return {
         "measurement_times": cols["t"],
-        "measurements": np.column_stack((cols["range"], cols["bearing"])),
-        "measurement_landmarks": integer_ids(cols["landmark"], lines, p, "landmark"),
-        "measurement_associated": ~np.isnan(cols["landmark"]),
+        "measurements": np.column_stack((cols["range"], bearing)),
+        "measurement_landmarks": cols["landmark"].astype(np.int64),
+        "measurement_associated": cols["landmark#"].astype(bool),
         "measurement_lines": lines,
     }
 

@@ -13,6 +13,8 @@ The record rules are the same for all: exactly the record's fields, finite numbe
 ids (vertex ids and edge ends), vertex ids unique across the vertex kinds read. The graph
 reader refuses any other record (``FIX``, 3-D types, …) naming its line: nothing is silently
 used or dropped; the trajectory and map readers skip and count the records they do not use.
+An ``EDGE_SE2`` from a vertex to itself (a self-loop) is refused with its line (so is a TORO
+``EDGE2``, :mod:`slamrel.formats.toro`).
 Numbers are written with :data:`~slamrel.formats.text.NUMBER_FORMAT` (exact round trip).
 """
 
@@ -204,6 +206,16 @@ def read_g2o_graph(
 
     e = recs["EDGE_SE2"][0]
     f2 = recs["EDGE_SE2_XY"][0]
+    loop = np.flatnonzero(e[:, 0] == e[:, 1])
+    if loop.size:
+        k = int(loop[0])
+        raise InputError(
+            f"EDGE_SE2 from vertex {int(e[k, 0])} to itself ({loop.size} such edge(s)); "
+            "expected an edge between two different poses (a self-loop constrains nothing "
+            "but its own measurement, which the solve would fit as zero motion)",
+            path=path,
+            line=int(lines["EDGE_SE2"][k]),
+        )
     graph = PoseGraph(
         poses=vse2[po, 1:4],
         landmarks=vxy[lo, 1:3],

@@ -27,7 +27,9 @@ from slamrel.formats.text import (
     NUMBER_FORMAT,
     PathLike,
     SourceText,
+    read_csv_id_column,
     read_csv_table,
+    read_source,
     write_csv_table,
 )
 
@@ -78,17 +80,20 @@ def read_landmark_csv(
         What the file is, for messages.
     """
     optional = _COV if covariance else ()
+    src = read_source(path) if source is None else source
     table = read_csv_table(
         path,
         required=(id_columns, "x", "y"),
         optional=optional,
         empty_ok=_COV,
         describe=describe,
-        source=source,
+        source=src,
     )
-    name = source.path if source is not None else path
+    name = src.path
     cols, lines = table
     id_name = next(c for c in id_columns if c in cols)
+    # the ids as written (int64 from the text, never through float64: 2**53 + 1 stays itself)
+    cols[id_name] = read_csv_id_column(src, id_name, lines)[0]  # type: ignore[assignment]
     xy = np.column_stack((cols["x"], cols["y"]))
     present = [c for c in _COV if c in cols]
     cov = None

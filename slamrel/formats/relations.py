@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from relation_metric.errors import InputError
@@ -14,17 +16,27 @@ _REL_COLUMNS = ("t1", "t2", "x", "y", "z", "roll", "pitch", "yaw")
 __all__ = ["read_relations", "write_relations"]
 
 
-def read_relations(path: PathLike) -> RelationSet:
+def read_relations(path: PathLike, *, report: dict[str, Any] | None = None) -> RelationSet:
     """Read a Freiburg ``.relations`` file: ``t1 t2 x y z roll pitch yaw`` per line.
 
     ``#`` lines are comments; runs of blanks separate fields; ``t2 < t1`` is allowed.
     The planar part ``[x, y, yaw]`` becomes ``delta``; ``[z, roll, pitch]`` is kept in
     ``out_of_plane``; :meth:`RelationSet.lifted` makes 6-DoF relations of them (the CLI and
     :func:`~relation_metric.evaluate.evaluate` do so when any of them is not zero).
+
+    Lines that repeat an earlier line's eight numbers exactly are found (the Freiburg files
+    hold a few: aces 9, fr079 4, mit-csail 1): all rows are returned, and ``report`` (when
+    given) receives ``"duplicates"``, a bool mask of the repeating rows (the first of each
+    is not one), and ``"duplicate_lines"``, the file lines ``(earlier, repeat)`` of the first
+    repeat (None when there is none). What to do with them is the caller's choice
+    (``slamrel evaluate`` drops them, counted, except in the metricevaluator mode, whose C++
+    tool counts them twice).
     """
-    values, _ = read_numeric_table(
+    values, lines = read_numeric_table(
         path, columns=_REL_COLUMNS, describe="a Freiburg .relations file"
     )
+    if report is not None:
+        report["duplicates"], report["duplicate_lines"] = _repeated_rows(values, lines)
     return RelationSet(
         values[:, 0],
         values[:, 1],
@@ -32,6 +44,25 @@ def read_relations(path: PathLike) -> RelationSet:
         key="time",
         out_of_plane=values[:, [4, 5, 6]],
     )
+
+
+def _repeated_rows(values: np.ndarray, lines: Any) -> tuple[np.ndarray, tuple[int, int] | None]:
+    """Mask of rows equal to an earlier row, and the lines of the first such pair."""
+    n = values.shape[0]
+    repeat = np.zeros(n, dtype=bool)
+    if n < 2:
+        return repeat, None
+    order = np.lexsort(values.T[::-1])  # equal rows adjacent, in file order (stable)
+    same = (values[order[1:]] == values[order[:-1]]).all(axis=1)
+    repeat[order[1:][same]] = True
+    if not same.any():
+        return repeat, None
+    later = int(np.flatnonzero(repeat)[0])
+    pos = int(np.flatnonzero(order == later)[0])
+    first = pos
+    while first > 0 and same[first - 1]:
+        first -= 1
+    return repeat, (int(lines(int(order[first]))), int(lines(later)))
 
 
 def write_relations(path: PathLike, relations: RelationSet) -> None:

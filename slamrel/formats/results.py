@@ -132,6 +132,13 @@ def write_evo_zip(
     """
     ev = evaluation
     valid = ev.valid
+    if not valid.any():
+        # evo_res cannot read a result without errors (its statistics of none are NaN)
+        raise InputError(
+            f"no scored relation ({len(ev.relations)} given, none associated): an evo result "
+            "needs at least one error; no zip written",
+            path=path,
+        )
     if part == "trans":
         errors = ev.errors.translation[valid]
         label = "RE (m)"

@@ -54,6 +54,7 @@ __all__ = [
     "CsvTable",
     "read_csv_table",
     "read_csv_text_column",
+    "read_csv_id_column",
     "format_csv_table",
     "write_csv_table",
     "parse_float",
@@ -499,6 +500,65 @@ def read_csv_text_column(source: SourceText, name: str) -> NDArray[np.str_] | No
         return None
     k = header.index(name)
     return np.array([text.split(",")[k].strip() for _, text in data], dtype=np.str_)
+
+
+_INT64_MAX = str(np.iinfo(np.int64).max)
+
+
+def read_csv_id_column(
+    source: SourceText,
+    name: str,
+    lines: NDArray[np.int64],
+    *,
+    empty_ok: bool = False,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """The integer ids of column ``name``, exactly as written: int64 from the text, never via
+    float64 (``2**53 + 1`` stays itself; GTSAM symbol keys near 8e18 are read).
+
+    For a file that :func:`read_csv_table` has read (the same ``source`` and its ``lines``).
+    A cell is an optional sign and ASCII digits, optionally followed by ``.`` and zeros
+    (``3.0``); anything else (``2.5``, ``1e3``, a value beyond int64) raises
+    :class:`InputError` at its line. Returns the ids (0 where empty) and the mask of
+    non-empty cells; empty cells raise unless ``empty_ok``.
+    """
+    cells = read_csv_text_column(source, name)
+    if cells is None:
+        raise InputError(f"missing column {name!r}", path=source.path)
+    if cells.size == 0:
+        return np.empty(0, dtype=np.int64), np.empty(0, dtype=bool)
+    empty = cells == ""
+    part = np.strings.partition(cells, ".")
+    head, dot, frac = part[0], part[1], part[2]
+    digits = np.strings.lstrip(head, "+-")
+    n_digits = np.strings.str_len(digits)
+    ok = (
+        np.strings.isdigit(digits)
+        & (np.strings.str_len(head) - n_digits <= 1)
+        & (np.strings.str_len(np.strings.encode(cells, "utf-8")) == np.strings.str_len(cells))
+        & ((dot == "") | (np.strings.strip(frac, "0") == ""))
+    )
+    long = n_digits >= len(_INT64_MAX)
+    if long.any():  # the few cells that may not fit in int64: compare as text
+        stripped = np.strings.lstrip(digits, "0")
+        width = np.strings.str_len(stripped)
+        fits = (width < len(_INT64_MAX)) | ((width == len(_INT64_MAX)) & (stripped <= _INT64_MAX))
+        ok &= ~long | fits
+    bad = np.flatnonzero(~ok & ~(empty & empty_ok))
+    if bad.size:
+        k = int(bad[0])
+        text = str(cells[k])
+        plain = text.isascii() and text.isprintable()
+        got = (text if plain else quote_token(text)) if text else "an empty cell"
+        raise InputError(
+            f"column '{name}': expected an integer id, got {got} (ids are read exactly as "
+            "written: an optional sign and digits)",
+            path=source.path,
+            line=int(lines[k]),
+        )
+    ids = np.zeros(cells.shape[0], dtype=np.int64)
+    if (~empty).any():
+        ids[~empty] = head[~empty].astype(np.int64)
+    return ids, ~empty
 
 
 def _column_name(c: Column) -> str:

@@ -58,6 +58,15 @@ def read_toro_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64]]:
         raise InputError(
             f"EDGE2 refers to unknown vertex {bad}", path=path, line=int(edge_lines[k])
         )
+    loop = np.flatnonzero(ends[:, 0] == ends[:, 1])
+    if loop.size:
+        k = int(loop[0])
+        raise InputError(
+            f"EDGE2 from vertex {int(ends[k, 0])} to itself ({loop.size} such edge(s)); "
+            "expected an edge between two different poses",
+            path=path,
+            line=int(edge_lines[k]),
+        )
     info = np.zeros((edge.shape[0], 3, 3))
     info[:, _ROWS, _COLS] = edge[:, 5:11]
     info[:, _COLS, _ROWS] = edge[:, 5:11]

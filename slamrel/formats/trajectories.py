@@ -55,7 +55,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric.errors import InputError
-from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
+from relation_metric.timeorder import (
+    RepeatedTimes,
+    TimeOrder,
+    TimeOrderWarning,
+    repeated_times,
+    sort_by_time,
+)
 from relation_metric.trajectory import OutOfPlane, Trajectory, check_coordinates
 from slamrel.constants import TRAJECTORY_FORMATS
 from slamrel.formats.g2o import format_g2o_records, read_g2o_records
@@ -81,6 +87,7 @@ __all__ = [
     "detect_trajectory_format",
     "sniff_trajectory_format",
     "without_repeated_times",
+    "without_exact_repeats",
     "read_trajectory",
     "write_trajectory",
     "yaw_from_quaternion",
@@ -161,6 +168,10 @@ class LoadedTrajectory(NamedTuple):
     discarded : OutOfPlane or None
         The out-of-plane motion a ``dimension="2d"`` read projected away (``None`` when
         nothing was projected).
+    repeated : RepeatedTimes
+        Poses whose time repeats the previous pose's (all are kept here; the caller decides:
+        a reference keeps the first, :func:`without_repeated_times`; an estimate refuses two
+        different poses for one time, :func:`without_exact_repeats`).
     """
 
     trajectory: Trajectory
@@ -169,6 +180,7 @@ class LoadedTrajectory(NamedTuple):
     time_order: TimeOrder = TimeOrder()
     repeated_dropped: int = 0
     discarded: OutOfPlane | None = None
+    repeated: RepeatedTimes = RepeatedTimes()
 
     @property
     def out_of_order(self) -> int:
@@ -346,8 +358,19 @@ def read_trajectory(
     trajectory = Trajectory(t, poses)
     if dimension == "3d":
         trajectory = trajectory.lifted()
+
+    def sorted_line(k: int) -> int:
+        row = int(order[k]) if report.out_of_order else k
+        return int(lines(row)) if callable(lines) else int(lines[row])
+
+    _, repeated = repeated_times(t, poses, sorted_line)
     return LoadedTrajectory(
-        trajectory, fmt, dict(skipped), report, discarded=discarded[0] if discarded else None
+        trajectory,
+        fmt,
+        dict(skipped),
+        report,
+        discarded=discarded[0] if discarded else None,
+        repeated=repeated,
     )
 
 
@@ -378,7 +401,7 @@ def _read_3d(
             source=src,
         )
         t, xyz, q = values[:, 0], values[:, 1:4], values[:, 4:8]
-        _check_unit_quaternions(q, src, lines)
+        q = _check_unit_quaternions(q, src, lines)
     elif fmt == "euroc":
         first = next((k for k, line in enumerate(src.lines) if line.strip()), None)
         if first is None or not src.lines[first].lstrip().lower().startswith("#timestamp"):
@@ -402,7 +425,7 @@ def _read_3d(
         xyz = np.column_stack([c[k] for k in _EUROC_COLUMNS[1:4]])
         q = np.column_stack([c[k] for k in _EUROC_COLUMNS[5:8]] + [c[_EUROC_COLUMNS[4]]])
         lines = table.lines.__getitem__
-        _check_unit_quaternions(q, src, lines)
+        q = _check_unit_quaternions(q, src, lines)
     else:  # kitti
         values, lines = read_numeric_table(
             path,
@@ -431,7 +454,12 @@ def _read_3d(
     return t, _poses_of_dimension(t, xyz, q, src, dimension, discarded), lines
 
 
-def _check_unit_quaternions(q: NDArray, src: SourceText, lines: Any) -> None:
+def _check_unit_quaternions(q: NDArray, src: SourceText, lines: Any) -> NDArray:
+    """The quaternions divided by their norms; a norm off 1 by more than 1e-3 is refused.
+
+    Every accepted quaternion is normalised here, before any path uses it: the planar yaw
+    formula assumes ``‖q‖ = 1`` and is off by about ``2 (‖q‖ − 1)`` otherwise.
+    """
     with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
         norms = np.linalg.norm(q, axis=1)
     bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
@@ -442,6 +470,7 @@ def _check_unit_quaternions(q: NDArray, src: SourceText, lines: Any) -> None:
             path=src.path,
             line=lines(k),
         )
+    return q / norms[:, None]
 
 
 def _kitti_times(times: PathLike | None, n: int, pose_path: str) -> NDArray:
@@ -516,6 +545,41 @@ def without_repeated_times(loaded: LoadedTrajectory, path: PathLike) -> LoadedTr
         trajectory=Trajectory(traj.timestamps[keep], traj.poses[keep]),
         repeated_dropped=loaded.repeated_dropped + dropped,
     )
+
+
+def without_exact_repeats(
+    loaded: LoadedTrajectory, path: PathLike, *, what: str = "estimate"
+) -> LoadedTrajectory:
+    """An estimate (or odometry) with one pose per timestamp, or an :class:`InputError`.
+
+    Two different poses for one timestamp make the pose of that time a guess (the nearest-time
+    association took whichever came first, and the score depended on the row order): they are
+    refused, naming both lines. Exact repeats (the same row written twice) are dropped,
+    counted (``LoadedTrajectory.repeated``) and warned about (``RepeatedTimeWarning``).
+    """
+    from relation_metric.timeorder import RepeatedTimeWarning, first_of_each_time
+
+    rep = loaded.repeated
+    if not rep.count:
+        return loaded
+    if rep.differing:
+        earlier = "" if rep.earlier_line is None else f" (line {rep.earlier_line})"
+        raise InputError(
+            f"two different {what} poses at t = {rep.time:.9g} s: this line and the one before "
+            f"it in time{earlier}; {rep.differing} timestamp repeat(s) carry a different pose. "
+            f"Expected one pose per timestamp (which one is meant is a guess; remove one)",
+            path=path,
+            line=rep.first_line,
+        )
+    traj = loaded.trajectory
+    keep = first_of_each_time(traj.timestamps)
+    warnings.warn(
+        f"{os.fspath(path)}: dropped {rep.count} {what} pose(s) that repeat the previous "
+        f"pose exactly, timestamp and pose (first at line {rep.first_line})",
+        RepeatedTimeWarning,
+        stacklevel=2,
+    )
+    return loaded._replace(trajectory=Trajectory(traj.timestamps[keep], traj.poses[keep]))
 
 
 def _read_csv_trajectory(src: SourceText) -> tuple[NDArray, NDArray, NDArray]:
