@@ -35,6 +35,7 @@ from __future__ import annotations
 import atexit
 import errno
 import functools
+import glob
 import io
 import json
 import os
@@ -842,15 +843,14 @@ def staged_directory(target: PathLike, *, kind: str, force: bool = True) -> Iter
     existed = _nonempty_dir(final)
     _make_parent(final.parent, target)
     remove_stale_work(final)
+    prefix = f".{final.name}.{os.getpid()}-"
+    before = set(final.parent.glob(f"{glob.escape(prefix)}*.partial"))
+    tmp: Path | None = None
     try:
-        tmp = Path(
-            tempfile.mkdtemp(
-                prefix=f".{final.name}.{os.getpid()}-", suffix=".partial", dir=final.parent
-            )
-        )
-    except OSError as exc:
-        raise _os_error(exc, target) from None
-    try:
+        try:
+            tmp = Path(tempfile.mkdtemp(prefix=prefix, suffix=".partial", dir=final.parent))
+        except OSError as exc:
+            raise _os_error(exc, target) from None
         try:
             os.chmod(tmp, dir_mode())
         except OSError as exc:
@@ -870,11 +870,21 @@ def staged_directory(target: PathLike, *, kind: str, force: bool = True) -> Iter
             except OSError as exc:
                 raise _os_error(exc, target, "cannot replace the folder") from None
     except InputError as exc:
-        _remove(tmp)
-        raise _renamed(exc, tmp, Path(target)) from None
+        _remove_partial(tmp, final.parent, prefix, before)
+        raise exc if tmp is None else _renamed(exc, tmp, Path(target)) from None
     except BaseException:
-        _remove(tmp)
+        _remove_partial(tmp, final.parent, prefix, before)
         raise
+
+
+def _remove_partial(tmp: Path | None, parent: Path, prefix: str, before: set[Path]) -> None:
+    """Remove the work folder; when a signal came between ``mkdtemp``'s ``mkdir`` and its
+    return (``tmp`` unknown), the ones of this process made since ``before``."""
+    if tmp is not None:
+        _remove(tmp)
+        return
+    for made in set(parent.glob(f"{glob.escape(prefix)}*.partial")) - before:
+        _remove(made)
 
 
 def _nonempty_dir(path: Path) -> bool:
