@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from relation_metric.arrays import PathLike
 from relation_metric.errors import InputError
 
-__all__ = ["integer_ids", "rows_of", "first_missing", "first_repeat"]
+__all__ = ["integer_ids", "rows_of", "first_missing", "first_repeat", "refuse_self_loops"]
 
 _MAX_EXACT_ID = 2.0**53  # from it on a double no longer holds every integer (2**53 + 1 rounds)
 
@@ -127,3 +127,25 @@ def first_repeat(
     if not dup.size:
         return None
     return int(order[dup[0]]), int(order[dup[0] + 1])
+
+
+def refuse_self_loops(
+    ends: ArrayLike,
+    lines: Sequence[int] | NDArray[np.int64],
+    path: PathLike | None,
+    record: str,
+) -> None:
+    """Raise at the first edge of ``ends`` (E, 2) from a vertex to itself, naming the
+    ``record`` keyword and its file line (``lines[k]``): a self-loop constrains nothing but
+    its own measurement, which a solve would fit as zero motion."""
+    e = np.asarray(ends)
+    loop = np.flatnonzero(e[:, 0] == e[:, 1]) if e.size else np.empty(0, np.int64)
+    if loop.size:
+        k = int(loop[0])
+        raise InputError(
+            f"{record} from vertex {int(e[k, 0])} to itself ({loop.size} such edge(s)); "
+            "expected an edge between two different poses (a self-loop constrains nothing "
+            "but its own measurement, which the solve would fit as zero motion)",
+            path=path,
+            line=int(lines[k]),
+        )

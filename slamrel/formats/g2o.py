@@ -29,7 +29,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
-from relation_metric.ids import first_missing, first_repeat, integer_ids, rows_of
+from relation_metric.ids import (
+    first_missing,
+    first_repeat,
+    integer_ids,
+    refuse_self_loops,
+    rows_of,
+)
 from relation_metric.trajectory import check_coordinates
 from slamrel.formats.text import (
     NUMBER_FORMAT,
@@ -206,16 +212,7 @@ def read_g2o_graph(
 
     e = recs["EDGE_SE2"][0]
     f2 = recs["EDGE_SE2_XY"][0]
-    loop = np.flatnonzero(e[:, 0] == e[:, 1])
-    if loop.size:
-        k = int(loop[0])
-        raise InputError(
-            f"EDGE_SE2 from vertex {int(e[k, 0])} to itself ({loop.size} such edge(s)); "
-            "expected an edge between two different poses (a self-loop constrains nothing "
-            "but its own measurement, which the solve would fit as zero motion)",
-            path=path,
-            line=int(lines["EDGE_SE2"][k]),
-        )
+    refuse_self_loops(e[:, :2], lines["EDGE_SE2"], path, "EDGE_SE2")
     graph = PoseGraph(
         poses=vse2[po, 1:4],
         landmarks=vxy[lo, 1:3],

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.errors import InputError
-from relation_metric.ids import rows_of
+from relation_metric.ids import refuse_self_loops, rows_of
 from slamrel.backends.least_squares import PoseGraph
 from slamrel.formats.text import NUMBER_FORMAT, PathLike, read_keyword_records, write_text_atomic
 
@@ -58,15 +58,7 @@ def read_toro_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64]]:
         raise InputError(
             f"EDGE2 refers to unknown vertex {bad}", path=path, line=int(edge_lines[k])
         )
-    loop = np.flatnonzero(ends[:, 0] == ends[:, 1])
-    if loop.size:
-        k = int(loop[0])
-        raise InputError(
-            f"EDGE2 from vertex {int(ends[k, 0])} to itself ({loop.size} such edge(s)); "
-            "expected an edge between two different poses",
-            path=path,
-            line=int(edge_lines[k]),
-        )
+    refuse_self_loops(ends, edge_lines, path, "EDGE2")
     info = np.zeros((edge.shape[0], 3, 3))
     info[:, _ROWS, _COLS] = edge[:, 5:11]
     info[:, _COLS, _ROWS] = edge[:, 5:11]
