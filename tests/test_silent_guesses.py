@@ -385,3 +385,13 @@ def test_float_path_ids_at_2_53_are_refused_not_rounded(
     ref = tmp_path / "ref.csv"
     ref.write_text("landmark,x,y\n1,0,0\n2,1,1\n")
     _refused(["map-compare", str(g), str(ref), "-q"], capsys, f"{g}:2:", "below 2**53")
+
+
+def test_isam_self_loop_is_refused_by_import_and_solve(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The same self-loop check as g2o and TORO (relation_metric.ids.refuse_self_loops)."""
+    path = tmp_path / "loop.txt"
+    path.write_text("ODOMETRY 0 1 1.0 0 0 10 0 0 10 0 100\nODOMETRY 1 1 0.0 0 0 10 0 0 10 0 100\n")
+    _refused(["import", "isam", str(path), "-o", str(tmp_path / "g.g2o")], capsys, f"{path}:2:")
+    _refused(["solve", str(path), "-o", str(tmp_path / "o")], capsys, f"{path}:2:")

@@ -34,7 +34,7 @@ from recovery.models import MotionModel, SensorModel
 from relation_metric import se2
 from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
-from relation_metric.ids import first_missing, integer_ids, rows_of
+from relation_metric.ids import first_missing, integer_ids, refuse_self_loops, rows_of
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.least_squares import PoseGraph, initial_landmarks
 from slamrel.formats.text import PathLike, SourceText, read_keyword_records, read_source
@@ -198,6 +198,7 @@ def read_isam(
     odo = o_vals
     if odo.shape[0] == 0:
         raise InputError("no ODOMETRY lines", path=path)
+    refuse_self_loops(odo[:, :2], o_lines, path, "ODOMETRY")
     o = odo
     z = z_vals
     pose_ids = np.unique(o[:, :2].astype(np.int64))
