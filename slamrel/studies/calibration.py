@@ -128,20 +128,13 @@ def calibration_case(
     of :func:`slamrel.report.verdict.run_verdict` on the run's result.
     """
     from slamrel.pipeline import RunInput, score_bundle
-    from slamrel.report.verdict import RunFacts, run_verdict
     from slamrel.simulation.healthy import healthy_bundle
 
     scale = FAULTS[fault][1] if fault != "none" and FAULTS[fault][0] == "map" else 1.0
     bundle = healthy_bundle(world, seed, form, noise=noise, odometry=None, error_scale=scale)
     if fault != "none":
         bundle = broken_bundle(bundle, fault, seed=seed)
-    result = score_bundle(RunInput(bundle, name=f"{world}/{noise}/{seed}/{form}/{fault}"))
-    verdict = run_verdict(RunFacts.of(result))
-    return {
-        "overall": verdict.level,
-        "levels": {ln.key: ln.level for ln in verdict.lines},
-        "values": {ln.key: ln.measure for ln in verdict.lines},
-    }
+    return _judged(score_bundle(RunInput(bundle, name=f"{world}/{noise}/{seed}/{form}/{fault}")))
 
 
 def reference_case(world: str, noise: str, seed: int) -> dict[str, Any]:
@@ -149,9 +142,15 @@ def reference_case(world: str, noise: str, seed: int) -> dict[str, Any]:
     the same JSON as :func:`calibration_case`. No expectation: an EKF-SLAM can be genuinely
     inconsistent, and the study reports what its lamps say."""
     from slamrel.pipeline import run_pipeline
+
+    return _judged(run_pipeline(world, noise=noise, seed=seed))
+
+
+def _judged(result: Any) -> dict[str, Any]:
+    """The JSON of a case: the verdict's overall level, and its levels and measures by lamp."""
     from slamrel.report.verdict import RunFacts, run_verdict
 
-    verdict = run_verdict(RunFacts.of(run_pipeline(world, noise=noise, seed=seed)))
+    verdict = run_verdict(RunFacts.of(result))
     return {
         "overall": verdict.level,
         "levels": {ln.key: ln.level for ln in verdict.lines},
