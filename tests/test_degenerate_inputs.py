@@ -222,13 +222,23 @@ def test_load_results_names_a_damaged_file(tmp_path):
 
 
 def test_simulate_refuses_a_rate_beyond_the_row_limit_before_building(tmp_path, capsys):
-    assert main(["simulate", "simple1", "--rate", "1000000", "-o", str(tmp_path / "b")]) == 3
+    """An option mistake (exit 2, like argparse), said in the option's words, before any work;
+    the limit itself (rows = rate × measurement steps, simple1 has 84) by hand."""
+    assert main(["simulate", "simple1", "--rate", "1000000", "-o", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
-    assert "84000000 control rows, above the limit of 1000000" in err
-    assert "at most 11904" in err
+    assert "argument --rate: 1000000 control steps" in err
+    assert "above the limit of 1000000 control rows" in err
+    assert f"at most {1_000_000 // 84}" in err
     assert not (tmp_path / "b").exists()
-    assert main(["run", "simple1", "--rate", "1000000", "-o", str(tmp_path / "r"), "-q"]) == 3
+    assert main(["run", "simple1", "--rate", "1000000", "-o", str(tmp_path / "r"), "-q"]) == 2
     assert not (tmp_path / "r").exists()
+    # the limit itself is accepted, one more is not
+    assert main(["simulate", "simple1", "--rate", "11905", "-o", str(tmp_path / "b")]) == 2
+    from relation_metric.errors import InputError
+    from slamrel.simulation.worlds import make_world
+
+    with pytest.raises(InputError, match="84000000 control rows"):  # the library's own check
+        make_world("simple1", rate=1_000_000)
 
 
 def test_sparse_ospa_equals_the_dense_assignment():

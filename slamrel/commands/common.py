@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Literal
 from landmark_graph.constants import ASSOCIATE_MODES, DEFAULT_ASSOCIATE
 from recovery.constants import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, ROBUST
 from relation_metric.constants import STRATEGIES
-from relation_metric.errors import InputError, SlamrelError
+from relation_metric.errors import InputError, OptionError, SlamrelError
 from slamrel.commands import options as opt
 from slamrel.constants import EVALUATE_DEFAULTS
 
@@ -283,3 +283,18 @@ def stats_table(rows: Sequence[tuple[str, Summary]]) -> str:
         cells = "".join(f"{v:>12.6f}" for v in vals) + f"{s.count:>12d}"
         lines.append(f"{label:<{width}}{cells}")
     return "\n".join(lines)
+
+
+def check_rate(world: str, rate: int) -> None:
+    """``--rate`` within what world ``world`` is built with (``OptionError``, exit 2, before
+    any work: an option mistake, not an input one)."""
+    from slamrel.simulation.worlds import MAX_CONTROL_ROWS, max_rate
+
+    most = max_rate(world)
+    if most is not None and rate > most:
+        raise OptionError(
+            f"{rate} control steps per measurement step on {world} is above the limit of "
+            f"{MAX_CONTROL_ROWS} control rows (the world, its bundle and the filter grow with "
+            f"them); expected at most {most}",
+            option="--rate",
+        )

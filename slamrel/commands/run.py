@@ -16,6 +16,7 @@ from slamrel.commands.common import (
     association_choice,
     association_file,
     check_outputs,
+    check_rate,
     errors_about,
     in_option_words,
 )
@@ -64,6 +65,8 @@ def run(args: argparse.Namespace) -> int:
             f"{', '.join(WORLDS)}"
         )
     is_dir = Path(args.source).is_dir()
+    if not is_dir:
+        check_rate(args.source, args.rate)
     assoc_file = association_file(args.associate)
     check_outputs(
         [], [args.source if is_dir else None, assoc_file], dirs=[args.output], force=args.force

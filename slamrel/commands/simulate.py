@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from slamrel.commands import options as opt
-from slamrel.commands.common import add_force_argument, check_outputs, errors_about
+from slamrel.commands.common import add_force_argument, check_outputs, check_rate, errors_about
 from slamrel.constants import NOISE_NAMES, WORLDS
 
 
@@ -74,6 +74,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     from slamrel.simulation.bundles import world_bundle
     from slamrel.simulation.worlds import make_world
 
+    check_rate(args.world, args.rate)
     check_outputs([], [], dirs=[args.output], force=args.force)
     world = make_world(args.world, noise=args.noise, seed=args.seed, rate=args.rate)
     write_bundle(args.output, world_bundle(world), force=args.force)

@@ -325,6 +325,14 @@ def sensor_of(noise: NoiseType, name: str, observation: str) -> FieldOfViewSenso
 MAX_CONTROL_ROWS = 1_000_000
 
 
+def max_rate(name: str) -> int | None:
+    """The largest control rate (control steps per measurement step) world ``name`` is built
+    with: :data:`MAX_CONTROL_ROWS` ``//`` its measurement steps (``None``: not a named world)."""
+    if name not in WORLDS + PAPER_WORLDS:
+        return None
+    return MAX_CONTROL_ROWS // max(path_of(name).shape[0] - 1, 1)
+
+
 def _check(name: str, noise: str, rate: int, observation: str | None) -> str:
     """The observation model to use; InputError on an unknown noise type, model or rate."""
     if noise not in NOISE_TYPES:
