@@ -376,15 +376,56 @@ def test_bundle_measurement_ids_are_read_exactly(tmp_path: Path) -> None:
     assert b.map_ids.tolist() == [big, big + 1]
 
 
-def test_float_path_ids_at_2_53_are_refused_not_rounded(
+GTSAM_X = ord("x") << 56  # gtsam.symbol('x', 0)
+
+
+def test_g2o_ids_beyond_2_53_are_read_exactly(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    # g2o records are held as float64: 2**53 + 1 would silently become 2**53
+    """g2o ids through float64 would turn 2**53 + 1 into 2**53 and GTSAM's symbol keys into
+    their neighbours: maps and graphs read them exactly; a trajectory, whose ids are its
+    timestamps, refuses them at their line."""
+    from slamrel.formats.g2o import read_g2o_graph
+    from slamrel.formats.landmark_maps import read_map
+
     g = tmp_path / "m.g2o"
-    g.write_text(f"VERTEX_XY 1 0 0\nVERTEX_XY {2**53 + 1} 1 1\n")
+    g.write_text(f"VERTEX_XY 1 0 0\nVERTEX_XY {2**53 + 1} 1 1\nVERTEX_XY {GTSAM_L + 3} 2 2\n")
+    assert read_map(str(g)).ids.tolist() == [1, 2**53 + 1, GTSAM_L + 3]
     ref = tmp_path / "ref.csv"
-    ref.write_text("landmark,x,y\n1,0,0\n2,1,1\n")
-    _refused(["map-compare", str(g), str(ref), "-q"], capsys, f"{g}:2:", "below 2**53")
+    ref.write_text(f"landmark,x,y\n1,0,0\n{2**53 + 1},1,1\n{GTSAM_L + 3},2,2\n")
+    out = tmp_path / "a.csv"
+    argv = ["map-compare", str(g), str(ref), "--associate", "id", "--write-association", str(out)]
+    assert main([*argv, "-q"]) == 0
+    pairs = [tuple(map(int, ln.split(","))) for ln in out.read_text().splitlines()[3:]]
+    assert sorted(pairs) == [(1, 1), (2**53 + 1, 2**53 + 1), (GTSAM_L + 3, GTSAM_L + 3)]
+    # a pose graph keyed by GTSAM symbols: x0 x1 x2 and l0, neighbours 1 apart
+    x0, l0 = GTSAM_X, GTSAM_L
+    info3, info2 = "100 0 0 100 0 100", "100 0 100"
+    graph = tmp_path / "g.g2o"
+    graph.write_text(
+        f"VERTEX_SE2 {x0} 0 0 0\nVERTEX_SE2 {x0 + 1} 1 0 0\nVERTEX_SE2 {x0 + 2} 2 0 0\n"
+        f"VERTEX_XY {l0} 1 1\n"
+        f"EDGE_SE2 {x0} {x0 + 1} 1 0 0 {info3}\nEDGE_SE2 {x0 + 1} {x0 + 2} 1 0 0 {info3}\n"
+        f"EDGE_SE2_XY {x0 + 2} {l0} -1 1 {info2}\n"
+    )
+    pg, pose_ids, lm_ids = read_g2o_graph(str(graph))
+    assert pose_ids.tolist() == [x0, x0 + 1, x0 + 2] and lm_ids.tolist() == [l0]
+    assert pg.pp_i.tolist() == [0, 1] and pg.pp_j.tolist() == [1, 2]
+    assert pg.pl_k.tolist() == [2] and pg.pl_l.tolist() == [0]
+    assert main(["solve", str(graph), "-o", str(tmp_path / "solved"), "-q"]) == 0
+    _, back_poses, back_lms = read_g2o_graph(str(tmp_path / "solved" / "solved.g2o"))
+    assert back_poses.tolist() == pose_ids.tolist() and back_lms.tolist() == [l0]
+    # an edge to x0 + 3 (which a double would round onto x0 + 4 or x0) is unknown, named exactly
+    bad = tmp_path / "bad.g2o"
+    bad.write_text(graph.read_text() + f"EDGE_SE2 {x0} {x0 + 3} 1 0 0 {info3}\n")
+    _refused(["solve", str(bad), "-o", str(tmp_path / "o")], capsys, f"{bad}:8:", str(x0 + 3))
+    # as a trajectory the ids are timestamps: refused, not rounded
+    _refused(
+        ["evaluate", str(graph), str(graph), "--strategy", "consecutive"],
+        capsys,
+        f"{graph}:1:",
+        "below 2**53",
+    )
 
 
 def test_isam_self_loop_is_refused_by_import_and_solve(

@@ -43,6 +43,8 @@ from slamrel.formats.text import (
     Records,
     SourceText,
     read_keyword_records,
+    read_source,
+    record_id_tokens,
     write_text_atomic,
 )
 
@@ -65,6 +67,8 @@ G2O_RECORDS: dict[str, tuple[str, ...]] = {
 }
 """The planar g2o records: their field names after the keyword."""
 
+# From 2**53 on a double no longer holds every integer: such ids are re-read from the text.
+_EXACT_FLOAT_IDS = 2.0**53
 # Leading id columns of each record (vertex id; edge ends), written as integers.
 _ID_COLUMNS = {"VERTEX_SE2": 1, "VERTEX_XY": 1, "EDGE_SE2": 2, "EDGE_SE2_XY": 2}
 
@@ -75,6 +79,7 @@ def read_g2o_records(
     *,
     skipped: Counter[str] | None = None,
     source: SourceText | None = None,
+    ids: dict[str, NDArray[np.int64]] | None = None,
 ) -> Records:
     """The records of ``kinds`` of a planar g2o file, each checked (see the module docstring).
 
@@ -87,6 +92,11 @@ def read_g2o_records(
         Other records are skipped and counted here by name; without it they are an error.
     source : SourceText, optional
         Already-read text of ``path``.
+    ids : dict, optional
+        Filled with record name → its id columns as exact int64, shape (K, 1) for vertices
+        and (K, 2) for edges. Ids of any size in int64 are read exactly as written (GTSAM's
+        symbol keys, ``'l' << 56 | j``, are near 7.8e18): in the returned values an id of
+        magnitude ≥ 2**53 is only the nearest double, so use these.
 
     Returns
     -------
@@ -102,30 +112,52 @@ def read_g2o_records(
         vertex id defined twice (``vertex id 5 is defined twice (first on line 2)``, at the
         second), an unknown record (without ``skipped``).
     """
+    src = read_source(path) if source is None else source
     fields = {k: len(G2O_RECORDS[k]) + 1 for k in kinds}
-    recs = read_keyword_records(path, fields, names=G2O_RECORDS, skipped=skipped, source=source)
-    name = path if source is None else source.path
-    ids, id_lines = [], []
+    recs = read_keyword_records(path, fields, names=G2O_RECORDS, skipped=skipped, source=src)
+    vertex_ids, id_lines = [], []
     for kind in kinds:
         vals, lines = recs[kind]
-        if _ID_COLUMNS[kind] == 1:
-            ids.append(integer_ids(vals[:, 0], lines, name, f"{kind} id"))
+        one = _ID_COLUMNS[kind] == 1
+        what = [f"{kind} id"] if one else [f"{kind} vertex 1", f"{kind} vertex 2"]
+        cols = np.stack(
+            [_exact_ids(vals[:, c], lines, src, c + 1, w) for c, w in enumerate(what)], axis=1
+        ).reshape(-1, len(what))
+        if ids is not None:
+            ids[kind] = cols
+        if one:
+            vertex_ids.append(cols[:, 0])
             id_lines.append(lines)
-        else:
-            for col in (0, 1):
-                integer_ids(vals[:, col], lines, name, f"{kind} vertex {col + 1}")
-    if ids:
-        every, every_line = np.concatenate(ids), np.concatenate(id_lines)
+    if vertex_ids:
+        every, every_line = np.concatenate(vertex_ids), np.concatenate(id_lines)
         repeat = first_repeat(every, tiebreak=every_line)
         if repeat is not None:
             first, k = repeat
             raise InputError(
                 f"vertex id {int(every[k])} is defined twice (first on line "
                 f"{int(every_line[first])})",
-                path=name,
+                path=src.path,
                 line=int(every_line[k]),
             )
     return recs
+
+
+def _exact_ids(
+    values: NDArray[np.float64],
+    lines: NDArray[np.int64],
+    src: SourceText,
+    field: int,
+    column: str,
+) -> NDArray[np.int64]:
+    """An id column as int64: through the parsed floats where they hold every integer
+    (``|id| < 2**53``), re-read from the text where they do not."""
+    big = np.abs(values) >= _EXACT_FLOAT_IDS
+    if not big.any():
+        return integer_ids(values, lines, src.path, column)
+    out = np.empty(values.shape[0], dtype=np.int64)
+    out[~big] = integer_ids(values[~big], lines[~big], src.path, column)
+    out[big] = record_id_tokens(src, lines[big], field, column)
+    return out
 
 
 def format_g2o_records(kind: str, ids: ArrayLike, values: ArrayLike) -> str:
@@ -173,15 +205,16 @@ def read_g2o_graph(
     """
     from slamrel.backends.least_squares import PoseGraph
 
-    recs = read_g2o_records(path, source=source)
+    exact: dict[str, NDArray[np.int64]] = {}
+    recs = read_g2o_records(path, source=source, ids=exact)
     name = str(path)
     lines = {k: v[1] for k, v in recs.items()}
     vse2 = recs["VERTEX_SE2"][0]
     vxy = recs["VERTEX_XY"][0]
     if vse2.shape[0] == 0:
         raise InputError("no VERTEX_SE2 records", path=path)
-    pose_ids = vse2[:, 0].astype(np.int64)
-    lm_ids = vxy[:, 0].astype(np.int64)
+    pose_ids = exact["VERTEX_SE2"][:, 0]
+    lm_ids = exact["VERTEX_XY"][:, 0]
     for vals, kind, what in ((vse2, "VERTEX_SE2", "pose"), (vxy, "VERTEX_XY", "landmark")):
         check_coordinates(vals[:, 1:3], what=what, path=name, line_of=lines[kind].__getitem__)
     for kind, size, start in (("EDGE_SE2", 3, 5), ("EDGE_SE2_XY", 2, 4)):
@@ -197,9 +230,8 @@ def read_g2o_graph(
     pose_ids, lm_ids = pose_ids[po], lm_ids[lo]
 
     def index(
-        ids: NDArray[np.int64], wanted: NDArray[np.float64], kind: str, what: str
+        ids: NDArray[np.int64], w: NDArray[np.int64], kind: str, what: str
     ) -> NDArray[np.int64]:
-        w = wanted.astype(np.int64)
         pos = rows_of(ids, w)
         k = first_missing(pos)
         if k is not None:
@@ -212,16 +244,17 @@ def read_g2o_graph(
 
     e = recs["EDGE_SE2"][0]
     f2 = recs["EDGE_SE2_XY"][0]
-    refuse_self_loops(e[:, :2], lines["EDGE_SE2"], path, "EDGE_SE2")
+    ee, ef = exact["EDGE_SE2"], exact["EDGE_SE2_XY"]
+    refuse_self_loops(ee, lines["EDGE_SE2"], path, "EDGE_SE2")
     graph = PoseGraph(
         poses=vse2[po, 1:4],
         landmarks=vxy[lo, 1:3],
-        pp_i=index(pose_ids, e[:, 0], "EDGE_SE2", "pose"),
-        pp_j=index(pose_ids, e[:, 1], "EDGE_SE2", "pose"),
+        pp_i=index(pose_ids, ee[:, 0], "EDGE_SE2", "pose"),
+        pp_j=index(pose_ids, ee[:, 1], "EDGE_SE2", "pose"),
         pp_z=e[:, 2:5],
         pp_info=_upper_to_full(e[:, 5:11], 3),
-        pl_k=index(pose_ids, f2[:, 0], "EDGE_SE2_XY", "pose"),
-        pl_l=index(lm_ids, f2[:, 1], "EDGE_SE2_XY", "landmark"),
+        pl_k=index(pose_ids, ef[:, 0], "EDGE_SE2_XY", "pose"),
+        pl_l=index(lm_ids, ef[:, 1], "EDGE_SE2_XY", "landmark"),
         pl_z=f2[:, 2:4],
         pl_info=_upper_to_full(f2[:, 4:7], 2),
     )

@@ -79,7 +79,7 @@ def read_map(path: PathLike) -> LandmarkMap:
 
 
 def _build(
-    ids: NDArray[np.float64],
+    ids: NDArray[np.float64] | NDArray[np.int64],
     xy: NDArray[np.float64],
     cov: NDArray[np.float64] | None,
     path: str,
@@ -103,10 +103,10 @@ def _read_csv_map(src: SourceText) -> LandmarkMap:
 
 def _read_g2o_map(src: SourceText) -> LandmarkMap:
     """``VERTEX_XY`` records (:func:`slamrel.formats.g2o.read_g2o_records`); others skipped."""
-    values, lines = read_g2o_records(src.path, ("VERTEX_XY",), skipped=Counter(), source=src)[
-        "VERTEX_XY"
-    ]
-    return _build(values[:, 0], values[:, 1:3], None, src.path, lines, "VERTEX_XY id")
+    ids: dict[str, NDArray[np.int64]] = {}
+    recs = read_g2o_records(src.path, ("VERTEX_XY",), skipped=Counter(), source=src, ids=ids)
+    values, lines = recs["VERTEX_XY"]
+    return _build(ids["VERTEX_XY"][:, 0], values[:, 1:3], None, src.path, lines, "VERTEX_XY id")
 
 
 MAP_FORMATS = ("csv", "g2o", "mrclam")

@@ -55,6 +55,8 @@ __all__ = [
     "read_csv_table",
     "read_csv_text_column",
     "read_csv_id_column",
+    "exact_integer_tokens",
+    "record_id_tokens",
     "format_csv_table",
     "write_csv_table",
     "parse_float",
@@ -527,6 +529,31 @@ def read_csv_id_column(
     if cells.size == 0:
         return np.empty(0, dtype=np.int64), np.empty(0, dtype=bool)
     empty = cells == ""
+    ids = exact_integer_tokens(
+        cells, lines, source.path, name, empty_ok=empty_ok, hint="an optional sign and digits"
+    )
+    return ids, ~empty
+
+
+def exact_integer_tokens(
+    cells: NDArray[np.str_],
+    lines: NDArray[np.int64],
+    path: str,
+    column: str,
+    *,
+    empty_ok: bool = False,
+    hint: str = "an optional sign and digits",
+) -> NDArray[np.int64]:
+    """Text cells as exact int64 ids, never via float64 (``2**53 + 1`` stays itself).
+
+    A cell is an optional sign and ASCII digits, optionally followed by ``.`` and zeros
+    (``3.0``); anything else (``2.5``, ``1e3``, a value beyond int64) raises
+    :class:`InputError` at its line (``lines[k]`` for cell ``k``). Empty cells become 0
+    (they raise unless ``empty_ok``).
+    """
+    if cells.size == 0:
+        return np.empty(0, dtype=np.int64)
+    empty = cells == ""
     part = np.strings.partition(cells, ".")
     head, dot, frac = part[0], part[1], part[2]
     digits = np.strings.lstrip(head, "+-")
@@ -550,15 +577,31 @@ def read_csv_id_column(
         plain = text.isascii() and text.isprintable()
         got = (text if plain else quote_token(text)) if text else "an empty cell"
         raise InputError(
-            f"column '{name}': expected an integer id, got {got} (ids are read exactly as "
-            "written: an optional sign and digits)",
-            path=source.path,
+            f"column '{column}': expected an integer id, got {got} (ids are read exactly as "
+            f"written: {hint})",
+            path=path,
             line=int(lines[k]),
         )
     ids = np.zeros(cells.shape[0], dtype=np.int64)
     if (~empty).any():
         ids[~empty] = head[~empty].astype(np.int64)
-    return ids, ~empty
+    return ids
+
+
+def record_id_tokens(
+    source: SourceText, lines: NDArray[np.int64], field: int, column: str
+) -> NDArray[np.int64]:
+    """Whitespace-separated field ``field`` (0-based, the keyword being field 0) of each of
+    ``lines`` of a keyword-record file, as exact int64 ids (:func:`exact_integer_tokens`).
+
+    For ids that a float64 column cannot hold (``|id| ≥ 2**53``: GTSAM symbol keys); the
+    fields are split in Python, so readers call it only when such an id is present.
+    """
+    if lines.size == 0:
+        return np.empty(0, dtype=np.int64)
+    text = source.lines
+    cells = np.array([text[n - 1].split()[field] for n in lines.tolist()], dtype=np.str_)
+    return exact_integer_tokens(cells, lines, source.path, column, hint="an integer")
 
 
 def _column_name(c: Column) -> str:

@@ -695,9 +695,19 @@ def _carmen_pose(
 
 def _read_g2o(src: SourceText, *, skipped: Counter[str]) -> tuple[NDArray, NDArray, NDArray]:
     """``VERTEX_SE2`` records (:func:`slamrel.formats.g2o.read_g2o_records`), in id order."""
-    values, lines = read_g2o_records(src.path, ("VERTEX_SE2",), skipped=skipped, source=src)[
-        "VERTEX_SE2"
-    ]
+    ids: dict[str, NDArray[np.int64]] = {}
+    recs = read_g2o_records(src.path, ("VERTEX_SE2",), skipped=skipped, source=src, ids=ids)
+    values, lines = recs["VERTEX_SE2"]
+    big = np.flatnonzero(np.abs(ids["VERTEX_SE2"][:, 0]) >= 2**53)
+    if big.size:  # a double cannot hold it: two poses could share one timestamp
+        k = int(big[0])
+        raise InputError(
+            f"VERTEX_SE2 id {int(ids['VERTEX_SE2'][k, 0])} is used as the pose's timestamp, "
+            "which a double holds exactly only below 2**53 in magnitude; expected smaller ids "
+            "(a GTSAM symbol key's pose index, for example)",
+            path=src.path,
+            line=int(lines[k]),
+        )
     order = np.argsort(values[:, 0], kind="stable")
     return values[order, 0], values[order, 1:4], lines[order]
 
