@@ -170,6 +170,7 @@ def evaluate(
     strict: bool = False,
     estimate_name: str | None = None,
     relations_name: str | None = None,
+    allow_empty: bool = False,
 ) -> Evaluation:
     """Score an estimate with the relation metric (Kümmerle et al. 2009).
 
@@ -188,6 +189,10 @@ def evaluate(
         are excluded, counted and named in an :class:`UnassociatedRelationsWarning`).
     estimate_name, relations_name : str, optional
         Where the estimate and the relations come from (file names), for messages.
+    allow_empty : bool
+        Score an empty ``relations`` as an :class:`Evaluation` of no relations (count 0, every
+        statistic NaN) instead of raising: for callers that report an empty set as such
+        (``slamrel run``'s per-set tables). By default no relations is an error.
 
     Returns
     -------
@@ -199,11 +204,19 @@ def evaluate(
         When no relation can be associated (the message shows both time spans), or with
         ``strict`` when any cannot.
     InputError
+        When ``relations`` is empty (without ``allow_empty``): the statistics of no relation
+        would be NaN, not a score.
         When the estimate has two different poses for one timestamp (relations by time);
         when the errors overflow float64 (coordinates near 1e150 and beyond): such poses
         cannot be scored, and statistics of ``inf`` would be no score either.
     """
     of_relations = f" of {relations_name}" if relations_name else ""
+    if len(relations) == 0 and not allow_empty:
+        raise InputError(
+            f"no relations to score{of_relations}: the relation set is empty; expected at "
+            "least one relation (the statistics of none would be NaN, not a score)",
+            path=relations_name,
+        )
     relations, estimate = on_common_group(relations, estimate, mode=mode)
     if relations.key == "time":
         _refuse_two_poses_at_one_time(estimate, estimate_name)

@@ -550,9 +550,11 @@ def _evaluate_sets(sets: dict[str, RelationSet], est: Trajectory) -> dict[str, E
     # otherwise (real logs) the nearest pose within 0.1 s, or SE(2) interpolation
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UnassociatedRelationsWarning)  # counted in the JSON
-        out = {"all": evaluate(_merge(sets), est, max_time_diff=0.1, interpolate=True)}
+        # an empty set is reported as such (relation_sets says why), not refused
+        kw: dict[str, Any] = {"max_time_diff": 0.1, "interpolate": True, "allow_empty": True}
+        out = {"all": evaluate(_merge(sets), est, **kw)}
         for k, rel in sets.items():
-            out[k] = evaluate(rel, est, max_time_diff=0.1, interpolate=True)
+            out[k] = evaluate(rel, est, **kw)
     return out
 
 

@@ -241,6 +241,23 @@ def test_no_selected_relation_is_refused_and_writes_nothing(
     assert not (tmp_path / "r.json").exists() and not (tmp_path / "r.zip").exists()
 
 
+def test_evaluate_api_refuses_no_relations_unless_asked() -> None:
+    """The Python API as the command: no relation is an error, not a NaN table; a caller
+    that reports empty sets itself (allow_empty=True) gets count 0."""
+    import slamrel
+    from relation_metric.errors import InputError
+
+    t, poses = _track()
+    traj = slamrel.Trajectory(t, poses)
+    rel = slamrel.generate_relations(traj, "consecutive")
+    empty = rel.subset(np.zeros(len(rel), dtype=bool))
+    with pytest.raises(InputError, match="no relations to score of ref.relations"):
+        slamrel.evaluate(empty, traj, relations_name="ref.relations")
+    ev = slamrel.evaluate(empty, traj, allow_empty=True)
+    assert ev.translation["abs"].count == 0
+    assert slamrel.evaluate(rel, traj).translation["abs"].count == len(rel)
+
+
 def test_evo_zip_of_no_scored_relation_is_refused(tmp_path: Path) -> None:
     from relation_metric.errors import InputError
     from relation_metric.evaluate import evaluate
@@ -249,7 +266,9 @@ def test_evo_zip_of_no_scored_relation_is_refused(tmp_path: Path) -> None:
     from slamrel.formats.results import write_evo_zip
 
     ev = evaluate(
-        RelationSet(np.empty(0), np.empty(0), np.empty((0, 3))), Trajectory([0.0], [[0, 0, 0]])
+        RelationSet(np.empty(0), np.empty(0), np.empty((0, 3))),
+        Trajectory([0.0], [[0, 0, 0]]),
+        allow_empty=True,
     )
     with pytest.raises(InputError, match="no zip written"):
         write_evo_zip(tmp_path / "e.zip", ev)
