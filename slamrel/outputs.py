@@ -25,7 +25,8 @@ The output rule of every ``slamrel`` command:
   re-checks the target, so a folder that appeared meanwhile is never replaced silently;
 * hidden work folders carry the writer's pid (``.NAME.PID-XXXXXXXX.partial``); one whose
   process is gone (killed with ``SIGKILL``, a power cut) is removed by the next write of the
-  same output, with a warning.
+  same output, with a warning; so is one named as before the pid was added
+  (``.NAME.XXXXXXXX.partial``) once nothing in it changed for an hour.
 
 Every failure is an :class:`~relation_metric.errors.InputError` naming the output path.
 """
@@ -45,6 +46,7 @@ import stat
 import sys
 import tempfile
 import threading
+import time
 import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
@@ -748,6 +750,13 @@ def _swap_lock(final: Path) -> Iterator[None]:
 
 
 _WORK = re.compile(r"(\d+)-[a-z0-9_]+\.(?:partial|old)")
+# Before the pid was in the name (slamrel 0.1.0 up to 2026-12-01): ``.NAME.XXXXXXXX.partial``,
+# the 8 characters of ``tempfile.mkdtemp``. Nothing says whether its writer still runs, so
+# one is removed only when nothing in it has changed for :data:`OLD_STYLE_STALE_AGE` seconds.
+_OLD_STYLE_WORK = re.compile(r"[a-z0-9_]{8}\.partial")
+#: Seconds without a change after which an old-style work folder (no pid in its name) is
+#: taken as left behind: a slamrel that builds one writes into it far more often than that.
+OLD_STYLE_STALE_AGE = 3600.0
 
 
 def _alive(pid: int) -> bool:
@@ -775,22 +784,40 @@ def remove_stale_work(final: Path) -> list[Path]:
     except OSError:
         return removed
     for name in entries:
-        m = _WORK.fullmatch(name[len(prefix) :])
-        if m is None:
-            continue
-        pid = int(m.group(1))
-        if pid == os.getpid() or _alive(pid):
-            continue
         path = final.parent / name
+        m = _WORK.fullmatch(name[len(prefix) :])
+        if m is not None:
+            pid = int(m.group(1))
+            if pid == os.getpid() or _alive(pid):
+                continue
+            why = f"pid {pid}, no longer running"
+        elif _OLD_STYLE_WORK.fullmatch(name[len(prefix) :]) and path.is_dir():
+            idle = _idle_seconds(path)
+            if idle < OLD_STYLE_STALE_AGE:
+                continue
+            why = f"an earlier slamrel's folder, unchanged for {idle / 3600:.1f} h"
+        else:
+            continue
         _remove(path)
         removed.append(path)
         warnings.warn(
-            f"{path}: removed an unfinished output left by a slamrel that stopped "
-            f"(pid {pid}, no longer running)",
+            f"{path}: removed an unfinished output left by a slamrel that stopped ({why})",
             StaleOutputWarning,
             stacklevel=3,
         )
     return removed
+
+
+def _idle_seconds(folder: Path) -> float:
+    """Seconds since anything in ``folder`` (itself included, links not followed) changed."""
+    newest = 0.0
+    for root, dirs, files in os.walk(folder):
+        for name in (root, *(os.path.join(root, n) for n in (*dirs, *files))):
+            try:
+                newest = max(newest, os.lstat(name).st_mtime)
+            except OSError:
+                continue
+    return time.time() - newest
 
 
 # ---------------------------------------------------------------------------- staged folders

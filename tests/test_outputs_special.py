@@ -325,6 +325,32 @@ def test_next_run_removes_work_folders_of_a_dead_slamrel(tmp_path: Path) -> None
     assert _hidden(tmp_path, "cx") == [alive.name]
 
 
+def test_old_style_work_folders_are_removed_once_idle(tmp_path: Path) -> None:
+    """Work folders named before the pid was added (``.NAME.XXXXXXXX.partial``) say nothing
+    of their writer: removed when nothing in them changed for an hour, kept when recent."""
+    from slamrel.outputs import OLD_STYLE_STALE_AGE
+
+    left = tmp_path / ".cx.01yrwy9x.partial"
+    (left / "figures").mkdir(parents=True)
+    (left / "figures" / "a.png").write_text("half\n")
+    hour_ago = time.time() - OLD_STYLE_STALE_AGE - 60
+    for p in (left / "figures" / "a.png", left / "figures", left):
+        os.utime(p, (hour_ago, hour_ago))
+    recent = tmp_path / ".cx.q8m2k4za.partial"  # could be an older slamrel writing now
+    recent.mkdir()
+    (recent / "b.txt").write_text("being written\n")
+    os.utime(recent, (hour_ago, hour_ago))  # the folder old, a file in it fresh: kept
+    other = tmp_path / ".cx.notours.partial"  # not slamrel's pattern: never touched
+    other.mkdir()
+    os.utime(other, (hour_ago, hour_ago))
+    proc = _cli("example", "-o", "cx", "-q", cwd=tmp_path)
+    assert proc.wait(timeout=120) == 0
+    err = proc.stderr.read() if proc.stderr else ""
+    assert err.count("removed an unfinished output") == 1, err
+    assert "unchanged for 1.0 h" in err
+    assert not left.exists() and recent.exists() and other.exists()
+
+
 def test_socket_and_block_device_outputs_are_refused(
     ex: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
