@@ -100,7 +100,26 @@ def _stop_signals() -> Iterator[None]:
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):  # type: ignore[no-untyped-def]
-    print(f"warning: {message}", file=sys.stderr)
+    print(f"warning: {_warning_text(message, category, filename, lineno)}", file=sys.stderr)
+
+
+def _warning_text(message: object, category: type[Warning], filename: str, lineno: int) -> str:
+    """What a warning says on the command line. slamrel's own warnings are sentences; a
+    floating-point warning of numpy (``invalid value encountered in divide``) is not meant
+    for users: it is said as what it is, where, and that it is slamrel's to fix."""
+    if issubclass(category, RuntimeWarning) and "encountered" in str(message):
+        where = filename
+        for root in ("relation_metric", "recovery", "landmark_graph", "slamrel", "numpy"):
+            k = filename.rfind(os.sep + root + os.sep)
+            if k >= 0:
+                where = filename[k + 1 :]
+                break
+        return (
+            f"floating-point problem inside slamrel: {message} ({where}:{lineno}); a number "
+            "computed through it may be NaN or infinite. This is a bug in slamrel, please "
+            "report it with the command line"
+        )
+    return str(message)
 
 
 def _os_error_text(exc: OSError) -> str:

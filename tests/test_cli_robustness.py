@@ -223,3 +223,26 @@ def test_trajectory_coordinates_beyond_float64_statistics_are_input_errors(tmp_p
         err = capsys.readouterr().err
         assert f"{est}:5: " in err and "beyond 1e+30 m" in err, err
         _clean_message(err)
+
+
+@pytest.mark.filterwarnings("default::RuntimeWarning")  # as a user's interpreter shows them
+def test_a_numpy_floating_point_warning_is_said_as_slamrels_bug(
+    monkeypatch: pytest.MonkeyPatch, tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A numpy RuntimeWarning reaching the command line (none is known: the suite turns
+    every one into an error) is not shown as numpy's bare phrase but as a bug, with where."""
+    import numpy as np
+
+    from slamrel.commands import simulate
+
+    def divide(args):  # type: ignore[no-untyped-def]
+        np.array([0.0]) / np.array([0.0])
+        return 0
+
+    monkeypatch.setattr(simulate, "run_simulate", divide)
+    assert main(["simulate", "simple1", "-o", str(tmp_path / "b")]) == 0
+    err = capsys.readouterr().err
+    said = "warning: floating-point problem inside slamrel: invalid value encountered in divide"
+    assert said in err
+    assert "test_cli_robustness.py:" in err and "bug in slamrel" in err
+    _clean_message(err)
