@@ -307,6 +307,43 @@ def test_signal_while_writing_leaves_no_partial(tmp_path: Path, signame: str) ->
     assert _hidden(tmp_path, "big") == []
 
 
+def test_sigterm_stops_a_study_with_its_workers_at_once(tmp_path: Path) -> None:
+    """SIGTERM reaches the study's process only (not its worker processes, unlike Ctrl-C in
+    a terminal): leaving the pool used to run every pending case first, for minutes."""
+    argv = ["study", "pose-only", "-o", "st", "--worlds", "hu-simple1", "--noise", "a"]
+    proc = _cli(*argv, "--runs", "6", "--workers", "2", cwd=tmp_path)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        if any((tmp_path / "st").glob("cases/*.json")):  # a case stored: workers busy
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None, "the study ended before the signal"
+    children = subprocess.run(
+        ["pgrep", "-P", str(proc.pid)], capture_output=True, text=True
+    ).stdout.split()
+    assert children, "the study runs no worker processes"
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=60) == 128 + signal.SIGTERM
+    assert time.monotonic() - sent < 20, "the study ran on after SIGTERM"
+    err = proc.stderr.read() if proc.stderr else ""
+    assert "stopped by SIGTERM" in err and "Traceback" not in err, err
+    for pid in map(int, children):  # no worker left computing
+        for _ in range(100):
+            if not Path(f"/proc/{pid}").exists() or "Z" in _state(pid):
+                break
+            time.sleep(0.1)
+        else:
+            pytest.fail(f"worker {pid} still runs after the study stopped")
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except OSError:
+        return "Z"
+
+
 def test_next_run_removes_work_folders_of_a_dead_slamrel(tmp_path: Path) -> None:
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait()

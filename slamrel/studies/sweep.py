@@ -228,18 +228,41 @@ def run_sweep(
             finished(t, *_guarded(t.function, t.kwargs))
     else:
         ctx = multiprocessing.get_context("spawn")
-        with (
-            _single_threaded_blas_env(),
-            ProcessPoolExecutor(
+        with _single_threaded_blas_env():
+            pool = ProcessPoolExecutor(
                 workers, mp_context=ctx, initializer=_exit_with_parent, initargs=(os.getpid(),)
-            ) as pool,
-        ):
+            )
+        try:
             futures = {pool.submit(_guarded, t.function, t.kwargs): t for t in todo}
             for fut in as_completed(futures):
                 finished(futures[fut], *fut.result())
+        except BaseException:  # SIGTERM (Terminated), Ctrl-C, a failed store: stop now
+            _stop_pool(pool)
+            raise
+        pool.shutdown()
     return SweepReport(
         len(todo), skipped, tuple(sorted(failed)), time.monotonic() - start, tuple(damaged)
     )
+
+
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Stop a pool at once: pending cases cancelled, running ones' workers terminated.
+
+    ``shutdown(wait=True)`` (what leaving a ``with`` block does) would first run every
+    pending case: a ``SIGTERM``, which reaches the sweep's process only, left a study
+    running for minutes. The workers are ended through the executor's process table
+    (``_processes``, not public API; absent, the workers end with their parent anyway,
+    :func:`_exit_with_parent`). Stored results stay: the sweep resumes from them.
+    """
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown()
+    pool.shutdown(wait=False, cancel_futures=True)  # which forgets them
+    for proc in processes:
+        try:
+            proc.terminate()
+        except (OSError, ValueError):  # already gone
+            continue
+    for proc in processes:
+        proc.join(timeout=5)
 
 
 def _run_dask(
