@@ -23,7 +23,7 @@ __all__ = [
 #: written by :func:`slamrel.formats.bundle.write_bundle` and required by its reader.
 BUNDLE_FORMAT = "slamrel-bundle/1"
 #: Trajectory file formats of :func:`slamrel.formats.trajectories.read_trajectory`.
-TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc")
+TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc", "bag")
 #: Built-in simulated worlds of :func:`slamrel.simulation.worlds.make_world` ...
 WORLDS = ("simple1", "simple2", "complex1", "complex2")
 #: ... and Hu et al.'s worlds to the letter (82 / 420 poses).

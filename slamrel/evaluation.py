@@ -31,6 +31,7 @@ from relation_metric.timeorder import FILTER_TIME_TOLERANCE, RepeatedTimeWarning
 from relation_metric.trajectory import Trajectory
 from slamrel.constants import TRAJECTORY_FORMATS
 from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
+from slamrel.formats.bags import is_bag, names_bag
 from slamrel.formats.relations import read_relations
 from slamrel.formats.text import read_numeric_table, read_source
 from slamrel.formats.trajectories import (
@@ -221,7 +222,7 @@ def _is_relations_file(path: str, options: EvaluateOptions) -> bool:
     """
 
     p = Path(path)
-    if p.is_dir() or options.reference_format is not None:
+    if p.is_dir() or options.reference_format is not None or names_bag(path):
         return False
     ext = p.suffix.lower()
     if ext in RELATIONS_EXTENSIONS:
@@ -557,7 +558,7 @@ def load_trajectory(
     name the command's options (``format_option`` for its ``format``).
     """
     p = Path(path)
-    if p.is_dir():
+    if p.is_dir() and not is_bag(p):
         if role != "reference":
             online = p / "online.csv"
             also = f", or pass {online} (the filter's online estimate)" if online.is_file() else ""
