@@ -72,6 +72,9 @@ class FileEvaluation:
     #: trajectory (``consecutive`` by default); ``None`` for a .relations file, whose
     #: relations may mix kinds. Written as the ``set`` column of ``--per-relation``.
     relation_set: str | None = None
+    #: The (estimate, reference) the ATE compares (the synchronised pairs with ``sync``);
+    #: None for a .relations file.
+    ate_inputs: tuple[Trajectory, Trajectory] | None = None
 
 
 def evaluate_files(
@@ -191,7 +194,8 @@ def score_files(
         assert ate_reference is not None  # the reference (just checked) or its synchronised copy
         result["ate"] = _ate(ate_estimate, ate_reference, options.max_time_diff)
     generated = None if ref_traj is None else (options.strategy or "consecutive")
-    return FileEvaluation(ev, ev_estimate, result, relation_set=generated)
+    pair = None if ate_pair[1] is None else (ate_pair[0], ate_pair[1])
+    return FileEvaluation(ev, ev_estimate, result, relation_set=generated, ate_inputs=pair)
 
 
 def _why_no_relations(
