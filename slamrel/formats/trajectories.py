@@ -778,7 +778,9 @@ def write_trajectory(
 
     Numbers are written with :data:`~slamrel.formats.text.NUMBER_FORMAT` (17 significant
     digits: the file reads back bit for bit). ``plain`` and ``tum`` have a ``#`` header line;
-    ``csv`` the header :data:`CSV_HEADER` (the one writer of a bundle's ``groundtruth.csv``
+    ``kitti`` the 12 numbers of ``[R | t]`` a line, no header and no times (write the
+    timestamps apart, one a line, as KITTI's ``times.txt``); ``csv`` the header
+    :data:`CSV_HEADER` (the one writer of a bundle's ``groundtruth.csv``
     and ``odometry.csv``); ``carmen`` writes ``FLASER 0`` records (laser pose = odometry
     pose), which the original metricEvaluator reads; ``g2o`` writes ``VERTEX_SE2`` lines
     (:func:`slamrel.formats.g2o.format_g2o_records`) with the pose index as id.
@@ -786,8 +788,10 @@ def write_trajectory(
     t = trajectory.timestamps
     p = trajectory.poses
     n = len(trajectory)
-    if p.shape[1] == 7 and format != "tum":
-        raise InputError(f"a 3-D trajectory can be written as tum only, not {format}", path=path)
+    if p.shape[1] == 7 and format not in ("tum", "kitti"):
+        raise InputError(
+            f"a 3-D trajectory can be written as tum or kitti only, not {format}", path=path
+        )
     if format == "plain":
         text = "# t x y theta\n" + _rows(np.column_stack((t, p)), [NUMBER_FORMAT] * 4)
     elif format == "tum":
@@ -797,6 +801,12 @@ def write_trajectory(
             q = quaternion_from_yaw(p[:, 2])
             rows = np.column_stack((t, p[:, 0], p[:, 1], np.zeros(n), q))
         text = "# t x y z qx qy qz qw\n" + _rows(rows, [NUMBER_FORMAT] * 8)
+    elif format == "kitti":
+        from relation_metric import se3
+
+        poses7 = p if p.shape[1] == 7 else trajectory.lifted().poses
+        m = se3.to_matrix(poses7)[:, :3, :].reshape(n, 12) if n else np.zeros((0, 12))
+        text = _rows(m, [NUMBER_FORMAT] * 12)
     elif format == "csv":
         text = CSV_HEADER + "\n" + _rows(np.column_stack((t, p)), [NUMBER_FORMAT] * 4, ",")
     elif format == "g2o":
