@@ -32,6 +32,7 @@ COMMAND_MODULES = (
     "slamrel.commands.run",
     "slamrel.commands.evaluate",
     "slamrel.commands.traj",
+    "slamrel.commands.nees",
     "slamrel.commands.recover",
     "slamrel.commands.relations",
     "slamrel.commands.map_compare",

@@ -14,7 +14,12 @@ from typing import TYPE_CHECKING
 
 from relation_metric.constants import MODES
 from slamrel.commands import options as opt
-from slamrel.commands.common import add_strategy_arguments, check_outputs, stats_table
+from slamrel.commands.common import (
+    add_strategy_arguments,
+    check_outputs,
+    input_files,
+    stats_table,
+)
 from slamrel.constants import EVALUATE_DEFAULTS, TRAJECTORY_FORMATS
 
 if TYPE_CHECKING:  # the library is imported in run(): start-up stays light
@@ -181,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
     from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
 
     outputs = [args.json, args.per_relation, args.plot, args.evo_zip, args.evo_ape_zip]
-    check_outputs(outputs, [args.reference, args.estimate, args.odometry])
+    check_outputs(outputs, input_files([args.reference, args.estimate, args.odometry]))
     options = EvaluateOptions(**{name: getattr(args, name) for name in SCORING_OPTIONS})
     scored = score_files(args.reference, args.estimate, options, degrees=args.degrees, ate=args.ate)
     _write_outputs(args, scored)

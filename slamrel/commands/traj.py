@@ -90,17 +90,6 @@ def _read_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _input_files(paths: list[str | None]) -> list[str | None]:
-    """The files behind the arguments: a bag topic's bag, so no output replaces it."""
-    from slamrel.formats.bags import split_bag_spec
-
-    out: list[str | None] = []
-    for p in paths:
-        spec = None if p is None else split_bag_spec(p)
-        out.append(p if spec is None else spec.path)
-    return out
-
-
 def run_topics(args: argparse.Namespace) -> int:
     """``slamrel traj topics BAG``."""
     from relation_metric.errors import InputError
@@ -139,12 +128,12 @@ def run_topics(args: argparse.Namespace) -> int:
 
 def run_info(args: argparse.Namespace) -> int:
     """``slamrel traj info TRAJ...``."""
-    from slamrel.commands.common import check_outputs
+    from slamrel.commands.common import check_outputs, input_files
     from slamrel.evaluation import load_trajectory
     from slamrel.formats.bags import read_bag_poses, split_bag_spec
     from slamrel.trajinfo import trajectory_info
 
-    check_outputs([args.json], _input_files(list(args.trajectories)))
+    check_outputs([args.json], input_files(list(args.trajectories)))
     report = []
     for path in args.trajectories:
         loaded = load_trajectory(
@@ -204,7 +193,7 @@ def _info_text(path: str, e: dict[str, object]) -> str:
 def run_convert(args: argparse.Namespace) -> int:
     """``slamrel traj convert TRAJ -o OUT``."""
     from relation_metric.errors import OptionError
-    from slamrel.commands.common import check_outputs
+    from slamrel.commands.common import check_outputs, input_files
     from slamrel.evaluation import load_trajectory
     from slamrel.formats.text import NUMBER_FORMAT, write_text_atomic
     from slamrel.formats.trajectories import write_trajectory
@@ -218,7 +207,7 @@ def run_convert(args: argparse.Namespace) -> int:
         )
     if args.output_times and fmt != "kitti":
         raise OptionError("is for a KITTI output (--to kitti)", option="--output-times")
-    check_outputs([args.output, args.output_times], _input_files([args.trajectory, args.times]))
+    check_outputs([args.output, args.output_times], input_files([args.trajectory, args.times]))
     loaded = load_trajectory(
         args.trajectory, args.format, role="estimate", planar=args.planar, times=args.times
     )
