@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import subprocess
+import sys
 import tempfile
 import textwrap
 from pathlib import Path
@@ -625,3 +626,34 @@ def test_live_evo_reproduces_stored_numbers():
         for part in ("trans", "rot"):
             for key, value in EVO[name][part].items():
                 assert live[name][part][key] == pytest.approx(value, rel=1e-12, abs=1e-15)
+
+
+def test_rosbags_is_imported_only_to_read_a_bag(tmp_path):
+    """Start-up stays light: no rosbags (nor numpy for --help) unless a bag is read."""
+    tum = tmp_path / "a.tum"
+    tum.write_text("0 0 0 0 0 0 0 1\n1 1 0 0 0 0 0 1\n2 2 0 0 0 0 0 1\n")
+    probe = textwrap.dedent(
+        """
+        import contextlib, io, json, sys
+        from slamrel.cli import main
+        with contextlib.redirect_stdout(io.StringIO()):
+            try:
+                main(json.loads(sys.argv[1]))
+            except SystemExit:
+                pass
+        print(json.dumps([m for m in ("rosbags", "numpy") if m in sys.modules]))
+        """
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+    def loaded(argv: list[str]) -> list[str]:
+        out = subprocess.run(
+            [sys.executable, "-c", probe, json.dumps(argv)],
+            capture_output=True, text=True, env=env, check=True,
+        )  # fmt: skip
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    for argv in (["traj", "--help"], ["nees", "--help"], ["evaluate", "--help"]):
+        assert loaded(argv) == [], argv
+    assert loaded(["evaluate", str(tum), str(tum), "-q"]) == ["numpy"]
+    assert loaded(["traj", "info", str(tum)]) == ["numpy"]
