@@ -15,6 +15,7 @@ import subprocess
 import sys
 import tempfile
 import textwrap
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -237,10 +238,13 @@ def test_tf_chain_against_hand_composition(tmp_path):
     from scipy.spatial.transform import Rotation, Slerp
 
     edges = _tf_bag(tmp_path / "tf")
-    got = read_bag_poses(split_bag_spec(f"{tmp_path / 'tf'}:/tf:map.camera"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        got = read_bag_poses(split_bag_spec(f"{tmp_path / 'tf'}:/tf:map.camera"))
     t_base, xyz_b, q_b = edges[("odom", "base")]
     inside = (t_base >= 0.0) & (t_base <= 4.0)
     assert got.skipped == {"outside the tf chain's time span": int(np.count_nonzero(~inside))}
+    assert any("lie outside the time span" in str(w.message) for w in caught)  # said, too
     t = t_base[inside]
     np.testing.assert_allclose(got.timestamps, t, atol=1e-9)
     t_map, xyz_m, q_m = edges[("map", "odom")]

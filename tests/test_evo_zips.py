@@ -111,6 +111,16 @@ def test_ape_zip_matches_the_printed_ate(tmp_path, capsys):
     assert cells[:7] == pytest.approx(expect, abs=1e-6) and int(cells[7]) == n
 
 
+def test_ape_zip_needs_a_reference_trajectory(tmp_path):
+    ref = tmp_path / "r.relations"
+    ref.write_text("0 1 1 0 0 0 0 0\n1 2 1 0 0 0 0 0\n")
+    est = tmp_path / "e.txt"
+    est.write_text("0 0 0 0\n1 1 0 0\n2 2 0 0\n")
+    z = tmp_path / "ape.zip"
+    assert main(["evaluate", str(ref), str(est), "--evo-ape-zip", str(z), "-q"]) == 2
+    assert not z.exists()
+
+
 def _evo_ok() -> bool:
     if not (EVO_BIN / "evo_res").exists():
         return False

@@ -50,11 +50,16 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _input_arguments(p: argparse.ArgumentParser) -> None:
     """REFERENCE, ESTIMATE and their formats."""
-    p.add_argument("reference", metavar="REFERENCE", help=".relations file or reference trajectory")
+    p.add_argument(
+        "reference",
+        metavar="REFERENCE",
+        help=".relations file or reference trajectory (a ROS bag topic as BAG:TOPIC)",
+    )
     p.add_argument(
         "estimate",
         metavar="ESTIMATE",
-        help="estimated trajectory (CARMEN, TUM, t x y θ, g2o, CSV, KITTI, EuRoC)",
+        help="estimated trajectory (CARMEN, TUM, t x y θ, g2o, CSV, KITTI, EuRoC, or a ROS bag "
+        "topic BAG:TOPIC / tf chain BAG:/tf:PARENT.CHILD with the 'bags' extra)",
     )
     p.add_argument(
         "--format", choices=TRAJECTORY_FORMATS, help="format of ESTIMATE (default: recognised)"

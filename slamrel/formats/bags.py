@@ -46,6 +46,7 @@ cannot be interpolated (tf2's extrapolation error): they are dropped and counted
 from __future__ import annotations
 
 import os
+import warnings
 from collections import Counter
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -62,6 +63,7 @@ __all__ = [
     "BAG_EXTENSIONS",
     "POSE_MESSAGE_TYPES",
     "BagSpec",
+    "TfChainWarning",
     "BagTopic",
     "BagPoses",
     "split_bag_spec",
@@ -84,6 +86,11 @@ _TF = "tf2_msgs/msg/TFMessage"
 POSE_MESSAGE_TYPES = (_POSE, _POSE_COV, _ODOM, _TRANSFORM, _TF)
 #: The types whose messages carry a pose covariance.
 COVARIANCE_TYPES = (_POSE_COV, _ODOM)
+
+
+class TfChainWarning(UserWarning):
+    """Stamps of a tf chain that cannot be interpolated were left out (counted)."""
+
 
 _INSTALL = "install the optional extra: pip install 'slamrel[bags]' (or pip install rosbags)"
 
@@ -425,7 +432,15 @@ def _tf_chain(reader: Any, topics: Mapping[str, Any], spec: BagSpec) -> BagPoses
         keep &= (t >= lo) & (t <= hi)
     skipped = {}
     if not keep.all():
-        skipped["outside the tf chain's time span"] = int(np.count_nonzero(~keep))
+        dropped = int(np.count_nonzero(~keep))
+        skipped["outside the tf chain's time span"] = dropped
+        warnings.warn(
+            f"{spec}: {dropped} of {t.size} stamps of {last.parent}->{last.child} lie outside the "
+            "time span of another moving transform of the chain (tf2 cannot interpolate "
+            "there); left out",
+            TfChainWarning,
+            stacklevel=3,
+        )
     t = t[keep]
     if t.size == 0:
         raise InputError(
@@ -471,4 +486,3 @@ def _slerp(a: NDArray[np.float64], b: NDArray[np.float64], s: NDArray[np.float64
     wb = np.where(small, s, np.sin(s * theta) / sin)
     q = wa[:, None] * a + wb[:, None] * b
     return q / np.linalg.norm(q, axis=1, keepdims=True)
-
