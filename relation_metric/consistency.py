@@ -451,42 +451,49 @@ def pose_errors(
 
 @dataclass(frozen=True)
 class NeesOverTime:
-    """The NEES of one filter run at each time, with its χ² bands.
+    """The NEES of a filter at each time (averaged over ``runs`` runs), with its χ² bands.
 
     Attributes
     ----------
     times : ndarray, shape (N,)
     nees : ndarray, shape (N,)
-        ``eᵀ P⁻¹ e`` of the full pose error (``dof`` 3 for SE(2), 6 for SE(3)).
+        ``eᵀ P⁻¹ e`` of the full pose error (``dof`` 3 for SE(2), 6 for SE(3)), averaged over
+        the runs at each time.
     position, orientation : ndarray, shape (N,)
         The NEES of the position and of the orientation alone, from the marginal blocks of
-        ``P`` (ov_eval's two NEES; ``position_dof`` 2 or 3, ``orientation_dof`` 1 or 3).
-    dof, position_dof, orientation_dof : int
+        ``P`` (ov_eval's two NEES; ``position_dof`` 2 or 3, ``orientation_dof`` 1 or 3),
+        averaged over the runs.
+    per_run : ndarray, shape (runs, N)
+        The pose NEES of each run.
+    dof, position_dof, orientation_dof, runs : int
     frame : str
         The error definition (:func:`pose_errors`).
     probability : float
     band : tuple of float
-        The two-sided ``probability`` band of one value, ``χ²⁻¹((1 ∓ p)/2; dof)``
-        (:func:`nees_band` with one run).
+        The two-sided ``probability`` band of the run average at one time,
+        ``χ²⁻¹((1 ∓ p)/2; runs·dof) / runs`` (:func:`nees_band`).
     inside : float
-        Fraction of the values inside ``band`` (about ``probability`` when consistent).
+        Fraction of the times whose run average lies inside ``band`` (about ``probability``
+        when consistent).
     mean : float
-        The time average ``ε̄``.
+        The average over runs and times ``ε̄``.
     n_eff : float
-        The values' effective sample size (:func:`effective_sample_size`): they are
-        correlated in time.
+        The effective sample size of the run-averaged series (:func:`effective_sample_size`):
+        the values are correlated in time.
     mean_band : tuple of float
-        The ``probability`` interval of ``ε̄`` for ``n_eff`` independent ``χ²(dof)`` values
-        (``dof`` × :func:`mean_chi2_interval`).
+        The ``probability`` interval of ``ε̄`` for ``runs · n_eff`` independent ``χ²(dof)``
+        values (``dof`` × :func:`mean_chi2_interval`).
     """
 
     times: NDArray[np.float64]
     nees: NDArray[np.float64]
     position: NDArray[np.float64]
     orientation: NDArray[np.float64]
+    per_run: NDArray[np.float64]
     dof: int
     position_dof: int
     orientation_dof: int
+    runs: int
     frame: str
     probability: float
     band: tuple[float, float]
@@ -501,8 +508,8 @@ class NeesOverTime:
         return self.mean_band[0] <= self.mean <= self.mean_band[1]
 
     def part_band(self, dof: int) -> tuple[float, float]:
-        """The single-value band of a part's NEES of ``dof`` dimensions."""
-        return nees_band(dof, 1, self.probability)
+        """The band of a part's run-averaged NEES of ``dof`` dimensions."""
+        return nees_band(dof, self.runs, self.probability)
 
 
 def nees_over_time(
@@ -516,30 +523,41 @@ def nees_over_time(
 ) -> NeesOverTime:
     """NEES over time of a filter's poses with covariances against the truth at the same times.
 
-    ``estimate``, ``truth``: SE(2) ``(N, 3)`` or SE(3) ``(N, 7)`` poses (matched in time by the
-    caller); ``covariances`` ``(N, d, d)`` of the error :func:`pose_errors` defines with
-    ``frame`` (SE(3): order ``x, y, z, rx, ry, rz``; SE(2): ``x, y, θ``). Vectorised.
+    ``estimate``: SE(2) ``(N, 3)`` or SE(3) ``(N, 7)`` poses of one run, or ``(R, N, ·)`` of R
+    runs (Monte Carlo runs at common times); ``truth`` the same shape, or ``(N, ·)`` shared by
+    the runs (matched in time by the caller); ``covariances`` ``(N, d, d)`` or ``(R, N, d, d)``
+    of the error :func:`pose_errors` defines with ``frame`` (SE(3): order ``x, y, z, rx, ry,
+    rz``; SE(2): ``x, y, θ``). With R runs the NEES at each time is the run average
+    ``ε̄_k = 1/R Σ_r ε_rk``, ``R ε̄_k ~ χ²(R d)`` (Bar-Shalom et al. 2001, Sec. 5.4).
+    Vectorised.
     """
     t = np.asarray(times, dtype=np.float64)
-    e = pose_errors(estimate, truth, frame)
+    est = np.asarray(estimate, dtype=np.float64)
+    runs_given = est.ndim == 3
+    est = est if runs_given else est[None]
+    r, n, w = est.shape if est.ndim == 3 else (0, 0, 0)
+    tru = np.broadcast_to(np.asarray(truth, dtype=np.float64), est.shape)
     p = np.asarray(covariances, dtype=np.float64)
+    p = p if runs_given else p[None]
+    e = pose_errors(est.reshape(r * n, w), tru.reshape(r * n, w), frame)
     d = e.shape[1]
-    if p.shape != (e.shape[0], d, d) or t.shape != (e.shape[0],):
+    if p.shape != (r, n, d, d) or t.shape != (n,):
         raise InputError(
-            f"times (N,), poses and covariances (N, {d}, {d}) expected, got {t.shape}, "
-            f"{e.shape[0]} poses, {p.shape}"
+            f"times (N,), poses and covariances (N, {d}, {d}) (or with a leading runs axis) "
+            f"expected, got {t.shape}, {est.shape}, {p.shape}"
         )
-    if e.shape[0] == 0:
+    if n == 0:
         raise InputError("no pose to compute the NEES of")
+    p = p.reshape(r * n, d, d)
     k = 3 if d == 6 else 2  # position block
-    full = nees(e, p)
-    pos = nees(e[:, :k], p[:, :k, :k])
-    ori = nees(e[:, k:], p[:, k:, k:])
-    band = nees_band(d, 1, probability)
-    inside = float(np.mean((full >= band[0]) & (full <= band[1])))
-    n_eff = effective_sample_size(full)
-    lo, hi = mean_chi2_interval(d, n_eff, probability)
+    full = nees(e, p).reshape(r, n)
+    pos = nees(e[:, :k], p[:, :k, :k]).reshape(r, n).mean(axis=0)
+    ori = nees(e[:, k:], p[:, k:, k:]).reshape(r, n).mean(axis=0)
+    summary = summarize_nees(full, dof=d, probability=probability)
+    avg = full.mean(axis=0)
+    n_eff = effective_sample_size(avg)
+    lo, hi = mean_chi2_interval(d, r * n_eff, probability)
     return NeesOverTime(
-        t, full, pos, ori, d, k, d - k, frame, probability, band, inside,
-        float(full.mean()), n_eff, (lo * d, hi * d),
+        t, avg, pos, ori, full, d, k, d - k, r, frame, probability, summary.band,
+        summary.inside, summary.mean, n_eff, (lo * d, hi * d),
     )  # fmt: skip

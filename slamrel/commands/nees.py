@@ -41,13 +41,23 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "sample size). See docs/nees.md.",
     )
     p.add_argument("reference", metavar="REFERENCE", help="the true trajectory")
-    p.add_argument("estimate", metavar="ESTIMATE", help="the filter's poses with covariances")
+    p.add_argument(
+        "estimates",
+        nargs="+",
+        metavar="ESTIMATE",
+        help="the filter's poses with covariances; several: Monte Carlo runs against one truth, "
+        "their NEES averaged at the times every run has (the band then for R runs)",
+    )
     p.add_argument(
         "--layout",
         choices=COVARIANCE_LAYOUTS,
         help="layout of ESTIMATE (default: bag for BAG:TOPIC, else told by its column count)",
     )
-    p.add_argument("--reference-format", choices=TRAJECTORY_FORMATS, help="format of REFERENCE")
+    p.add_argument(
+        "--reference-format",
+        choices=TRAJECTORY_FORMATS,
+        help="format of REFERENCE (default: recognised)",
+    )
     p.add_argument(
         "--error-frame",
         choices=ERROR_FRAMES,
@@ -94,45 +104,54 @@ def _probability(text: str) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
-    """``slamrel nees REFERENCE ESTIMATE``."""
+    """``slamrel nees REFERENCE ESTIMATE...``."""
     import numpy as np
 
     from relation_metric.consistency import nees_over_time
     from relation_metric.errors import InputError
-    from relation_metric.time_association import nearest_index
     from slamrel.commands.common import check_outputs, input_files
     from slamrel.evaluation import load_trajectory
     from slamrel.formats.covariances import DEFAULT_FRAME, read_pose_covariances
 
-    check_outputs([args.json, args.csv, args.plot], input_files([args.reference, args.estimate]))
-    est = read_pose_covariances(args.estimate, args.layout)
-    planar = est.poses.shape[1] == 3
+    check_outputs([args.json, args.csv, args.plot], input_files([args.reference, *args.estimates]))
+    runs = [read_pose_covariances(path, args.layout) for path in args.estimates]
+    layouts = {e.layout for e in runs}
+    widths = {e.poses.shape[1] for e in runs}
+    if len(layouts) > 1 or len(widths) > 1:
+        raise InputError(
+            f"the runs differ in layout ({', '.join(sorted(layouts))}); expected runs of one "
+            "filter in one layout",
+            path=args.estimates[0],
+        )
+    planar = widths == {3}
     ref = load_trajectory(
         args.reference, args.reference_format, role="reference", planar=planar
     ).trajectory
-    ref_poses = ref.lifted().poses if not planar else ref.poses
-    k = nearest_index(ref.timestamps, est.timestamps)
-    ok = np.abs(ref.timestamps[k] - est.timestamps) <= args.max_time_diff
-    matched = int(np.count_nonzero(ok))
-    if matched == 0:
+    ref_poses = ref.poses if planar else ref.lifted().poses
+    times, rows, truth, used = _common_times(
+        ref.timestamps, [e.timestamps for e in runs], args.max_time_diff
+    )
+    if times.size == 0:
+        e = runs[0]
         raise InputError(
-            f"no estimate pose lies within {args.max_time_diff} s of a reference pose "
-            f"(estimate {est.timestamps[0]:.6f}..{est.timestamps[-1]:.6f} s, reference "
+            f"no estimate time lies within {args.max_time_diff} s of a reference pose"
+            + (" in every run" if len(runs) > 1 else "")
+            + f" (estimate {e.timestamps[0]:.6f}..{e.timestamps[-1]:.6f} s, reference "
             f"{ref.timestamps[0]:.6f}..{ref.timestamps[-1]:.6f} s); expected common times "
             "(raise --max-time-diff?)",
-            path=args.estimate,
+            path=args.estimates[0],
         )
-    frame = args.error_frame or DEFAULT_FRAME[est.layout]
+    frame = args.error_frame or DEFAULT_FRAME[runs[0].layout]
     r = nees_over_time(
-        est.timestamps[ok],
-        est.poses[ok],
-        ref_poses[k[ok]],
-        est.covariances[ok],
+        times,
+        np.stack([e.poses[i] for e, i in zip(runs, rows)]),
+        np.stack([ref_poses[j] for j in truth]),
+        np.stack([e.covariances[i] for e, i in zip(runs, rows)]),
         frame=frame,
         probability=args.probability,
     )
-    unmatched = int(ok.size - matched)
-    result = _result(args, r, est.layout, matched, unmatched, est.time_order.out_of_order)
+    left_out = [int(e.timestamps.size - u) for e, u in zip(runs, used)]
+    result = _result(args, r, runs[0].layout, left_out, [e.time_order.out_of_order for e in runs])
     if args.json:
         from slamrel.formats.results import write_json
 
@@ -155,13 +174,44 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _common_times(
+    reference: NDArray[np.float64], runs: list[NDArray[np.float64]], tol: float
+) -> tuple[NDArray[np.float64], list[NDArray[np.intp]], list[NDArray[np.intp]], list[int]]:
+    """The times every run has a pose at, each within ``tol`` of a reference pose.
+
+    The times are the first run's estimate times with a reference pose within ``tol``; a
+    later run takes its pose nearest each (within ``tol``), and a time some run lacks is left
+    out. Returns the times (N,), per run the row of each time in the run and the reference
+    row nearest that row's own time, and per run the number of its rows used.
+    """
+    import numpy as np
+
+    from relation_metric.time_association import nearest_index
+
+    def near(
+        base: NDArray[np.float64], t: NDArray[np.float64]
+    ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+        k = nearest_index(base, t)
+        return k, np.abs(base[k] - t) <= tol
+
+    _, keep = near(reference, runs[0])
+    rows = []
+    for t in runs:
+        i, close = near(t, runs[0])  # the run's pose nearest each time of run 0
+        _, has_ref = near(reference, t[i])
+        keep &= close & has_ref
+        rows.append(i)
+    rows = [i[keep] for i in rows]
+    truth = [nearest_index(reference, t[i]) for t, i in zip(runs, rows)]
+    return runs[0][keep], rows, truth, [int(np.unique(i).size) for i in rows]
+
+
 def _result(
     args: argparse.Namespace,
     r: NeesOverTime,
     layout: str,
-    matched: int,
-    unmatched: int,
-    out_of_order: int,
+    left_out: list[int],
+    out_of_order: list[int],
 ) -> dict[str, Any]:
     """The JSON of ``--json`` (and what is printed)."""
 
@@ -175,13 +225,14 @@ def _result(
         }
 
     return {
-        "estimate": args.estimate,
+        "estimates": list(args.estimates),
         "reference": args.reference,
         "layout": layout,
         "error_frame": r.frame,
         "dimension": "3-D" if r.dof == 6 else "2-D",
-        "matched": matched,
-        "unmatched": unmatched,
+        "runs": r.runs,
+        "matched": int(r.times.size),
+        "left_out": left_out,
         "out_of_order": out_of_order,
         "max_time_diff_s": args.max_time_diff,
         "probability": r.probability,
@@ -211,10 +262,12 @@ def _text(res: dict[str, Any]) -> str:
     n = res["nees"]
     pct = round(100 * res["probability"], 6)
     verdict = "inside" if n["consistent"] else "OUTSIDE"
+    runs = f" × {res['runs']} runs (averaged at each time)" if res["runs"] > 1 else ""
+    left = ", ".join(str(v) for v in res["left_out"])
     lines = [
-        f"NEES of {res['matched']} poses ({res['dimension']}, {res['layout']}, error frame "
-        f"{res['error_frame']}); {res['unmatched']} estimate pose(s) without a reference pose "
-        f"within {res['max_time_diff_s']} s left out",
+        f"NEES of {res['matched']} poses{runs} ({res['dimension']}, {res['layout']}, error "
+        f"frame {res['error_frame']}); left out (no reference pose within "
+        f"{res['max_time_diff_s']} s{', or a time another run lacks' if runs else ''}): {left}",
         f"  pose ({n['dof']} dof): mean {n['mean']:.6g}, median {n['median']:.6g}, max "
         f"{n['max']:.6g}; {100 * n['inside']:.2f}% inside the {pct:g}% band "
         f"[{n['band'][0]:.6g}, {n['band'][1]:.6g}]",

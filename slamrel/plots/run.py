@@ -310,8 +310,9 @@ def filter_nees_figure(r: NeesOverTime) -> Any:
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, constrained_layout=True)
     t = r.times - r.times[0]
     pct = f"{100 * r.probability:g}%"
-    top.semilogy(t, np.maximum(r.nees, 1e-6), lw=0.8, color="tab:blue", label="NEES")
-    top.axhspan(*r.band, color="tab:green", alpha=0.15, label=f"{pct} χ² band ({r.dof} dof)")
+    runs = f", average of {r.runs} runs" if r.runs > 1 else ""
+    top.semilogy(t, np.maximum(r.nees, 1e-6), lw=0.8, color="tab:blue", label=f"NEES{runs}")
+    top.axhspan(*r.band, color="tab:green", alpha=0.15, label=f"{pct} χ² band ({r.dof} dof{runs})")
     top.axhline(r.mean, color="tab:red", lw=1, label=f"mean {r.mean:.3g}")
     top.axhspan(*r.mean_band, color="tab:red", alpha=0.15, label=f"{pct} interval of the mean")
     top.set_ylabel("NEES")
