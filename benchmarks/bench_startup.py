@@ -52,6 +52,8 @@ WORK_IMPORTS = {
     "solve": "slamrel.backends.least_squares, slamrel.formats.g2o, slamrel.formats.isam, "
     "slamrel.formats.trajectories, slamrel.formats.landmark_csv",
     "example": "slamrel.simulation.example, relation_metric.relations, slamrel.formats.trajectories",
+    "traj": "slamrel.evaluation, slamrel.formats.bags, slamrel.trajinfo",
+    "nees": "relation_metric.consistency, slamrel.formats.covariances, slamrel.evaluation",
 }
 HEAVY = ("matplotlib", "scipy.stats", "scipy.optimize", "scipy.spatial", "slamrel.pipeline")
 

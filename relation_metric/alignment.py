@@ -113,6 +113,8 @@ class ATEResult:
     translation_stats, rotation_stats : Summary
     matched : int
         Poses matched in time (within the tolerance).
+    timestamps : ndarray, shape (K,), or None
+        The matched estimate poses' times (the rows of ``translation`` and ``rotation``).
     """
 
     alignment: Alignment
@@ -121,6 +123,7 @@ class ATEResult:
     translation_stats: Summary
     rotation_stats: Summary
     matched: int
+    timestamps: NDArray[np.float64] | None = None
 
 
 def absolute_trajectory_error(
@@ -167,7 +170,8 @@ def absolute_trajectory_error(
         err = se3.between(moved, ref)  # evo's APE: E = P_est⁻¹ P_ref
         trans = np.linalg.norm(ref[:, :3] - moved[:, :3], axis=1)
         rot = se3.rotation_angle(err[:, 3:])
-        return ATEResult(al, trans, rot, summarize(trans), summarize(rot), int(ok.sum()))
-    trans = np.hypot(*(ref[:, :2] - moved[:, :2]).T)
-    rot = np.abs(se2.wrap_angle(ref[:, 2] - moved[:, 2]))
-    return ATEResult(al, trans, rot, summarize(trans), summarize(rot), int(ok.sum()))
+    else:
+        trans = np.hypot(*(ref[:, :2] - moved[:, :2]).T)
+        rot = np.abs(se2.wrap_angle(ref[:, 2] - moved[:, 2]))
+    stamps = estimate.timestamps[ok]
+    return ATEResult(al, trans, rot, summarize(trans), summarize(rot), int(ok.sum()), stamps)

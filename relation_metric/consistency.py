@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric import se2
+from relation_metric.constants import ERROR_FRAMES
 from relation_metric.errors import InputError
 
 OUTLIER_PROBABILITY = 0.9999
@@ -54,6 +55,10 @@ __all__ = [
     "nees2",
     "effective_sample_size",
     "mean_chi2_interval",
+    "ERROR_FRAMES",
+    "pose_errors",
+    "NeesOverTime",
+    "nees_over_time",
 ]
 
 
@@ -394,3 +399,165 @@ def nees2(
     e = tru - est
     dof = e.size
     return JointNees(joint_nees(e, covariance), dof, nees_gate(dof, probability), probability)
+
+
+def pose_errors(
+    estimate: ArrayLike, truth: ArrayLike, frame: str = "parent"
+) -> NDArray[np.float64]:
+    """The error vectors ``e`` whose covariance a filter reports, shape (N, d).
+
+    ``e = [δp, δθ]`` (position first, the order of ROS's ``PoseWithCovariance``), the true pose
+    relative to the estimate ``(p̂, R̂)``:
+
+    ``frame="parent"``  both in the parent (world) frame, on fixed axes — what
+        ``geometry_msgs/PoseWithCovariance`` documents ("the pose in the coordinate frame
+        given by header.frame_id ... the orientation parameters use a fixed-axis
+        representation"): ``δp = p − p̂``, ``δθ = Log(R R̂ᵀ)`` (``R = Exp(δθ) R̂``, a left
+        perturbation).
+    ``frame="body"``  both in the estimate's body frame (the local coordinates of
+        ``T̂⁻¹ T``, a right perturbation, as GTSAM's and many filters' error states):
+        ``δp = R̂ᵀ (p − p̂)``, ``δθ = Log(R̂ᵀ R)`` (``R = R̂ Exp(δθ)``).
+    ``frame="openvins"``  OpenVINS's ov_eval: position in the parent frame, orientation in
+        the body frame: ``δp = p − p̂``, ``δθ = Log(R̂ᵀ R)`` (ov_eval's
+        ``ResultTrajectory::calculate_nees``: ``e_R = −Log(R_GtoI,gt R_GtoI,estᵀ)``).
+
+    SE(2) poses ``[x, y, θ]`` (d = 3): ``parent``/``openvins`` ``[x − x̂, y − ŷ, wrap(θ − θ̂)]``
+    (:func:`relation_metric.se2.minus`, the error of :func:`pose_nees`), ``body``
+    ``[R̂ᵀ(p − p̂), wrap(θ − θ̂)]``. SE(3) poses ``[x, y, z, qx, qy, qz, qw]`` (d = 6).
+    """
+    est = np.asarray(estimate, dtype=np.float64)
+    tru = np.asarray(truth, dtype=np.float64)
+    if frame not in ERROR_FRAMES:
+        raise InputError(f"frame must be one of {', '.join(ERROR_FRAMES)}, got {frame!r}")
+    if est.shape != tru.shape or est.ndim != 2 or est.shape[1] not in (3, 7):
+        raise InputError(
+            f"estimate and truth poses (N, 3) or (N, 7) of one shape expected, got "
+            f"{est.shape}, {tru.shape}"
+        )
+    if est.shape[1] == 3:
+        return se2.between(est, tru) if frame == "body" else se2.minus(tru, est)
+    from relation_metric import se3
+
+    rel = se3.between(est, tru)  # T̂⁻¹ T: translation R̂ᵀ(p − p̂), rotation R̂ᵀ R
+    d_body = se3.rotation_vector(rel[:, 3:])
+    if frame == "body":
+        return np.column_stack((rel[:, :3], d_body))
+    dp = tru[:, :3] - est[:, :3]
+    if frame == "openvins":
+        return np.column_stack((dp, d_body))
+    left = se3.quat_multiply(tru[:, 3:], se3.quat_conjugate(est[:, 3:]))  # R R̂ᵀ
+    return np.column_stack((dp, se3.rotation_vector(left)))
+
+
+@dataclass(frozen=True)
+class NeesOverTime:
+    """The NEES of a filter at each time (averaged over ``runs`` runs), with its χ² bands.
+
+    Attributes
+    ----------
+    times : ndarray, shape (N,)
+    nees : ndarray, shape (N,)
+        ``eᵀ P⁻¹ e`` of the full pose error (``dof`` 3 for SE(2), 6 for SE(3)), averaged over
+        the runs at each time.
+    position, orientation : ndarray, shape (N,)
+        The NEES of the position and of the orientation alone, from the marginal blocks of
+        ``P`` (ov_eval's two NEES; ``position_dof`` 2 or 3, ``orientation_dof`` 1 or 3),
+        averaged over the runs.
+    per_run : ndarray, shape (runs, N)
+        The pose NEES of each run.
+    dof, position_dof, orientation_dof, runs : int
+    frame : str
+        The error definition (:func:`pose_errors`).
+    probability : float
+    band : tuple of float
+        The two-sided ``probability`` band of the run average at one time,
+        ``χ²⁻¹((1 ∓ p)/2; runs·dof) / runs`` (:func:`nees_band`).
+    inside : float
+        Fraction of the times whose run average lies inside ``band`` (about ``probability``
+        when consistent).
+    mean : float
+        The average over runs and times ``ε̄``.
+    n_eff : float
+        The effective sample size of the run-averaged series (:func:`effective_sample_size`):
+        the values are correlated in time.
+    mean_band : tuple of float
+        The ``probability`` interval of ``ε̄`` for ``runs · n_eff`` independent ``χ²(dof)``
+        values (``dof`` × :func:`mean_chi2_interval`).
+    """
+
+    times: NDArray[np.float64]
+    nees: NDArray[np.float64]
+    position: NDArray[np.float64]
+    orientation: NDArray[np.float64]
+    per_run: NDArray[np.float64]
+    dof: int
+    position_dof: int
+    orientation_dof: int
+    runs: int
+    frame: str
+    probability: float
+    band: tuple[float, float]
+    inside: float
+    mean: float
+    n_eff: float
+    mean_band: tuple[float, float]
+
+    @property
+    def consistent(self) -> bool:
+        """Whether the mean NEES lies inside its interval."""
+        return self.mean_band[0] <= self.mean <= self.mean_band[1]
+
+    def part_band(self, dof: int) -> tuple[float, float]:
+        """The band of a part's run-averaged NEES of ``dof`` dimensions."""
+        return nees_band(dof, self.runs, self.probability)
+
+
+def nees_over_time(
+    times: ArrayLike,
+    estimate: ArrayLike,
+    truth: ArrayLike,
+    covariances: ArrayLike,
+    *,
+    frame: str = "parent",
+    probability: float = 0.95,
+) -> NeesOverTime:
+    """NEES over time of a filter's poses with covariances against the truth at the same times.
+
+    ``estimate``: SE(2) ``(N, 3)`` or SE(3) ``(N, 7)`` poses of one run, or ``(R, N, ·)`` of R
+    runs (Monte Carlo runs at common times); ``truth`` the same shape, or ``(N, ·)`` shared by
+    the runs (matched in time by the caller); ``covariances`` ``(N, d, d)`` or ``(R, N, d, d)``
+    of the error :func:`pose_errors` defines with ``frame`` (SE(3): order ``x, y, z, rx, ry,
+    rz``; SE(2): ``x, y, θ``). With R runs the NEES at each time is the run average
+    ``ε̄_k = 1/R Σ_r ε_rk``, ``R ε̄_k ~ χ²(R d)`` (Bar-Shalom et al. 2001, Sec. 5.4).
+    Vectorised.
+    """
+    t = np.asarray(times, dtype=np.float64)
+    est = np.asarray(estimate, dtype=np.float64)
+    runs_given = est.ndim == 3
+    est = est if runs_given else est[None]
+    r, n, w = est.shape if est.ndim == 3 else (0, 0, 0)
+    tru = np.broadcast_to(np.asarray(truth, dtype=np.float64), est.shape)
+    p = np.asarray(covariances, dtype=np.float64)
+    p = p if runs_given else p[None]
+    e = pose_errors(est.reshape(r * n, w), tru.reshape(r * n, w), frame)
+    d = e.shape[1]
+    if p.shape != (r, n, d, d) or t.shape != (n,):
+        raise InputError(
+            f"times (N,), poses and covariances (N, {d}, {d}) (or with a leading runs axis) "
+            f"expected, got {t.shape}, {est.shape}, {p.shape}"
+        )
+    if n == 0:
+        raise InputError("no pose to compute the NEES of")
+    p = p.reshape(r * n, d, d)
+    k = 3 if d == 6 else 2  # position block
+    full = nees(e, p).reshape(r, n)
+    pos = nees(e[:, :k], p[:, :k, :k]).reshape(r, n).mean(axis=0)
+    ori = nees(e[:, k:], p[:, k:, k:]).reshape(r, n).mean(axis=0)
+    summary = summarize_nees(full, dof=d, probability=probability)
+    avg = full.mean(axis=0)
+    n_eff = effective_sample_size(avg)
+    lo, hi = mean_chi2_interval(d, r * n_eff, probability)
+    return NeesOverTime(
+        t, avg, pos, ori, full, d, k, d - k, r, frame, probability, summary.band,
+        summary.inside, summary.mean, n_eff, (lo * d, hi * d),
+    )  # fmt: skip

@@ -7,12 +7,21 @@ option choices and defaults without importing numpy (``slamrel --help`` stays li
 
 from __future__ import annotations
 
-__all__ = ["MODES", "STRATEGIES", "BOOTSTRAP_RESAMPLES", "MIN_BLOCKS", "OVERLAP_FACTOR"]
+__all__ = [
+    "MODES",
+    "STRATEGIES",
+    "ERROR_FRAMES",
+    "BOOTSTRAP_RESAMPLES",
+    "MIN_BLOCKS",
+    "OVERLAP_FACTOR",
+]
 
 #: Error definitions of :func:`relation_metric.metric.relation_errors` (``mode``).
 MODES = ("paper", "metricevaluator")
 #: Selection strategies of :func:`relation_metric.relations.generate_relations`.
 STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs")
+#: Error definitions of a pose covariance (:func:`relation_metric.consistency.pose_errors`).
+ERROR_FRAMES = ("parent", "body", "openvins")
 #: Bootstrap resamples B of :func:`relation_metric.significance.paired_difference`: the
 #: p-value's resolution is 1/(B + 1) = 10⁻⁴.
 BOOTSTRAP_RESAMPLES = 9999

@@ -31,6 +31,8 @@ from relation_metric.errors import OptionError, SlamrelError
 COMMAND_MODULES = (
     "slamrel.commands.run",
     "slamrel.commands.evaluate",
+    "slamrel.commands.traj",
+    "slamrel.commands.nees",
     "slamrel.commands.recover",
     "slamrel.commands.relations",
     "slamrel.commands.map_compare",

@@ -13,6 +13,7 @@ __all__ = [
     "BUNDLE_FORMAT",
     "EVALUATE_DEFAULTS",
     "TRAJECTORY_FORMATS",
+    "COVARIANCE_LAYOUTS",
     "WORLDS",
     "PAPER_WORLDS",
     "NOISE_NAMES",
@@ -23,7 +24,9 @@ __all__ = [
 #: written by :func:`slamrel.formats.bundle.write_bundle` and required by its reader.
 BUNDLE_FORMAT = "slamrel-bundle/1"
 #: Trajectory file formats of :func:`slamrel.formats.trajectories.read_trajectory`.
-TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc")
+TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc", "bag")
+#: Layouts of a filter's poses with covariances (:mod:`slamrel.formats.covariances`).
+COVARIANCE_LAYOUTS = ("tum-cov", "openvins", "se2-cov", "bag")
 #: Built-in simulated worlds of :func:`slamrel.simulation.worlds.make_world` ...
 WORLDS = ("simple1", "simple2", "complex1", "complex2")
 #: ... and Hu et al.'s worlds to the letter (82 / 420 poses).

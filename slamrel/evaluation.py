@@ -31,6 +31,7 @@ from relation_metric.timeorder import FILTER_TIME_TOLERANCE, RepeatedTimeWarning
 from relation_metric.trajectory import Trajectory
 from slamrel.constants import TRAJECTORY_FORMATS
 from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
+from slamrel.formats.bags import is_bag, names_bag
 from slamrel.formats.relations import read_relations
 from slamrel.formats.text import read_numeric_table, read_source
 from slamrel.formats.trajectories import (
@@ -71,6 +72,9 @@ class FileEvaluation:
     #: trajectory (``consecutive`` by default); ``None`` for a .relations file, whose
     #: relations may mix kinds. Written as the ``set`` column of ``--per-relation``.
     relation_set: str | None = None
+    #: The (estimate, reference) the ATE compares (the synchronised pairs with ``sync``);
+    #: None for a .relations file.
+    ate_inputs: tuple[Trajectory, Trajectory] | None = None
 
 
 def evaluate_files(
@@ -190,7 +194,8 @@ def score_files(
         assert ate_reference is not None  # the reference (just checked) or its synchronised copy
         result["ate"] = _ate(ate_estimate, ate_reference, options.max_time_diff)
     generated = None if ref_traj is None else (options.strategy or "consecutive")
-    return FileEvaluation(ev, ev_estimate, result, relation_set=generated)
+    pair = None if ate_pair[1] is None else (ate_pair[0], ate_pair[1])
+    return FileEvaluation(ev, ev_estimate, result, relation_set=generated, ate_inputs=pair)
 
 
 def _why_no_relations(
@@ -221,7 +226,7 @@ def _is_relations_file(path: str, options: EvaluateOptions) -> bool:
     """
 
     p = Path(path)
-    if p.is_dir() or options.reference_format is not None:
+    if p.is_dir() or options.reference_format is not None or names_bag(path):
         return False
     ext = p.suffix.lower()
     if ext in RELATIONS_EXTENSIONS:
@@ -557,7 +562,7 @@ def load_trajectory(
     name the command's options (``format_option`` for its ``format``).
     """
     p = Path(path)
-    if p.is_dir():
+    if p.is_dir() and not is_bag(p):
         if role != "reference":
             online = p / "online.csv"
             also = f", or pass {online} (the filter's online estimate)" if online.is_file() else ""

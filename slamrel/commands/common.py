@@ -30,6 +30,7 @@ __all__ = [
     "relations_from_args",
     "stats_table",
     "check_outputs",
+    "input_files",
     "add_force_argument",
     "add_noise_argument",
     "add_association_arguments",
@@ -147,6 +148,18 @@ def relations_from_args(
         chained=getattr(args, "chained", False),
         key=key,
     )
+
+
+def input_files(paths: Sequence[str | None]) -> list[str | None]:
+    """The files behind input arguments: a bag topic ``BAG:TOPIC``'s bag, so no output replaces
+    it (:func:`check_outputs`)."""
+    from slamrel.formats.bags import split_bag_spec
+
+    out: list[str | None] = []
+    for p in paths:
+        spec = None if p is None else split_bag_spec(p)
+        out.append(p if spec is None else spec.path)
+    return out
 
 
 def check_outputs(

@@ -14,7 +14,12 @@ from typing import TYPE_CHECKING
 
 from relation_metric.constants import MODES
 from slamrel.commands import options as opt
-from slamrel.commands.common import add_strategy_arguments, check_outputs, stats_table
+from slamrel.commands.common import (
+    add_strategy_arguments,
+    check_outputs,
+    input_files,
+    stats_table,
+)
 from slamrel.constants import EVALUATE_DEFAULTS, TRAJECTORY_FORMATS
 
 if TYPE_CHECKING:  # the library is imported in run(): start-up stays light
@@ -45,11 +50,16 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _input_arguments(p: argparse.ArgumentParser) -> None:
     """REFERENCE, ESTIMATE and their formats."""
-    p.add_argument("reference", metavar="REFERENCE", help=".relations file or reference trajectory")
+    p.add_argument(
+        "reference",
+        metavar="REFERENCE",
+        help=".relations file or reference trajectory (a ROS bag topic as BAG:TOPIC)",
+    )
     p.add_argument(
         "estimate",
         metavar="ESTIMATE",
-        help="estimated trajectory (CARMEN, TUM, t x y θ, g2o, CSV, KITTI, EuRoC)",
+        help="estimated trajectory (CARMEN, TUM, t x y θ, g2o, CSV, KITTI, EuRoC, or a ROS bag "
+        "topic BAG:TOPIC / tf chain BAG:/tf:PARENT.CHILD with the 'bags' extra)",
     )
     p.add_argument(
         "--format", choices=TRAJECTORY_FORMATS, help="format of ESTIMATE (default: recognised)"
@@ -123,12 +133,32 @@ def _output_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--plot", type=opt.figure_file, metavar="FILE", help="write a figure (.png/.svg/.pdf)"
     )
-    p.add_argument("--evo-zip", metavar="FILE", help="write an evo result zip (for evo_res)")
+    p.add_argument(
+        "--evo-zip",
+        metavar="FILE",
+        help="write the relation errors as an evo result zip (for evo_res); its title is "
+        "evo_rpe's when the relations are evo's RPE pairs (--sync with --strategy consecutive, "
+        "or distance --chained, mode paper), so evo_res reads it beside evo's own zips",
+    )
+    p.add_argument(
+        "--evo-ape-zip",
+        metavar="FILE",
+        help="write the absolute pose error as an evo_ape result zip (for evo_res; needs a "
+        "reference trajectory), aligned by --evo-ape-align",
+    )
+    p.add_argument(
+        "--evo-ape-align",
+        choices=("none", "se3", "sim3"),
+        default="none",
+        help="alignment of --evo-ape-zip: none (evo_ape's default), se3 (-a) or sim3 (-as); "
+        "se2/sim2 for planar trajectories (default: %(default)s)",
+    )
     p.add_argument(
         "--evo-part",
         choices=("trans", "rot"),
         default="trans",
-        help="which error the evo zip holds",
+        help="which error the evo zips hold: translation [m] or rotation angle [rad, deg with "
+        "--degrees] (default: %(default)s)",
     )
 
 
@@ -160,8 +190,8 @@ def run(args: argparse.Namespace) -> int:
     from slamrel.evaluation import score_files
     from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
 
-    outputs = [args.json, args.per_relation, args.plot, args.evo_zip]
-    check_outputs(outputs, [args.reference, args.estimate, args.odometry])
+    outputs = [args.json, args.per_relation, args.plot, args.evo_zip, args.evo_ape_zip]
+    check_outputs(outputs, input_files([args.reference, args.estimate, args.odometry]))
     options = EvaluateOptions(**{name: getattr(args, name) for name in SCORING_OPTIONS})
     scored = score_files(args.reference, args.estimate, options, degrees=args.degrees, ate=args.ate)
     _write_outputs(args, scored)
@@ -172,7 +202,12 @@ def run(args: argparse.Namespace) -> int:
 
 def _write_outputs(args: argparse.Namespace, scored: FileEvaluation) -> None:
     """``--json``, ``--per-relation``, ``--evo-zip`` and ``--plot``, in that order."""
-    from slamrel.formats.results import write_evo_zip, write_json, write_per_relation_csv
+    from slamrel.formats.results import (
+        evo_delta,
+        write_evo_zip,
+        write_json,
+        write_per_relation_csv,
+    )
 
     ev = scored.evaluation
     if args.json:
@@ -183,18 +218,99 @@ def _write_outputs(args: argparse.Namespace, scored: FileEvaluation) -> None:
             sets = [scored.relation_set] * len(ev.relations)
         write_per_relation_csv(args.per_relation, ev, degrees=args.degrees, relation_sets=sets)
     if args.evo_zip:
+        delta = evo_delta(
+            sync=args.sync,
+            strategy=args.strategy,
+            step=args.step,
+            distance=args.distance,
+            chained=args.chained,
+            mode=args.mode,
+        )
         write_evo_zip(
             args.evo_zip,
             ev,
             part=args.evo_part,
-            est_name=os.path.basename(args.estimate),
-            ref_name=os.path.basename(args.reference),
+            est_name=_evo_name(args.estimate),
+            ref_name=_evo_name(args.reference),
             degrees=args.degrees,
+            delta=delta if args.weights is None else None,
         )
+    if args.evo_ape_zip:
+        _write_evo_ape(args, scored)
     if args.plot:
         from slamrel.plots.relation_errors import evaluation_figure, save_figure
 
         save_figure(evaluation_figure(ev, scored.estimate, degrees=args.degrees), args.plot)
+
+
+def _evo_name(path: str) -> str:
+    """The name evo gives a trajectory: a bag topic's name, else the file's name."""
+    from slamrel.formats.bags import split_bag_spec
+
+    spec = split_bag_spec(path)
+    return os.path.basename(path) if spec is None else spec.topic
+
+
+def _write_evo_ape(args: argparse.Namespace, scored: FileEvaluation) -> None:
+    """``--evo-ape-zip``: the APE of the (synchronised) estimate after ``--evo-ape-align``."""
+    from relation_metric.alignment import absolute_trajectory_error
+    from relation_metric.errors import OptionError
+    from slamrel.formats.results import write_evo_ape_zip
+
+    if scored.ate_inputs is None:
+        raise OptionError(
+            f"needs a reference trajectory, not a .relations file ({args.reference})",
+            option="--evo-ape-zip",
+        )
+    est, ref = scored.ate_inputs
+    align = args.evo_ape_align
+    planar = est.group.name == "SE2" and ref.group.name == "SE2"
+    if planar and align != "none":
+        align = {"se3": "se2", "sim3": "sim2"}[align]
+    r = absolute_trajectory_error(est, ref, align=align, max_time_diff=args.max_time_diff)
+    if args.evo_part == "trans":
+        errors, part = r.translation, "trans"
+    else:
+        import numpy as np
+
+        errors = np.degrees(r.rotation) if args.degrees else r.rotation
+        part = "rot_deg" if args.degrees else "rot"
+    assert r.timestamps is not None  # absolute_trajectory_error sets them
+    write_evo_ape_zip(
+        args.evo_ape_zip,
+        errors,
+        r.timestamps,
+        part=part,
+        align=align,
+        est_name=_evo_name(args.estimate),
+        ref_name=_evo_name(args.reference),
+    )
+
+
+def ate_text(ate: dict, *, degrees: bool) -> str:
+    """The ATE of ``--ate`` as evo prints an APE: rmse, mean, median, std, min, max, sse.
+
+    One row per alignment and part; ``std`` here is evo's, the population standard deviation
+    (the JSON's ``std`` is the sample one, n − 1); ``sse = Σ e² = rmse² · n``.
+    """
+    import math
+
+    unit = "deg" if degrees else "rad"
+    names = ("rmse", "mean", "median", "std", "min", "max", "sse", "count")
+    rows = []
+    for part, label in (("translation", "translation [m]"), ("rotation", f"rotation [{unit}]")):
+        scale = math.degrees(1.0) if degrees and part == "rotation" else 1.0  # the JSON's rad
+        for align, r in ate.items():
+            s, n = r[part], r["matched"]
+            std = s["std"] * math.sqrt((n - 1) / n) if n > 1 and s["std"] is not None else 0.0
+            vals = [s["rmse"], s["mean"], s["median"], std, s["min"], s["max"]]
+            vals = [v * scale for v in vals] + [(s["rmse"] * scale) ** 2 * n]
+            rows.append((f"ATE {label} {align}", vals, n))
+    width = max(len(label) for label, _, _ in rows)
+    lines = [" " * width + "".join(f"{k:>15}" for k in names)]
+    for label, vals, n in rows:
+        lines.append(f"{label:<{width}}" + "".join(f"{v:>15.6f}" for v in vals) + f"{n:>15d}")
+    return "\n".join(lines) + "\n(std: population, as evo; the JSON's std is the sample std)"
 
 
 def summary_text(scored: FileEvaluation, *, degrees: bool) -> str:
@@ -247,8 +363,5 @@ def summary_text(scored: FileEvaluation, *, degrees: bool) -> str:
             f"\nrelations: {result['relations_zero_length_dropped']} zero-length (t1 == t2) dropped"
         )
     if "ate" in result:
-        a = result["ate"]
-        text += "\nATE translation rmse [m]: " + ", ".join(
-            f"{k} {v['translation']['rmse']:.6f}" for k, v in a.items()
-        )
+        text += "\n" + ate_text(result["ate"], degrees=degrees)
     return text

@@ -8,16 +8,26 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.errors import InputError
 from relation_metric.evaluate import Evaluation
 from slamrel.formats.text import NUMBER_FORMAT, PathLike, write_bytes_atomic, write_text_atomic
 
-__all__ = ["write_json", "write_per_relation_csv", "write_evo_zip", "evo_stats"]
+__all__ = [
+    "write_json",
+    "write_per_relation_csv",
+    "write_evo_zip",
+    "write_evo_ape_zip",
+    "evo_stats",
+    "EvoDelta",
+    "evo_delta",
+    "evo_title",
+]
 
 
 def write_json(path: PathLike, data: dict[str, Any]) -> None:
@@ -115,6 +125,75 @@ def evo_stats(errors: np.ndarray) -> dict[str, float]:
     }
 
 
+@dataclass(frozen=True)
+class EvoDelta:
+    """The RPE pairs of evo that slamrel's relations equal (see :func:`evo_delta`).
+
+    ``delta`` in ``unit`` (``"frames"`` or ``"m"``), ``all_pairs`` evo's ``--all_pairs``.
+    """
+
+    delta: float
+    unit: str
+    all_pairs: bool = False
+
+
+def evo_delta(
+    *, sync: bool, strategy: str | None, step: int, distance: float, chained: bool, mode: str
+) -> EvoDelta | None:
+    """evo's RPE pairs equal to slamrel's relations, or None when evo has no such RPE.
+
+    slamrel's relations are evo's RPE (``evo_rpe --pairs_from_reference``) when the poses are
+    associated pose by pose first (``sync``), the error is the ``paper`` definition
+    (``E = (Q_i⁻¹ Q_j)⁻¹ (P_i⁻¹ P_j)``) and the relations are ``consecutive`` with ``step`` D
+    (``chained``: evo's consecutive pairs ``--delta D --delta_unit f``; not chained: every
+    pose and the one D later, evo's ``--all_pairs``; D = 1 is both) or ``distance`` D metres,
+    chained (``--delta D --delta_unit m``). The parity tests check these to 1e-9.
+    """
+    if not sync or mode != "paper":
+        return None
+    if strategy in (None, "consecutive"):
+        return EvoDelta(float(step), "frames", all_pairs=not chained and step != 1)
+    if strategy == "distance" and chained:
+        return EvoDelta(float(distance), "m")
+    return None
+
+
+_EVO_RELATION = {
+    "trans": ("translation part", "m"),
+    "rot": ("rotation angle in radians", "rad"),
+    "rot_deg": ("rotation angle in degrees", "deg"),
+}
+_EVO_ALIGN = {
+    "none": "(not aligned)",
+    "se3": "(with SE(3) Umeyama alignment)",
+    "sim3": "(with Sim(3) Umeyama alignment)",
+    "se2": "(with SE(2) Umeyama alignment)",
+    "sim2": "(with Sim(2) Umeyama alignment)",
+}
+
+
+def evo_title(metric: str, part: str, *, delta: EvoDelta | None = None, align: str = "none") -> str:
+    """The ``title`` evo writes in a result of the same computation (``evo_res`` compares them).
+
+    ``metric`` ``"rpe"`` or ``"ape"``; ``part`` ``"trans"``, ``"rot"`` or ``"rot_deg"``.
+    An RPE with ``delta`` (:func:`evo_delta`) reads as evo_rpe's ``RPE w.r.t. translation part
+    (m)\nfor delta = 1 (frames) using consecutive pairs\n(not aligned)``; without (relations
+    evo has no name for) as ``RE w.r.t. … (m)\nrelation metric (Kümmerle et al. 2009)``; an APE
+    as evo_ape's ``APE w.r.t. … (m)\n(with SE(3) Umeyama alignment)``.
+    """
+    relation, unit = _EVO_RELATION[part]
+    if metric == "ape":
+        return f"APE w.r.t. {relation} ({unit})\n{_EVO_ALIGN[align]}"
+    if delta is None:
+        return f"RE w.r.t. {relation} ({unit})\nrelation metric (Kümmerle et al. 2009)"
+    d = int(delta.delta) if delta.unit == "frames" else delta.delta
+    pairs = "all pairs" if delta.all_pairs else "consecutive pairs"
+    return (
+        f"RPE w.r.t. {relation} ({unit})\nfor delta = {d} ({delta.unit}) using {pairs}"
+        "\n(not aligned)"
+    )
+
+
 def write_evo_zip(
     path: PathLike,
     evaluation: Evaluation,
@@ -123,12 +202,17 @@ def write_evo_zip(
     est_name: str = "estimate",
     ref_name: str = "reference",
     degrees: bool = False,
+    delta: EvoDelta | None = None,
 ) -> None:
-    """Write an evo result zip (``info.json``, ``stats.json``, ``error_array.npy``, …).
+    """Write an evo result zip of the relation errors (``info.json``, ``stats.json``, ...).
 
     ``evo_res`` can then tabulate and plot slamrel results beside evo's own. One zip holds
-    one error array: ``part="trans"`` (m) or ``"rot"`` (rad, or deg with ``degrees``).
-    Note evo's ``std`` is the population standard deviation, unlike slamrel's JSON (n − 1).
+    one error array: ``part="trans"`` (m) or ``"rot"`` (rad, or deg with ``degrees``). The
+    title is evo_rpe's for the same computation when there is one (``delta``, see
+    :func:`evo_delta` and :func:`evo_title`), so that ``evo_res`` reads slamrel's zips beside
+    evo's without ``--ignore_title``. ``timestamps`` are the second pose's of each relation
+    (as evo's). Note evo's ``std`` is the population standard deviation, unlike slamrel's
+    JSON (n − 1).
     """
     ev = evaluation
     valid = ev.valid
@@ -141,37 +225,65 @@ def write_evo_zip(
         )
     if part == "trans":
         errors = ev.errors.translation[valid]
-        label = "RE (m)"
-        title = "relation error, translation part (Kümmerle et al. 2009)"
     elif part == "rot":
         errors = ev.errors.rotation[valid]
         if degrees:
             errors = np.degrees(errors)
-        label = "RE (deg)" if degrees else "RE (rad)"
-        title = "relation error, rotation part (Kümmerle et al. 2009)"
     else:
         raise ValueError(f"part must be 'trans' or 'rot', got {part!r}")
+    key = "rot_deg" if part == "rot" and degrees else part
     info = {
-        "title": title,
+        "title": evo_title("rpe", key, delta=delta),
         "ref_name": ref_name,
         "est_name": est_name,
-        "label": label,
-        "pose_relation": "translation part" if part == "trans" else "rotation part",
-        "relation_delta_unit": "relations",
+        "label": f"{'RPE' if delta else 'RE'} ({_EVO_RELATION[key][1]})",
         "relation_count": int(valid.sum()),
         "mode": ev.errors.mode,
         "generator": "slamrel",
     }
-    arrays = {
-        "error_array": errors,
-        "timestamps": ev.relations.second[valid],
-        "seconds_from_start": ev.relations.second[valid]
-        - (ev.relations.second[valid].min() if valid.any() else 0.0),
+    t = ev.relations.second[valid]
+    _write_evo_archive(path, info, errors, t, t - t.min())
+
+
+def write_evo_ape_zip(
+    path: PathLike,
+    errors: ArrayLike,
+    timestamps: ArrayLike,
+    *,
+    part: str = "trans",
+    align: str = "none",
+    est_name: str = "estimate",
+    ref_name: str = "reference",
+) -> None:
+    """Write an evo result zip of absolute pose errors, as ``evo_ape --save_results`` does.
+
+    ``errors`` (K,) per matched pose (m for ``part="trans"``, rad for ``"rot"``, deg for
+    ``"rot_deg"``) after ``align`` (``none``/``se3``/``sim3``/``se2``/``sim2``), at the
+    estimate's ``timestamps`` (K,); the title is evo_ape's (:func:`evo_title`).
+    """
+    e = np.asarray(errors, dtype=np.float64)
+    t = np.asarray(timestamps, dtype=np.float64)
+    if e.size == 0:
+        raise InputError("no matched pose: an evo result needs at least one error", path=path)
+    info = {
+        "title": evo_title("ape", part, align=align),
+        "ref_name": ref_name,
+        "est_name": est_name,
+        "label": f"APE ({_EVO_RELATION[part][1]})",
+        "generator": "slamrel",
     }
+    _write_evo_archive(path, info, e, t, t - t.min())
+
+
+def _write_evo_archive(
+    path: PathLike, info: dict[str, Any], errors: NDArray, timestamps: NDArray, seconds: NDArray
+) -> None:
+    """The zip evo's ``file_interface.save_res_file`` writes: info, stats and the arrays."""
+    arrays = {"error_array": errors, "timestamps": timestamps, "seconds_from_start": seconds}
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as archive:
         archive.writestr("info.json", json.dumps(info))
-        archive.writestr("stats.json", json.dumps(evo_stats(errors) if errors.size else {}))
+        archive.writestr("stats.json", json.dumps(evo_stats(errors)))
         for name, arr in arrays.items():
             npy = io.BytesIO()
             np.save(npy, np.asarray(arr, dtype=np.float64))

@@ -64,6 +64,14 @@ from relation_metric.timeorder import (
 )
 from relation_metric.trajectory import OutOfPlane, Trajectory, check_coordinates
 from slamrel.constants import TRAJECTORY_FORMATS
+from slamrel.formats.bags import (
+    BagSpec,
+    bag_topics,
+    describe_bag_topics,
+    is_bag,
+    read_bag_poses,
+    split_bag_spec,
+)
 from slamrel.formats.g2o import format_g2o_records, read_g2o_records
 from slamrel.formats.text import (
     NUMBER_FORMAT,
@@ -308,6 +316,14 @@ def read_trajectory(
     -------
     LoadedTrajectory
     """
+    spec = split_bag_spec(path)
+    if spec is not None or format == "bag" or is_bag(path):
+        if format not in (None, "bag"):
+            raise InputError(
+                f"a ROS bag topic cannot be read as {format}; drop format=... (or pass bag)",
+                path=path,
+            )
+        return _read_bag(path, spec, dimension=dimension, what=what)
     src = read_source(path)
     fmt = format or detect_trajectory_format(path, src)
     if fmt not in TRAJECTORY_FORMATS:
@@ -368,6 +384,56 @@ def read_trajectory(
         trajectory,
         fmt,
         dict(skipped),
+        report,
+        discarded=discarded[0] if discarded else None,
+        repeated=repeated,
+    )
+
+
+def _read_bag(
+    path: PathLike, spec: BagSpec | None, *, dimension: str, what: str
+) -> LoadedTrajectory:
+    """A topic or tf chain of a ROS bag (:mod:`slamrel.formats.bags`) as a trajectory.
+
+    Rows are messages: the "line" of a message is its 1-based index on the topic. The
+    dimension rule and the time order are those of the text formats.
+    """
+    if spec is None:
+        raise InputError(
+            "is a ROS bag, which holds many topics: name the trajectory as BAG:TOPIC (or "
+            f"BAG:/tf:PARENT.CHILD); {describe_bag_topics(bag_topics(path))}",
+            path=path,
+        )
+    if dimension not in DIMENSIONS:
+        raise InputError(f"dimension must be one of {', '.join(DIMENSIONS)}, got {dimension!r}")
+    got = read_bag_poses(spec)
+    name = str(spec)
+    t, rows = got.timestamps, got.poses
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise InputError(f"message {int(bad[0]) + 1}: non-finite stamp", path=name)
+    number = np.arange(1, t.size + 1)
+    src = SourceText(name, [], True)
+    q = _check_unit_quaternions(rows[:, 3:], src, number.__getitem__)
+    discarded: list[OutOfPlane] = []
+    poses = _poses_of_dimension(t, rows[:, :3], q, src, dimension, discarded)
+    positions = poses[:, :3] if poses.shape[1] == 7 else poses[:, :2]
+    check_coordinates(positions, what=what, path=name, line_of=number.__getitem__)
+    order, report = sort_by_time(t, tolerance=None, lines=number, path=name, what=what)
+    if report.out_of_order:
+        t, poses = t[order], poses[order]
+        warnings.warn(
+            f"{name}: {report.describe(what)}; put in time order", TimeOrderWarning, stacklevel=3
+        )
+    trajectory = Trajectory(t, poses)
+    if dimension == "3d":
+        trajectory = trajectory.lifted()
+    lines = number[order] if report.out_of_order else number
+    _, repeated = repeated_times(t, poses, lambda k: int(lines[k]))
+    return LoadedTrajectory(
+        trajectory,
+        "bag",
+        dict(got.skipped),
         report,
         discarded=discarded[0] if discarded else None,
         repeated=repeated,
@@ -722,7 +788,9 @@ def write_trajectory(
 
     Numbers are written with :data:`~slamrel.formats.text.NUMBER_FORMAT` (17 significant
     digits: the file reads back bit for bit). ``plain`` and ``tum`` have a ``#`` header line;
-    ``csv`` the header :data:`CSV_HEADER` (the one writer of a bundle's ``groundtruth.csv``
+    ``kitti`` the 12 numbers of ``[R | t]`` a line, no header and no times (write the
+    timestamps apart, one a line, as KITTI's ``times.txt``); ``csv`` the header
+    :data:`CSV_HEADER` (the one writer of a bundle's ``groundtruth.csv``
     and ``odometry.csv``); ``carmen`` writes ``FLASER 0`` records (laser pose = odometry
     pose), which the original metricEvaluator reads; ``g2o`` writes ``VERTEX_SE2`` lines
     (:func:`slamrel.formats.g2o.format_g2o_records`) with the pose index as id.
@@ -730,8 +798,10 @@ def write_trajectory(
     t = trajectory.timestamps
     p = trajectory.poses
     n = len(trajectory)
-    if p.shape[1] == 7 and format != "tum":
-        raise InputError(f"a 3-D trajectory can be written as tum only, not {format}", path=path)
+    if p.shape[1] == 7 and format not in ("tum", "kitti"):
+        raise InputError(
+            f"a 3-D trajectory can be written as tum or kitti only, not {format}", path=path
+        )
     if format == "plain":
         text = "# t x y theta\n" + _rows(np.column_stack((t, p)), [NUMBER_FORMAT] * 4)
     elif format == "tum":
@@ -741,6 +811,12 @@ def write_trajectory(
             q = quaternion_from_yaw(p[:, 2])
             rows = np.column_stack((t, p[:, 0], p[:, 1], np.zeros(n), q))
         text = "# t x y z qx qy qz qw\n" + _rows(rows, [NUMBER_FORMAT] * 8)
+    elif format == "kitti":
+        from relation_metric import se3
+
+        poses7 = p if p.shape[1] == 7 else trajectory.lifted().poses
+        m = se3.to_matrix(poses7)[:, :3, :].reshape(n, 12) if n else np.zeros((0, 12))
+        text = _rows(m, [NUMBER_FORMAT] * 12)
     elif format == "csv":
         text = CSV_HEADER + "\n" + _rows(np.column_stack((t, p)), [NUMBER_FORMAT] * 4, ",")
     elif format == "g2o":

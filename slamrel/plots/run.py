@@ -12,7 +12,7 @@ from typing import Any, NamedTuple, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from relation_metric.consistency import NeesSummary
+from relation_metric.consistency import NeesOverTime, NeesSummary
 from relation_metric.trajectory import Trajectory
 from slamrel.plots.relation_errors import pyplot
 
@@ -297,4 +297,38 @@ def mark_stretches_time(
         ax.set_xlim(lo, hi)
     first = fig.axes[axes[0]]
     first.legend(**(legend or {"loc": "upper left", "fontsize": 8}))
+    return fig
+
+
+def filter_nees_figure(r: NeesOverTime) -> Any:
+    """The NEES of a filter over time (:func:`relation_metric.consistency.nees_over_time`).
+
+    Top: the pose NEES (log scale) with the ``r.probability`` band of one value and the mean
+    with its interval; bottom: the position and orientation NEES with their bands.
+    """
+    plt = pyplot()
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True, constrained_layout=True)
+    t = r.times - r.times[0]
+    pct = f"{100 * r.probability:g}%"
+    runs = f", average of {r.runs} runs" if r.runs > 1 else ""
+    top.semilogy(t, np.maximum(r.nees, 1e-6), lw=0.8, color="tab:blue", label=f"NEES{runs}")
+    top.axhspan(*r.band, color="tab:green", alpha=0.15, label=f"{pct} χ² band ({r.dof} dof{runs})")
+    top.axhline(r.mean, color="tab:red", lw=1, label=f"mean {r.mean:.3g}")
+    top.axhspan(*r.mean_band, color="tab:red", alpha=0.15, label=f"{pct} interval of the mean")
+    top.set_ylabel("NEES")
+    top.set_title(f"{100 * r.inside:.1f}% inside the band; error frame {r.frame}", fontsize=9)
+    top.legend(loc="best", fontsize=8)
+    for values, dof, name, colour in (
+        (r.position, r.position_dof, "position", "tab:orange"),
+        (r.orientation, r.orientation_dof, "orientation", "tab:purple"),
+    ):
+        bottom.semilogy(
+            t, np.maximum(values, 1e-6), lw=0.8, color=colour, label=f"{name} ({dof} dof)"
+        )
+        lo, hi = r.part_band(dof)
+        bottom.axhline(lo, color=colour, lw=0.6, ls="--")
+        bottom.axhline(hi, color=colour, lw=0.6, ls="--")
+    bottom.set_ylabel("NEES (dashed: bands)")
+    bottom.set_xlabel("time since the first pose [s]")
+    bottom.legend(loc="best", fontsize=8)
     return fig
