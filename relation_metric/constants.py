@@ -12,7 +12,7 @@ __all__ = ["MODES", "STRATEGIES", "BOOTSTRAP_RESAMPLES", "MIN_BLOCKS", "OVERLAP_
 #: Error definitions of :func:`relation_metric.metric.relation_errors` (``mode``).
 MODES = ("paper", "metricevaluator")
 #: Selection strategies of :func:`relation_metric.relations.generate_relations`.
-STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs")
+STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs", "time")
 #: Bootstrap resamples B of :func:`relation_metric.significance.paired_difference`: the
 #: p-value's resolution is 1/(B + 1) = 10⁻⁴.
 BOOTSTRAP_RESAMPLES = 9999

@@ -17,6 +17,8 @@ __all__ = [
     "PAPER_WORLDS",
     "NOISE_NAMES",
     "POSE_ONLY_METHODS",
+    "PAIRS_FROM",
+    "EVO_MAX_TIME_DIFF",
 ]
 
 #: The format id of the SLAM result bundle (``bundle.json``'s ``format``; docs/bundle.md),
@@ -62,4 +64,13 @@ EVALUATE_DEFAULTS: dict[str, Any] = {
     "min_distance": None,
     "seed": 0,
     "chained": False,
+    "seconds": 1.0,
+    "pairs_from": "reference",
+    "t_offset": 0.0,
+    "t_start": None,
+    "t_end": None,
 }
+#: Where relations generated from a trajectory take their pose pairs (``--pairs-from``).
+PAIRS_FROM = ("reference", "estimate")
+#: evo's default time tolerance of its pose-by-pose association (``t_max_diff``) [s].
+EVO_MAX_TIME_DIFF = 0.01

@@ -82,7 +82,11 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         "--strategy",
         choices=STRATEGIES,
         default=default,
-        help="how to select relations (default: %(default)s)",
+        help="how to select relations from a reference trajectory (default: consecutive): "
+        "consecutive (pose k with k+STEP), "
+        "distance (each pose with the first pose DISTANCE metres of travel further), time "
+        "(each pose with the pose nearest SECONDS later: TUM's RPE by seconds), loops, "
+        "global, random, all-pairs",
     )
     g.add_argument(
         "--step", type=opt.positive_int, default=d.step, help="consecutive: pose k with k+STEP"
@@ -117,6 +121,13 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         default=d.min_distance,
         help="global: min distance between the poses [m] (default: extent/4)",
     )
+    g.add_argument(
+        "--seconds",
+        type=opt.positive_float,
+        default=d.seconds,
+        metavar="S",
+        help="time: seconds between the two poses (default %(default)s)",
+    )
     g.add_argument("--seed", type=opt.seed, default=d.seed, help="global/random: seed")
     g.add_argument(
         "--chained",
@@ -145,6 +156,7 @@ def relations_from_args(
         min_distance=args.min_distance,
         seed=args.seed,
         chained=getattr(args, "chained", False),
+        seconds=getattr(args, "seconds", EVALUATE_DEFAULTS["seconds"]),
         key=key,
     )
 

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from relation_metric.constants import MODES
 from slamrel.commands import options as opt
 from slamrel.commands.common import add_strategy_arguments, check_outputs, stats_table
-from slamrel.constants import EVALUATE_DEFAULTS, TRAJECTORY_FORMATS
+from slamrel.constants import EVALUATE_DEFAULTS, PAIRS_FROM, TRAJECTORY_FORMATS
 
 if TYPE_CHECKING:  # the library is imported in run(): start-up stays light
     from slamrel.evaluation import FileEvaluation
@@ -107,7 +107,24 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--ate",
         action="store_true",
-        help="also the aligned absolute trajectory error (needs a reference trajectory)",
+        help="also the absolute trajectory error (needs a reference trajectory): without "
+        "alignment and after each alignment: rigid and similarity (Umeyama), 4-DoF (3-D: "
+        "yaw about z and translation), origin (first pose on first pose) and affine "
+        "(positions only); with per-axis, in-plane and height errors in --json",
+    )
+    p.add_argument(
+        "--n-to-align",
+        type=opt.int_range(2, 2**63 - 1),
+        metavar="N",
+        help="--ate: fit the alignments on the first N matched poses only, apply them to all "
+        "(evo's --n_to_align; default: all poses)",
+    )
+    p.add_argument(
+        "--kitti-drift",
+        action="store_true",
+        help="also the KITTI odometry drift (the devkit's: translational %% and rotational "
+        "deg/m over 100..800 m segments of the reference path, every 10th start frame), on "
+        "the pose-by-pose synchronised pairs (needs a reference trajectory)",
     )
 
 
@@ -147,6 +164,37 @@ def _view_arguments(p: argparse.ArgumentParser) -> None:
         "within --max-time-diff; use 0.01 for evo's default t_max_diff), then generate the "
         "relations on the matched poses (needs a reference trajectory)",
     )
+    p.add_argument(
+        "--pairs-from",
+        choices=PAIRS_FROM,
+        default=DEFAULT.pairs_from,
+        help="with --sync: choose the relations' pose pairs on the reference (slamrel's "
+        "default, the relation metric's reference relations) or on the estimate (evo's "
+        "default; its --pairs_from_reference is 'reference'); default: %(default)s",
+    )
+    p.add_argument(
+        "--t-offset",
+        type=opt.finite_float,
+        default=DEFAULT.t_offset,
+        metavar="S",
+        help="add S seconds to every ESTIMATE timestamp first (evo's --t_offset; "
+        "default %(default)s)",
+    )
+    p.add_argument(
+        "--t-start",
+        type=opt.finite_float,
+        default=DEFAULT.t_start,
+        metavar="T",
+        help="keep only poses (and relations) at times >= T [s], on both trajectories, after "
+        "--t-offset (evo's --t_start; default: no bound)",
+    )
+    p.add_argument(
+        "--t-end",
+        type=opt.finite_float,
+        default=DEFAULT.t_end,
+        metavar="T",
+        help="... and at times <= T [s] (evo's --t_end; default: no bound)",
+    )
     p.add_argument("--times", metavar="FILE", help="KITTI ESTIMATE: timestamps, one a line")
     p.add_argument("--reference-times", metavar="FILE", help="KITTI REFERENCE: timestamps")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
@@ -157,13 +205,24 @@ def run(args: argparse.Namespace) -> int:
 
     The library is imported here, not when the parser is built.
     """
+    from relation_metric.errors import OptionError
     from slamrel.evaluation import score_files
     from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
 
     outputs = [args.json, args.per_relation, args.plot, args.evo_zip]
     check_outputs(outputs, [args.reference, args.estimate, args.odometry])
+    if args.t_start is not None and args.t_end is not None and args.t_end < args.t_start:
+        raise OptionError(f"{args.t_end} is before --t-start {args.t_start}", option="--t-end")
     options = EvaluateOptions(**{name: getattr(args, name) for name in SCORING_OPTIONS})
-    scored = score_files(args.reference, args.estimate, options, degrees=args.degrees, ate=args.ate)
+    scored = score_files(
+        args.reference,
+        args.estimate,
+        options,
+        degrees=args.degrees,
+        ate=args.ate,
+        n_to_align=args.n_to_align,
+        drift=args.kitti_drift,
+    )
     _write_outputs(args, scored)
     if not args.quiet:
         print(summary_text(scored, degrees=args.degrees))
@@ -246,9 +305,35 @@ def summary_text(scored: FileEvaluation, *, degrees: bool) -> str:
         text += (
             f"\nrelations: {result['relations_zero_length_dropped']} zero-length (t1 == t2) dropped"
         )
+    if "kitti_drift" in result:
+        text += "\n" + _drift_text(result["kitti_drift"])
     if "ate" in result:
         a = result["ate"]
         text += "\nATE translation rmse [m]: " + ", ".join(
             f"{k} {v['translation']['rmse']:.6f}" for k, v in a.items()
         )
     return text
+
+
+def _drift_text(drift: dict[str, object]) -> str:
+    """The console lines of ``--kitti-drift``: the devkit's numbers and the per-length table."""
+    rows = drift["per_length"]
+    assert isinstance(rows, list)
+    lines = [
+        f"KITTI drift ({drift['segments']} segments on {drift['pairs']} synchronised poses): "
+        f"translation {_num(drift['translation_percent'], '.4f')} %, rotation "
+        f"{_num(drift['rotation_deg_per_m'], '.6f')} deg/m (mean over all segments; mean of "
+        f"the per-length means {_num(drift['translation_percent_by_length'], '.4f')} %, "
+        f"{_num(drift['rotation_deg_per_m_by_length'], '.6f')} deg/m)",
+        "  length [m]  segments  translation [%]  rotation [deg/m]",
+    ]
+    for r in rows:
+        t = _num(r["translation_percent"], ".4f")
+        rot = _num(r["rotation_deg_per_m"], ".6f")
+        lines.append(f"  {r['length_m']:>10.0f}  {r['count']:>8d}  {t:>15}  {rot:>16}")
+    return "\n".join(lines)
+
+
+def _num(value: object, spec: str) -> str:
+    """A number with ``spec``, or ``-`` for none (a length without a segment)."""
+    return "-" if value is None else format(value, spec)
