@@ -280,3 +280,67 @@ def test_window_refusals(tmp_path, capsys):
     assert main([*args, "--t-start", "5", "--t-end", "1"]) == 2
     assert main([*args, "--t-start", "100"]) == 3
     assert "time window" in capsys.readouterr().err
+
+
+def _planar_tum(path, t, xy):
+    """A 3-D TUM file of a planar path (heading along the path)."""
+    th = np.unwrap(np.arctan2(np.gradient(xy[:, 1]), np.gradient(xy[:, 0])))
+    q = np.column_stack((np.zeros((len(t), 2)), np.sin(th / 2), np.cos(th / 2)))
+    z = 0.01 * np.sin(t)  # off the plane: read as SE(3)
+    np.savetxt(path, np.column_stack((t, xy, z, q)), fmt="%.9f")
+
+
+def test_pairs_from_estimate_are_chosen_on_the_estimates_path(tmp_path):
+    t = np.arange(300) * 0.1
+    xy = np.column_stack((5 * np.cos(t / 5), 5 * np.sin(t / 5)))
+    est_xy = 1.3 * xy + np.random.default_rng(0).normal(0, 0.01, xy.shape)  # longer path
+    _planar_tum(tmp_path / "ref.tum", t, xy)
+    _planar_tum(tmp_path / "est.tum", t, est_xy)
+    per = tmp_path / "per.csv"
+    base = ["evaluate", str(tmp_path / "ref.tum"), str(tmp_path / "est.tum"), "--sync",
+            "--max-time-diff", "0.01", "--strategy", "distance", "--distance", "2", "-q"]
+    assert main([*base, "--pairs-from", "estimate", "--per-relation", str(per)]) == 0
+    rows = np.genfromtxt(per, delimiter=",", names=True)
+    est = np.loadtxt(tmp_path / "est.tum")[:, 1:4]
+    s = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(est, axis=0), axis=1))))
+    expect = []
+    for i in range(len(s)):  # evo's rule: the first pose at least 2 m further on the estimate
+        j = next((k for k in range(i, len(s)) if s[k] >= s[i] + 2.0), None)
+        if j is not None:
+            expect.append((t[i], t[j]))
+    np.testing.assert_allclose(np.column_stack((rows["t1"], rows["t2"])), expect, atol=1e-9)
+    # on the reference (the default), whose path is shorter, 2 m takes more poses: fewer pairs
+    assert main([*base, "--per-relation", str(per)]) == 0
+    assert len(np.genfromtxt(per, delimiter=",", names=True)) < len(expect)
+
+
+def test_pairs_from_estimate_needs_sync(tmp_path, capsys):
+    t = np.arange(50) * 0.1
+    _planar_tum(tmp_path / "ref.tum", t, np.column_stack((t, t**2 / 10)))
+    args = ["evaluate", str(tmp_path / "ref.tum"), str(tmp_path / "ref.tum")]
+    assert main([*args, "--pairs-from", "estimate"]) == 2
+    assert "--sync" in capsys.readouterr().err
+
+
+def test_denser_reference_and_tolerance_are_warned_about(tmp_path, capsys):
+    t_ref = np.arange(2000) * 0.005  # 200 Hz, as EuRoC's ground truth
+    t_est = np.arange(100) * 0.1  # 10 Hz
+    path = lambda t: np.column_stack((np.cos(t), np.sin(t)))  # noqa: E731
+    _planar_tum(tmp_path / "ref.tum", t_ref, path(t_ref))
+    _planar_tum(tmp_path / "est.tum", t_est, path(t_est))
+    args = ["evaluate", str(tmp_path / "ref.tum"), str(tmp_path / "est.tum"), "-q"]
+    assert main(args) == 0
+    assert "200 poses/s, the estimate 10 (20x denser)" in capsys.readouterr().err
+    assert main([*args, "--sync"]) == 0
+    err = capsys.readouterr().err
+    assert "evo's default t_max_diff is 0.01 s" in err and "denser" not in err
+    assert main([*args, "--sync", "--max-time-diff", "0.01"]) == 0  # evo's settings: silent
+    assert "warning" not in capsys.readouterr().err
+
+
+def test_evaluate_help_has_evo_equivalents_and_the_real_strategy_default(capsys):
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--help"])
+    text = capsys.readouterr().out
+    assert "evo equivalents" in text and "--pairs-from estimate" in text
+    assert "default: None" not in text and "(default: consecutive)" in text

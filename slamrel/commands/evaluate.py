@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import textwrap
 from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
@@ -25,15 +26,44 @@ DEFAULT = SimpleNamespace(**EVALUATE_DEFAULTS)
 
 HELP = "score an estimated trajectory against reference relations"
 
+#: The "evo equivalents" paragraph of ``slamrel evaluate --help``.
+EVO_EQUIVALENTS = """\
+evo equivalents (where the definitions agree, the numbers agree to the printed digit):
+  evo_rpe tum REF EST --delta D --delta_unit f
+      = slamrel evaluate REF EST --sync --max-time-diff 0.01 --step D --chained
+  evo_rpe ... --delta D --delta_unit m
+      = ... --strategy distance --distance D --chained --pairs-from estimate
+        (evo picks the pairs on the estimate; with --pairs_from_reference, drop
+        --pairs-from here); --all_pairs: the same without --chained
+  TUM evaluate_rpe.py --fixed_delta --delta S --delta_unit s
+      = ... --sync --pairs-from estimate --strategy time --seconds S (TUM's pair rule;
+        its time matching, within twice the reference's median spacing, is not --sync's)
+  evo_ape tum REF EST [-a | -as]
+      = slamrel evaluate REF EST --ate --sync --max-time-diff 0.01 (its none / se3 / sim3
+        rows); --n_to_align N = --n-to-align N; --align_origin = the origin row (4-DoF and
+        affine rows too)
+  --t_offset / --t_start / --t_end = --t-offset / --t-start / --t-end
+  KITTI devkit drift (t_err %, r_err deg/m) = --kitti-drift
+Where they differ: slamrel's default tolerance is --max-time-diff 0.1 s (evo's t_max_diff
+is 0.01 s; --sync with another value is warned about); without --sync slamrel generates
+relations between reference poses and matches each end to the estimate (a reference far
+denser than the estimate, as EuRoC's 200 Hz ground truth against a 10 Hz estimate, is
+warned about); with --sync the pairs come from the reference unless --pairs-from
+estimate."""
+
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(
         "evaluate",
         help=HELP,
-        description=HELP
-        + ". REFERENCE is a Freiburg .relations file, or a reference trajectory (or a SLAM "
-        "result bundle with groundtruth.csv) from which relations are generated with "
-        "--strategy.",
+        description=textwrap.fill(
+            HELP + ". REFERENCE is a Freiburg .relations file, or a reference trajectory (or a "
+            "SLAM result bundle with groundtruth.csv) from which relations are generated with "
+            "--strategy.",
+            width=88,
+        ),
+        epilog=EVO_EQUIVALENTS,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     _input_arguments(p)
     _association_arguments(p)
