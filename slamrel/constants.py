@@ -16,6 +16,7 @@ __all__ = [
     "WORLDS",
     "PAPER_WORLDS",
     "NOISE_NAMES",
+    "NOISE_HELP",
     "POSE_ONLY_METHODS",
     "PAIRS_FROM",
     "EVO_MAX_TIME_DIFF",
@@ -32,6 +33,13 @@ WORLDS = ("simple1", "simple2", "complex1", "complex2")
 PAPER_WORLDS = ("hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2")
 #: Hu et al.'s noise types (Table I), the keys of ``slamrel.simulation.worlds.NOISE_TYPES``.
 NOISE_NAMES = ("a", "b", "c")
+#: The help of a ``--noise`` option: Hu et al.'s noise types (Table I) as
+#: ``slamrel.simulation.worlds.NOISE_TYPES`` holds them (tests/test_help.py checks the numbers).
+NOISE_HELP = (
+    "noise type of Hu et al. (Table I), standard deviations per step: a: dx, dy 0.1 m, "
+    "dθ 0.05 rad, observation 0.1; b: 0.2 m, 0.2 rad, 0.1; c: 0.1 m, 0.05 rad, 0.3 "
+    "(default: %(default)s)"
+)
 #: Methods of the pose-only study (:mod:`slamrel.studies.pose_only`, its ``METHODS``).
 POSE_ONLY_METHODS = ("full", "m1", "m2", "toro")
 

@@ -89,22 +89,28 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         "global, random, all-pairs",
     )
     g.add_argument(
-        "--step", type=opt.positive_int, default=d.step, help="consecutive: pose k with k+STEP"
+        "--step",
+        type=opt.positive_int,
+        default=d.step,
+        help="consecutive: pose k with k+STEP (default: %(default)s)",
     )
     g.add_argument(
         "--distance",
         type=opt.positive_float,
         default=d.distance,
-        help="distance: metres of travel",
+        help="distance: metres of travel (default: %(default)s)",
     )
     g.add_argument(
-        "--radius", type=opt.positive_float, default=d.radius, help="loops: max distance [m]"
+        "--radius",
+        type=opt.positive_float,
+        default=d.radius,
+        help="loops: max distance [m] (default: %(default)s)",
     )
     g.add_argument(
         "--min-separation-time",
         type=opt.nonnegative_float,
         default=d.min_separation_time,
-        help="loops: min time between the two poses [s]",
+        help="loops: min time between the two poses [s] (default: %(default)s)",
     )
     g.add_argument(
         "--min-separation-distance",
@@ -113,7 +119,10 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         help="loops: or min travel between the two poses [m]",
     )
     g.add_argument(
-        "--count", type=opt.count, default=d.count, help="global/random: number of pairs"
+        "--count",
+        type=opt.count,
+        default=d.count,
+        help="global/random: number of pairs (default: %(default)s)",
     )
     g.add_argument(
         "--min-distance",
@@ -128,7 +137,9 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         metavar="S",
         help="time: seconds between the two poses (default %(default)s)",
     )
-    g.add_argument("--seed", type=opt.seed, default=d.seed, help="global/random: seed")
+    g.add_argument(
+        "--seed", type=opt.seed, default=d.seed, help="global/random: seed (default: %(default)s)"
+    )
     g.add_argument(
         "--chained",
         action="store_true",

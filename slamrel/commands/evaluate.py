@@ -92,7 +92,11 @@ def _input_arguments(p: argparse.ArgumentParser) -> None:
 def _association_arguments(p: argparse.ArgumentParser) -> None:
     """Timestamp association, error definition and what counts as an error."""
     p.add_argument("--odometry", metavar="LOG", help="odometry log that corrects far timestamps")
-    p.add_argument("--odometry-format", choices=TRAJECTORY_FORMATS)
+    p.add_argument(
+        "--odometry-format",
+        choices=TRAJECTORY_FORMATS,
+        help="format of the odometry log (default: recognised)",
+    )
     p.add_argument(
         "--max-time-diff",
         type=opt.nonnegative_float,
@@ -108,7 +112,7 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
         type=opt.positive_float,
         default=DEFAULT.max_interpolation_gap,
         metavar="S",
-        help="longest gap interpolated over [s]",
+        help="longest gap interpolated over [s] (default: %(default)s)",
     )
     p.add_argument(
         "--mode",
@@ -175,7 +179,7 @@ def _output_arguments(p: argparse.ArgumentParser) -> None:
         "--evo-part",
         choices=("trans", "rot"),
         default="trans",
-        help="which error the evo zip holds",
+        help="which error the evo zip holds (default: %(default)s)",
     )
 
 
