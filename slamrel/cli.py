@@ -41,6 +41,7 @@ COMMAND_MODULES = (
     "slamrel.commands.solve",
     "slamrel.commands.example",
     "slamrel.commands.study",
+    "slamrel.commands.batch",
 )
 
 EXIT_OK, EXIT_BUG, EXIT_USAGE, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 130

@@ -14,7 +14,7 @@ from recovery.constants import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, ROBUST
 from relation_metric.constants import STRATEGIES
 from relation_metric.errors import InputError, SlamrelError
 from slamrel.commands import options as opt
-from slamrel.constants import EVALUATE_DEFAULTS
+from slamrel.constants import EVALUATE_DEFAULTS, PAIRS_FROM
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from landmark_graph.landmark_association import Association
@@ -146,6 +146,37 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         default=d.chained,
         help="consecutive/distance: one chain of relations from pose 0, each starting where "
         "the previous ended (evo's RPE pairs) instead of one relation from every pose",
+    )
+
+
+def add_tolerance_argument(parser: argparse.ArgumentParser) -> None:
+    """``--max-time-diff``: the nearest-pose tolerance (``evaluate``, ``batch``)."""
+    parser.add_argument(
+        "--max-time-diff",
+        type=opt.nonnegative_float,
+        default=EVALUATE_DEFAULTS["max_time_diff"],
+        metavar="S",
+        help="nearest-pose tolerance [s] (default %(default)s)",
+    )
+
+
+def add_sync_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--sync`` and ``--pairs-from``: evo's pose-by-pose association and where the pose
+    pairs are chosen (``evaluate``, ``batch``)."""
+    parser.add_argument(
+        "--sync",
+        action="store_true",
+        help="associate reference and estimate pose by pose first, as evo does (nearest time "
+        "within --max-time-diff; use 0.01 for evo's default t_max_diff), then generate the "
+        "relations on the matched poses (needs a reference trajectory)",
+    )
+    parser.add_argument(
+        "--pairs-from",
+        choices=PAIRS_FROM,
+        default=EVALUATE_DEFAULTS["pairs_from"],
+        help="with --sync: choose the relations' pose pairs on the reference (slamrel's "
+        "default, the relation metric's reference relations) or on the estimate (evo's "
+        "default; its --pairs_from_reference is 'reference'); default: %(default)s",
     )
 
 

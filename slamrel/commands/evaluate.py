@@ -15,8 +15,14 @@ from typing import TYPE_CHECKING
 
 from relation_metric.constants import MODES
 from slamrel.commands import options as opt
-from slamrel.commands.common import add_strategy_arguments, check_outputs, stats_table
-from slamrel.constants import EVALUATE_DEFAULTS, PAIRS_FROM, TRAJECTORY_FORMATS
+from slamrel.commands.common import (
+    add_strategy_arguments,
+    add_sync_arguments,
+    add_tolerance_argument,
+    check_outputs,
+    stats_table,
+)
+from slamrel.constants import EVALUATE_DEFAULTS, TRAJECTORY_FORMATS
 
 if TYPE_CHECKING:  # the library is imported in run(): start-up stays light
     from slamrel.evaluation import FileEvaluation
@@ -97,13 +103,7 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
         choices=TRAJECTORY_FORMATS,
         help="format of the odometry log (default: recognised)",
     )
-    p.add_argument(
-        "--max-time-diff",
-        type=opt.nonnegative_float,
-        default=DEFAULT.max_time_diff,
-        metavar="S",
-        help="nearest-pose tolerance [s] (default %(default)s)",
-    )
+    add_tolerance_argument(p)
     p.add_argument(
         "--interpolate", action="store_true", help="interpolate on SE(2)/SE(3) beyond the tolerance"
     )
@@ -191,21 +191,7 @@ def _view_arguments(p: argparse.ArgumentParser) -> None:
         help="score 3-D inputs (TUM/KITTI/EuRoC with out-of-plane motion, 6-DoF relations) in "
         "2-D: z, roll and pitch are discarded, with a warning that states how much",
     )
-    p.add_argument(
-        "--sync",
-        action="store_true",
-        help="associate reference and estimate pose by pose first, as evo does (nearest time "
-        "within --max-time-diff; use 0.01 for evo's default t_max_diff), then generate the "
-        "relations on the matched poses (needs a reference trajectory)",
-    )
-    p.add_argument(
-        "--pairs-from",
-        choices=PAIRS_FROM,
-        default=DEFAULT.pairs_from,
-        help="with --sync: choose the relations' pose pairs on the reference (slamrel's "
-        "default, the relation metric's reference relations) or on the estimate (evo's "
-        "default; its --pairs_from_reference is 'reference'); default: %(default)s",
-    )
+    add_sync_arguments(p)
     p.add_argument(
         "--t-offset",
         type=opt.finite_float,
