@@ -20,6 +20,7 @@ __all__ = [
     "POSE_ONLY_METHODS",
     "PAIRS_FROM",
     "EVO_MAX_TIME_DIFF",
+    "PLOT_MODES",
 ]
 
 #: The format id of the SLAM result bundle (``bundle.json``'s ``format``; docs/bundle.md),
@@ -80,5 +81,8 @@ EVALUATE_DEFAULTS: dict[str, Any] = {
 }
 #: Where relations generated from a trajectory take their pose pairs (``--pairs-from``).
 PAIRS_FROM = ("reference", "estimate")
+#: The planes of ``slamrel evaluate --plot-mode``
+#: (:func:`slamrel.plots.relation_errors.plot_plane`).
+PLOT_MODES = ("auto", "xy", "xz", "yz", "yx", "zx", "zy")
 #: evo's default time tolerance of its pose-by-pose association (``t_max_diff``) [s].
 EVO_MAX_TIME_DIFF = 0.01

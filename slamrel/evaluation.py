@@ -71,6 +71,9 @@ class FileEvaluation:
     #: trajectory (``consecutive`` by default); ``None`` for a .relations file, whose
     #: relations may mix kinds. Written as the ``set`` column of ``--per-relation``.
     relation_set: str | None = None
+    #: The reference trajectory (after the time window), drawn by the figure; ``None`` for a
+    #: .relations file.
+    reference: Trajectory | None = None
 
 
 def evaluate_files(
@@ -213,7 +216,7 @@ def score_files(
             )
         result["kitti_drift"] = _kitti_drift(ate_pair, options.max_time_diff, reference)
     generated = None if ref_traj is None else (options.strategy or "consecutive")
-    return FileEvaluation(ev, ev_estimate, result, relation_set=generated)
+    return FileEvaluation(ev, ev_estimate, result, relation_set=generated, reference=ref_traj)
 
 
 def _why_no_relations(

@@ -106,8 +106,9 @@ def test_kitti_drift_of_a_scaled_straight_line_is_its_scale_error():
     est[:, 2] *= 1.01
     d = kitti_drift(gt, est)
     # the segment of L ends at the first frame strictly beyond L: L + 1 frames of 1 m
-    assert d.translation_percent == pytest.approx(100 * 0.01 * np.mean(
-        (d.segment_length + 1) / d.segment_length), rel=1e-12)
+    assert d.translation_percent == pytest.approx(
+        100 * 0.01 * np.mean((d.segment_length + 1) / d.segment_length), rel=1e-12
+    )
     assert d.rotation_deg_per_m == 0.0
     assert d.per_length[-1].count == len(range(0, n - 801, 10))
 
@@ -164,8 +165,10 @@ def test_affine_fit_is_the_least_squares_minimum():
     # nested families: affine ≤ similarity ≤ rigid
     sim = umeyama(x, y, with_scale=True)
     rig = umeyama(x, y)
+
     def cost(al):
         return float(np.sum((y - (al.scale * x @ al.rotation.T + al.translation)) ** 2))
+
     assert ours <= cost(sim) + 1e-12 <= cost(rig) + 2e-12
     # an exact affine image is rescued to zero
     assert np.allclose(affine_fit(x, x @ a_true.T + 3.0).apply_points(x), x @ a_true.T + 3.0)
@@ -198,8 +201,9 @@ def test_four_dof_alignment_against_brute_force():
         moved = x @ r.T
         return float(np.sum((y - moved - (y.mean(0) - moved.mean(0))) ** 2))
 
-    best = minimize_scalar(cost_at, bounds=(psi - 0.5, psi + 0.5), method="bounded",
-                           options={"xatol": 1e-12})
+    best = minimize_scalar(
+        cost_at, bounds=(psi - 0.5, psi + 0.5), method="bounded", options={"xatol": 1e-12}
+    )
     al = umeyama_yaw(x, y)
     got = float(np.sum((y - (x @ al.rotation.T + al.translation)) ** 2))
     assert got == pytest.approx(best.fun, rel=1e-9)
@@ -228,8 +232,9 @@ def test_origin_first_n_and_axes():
     r10 = absolute_trajectory_error(est, ref, align="se3", n_to_align=10)
     al = umeyama(est.poses[:10, :3], ref.poses[:10, :3])
     moved = est.poses[:, :3] @ al.rotation.T + al.translation
-    np.testing.assert_allclose(r10.translation, np.linalg.norm(ref.poses[:, :3] - moved, axis=1),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        r10.translation, np.linalg.norm(ref.poses[:, :3] - moved, axis=1), atol=1e-9
+    )
     assert r10.aligned_on == 10
     # per axis: the components of p_ref − A(p_est), in-plane and height
     res = ref.poses[:, :3] - moved
@@ -257,8 +262,23 @@ def test_time_offset_and_window_equal_cutting_the_files(tmp_path):
 
     def score(r, e, *extra):
         out = tmp_path / "o.json"
-        assert main(["evaluate", str(tmp_path / r), str(tmp_path / e), "--ate", "--json",
-                     str(out), "-q", "--max-time-diff", "0.01", *extra]) == 0
+        assert (
+            main(
+                [
+                    "evaluate",
+                    str(tmp_path / r),
+                    str(tmp_path / e),
+                    "--ate",
+                    "--json",
+                    str(out),
+                    "-q",
+                    "--max-time-diff",
+                    "0.01",
+                    *extra,
+                ]
+            )
+            == 0
+        )
         res = json.loads(out.read_text())
         return res["translation"]["abs"], res["ate"]["se3"]["translation"], res
 
@@ -269,8 +289,10 @@ def test_time_offset_and_window_equal_cutting_the_files(tmp_path):
     cut = score("ref_cut.tum", "est_cut.tum")
     windowed = score("ref.tum", "est.tum", "--t-start", "3", "--t-end", "15")
     assert windowed[:2] == cut[:2]
-    assert windowed[2]["time_window_dropped"] == {"reference": int((~keep).sum()),
-                                                  "estimate": int((~keep).sum())}
+    assert windowed[2]["time_window_dropped"] == {
+        "reference": int((~keep).sum()),
+        "estimate": int((~keep).sum()),
+    }
 
 
 def test_window_refusals(tmp_path, capsys):
@@ -297,8 +319,19 @@ def test_pairs_from_estimate_are_chosen_on_the_estimates_path(tmp_path):
     _planar_tum(tmp_path / "ref.tum", t, xy)
     _planar_tum(tmp_path / "est.tum", t, est_xy)
     per = tmp_path / "per.csv"
-    base = ["evaluate", str(tmp_path / "ref.tum"), str(tmp_path / "est.tum"), "--sync",
-            "--max-time-diff", "0.01", "--strategy", "distance", "--distance", "2", "-q"]
+    base = [
+        "evaluate",
+        str(tmp_path / "ref.tum"),
+        str(tmp_path / "est.tum"),
+        "--sync",
+        "--max-time-diff",
+        "0.01",
+        "--strategy",
+        "distance",
+        "--distance",
+        "2",
+        "-q",
+    ]
     assert main([*base, "--pairs-from", "estimate", "--per-relation", str(per)]) == 0
     rows = np.genfromtxt(per, delimiter=",", names=True)
     est = np.loadtxt(tmp_path / "est.tum")[:, 1:4]
@@ -344,3 +377,55 @@ def test_evaluate_help_has_evo_equivalents_and_the_real_strategy_default(capsys)
     text = capsys.readouterr().out
     assert "evo equivalents" in text and "--pairs-from estimate" in text
     assert "default: None" not in text and "(default: consecutive)" in text
+
+
+def test_plot_plane_auto_and_named():
+    from slamrel.plots.relation_errors import plot_plane
+
+    gt, _ = kitti_sim.drive()
+    kitti = gt[:, :3, 3]  # camera frame: x right, y down, z forward; the drive lies in x-z
+    assert plot_plane("auto", kitti) == (0, 2, 1)
+    z_up = kitti[:, [0, 2, 1]]
+    assert plot_plane("auto", z_up) == (0, 1, 2)
+    assert plot_plane("zy", kitti) == (2, 1, 0)
+    assert plot_plane("auto", kitti[:, :2]) == (0, 1, None)
+    with pytest.raises(ValueError, match="needs 3-D"):
+        plot_plane("xz", kitti[:, :2])
+
+
+def test_plot_mode_draws_the_chosen_plane_and_the_reference(tmp_path):
+    from slamrel.evaluation import score_files
+    from slamrel.evaluation_options import EvaluateOptions
+    from slamrel.plots.relation_errors import evaluation_figure, pyplot
+
+    gt, est = kitti_sim.drive(frames=300)
+    kitti_sim.write_kitti(tmp_path / "gt.txt", gt)
+    kitti_sim.write_kitti(tmp_path / "est.txt", est)
+    scored = score_files(tmp_path / "gt.txt", tmp_path / "est.txt", EvaluateOptions())
+    fig = evaluation_figure(
+        scored.evaluation, scored.estimate, plot_mode="auto", reference=scored.reference
+    )
+    ax = fig.axes[1]
+    lines = {ln.get_label(): ln for ln in ax.get_lines()}
+    np.testing.assert_allclose(lines["reference (as given)"].get_xydata(), gt[:, :3, 3][:, [0, 2]])
+    np.testing.assert_allclose(lines["estimate"].get_xydata(), est[:, :3, 3][:, [0, 2]], atol=1e-9)
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("x [m]", "z [m]")
+    assert any(a.get_ylabel() == "y [m]" for a in fig.axes)  # the remaining axis over time
+    pyplot().close(fig)
+    out = tmp_path / "f.png"
+    assert (
+        main(
+            [
+                "evaluate",
+                str(tmp_path / "gt.txt"),
+                str(tmp_path / "est.txt"),
+                "--plot",
+                str(out),
+                "--plot-mode",
+                "xy",
+                "-q",
+            ]
+        )
+        == 0
+    )
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -22,7 +22,7 @@ from slamrel.commands.common import (
     check_outputs,
     stats_table,
 )
-from slamrel.constants import EVALUATE_DEFAULTS, TRAJECTORY_FORMATS
+from slamrel.constants import EVALUATE_DEFAULTS, PLOT_MODES, TRAJECTORY_FORMATS
 
 if TYPE_CHECKING:  # the library is imported in run(): start-up stays light
     from slamrel.evaluation import FileEvaluation
@@ -174,6 +174,15 @@ def _output_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--plot", type=opt.figure_file, metavar="FILE", help="write a figure (.png/.svg/.pdf)"
     )
+    p.add_argument(
+        "--plot-mode",
+        choices=PLOT_MODES,
+        default="auto",
+        help="--plot: the plane the trajectories are drawn in, horizontal axis first (xz: x "
+        "across, z up the page); auto: the two axes of largest extent (a KITTI drive, camera "
+        "frame y down and z forward, in x-z; z-up data in x-y), the third axis over time "
+        "below; the reference trajectory is drawn too, as given (default: %(default)s)",
+    )
     p.add_argument("--evo-zip", metavar="FILE", help="write an evo result zip (for evo_res)")
     p.add_argument(
         "--evo-part",
@@ -273,7 +282,14 @@ def _write_outputs(args: argparse.Namespace, scored: FileEvaluation) -> None:
     if args.plot:
         from slamrel.plots.relation_errors import evaluation_figure, save_figure
 
-        save_figure(evaluation_figure(ev, scored.estimate, degrees=args.degrees), args.plot)
+        fig = evaluation_figure(
+            ev,
+            scored.estimate,
+            degrees=args.degrees,
+            plot_mode=args.plot_mode,
+            reference=scored.reference,
+        )
+        save_figure(fig, args.plot)
 
 
 def summary_text(scored: FileEvaluation, *, degrees: bool) -> str:
