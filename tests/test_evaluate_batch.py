@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import os
 import signal
 import statistics
@@ -113,6 +114,8 @@ def test_a_folder_of_runs_and_manifest_mistakes(tmp_path, capsys):
         traj = np.column_stack((t, t, np.zeros(20), np.zeros(20)))
         np.savetxt(d / "reference.txt", traj, fmt="%.9f")
         traj[:, 2] += 0.01 * k * t
+        if k == 1:  # a pose written twice: dropped and warned about, counted in the table
+            traj = np.vstack((traj[:5], traj[4:]))
         np.savetxt(d / "estimate.txt", traj, fmt="%.9f")
     assert (
         main(["batch", str(tmp_path / "runs"), "-o", str(tmp_path / "b"), "--workers", "0", "-q"])
@@ -121,6 +124,58 @@ def test_a_folder_of_runs_and_manifest_mistakes(tmp_path, capsys):
     rows = [r for r in _table(tmp_path / "b" / "table.csv") if r["kind"] == "run"]
     assert [r["name"] for r in rows] == ["run0", "run1", "run2"]
     assert float(rows[0]["trans_mean"]) == 0.0 and float(rows[2]["trans_mean"]) > 0.0
+    assert [r["warnings"] for r in rows] == ["0", "1", "0"]
+    # --ate: the RMSEs evaluate --ate gives; the table feeds compare
+    assert (
+        main(
+            [
+                "batch",
+                str(tmp_path / "runs"),
+                "-o",
+                str(tmp_path / "ba"),
+                "--workers",
+                "0",
+                "--ate",
+                "-q",
+            ]
+        )
+        == 0
+    )
+    rows = [r for r in _table(tmp_path / "ba" / "table.csv") if r["kind"] == "run"]
+    js = tmp_path / "e.json"
+    run2 = tmp_path / "runs" / "run2"
+    assert (
+        main(
+            [
+                "evaluate",
+                str(run2 / "reference.txt"),
+                str(run2 / "estimate.txt"),
+                "--ate",
+                "--json",
+                str(js),
+                "-q",
+            ]
+        )
+        == 0
+    )
+    ate = json.loads(js.read_text())["ate"]
+    assert float(rows[2]["ate_rigid_rmse"]) == ate["se2"]["translation"]["rmse"]
+    assert float(rows[2]["ate_none_rmse"]) == ate["none"]["translation"]["rmse"]
+    per = tmp_path / "ba" / "per_relation"
+    assert (
+        main(
+            [
+                "compare",
+                f"d:a={per / 'run1.csv'}",
+                f"d:b={per / 'run2.csv'}",
+                "-o",
+                str(tmp_path / "cmp"),
+                "-q",
+            ]
+        )
+        == 0
+    )
+    assert (tmp_path / "cmp" / "table.csv").is_file()
     bad = tmp_path / "bad.csv"
     bad.write_text("name,reference,estimate\nr1,a.txt,b.txt\nr1,c.txt,d.txt\n")
     assert main(["batch", str(bad), "-o", str(tmp_path / "c")]) == 3

@@ -36,10 +36,12 @@ __all__ = [
     "COLUMNS",
 ]
 
-#: The numeric columns of the table: relations scored and the relation errors (abs).
+#: The numeric columns of the table: relations scored and left unassociated, the warnings the
+#: run's evaluation gave (their text is in its result file), the relation errors (abs).
 COLUMNS = (
     "relations",
     "unassociated",
+    "warnings",
     "trans_mean",
     "trans_rmse",
     "rot_mean",
@@ -150,6 +152,14 @@ def evaluate_run(
     return out
 
 
+def _number(result: dict[str, Any], column: str) -> float:
+    """A table cell from a stored result: NaN for None (no value), a count for a list."""
+    value = result[column]
+    if isinstance(value, list):
+        return float(len(value))
+    return float("nan") if value is None else float(value)
+
+
 @dataclass(frozen=True)
 class BatchRow:
     """One row of the batch table: a run (``kind="run"``) or a statistic over a group's
@@ -207,7 +217,7 @@ def batch_table(
         if res is None:
             failed.append(run.name)
             continue
-        vals = tuple(float("nan") if res[c] is None else float(res[c]) for c in columns)
+        vals = tuple(_number(res, c) for c in columns)
         rows.append(BatchRow("run", run.name, run.dataset, run.algorithm, vals))
         groups.setdefault((run.dataset, run.algorithm), []).append(vals)
     for (dataset, algorithm), group in groups.items():
