@@ -83,6 +83,6 @@ EVALUATE_DEFAULTS: dict[str, Any] = {
 PAIRS_FROM = ("reference", "estimate")
 #: The planes of ``slamrel evaluate --plot-mode``
 #: (:func:`slamrel.plots.relation_errors.plot_plane`).
-PLOT_MODES = ("auto", "xy", "xz", "yz", "yx", "zx", "zy")
+PLOT_MODES = ("auto", "xy", "xz", "yz", "yx", "zx", "zy", "xyz")
 #: evo's default time tolerance of its pose-by-pose association (``t_max_diff``) [s].
 EVO_MAX_TIME_DIFF = 0.01

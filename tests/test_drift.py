@@ -396,7 +396,7 @@ def test_plot_plane_auto_and_named():
 def test_plot_mode_draws_the_chosen_plane_and_the_reference(tmp_path):
     from slamrel.evaluation import score_files
     from slamrel.evaluation_options import EvaluateOptions
-    from slamrel.plots.relation_errors import evaluation_figure, pyplot
+    from slamrel.plots.relation_errors import evaluation_figure, plot_plane, pyplot
 
     gt, est = kitti_sim.drive(frames=300)
     kitti_sim.write_kitti(tmp_path / "gt.txt", gt)
@@ -429,3 +429,15 @@ def test_plot_mode_draws_the_chosen_plane_and_the_reference(tmp_path):
         == 0
     )
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    fig = evaluation_figure(
+        scored.evaluation, scored.estimate, plot_mode="xyz", reference=scored.reference
+    )
+    ax3 = next(a for a in fig.axes if a.name == "3d")
+    ref_line = next(ln for ln in ax3.get_lines() if ln.get_label() == "reference (as given)")
+    np.testing.assert_allclose(np.column_stack(ref_line.get_data_3d()), gt[:, :3, 3])
+    pyplot().close(fig)
+    planar = ["evaluate", str(tmp_path / "gt.txt"), str(tmp_path / "est.txt"), "--planar"]
+    assert main([*planar, "--plot", str(tmp_path / "g.png"), "--plot-mode", "xz", "-q"]) == 2
+    assert not (tmp_path / "g.png").exists()
+    with pytest.raises(ValueError, match="3-D view"):
+        plot_plane("xyz", gt[:, :3, 3])

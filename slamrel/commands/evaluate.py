@@ -181,7 +181,8 @@ def _output_arguments(p: argparse.ArgumentParser) -> None:
         help="--plot: the plane the trajectories are drawn in, horizontal axis first (xz: x "
         "across, z up the page); auto: the two axes of largest extent (a KITTI drive, camera "
         "frame y down and z forward, in x-z; z-up data in x-y), the third axis over time "
-        "below; the reference trajectory is drawn too, as given (default: %(default)s)",
+        "below; xyz: a 3-D view (3-D inputs); the reference trajectory is drawn too, as given "
+        "(default: %(default)s)",
     )
     p.add_argument("--evo-zip", metavar="FILE", help="write an evo result zip (for evo_res)")
     p.add_argument(
@@ -252,10 +253,26 @@ def run(args: argparse.Namespace) -> int:
         n_to_align=args.n_to_align,
         drift=args.kitti_drift,
     )
+    if args.plot:
+        _check_plot_mode(args.plot_mode, scored)
     _write_outputs(args, scored)
     if not args.quiet:
         print(summary_text(scored, degrees=args.degrees))
     return 0
+
+
+def _check_plot_mode(mode: str, scored: FileEvaluation) -> None:
+    """A plane the estimate does not have (``xz`` of a planar run) is an option mistake, said
+    before any output is written."""
+    from relation_metric.errors import OptionError
+
+    dim = scored.estimate.group.position_dim
+    if dim == 2 and mode not in ("auto", "xy", "yx"):
+        raise OptionError(
+            f"{mode} needs a 3-D estimate; {scored.estimate.group.name} poses have x and y only "
+            "(use auto, xy or yx)",
+            option="--plot-mode",
+        )
 
 
 def _write_outputs(args: argparse.Namespace, scored: FileEvaluation) -> None:

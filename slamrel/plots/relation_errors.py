@@ -40,6 +40,8 @@ def plot_plane(mode: str, positions: np.ndarray) -> tuple[int, int, int | None]:
     dim = positions.shape[1]
     if mode not in PLOT_MODES:
         raise ValueError(f"plot mode: expected one of {', '.join(PLOT_MODES)}, got {mode!r}")
+    if mode == "xyz":
+        raise ValueError("plot mode 'xyz' is a 3-D view, not a plane")
     if mode == "auto":
         if dim == 2:
             return 0, 1, None
@@ -87,7 +89,9 @@ def evaluation_figure(
 
     The estimate is drawn in the plane of ``plot_mode`` (:data:`PLOT_MODES`; ``"auto"``:
     the plane of largest extent, :func:`plot_plane`); a 3-D estimate gets a third panel of its
-    remaining axis over time (its height when the plane is horizontal). ``reference`` (a
+    remaining axis over time (its height when the plane is horizontal). ``"xyz"`` (3-D
+    estimates only) draws a perspective view of all three axes instead, the touched poses
+    coloured by their error. ``reference`` (a
     trajectory, drawn as given: the relation metric aligns nothing) is drawn beneath it.
 
     The estimate is coloured pose by pose with the largest translational error of the
@@ -97,6 +101,8 @@ def evaluation_figure(
     """
     plt = pyplot()
     three_d = estimate.group.position_dim == 3
+    if plot_mode == "xyz":
+        return _figure_xyz(evaluation, estimate, degrees, title, reference)
     h, v, rest = plot_plane(plot_mode, estimate.positions)
     fig, axes = plt.subplots(
         3 if three_d else 2,
@@ -126,6 +132,38 @@ def evaluation_figure(
     if three_d:
         assert rest is not None  # 3-D: the axis not drawn
         _height_over_time(axes[2], estimate, pose_err, hit, rest)
+    return fig
+
+
+def _figure_xyz(
+    evaluation: Evaluation,
+    estimate: Trajectory,
+    degrees: bool,
+    title: str | None,
+    reference: Trajectory | None,
+) -> Figure:
+    """``plot_mode="xyz"``: errors over time and a 3-D view of reference and estimate."""
+    if estimate.group.position_dim != 3:
+        raise ValueError("plot mode 'xyz' needs a 3-D estimate; the trajectory is planar")
+    plt = pyplot()
+    fig = plt.figure(figsize=(8.0, 12.0), constrained_layout=True)
+    ax_t = fig.add_subplot(3, 1, 1)
+    ax = fig.add_subplot(3, 1, (2, 3), projection="3d")
+    _errors_over_time(ax_t, evaluation, estimate, degrees)
+    pose_err, hit = _pose_errors(evaluation, len(estimate))
+    if reference is not None and len(reference):
+        p = reference.lifted().positions
+        ax.plot(p[:, 0], p[:, 1], p[:, 2], "--", color="0.35", lw=1.0, label="reference (as given)")
+    q = estimate.positions
+    ax.plot(q[:, 0], q[:, 1], q[:, 2], "-", color="0.7", lw=1.0, label="estimate")
+    if hit.any():
+        sc = ax.scatter(q[hit, 0], q[hit, 1], q[hit, 2], c=pose_err[hit], s=4, cmap="viridis")
+        fig.colorbar(sc, ax=ax, shrink=0.6, label="largest translational error at a pose [m]")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_zlabel("z [m]")
+    ax.set_title(title or "estimate coloured by relation error (3-D view)")
+    ax.legend(loc="best")
     return fig
 
 
