@@ -52,6 +52,7 @@ __all__ = [
     "load_reference",
     "load_trajectory",
     "in_option_words",
+    "relation_axes",
 ]
 
 
@@ -119,6 +120,7 @@ def score_files(
     ate: bool = False,
     n_to_align: int | None = None,
     drift: bool = False,
+    axes: bool = False,
 ) -> FileEvaluation:
     """Read REFERENCE and ESTIMATE as ``slamrel evaluate`` does and score the estimate.
 
@@ -126,7 +128,8 @@ def score_files(
     adds the aligned absolute trajectory error to it (needs a reference trajectory), its
     alignments fitted on the first ``n_to_align`` matched poses (None: all); ``drift`` adds
     the KITTI drift (:func:`relation_metric.drift.kitti_drift`) of the pose-by-pose
-    synchronised pairs (needs a reference trajectory).
+    synchronised pairs (needs a reference trajectory); ``axes`` adds the per-axis
+    translational relation errors (:func:`relation_axes`).
     """
     reference, estimate = os.fspath(reference), os.fspath(estimate)
     _warn_same_file(reference, estimate)
@@ -208,6 +211,8 @@ def score_files(
         ate_estimate, ate_reference = ate_pair
         assert ate_reference is not None  # the reference (just checked) or its synchronised copy
         result["ate"] = _ate(ate_estimate, ate_reference, options.max_time_diff, n_to_align)
+    if axes:
+        result["relation_axes"] = {k: v.as_dict() for k, v in relation_axes(ev).items()}
     if drift:
         if ref_traj is None:
             raise OptionError(
@@ -539,6 +544,18 @@ def _ate(
         entry["axes"] = {k: v.as_dict() for k, v in r.axes.summaries().items()}
         out[align] = entry
     return out
+
+
+def relation_axes(ev: Evaluation) -> dict[str, Any]:
+    """Per-axis translational errors of the scored relations: summaries of ``|e_x|``,
+    ``|e_y|`` (and ``|e_z|``), the in-plane ``‖(e_x, e_y)‖`` and (3-D) the height ``|e_z|``,
+    where ``e = (δ_ij ⊖ δ*_ij)``'s translation is in the frame of the relation's first
+    reference pose (the body frame: for KITTI's camera frame z is forward, y down).
+    Unweighted (the metricEvaluator's weights do not apply)."""
+    from relation_metric.alignment import AxisErrors
+
+    dim = 3 if ev.relations.group.name == "SE3" else 2
+    return AxisErrors(ev.errors.vector[ev.valid, :dim]).summaries()
 
 
 def _kitti_drift(

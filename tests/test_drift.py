@@ -441,3 +441,24 @@ def test_plot_mode_draws_the_chosen_plane_and_the_reference(tmp_path):
     assert not (tmp_path / "g.png").exists()
     with pytest.raises(ValueError, match="3-D view"):
         plot_plane("xyz", gt[:, :3, 3])
+
+
+def test_relation_axes_by_hand(tmp_path, capsys):
+    # straight along x, heading 0; the estimate drifts 0.1 m sideways a step: every
+    # consecutive relation is off by e = (0, 0.1) in its own frame
+    t = np.arange(30.0)
+    ref = np.column_stack((t, t, np.zeros(30), np.zeros(30)))
+    est = ref.copy()
+    est[:, 2] = 0.1 * t
+    est[:, 3] = 0.0
+    np.savetxt(tmp_path / "ref.txt", ref, fmt="%.9f")
+    np.savetxt(tmp_path / "est.txt", est, fmt="%.9f")
+    out = tmp_path / "a.json"
+    args = ["evaluate", str(tmp_path / "ref.txt"), str(tmp_path / "est.txt"), "--axes"]
+    assert main([*args, "--json", str(out)]) == 0
+    axes = json.loads(out.read_text())["relation_axes"]
+    assert set(axes) == {"x", "y", "in_plane"}
+    assert axes["x"]["max"] == pytest.approx(0.0, abs=1e-12)
+    assert axes["y"]["mean"] == pytest.approx(0.1, abs=1e-12) and axes["y"]["count"] == 29
+    assert axes["in_plane"]["rmse"] == pytest.approx(0.1, abs=1e-12)
+    assert "|e_y| [m]" in capsys.readouterr().out

@@ -154,6 +154,13 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
         "(evo's --n_to_align; default: all poses)",
     )
     p.add_argument(
+        "--axes",
+        action="store_true",
+        help="also the per-axis translational relation errors |e_x|, |e_y|, |e_z|, in-plane "
+        "‖(e_x, e_y)‖ and height |e_z|, in the frame of each relation's first pose (printed, "
+        "and relation_axes in --json)",
+    )
+    p.add_argument(
         "--kitti-drift",
         action="store_true",
         help="also the KITTI odometry drift (the devkit's: translational %% and rotational "
@@ -252,6 +259,7 @@ def run(args: argparse.Namespace) -> int:
         ate=args.ate,
         n_to_align=args.n_to_align,
         drift=args.kitti_drift,
+        axes=args.axes,
     )
     if args.plot:
         _check_plot_mode(args.plot_mode, scored)
@@ -358,6 +366,8 @@ def summary_text(scored: FileEvaluation, *, degrees: bool) -> str:
         text += (
             f"\nrelations: {result['relations_zero_length_dropped']} zero-length (t1 == t2) dropped"
         )
+    if "relation_axes" in result:
+        text += "\nper axis (relation frame):\n" + _axes_text(result["relation_axes"])
     if "kitti_drift" in result:
         text += "\n" + _drift_text(result["kitti_drift"])
     if "ate" in result:
@@ -390,3 +400,16 @@ def _drift_text(drift: dict[str, object]) -> str:
 def _num(value: object, spec: str) -> str:
     """A number with ``spec``, or ``-`` for none (a length without a segment)."""
     return "-" if value is None else format(value, spec)
+
+
+def _axes_text(axes: dict[str, dict[str, float | int | None]]) -> str:
+    """The ``--axes`` table: one row per axis, the statistics of :func:`stats_table`."""
+    from relation_metric.stats import Summary
+
+    def summary(d: dict[str, float | int | None]) -> Summary:
+        nan = float("nan")
+        return Summary(**{k: (nan if v is None else v) for k, v in d.items()})  # type: ignore[arg-type]
+
+    labels = {"x": "|e_x| [m]", "y": "|e_y| [m]", "z": "|e_z| [m]", "in_plane": "in-plane [m]",
+              "height": "height |e_z| [m]"}  # fmt: skip
+    return stats_table([(labels[k], summary(v)) for k, v in axes.items()])
