@@ -220,3 +220,30 @@ def test_batch_on_a_local_dask_cluster_killed_and_resumed(tmp_path):
     for k in (0, 50, 99):
         rel = f"per_relation/r{k:03d}.csv"
         assert (killed / rel).read_bytes() == (tmp_path / "straight" / rel).read_bytes()
+
+
+def test_batch_kitti_drift_and_time_window_equal_evaluate(tmp_path):
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import kitti_sim
+
+    for k in range(2):
+        d = tmp_path / "runs" / f"seq{k}"
+        d.mkdir(parents=True)
+        gt, est = kitti_sim.drive(seed=k, frames=400)
+        kitti_sim.write_kitti(d / "reference.txt", gt)
+        kitti_sim.write_kitti(d / "estimate.txt", est)
+    opts = ["--t-start", "30", "--t-end", "350"]  # KITTI without times.txt: t = frame index
+    assert main(["batch", str(tmp_path / "runs"), "-o", str(tmp_path / "b"), "--workers", "0",
+                 "--kitti-drift", *opts, "-q"]) == 0  # fmt: skip
+    rows = [r for r in _table(tmp_path / "b" / "table.csv") if r["kind"] == "run"]
+    for k, row in enumerate(rows):
+        d = tmp_path / "runs" / f"seq{k}"
+        js = tmp_path / f"{k}.json"
+        assert main(["evaluate", str(d / "reference.txt"), str(d / "estimate.txt"),
+                     "--kitti-drift", *opts, "--json", str(js), "-q"]) == 0  # fmt: skip
+        res = json.loads(js.read_text())
+        assert float(row["drift_t_percent"]) == res["kitti_drift"]["translation_percent"]
+        assert float(row["drift_r_deg_per_m"]) == res["kitti_drift"]["rotation_deg_per_m"]
+        assert int(row["relations"]) == res["relations"] < 399  # the window cut the run
+    assert main(["batch", str(tmp_path / "runs"), "-o", str(tmp_path / "c"), "--t-start", "9",
+                 "--t-end", "1"]) == 2  # fmt: skip

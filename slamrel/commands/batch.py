@@ -17,7 +17,9 @@ from slamrel.commands import options as opt
 from slamrel.commands.common import (
     add_strategy_arguments,
     add_sync_arguments,
+    add_time_window_arguments,
     add_tolerance_argument,
+    check_time_window,
 )
 
 HELP = "evaluate many runs (a manifest or a folder of runs) into one table, resumably"
@@ -56,8 +58,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         action="store_true",
         help="also the ATE translation RMSE without alignment and after SE/Sim alignment",
     )
+    p.add_argument(
+        "--kitti-drift",
+        action="store_true",
+        help="also the KITTI drift (translational %%, rotational deg/m; see slamrel evaluate "
+        "--help) of each run",
+    )
     add_tolerance_argument(p)
     add_sync_arguments(p)
+    add_time_window_arguments(p)
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     add_strategy_arguments(p, default="consecutive")
     p.set_defaults(func=run)
@@ -73,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     from slamrel.studies.batch import batch_table, batch_tasks, runs_in_folder
     from slamrel.studies.sweep import run_sweep, stored_results
 
+    check_time_window(args)
     source = Path(args.source)
     runs = runs_in_folder(source) if source.is_dir() else read_manifest(source)
     options = {n: getattr(args, n) for n in SCORING_OPTIONS if hasattr(args, n)}
@@ -80,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     out = resumable_directory(args.output, kind="evaluate-batch", inputs=[args.source])
     per_relation = out / "per_relation"
     per_relation.mkdir(exist_ok=True)
-    tasks = batch_tasks(runs, options, str(per_relation), ate=args.ate)
+    tasks = batch_tasks(runs, options, str(per_relation), ate=args.ate, drift=args.kitti_drift)
 
     def progress(line: str) -> None:
         if not args.quiet:
@@ -89,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
     report = run_sweep(
         tasks, out / "cases", workers=args.workers, scheduler=args.scheduler, progress=progress
     )
-    table = batch_table(runs, stored_results(out / "cases", tasks), ate=args.ate)
+    results = stored_results(out / "cases", tasks)
+    table = batch_table(runs, results, ate=args.ate, drift=args.kitti_drift)
     write_text_atomic(out / "table.csv", table.csv())
     write_text_atomic(out / "table.md", table.markdown())
     if not args.quiet:

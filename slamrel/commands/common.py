@@ -180,6 +180,42 @@ def add_sync_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_time_window_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--t-offset``, ``--t-start``, ``--t-end`` (``evaluate``, ``batch``)."""
+    d = SimpleNamespace(**EVALUATE_DEFAULTS)
+    parser.add_argument(
+        "--t-offset",
+        type=opt.finite_float,
+        default=d.t_offset,
+        metavar="S",
+        help="add S seconds to every ESTIMATE timestamp first (evo's --t_offset; "
+        "default %(default)s)",
+    )
+    parser.add_argument(
+        "--t-start",
+        type=opt.finite_float,
+        default=d.t_start,
+        metavar="T",
+        help="keep only poses (and relations) at times >= T [s], on both trajectories, after "
+        "--t-offset (evo's --t_start; default: no bound)",
+    )
+    parser.add_argument(
+        "--t-end",
+        type=opt.finite_float,
+        default=d.t_end,
+        metavar="T",
+        help="... and at times <= T [s] (evo's --t_end; default: no bound)",
+    )
+
+
+def check_time_window(args: argparse.Namespace) -> None:
+    """``--t-end`` before ``--t-start`` is an option mistake (exit 2)."""
+    if args.t_start is not None and args.t_end is not None and args.t_end < args.t_start:
+        from relation_metric.errors import OptionError
+
+        raise OptionError(f"{args.t_end} is before --t-start {args.t_start}", option="--t-end")
+
+
 def relations_from_args(
     reference: Trajectory, args: argparse.Namespace, *, key: Literal["time", "index"] = "time"
 ) -> RelationSet:

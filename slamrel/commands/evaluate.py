@@ -18,8 +18,10 @@ from slamrel.commands import options as opt
 from slamrel.commands.common import (
     add_strategy_arguments,
     add_sync_arguments,
+    add_time_window_arguments,
     add_tolerance_argument,
     check_outputs,
+    check_time_window,
     stats_table,
 )
 from slamrel.constants import EVALUATE_DEFAULTS, PLOT_MODES, TRAJECTORY_FORMATS
@@ -209,29 +211,7 @@ def _view_arguments(p: argparse.ArgumentParser) -> None:
         "2-D: z, roll and pitch are discarded, with a warning that states how much",
     )
     add_sync_arguments(p)
-    p.add_argument(
-        "--t-offset",
-        type=opt.finite_float,
-        default=DEFAULT.t_offset,
-        metavar="S",
-        help="add S seconds to every ESTIMATE timestamp first (evo's --t_offset; "
-        "default %(default)s)",
-    )
-    p.add_argument(
-        "--t-start",
-        type=opt.finite_float,
-        default=DEFAULT.t_start,
-        metavar="T",
-        help="keep only poses (and relations) at times >= T [s], on both trajectories, after "
-        "--t-offset (evo's --t_start; default: no bound)",
-    )
-    p.add_argument(
-        "--t-end",
-        type=opt.finite_float,
-        default=DEFAULT.t_end,
-        metavar="T",
-        help="... and at times <= T [s] (evo's --t_end; default: no bound)",
-    )
+    add_time_window_arguments(p)
     p.add_argument("--times", metavar="FILE", help="KITTI ESTIMATE: timestamps, one a line")
     p.add_argument("--reference-times", metavar="FILE", help="KITTI REFERENCE: timestamps")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
@@ -242,14 +222,12 @@ def run(args: argparse.Namespace) -> int:
 
     The library is imported here, not when the parser is built.
     """
-    from relation_metric.errors import OptionError
     from slamrel.evaluation import score_files
     from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
 
     outputs = [args.json, args.per_relation, args.plot, args.evo_zip]
     check_outputs(outputs, [args.reference, args.estimate, args.odometry])
-    if args.t_start is not None and args.t_end is not None and args.t_end < args.t_start:
-        raise OptionError(f"{args.t_end} is before --t-start {args.t_start}", option="--t-end")
+    check_time_window(args)
     options = EvaluateOptions(**{name: getattr(args, name) for name in SCORING_OPTIONS})
     scored = score_files(
         args.reference,

@@ -49,6 +49,8 @@ COLUMNS = (
 )
 #: With ``ate``: the translation RMSE of the ATE without alignment and after SE/Sim.
 ATE_COLUMNS = ("ate_none_rmse", "ate_rigid_rmse", "ate_sim_rmse")
+#: With ``drift``: the KITTI devkit's sequence errors (:mod:`relation_metric.drift`).
+DRIFT_COLUMNS = ("drift_t_percent", "drift_r_deg_per_m")
 
 
 def runs_in_folder(folder: str | Path) -> list[BatchRun]:
@@ -88,7 +90,12 @@ def _digest(path: str) -> str:
 
 
 def batch_tasks(
-    runs: Sequence[BatchRun], options: dict[str, Any], per_relation_dir: str, *, ate: bool
+    runs: Sequence[BatchRun],
+    options: dict[str, Any],
+    per_relation_dir: str,
+    *,
+    ate: bool,
+    drift: bool = False,
 ) -> list[Task]:
     """The sweep's tasks, in run order. ``options``: fields of ``EvaluateOptions``."""
     return [
@@ -100,6 +107,7 @@ def batch_tasks(
                 "estimate": run.estimate,
                 "options": options,
                 "ate": ate,
+                "drift": drift,
                 "per_relation": str(Path(per_relation_dir) / f"{run.name}.csv"),
                 "digest": [_digest(run.reference), _digest(run.estimate)],
             },
@@ -115,10 +123,12 @@ def evaluate_run(
     ate: bool,
     per_relation: str,
     digest: Sequence[str],
+    drift: bool = False,
 ) -> dict[str, Any]:
     """One run: scored as ``slamrel evaluate`` scores it; its per-relation CSV written.
 
-    Returns the JSON-ready numbers of :data:`COLUMNS` (and :data:`ATE_COLUMNS`), the warnings
+    Returns the JSON-ready numbers of :data:`COLUMNS` (and :data:`ATE_COLUMNS`,
+    :data:`DRIFT_COLUMNS`), the warnings
     the evaluation gave (text, in order: nothing is dropped silently) and ``digest`` (the
     inputs' hashes, part of the task's key).
     """
@@ -128,7 +138,7 @@ def evaluate_run(
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        scored = score_files(reference, estimate, EvaluateOptions(**options), ate=ate)
+        scored = score_files(reference, estimate, EvaluateOptions(**options), ate=ate, drift=drift)
     ev = scored.evaluation
     sets = None if scored.relation_set is None else [scored.relation_set] * len(ev.relations)
     write_per_relation_csv(per_relation, ev, relation_sets=sets)
@@ -149,6 +159,9 @@ def evaluate_run(
         out["ate_none_rmse"] = a["none"]["translation"]["rmse"]
         out["ate_rigid_rmse"] = a[rigid]["translation"]["rmse"]
         out["ate_sim_rmse"] = a[sim]["translation"]["rmse"]
+    if drift:
+        out["drift_t_percent"] = res["kitti_drift"]["translation_percent"]
+        out["drift_r_deg_per_m"] = res["kitti_drift"]["rotation_deg_per_m"]
     return out
 
 
@@ -204,12 +217,16 @@ class BatchTable:
 
 
 def batch_table(
-    runs: Sequence[BatchRun], results: Sequence[dict[str, Any] | None], *, ate: bool
+    runs: Sequence[BatchRun],
+    results: Sequence[dict[str, Any] | None],
+    *,
+    ate: bool,
+    drift: bool = False,
 ) -> BatchTable:
     """The table over runs from their stored results (``None``: the run failed)."""
     import numpy as np
 
-    columns = COLUMNS + (ATE_COLUMNS if ate else ())
+    columns = COLUMNS + (ATE_COLUMNS if ate else ()) + (DRIFT_COLUMNS if drift else ())
     rows: list[BatchRow] = []
     groups: dict[tuple[str, str], list[tuple[float, ...]]] = {}
     failed = []
