@@ -22,7 +22,17 @@ from relation_metric.stats import Summary, summarize
 from relation_metric.time_association import nearest_index
 from relation_metric.trajectory import Trajectory
 
-__all__ = ["Alignment", "umeyama", "ATEResult", "absolute_trajectory_error"]
+__all__ = [
+    "Alignment",
+    "umeyama",
+    "AffineAlignment",
+    "affine_fit",
+    "ATEResult",
+    "AxisErrors",
+    "ALIGNMENTS",
+    "umeyama_yaw",
+    "absolute_trajectory_error",
+]
 
 
 @dataclass(frozen=True)
@@ -56,6 +66,20 @@ class Alignment:
         return out
 
 
+def _point_sets(
+    source: ArrayLike, target: ArrayLike, dims: tuple[int, ...]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Two corresponding ``(N, d)`` point sets, ``d`` in ``dims`` and N ≥ 2, as float arrays."""
+    x = np.asarray(source, dtype=np.float64)
+    y = np.asarray(target, dtype=np.float64)
+    if x.shape != y.shape or x.ndim != 2 or x.shape[1] not in dims:
+        shapes = " or ".join(f"(N, {d})" for d in dims)
+        raise InputError(f"alignment needs two {shapes} point sets, got {x.shape} and {y.shape}")
+    if x.shape[0] < 2:
+        raise InputError(f"alignment needs at least 2 corresponding points, got {x.shape[0]}")
+    return x, y
+
+
 def umeyama(source: ArrayLike, target: ArrayLike, *, with_scale: bool = False) -> Alignment:
     """Least-squares similarity taking ``source`` points onto ``target`` points.
 
@@ -72,16 +96,9 @@ def umeyama(source: ArrayLike, target: ArrayLike, *, with_scale: bool = False) -
     -------
     Alignment
     """
-    x = np.asarray(source, dtype=np.float64)
-    y = np.asarray(target, dtype=np.float64)
-    if x.shape != y.shape or x.ndim != 2 or x.shape[1] not in (2, 3):
-        raise InputError(
-            f"alignment needs two (N, 2) or (N, 3) point sets, got {x.shape} and {y.shape}"
-        )
+    x, y = _point_sets(source, target, (2, 3))
     dim = x.shape[1]
     n = x.shape[0]
-    if n < 2:
-        raise InputError(f"alignment needs at least 2 corresponding points, got {n}")
     mu_x = x.mean(axis=0)  # Eq. 34
     mu_y = y.mean(axis=0)  # Eq. 35
     xc = x - mu_x
@@ -102,27 +119,128 @@ def umeyama(source: ArrayLike, target: ArrayLike, *, with_scale: bool = False) -
 
 
 @dataclass(frozen=True)
+class AffineAlignment:
+    """An affine map ``y ≈ A x + b`` in 2-D or 3-D: ``matrix`` ``A`` (d, d), ``translation`` ``b``.
+
+    ``rank`` is the rank of the centred source points' scatter matrix: below ``d`` (a planar
+    3-D path, a straight line) ``A`` is not unique and the minimum-norm one is returned; the
+    minimum of the sum of squared distances is unique either way.
+    """
+
+    matrix: NDArray[np.float64]
+    translation: NDArray[np.float64]
+    rank: int
+
+    def apply_points(self, points: ArrayLike) -> NDArray[np.float64]:
+        """``A x + b`` for points ``(..., d)``."""
+        return np.asarray(points, dtype=np.float64) @ self.matrix.T + self.translation
+
+
+def affine_fit(source: ArrayLike, target: ArrayLike) -> AffineAlignment:
+    """The affine map minimising the sum of squared distances ``Σ ‖y_i − (A x_i + b)‖²``.
+
+    The "rescue" of the naive absolute error over the largest family of maps that keep
+    straight lines straight (rigid ⊂ similarity ⊂ affine): the minimum over affine maps is a
+    lower bound of the SE/Sim-aligned errors. Closed form (linear least squares): with the
+    centroids ``μ_x, μ_y`` and centred points ``x̃, ỹ``,
+    ``A = (Σ ỹ x̃ᵀ)(Σ x̃ x̃ᵀ)⁺`` and ``b = μ_y − A μ_x`` (``⁺`` the pseudo-inverse).
+
+    Parameters
+    ----------
+    source, target : array_like, shape (N, d), d ∈ {2, 3}
+        Corresponding points (estimate, reference); N ≥ 2.
+    """
+    x, y = _point_sets(source, target, (2, 3))
+    mu_x, mu_y = x.mean(axis=0), y.mean(axis=0)
+    xc, yc = x - mu_x, y - mu_y
+    scatter = xc.T @ xc
+    a = (yc.T @ xc) @ np.linalg.pinv(scatter)
+    rank = int(np.linalg.matrix_rank(scatter))
+    return AffineAlignment(matrix=a, translation=mu_y - a @ mu_x, rank=rank)
+
+
+def umeyama_yaw(source: ArrayLike, target: ArrayLike) -> Alignment:
+    """Least-squares 4-DoF alignment: a rotation about z (yaw) and a translation, in 3-D.
+
+    Minimises ``Σ ‖y_i − (R_z(ψ) x_i + t)‖²`` over ``ψ`` and ``t`` (visual-inertial odometry:
+    roll and pitch are observable through gravity, yaw and position are not). Closed form:
+    with centred points ``x̃, ỹ``, the z terms do not depend on ``ψ``, so
+    ``ψ = atan2(Σ (x̃_x ỹ_y − x̃_y ỹ_x), Σ (x̃_x ỹ_x + x̃_y ỹ_y))`` (2-D Procrustes of the
+    horizontal parts) and ``t = μ_y − R_z(ψ) μ_x``. Points ``(N, 3)``, N ≥ 2.
+    """
+    x, y = _point_sets(source, target, (3,))
+    mu_x, mu_y = x.mean(axis=0), y.mean(axis=0)
+    xc, yc = x - mu_x, y - mu_y
+    psi = float(
+        np.arctan2(
+            np.sum(xc[:, 0] * yc[:, 1] - xc[:, 1] * yc[:, 0]),
+            np.sum(xc[:, 0] * yc[:, 0] + xc[:, 1] * yc[:, 1]),
+        )
+    )
+    c, s = np.cos(psi), np.sin(psi)
+    r = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return Alignment(angle=abs(psi), translation=mu_y - r @ mu_x, scale=1.0, rotation=r)
+
+
+@dataclass(frozen=True)
+class AxisErrors:
+    """Per-axis position errors of the matched poses after alignment.
+
+    ``residual`` is ``p_ref − A(p_est)``, ``(K, d)`` (world axes of the reference);
+    ``x``, ``y``, ``z`` summarise ``|residual|`` per axis (``z`` only in 3-D);
+    ``in_plane`` summarises ``‖residual_xy‖``, ``height`` ``|residual_z|`` (3-D; the same as
+    ``z``: the vertical axis is the reference's z).
+    """
+
+    residual: NDArray[np.float64]
+
+    def summaries(self) -> dict[str, Summary]:
+        """``{"x", "y"[, "z"], "in_plane"[, "height"]}`` → statistics."""
+        r = self.residual
+        out = {"x": summarize(np.abs(r[:, 0])), "y": summarize(np.abs(r[:, 1]))}
+        if r.shape[1] == 3:
+            out["z"] = summarize(np.abs(r[:, 2]))
+        out["in_plane"] = summarize(np.hypot(r[:, 0], r[:, 1]))
+        if r.shape[1] == 3:
+            out["height"] = summarize(np.abs(r[:, 2]))
+        return out
+
+
+#: The alignments of :func:`absolute_trajectory_error` (``align``).
+ALIGNMENTS = ("none", "se2", "sim2", "se3", "sim3", "4dof", "origin", "affine")
+
+
+@dataclass(frozen=True)
 class ATEResult:
     """Absolute trajectory error after alignment.
 
     Attributes
     ----------
-    alignment : Alignment
+    alignment : Alignment or AffineAlignment
+        The map applied to the estimate (an :class:`AffineAlignment` for ``align="affine"``).
     translation, rotation : ndarray, shape (K,)
-        Per matched pose: ``‖p_ref − A(p_est)‖`` (m) and ``|wrap(θ_ref − θ_est − angle)|``.
+        Per matched pose: ``‖p_ref − A(p_est)‖`` (m) and ``|wrap(θ_ref − θ_est − angle)|``
+        (SE(3): the angle of ``R_refᵀ R_est'``). Empty for ``align="affine"``: an affine map
+        does not map orientations.
     translation_stats, rotation_stats : Summary
     matched : int
         Poses matched in time (within the tolerance).
+    axes : AxisErrors
+        The per-axis, in-plane and height position errors.
+    aligned_on : int
+        How many of the matched poses the alignment was fitted on (the first ones).
     timestamps : ndarray, shape (K,), or None
         The matched estimate poses' times (the rows of ``translation`` and ``rotation``).
     """
 
-    alignment: Alignment
+    alignment: Alignment | AffineAlignment
     translation: NDArray[np.float64]
     rotation: NDArray[np.float64]
     translation_stats: Summary
     rotation_stats: Summary
     matched: int
+    axes: AxisErrors
+    aligned_on: int
     timestamps: NDArray[np.float64] | None = None
 
 
@@ -132,20 +250,38 @@ def absolute_trajectory_error(
     *,
     align: str = "se2",
     max_time_diff: float = 0.1,
+    n_to_align: int | None = None,
 ) -> ATEResult:
     """ATE of ``estimate`` against ``reference`` after ``align``.
 
-    ``align`` ∈ {"none", "se2", "sim2", "se3", "sim3"}: a rigid or similarity alignment of
-    the positions (``se2``/``sim2`` and ``se3``/``sim3`` are the same request; the group of
-    the trajectories decides 2-D or 3-D). On SE(3) (either trajectory 3-D; the other is
-    lifted) the errors are evo's APE ``translation_part`` and ``rotation_angle``:
-    ``‖t_ref − t_est'‖`` and the angle of ``R_refᵀ R_est'``.
+    ``align`` (one of :data:`ALIGNMENTS`) is the map ``A`` applied to the estimate:
+
+    - ``"none"``: the identity;
+    - ``"se2"``/``"se3"`` and ``"sim2"``/``"sim3"``: the rigid or similarity transform
+      minimising ``Σ ‖p_ref − A(p_est)‖²`` (Umeyama; the two spellings are one request, the
+      group of the trajectories decides 2-D or 3-D);
+    - ``"4dof"``: a rotation about z and a translation minimising the same sum
+      (:func:`umeyama_yaw`; visual-inertial odometry, gravity along z); on SE(2) it is SE(2);
+    - ``"origin"``: ``A = X_ref,0 ∘ X_est,0⁻¹``, which puts the first matched estimate pose
+      (position and orientation) on the first matched reference pose (evo's
+      ``--align_origin``);
+    - ``"affine"``: the affine map minimising the sum (:func:`affine_fit`), the lower bound
+      of the others; positions only, so no rotation errors.
+
+    ``n_to_align`` fits the alignment on the first ``n_to_align`` matched poses only (≥ 2;
+    evo's ``--n_to_align``) and applies it to all; None: on all.
+
+    On SE(3) (either trajectory 3-D; the other is lifted) the errors are evo's APE
+    ``translation_part`` and ``rotation_angle``: ``‖t_ref − t_est'‖`` and the angle of
+    ``R_refᵀ R_est'``.
 
     Estimate poses are matched to the reference pose nearest in time (within
     ``max_time_diff``); unmatched estimate poses are left out and the count is reported.
     """
-    if align not in ("none", "se2", "sim2", "se3", "sim3"):
-        raise InputError(f"align must be 'none', 'se2', 'sim2', 'se3' or 'sim3', got {align!r}")
+    if align not in ALIGNMENTS:
+        raise InputError(f"align must be one of {', '.join(ALIGNMENTS)}, got {align!r}")
+    if n_to_align is not None and (int(n_to_align) != n_to_align or n_to_align < 2):
+        raise InputError(f"n_to_align must be an integer >= 2, got {n_to_align!r}")
     if estimate.group is SE3 or reference.group is SE3:
         estimate, reference = estimate.lifted(), reference.lifted()
     k = nearest_index(reference.timestamps, estimate.timestamps)
@@ -158,20 +294,65 @@ def absolute_trajectory_error(
     est = estimate.poses[ok]
     ref = reference.poses[k[ok]]
     group = estimate.group
-    dim = group.position_dim
-    if align == "none":
-        al = Alignment(0.0, np.zeros(dim), 1.0)
-    else:
-        al = umeyama(
-            group.positions(est), group.positions(ref), with_scale=align in ("sim2", "sim3")
+    m = est.shape[0] if n_to_align is None else min(int(n_to_align), est.shape[0])
+    p_est, p_ref = group.positions(est), group.positions(ref)
+    if align == "affine":
+        af = affine_fit(p_est[:m], p_ref[:m])
+        residual = p_ref - af.apply_points(p_est)
+        trans = np.linalg.norm(residual, axis=1)
+        rot = np.empty(0)
+        return ATEResult(
+            af,
+            trans,
+            rot,
+            summarize(trans),
+            summarize(rot),
+            int(ok.sum()),
+            AxisErrors(residual),
+            m,
+            estimate.timestamps[ok],
         )
+    al = _rigid_alignment(align, group, est, ref, m)
     moved = al.apply(est)
     if group is SE3:
         err = se3.between(moved, ref)  # evo's APE: E = P_est⁻¹ P_ref
-        trans = np.linalg.norm(ref[:, :3] - moved[:, :3], axis=1)
+        residual = ref[:, :3] - moved[:, :3]
         rot = se3.rotation_angle(err[:, 3:])
     else:
-        trans = np.hypot(*(ref[:, :2] - moved[:, :2]).T)
+        residual = ref[:, :2] - moved[:, :2]
         rot = np.abs(se2.wrap_angle(ref[:, 2] - moved[:, 2]))
+    trans = np.linalg.norm(residual, axis=1)
     stamps = estimate.timestamps[ok]
-    return ATEResult(al, trans, rot, summarize(trans), summarize(rot), int(ok.sum()), stamps)
+    return ATEResult(
+        al,
+        trans,
+        rot,
+        summarize(trans),
+        summarize(rot),
+        int(ok.sum()),
+        AxisErrors(residual),
+        m,
+        stamps,
+    )
+
+
+def _rigid_alignment(
+    align: str, group: object, est: NDArray[np.float64], ref: NDArray[np.float64], m: int
+) -> Alignment:
+    """The map of ``align`` (not affine), fitted on the first ``m`` matched poses."""
+    three_d = group is SE3
+    dim = 3 if three_d else 2
+    if align == "none":
+        return Alignment(0.0, np.zeros(dim), 1.0)
+    if align == "origin":
+        if three_d:
+            t = se3.compose(ref[0], se3.inverse(est[0]))  # X_ref,0 ∘ X_est,0⁻¹
+            r = se3.to_matrix(t)[:3, :3]
+            angle = float(se3.rotation_angle(t[3:]))
+            return Alignment(angle=angle, translation=t[:3].copy(), scale=1.0, rotation=r)
+        t2 = se2.compose(ref[0], se2.inverse(est[0]))
+        return Alignment(angle=float(t2[2]), translation=t2[:2].copy(), scale=1.0)
+    if align == "4dof" and three_d:
+        return umeyama_yaw(est[:m, :3], ref[:m, :3])
+    pos = slice(0, dim)
+    return umeyama(est[:m, pos], ref[:m, pos], with_scale=align in ("sim2", "sim3"))

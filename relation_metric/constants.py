@@ -19,7 +19,7 @@ __all__ = [
 #: Error definitions of :func:`relation_metric.metric.relation_errors` (``mode``).
 MODES = ("paper", "metricevaluator")
 #: Selection strategies of :func:`relation_metric.relations.generate_relations`.
-STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs")
+STRATEGIES = ("consecutive", "distance", "loops", "global", "random", "all-pairs", "time")
 #: Error definitions of a pose covariance (:func:`relation_metric.consistency.pose_errors`).
 ERROR_FRAMES = ("parent", "body", "openvins")
 #: Bootstrap resamples B of :func:`relation_metric.significance.paired_difference`: the

@@ -178,6 +178,7 @@ def generate_relations(
     seed: int = 0,
     key: Literal["time", "index"] = "time",
     chained: bool = False,
+    seconds: float = 1.0,
 ) -> RelationSet:
     """Select relations from a reference trajectory (Kümmerle et al. 2009, Sec. V).
 
@@ -197,8 +198,13 @@ def generate_relations(
         reveal global breakage.
         ``"random"``: ``count`` seeded random pairs, uniformly over all pairs i < j.
         ``"all-pairs"``: every pair i < j (quadratic; for short trajectories only).
+        ``"time"``: RPE by seconds, TUM's definition (``evaluate_rpe.py --fixed_delta
+        --delta S --delta_unit s``): each pose ``i`` with the pose ``j`` nearest in time to
+        ``t_i + seconds``; the pair is dropped when ``j`` is the last pose (TUM's rule: a
+        target past the end finds the last pose) or ``j == i`` (``seconds`` below half the
+        pose spacing).
     step, distance, radius, min_separation_time, min_separation_distance, count, \
-min_distance, seed :
+min_distance, seed, seconds :
         Strategy parameters, see above.
     key : {"time", "index"}
         Name the pairs by timestamps or by pose indices.
@@ -252,6 +258,16 @@ min_distance, seed :
         i, j = _random_pairs(n, count, seed)
     elif strategy == "all-pairs":
         i, j = np.triu_indices(n, k=1)
+    elif strategy == "time":
+        if not (np.isfinite(seconds) and seconds > 0):
+            raise InputError(f"seconds must be > 0, got {seconds}")
+        from relation_metric.time_association import nearest_index
+
+        t = reference.timestamps
+        j = nearest_index(t, t + seconds)
+        i = np.arange(n)
+        keep = (j != n - 1) & (j != i)
+        i, j = i[keep], j[keep]
     else:
         raise InputError(f"unknown strategy {strategy!r}; expected one of {', '.join(STRATEGIES)}")
     order = np.lexsort((j, i))

@@ -43,6 +43,7 @@ COMMAND_MODULES = (
     "slamrel.commands.solve",
     "slamrel.commands.example",
     "slamrel.commands.study",
+    "slamrel.commands.batch",
 )
 
 EXIT_OK, EXIT_BUG, EXIT_USAGE, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
@@ -62,7 +63,20 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
+    _describe(sub)
     return parser
+
+
+def _describe(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """A (sub-)command without a description of its own is described by its one-line help,
+    so that ``slamrel CMD --help`` always says what CMD does; nested commands too."""
+    for pseudo in sub._choices_actions:
+        parser = sub.choices[pseudo.dest]
+        if parser.description is None and pseudo.help:
+            parser.description = pseudo.help[0].upper() + pseudo.help[1:] + "."
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                _describe(action)
 
 
 class Terminated(KeyboardInterrupt):

@@ -17,7 +17,11 @@ __all__ = [
     "WORLDS",
     "PAPER_WORLDS",
     "NOISE_NAMES",
+    "NOISE_HELP",
     "POSE_ONLY_METHODS",
+    "PAIRS_FROM",
+    "EVO_MAX_TIME_DIFF",
+    "PLOT_MODES",
 ]
 
 #: The format id of the SLAM result bundle (``bundle.json``'s ``format``; docs/bundle.md),
@@ -33,6 +37,13 @@ WORLDS = ("simple1", "simple2", "complex1", "complex2")
 PAPER_WORLDS = ("hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2")
 #: Hu et al.'s noise types (Table I), the keys of ``slamrel.simulation.worlds.NOISE_TYPES``.
 NOISE_NAMES = ("a", "b", "c")
+#: The help of a ``--noise`` option: Hu et al.'s noise types (Table I) as
+#: ``slamrel.simulation.worlds.NOISE_TYPES`` holds them (tests/test_help.py checks the numbers).
+NOISE_HELP = (
+    "noise type of Hu et al. (Table I), standard deviations per step: a: dx, dy 0.1 m, "
+    "dθ 0.05 rad, observation 0.1; b: 0.2 m, 0.2 rad, 0.1; c: 0.1 m, 0.05 rad, 0.3 "
+    "(default: %(default)s)"
+)
 #: Methods of the pose-only study (:mod:`slamrel.studies.pose_only`, its ``METHODS``).
 POSE_ONLY_METHODS = ("full", "m1", "m2", "toro")
 
@@ -65,4 +76,16 @@ EVALUATE_DEFAULTS: dict[str, Any] = {
     "min_distance": None,
     "seed": 0,
     "chained": False,
+    "seconds": 1.0,
+    "pairs_from": "reference",
+    "t_offset": 0.0,
+    "t_start": None,
+    "t_end": None,
 }
+#: Where relations generated from a trajectory take their pose pairs (``--pairs-from``).
+PAIRS_FROM = ("reference", "estimate")
+#: The planes of ``slamrel evaluate --plot-mode``
+#: (:func:`slamrel.plots.relation_errors.plot_plane`).
+PLOT_MODES = ("auto", "xy", "xz", "yz", "yx", "zx", "zy", "xyz")
+#: evo's default time tolerance of its pose-by-pose association (``t_max_diff``) [s].
+EVO_MAX_TIME_DIFF = 0.01

@@ -22,14 +22,14 @@ from typing import Any, Literal
 
 import numpy as np
 
-from relation_metric.alignment import absolute_trajectory_error
+from relation_metric.alignment import AffineAlignment, absolute_trajectory_error
 from relation_metric.errors import InputError, OptionError
 from relation_metric.evaluate import Evaluation, evaluate
 from relation_metric.relations import RelationSet, generate_relations
 from relation_metric.time_association import synchronize
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, RepeatedTimeWarning, zero_length
 from relation_metric.trajectory import Trajectory
-from slamrel.constants import TRAJECTORY_FORMATS
+from slamrel.constants import EVO_MAX_TIME_DIFF, TRAJECTORY_FORMATS
 from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
 from slamrel.formats.bags import is_bag, names_bag
 from slamrel.formats.relations import read_relations
@@ -53,6 +53,7 @@ __all__ = [
     "load_reference",
     "load_trajectory",
     "in_option_words",
+    "relation_axes",
 ]
 
 
@@ -75,6 +76,9 @@ class FileEvaluation:
     #: The (estimate, reference) the ATE compares (the synchronised pairs with ``sync``);
     #: None for a .relations file.
     ate_inputs: tuple[Trajectory, Trajectory] | None = None
+    #: The reference trajectory (after the time window), drawn by the figure; ``None`` for a
+    #: .relations file.
+    reference: Trajectory | None = None
 
 
 def evaluate_files(
@@ -118,11 +122,18 @@ def score_files(
     *,
     degrees: bool = False,
     ate: bool = False,
+    n_to_align: int | None = None,
+    drift: bool = False,
+    axes: bool = False,
 ) -> FileEvaluation:
     """Read REFERENCE and ESTIMATE as ``slamrel evaluate`` does and score the estimate.
 
     ``degrees`` states the rotation of :attr:`FileEvaluation.result` in degrees; ``ate``
-    adds the aligned absolute trajectory error to it (needs a reference trajectory).
+    adds the aligned absolute trajectory error to it (needs a reference trajectory), its
+    alignments fitted on the first ``n_to_align`` matched poses (None: all); ``drift`` adds
+    the KITTI drift (:func:`relation_metric.drift.kitti_drift`) of the pose-by-pose
+    synchronised pairs (needs a reference trajectory); ``axes`` adds the per-axis
+    translational relation errors (:func:`relation_axes`).
     """
     reference, estimate = os.fspath(reference), os.fspath(estimate)
     _warn_same_file(reference, estimate)
@@ -142,17 +153,28 @@ def score_files(
     notes["estimate_out_of_order"] = loaded.time_order.as_dict()
     notes["estimate_repeated_times"] = loaded.repeated.as_dict()
     odometry = _load_odometry(options, skip, notes) if options.odometry else None
-    scored = loaded.trajectory
-    ate_pair = (loaded.trajectory, ref_traj)
+    scored = _windowed(
+        _offset(loaded.trajectory, options.t_offset), options, notes, estimate, "estimate"
+    )
+    ate_pair = (scored, ref_traj)
+    if options.pairs_from == "estimate" and not options.sync:
+        raise OptionError(
+            "chooses the pose pairs on the estimate, which needs the pose-by-pose "
+            "association first: add --sync (as evo, which always associates first)",
+            option="--pairs-from estimate",
+        )
+    if ref_traj is not None and not options.sync:
+        _warn_denser_reference(ref_traj, scored, relations, reference)
     if options.sync:
         if ref_traj is None:
             raise OptionError(
                 f"needs a reference trajectory, not a .relations file ({reference})",
                 option="--sync",
             )
+        _warn_evo_tolerance(options.max_time_diff)
         ref_sync, est_sync = synchronize(ref_traj, scored, max_diff=options.max_time_diff)
         notes["synchronized_pairs"] = len(ref_sync)
-        relations = _generate(ref_sync, options, key="index")
+        relations = _generate_pairs(ref_sync, est_sync, options)
         scored = est_sync
         ate_pair = _same_times(est_sync, ref_sync)
     if len(relations) == 0:
@@ -192,10 +214,21 @@ def score_files(
             )
         ate_estimate, ate_reference = ate_pair
         assert ate_reference is not None  # the reference (just checked) or its synchronised copy
-        result["ate"] = _ate(ate_estimate, ate_reference, options.max_time_diff)
+        result["ate"] = _ate(ate_estimate, ate_reference, options.max_time_diff, n_to_align)
+    if axes:
+        result["relation_axes"] = {k: v.as_dict() for k, v in relation_axes(ev).items()}
+    if drift:
+        if ref_traj is None:
+            raise OptionError(
+                f"needs a reference trajectory, not a .relations file ({reference})",
+                option="--kitti-drift",
+            )
+        result["kitti_drift"] = _kitti_drift(ate_pair, options.max_time_diff, reference)
     generated = None if ref_traj is None else (options.strategy or "consecutive")
     pair = None if ate_pair[1] is None else (ate_pair[0], ate_pair[1])
-    return FileEvaluation(ev, ev_estimate, result, relation_set=generated, ate_inputs=pair)
+    return FileEvaluation(
+        ev, ev_estimate, result, relation_set=generated, ate_inputs=pair, reference=ref_traj
+    )
 
 
 def _why_no_relations(
@@ -326,6 +359,7 @@ def load_reference(
                 stacklevel=2,
             )
             relations = relations.subset(~zero)
+        relations = _relations_in_window(relations, options, notes)
         if relations.has_out_of_plane and options.planar:
             assert relations.out_of_plane is not None  # has_out_of_plane: there are some
             oop = np.abs(relations.out_of_plane)
@@ -354,9 +388,10 @@ def load_reference(
     _note_projection(notes, "reference", loaded)
     notes["reference_out_of_order"] = loaded.time_order.as_dict()
     notes["reference_repeated_times_dropped"] = loaded.repeated_dropped
+    traj = _windowed(loaded.trajectory, options, notes, reference, "reference")
     if options.sync:  # relations are generated after the pose-by-pose association
-        return RelationSet(np.empty(0), np.empty(0), np.empty((0, 3))), loaded.trajectory
-    return _generate(loaded.trajectory, options), loaded.trajectory
+        return RelationSet(np.empty(0), np.empty(0), np.empty((0, 3))), traj
+    return _generate(traj, options), traj
 
 
 class DuplicateRelationWarning(RepeatedTimeWarning):
@@ -417,6 +452,7 @@ def _generate(
         min_distance=options.min_distance,
         seed=options.seed,
         chained=options.chained,
+        seconds=options.seconds,
         key=key,
     )
 
@@ -487,19 +523,172 @@ def _same_times(est: Trajectory, ref: Trajectory) -> tuple[Trajectory, Trajector
     return Trajectory(t, est.poses), Trajectory(t, ref.poses)
 
 
-def _ate(estimate: Trajectory, reference: Trajectory, tol: float) -> dict[str, Any]:
-    """The ATE without, and with, rigid and similarity alignment (``--ate``)."""
+def _ate(
+    estimate: Trajectory, reference: Trajectory, tol: float, n_to_align: int | None = None
+) -> dict[str, Any]:
+    """The ATE without alignment and with each alignment (``--ate``).
+
+    Rigid and similarity (Umeyama), 4-DoF (3-D only: yaw and translation), origin (first
+    pose on first pose) and affine (positions only: no rotation statistics, its map's
+    ``matrix`` instead of a scale); each with its per-axis, in-plane and height errors.
+    """
     out: dict[str, Any] = {}
     three_d = estimate.group.name == "SE3" or reference.group.name == "SE3"
-    for align in ("none", "se3", "sim3") if three_d else ("none", "se2", "sim2"):
-        r = absolute_trajectory_error(estimate, reference, align=align, max_time_diff=tol)
-        out[align] = {
-            "translation": r.translation_stats.as_dict(),
-            "rotation": r.rotation_stats.as_dict(),
-            "scale": r.alignment.scale,
-            "matched": r.matched,
-        }
+    aligns = ("none", "se3", "sim3", "4dof") if three_d else ("none", "se2", "sim2")
+    for align in aligns + ("origin", "affine"):
+        r = absolute_trajectory_error(
+            estimate, reference, align=align, max_time_diff=tol, n_to_align=n_to_align
+        )
+        entry: dict[str, Any] = {"translation": r.translation_stats.as_dict()}
+        if isinstance(r.alignment, AffineAlignment):
+            entry["matrix"] = r.alignment.matrix.tolist()
+            entry["rank"] = r.alignment.rank
+        else:
+            entry["rotation"] = r.rotation_stats.as_dict()
+            entry["scale"] = r.alignment.scale
+        entry["matched"] = r.matched
+        entry["aligned_on"] = r.aligned_on
+        entry["axes"] = {k: v.as_dict() for k, v in r.axes.summaries().items()}
+        out[align] = entry
     return out
+
+
+def relation_axes(ev: Evaluation) -> dict[str, Any]:
+    """Per-axis translational errors of the scored relations: summaries of ``|e_x|``,
+    ``|e_y|`` (and ``|e_z|``), the in-plane ``‖(e_x, e_y)‖`` and (3-D) the height ``|e_z|``,
+    where ``e = (δ_ij ⊖ δ*_ij)``'s translation is in the frame of the relation's first
+    reference pose (the body frame: for KITTI's camera frame z is forward, y down).
+    Unweighted (the metricEvaluator's weights do not apply)."""
+    from relation_metric.alignment import AxisErrors
+
+    dim = 3 if ev.relations.group.name == "SE3" else 2
+    return AxisErrors(ev.errors.vector[ev.valid, :dim]).summaries()
+
+
+def _kitti_drift(
+    pair: tuple[Trajectory, Trajectory | None], tol: float, reference: str
+) -> dict[str, Any]:
+    """``--kitti-drift``: the devkit's drift on the pose-by-pose synchronised pairs."""
+    from relation_metric.drift import kitti_drift
+
+    estimate, ref = pair
+    assert ref is not None  # checked by the caller
+    ref_sync, est_sync = synchronize(ref, estimate, max_diff=tol)
+    d = kitti_drift(ref_sync.lifted().poses, est_sync.lifted().poses)
+    if d.segments == 0:
+        length = float(ref_sync.path_length()[-1])
+        raise InputError(
+            f"no KITTI segment fits: the reference path is {length:.1f} m long over the "
+            f"{len(ref_sync)} synchronised poses, shorter than the shortest segment (100 m)",
+            path=reference,
+        )
+    out = d.as_dict()
+    out["pairs"] = len(ref_sync)
+    return out
+
+
+def _offset(traj: Trajectory, t_offset: float) -> Trajectory:
+    """``--t-offset``: the estimate with ``t_offset`` added to every timestamp."""
+    if t_offset == 0.0:
+        return traj
+    return Trajectory(traj.timestamps + t_offset, traj.poses)
+
+
+def _windowed(
+    traj: Trajectory, options: EvaluateOptions, notes: dict[str, Any], path: str, role: str
+) -> Trajectory:
+    """``--t-start``/``--t-end``: the poses with ``t_start ≤ t ≤ t_end`` (counted in notes)."""
+    if options.t_start is None and options.t_end is None:
+        return traj
+    t = traj.timestamps
+    keep = np.ones(t.shape, dtype=bool)
+    if options.t_start is not None:
+        keep &= t >= options.t_start
+    if options.t_end is not None:
+        keep &= t <= options.t_end
+    notes.setdefault("time_window_dropped", {})[role] = int(np.count_nonzero(~keep))
+    if np.count_nonzero(keep) < 2:
+        raise InputError(
+            f"fewer than 2 poses lie in the time window [{options.t_start}, {options.t_end}] s "
+            f"(the {role} spans {t[0]:.6f} .. {t[-1]:.6f} s"
+            + (f" after --t-offset {options.t_offset:g}" if role == "estimate" else "")
+            + ")",
+            path=path,
+        )
+    return Trajectory(t[keep], traj.poses[keep])
+
+
+def _relations_in_window(
+    relations: RelationSet, options: EvaluateOptions, notes: dict[str, Any]
+) -> RelationSet:
+    """``--t-start``/``--t-end`` on a .relations file: relations with both ends inside."""
+    if options.t_start is None and options.t_end is None:
+        return relations
+    lo = -np.inf if options.t_start is None else options.t_start
+    hi = np.inf if options.t_end is None else options.t_end
+    inside = (relations.first >= lo) & (relations.first <= hi)
+    inside &= (relations.second >= lo) & (relations.second <= hi)
+    notes.setdefault("time_window_dropped", {})["relations"] = int(np.count_nonzero(~inside))
+    return relations.subset(inside)
+
+
+def _generate_pairs(ref_sync: Trajectory, est_sync: Trajectory, options: EvaluateOptions) -> Any:
+    """Relations on synchronised pairs, the pose pairs chosen on ``options.pairs_from``.
+
+    ``"estimate"`` (evo's default): the strategy runs on the estimate (its path length, its
+    times); the relations' ``δ*`` are still the reference's motions between the matched poses.
+    """
+    if options.pairs_from == "reference":
+        return _generate(ref_sync, options, key="index")
+    on_est = _generate(est_sync, options, key="index")
+    i = on_est.first.astype(np.int64)
+    j = on_est.second.astype(np.int64)
+    return RelationSet.from_trajectory_pairs(ref_sync, i, j, key="index")
+
+
+class DenserReferenceWarning(UserWarning):
+    """The reference has many more poses per second than the estimate."""
+
+
+#: A reference this many times denser than the estimate is warned about.
+DENSER_FACTOR = 5.0
+
+
+def _warn_denser_reference(
+    ref: Trajectory, est: Trajectory, relations: RelationSet, reference: str
+) -> None:
+    """Relations generated on a much denser reference mostly join reference poses that
+    map to the same or neighbouring estimate poses: say so (EuRoC: 200 Hz vs 10 Hz)."""
+    if len(ref) < 2 or len(est) < 2:
+        return
+    ref_rate = (len(ref) - 1) / max(ref.span()[1] - ref.span()[0], 1e-300)
+    est_rate = (len(est) - 1) / max(est.span()[1] - est.span()[0], 1e-300)
+    if ref_rate > DENSER_FACTOR * est_rate:
+        warnings.warn(
+            f"{reference}: the reference has {ref_rate:.4g} poses/s, the estimate "
+            f"{est_rate:.4g} ({ref_rate / est_rate:.3g}x denser): the {len(relations)} "
+            "relations are generated between reference poses, most of whose ends share an "
+            "estimate pose or lie between two; evo associates pose by pose first (--sync "
+            "--max-time-diff 0.01)",
+            DenserReferenceWarning,
+            stacklevel=3,
+        )
+
+
+class ToleranceWarning(UserWarning):
+    """The pose-by-pose association's tolerance is not evo's default."""
+
+
+def _warn_evo_tolerance(max_time_diff: float) -> None:
+    """``--sync`` with a tolerance other than evo's ``t_max_diff`` (0.01 s): say so."""
+    if max_time_diff != EVO_MAX_TIME_DIFF:
+        warnings.warn(
+            f"--sync with --max-time-diff {max_time_diff:g} s: evo's default t_max_diff is "
+            f"{EVO_MAX_TIME_DIFF:g} s, so evo pairs the poses differently; pass "
+            f"--max-time-diff {EVO_MAX_TIME_DIFF:g} to match it",
+            ToleranceWarning,
+            stacklevel=3,
+        )
 
 
 @contextmanager

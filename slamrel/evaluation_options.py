@@ -17,7 +17,7 @@ from typing import Any
 
 from relation_metric.constants import MODES, STRATEGIES
 from slamrel.constants import EVALUATE_DEFAULTS as _DEFAULT
-from slamrel.constants import TRAJECTORY_FORMATS
+from slamrel.constants import PAIRS_FROM, TRAJECTORY_FORMATS
 
 __all__ = ["EvaluateOptions", "SCORING_OPTIONS"]
 
@@ -88,6 +88,20 @@ class EvaluateOptions:
     #: consecutive/distance: one chain of relations from pose 0, each starting where the
     #: previous ended (evo's RPE pairs) instead of one relation from every pose.
     chained: bool = _DEFAULT["chained"]
+    #: time: seconds between the two poses (TUM's RPE by seconds) [s], > 0.
+    seconds: float = _DEFAULT["seconds"]
+    #: Which trajectory generated relations take their pose pairs from (one of
+    #: ``PAIRS_FROM``): ``"reference"`` (slamrel's default: the relation metric's reference
+    #: relations) or ``"estimate"`` (evo's default; needs ``sync``: the pair indices are chosen
+    #: on the synchronised estimate, ``δ*`` taken from the matched reference poses).
+    pairs_from: str = _DEFAULT["pairs_from"]
+    #: Added to every ESTIMATE timestamp before anything else [s] (evo's ``--t_offset``).
+    t_offset: float = _DEFAULT["t_offset"]
+    #: Keep only poses (and relations) with ``t_start ≤ t`` [s], on both trajectories, after
+    #: ``t_offset`` (evo's ``--t_start``); None: no bound.
+    t_start: float | None = _DEFAULT["t_start"]
+    #: ... and ``t ≤ t_end`` [s] (evo's ``--t_end``); None: no bound.
+    t_end: float | None = _DEFAULT["t_end"]
 
     def __post_init__(self) -> None:
         for name in ("format", "reference_format", "odometry_format"):
@@ -120,6 +134,14 @@ class EvaluateOptions:
             top = MAX_SAMPLED_RELATIONS
             _integer(self, "count", 1, top, f"an integer in 1..{top}")
         _integer(self, "seed", 0, _MAX_SEED, "a seed in [0, 2**63 - 1]")
+        _number(self, "seconds", lambda v: v > 0.0, "a finite positive number")
+        _choice("pairs_from", self.pairs_from, PAIRS_FROM)
+        _number(self, "t_offset", lambda v: True, "a finite number")
+        for name in ("t_start", "t_end"):
+            if getattr(self, name) is not None:
+                _number(self, name, lambda v: True, "a finite number")
+        if self.t_start is not None and self.t_end is not None and self.t_end < self.t_start:
+            raise ValueError(f"t_end: expected >= t_start ({self.t_start}), got {self.t_end}")
         for name in ("interpolate", "strict", "skip_invalid_poses", "planar", "sync", "chained"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")

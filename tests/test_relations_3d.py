@@ -323,9 +323,12 @@ def test_cli_3d_ate_evo_zip_plot_and_relations_generate(tmp_path):
     ]  # fmt: skip
     assert main(args) == 0
     ate = json.loads(out.read_text())["ate"]
-    assert set(ate) == {"none", "se3", "sim3"}
+    assert set(ate) == {"none", "se3", "sim3", "4dof", "origin", "affine"}
     assert ate["none"]["translation"]["rmse"] > 1.0
     assert ate["se3"]["translation"]["rmse"] < 0.01
+    # nested families: the affine minimum is below the rigid one; a tilted offset is no yaw
+    assert ate["affine"]["translation"]["rmse"] <= ate["se3"]["translation"]["rmse"] + 1e-12
+    assert ate["4dof"]["translation"]["rmse"] > ate["se3"]["translation"]["rmse"]
     assert (tmp_path / "e.zip").stat().st_size > 0 and (tmp_path / "p.png").stat().st_size > 0
     rel_path = tmp_path / "g.relations"
     assert main(["relations", "generate", str(tmp_path / "gt.tum"), "-o", str(rel_path), "-q"]) == 0

@@ -14,7 +14,7 @@ from recovery.constants import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, ROBUST
 from relation_metric.constants import STRATEGIES
 from relation_metric.errors import InputError, OptionError, SlamrelError
 from slamrel.commands import options as opt
-from slamrel.constants import EVALUATE_DEFAULTS
+from slamrel.constants import EVALUATE_DEFAULTS, PAIRS_FROM
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from landmark_graph.landmark_association import Association
@@ -83,25 +83,35 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         "--strategy",
         choices=STRATEGIES,
         default=default,
-        help="how to select relations (default: %(default)s)",
+        help="how to select relations from a reference trajectory (default: consecutive): "
+        "consecutive (pose k with k+STEP), "
+        "distance (each pose with the first pose DISTANCE metres of travel further), time "
+        "(each pose with the pose nearest SECONDS later: TUM's RPE by seconds), loops, "
+        "global, random, all-pairs",
     )
     g.add_argument(
-        "--step", type=opt.positive_int, default=d.step, help="consecutive: pose k with k+STEP"
+        "--step",
+        type=opt.positive_int,
+        default=d.step,
+        help="consecutive: pose k with k+STEP (default: %(default)s)",
     )
     g.add_argument(
         "--distance",
         type=opt.positive_float,
         default=d.distance,
-        help="distance: metres of travel",
+        help="distance: metres of travel (default: %(default)s)",
     )
     g.add_argument(
-        "--radius", type=opt.positive_float, default=d.radius, help="loops: max distance [m]"
+        "--radius",
+        type=opt.positive_float,
+        default=d.radius,
+        help="loops: max distance [m] (default: %(default)s)",
     )
     g.add_argument(
         "--min-separation-time",
         type=opt.nonnegative_float,
         default=d.min_separation_time,
-        help="loops: min time between the two poses [s]",
+        help="loops: min time between the two poses [s] (default: %(default)s)",
     )
     g.add_argument(
         "--min-separation-distance",
@@ -110,7 +120,10 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         help="loops: or min travel between the two poses [m]",
     )
     g.add_argument(
-        "--count", type=opt.count, default=d.count, help="global/random: number of pairs"
+        "--count",
+        type=opt.count,
+        default=d.count,
+        help="global/random: number of pairs (default: %(default)s)",
     )
     g.add_argument(
         "--min-distance",
@@ -118,7 +131,16 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         default=d.min_distance,
         help="global: min distance between the poses [m] (default: extent/4)",
     )
-    g.add_argument("--seed", type=opt.seed, default=d.seed, help="global/random: seed")
+    g.add_argument(
+        "--seconds",
+        type=opt.positive_float,
+        default=d.seconds,
+        metavar="S",
+        help="time: seconds between the two poses (default %(default)s)",
+    )
+    g.add_argument(
+        "--seed", type=opt.seed, default=d.seed, help="global/random: seed (default: %(default)s)"
+    )
     g.add_argument(
         "--chained",
         action="store_true",
@@ -126,6 +148,73 @@ def add_strategy_arguments(parser: argparse.ArgumentParser, *, default: str | No
         help="consecutive/distance: one chain of relations from pose 0, each starting where "
         "the previous ended (evo's RPE pairs) instead of one relation from every pose",
     )
+
+
+def add_tolerance_argument(parser: argparse.ArgumentParser) -> None:
+    """``--max-time-diff``: the nearest-pose tolerance (``evaluate``, ``batch``)."""
+    parser.add_argument(
+        "--max-time-diff",
+        type=opt.nonnegative_float,
+        default=EVALUATE_DEFAULTS["max_time_diff"],
+        metavar="S",
+        help="nearest-pose tolerance [s] (default %(default)s)",
+    )
+
+
+def add_sync_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--sync`` and ``--pairs-from``: evo's pose-by-pose association and where the pose
+    pairs are chosen (``evaluate``, ``batch``)."""
+    parser.add_argument(
+        "--sync",
+        action="store_true",
+        help="associate reference and estimate pose by pose first, as evo does (nearest time "
+        "within --max-time-diff; use 0.01 for evo's default t_max_diff), then generate the "
+        "relations on the matched poses (needs a reference trajectory)",
+    )
+    parser.add_argument(
+        "--pairs-from",
+        choices=PAIRS_FROM,
+        default=EVALUATE_DEFAULTS["pairs_from"],
+        help="with --sync: choose the relations' pose pairs on the reference (slamrel's "
+        "default, the relation metric's reference relations) or on the estimate (evo's "
+        "default; its --pairs_from_reference is 'reference'); default: %(default)s",
+    )
+
+
+def add_time_window_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--t-offset``, ``--t-start``, ``--t-end`` (``evaluate``, ``batch``)."""
+    d = SimpleNamespace(**EVALUATE_DEFAULTS)
+    parser.add_argument(
+        "--t-offset",
+        type=opt.finite_float,
+        default=d.t_offset,
+        metavar="S",
+        help="add S seconds to every ESTIMATE timestamp first (evo's --t_offset; "
+        "default %(default)s)",
+    )
+    parser.add_argument(
+        "--t-start",
+        type=opt.finite_float,
+        default=d.t_start,
+        metavar="T",
+        help="keep only poses (and relations) at times >= T [s], on both trajectories, after "
+        "--t-offset (evo's --t_start; default: no bound)",
+    )
+    parser.add_argument(
+        "--t-end",
+        type=opt.finite_float,
+        default=d.t_end,
+        metavar="T",
+        help="... and at times <= T [s] (evo's --t_end; default: no bound)",
+    )
+
+
+def check_time_window(args: argparse.Namespace) -> None:
+    """``--t-end`` before ``--t-start`` is an option mistake (exit 2)."""
+    if args.t_start is not None and args.t_end is not None and args.t_end < args.t_start:
+        from relation_metric.errors import OptionError
+
+        raise OptionError(f"{args.t_end} is before --t-start {args.t_start}", option="--t-end")
 
 
 def relations_from_args(
@@ -146,6 +235,7 @@ def relations_from_args(
         min_distance=args.min_distance,
         seed=args.seed,
         chained=getattr(args, "chained", False),
+        seconds=getattr(args, "seconds", EVALUATE_DEFAULTS["seconds"]),
         key=key,
     )
 

@@ -59,8 +59,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         epilog="the tests:\n" + _paragraphs(*_TESTS, indent="  "),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("results", nargs="+", metavar="RESULT")
-    p.add_argument("-o", "--output", required=True, metavar="DIR")
+    p.add_argument(
+        "results",
+        nargs="+",
+        metavar="RESULT",
+        help="per-relation CSVs of slamrel evaluate --per-relation, one per algorithm",
+    )
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="directory to write")
     p.add_argument(
         "--alpha",
         type=opt.probability,
@@ -74,9 +79,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="B",
         help="bootstrap resamples per test (default %(default)s)",
     )
-    p.add_argument("--seed", type=opt.seed, default=0, help="seed of the bootstrap")
+    p.add_argument(
+        "--seed",
+        type=opt.seed,
+        default=0,
+        help="seed of the bootstrap (default: %(default)s)",
+    )
     add_force_argument(p)
-    p.add_argument("-q", "--quiet", action="store_true")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     p.set_defaults(func=run)
 
 

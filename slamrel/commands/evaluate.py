@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import textwrap
 from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
@@ -16,11 +17,15 @@ from relation_metric.constants import MODES
 from slamrel.commands import options as opt
 from slamrel.commands.common import (
     add_strategy_arguments,
+    add_sync_arguments,
+    add_time_window_arguments,
+    add_tolerance_argument,
     check_outputs,
+    check_time_window,
     input_files,
     stats_table,
 )
-from slamrel.constants import EVALUATE_DEFAULTS, TRAJECTORY_FORMATS
+from slamrel.constants import EVALUATE_DEFAULTS, PLOT_MODES, TRAJECTORY_FORMATS
 
 if TYPE_CHECKING:  # the library is imported in run(): start-up stays light
     from slamrel.evaluation import FileEvaluation
@@ -30,15 +35,44 @@ DEFAULT = SimpleNamespace(**EVALUATE_DEFAULTS)
 
 HELP = "score an estimated trajectory against reference relations"
 
+#: The "evo equivalents" paragraph of ``slamrel evaluate --help``.
+EVO_EQUIVALENTS = """\
+evo equivalents (where the definitions agree, the numbers agree to the printed digit):
+  evo_rpe tum REF EST --delta D --delta_unit f
+      = slamrel evaluate REF EST --sync --max-time-diff 0.01 --step D --chained
+  evo_rpe ... --delta D --delta_unit m
+      = ... --strategy distance --distance D --chained --pairs-from estimate
+        (evo picks the pairs on the estimate; with --pairs_from_reference, drop
+        --pairs-from here); --all_pairs: the same without --chained
+  TUM evaluate_rpe.py --fixed_delta --delta S --delta_unit s
+      = ... --sync --pairs-from estimate --strategy time --seconds S (TUM's pair rule;
+        its time matching, within twice the reference's median spacing, is not --sync's)
+  evo_ape tum REF EST [-a | -as]
+      = slamrel evaluate REF EST --ate --sync --max-time-diff 0.01 (its none / se3 / sim3
+        rows); --n_to_align N = --n-to-align N; --align_origin = the origin row (4-DoF and
+        affine rows too)
+  --t_offset / --t_start / --t_end = --t-offset / --t-start / --t-end
+  KITTI devkit drift (t_err %, r_err deg/m) = --kitti-drift
+Where they differ: slamrel's default tolerance is --max-time-diff 0.1 s (evo's t_max_diff
+is 0.01 s; --sync with another value is warned about); without --sync slamrel generates
+relations between reference poses and matches each end to the estimate (a reference far
+denser than the estimate, as EuRoC's 200 Hz ground truth against a 10 Hz estimate, is
+warned about); with --sync the pairs come from the reference unless --pairs-from
+estimate."""
+
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(
         "evaluate",
         help=HELP,
-        description=HELP
-        + ". REFERENCE is a Freiburg .relations file, or a reference trajectory (or a SLAM "
-        "result bundle with groundtruth.csv) from which relations are generated with "
-        "--strategy.",
+        description=textwrap.fill(
+            HELP + ". REFERENCE is a Freiburg .relations file, or a reference trajectory (or a "
+            "SLAM result bundle with groundtruth.csv) from which relations are generated with "
+            "--strategy.",
+            width=88,
+        ),
+        epilog=EVO_EQUIVALENTS,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     _input_arguments(p)
     _association_arguments(p)
@@ -72,14 +106,12 @@ def _input_arguments(p: argparse.ArgumentParser) -> None:
 def _association_arguments(p: argparse.ArgumentParser) -> None:
     """Timestamp association, error definition and what counts as an error."""
     p.add_argument("--odometry", metavar="LOG", help="odometry log that corrects far timestamps")
-    p.add_argument("--odometry-format", choices=TRAJECTORY_FORMATS)
     p.add_argument(
-        "--max-time-diff",
-        type=opt.nonnegative_float,
-        default=DEFAULT.max_time_diff,
-        metavar="S",
-        help="nearest-pose tolerance [s] (default %(default)s)",
+        "--odometry-format",
+        choices=TRAJECTORY_FORMATS,
+        help="format of the odometry log (default: recognised)",
     )
+    add_tolerance_argument(p)
     p.add_argument(
         "--interpolate", action="store_true", help="interpolate on SE(2)/SE(3) beyond the tolerance"
     )
@@ -88,7 +120,7 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
         type=opt.positive_float,
         default=DEFAULT.max_interpolation_gap,
         metavar="S",
-        help="longest gap interpolated over [s]",
+        help="longest gap interpolated over [s] (default: %(default)s)",
     )
     p.add_argument(
         "--mode",
@@ -117,7 +149,31 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--ate",
         action="store_true",
-        help="also the aligned absolute trajectory error (needs a reference trajectory)",
+        help="also the absolute trajectory error (needs a reference trajectory): without "
+        "alignment and after each alignment: rigid and similarity (Umeyama), 4-DoF (3-D: "
+        "yaw about z and translation), origin (first pose on first pose) and affine "
+        "(positions only); with per-axis, in-plane and height errors in --json",
+    )
+    p.add_argument(
+        "--n-to-align",
+        type=opt.int_range(2, 2**63 - 1),
+        metavar="N",
+        help="--ate: fit the alignments on the first N matched poses only, apply them to all "
+        "(evo's --n_to_align; default: all poses)",
+    )
+    p.add_argument(
+        "--axes",
+        action="store_true",
+        help="also the per-axis translational relation errors |e_x|, |e_y|, |e_z|, in-plane "
+        "‖(e_x, e_y)‖ and height |e_z|, in the frame of each relation's first pose (printed, "
+        "and relation_axes in --json)",
+    )
+    p.add_argument(
+        "--kitti-drift",
+        action="store_true",
+        help="also the KITTI odometry drift (the devkit's: translational %% and rotational "
+        "deg/m over 100..800 m segments of the reference path, every 10th start frame), on "
+        "the pose-by-pose synchronised pairs (needs a reference trajectory)",
     )
 
 
@@ -132,6 +188,16 @@ def _output_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--plot", type=opt.figure_file, metavar="FILE", help="write a figure (.png/.svg/.pdf)"
+    )
+    p.add_argument(
+        "--plot-mode",
+        choices=PLOT_MODES,
+        default="auto",
+        help="--plot: the plane the trajectories are drawn in, horizontal axis first (xz: x "
+        "across, z up the page); auto: the two axes of largest extent (a KITTI drive, camera "
+        "frame y down and z forward, in x-z; z-up data in x-y), the third axis over time "
+        "below; xyz: a 3-D view (3-D inputs); the reference trajectory is drawn too, as given "
+        "(default: %(default)s)",
     )
     p.add_argument(
         "--evo-zip",
@@ -170,13 +236,8 @@ def _view_arguments(p: argparse.ArgumentParser) -> None:
         help="score 3-D inputs (TUM/KITTI/EuRoC with out-of-plane motion, 6-DoF relations) in "
         "2-D: z, roll and pitch are discarded, with a warning that states how much",
     )
-    p.add_argument(
-        "--sync",
-        action="store_true",
-        help="associate reference and estimate pose by pose first, as evo does (nearest time "
-        "within --max-time-diff; use 0.01 for evo's default t_max_diff), then generate the "
-        "relations on the matched poses (needs a reference trajectory)",
-    )
+    add_sync_arguments(p)
+    add_time_window_arguments(p)
     p.add_argument("--times", metavar="FILE", help="KITTI ESTIMATE: timestamps, one a line")
     p.add_argument("--reference-times", metavar="FILE", help="KITTI REFERENCE: timestamps")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
@@ -192,12 +253,38 @@ def run(args: argparse.Namespace) -> int:
 
     outputs = [args.json, args.per_relation, args.plot, args.evo_zip, args.evo_ape_zip]
     check_outputs(outputs, input_files([args.reference, args.estimate, args.odometry]))
+    check_time_window(args)
     options = EvaluateOptions(**{name: getattr(args, name) for name in SCORING_OPTIONS})
-    scored = score_files(args.reference, args.estimate, options, degrees=args.degrees, ate=args.ate)
+    scored = score_files(
+        args.reference,
+        args.estimate,
+        options,
+        degrees=args.degrees,
+        ate=args.ate,
+        n_to_align=args.n_to_align,
+        drift=args.kitti_drift,
+        axes=args.axes,
+    )
+    if args.plot:
+        _check_plot_mode(args.plot_mode, scored)
     _write_outputs(args, scored)
     if not args.quiet:
         print(summary_text(scored, degrees=args.degrees))
     return 0
+
+
+def _check_plot_mode(mode: str, scored: FileEvaluation) -> None:
+    """A plane the estimate does not have (``xz`` of a planar run) is an option mistake, said
+    before any output is written."""
+    from relation_metric.errors import OptionError
+
+    dim = scored.estimate.group.position_dim
+    if dim == 2 and mode not in ("auto", "xy", "yx"):
+        raise OptionError(
+            f"{mode} needs a 3-D estimate; {scored.estimate.group.name} poses have x and y only "
+            "(use auto, xy or yx)",
+            option="--plot-mode",
+        )
 
 
 def _write_outputs(args: argparse.Namespace, scored: FileEvaluation) -> None:
@@ -240,7 +327,14 @@ def _write_outputs(args: argparse.Namespace, scored: FileEvaluation) -> None:
     if args.plot:
         from slamrel.plots.relation_errors import evaluation_figure, save_figure
 
-        save_figure(evaluation_figure(ev, scored.estimate, degrees=args.degrees), args.plot)
+        fig = evaluation_figure(
+            ev,
+            scored.estimate,
+            degrees=args.degrees,
+            plot_mode=args.plot_mode,
+            reference=scored.reference,
+        )
+        save_figure(fig, args.plot)
 
 
 def _evo_name(path: str) -> str:
@@ -301,6 +395,8 @@ def ate_text(ate: dict, *, degrees: bool) -> str:
     for part, label in (("translation", "translation [m]"), ("rotation", f"rotation [{unit}]")):
         scale = math.degrees(1.0) if degrees and part == "rotation" else 1.0  # the JSON's rad
         for align, r in ate.items():
+            if not isinstance(r, dict) or not isinstance(r.get(part), dict):
+                continue  # e.g. the affine row: an affine map does not map orientations
             s, n = r[part], r["matched"]
             std = s["std"] * math.sqrt((n - 1) / n) if n > 1 and s["std"] is not None else 0.0
             vals = [s["rmse"], s["mean"], s["median"], std, s["min"], s["max"]]
@@ -362,6 +458,47 @@ def summary_text(scored: FileEvaluation, *, degrees: bool) -> str:
         text += (
             f"\nrelations: {result['relations_zero_length_dropped']} zero-length (t1 == t2) dropped"
         )
+    if "relation_axes" in result:
+        text += "\nper axis (relation frame):\n" + _axes_text(result["relation_axes"])
+    if "kitti_drift" in result:
+        text += "\n" + _drift_text(result["kitti_drift"])
     if "ate" in result:
         text += "\n" + ate_text(result["ate"], degrees=degrees)
     return text
+
+
+def _drift_text(drift: dict[str, object]) -> str:
+    """The console lines of ``--kitti-drift``: the devkit's numbers and the per-length table."""
+    rows = drift["per_length"]
+    assert isinstance(rows, list)
+    lines = [
+        f"KITTI drift ({drift['segments']} segments on {drift['pairs']} synchronised poses): "
+        f"translation {_num(drift['translation_percent'], '.4f')} %, rotation "
+        f"{_num(drift['rotation_deg_per_m'], '.6f')} deg/m (mean over all segments; mean of "
+        f"the per-length means {_num(drift['translation_percent_by_length'], '.4f')} %, "
+        f"{_num(drift['rotation_deg_per_m_by_length'], '.6f')} deg/m)",
+        "  length [m]  segments  translation [%]  rotation [deg/m]",
+    ]
+    for r in rows:
+        t = _num(r["translation_percent"], ".4f")
+        rot = _num(r["rotation_deg_per_m"], ".6f")
+        lines.append(f"  {r['length_m']:>10.0f}  {r['count']:>8d}  {t:>15}  {rot:>16}")
+    return "\n".join(lines)
+
+
+def _num(value: object, spec: str) -> str:
+    """A number with ``spec``, or ``-`` for none (a length without a segment)."""
+    return "-" if value is None else format(value, spec)
+
+
+def _axes_text(axes: dict[str, dict[str, float | int | None]]) -> str:
+    """The ``--axes`` table: one row per axis, the statistics of :func:`stats_table`."""
+    from relation_metric.stats import Summary
+
+    def summary(d: dict[str, float | int | None]) -> Summary:
+        nan = float("nan")
+        return Summary(**{k: (nan if v is None else v) for k, v in d.items()})  # type: ignore[arg-type]
+
+    labels = {"x": "|e_x| [m]", "y": "|e_y| [m]", "z": "|e_z| [m]", "in_plane": "in-plane [m]",
+              "height": "height |e_z| [m]"}  # fmt: skip
+    return stats_table([(labels[k], summary(v)) for k, v in axes.items()])

@@ -14,10 +14,18 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "example",
         help="write a seeded example (reference, estimate, relations) to try evaluate on",
     )
-    p.add_argument("-o", "--output", default="slamrel-example", metavar="DIR")
-    p.add_argument("--seed", type=opt.seed, default=0)
+    p.add_argument(
+        "-o",
+        "--output",
+        default="slamrel-example",
+        metavar="DIR",
+        help="directory to write (default: %(default)s)",
+    )
+    p.add_argument(
+        "--seed", type=opt.seed, default=0, help="seed of the example (default: %(default)s)"
+    )
     add_force_argument(p)
-    p.add_argument("-q", "--quiet", action="store_true")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     p.set_defaults(func=run)
 
 

@@ -30,8 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         description="Read an iSAM/GTSAM planar text file (e.g. Victoria Park) and write it as "
         "a g2o graph whose vertices are the odometry initial guess.",
     )
-    i.add_argument("file", metavar="FILE")
-    i.add_argument("-o", "--output", required=True, metavar="OUT.g2o")
+    i.add_argument("file", metavar="FILE", help="iSAM/GTSAM planar text file")
+    i.add_argument("-o", "--output", required=True, metavar="OUT.g2o", help="g2o file to write")
     add_noise_argument(i)
     i.add_argument(
         "--bundle",
@@ -39,20 +39,23 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="also write the problem as an EKF-SLAM log bundle (for slamrel slam / recover)",
     )
     add_force_argument(i)
-    i.add_argument("-q", "--quiet", action="store_true")
+    i.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     i.set_defaults(func=run_import_isam)
     mr = isub.add_parser(
         "mrclam",
         help="UTIAS MRCLAM robot logs -> SLAM log bundle (velocity model, fitted noise)",
         description="One bundle per robot (--robot N, or all five into OUT/robotN): controls, "
         "landmark measurements with their subjects as known association, surveyed landmarks as "
-        "the map, Vicon ground truth; noise fitted from the data (see fit_noise).",
+        "the map, Vicon ground truth; noise fitted from the data: the "
+        "odometry's travel and turn over 1 s windows against the ground truth's (sigma^2 = "
+        "Var(window error) / mean(sum dt^2)), each range and bearing against the one "
+        "predicted from the interpolated ground truth and the surveyed landmark.",
     )
-    mr.add_argument("directory", metavar="DIR")
+    mr.add_argument("directory", metavar="DIR", help="an extracted MRCLAM dataset directory")
     mr.add_argument(
         "--robot", type=opt.int_range(1, 5), default=None, help="1..5 (default: all five)"
     )
-    mr.add_argument("-o", "--output", required=True, metavar="BUNDLE")
+    mr.add_argument("-o", "--output", required=True, metavar="BUNDLE", help="bundle to write")
     mr.add_argument(
         "--no-calibrate",
         action="store_true",
@@ -63,10 +66,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         choices=("speed", "constant"),
         default="speed",
         help="velocity-model noise growing with the commanded speeds (fitted alpha, zero at "
-        "rest; default) or constant per control row (fitted sigma_v, sigma_omega)",
+        "rest) or constant per control row (fitted sigma_v, sigma_omega) (default: %(default)s)",
     )
     add_force_argument(mr)
-    mr.add_argument("-q", "--quiet", action="store_true")
+    mr.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     mr.set_defaults(func=run_import_mrclam)
 
 

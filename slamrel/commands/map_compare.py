@@ -28,16 +28,24 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "map-compare",
         help="compare an estimated landmark map with a reference (Delaunay-mesh relations)",
     )
-    p.add_argument("estimate", metavar="ESTIMATE_MAP")
-    p.add_argument("reference", metavar="REFERENCE_MAP")
+    p.add_argument("estimate", metavar="ESTIMATE_MAP", help="estimated landmark map (CSV)")
+    p.add_argument("reference", metavar="REFERENCE_MAP", help="reference landmark map (CSV)")
     add_association_arguments(p)
     p.add_argument(
         "--cutoff",
         type=opt.length,
         default=1.0,
-        help="OSPA/GOSPA and auto-association cut-off c [m]",
+        help="OSPA/GOSPA cut-off c [m]: a landmark farther than c from its match counts as "
+        "missed, and the automatic association pairs no landmarks farther apart "
+        "(default: %(default)s)",
     )
-    p.add_argument("--order", type=opt.float_at_least(1.0), default=2.0, help="OSPA/GOSPA order p")
+    p.add_argument(
+        "--order",
+        type=opt.float_at_least(1.0),
+        default=2.0,
+        help="OSPA/GOSPA order p ≥ 1: the "
+        "p-norm that averages the per-landmark distances (default: %(default)s)",
+    )
     p.add_argument(
         "--thin-angle",
         type=opt.triangle_angle,
@@ -45,9 +53,16 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="DEG",
         help="flag triangles whose smallest angle is below DEG degrees (default: 5)",
     )
-    p.add_argument("--seed", type=opt.seed, default=0)
-    p.add_argument("--json", metavar="F")
-    p.add_argument("--per-edge", metavar="F.csv")
+    p.add_argument(
+        "--seed",
+        type=opt.seed,
+        default=0,
+        help="seed of the automatic association (default: %(default)s)",
+    )
+    p.add_argument("--json", metavar="F", help="write the results as JSON")
+    p.add_argument(
+        "--per-edge", metavar="F.csv", help="write the per-edge (mesh relation) errors as CSV"
+    )
     p.add_argument(
         "--plot",
         type=opt.figure_file,
@@ -67,7 +82,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="write the association used as 'estimate,reference' id pairs (edit it and pass "
         "it back with --associate F.csv to override the automatic result)",
     )
-    p.add_argument("-q", "--quiet", action="store_true")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     p.set_defaults(func=run)
 
 

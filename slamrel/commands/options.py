@@ -21,6 +21,7 @@ __all__ = [
     "nonnegative_int",
     "positive_float",
     "nonnegative_float",
+    "finite_float",
     "probability",
     "fraction",
     "triangle_angle",
@@ -82,6 +83,7 @@ positive_float = _option_type(_float, lambda v: v > 0.0, "a finite positive numb
 nonnegative_float = _option_type(
     _float, lambda v: v >= 0.0, "a finite non-negative number", "nonnegative"
 )
+finite_float = _option_type(_float, lambda v: True, "a finite number", "finite")
 probability = _option_type(
     _float, lambda v: 0.0 < v < 1.0, "a probability in (0, 1)", "probability"
 )

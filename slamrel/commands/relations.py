@@ -31,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="project a 3-D reference onto the plane (warns what z/roll/pitch is discarded)",
     )
     g.add_argument("--times", metavar="FILE", help="KITTI: timestamps, one a line")
-    g.add_argument("-q", "--quiet", action="store_true")
+    g.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     add_strategy_arguments(g, default="consecutive")
     g.set_defaults(func=run_generate)
 

@@ -30,8 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "draw new ones, then save the association CSV and pass it to "
         "'slamrel map-compare --associate FILE'. The page reads a saved CSV back to continue.",
     )
-    p.add_argument("estimate", metavar="ESTIMATE_MAP")
-    p.add_argument("reference", metavar="REFERENCE_MAP")
+    p.add_argument("estimate", metavar="ESTIMATE_MAP", help="estimated landmark map (CSV)")
+    p.add_argument("reference", metavar="REFERENCE_MAP", help="reference landmark map (CSV)")
     p.add_argument(
         "-o", "--output", default="review.html", metavar="F.html", help="(default: review.html)"
     )
@@ -42,8 +42,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default=1.0,
         help="auto-association cut-off c [m]; residual colours saturate at c (default: 1)",
     )
-    p.add_argument("--seed", type=opt.seed, default=0, help="seed of the automatic association")
-    p.add_argument("-q", "--quiet", action="store_true")
+    p.add_argument(
+        "--seed",
+        type=opt.seed,
+        default=0,
+        help="seed of the automatic association (default: %(default)s)",
+    )
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     p.set_defaults(func=run)
 
 

@@ -20,7 +20,7 @@ from slamrel.commands.common import (
     errors_about,
     in_option_words,
 )
-from slamrel.constants import NOISE_NAMES, WORLDS
+from slamrel.constants import NOISE_HELP, NOISE_NAMES, WORLDS
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from landmark_graph.landmark_association import Association
@@ -34,17 +34,42 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         description="SOURCE is a SLAM result bundle directory (scored against its "
         "groundtruth.csv) or a built-in world (" + ", ".join(WORLDS) + "); default simple1.",
     )
-    p.add_argument("source", nargs="?", default="simple1", metavar="SOURCE")
-    p.add_argument("-o", "--output", default="slamrel-report", metavar="DIR")
-    p.add_argument("--noise", choices=NOISE_NAMES, default="a")
-    p.add_argument("--seed", type=opt.seed, default=0)
     p.add_argument(
-        "--rate", type=opt.nonnegative_int, default=0, help="control steps per measurement step"
+        "source",
+        nargs="?",
+        default="simple1",
+        metavar="SOURCE",
+        help="a built-in world name or a log bundle (default: %(default)s)",
     )
     p.add_argument(
-        "--corrupt", type=opt.fraction, default=0.0, help="fraction of associations corrupted"
+        "-o",
+        "--output",
+        default="slamrel-report",
+        metavar="DIR",
+        help="report directory (default: %(default)s)",
     )
-    p.add_argument("--noise-scale", type=opt.noise_scale, default=1.0)
+    p.add_argument("--noise", choices=NOISE_NAMES, default="a", help=NOISE_HELP)
+    p.add_argument(
+        "--seed", type=opt.seed, default=0, help="seed of the simulation (default: %(default)s)"
+    )
+    p.add_argument(
+        "--rate",
+        type=opt.nonnegative_int,
+        default=0,
+        help="control steps per measurement step (0: odometry; default: %(default)s)",
+    )
+    p.add_argument(
+        "--corrupt",
+        type=opt.fraction,
+        default=0.0,
+        help="fraction of associations corrupted (default: %(default)s)",
+    )
+    p.add_argument(
+        "--noise-scale",
+        type=opt.noise_scale,
+        default=1.0,
+        help="factor on the noise the filter assumes (default: %(default)s)",
+    )
     add_association_arguments(p)
     add_force_argument(p)
     add_recovery_arguments(
@@ -52,7 +77,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         fail_help="exit 3 when the recovery diverges (the report is still written, with dead "
         "reckoning)",
     )
-    p.add_argument("-q", "--quiet", action="store_true")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     p.set_defaults(func=run)
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from slamrel.commands import options as opt
 from slamrel.commands.common import add_force_argument, check_outputs, check_rate, errors_about
-from slamrel.constants import NOISE_NAMES, WORLDS
+from slamrel.constants import NOISE_HELP, NOISE_NAMES, WORLDS
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -16,38 +16,46 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="write a simulated world (Hu et al.) as a bundle: log, true map, ground truth",
     )
     s.add_argument("world", choices=WORLDS, metavar="WORLD", help=", ".join(WORLDS))
-    s.add_argument("--noise", choices=NOISE_NAMES, default="a")
-    s.add_argument("--seed", type=opt.seed, default=0)
+    s.add_argument("--noise", choices=NOISE_NAMES, default="a", help=NOISE_HELP)
+    s.add_argument(
+        "--seed", type=opt.seed, default=0, help="seed of the simulation (default: %(default)s)"
+    )
     s.add_argument(
         "--rate",
         type=opt.nonnegative_int,
         default=0,
-        help="control steps per measurement step (0: odometry)",
+        help="control steps per measurement step (0: odometry; default: %(default)s)",
     )
-    s.add_argument("-o", "--output", required=True, metavar="BUNDLE")
+    s.add_argument("-o", "--output", required=True, metavar="BUNDLE", help="bundle to write")
     add_force_argument(s)
-    s.add_argument("-q", "--quiet", action="store_true")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     s.set_defaults(func=run_simulate)
 
     m = sub.add_parser(
         "slam",
         help="run the reference EKF-SLAM on a bundle's log and write the SLAM result bundle",
     )
-    m.add_argument("bundle", metavar="LOG_BUNDLE")
-    m.add_argument("-o", "--output", required=True, metavar="BUNDLE")
-    m.add_argument("--association", choices=("known", "nn"), default="known")
+    m.add_argument("bundle", metavar="LOG_BUNDLE", help="a log bundle (slamrel simulate)")
+    m.add_argument("-o", "--output", required=True, metavar="BUNDLE", help="bundle to write")
+    m.add_argument(
+        "--association",
+        choices=("known", "nn"),
+        default="known",
+        help="data association: known (the simulation's landmark ids) or nn (nearest "
+        "neighbour in Mahalanobis distance) (default: %(default)s)",
+    )
     m.add_argument(
         "--corrupt",
         type=opt.fraction,
         default=0.0,
         metavar="F",
-        help="fraction of associations to corrupt on purpose",
+        help="fraction of associations to corrupt on purpose (default: %(default)s)",
     )
     m.add_argument(
         "--noise-scale",
         type=opt.noise_scale,
         default=1.0,
-        help="factor on the noise the filter assumes",
+        help="factor on the noise the filter assumes (default: %(default)s)",
     )
     m.add_argument(
         "--outlier-gate",
@@ -57,7 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="χ² probability of a validation gate on known-association updates "
         "(default: no gate); rejected measurements are counted",
     )
-    m.add_argument("--seed", type=opt.seed, default=0)
+    m.add_argument(
+        "--seed", type=opt.seed, default=0, help="seed of the corruption (default: %(default)s)"
+    )
     m.add_argument(
         "--store-online",
         action="store_true",
@@ -65,7 +75,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "(validation only)",
     )
     add_force_argument(m)
-    m.add_argument("-q", "--quiet", action="store_true")
+    m.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     m.set_defaults(func=run_slam)
 
 

@@ -36,9 +36,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "solve from chained odometry falls into on long runs such as Victoria Park); writes "
         "trajectory.txt (t = pose index), landmarks.csv and solved.g2o into -o DIR.",
     )
-    s.add_argument("graph", metavar="GRAPH")
-    s.add_argument("-o", "--output", required=True, metavar="DIR")
-    s.add_argument("--max-iterations", type=opt.positive_int, default=100, help="per sub-problem")
+    s.add_argument("graph", metavar="GRAPH", help="g2o graph or iSAM text file")
+    s.add_argument("-o", "--output", required=True, metavar="DIR", help="directory to write")
+    s.add_argument(
+        "--max-iterations",
+        type=opt.positive_int,
+        default=100,
+        help="Levenberg-Marquardt iterations per sub-problem (default: %(default)s)",
+    )
     s.add_argument(
         "--tolerance",
         type=opt.probability,
@@ -64,7 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     add_noise_argument(s)
     add_force_argument(s)
-    s.add_argument("-q", "--quiet", action="store_true")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     s.set_defaults(func=run_solve)
 
 

@@ -46,8 +46,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "calibrate the verdict on healthy and broken runs",
     )
     s.add_argument("study", choices=STUDIES, metavar="STUDY", help=", ".join(STUDIES))
-    s.add_argument("-o", "--output", required=True, metavar="DIR")
-    s.add_argument("--runs", type=opt.positive_int, default=10, help="Monte Carlo runs (10)")
+    s.add_argument("-o", "--output", required=True, metavar="DIR", help="directory to write")
+    s.add_argument(
+        "--runs",
+        type=opt.positive_int,
+        default=10,
+        help="Monte Carlo runs (default: %(default)s)",
+    )
     s.add_argument(
         "--worlds",
         type=_names(PAPER_WORLDS + WORLDS, "worlds"),
@@ -60,20 +65,26 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         type=_names(NOISE_NAMES, "noise types"),
         default=list(NOISE_NAMES),
         metavar="LIST",
-        help="comma-separated noise types (default a,b,c)",
+        help="comma-separated noise types of Hu et al. (Table I; see slamrel simulate "
+        "--help) (default: a,b,c)",
     )
     s.add_argument(
         "--methods",
         type=_names(POSE_ONLY_METHODS, "methods"),
         default=list(POSE_ONLY_METHODS),
         metavar="LIST",
-        help="comma-separated methods: " + ", ".join(POSE_ONLY_METHODS),
+        help="comma-separated methods: "
+        + ", ".join(POSE_ONLY_METHODS)
+        + " (default: "
+        + ",".join(POSE_ONLY_METHODS)
+        + ")",
     )
     s.add_argument(
         "--pair-start",
         choices=("truth", "odometry", "align"),
         default="truth",
-        help="start of the pose-only pair least squares (truth: as the paper)",
+        help="start of the pose-only pair least squares (truth: as the paper) (default: "
+        "%(default)s)",
     )
     s.add_argument(
         "--broken-runs",
@@ -82,9 +93,27 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="N",
         help="verdict-calibration: seeds of the broken runs (default: --runs)",
     )
-    s.add_argument("--min-common", type=opt.int_range(2, 1000), default=5, metavar="K")
-    s.add_argument("--toro-iterations", type=opt.positive_int, default=100, metavar="N")
-    s.add_argument("--workers", type=opt.positive_int, default=1, help="worker processes (1)")
+    s.add_argument(
+        "--min-common",
+        type=opt.int_range(2, 1000),
+        default=5,
+        metavar="K",
+        help="method m2: pair every two poses that observe at least K common landmarks "
+        "(default: %(default)s)",
+    )
+    s.add_argument(
+        "--toro-iterations",
+        type=opt.positive_int,
+        default=100,
+        metavar="N",
+        help="method toro: iterations of the TORO solver (default: %(default)s)",
+    )
+    s.add_argument(
+        "--workers",
+        type=opt.positive_int,
+        default=1,
+        help="worker processes (default: %(default)s)",
+    )
     s.add_argument(
         "--scheduler",
         default=None,
@@ -93,7 +122,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "(needs dask[distributed])",
     )
     s.add_argument("--timing", action="store_true", help="add a time column to the tables")
-    s.add_argument("-q", "--quiet", action="store_true")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     s.set_defaults(func=run_study)
 
 

@@ -14,13 +14,46 @@ import numpy as np
 
 from relation_metric.evaluate import Evaluation
 from relation_metric.trajectory import Trajectory
+from slamrel.constants import PLOT_MODES
 from slamrel.formats.text import PathLike, write_bytes_atomic
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-__all__ = ["evaluation_figure", "save_figure", "pyplot"]
+__all__ = ["evaluation_figure", "save_figure", "pyplot", "plot_plane", "PLOT_MODES"]
+
+#: The planes of :func:`evaluation_figure` (``plot_mode``): two position axes, horizontal then
+#: vertical, or ``"auto"`` (:func:`plot_plane`); defined in :mod:`slamrel.constants`.
+_AXES = "xyz"
+
+
+def plot_plane(mode: str, positions: np.ndarray) -> tuple[int, int, int | None]:
+    """The drawn plane's axes ``(horizontal, vertical, remaining)`` for ``positions (N, d)``.
+
+    ``"auto"``: the two axes of largest extent (max − min), in x, y, z order, and the third as
+    the remaining axis (3-D): a KITTI drive in its camera frame (x right, y down, z forward)
+    is drawn in x-z with y as the remaining, "height", axis; a planar or a TUM-style z-up
+    trajectory in x-y. A named plane (``"xz"``: x horizontal, z vertical) is drawn as named;
+    in 2-D only ``xy``, ``yx`` and ``auto``. The remaining axis is ``None`` in 2-D.
+    """
+    dim = positions.shape[1]
+    if mode not in PLOT_MODES:
+        raise ValueError(f"plot mode: expected one of {', '.join(PLOT_MODES)}, got {mode!r}")
+    if mode == "xyz":
+        raise ValueError("plot mode 'xyz' is a 3-D view, not a plane")
+    if mode == "auto":
+        if dim == 2:
+            return 0, 1, None
+        extent = positions.max(axis=0) - positions.min(axis=0) if len(positions) else np.zeros(3)
+        order = np.argsort(-extent, kind="stable")
+        h, v = sorted(int(i) for i in order[:2])
+        return h, v, int(order[2])
+    h, v = _AXES.index(mode[0]), _AXES.index(mode[1])
+    if max(h, v) >= dim:
+        raise ValueError(f"plot mode {mode!r} needs 3-D positions; the trajectory is planar")
+    rest = ({0, 1, 2} - {h, v}).pop() if dim == 3 else None
+    return h, v, rest
 
 
 def pyplot():  # type: ignore[no-untyped-def]
@@ -49,10 +82,17 @@ def evaluation_figure(
     *,
     degrees: bool = False,
     title: str | None = None,
+    plot_mode: str = "xy",
+    reference: Trajectory | None = None,
 ) -> Figure:
     """Errors over time (top) and the estimate with each relation coloured by its error.
 
-    A 3-D estimate is drawn from above (x, y) with a third panel of its height z over time.
+    The estimate is drawn in the plane of ``plot_mode`` (:data:`PLOT_MODES`; ``"auto"``:
+    the plane of largest extent, :func:`plot_plane`); a 3-D estimate gets a third panel of its
+    remaining axis over time (its height when the plane is horizontal). ``"xyz"`` (3-D
+    estimates only) draws a perspective view of all three axes instead, the touched poses
+    coloured by their error. ``reference`` (a
+    trajectory, drawn as given: the relation metric aligns nothing) is drawn beneath it.
 
     The estimate is coloured pose by pose with the largest translational error of the
     relations that touch each pose, and the ends of the ten worst relations are marked, so
@@ -61,6 +101,9 @@ def evaluation_figure(
     """
     plt = pyplot()
     three_d = estimate.group.position_dim == 3
+    if plot_mode == "xyz":
+        return _figure_xyz(evaluation, estimate, degrees, title, reference)
+    h, v, rest = plot_plane(plot_mode, estimate.positions)
     fig, axes = plt.subplots(
         3 if three_d else 2,
         1,
@@ -70,14 +113,57 @@ def evaluation_figure(
     )
     _errors_over_time(axes[0], evaluation, estimate, degrees)
     pose_err, hit = _pose_errors(evaluation, len(estimate))
-    _coloured_estimate(fig, axes[1], evaluation, estimate, pose_err)
     ax_xy = axes[1]
+    if reference is not None and len(reference):
+        ref = reference.lifted() if three_d else reference
+        if ref.group.position_dim == estimate.group.position_dim:
+            p = ref.positions
+            ax_xy.plot(
+                p[:, h], p[:, v], "--", color="0.35", lw=1.0, zorder=0, label="reference (as given)"
+            )
+    _coloured_estimate(fig, ax_xy, evaluation, estimate, pose_err, (h, v))
     ax_xy.set_aspect("equal", adjustable="datalim")
-    ax_xy.set_xlabel("x [m]")
-    ax_xy.set_ylabel("y [m]")
-    ax_xy.set_title(title or ("estimate coloured by relation error" + (" (top view)" * three_d)))
+    ax_xy.set_xlabel(f"{_AXES[h]} [m]")
+    ax_xy.set_ylabel(f"{_AXES[v]} [m]")
+    plane = f" ({_AXES[h]}-{_AXES[v]} plane)" if three_d else ""
+    ax_xy.set_title(title or ("estimate coloured by relation error" + plane))
+    if reference is not None:
+        ax_xy.legend(loc="best")
     if three_d:
-        _height_over_time(axes[2], estimate, pose_err, hit)
+        assert rest is not None  # 3-D: the axis not drawn
+        _height_over_time(axes[2], estimate, pose_err, hit, rest)
+    return fig
+
+
+def _figure_xyz(
+    evaluation: Evaluation,
+    estimate: Trajectory,
+    degrees: bool,
+    title: str | None,
+    reference: Trajectory | None,
+) -> Figure:
+    """``plot_mode="xyz"``: errors over time and a 3-D view of reference and estimate."""
+    if estimate.group.position_dim != 3:
+        raise ValueError("plot mode 'xyz' needs a 3-D estimate; the trajectory is planar")
+    plt = pyplot()
+    fig = plt.figure(figsize=(8.0, 12.0), constrained_layout=True)
+    ax_t = fig.add_subplot(3, 1, 1)
+    ax = fig.add_subplot(3, 1, (2, 3), projection="3d")
+    _errors_over_time(ax_t, evaluation, estimate, degrees)
+    pose_err, hit = _pose_errors(evaluation, len(estimate))
+    if reference is not None and len(reference):
+        p = reference.lifted().positions
+        ax.plot(p[:, 0], p[:, 1], p[:, 2], "--", color="0.35", lw=1.0, label="reference (as given)")
+    q = estimate.positions
+    ax.plot(q[:, 0], q[:, 1], q[:, 2], "-", color="0.7", lw=1.0, label="estimate")
+    if hit.any():
+        sc = ax.scatter(q[hit, 0], q[hit, 1], q[hit, 2], c=pose_err[hit], s=4, cmap="viridis")
+        fig.colorbar(sc, ax=ax, shrink=0.6, label="largest translational error at a pose [m]")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_zlabel("z [m]")
+    ax.set_title(title or "estimate coloured by relation error (3-D view)")
+    ax.legend(loc="best")
     return fig
 
 
@@ -126,7 +212,12 @@ def _pose_errors(ev: Evaluation, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _coloured_estimate(
-    fig: Figure, ax_xy: Axes, ev: Evaluation, estimate: Trajectory, pose_err: np.ndarray
+    fig: Figure,
+    ax_xy: Axes,
+    ev: Evaluation,
+    estimate: Trajectory,
+    pose_err: np.ndarray,
+    plane: tuple[int, int] = (0, 1),
 ) -> None:
     """The estimate in grey, each segment coloured by the larger error of its two poses (the
     wrong part of the map lights up), and the ends of the ten worst relations marked."""
@@ -135,8 +226,9 @@ def _coloured_estimate(
     valid = ev.valid
     a = ev.association
     err = ev.errors.translation[valid]
-    xy = estimate.poses[:, :2]
-    ax_xy.plot(xy[:, 0], xy[:, 1], "-", color="0.8", lw=1.0, zorder=1)
+    cols = list(plane)
+    xy = estimate.poses[:, cols]
+    ax_xy.plot(xy[:, 0], xy[:, 1], "-", color="0.8", lw=1.0, zorder=1, label="estimate")
     if not (err.size and len(estimate) > 1):
         return
     seg_err = np.fmax(pose_err[:-1], pose_err[1:])
@@ -148,7 +240,9 @@ def _coloured_estimate(
     lc.set_clim(0.0, hi)
     ax_xy.add_collection(lc)
     worst = np.argsort(err)[-min(10, err.size) :]
-    ends = np.concatenate((a.pose_first[valid][worst, :2], a.pose_second[valid][worst, :2]))
+    ends = np.concatenate(
+        (a.pose_first[valid][worst][:, cols], a.pose_second[valid][worst][:, cols])
+    )
     ax_xy.plot(
         ends[:, 0],
         ends[:, 1],
@@ -167,23 +261,25 @@ def _coloured_estimate(
 
 
 def _height_over_time(
-    ax_z: Axes, estimate: Trajectory, pose_err: np.ndarray, hit: np.ndarray
+    ax_z: Axes, estimate: Trajectory, pose_err: np.ndarray, hit: np.ndarray, axis: int = 2
 ) -> None:
-    """Height z of a 3-D estimate over time, the touched poses coloured by their error."""
+    """The remaining axis (default z, the height) of a 3-D estimate over time, the touched
+    poses coloured by their error."""
     t0 = float(estimate.timestamps[0]) if len(estimate) else 0.0
-    ax_z.plot(estimate.timestamps - t0, estimate.poses[:, 2], "-", color="0.5", lw=1.0)
+    ax_z.plot(estimate.timestamps - t0, estimate.poses[:, axis], "-", color="0.5", lw=1.0)
     if hit.any():
         ax_z.scatter(
             estimate.timestamps[hit] - t0,
-            estimate.poses[hit, 2],
+            estimate.poses[hit, axis],
             c=pose_err[hit],
             s=4,
             cmap="viridis",
             zorder=2,
         )
     ax_z.set_xlabel("time since start [s]")
-    ax_z.set_ylabel("z [m]")
-    ax_z.set_title("height of the estimate, coloured by relation error")
+    ax_z.set_ylabel(f"{_AXES[axis]} [m]")
+    what = "height (z)" if axis == 2 else f"the remaining axis ({_AXES[axis]})"
+    ax_z.set_title(f"{what} of the estimate, coloured by relation error")
 
 
 def save_figure(fig: Figure, path: PathLike, *, dpi: int = 120) -> None:

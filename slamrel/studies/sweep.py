@@ -36,7 +36,14 @@ from typing import Any
 from relation_metric.errors import InputError
 from slamrel.formats.text import write_text_atomic
 
-__all__ = ["Task", "SweepReport", "run_sweep", "load_results", "format_progress"]
+__all__ = [
+    "Task",
+    "SweepReport",
+    "run_sweep",
+    "load_results",
+    "stored_results",
+    "format_progress",
+]
 
 
 @dataclass(frozen=True)
@@ -319,3 +326,14 @@ def load_results(directory: str | os.PathLike[str], tasks: Iterable[Task]) -> li
         if record is not None:
             out.append(record)
     return out
+
+
+def stored_results(
+    directory: str | os.PathLike[str], tasks: Iterable[Task]
+) -> list[dict[str, Any] | None]:
+    """The stored result of each of ``tasks``, in their order; ``None`` where none is stored
+    (the task failed or has not run). A damaged file is an :class:`InputError` as in
+    :func:`load_results`."""
+    tasks = list(tasks)
+    done = {r["key"]: r["result"] for r in load_results(directory, tasks)}
+    return [done.get(t.key) for t in tasks]
