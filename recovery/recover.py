@@ -34,7 +34,13 @@ from numpy.typing import NDArray
 
 from recovery.anchoring import Anchoring, NeesFrame, start_frame, truth_at_start
 from recovery.bundle import Bundle
-from recovery.constants import BATCH_MAX_ITERATIONS, DEFAULT_ROBUST, METHODS
+from recovery.constants import (
+    BATCH_MAX_ITERATIONS,
+    DEFAULT_ROBUST,
+    METHODS,
+    SMOOTHER_CHI2_RESOLUTION,
+    SMOOTHER_MAX_ITERATIONS,
+)
 from recovery.ekf import (
     DEFAULT_MAX_OUTLIER_RUN,
     EVENT_KINDS,
@@ -600,7 +606,7 @@ class Recovery:
         The NEES summary with the poses compared with the ground truth as they are, unaligned
         (equal to ``nees_stats`` when the frame is the truth frame).
     iterations : int
-        Batch iterations (0 for the filter and the smoother).
+        Gauss–Newton iterations of the smoother or the batch (0 for the filter).
     robust : RobustSettings or None
         The robust update (``None``: the plain EKF).
     batch : BatchCosts or None
@@ -665,7 +671,7 @@ class Recovery:
             out["nees_frame"] = self.nees_frame.as_dict()
         if self.nees_stats_truth_frame is not None:
             out["nees_truth_frame"] = self.nees_stats_truth_frame.as_dict()
-        if self.method == "batch":
+        if self.method != "filter":
             out["iterations"] = self.iterations
         if self.robust is not None:
             out["robust"] = self.robust.as_dict()
@@ -731,6 +737,16 @@ def pose_nees_against(
     return out
 
 
+#: How :func:`recovery.batch.refine` stops for each method: the smoother at the data's
+#: statistical resolution (a step changing χ² by less than one unit), the batch numerically.
+_SMOOTHER_STOP = {
+    "max_iterations": SMOOTHER_MAX_ITERATIONS,
+    "tolerance": 0.0,
+    "cost_tolerance": 0.5 * SMOOTHER_CHI2_RESOLUTION,
+}
+_BATCH_STOP = {"max_iterations": BATCH_MAX_ITERATIONS}
+
+
 def recover(
     bundle: Bundle,
     *,
@@ -752,9 +768,10 @@ def recover(
     bundle : Bundle
     method : {"filter", "smoother", "batch"}
         EKF only (Schmidt update with the map uncertainty); the smoother: the extended RTS
-        smoother of the filter run, then one Gauss–Newton step over all poses and the map
-        correction (:mod:`recovery.batch`: the map-augmented fixed-interval smoother); the
-        batch: that problem iterated to convergence. All three use the one map uncertainty of
+        smoother of the filter run, then Gauss–Newton steps over all poses and the map
+        correction until one lowers χ² by less than one unit (:mod:`recovery.batch`: the
+        map-augmented fixed-interval smoother, relinearised); the batch: that problem
+        iterated to numerical convergence. All three use the one map uncertainty of
         :func:`recovery.map_uncertainty.map_uncertainty`.
     gate : float, optional
         χ² probability of the innovation gate; ``None`` (default) gates nothing, so a broken
@@ -844,13 +861,13 @@ def recover(
             used=fr.status == USED,
             weights=weights,
             map_factor=mu.factor,
-            max_iterations=1 if method == "smoother" else BATCH_MAX_ITERATIONS,
+            **(_SMOOTHER_STOP if method == "smoother" else _BATCH_STOP),
         )
         poses, covs = br.poses, br.covariances
         if br.map_correction is not None:
             correction = readonly(br.map_correction)
+        iterations = br.iterations
         if method == "batch":
-            iterations = br.iterations
             costs = BatchCosts(cost_initial=br.cost_initial, cost_final=br.cost_final)
     covs, n_repaired = _check_finite(poses, covs, inp.times, repair=on_divergence != "raise")
     traj = Trajectory(inp.times, poses)
