@@ -55,6 +55,12 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="also write the per-relation quality report (CSV, one row a relation)",
     )
     a.add_argument(
+        "--review",
+        metavar="HTML",
+        help="also write the review page (one self-contained file: overlay, accept/reject, "
+        "nudge, re-align, save .relations and the review state)",
+    )
+    a.add_argument(
         "--record",
         help="laser record to read (FLASER, RLASER, ROBOTLASER1, ...; default: the only "
         "kind the log holds)",
@@ -174,7 +180,7 @@ def run_align(args: argparse.Namespace) -> int:
             raise OptionError(f"--{name.replace('_', '-')} must be positive")
     if args.max_range is not None and not args.max_range > 0:
         raise OptionError("--max-range must be positive")
-    check_outputs([args.output, args.report], [args.log, args.estimate, args.at])
+    check_outputs([args.output, args.report, args.review], [args.log, args.estimate, args.at])
     scans = read_laser_scans(args.log, record=args.record)
     if args.estimate:
         from slamrel.evaluation import load_trajectory
@@ -224,6 +230,12 @@ def run_align(args: argparse.Namespace) -> int:
         from slamrel.outputs import write_text_atomic
 
         write_text_atomic(args.report, format_report(result))
+    if args.review:
+        from pathlib import Path
+
+        from slamrel.review.scans import write_scan_review
+
+        write_scan_review(args.review, scans, result, poses, options, name=Path(args.log).name)
     if not args.quiet:
         flagged = int(result.flagged.sum())
         print(
