@@ -18,7 +18,7 @@ from slamrel.formats.laser import read_laser_scans
 from slamrel.scans.correlative import correlative_match
 from slamrel.scans.matching import align, prepare_scan
 from slamrel.scans.proposals import consecutive_pairs, loop_pairs, pairs_at_times
-from slamrel.scans.relations import AlignOptions, align_scans, guesses_from_poses
+from slamrel.scans.relations import AlignOptions, QualityLimits, align_scans, guesses_from_poses
 from slamrel.simulation.laser import (
     LaserSensor,
     laser_world,
@@ -159,7 +159,9 @@ def test_loop_pairs_meet_targets_with_the_global_initialiser():
     true = guesses_from_poses(log.truth, prop)
     g_et, _ = _errors(guess, true)
     assert np.median(g_et) > 0.3  # the odometry guess after the loop is poor
-    res = align_scans(s, prop, guess, AlignOptions(global_search="always"))
+    # the user knows the guess may be 1 m off after the loop: corrections up to that are normal
+    limits = QualityLimits(max_correction=1.0, max_correction_angle=0.1)
+    res = align_scans(s, prop, guess, AlignOptions(global_search="always", limits=limits))
     et, er = _errors(res.delta, true)
     assert np.median(et) <= 0.015 and np.median(er) <= 0.2
     ok = ~res.flagged
@@ -187,6 +189,19 @@ def test_corridor_pair_is_flagged_degenerate_along_the_corridor():
     pair = pairs_at_times(log.scans.timestamps, np.array([0.0]), np.array([0.2]), tolerance=0.01)
     res = align_scans(log.scans, pair, true[None])
     assert "degenerate" in res.flags[0]
+
+
+def test_a_relation_far_from_its_guess_is_flagged():
+    log = _room_log(seed=4)
+    s = log.scans
+    prop = pairs_at_times(s.timestamps, s.timestamps[[10]], s.timestamps[[12]], tolerance=0.01)
+    true = guesses_from_poses(log.truth, prop)
+    near = align_scans(s, prop, compose(true, np.array([0.03, 0.0, 0.01])))
+    far = align_scans(s, prop, compose(true, np.array([0.2, 0.1, 0.0])))
+    assert near.flags[0] == "" and np.hypot(*(near.delta[0, :2] - true[0, :2])) < 0.01
+    # from 0.22 m off the matcher still finds the truth, but says it moved far
+    assert np.hypot(*(far.delta[0, :2] - true[0, :2])) < 0.01
+    assert "large correction" in far.flags[0] and far.suspicion[0] > 2.0
 
 
 def test_correlative_search_recovers_a_poor_guess():

@@ -131,6 +131,19 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="half width of the correlative search in rotation [rad] (default 0.5)",
     )
     a.add_argument(
+        "--max-correction",
+        type=float,
+        default=0.1,
+        help="flag relations the alignment moved farther than this from their guess [m] "
+        "(default 0.1; raise it when the guesses are known to be poor)",
+    )
+    a.add_argument(
+        "--max-correction-angle",
+        type=float,
+        default=0.05,
+        help="the same for the rotation [rad] (default 0.05)",
+    )
+    a.add_argument(
         "--max-range",
         type=float,
         help="ignore readings at or beyond this [m] (default: the scan's maximum range)",
@@ -172,10 +185,16 @@ def run_align(args: argparse.Namespace) -> int:
     from slamrel.formats.relations import read_relations, write_relations
     from slamrel.scans.correlative import CorrelativeOptions
     from slamrel.scans.proposals import consecutive_pairs, loop_pairs, pairs_at_times
-    from slamrel.scans.relations import AlignOptions, align_scans, guesses_from_poses
+    from slamrel.scans.relations import (
+        AlignOptions,
+        QualityLimits,
+        align_scans,
+        guesses_from_poses,
+    )
     from slamrel.scans.report import estimate_at_scans, format_report
 
-    for name in ("distance", "angle", "loop_radius", "search_xy", "search_theta"):
+    names = ("distance", "angle", "loop_radius", "search_xy", "search_theta", "max_correction")
+    for name in (*names, "max_correction_angle"):
         if not getattr(args, name) > 0:
             raise OptionError(f"--{name.replace('_', '-')} must be positive")
     if args.max_range is not None and not args.max_range > 0:
@@ -223,6 +242,9 @@ def run_align(args: argparse.Namespace) -> int:
         correlative=CorrelativeOptions(search_xy=args.search_xy, search_theta=args.search_theta),
         global_search=args.global_search,
         max_range=args.max_range,
+        limits=QualityLimits(
+            max_correction=args.max_correction, max_correction_angle=args.max_correction_angle
+        ),
     )
     result = align_scans(scans, prop, guesses_from_poses(poses, prop), options)
     write_relations(args.output, result.relation_set())

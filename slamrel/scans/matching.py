@@ -97,6 +97,13 @@ class IcpOptions:
         Fewer associated points than this is a failure (20).
     degenerate_ratio : float
         ``condition`` below this flags degenerate geometry (0.02).
+    stall_tolerance, stall_iterations : float, int
+        Also converged: steps below ``stall_tolerance`` (1e-4 m and rad) for
+        ``stall_iterations`` (4) iterations in a row at a settled gate. Trimming and the
+        gate switch a few correspondences back and forth, and the estimate then circles
+        within that tolerance instead of settling below ``tolerance``. When it circles
+        exactly (the same iterates again, period 2–4, twice in a row) it stops at the mean
+        of the cycle.
     """
 
     max_distance: float = 0.5
@@ -108,6 +115,8 @@ class IcpOptions:
     tolerance: float = 1e-6
     min_matches: int = 20
     degenerate_ratio: float = 0.02
+    stall_tolerance: float = 1e-4
+    stall_iterations: int = 4
 
 
 @dataclass(frozen=True)
@@ -240,6 +249,24 @@ def prepare_scan(
     return PreparedScan(p[valid], anchors, normals, cKDTree(anchors))
 
 
+def _cycle(history: list[NDArray[np.float64]], tolerance: float, longest: int = 4) -> int:
+    """The period ``p ≤ longest`` with ``x_k = x_{k−p}`` to ``tolerance`` (seen twice), or 0."""
+    for p in range(2, longest + 1):
+        if len(history) > 2 * p and all(
+            np.abs(history[-1 - q] - history[-1 - q - p]).max() < tolerance for q in range(p)
+        ):
+            return p
+    return 0
+
+
+def _median(a: NDArray[np.float64]) -> float:
+    """The median of a non-empty 1-D array (``np.partition``, without ``np.median``'s checks)."""
+    n = a.shape[0]
+    h = n // 2
+    part = np.partition(a, [h - 1, h] if n % 2 == 0 and n > 1 else h)
+    return float(part[h] if n % 2 else 0.5 * (part[h - 1] + part[h]))
+
+
 def _failed(guess: NDArray[np.float64], why: str, iterations: int = 0) -> Alignment:
     nan3 = np.full((3, 3), np.nan)
     return Alignment(
@@ -290,6 +317,8 @@ def align(
     converged = False
     it = 0
     sigma = opt.min_sigma
+    stalled = 0
+    history: list[NDArray[np.float64]] = [x]
     for it in range(1, opt.max_iterations + 1):
         q = transform(x, pts)
         dist, k = reference.tree.query(q, distance_upper_bound=gate)
@@ -306,7 +335,7 @@ def align(
             cut = np.partition(ae, keep - 1)[keep - 1]
             sel = ae <= cut
             n, qo, e, ae = n[sel], qo[sel], e[sel], ae[sel]
-        sigma = max(_MAD * float(np.median(ae)), opt.min_sigma)
+        sigma = max(_MAD * _median(ae), opt.min_sigma)
         w = 1.0 / (1.0 + (e / (_CAUCHY * sigma)) ** 2)
         rp_x = qo[:, 0] - x[0]
         rp_y = qo[:, 1] - x[1]
@@ -319,9 +348,18 @@ def align(
         except np.linalg.LinAlgError:
             step = -np.linalg.lstsq(h, g, rcond=None)[0]
         x = x + step
+        history.append(x)
         new_gate = min(opt.max_distance, max(opt.min_distance, opt.gate_sigmas * sigma))
-        small = np.hypot(step[0], step[1]) < opt.tolerance and abs(step[2]) < opt.tolerance
-        if small and new_gate >= gate * 0.999:
+        size = max(float(np.hypot(step[0], step[1])), abs(float(step[2])))
+        small = size < opt.tolerance
+        stalled = stalled + 1 if size < opt.stall_tolerance else 0
+        settled = new_gate >= gate * 0.999
+        if (small or stalled >= opt.stall_iterations) and settled:
+            converged = True
+            break
+        period = _cycle(history, opt.tolerance)
+        if period and settled:  # the correspondences repeat: the iteration is periodic
+            x = np.mean(history[-period:], axis=0)
             converged = True
             break
         gate = min(gate, new_gate) if small or it > 5 else gate

@@ -8,12 +8,13 @@ For each proposed pair ``(i, j)`` (:mod:`slamrel.scans.proposals`):
    alignment leaves failed, with low overlap or a high residual — signs of a wrong basin;
    ``"always"``: for every pair), a correlative search around
    ``δ₀`` (:func:`slamrel.scans.correlative.correlative_match`) and ICP from its best
-   candidate; the alignment with the larger matched fraction (then the smaller residual)
-   is kept, and ``initialiser`` says which;
+   candidate, kept only when it passes every quality check and matches clearly more
+   (``initialiser`` says which was kept);
 4. the quality flags (:class:`QualityLimits`): ``failed``, ``not converged``,
    ``degenerate`` (the matcher's own test), ``weak geometry``, ``low overlap``,
-   ``high residual``. The **suspicion** is the largest of ``min_matched / f``,
-   ``residual / max_residual`` and ``min_condition / condition`` (∞ for a failure): a pair is
+   ``high residual``, ``large correction``. The **suspicion** is the largest of
+   ``min_matched / f``, ``residual / max_residual``, ``min_condition / condition`` and the
+   correction over its limit (∞ for a failure): a pair is
    flagged when it exceeds 1; the review page visits pairs in decreasing suspicion.
 """
 
@@ -49,11 +50,18 @@ class QualityLimits:
     min_condition : float
         Translational condition below this: ``weak geometry`` (0.1; the matcher's
         ``degenerate`` is the stricter ``IcpOptions.degenerate_ratio``).
+    max_correction, max_correction_angle : float
+        The alignment moved the relation farther than this from its guess
+        (``guess⁻¹ ∘ δ``: 0.1 m, 0.05 rad ≈ 2.9°): ``large correction``. A matcher that slides
+        into a neighbouring basin (a door frame, the next stretch of corridor) fits well
+        there; only the distance from a sound guess gives it away.
     """
 
     min_matched: float = 0.3
     max_residual: float = 0.03
     min_condition: float = 0.1
+    max_correction: float = 0.1
+    max_correction_angle: float = 0.05
 
 
 @dataclass(frozen=True)
@@ -127,9 +135,18 @@ class ScanRelations:
         return RelationSet(self.proposals.t1, self.proposals.t2, self.delta, key="time")
 
 
-def _judge(a: Alignment, limits: QualityLimits) -> tuple[list[str], float]:
+def _judge(
+    a: Alignment, limits: QualityLimits, guess: NDArray[np.float64]
+) -> tuple[list[str], float]:
+    """Flags and suspicion of ``a``; the correction is measured from the pair's own ``guess``
+    (not from a correlative re-start)."""
     if a.failed:
         return ["failed"], float("inf")
+    corr = between(guess, a.delta)
+    moved = max(
+        float(np.hypot(corr[0], corr[1])) / limits.max_correction,
+        abs(float(corr[2])) / limits.max_correction_angle,
+    )
     flags = []
     if not a.converged:
         flags.append("not converged")
@@ -141,7 +158,10 @@ def _judge(a: Alignment, limits: QualityLimits) -> tuple[list[str], float]:
         flags.append("low overlap")
     if a.residual > limits.max_residual:
         flags.append("high residual")
+    if moved > 1.0:
+        flags.append("large correction")
     ratios = (
+        moved,
         limits.min_matched / max(a.matched_fraction, 1e-9),
         a.residual / limits.max_residual,
         limits.min_condition / max(a.condition, 1e-9),
@@ -152,15 +172,16 @@ def _judge(a: Alignment, limits: QualityLimits) -> tuple[list[str], float]:
     return flags, float(suspicion)
 
 
-def _better(a: Alignment, b: Alignment) -> bool:
-    """Is ``b`` a better alignment than ``a`` (matched more, then smaller residual)?"""
-    if b.failed:
+def _better(a: Alignment, b: Alignment, limits: QualityLimits) -> bool:
+    """Does the re-initialised ``b`` replace ``a``?
+
+    Only when ``b`` passes every quality check and matches clearly more (by 0.1 of the
+    current scan's returns): in corridors a search window holds many near-equal fits, and a
+    slightly larger overlap elsewhere is aliasing, not a better relation.
+    """
+    if b.failed or _judge(b, limits, b.guess)[0]:
         return False
-    if a.failed:
-        return True
-    if abs(b.matched_fraction - a.matched_fraction) > 0.02:
-        return b.matched_fraction > a.matched_fraction
-    return b.residual < a.residual
+    return bool(a.failed) or b.matched_fraction >= a.matched_fraction + 0.1
 
 
 def align_scans(
@@ -196,16 +217,16 @@ def align_scans(
     for (i, j), g in zip(proposals.pairs.tolist(), guesses, strict=True):
         ref, cur = scan(i), scan(j)
         a = align(ref, cur, g, opt.icp)
-        flags, susp = _judge(a, opt.limits)
+        flags, susp = _judge(a, opt.limits, g)
         how = "guess"
         lost = bool({"failed", "low overlap", "high residual"} & set(flags))
         if opt.global_search == "always" or (opt.global_search == "flagged" and lost):
             if ref.points.shape[0] and cur.points.shape[0]:
                 c = correlative_match(ref.points, cur.points, g, opt.correlative)
                 b = align(ref, cur, c.delta, opt.icp)
-                if _better(a, b):
+                if _better(a, b, opt.limits):
                     a, how = b, "correlative"
-                    flags, susp = _judge(a, opt.limits)
+                    flags, susp = _judge(a, opt.limits, g)
         out.append((a, how, flags, susp))
     al = [o[0] for o in out]
     return ScanRelations(
