@@ -84,6 +84,21 @@
   function icp(ref, cur, x0) {
     const x = x0.slice(), L = ref.c.length / 2;
     let gate = ICP.maxDistance, sigma = ICP.minSigma, converged = false, it = 0, matched = 0, rms = NaN;
+    let stalled = 0;
+    const history = [x.slice()];
+    // period p <= 4 with x_k = x_{k-p} seen twice: the correspondences repeat
+    const cycle = () => {
+      for (let p = 2; p <= 4; p++) {
+        if (history.length <= 2 * p) continue;
+        let same = true;
+        for (let q = 0; q < p && same; q++) {
+          const a = history[history.length - 1 - q], b = history[history.length - 1 - q - p];
+          same = Math.max(...a.map((v, k) => Math.abs(v - b[k]))) < ICP.tolerance;
+        }
+        if (same) return p;
+      }
+      return 0;
+    };
     for (it = 1; it <= ICP.maxIterations; it++) {
       const q = moved(cur, x), res = [];
       for (let m = 0; m < q.length; m += 2) {
@@ -113,11 +128,21 @@
       const dxv = solve3(H, g);
       if (!dxv) break;
       x[0] -= dxv[0]; x[1] -= dxv[1]; x[2] -= dxv[2];
+      history.push(x.slice());
       matched = use.filter((r) => Math.abs(r[0]) <= 3 * sigma).length;
       rms = Math.sqrt(s2 / use.length);
       const newGate = Math.min(ICP.maxDistance, Math.max(ICP.minDistance, ICP.gateSigmas * sigma));
-      const small = Math.hypot(dxv[0], dxv[1]) < ICP.tolerance && Math.abs(dxv[2]) < ICP.tolerance;
-      if (small && newGate >= gate * 0.999) { converged = true; break; }
+      const size = Math.max(Math.hypot(dxv[0], dxv[1]), Math.abs(dxv[2]));
+      const small = size < ICP.tolerance, settled = newGate >= gate * 0.999;
+      stalled = size < ICP.stallTolerance ? stalled + 1 : 0;
+      if ((small || stalled >= ICP.stallIterations) && settled) { converged = true; break; }
+      const period = cycle();
+      if (period && settled) {
+        const last = history.slice(-period);
+        for (let k = 0; k < 3; k++) x[k] = last.reduce((acc, v) => acc + v[k], 0) / period;
+        converged = true;
+        break;
+      }
       if (small || it > 5) gate = Math.min(gate, newGate);
     }
     x[2] = wrap(x[2]);

@@ -80,6 +80,8 @@ def scan_review_payload(
             "maxIterations": icp.max_iterations,
             "tolerance": icp.tolerance,
             "minMatches": icp.min_matches,
+            "stallTolerance": icp.stall_tolerance,
+            "stallIterations": icp.stall_iterations,
         },
         "scans": scan_list,
         "poses": _mm(poses[used], 4),
