@@ -1,4 +1,5 @@
-"""``slamrel relations generate``: select reference relations from a trajectory."""
+"""``slamrel relations generate``: select reference relations from a trajectory;
+``slamrel relations align``: make them from a laser log by scan alignment."""
 
 from __future__ import annotations
 
@@ -34,6 +35,127 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     g.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     add_strategy_arguments(g, default="consecutive")
     g.set_defaults(func=run_generate)
+    _register_align(rsub)
+
+
+def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    a = rsub.add_parser(
+        "align",
+        help="make reference relations from a laser log by scan alignment",
+        description="Align pairs of laser scans of a CARMEN log (point-to-line ICP from an "
+        "initial guess, a correlative search where the guess is poor) and write the "
+        "relations as a Freiburg .relations file, with a per-relation quality report "
+        "(matched fraction, residual, degeneracy, flags) for review.",
+    )
+    a.add_argument("log", metavar="LOG", help="CARMEN log with laser scans (.clf/.log)")
+    a.add_argument("-o", "--output", required=True, metavar="OUT", help="output .relations")
+    a.add_argument(
+        "--report",
+        metavar="CSV",
+        help="also write the per-relation quality report (CSV, one row a relation)",
+    )
+    a.add_argument(
+        "--review",
+        metavar="HTML",
+        help="also write the review page (one self-contained file: overlay, accept/reject, "
+        "nudge, re-align, save .relations and the review state)",
+    )
+    a.add_argument(
+        "--record",
+        help="laser record to read (FLASER, RLASER, ROBOTLASER1, ...; default: the only "
+        "kind the log holds)",
+    )
+    a.add_argument(
+        "--estimate",
+        metavar="TRAJ",
+        help="trajectory whose laser poses give the initial guesses (default: the log's own "
+        "laser poses, i.e. its odometry)",
+    )
+    a.add_argument("--estimate-format", choices=TRAJECTORY_FORMATS, help="format of TRAJ")
+    a.add_argument(
+        "--skip-invalid-poses",
+        action="store_true",
+        help="skip (and count) estimate pose records with non-finite values instead of "
+        "refusing the file",
+    )
+    which = a.add_mutually_exclusive_group()
+    which.add_argument(
+        "--at",
+        metavar="RELATIONS",
+        help="align the timestamp pairs of this .relations file (re-derive or audit it)",
+    )
+    which.add_argument(
+        "--loops",
+        action="store_true",
+        help="add loop pairs (keyframes within --loop-radius, --loop-min-travel apart along "
+        "the path) to the consecutive pairs",
+    )
+    a.add_argument(
+        "--distance",
+        type=float,
+        default=0.5,
+        help="keyframe spacing by travel [m] for consecutive and loop pairs (default 0.5)",
+    )
+    a.add_argument(
+        "--angle",
+        type=float,
+        default=0.3,
+        help="keyframe spacing by rotation [rad] (default 0.3)",
+    )
+    a.add_argument(
+        "--loop-radius", type=float, default=1.0, help="loop pair radius [m] (default 1.0)"
+    )
+    a.add_argument(
+        "--loop-min-travel",
+        type=float,
+        default=10.0,
+        help="least travel between the two scans of a loop pair [m] (default 10)",
+    )
+    a.add_argument(
+        "--global-search",
+        choices=("never", "flagged", "always"),
+        default="flagged",
+        help="when to run the correlative search around the guess: never, for pairs the "
+        "first alignment leaves failed/low-overlap/high-residual (default), or always",
+    )
+    a.add_argument(
+        "--search-xy",
+        type=float,
+        default=1.5,
+        help="half width of the correlative search in x and y [m] (default 1.5)",
+    )
+    a.add_argument(
+        "--search-theta",
+        type=float,
+        default=0.5,
+        help="half width of the correlative search in rotation [rad] (default 0.5)",
+    )
+    a.add_argument(
+        "--max-correction",
+        type=float,
+        default=0.1,
+        help="flag relations the alignment moved farther than this from their guess [m] "
+        "(default 0.1; raise it when the guesses are known to be poor)",
+    )
+    a.add_argument(
+        "--max-correction-angle",
+        type=float,
+        default=0.05,
+        help="the same for the rotation [rad] (default 0.05)",
+    )
+    a.add_argument(
+        "--max-range",
+        type=float,
+        help="ignore readings at or beyond this [m] (default: the scan's maximum range)",
+    )
+    a.add_argument(
+        "--time-tolerance",
+        type=float,
+        default=0.05,
+        help="--at: largest gap between a relation time and its scan [s] (default 0.05)",
+    )
+    a.add_argument("-q", "--quiet", action="store_true")
+    a.set_defaults(func=run_align)
 
 
 def run_generate(args: argparse.Namespace) -> int:
@@ -51,5 +173,100 @@ def run_generate(args: argparse.Namespace) -> int:
         print(
             f"{len(rel)} {args.strategy} relations from {len(reference)} {dim} poses "
             f"-> {args.output}"
+        )
+    return 0
+
+
+def run_align(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from relation_metric.errors import OptionError
+    from slamrel.formats.laser import read_laser_scans
+    from slamrel.formats.relations import read_relations, write_relations
+    from slamrel.scans.correlative import CorrelativeOptions
+    from slamrel.scans.proposals import consecutive_pairs, loop_pairs, pairs_at_times
+    from slamrel.scans.relations import (
+        AlignOptions,
+        QualityLimits,
+        align_scans,
+        guesses_from_poses,
+    )
+    from slamrel.scans.report import estimate_at_scans, format_report
+
+    names = ("distance", "angle", "loop_radius", "search_xy", "search_theta", "max_correction")
+    for name in (*names, "max_correction_angle"):
+        if not getattr(args, name) > 0:
+            raise OptionError(f"--{name.replace('_', '-')} must be positive")
+    if args.max_range is not None and not args.max_range > 0:
+        raise OptionError("--max-range must be positive")
+    check_outputs([args.output, args.report, args.review], [args.log, args.estimate, args.at])
+    scans = read_laser_scans(args.log, record=args.record)
+    if args.estimate:
+        from slamrel.evaluation import load_trajectory
+
+        est = load_trajectory(
+            args.estimate,
+            args.estimate_format,
+            role="estimate",
+            skip_invalid=args.skip_invalid_poses,
+        ).trajectory
+        poses, corrected = estimate_at_scans(scans, est.timestamps, est.poses)
+        source = args.estimate
+    else:
+        poses, corrected, source = scans.laser_pose, 0, "the log's laser poses"
+    if not np.isfinite(poses).all():
+        raise OptionError(
+            f"{args.log} has scans without poses ({scans.record}); give --estimate TRAJ"
+        )
+    if args.at:
+        given = read_relations(args.at)
+        prop = pairs_at_times(
+            scans.timestamps,
+            given.first,
+            given.second,
+            tolerance=args.time_tolerance,
+            path=args.at,
+        )
+    else:
+        prop = consecutive_pairs(poses, scans.timestamps, distance=args.distance, angle=args.angle)
+        if args.loops:
+            prop = prop + loop_pairs(
+                poses,
+                scans.timestamps,
+                radius=args.loop_radius,
+                min_travel=args.loop_min_travel,
+                distance=args.distance,
+                angle=args.angle,
+            )
+    options = AlignOptions(
+        correlative=CorrelativeOptions(search_xy=args.search_xy, search_theta=args.search_theta),
+        global_search=args.global_search,
+        max_range=args.max_range,
+        limits=QualityLimits(
+            max_correction=args.max_correction, max_correction_angle=args.max_correction_angle
+        ),
+    )
+    result = align_scans(scans, prop, guesses_from_poses(poses, prop), options)
+    write_relations(args.output, result.relation_set())
+    if args.report:
+        from slamrel.outputs import write_text_atomic
+
+        write_text_atomic(args.report, format_report(result))
+    if args.review:
+        from pathlib import Path
+
+        from slamrel.review.scans import write_scan_review
+
+        write_scan_review(args.review, scans, result, poses, options, name=Path(args.log).name)
+    if not args.quiet:
+        flagged = int(result.flagged.sum())
+        print(
+            f"{len(result)} relations from {len(scans)} {scans.record} scans "
+            f"(guesses from {source}; {corrected} scan pose(s) odometry-corrected) "
+            f"-> {args.output}"
+        )
+        print(
+            f"{flagged} flagged for review, {int((result.initialiser == 'correlative').sum())} "
+            f"re-initialised by the correlative search"
         )
     return 0

@@ -729,33 +729,93 @@ def _carmen_count(fields: list[str], k: int, what: str, src: SourceText, number:
     return int(value)
 
 
-def _carmen_pose(
-    fields: list[str], *, pose: str, src: SourceText, number: int
-) -> tuple[float, tuple[float, float, float]]:
+class CarmenLayout(NamedTuple):
+    """Where the parts of one CARMEN record sit in its whitespace-split fields.
+
+    The one description of the CARMEN record layouts, shared by the trajectory reader and
+    the laser-scan reader (:mod:`slamrel.formats.laser`). Indices are into ``fields``
+    (``fields[0]`` is the record name); ``None`` when the record has no such part.
+
+    ``FLASER``/``RLASER n r1..rn x y θ odom_x odom_y odom_θ ipc_t host logger_t``;
+    ``ROBOTLASER1``/``ROBOTLASER2 type start fov res max_range accuracy remission_mode n
+    r1..rn m e1..em laser_x laser_y laser_θ robot_x robot_y robot_θ tv rv forward_safety
+    side_safety turn_axis ipc_t host logger_t``; ``RAWLASER1..4 type start fov res max_range
+    accuracy remission_mode n r1..rn m e1..em ipc_t host logger_t``; ``ODOM x y θ tv rv accel
+    ipc_t host logger_t``.
+    """
+
+    kind: str
+    readings: int
+    ranges: int | None
+    config: int | None
+    laser: int | None
+    robot: int | None
+    time: int
+
+
+CARMEN_LASER_RECORDS = ("FLASER", "RLASER", "ROBOTLASER1", "ROBOTLASER2") + tuple(
+    f"RAWLASER{k}" for k in range(1, 5)
+)
+"""CARMEN records that carry a laser scan (see :class:`CarmenLayout`)."""
+
+
+def carmen_layout(fields: list[str], src: SourceText, number: int) -> CarmenLayout:
+    """The :class:`CarmenLayout` of one record (ODOM or a laser record), its length checked.
+
+    Raises :class:`InputError` (file, line) for a count that is not a non-negative integer
+    or a record whose field count does not match its counts.
+    """
     kind = fields[0]
-    if kind == "FLASER":
+    if kind in ("FLASER", "RLASER"):
         n = _carmen_count(fields, 1, "number of readings", src, number)
+        layout = CarmenLayout(kind, n, 2, None, n + 2, n + 5, n + 8)
         expected = n + 11
-        base = n + 2 if pose == "laser" else n + 5
-        t_index = n + 8
-    elif kind == "ROBOTLASER1":
+    elif kind in ("ROBOTLASER1", "ROBOTLASER2") or kind.startswith("RAWLASER"):
         n = _carmen_count(fields, 8, "number of readings", src, number)
         m = _carmen_count(fields, 9 + n, "number of remissions", src, number)
-        expected = n + m + 24
-        base = 10 + n + m if pose == "laser" else 13 + n + m
-        t_index = 21 + n + m
-    else:  # ODOM
+        if kind.startswith("ROBOT"):
+            layout = CarmenLayout(kind, n, 9, 1, 10 + n + m, 13 + n + m, 21 + n + m)
+            expected = n + m + 24
+        else:
+            layout = CarmenLayout(kind, n, 9, 1, None, None, 10 + n + m)
+            expected = n + m + 13
+    elif kind == "ODOM":
+        layout = CarmenLayout(kind, 0, None, None, None, 1, 7)
         expected = 10
-        base = 1
-        t_index = 7
+    else:
+        raise InputError(f"{kind} is not a CARMEN pose or laser record", path=src.path, line=number)
     if len(fields) != expected:
         raise InputError(
             f"{kind} record: expected {expected} fields, got {len(fields)}",
             path=src.path,
             line=number,
         )
+    return layout
+
+
+def carmen_floats(
+    fields: list[str], start: int, count: int, what: str, src: SourceText, number: int
+) -> NDArray[np.float64]:
+    """``fields[start:start + count]`` as floats; a bad token raises :class:`InputError`."""
+    try:
+        chunk = fields[start : start + count]
+        if any(not tok.isascii() or "_" in tok for tok in chunk):
+            raise ValueError
+        return np.array(chunk, dtype=np.float64)
+    except ValueError:
+        for k in range(count):
+            _carmen_float(fields, start + k, f"{what} {k + 1}", src, number)
+        raise  # pragma: no cover - the loop above raises
+
+
+def _carmen_pose(
+    fields: list[str], *, pose: str, src: SourceText, number: int
+) -> tuple[float, tuple[float, float, float]]:
+    layout = carmen_layout(fields, src, number)
+    base = layout.laser if pose == "laser" and layout.laser is not None else layout.robot
+    assert base is not None
     p = tuple(_carmen_float(fields, base + k, c, src, number) for k, c in enumerate("xyθ"))
-    t = _carmen_float(fields, t_index, "ipc_timestamp", src, number)
+    t = _carmen_float(fields, layout.time, "ipc_timestamp", src, number)
     return t, p  # type: ignore[return-value]
 
 

@@ -217,6 +217,25 @@ def _asset(name: str) -> str:
     return resources.files("slamrel.review").joinpath(name).read_text(encoding="utf-8")
 
 
+def fill_page(
+    template: str, *, title: str, styles: tuple[str, ...], script: str, payload: Any
+) -> str:
+    """A self-contained page from this package's ``template`` with its assets inline.
+
+    ``/*{{TITLE}}*/``, ``/*{{STYLE}}*/``, ``/*{{DATA}}*/`` and ``/*{{SCRIPT}}*/`` are filled
+    in one pass (nothing substituted is substituted again); ``payload`` becomes JSON with
+    no ``<`` (so that ``</script`` or ``<!--`` cannot change how HTML parses it).
+    """
+    blob = json.dumps(payload, allow_nan=False, separators=(",", ":")).replace("<", "\\u003c")
+    parts = {
+        "TITLE": html.escape(title),
+        "STYLE": "\n".join(_asset(name) for name in styles),
+        "DATA": blob,
+        "SCRIPT": _asset(script),
+    }
+    return re.sub(r"/\*\{\{(\w+)\}\}\*/", lambda m: parts[m.group(1)], _asset(template))
+
+
 def review_html(
     data: ReviewData,
     *,
@@ -230,16 +249,13 @@ def review_html(
     """
     payload = data.as_dict()
     payload["names"] = {"estimate": names[0], "reference": names[1]}
-    # JSON inside <script>: "</script" or "<!--" would change how HTML parses it, so no "<"
-    blob = json.dumps(payload, allow_nan=False, separators=(",", ":")).replace("<", "\\u003c")
-    parts = {
-        "TITLE": html.escape(title),
-        "STYLE": _asset("review_page.css"),
-        "DATA": blob,
-        "SCRIPT": _asset("review_page.js"),
-    }
-    # one pass, so that nothing substituted is substituted again
-    return re.sub(r"/\*\{\{(\w+)\}\}\*/", lambda m: parts[m.group(1)], _asset("review_page.html"))
+    return fill_page(
+        "review_page.html",
+        title=title,
+        styles=("review_page.css",),
+        script="review_page.js",
+        payload=payload,
+    )
 
 
 def write_review(

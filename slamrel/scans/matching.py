@@ -1,0 +1,423 @@
+"""Point-to-line ICP for 2-D laser scans, with the quality measures a reviewer needs.
+
+Convention
+----------
+The relation of two scans is ``δ = [x, y, θ]``, the pose of the *current* scan's laser frame
+in the *reference* scan's laser frame (``δ_ij = x_i⁻¹ ∘ x_j`` of Kümmerle et al. 2009 with
+``i`` the reference, ``j`` the current scan): a current point ``p`` is ``R(θ) p + t`` in the
+reference frame.
+
+Metric (Censi 2008, "An ICP variant using a point-to-line metric", ICRA)
+-------------------------------------------------------------------------
+Each reference return ``a_k`` gets a line: the least-squares line through the returns of
+the neighbouring beams ``k−w … k+w`` that lie within ``radius`` and within ``max_gap · |j|``
+of it (at least three; a window whose scatter is not line-like,
+``λ_min/λ_max > max_curvature``, gets no line: corners and clutter). The line is stored as
+its centroid ``c_k`` and unit normal ``n_k``. (Censi builds the line from the two nearest
+reference points at every iteration; fitting it once per scan over a few neighbours is the
+same metric with less noise and no per-iteration work.) A current point ``q = R p + t`` is
+associated with the reference line whose centroid is nearest (cKDTree), if nearer than the
+gate; its residual is
+
+    e = n_kᵀ (R p + t − c_k)
+
+and the step solves the weighted Gauss–Newton system ``(Jᵀ W J) Δ = −Jᵀ W e`` with
+``J = [n_x, n_y, n_kᵀ R' p]`` (``R' p = [−(Rp)_y, (Rp)_x]``), updating ``t += Δ_t``,
+``θ += Δ_θ``.
+
+Robustness: the largest ``1 − trim`` share of ``|e|`` is dropped (trimmed ICP,
+Chetverikov et al. 2002) and the rest weighted by Cauchy's ``w = 1 / (1 + (e / (c σ))²)``,
+``σ = 1.4826 · median |e|`` (never below ``min_sigma``), ``c = 2.385``. The gate starts at
+``max_distance`` and shrinks to ``gate_sigmas · σ`` (never below ``min_distance``).
+
+Results (:class:`Alignment`)
+----------------------------
+``covariance``
+    The Gauss–Newton (Hessian) covariance ``Σ = s² (Jᵀ W J)⁻¹``, ``s² = Σ w e² / (Σ w − 3)``,
+    at the solution. It is *not* Censi's closed form (which adds the sensitivity of the
+    correspondences) and, as every such estimate from correlated laser residuals, it is
+    optimistic; use it to compare relations with each other and for the degeneracy test.
+``matched_fraction``
+    Share of the current scan's returns that end with a reference line within the final
+    gate and ``|e| ≤ 3 σ``.
+``residual``
+    RMS of ``e`` over the matched points [m].
+``condition``, ``weak_direction``, ``degenerate``
+    The translational information with the rotation marginalised out,
+    ``S = H_tt − H_tθ H_θθ⁻¹ H_θt`` (2 × 2, ``H = Jᵀ W J``); ``condition = λ_min / λ_max`` of
+    ``S`` and ``weak_direction`` its eigenvector of ``λ_min`` in the reference frame. A
+    corridor constrains only the direction across it: ``condition`` near 0, and the weak
+    direction is along the corridor. ``degenerate`` when ``condition < degenerate_ratio``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from relation_metric.se2 import wrap_angle_float
+
+__all__ = [
+    "IcpOptions",
+    "PreparedScan",
+    "Alignment",
+    "prepare_scan",
+    "align",
+    "transform",
+]
+
+_MAD = 1.4826
+_CAUCHY = 2.385
+
+
+@dataclass(frozen=True)
+class IcpOptions:
+    """Parameters of :func:`align` (lengths in metres, angles in radians).
+
+    Attributes
+    ----------
+    max_distance : float
+        Initial association gate (0.5 m).
+    min_distance : float
+        Smallest gate the adaptive gate may shrink to (0.05 m).
+    gate_sigmas : float
+        The gate shrinks to this many robust residual scales (4).
+    trim : float
+        Share of the associated points kept, the smallest residuals (0.9).
+    min_sigma : float
+        Floor of the robust residual scale (0.005 m: the order of a laser's range noise).
+    max_iterations : int
+        Gauss–Newton iterations at most (60).
+    tolerance : float
+        Convergence: a step below this in translation [m] and in rotation [rad] (1e-6).
+    min_matches : int
+        Fewer associated points than this is a failure (20).
+    degenerate_ratio : float
+        ``condition`` below this flags degenerate geometry (0.02).
+    stall_tolerance, stall_iterations : float, int
+        Also converged: steps below ``stall_tolerance`` (1e-4 m and rad) for
+        ``stall_iterations`` (4) iterations in a row at a settled gate. Trimming and the
+        gate switch a few correspondences back and forth, and the estimate then circles
+        within that tolerance instead of settling below ``tolerance``. When it circles
+        exactly (the same iterates again, period 2–4, twice in a row) it stops at the mean
+        of the cycle.
+    """
+
+    max_distance: float = 0.5
+    min_distance: float = 0.05
+    gate_sigmas: float = 4.0
+    trim: float = 0.9
+    min_sigma: float = 0.005
+    max_iterations: int = 60
+    tolerance: float = 1e-6
+    min_matches: int = 20
+    degenerate_ratio: float = 0.02
+    stall_tolerance: float = 1e-4
+    stall_iterations: int = 4
+
+
+@dataclass(frozen=True)
+class PreparedScan:
+    """A scan ready to be matched: its returns, and the lines fitted to it.
+
+    Attributes
+    ----------
+    points : (K, 2) float
+        The returns in the laser frame (the role of the *current* scan).
+    anchors, normals : (L, 2) float
+        Centroid and unit normal of each fitted line (the role of the *reference* scan).
+    tree : cKDTree
+        Over ``anchors``.
+    """
+
+    points: NDArray[np.float64]
+    anchors: NDArray[np.float64]
+    normals: NDArray[np.float64]
+    tree: cKDTree = field(repr=False)
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """The result of :func:`align` (see the module docstring for each measure).
+
+    Attributes
+    ----------
+    delta : (3,) float
+        ``[x, y, θ]`` of the current scan in the reference frame.
+    guess : (3,) float
+        The initial guess it started from.
+    covariance : (3, 3) float
+        Gauss–Newton covariance of ``delta`` (NaN when the alignment failed).
+    matched_fraction : float
+    residual : float
+        RMS point-to-line residual of the matched points [m].
+    sigma : float
+        Robust residual scale at the end [m].
+    matches : int
+        Number of matched points.
+    iterations : int
+    converged : bool
+    condition : float
+        ``λ_min / λ_max`` of the translational information.
+    weak_direction : (2,) float
+        Unit vector of the least constrained translation, reference frame.
+    degenerate : bool
+    failed : str
+        Why no estimate exists ("" when one does): too few returns or matches.
+    """
+
+    delta: NDArray[np.float64]
+    guess: NDArray[np.float64]
+    covariance: NDArray[np.float64]
+    matched_fraction: float
+    residual: float
+    sigma: float
+    matches: int
+    iterations: int
+    converged: bool
+    condition: float
+    weak_direction: NDArray[np.float64]
+    degenerate: bool
+    failed: str = ""
+
+
+def transform(delta: NDArray[np.float64], points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``R(θ) p + t`` for points ``(K, 2)`` and ``delta = [x, y, θ]``."""
+    c, s = np.cos(delta[2]), np.sin(delta[2])
+    out = np.empty_like(points)
+    out[:, 0] = c * points[:, 0] - s * points[:, 1] + delta[0]
+    out[:, 1] = s * points[:, 0] + c * points[:, 1] + delta[1]
+    return out
+
+
+def prepare_scan(
+    beam_points: NDArray[np.float64],
+    *,
+    window: int = 8,
+    radius: float = 0.2,
+    max_gap: float = 0.3,
+    max_curvature: float = 0.05,
+) -> PreparedScan:
+    """Fit the lines of a scan given in beam order, ``(B, 2)`` with NaN rows for no return.
+
+    Parameters
+    ----------
+    beam_points : (B, 2) float
+        Cartesian returns in the laser frame, one row a beam (NaN: no return), as
+        :meth:`slamrel.formats.laser.LaserScans.points` gives them.
+    window : int
+        Neighbouring beams on each side that may join a line fit (8).
+    radius : float
+        A neighbour joins only when within ``radius`` of the beam's return [m] (0.2 m: a
+        line long enough that 1 cm range noise tilts it little, short enough for corners).
+    max_gap : float
+        A neighbour ``j`` beams away joins the fit when within ``max_gap · |j|`` [m].
+    max_curvature : float
+        Largest ``λ_min / λ_max`` of the window's scatter that still counts as a line.
+    """
+    p = np.asarray(beam_points, dtype=np.float64)
+    valid = np.asarray(np.isfinite(p).all(axis=1), dtype=bool)
+    b = p.shape[0]
+    offsets = np.arange(-window, window + 1)
+    idx = np.arange(b)[:, None] + offsets[None, :]
+    inside = (idx >= 0) & (idx < b)
+    idx = np.clip(idx, 0, max(b - 1, 0))
+    nb = p[idx]  # (B, W, 2)
+    with np.errstate(invalid="ignore"):
+        dist = np.linalg.norm(nb - p[:, None, :], axis=2)
+        use = np.asarray(inside & valid[idx] & valid[:, None])
+        use &= (dist <= max_gap * np.abs(offsets)[None, :]) & (dist <= radius)
+    count = use.sum(axis=1)
+    w = use.astype(np.float64)
+    nbz = np.where(use[:, :, None], nb, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        centroid = nbz.sum(axis=1) / count[:, None]
+        d = np.where(use[:, :, None], nb - centroid[:, None, :], 0.0)
+        cxx = (w * d[:, :, 0] ** 2).sum(axis=1)
+        cyy = (w * d[:, :, 1] ** 2).sum(axis=1)
+        cxy = (w * d[:, :, 0] * d[:, :, 1]).sum(axis=1)
+        half_trace = 0.5 * (cxx + cyy)
+        root = np.sqrt(0.25 * (cxx - cyy) ** 2 + cxy**2)
+        lam_min, lam_max = half_trace - root, half_trace + root
+        phi = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
+        line = (count >= 3) & (lam_min <= max_curvature * lam_max) & (lam_max > 0)
+    normals = np.column_stack((-np.sin(phi), np.cos(phi)))[line]
+    anchors = centroid[line]
+    return PreparedScan(p[valid], anchors, normals, cKDTree(anchors))
+
+
+def _cycle(history: list[NDArray[np.float64]], tolerance: float, longest: int = 4) -> int:
+    """The period ``p ≤ longest`` with ``x_k = x_{k−p}`` to ``tolerance`` (seen twice), or 0."""
+    for p in range(2, longest + 1):
+        if len(history) > 2 * p and all(
+            np.abs(history[-1 - q] - history[-1 - q - p]).max() < tolerance for q in range(p)
+        ):
+            return p
+    return 0
+
+
+def _median(a: NDArray[np.float64]) -> float:
+    """The median of a non-empty 1-D array (``np.partition``, without ``np.median``'s checks)."""
+    n = a.shape[0]
+    h = n // 2
+    part = np.partition(a, [h - 1, h] if n % 2 == 0 and n > 1 else h)
+    return float(part[h] if n % 2 else 0.5 * (part[h - 1] + part[h]))
+
+
+def _failed(guess: NDArray[np.float64], why: str, iterations: int = 0) -> Alignment:
+    nan3 = np.full((3, 3), np.nan)
+    return Alignment(
+        guess.copy(),
+        guess.copy(),
+        nan3,
+        0.0,
+        float("nan"),
+        float("nan"),
+        0,
+        iterations,
+        False,
+        float("nan"),
+        np.full(2, np.nan),
+        False,
+        why,
+    )
+
+
+def align(
+    reference: PreparedScan,
+    current: PreparedScan,
+    guess: NDArray[np.float64],
+    options: IcpOptions | None = None,
+) -> Alignment:
+    """Align ``current`` to ``reference`` from ``guess`` by point-to-line ICP.
+
+    Parameters
+    ----------
+    reference, current : PreparedScan
+    guess : (3,) float
+        Initial ``[x, y, θ]`` of the current scan in the reference frame.
+    options : IcpOptions, optional
+
+    Returns
+    -------
+    Alignment
+        ``failed`` is non-empty (and ``delta`` the guess) when there are too few returns,
+        lines or matches to estimate three parameters.
+    """
+    opt = options or IcpOptions()
+    guess = np.asarray(guess, dtype=np.float64).reshape(3)
+    x = guess.copy()
+    pts = current.points
+    if pts.shape[0] < opt.min_matches or reference.anchors.shape[0] < opt.min_matches:
+        return _failed(guess, "too few returns or lines")
+    gate = opt.max_distance
+    converged = False
+    it = 0
+    sigma = opt.min_sigma
+    stalled = 0
+    history: list[NDArray[np.float64]] = [x]
+    for it in range(1, opt.max_iterations + 1):
+        q = transform(x, pts)
+        dist, k = reference.tree.query(q, distance_upper_bound=gate)
+        ok = np.isfinite(dist)
+        if int(ok.sum()) < opt.min_matches:
+            return _failed(guess, "too few matches", it)
+        kk = k[ok]
+        n = reference.normals[kk]
+        qo = q[ok]
+        e = np.einsum("ij,ij->i", n, qo - reference.anchors[kk])
+        ae = np.abs(e)
+        keep = max(opt.min_matches, int(np.ceil(opt.trim * ae.shape[0])))
+        if keep < ae.shape[0]:
+            cut = np.partition(ae, keep - 1)[keep - 1]
+            sel = ae <= cut
+            n, qo, e, ae = n[sel], qo[sel], e[sel], ae[sel]
+        sigma = max(_MAD * _median(ae), opt.min_sigma)
+        w = 1.0 / (1.0 + (e / (_CAUCHY * sigma)) ** 2)
+        rp_x = qo[:, 0] - x[0]
+        rp_y = qo[:, 1] - x[1]
+        jac = np.column_stack((n[:, 0], n[:, 1], n[:, 1] * rp_x - n[:, 0] * rp_y))
+        jw = jac * w[:, None]
+        h = jw.T @ jac
+        g = jw.T @ e
+        try:
+            step = -np.linalg.solve(h, g)
+        except np.linalg.LinAlgError:
+            step = -np.linalg.lstsq(h, g, rcond=None)[0]
+        x = x + step
+        history.append(x)
+        new_gate = min(opt.max_distance, max(opt.min_distance, opt.gate_sigmas * sigma))
+        size = max(float(np.hypot(step[0], step[1])), abs(float(step[2])))
+        small = size < opt.tolerance
+        stalled = stalled + 1 if size < opt.stall_tolerance else 0
+        settled = new_gate >= gate * 0.999
+        if (small or stalled >= opt.stall_iterations) and settled:
+            converged = True
+            break
+        period = _cycle(history, opt.tolerance)
+        if period and settled:  # the correspondences repeat: the iteration is periodic
+            x = np.mean(history[-period:], axis=0)
+            converged = True
+            break
+        gate = min(gate, new_gate) if small or it > 5 else gate
+    return _summarise(reference, current, x, guess, gate, sigma, it, converged, opt)
+
+
+def _summarise(
+    reference: PreparedScan,
+    current: PreparedScan,
+    x: NDArray[np.float64],
+    guess: NDArray[np.float64],
+    gate: float,
+    sigma: float,
+    iterations: int,
+    converged: bool,
+    opt: IcpOptions,
+) -> Alignment:
+    """Quality measures at the solution ``x`` (see the module docstring)."""
+    pts = current.points
+    q = transform(x, pts)
+    dist, k = reference.tree.query(q, distance_upper_bound=gate)
+    ok = np.isfinite(dist)
+    kk = k[ok]
+    n = reference.normals[kk]
+    e = np.einsum("ij,ij->i", n, q[ok] - reference.anchors[kk])
+    inlier = np.abs(e) <= 3.0 * sigma
+    n, qo, e = n[inlier], q[ok][inlier], e[inlier]
+    m = int(e.shape[0])
+    if m < opt.min_matches:
+        return _failed(guess, "too few matches", iterations)
+    w = 1.0 / (1.0 + (e / (_CAUCHY * sigma)) ** 2)
+    rp_x, rp_y = qo[:, 0] - x[0], qo[:, 1] - x[1]
+    jac = np.column_stack((n[:, 0], n[:, 1], n[:, 1] * rp_x - n[:, 0] * rp_y))
+    h = (jac * w[:, None]).T @ jac
+    s2 = float((w * e * e).sum() / max(w.sum() - 3.0, 1.0))
+    try:
+        cov = s2 * np.linalg.inv(h)
+    except np.linalg.LinAlgError:
+        cov = np.full((3, 3), np.inf)
+    if h[2, 2] > 0:
+        schur = h[:2, :2] - np.outer(h[:2, 2], h[2, :2]) / h[2, 2]
+    else:
+        schur = h[:2, :2]
+    lam, vec = np.linalg.eigh(schur)
+    condition = float(lam[0] / lam[1]) if lam[1] > 0 else 0.0
+    out = x.copy()
+    out[2] = wrap_angle_float(float(out[2]))
+    return Alignment(
+        delta=out,
+        guess=guess.copy(),
+        covariance=cov,
+        matched_fraction=m / max(pts.shape[0], 1),
+        residual=float(np.sqrt(np.mean(e * e))),
+        sigma=sigma,
+        matches=m,
+        iterations=iterations,
+        converged=converged,
+        condition=condition,
+        weak_direction=vec[:, 0].copy(),
+        degenerate=condition < opt.degenerate_ratio,
+    )

@@ -1,0 +1,158 @@
+"""Which scan pairs to align: consecutive by travel, loops by proximity, or given timestamps.
+
+All three return :class:`Proposals`: scan index pairs ``(P, 2)`` (reference first), plus the
+timestamps the relations will carry. Poses are ``(N, 3)`` laser poses ``[x, y, θ]`` of an
+estimate (or the log's odometry) at the scans' times.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from relation_metric.errors import InputError
+from relation_metric.se2 import between
+from slamrel.formats.laser import nearest_times
+
+__all__ = ["Proposals", "keyframes", "consecutive_pairs", "loop_pairs", "pairs_at_times"]
+
+
+@dataclass(frozen=True)
+class Proposals:
+    """Scan pairs to align.
+
+    Attributes
+    ----------
+    pairs : (P, 2) int
+        ``[i, j]``: scan ``j`` is aligned to reference scan ``i``.
+    t1, t2 : (P,) float
+        The timestamps the relations carry (the scans' own, or the ones of a relation file).
+    kind : (P,) str
+        ``"consecutive"``, ``"loop"`` or ``"given"``.
+    time_offset : (P,) float
+        ``max(|t1 − t(scan i)|, |t2 − t(scan j)|)`` [s]: 0 unless times were given.
+    """
+
+    pairs: NDArray[np.int64]
+    t1: NDArray[np.float64]
+    t2: NDArray[np.float64]
+    kind: NDArray[np.str_]
+    time_offset: NDArray[np.float64]
+
+    def __len__(self) -> int:
+        return int(self.pairs.shape[0])
+
+    def __add__(self, other: Proposals) -> Proposals:
+        return Proposals(
+            np.concatenate((self.pairs, other.pairs)).astype(np.int64),
+            np.concatenate((self.t1, other.t1)),
+            np.concatenate((self.t2, other.t2)),
+            np.concatenate((self.kind, other.kind)),
+            np.concatenate((self.time_offset, other.time_offset)),
+        )
+
+
+def _proposals(pairs: NDArray[np.int64], times: NDArray[np.float64], kind: str) -> Proposals:
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    return Proposals(
+        pairs,
+        times[pairs[:, 0]],
+        times[pairs[:, 1]],
+        np.full(pairs.shape[0], kind),
+        np.zeros(pairs.shape[0]),
+    )
+
+
+def keyframes(poses: NDArray[np.float64], distance: float, angle: float) -> NDArray[np.int64]:
+    """Indices of scans a robot keeps when it moved ``distance`` [m] or turned ``angle`` [rad].
+
+    The first scan is a keyframe; scan ``k`` is the next one when the motion since the last
+    keyframe, ``between(x_last, x_k)``, has a translation ``≥ distance`` or a rotation
+    ``≥ angle``. (Sequential by nature: each choice depends on the previous one.)
+    """
+    n = poses.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    keep = [0]
+    last = poses[0]
+    rel = between(poses[0], poses)
+    for k in range(1, n):
+        d = rel[k]
+        if np.hypot(d[0], d[1]) >= distance or abs(d[2]) >= angle:
+            keep.append(k)
+            last = poses[k]
+            rel = between(last, poses)
+    return np.asarray(keep, dtype=np.int64)
+
+
+def consecutive_pairs(
+    poses: NDArray[np.float64], times: NDArray[np.float64], *, distance: float, angle: float
+) -> Proposals:
+    """Pairs of consecutive keyframes (:func:`keyframes`)."""
+    key = keyframes(poses, distance, angle)
+    return _proposals(np.column_stack((key[:-1], key[1:])), times, "consecutive")
+
+
+def loop_pairs(
+    poses: NDArray[np.float64],
+    times: NDArray[np.float64],
+    *,
+    radius: float,
+    min_travel: float,
+    distance: float,
+    angle: float,
+    max_angle: float = np.pi,
+) -> Proposals:
+    """Keyframe pairs that are near in space but far apart along the path.
+
+    Keyframes (:func:`keyframes`) whose positions lie within ``radius`` [m] of each other,
+    whose headings differ by at most ``max_angle`` [rad] (a laser with a limited field of
+    view sees little of the same scene from opposite directions), and between which the
+    estimate travelled at least ``min_travel`` [m].
+    """
+    key = keyframes(poses, distance, angle)
+    p = poses[key]
+    travel = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))))
+    pairs = np.array(sorted(cKDTree(p[:, :2]).query_pairs(radius)), dtype=np.int64).reshape(-1, 2)
+    if pairs.shape[0]:
+        i, j = key[pairs[:, 0]], key[pairs[:, 1]]
+        dth = np.abs(between(poses[i], poses[j])[:, 2])
+        ok = (np.abs(travel[j] - travel[i]) >= min_travel) & (dth <= max_angle)
+        pairs = np.column_stack((i[ok], j[ok]))
+    return _proposals(pairs, times, "loop")
+
+
+def pairs_at_times(
+    scan_times: NDArray[np.float64],
+    t1: NDArray[np.float64],
+    t2: NDArray[np.float64],
+    *,
+    tolerance: float,
+    path: str | None = None,
+) -> Proposals:
+    """The scans nearest to each timestamp pair of a relation file.
+
+    A timestamp farther than ``tolerance`` [s] from every scan is an error (naming the first
+    such relation): a relation between scans the log does not hold cannot be re-derived.
+    """
+    i, di = nearest_times(scan_times, t1)
+    j, dj = nearest_times(scan_times, t2)
+    off = np.maximum(di, dj)
+    far = np.flatnonzero(off > tolerance)
+    if far.size:
+        k = int(far[0])
+        raise InputError(
+            f"{far.size} relation(s) name times with no scan within {tolerance} s; the first, "
+            f"relation {k + 1} ({t1[k]!r} {t2[k]!r}), is {off[k]:.3g} s from the nearest scan",
+            path=path,
+        )
+    return Proposals(
+        np.column_stack((i, j)).astype(np.int64),
+        np.asarray(t1, dtype=np.float64),
+        np.asarray(t2, dtype=np.float64),
+        np.full(i.shape[0], "given"),
+        off,
+    )
