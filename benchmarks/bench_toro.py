@@ -57,13 +57,14 @@ def real_toro(binary: str, graph: PoseGraph, iterations: int) -> tuple[np.ndarra
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "g.graph"
         write_toro_graph(path, graph)
-        out = subprocess.run(
+        done = subprocess.run(
             [binary, "-i", str(iterations), "-nde", str(path)],
             capture_output=True,
             text=True,
             check=True,
             cwd=tmp,
-        ).stdout
+        )
+        out = done.stdout + done.stderr
         seconds = float(re.search(r"TOTAL TIME\s*=\s*([0-9.eE+-]+)", out).group(1))  # type: ignore[union-attr]
         poses = np.asarray(read_toro_graph(Path(tmp) / "g-treeopt-final.graph")[0].poses)
     return poses, seconds / max(iterations, 1)
