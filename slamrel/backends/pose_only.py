@@ -73,6 +73,10 @@ __all__ = [
     "full_least_squares",
     "pose_only_least_squares",
     "pose_only_graph",
+    "ChiSquare",
+    "relative_pose_chi2",
+    "odometry_graph",
+    "data_chi2",
     "pose_only_from_landmark_graph",
     "LandmarkGraphPoseOnly",
     "PoseOnlyResult",
@@ -802,6 +806,72 @@ def landmarks_given_poses(
         cov = cov + g @ px @ g.T
         cov = 0.5 * (cov + cov.T)
     return readonly(lm), readonly(cov), ids
+
+
+@dataclass(frozen=True)
+class ChiSquare:
+    """A χ² statistic of measurements at an estimate and its degrees of freedom.
+
+    Attributes
+    ----------
+    value : float
+        ``Σ eᵀ Ω e`` over the measurements.
+    dof : int
+        Measurement dimensions minus estimated dimensions (its expected value for a
+        consistent least-squares estimate).
+    measurements : int
+        Measurement dimensions.
+    """
+
+    value: float
+    dof: int
+    measurements: int
+
+
+def relative_pose_chi2(graph: PoseGraph, poses: ArrayLike) -> ChiSquare:
+    """Hu et al.'s NEES2: the χ² of a pose graph's relative-pose constraints at ``poses``,
+    ``Σ_c e_cᵀ Ω_c e_c`` with ``e_c = [R_iᵀ (t_j − t_i) − δ_t, wrap(θ_j − θ_i − δ_θ)]``.
+    No ground truth. Degrees of freedom ``3 E − 3 (N − 1)`` (pose 0 fixed).
+
+    For pose-only SLAM the graph is the one solved (pair constraints and odometry); for full
+    least squares, whose only relative-pose constraints are the odometry steps, the
+    odometry graph."""
+    x = np.asarray(poses, dtype=np.float64)
+    e = se2.between(x[graph.pp_i], x[graph.pp_j]) - graph.pp_z
+    e[:, 2] = se2.wrap_angle(e[:, 2])
+    value = float(np.einsum("ea,eab,eb->", e, graph.pp_info, e))
+    m = 3 * int(graph.pp_i.size)
+    return ChiSquare(value, m - 3 * (graph.n_poses - 1), m)
+
+
+def odometry_graph(log: LandmarkLog) -> PoseGraph:
+    """The log's odometry steps as a pose graph (full least squares' relative-pose
+    constraints, for :func:`relative_pose_chi2`)."""
+    i, u, info = _odometry_factors(log)
+    return PoseGraph(log.odometry.poses, np.empty((0, 2)), i, i + 1, u, info)
+
+
+def data_chi2(log: LandmarkLog, poses: ArrayLike) -> ChiSquare:
+    """Hu et al.'s NEES3: the χ² of *all* the original measurements — every odometry step
+    and every landmark observation — with the poses fixed at ``poses`` and the landmarks at
+    their least-squares fit to them (:func:`landmarks_given_poses`). No ground truth.
+
+    Degrees of freedom ``3 (N − 1) + 2 K − 3 (N − 1) − 2 L = 2 (K − L)`` (K observations, L
+    landmarks; the poses and landmarks estimated): full least squares minimises exactly this
+    χ², so its value is its final cost × 2 and ≈ the dof when its noise model is right; any
+    other estimate of the poses gives more."""
+    x = np.asarray(poses, dtype=np.float64)
+    lm, _, ids = landmarks_given_poses(log, x)
+    lookup = np.empty(int(ids.max()) + 1 if ids.size else 0, dtype=np.int64)
+    lookup[ids] = np.arange(ids.size)
+    z, info = cartesian_observations(log)
+    k = log.pose
+    pred = se2.inverse_transform_points(x[k], lm[lookup[log.landmark]])
+    e_o = pred - z
+    odo = relative_pose_chi2(odometry_graph(log), x)
+    value = odo.value + float(np.einsum("ka,kab,kb->", e_o, info, e_o))
+    m = odo.measurements + 2 * int(k.size)
+    return ChiSquare(value, m - 3 * (x.shape[0] - 1) - 2 * int(ids.size), m)
 
 
 def nees3(
