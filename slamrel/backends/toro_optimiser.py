@@ -168,6 +168,16 @@ def incremental_tree(
     return parent
 
 
+_TWO_PI = 2.0 * np.pi
+
+
+def _wrap(a: Array) -> Array:
+    """Angles to ``[−π, π)`` in three array operations (the hot loop's residual angles)."""
+    w = np.remainder(a + np.pi, _TWO_PI) - np.pi
+    w[w >= np.pi] -= _TWO_PI  # the remainder can round up to exactly 2π
+    return w
+
+
 def graph_cost(poses: Array, graph: PoseGraph) -> float:
     """``½ Σ eᵀ Ω e`` of the pose–pose factors (local residual, the graph's information)."""
     e = se2.between(poses[graph.pp_i], poses[graph.pp_j]) - graph.pp_z
@@ -318,14 +328,22 @@ def toro_optimize(
     paths = _paths(parent, depth, pi, pj)
     visit = np.argsort(depth[paths.lca], kind="stable") if order == "depth" else np.arange(pi.size)
     runs = _runs(paths.signed, visit)
+    # the runs laid end to end: constraint slots [c0, c1) and path entries [n0, n1) per run
+    concat = np.concatenate(runs) if runs else np.empty(0, np.int64)
+    sub = paths.signed[concat]
+    nodes_all = sub.indices.astype(np.int64)
+    sign_all = sub.data.astype(np.float64)
+    owner_all = np.repeat(np.arange(concat.size), np.diff(sub.indptr))
+    # per entry: (±1 for the path difference, 1 on the i side for the heading of i)
+    factor_all = np.stack((sign_all, (sign_all > 0).astype(np.float64)), axis=1)[:, None, :]
+    bounds = np.cumsum([0] + [r.size for r in runs])
     blocks = []
-    for run in runs:  # per run: its poses, their owner's run position, ±1, owner starts
-        s = paths.signed[run]
-        counts = np.diff(s.indptr)
-        starts = s.indptr[:-1].astype(np.int64)
+    for k in range(len(runs)):
+        c0, c1 = int(bounds[k]), int(bounds[k + 1])
+        n0, n1 = int(sub.indptr[c0]), int(sub.indptr[c1])
         blocks.append(
-            (run, s.indices.astype(np.int64), np.repeat(np.arange(run.size), counts),
-             s.data[:, None], (s.data > 0).astype(np.float64), starts)
+            (c0, c1, n0, n1, nodes_all[n0:n1], owner_all[n0:n1] - c0,
+             (sub.indptr[c0:c1] - n0).astype(np.int64), factor_all[n0:n1])
         )  # fmt: skip
     p0 = _tree_guess(graph, parent, levels) if initial == "tree" else np.array(graph.poses)
     x = p0.copy()
@@ -356,22 +374,28 @@ def toro_optimize(
         m_inv = np.zeros_like(m)
         np.divide(1.0, m, out=m_inv, where=active)
         frac = np.minimum(1.0, 2.0 * length[:, None] * w / (gamma * t))
-        th_lca = p[paths.lca, 2]
-        for run, nodes, owner, sign, on_i, starts in blocks:
+        # what stays fixed within an iteration, in run order: the share of each path pose
+        # (M_k⁻¹ / Σ_P M⁻¹, signed), the fractions, the top poses' headings
+        mn = m_inv[nodes_all]
+        share = np.add.reduceat(mn, sub.indptr[:-1]) if concat.size else mn
+        split = np.zeros_like(mn)
+        np.divide(mn * sign_all[:, None], share[owner_all], out=split, where=share[owner_all] > 0)
+        neg_frac = -frac[concat]
+        th_top = p[paths.lca[concat], 2]
+        z_run = z[concat]
+        for c0, c1, n0, n1, nodes, owner, starts, factor in blocks:
             xn = x[nodes]
-            d = np.add.reduceat(xn * sign, starts)  # (t_i − t_j, θ_i − θ_j) over the path
-            th = th_lca[run] + np.add.reduceat(xn[:, 2] * on_i, starts)
+            # (t_i − t_j, θ_i − θ_j) over the path and Σ of the i side's parameters, at once
+            both = np.add.reduceat(xn[:, :, None] * factor, starts)
+            th = th_top[c0:c1] + both[:, 2, 1]
+            zr = z_run[c0:c1]
             cr, sr = np.cos(th), np.sin(th)
-            zr = z[run]
-            r = np.empty_like(d)
-            r[:, 0] = d[:, 0] + cr * zr[:, 0] - sr * zr[:, 1]
-            r[:, 1] = d[:, 1] + sr * zr[:, 0] + cr * zr[:, 1]
-            r[:, 2] = se2.wrap_angle(d[:, 2] + zr[:, 2])
-            mn = m_inv[nodes]
-            share = np.add.reduceat(mn, starts)
-            coef = np.zeros_like(r)
-            np.divide(-frac[run] * r, share, out=coef, where=share > 0)
-            x[nodes] = xn + mn * coef[owner] * sign  # the poses of a run are distinct
+            r = both[:, :, 0]
+            r[:, 0] += cr * zr[:, 0] - sr * zr[:, 1]
+            r[:, 1] += sr * zr[:, 0] + cr * zr[:, 1]
+            r[:, 2] = _wrap(r[:, 2] + zr[:, 2])
+            r *= neg_frac[c0:c1]
+            x[nodes] = xn + split[n0:n1] * r[owner]  # the poses of a run are distinct
         costs.append(graph_cost(poses_of(x), graph))
     p = poses_of(x)
     p[:, 2] = se2.wrap_angle(p[:, 2])
