@@ -75,3 +75,36 @@ def test_solve_refusals(tmp_path, capsys, rng, extra, said):
     ring = str(tmp_path / "ring.g2o")
     assert main(["solve", ring, "-o", str(tmp_path / "p"), "--pose-only", "m2"]) == 3
     assert "this graph has none (a pose graph: drop --pose-only)" in capsys.readouterr().err
+
+
+def test_a_landmark_graph_as_a_log_keeps_every_factor():
+    from relation_metric.errors import InputError
+    from slamrel.backends.least_squares import PoseGraph
+    from slamrel.backends.pose_only import pose_only_from_landmark_graph
+
+    w = make_world("hu-simple1", noise="a", seed=2)
+    log = LandmarkLog.from_world(w)
+    g, _ = full_graph(log)
+    # a loop closure and a repeated step beside the odometry: kept, counted, unchanged
+    extra_i, extra_j = np.array([0, 5]), np.array([40, 6])
+    z = se2.between(np.asarray(w.truth.poses)[extra_i], np.asarray(w.truth.poses)[extra_j])
+    info = np.broadcast_to(np.diag([100.0, 100.0, 400.0]), (2, 3, 3))
+    # the loop closure first, the repeated step last: the first factor k -> k+1 is odometry
+    e = g.pp_i.size
+    g2 = PoseGraph(g.poses, g.landmarks, np.concatenate((extra_i[:1], g.pp_i, extra_i[1:])),
+                   np.concatenate((extra_j[:1], g.pp_j, extra_j[1:])),
+                   np.concatenate((z[:1], g.pp_z, z[1:])), np.concatenate((info[:1], g.pp_info,
+                   info[1:])), g.pl_k, g.pl_l, g.pl_z, g.pl_info)  # fmt: skip
+    back, other = LandmarkLog.from_graph(g2)
+    np.testing.assert_array_equal(other, [0, e + 1])
+    np.testing.assert_allclose(back.odometry.poses, log.odometry.poses, atol=1e-9)
+    np.testing.assert_array_equal(np.sort(back.pose), np.sort(log.pose))
+    po = pose_only_from_landmark_graph(g2, method=1)
+    assert po.kept == 2
+    assert po.graph.pp_i.size == po.constraints.pairs.shape[0] + (g.n_poses - 1) + 2
+    np.testing.assert_array_equal(po.graph.pp_z[-2:], z)
+    gap = PoseGraph(g.poses, g.landmarks, g.pp_i[g.pp_i != 7], g.pp_j[g.pp_i != 7],
+                    g.pp_z[g.pp_i != 7], g.pp_info[g.pp_i != 7], g.pl_k, g.pl_l, g.pl_z,
+                    g.pl_info)  # fmt: skip
+    with pytest.raises(InputError, match="no pose-pose factor from pose 7 to pose 8"):
+        LandmarkLog.from_graph(gap)
