@@ -33,7 +33,7 @@ if TYPE_CHECKING:  # the library is imported where it is used: start-up stays li
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     s = sub.add_parser(
         "solve",
-        help="least squares or TORO on a pose graph, full or pose-only (g2o or iSAM text)",
+        help="least squares or TORO on a pose graph, full or pose-only (g2o, TORO or iSAM text)",
         description="--method lm (default): Levenberg-Marquardt from the file's initial "
         "guess: the whole graph "
         "first, given up when it stalls (a step removing less than half the cost while "
@@ -125,9 +125,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
     """The graph and its file's pose and landmark ids."""
+    import numpy as np
+
     from slamrel.formats.g2o import read_g2o_graph
     from slamrel.formats.isam import is_isam, read_isam
     from slamrel.formats.text import read_source
+    from slamrel.formats.toro import is_toro, read_toro_graph
 
     # the reader of `import isam`, and its rules (comments, byte order mark, missing file,
     # a folder, no permission): the same file gets the same verdict from both commands
@@ -136,6 +139,9 @@ def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
         with in_option_words(NOISE_WORDS):
             data = read_isam(path, noise=noise, source=src)  # type: ignore[arg-type]
         return data.graph, data.pose_ids, data.landmark_ids
+    if is_toro(src):
+        graph, ids = read_toro_graph(path)
+        return graph, ids, np.empty(0, np.int64)
     return read_g2o_graph(path, source=src)
 
 
