@@ -216,3 +216,19 @@ def test_toro_options_are_checked(rng):
         toro_optimize(g, tree="mst")  # type: ignore[arg-type]
     with pytest.raises(InputError, match="order must be one of depth, input"):
         toro_optimize(g, order="random")  # type: ignore[arg-type]
+
+
+def test_toro_says_a_disconnected_pose_before_an_out_of_order_one():
+    z = np.zeros((2, 3))
+    info = np.broadcast_to(np.eye(3), (2, 3, 3))
+    # poses 2 and 3 are linked to each other only: not connected to pose 0
+    g = PoseGraph(np.zeros((4, 3)), np.empty((0, 2)), [0, 2], [1, 3], z, info)
+    with pytest.raises(InputError, match="pose 2 is not connected to pose 0"):
+        toro_optimize(g)
+    # connected, but pose 2 is linked to a later pose only: the incremental tree cannot
+    # insert it in order, the breadth-first tree can
+    g = PoseGraph(np.zeros((4, 3)), np.empty((0, 2)), [0, 3, 0], [1, 2, 3], np.zeros((3, 3)),
+                  np.broadcast_to(np.eye(3), (3, 3, 3)))  # fmt: skip
+    with pytest.raises(InputError, match="pose 2 has no constraint to an earlier pose"):
+        toro_optimize(g)
+    np.testing.assert_array_equal(toro_optimize(g, tree="breadth-first").parent, [-1, 0, 3, 0])

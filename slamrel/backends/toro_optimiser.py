@@ -321,9 +321,9 @@ def toro_optimize(
             raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
     n = graph.n_poses
     pi, pj = graph.pp_i, graph.pp_j
-    parent = (incremental_tree if tree == "incremental" else spanning_tree)(n, pi, pj)
-    if tree == "incremental" and n > 1:
-        spanning_tree(n, pi, pj)  # the same connectivity check and message
+    parent = spanning_tree(n, pi, pj)  # first: a pose not connected to pose 0 is said as such
+    if tree == "incremental":
+        parent = incremental_tree(n, pi, pj)
     depth, levels = _depths(parent)
     paths = _paths(parent, depth, pi, pj)
     visit = np.argsort(depth[paths.lca], kind="stable") if order == "depth" else np.arange(pi.size)
