@@ -526,77 +526,86 @@ MRCLAM = [
 ]
 
 # The full-size study (10 runs), measured with `slamrel study pose-only --runs 10 -o DIR`;
-# pasted as text because it takes about half an hour (see the cell that recomputes it).
+# pasted as text because it takes about an hour on 2 cores (see the cell that recomputes it).
 POSE_ONLY_FULL_STUDY = (
-    "Measured with `slamrel study pose-only --runs 10 --workers 2 -o DIR` at commit cc52a2b (480 cases; the pose-only pair least squares started at the truth, as in the paper; TORO-style: 100 iterations). Map NEES: NEES2 for full LS, NEES3 for the others.\n"
-    "\n"
-    "| world | noise | method | runs | NEES1 mean | NEES1 std | NEES1 gate | runs under gate | map NEES (2 / 3) mean | map gate | map runs under gate | RMS position error [m] | RMS heading error [rad] |\n"
-    "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
-    "| hu-simple1 | a | full LS | 10 | 240.6 | 25.5 | 280.4 | 9 | 433.9 | 495.4 | 10 | 0.070 | 0.011 |\n"
-    "| hu-simple1 | a | pose-only M1 | 10 | 135.8 | 13.5 | 280.4 | 10 | 399.1 | 495.4 | 10 | 0.139 | 0.020 |\n"
-    "| hu-simple1 | a | pose-only M2 | 10 | 145.5 | 13.3 | 280.4 | 10 | 419.6 | 495.4 | 10 | 0.072 | 0.012 |\n"
-    "| hu-simple1 | a | TORO-style (M2) | 10 | 295.6 | 47.3 | 280.4 | 5 | 449.8 | 495.4 | 10 | 0.133 | 0.020 |\n"
-    "| hu-simple1 | b | full LS | 10 | 239.6 | 25.3 | 280.4 | 9 | 434.5 | 495.4 | 10 | 0.070 | 0.012 |\n"
-    "| hu-simple1 | b | pose-only M1 | 10 | 122.0 | 13.9 | 280.4 | 10 | 394.4 | 495.4 | 10 | 0.129 | 0.020 |\n"
-    "| hu-simple1 | b | pose-only M2 | 10 | 135.2 | 13.4 | 280.4 | 10 | 419.8 | 495.4 | 10 | 0.069 | 0.012 |\n"
-    "| hu-simple1 | b | TORO-style (M2) | 10 | 287.2 | 54.8 | 280.4 | 6 | 449.4 | 495.4 | 10 | 0.129 | 0.020 |\n"
-    "| hu-simple1 | c | full LS | 10 | 239.3 | 22.5 | 280.4 | 9 | 433.5 | 495.4 | 10 | 0.203 | 0.031 |\n"
-    "| hu-simple1 | c | pose-only M1 | 10 | 185.0 | 13.8 | 280.4 | 10 | 419.6 | 495.4 | 10 | 0.455 | 0.059 |\n"
-    "| hu-simple1 | c | pose-only M2 | 10 | 181.9 | 11.3 | 280.4 | 10 | 423.7 | 495.4 | 10 | 0.264 | 0.037 |\n"
-    "| hu-simple1 | c | TORO-style (M2) | 10 | 370.1 | 40.4 | 280.4 | 0 | 455.9 | 495.4 | 9 | 0.395 | 0.055 |\n"
-    "| hu-simple2 | a | full LS | 10 | 247.9 | 20.1 | 280.4 | 9 | 438.0 | 496.2 | 9 | 0.115 | 0.015 |\n"
-    "| hu-simple2 | a | pose-only M1 | 10 | 140.1 | 9.7 | 280.4 | 10 | 403.2 | 496.2 | 10 | 0.182 | 0.024 |\n"
-    "| hu-simple2 | a | pose-only M2 | 10 | 151.2 | 10.5 | 280.4 | 10 | 423.5 | 496.2 | 9 | 0.115 | 0.015 |\n"
-    "| hu-simple2 | a | TORO-style (M2) | 10 | 242.8 | 15.1 | 280.4 | 10 | 435.8 | 496.2 | 9 | 0.115 | 0.016 |\n"
-    "| hu-simple2 | b | full LS | 10 | 249.1 | 22.6 | 280.4 | 9 | 438.3 | 496.2 | 9 | 0.116 | 0.015 |\n"
-    "| hu-simple2 | b | pose-only M1 | 10 | 127.5 | 12.5 | 280.4 | 10 | 398.4 | 496.2 | 10 | 0.187 | 0.024 |\n"
-    "| hu-simple2 | b | pose-only M2 | 10 | 142.0 | 12.5 | 280.4 | 10 | 423.1 | 496.2 | 9 | 0.114 | 0.015 |\n"
-    "| hu-simple2 | b | TORO-style (M2) | 10 | 235.9 | 18.6 | 280.4 | 9 | 435.2 | 496.2 | 9 | 0.106 | 0.016 |\n"
-    "| hu-simple2 | c | full LS | 10 | 245.6 | 15.2 | 280.4 | 10 | 438.5 | 496.2 | 9 | 0.318 | 0.040 |\n"
-    "| hu-simple2 | c | pose-only M1 | 10 | 185.7 | 9.2 | 280.4 | 10 | 421.8 | 496.2 | 9 | 0.490 | 0.062 |\n"
-    "| hu-simple2 | c | pose-only M2 | 10 | 184.7 | 12.0 | 280.4 | 10 | 426.9 | 496.2 | 9 | 0.335 | 0.042 |\n"
-    "| hu-simple2 | c | TORO-style (M2) | 10 | 297.6 | 25.1 | 280.4 | 2 | 438.5 | 496.2 | 9 | 0.357 | 0.047 |\n"
-    "| hu-complex1 | a | full LS | 10 | 1251.4 | 48.1 | 1340.6 | 9 | 438.0 | 498.8 | 10 | 0.243 | 0.027 |\n"
-    "| hu-complex1 | a | pose-only M1 | 10 | 903.8 | 111.7 | 1340.6 | 10 | 849.2 | 498.8 | 6 | 2.784 | 0.176 |\n"
-    "| hu-complex1 | a | pose-only M2 | 10 | 854.6 | 40.6 | 1340.6 | 10 | 494.3 | 498.8 | 7 | 1.027 | 0.080 |\n"
-    "| hu-complex1 | a | TORO-style (M2) | 10 | 1832.7 | 126.7 | 1340.6 | 0 | 605.3 | 498.8 | 3 | 1.306 | 0.099 |\n"
-    "| hu-complex1 | b | full LS | 10 | 1259.4 | 51.3 | 1340.6 | 9 | 442.1 | 498.8 | 10 | 0.328 | 0.048 |\n"
-    "| hu-complex1 | b | pose-only M1 | 10 | 845.5 | 164.6 | 1340.6 | 10 | 1005.6 | 498.8 | 4 | 3.451 | 0.226 |\n"
-    "| hu-complex1 | b | pose-only M2 | 10 | 3042.7 | 3202.5 | 1340.6 | 7 | 12168.2 | 498.8 | 2 | 3.737 | 0.309 |\n"
-    "| hu-complex1 | b | TORO-style (M2) | 10 | 3821.5 | 3160.6 | 1340.6 | 0 | 12179.4 | 498.8 | 1 | 3.885 | 0.317 |\n"
-    "| hu-complex1 | c | full LS | 10 | 1254.3 | 53.5 | 1340.6 | 9 | 441.6 | 498.8 | 10 | 0.568 | 0.056 |\n"
-    "| hu-complex1 | c | pose-only M1 | 10 | 1441.8 | 480.9 | 1340.6 | 6 | 1545.7 | 498.8 | 3 | 5.369 | 0.350 |\n"
-    "| hu-complex1 | c | pose-only M2 | 10 | 1050.2 | 51.0 | 1340.6 | 10 | 441.7 | 498.8 | 9 | 1.377 | 0.104 |\n"
-    "| hu-complex1 | c | TORO-style (M2) | 10 | 1897.7 | 124.4 | 1340.6 | 0 | 548.4 | 498.8 | 3 | 2.021 | 0.154 |\n"
-    "| hu-complex2 | a | full LS | 10 | 1235.5 | 42.8 | 1340.6 | 10 | 444.8 | 497.5 | 10 | 0.082 | 0.014 |\n"
-    "| hu-complex2 | a | pose-only M1 | 10 | 873.4 | 190.9 | 1340.6 | 9 | 754.3 | 497.5 | 6 | 2.167 | 0.160 |\n"
-    "| hu-complex2 | a | pose-only M2 | 10 | 760.2 | 26.4 | 1340.6 | 10 | 413.4 | 497.5 | 10 | 0.112 | 0.018 |\n"
-    "| hu-complex2 | a | TORO-style (M2) | 10 | 2458.5 | 112.4 | 1340.6 | 0 | 505.2 | 497.5 | 6 | 0.244 | 0.030 |\n"
-    "| hu-complex2 | b | full LS | 10 | 53354.1 | 156329.4 | 1340.6 | 9 | 32019.3 | 497.5 | 9 | 0.412 | 0.091 |\n"
-    "| hu-complex2 | b | pose-only M1 | 10 | 737.3 | 70.4 | 1340.6 | 10 | 659.8 | 497.5 | 5 | 2.254 | 0.178 |\n"
-    "| hu-complex2 | b | pose-only M2 | 10 | 678.3 | 24.9 | 1340.6 | 10 | 408.4 | 497.5 | 10 | 0.125 | 0.026 |\n"
-    "| hu-complex2 | b | TORO-style (M2) | 10 | 1783.6 | 119.0 | 1340.6 | 0 | 487.6 | 497.5 | 8 | 0.283 | 0.043 |\n"
-    "| hu-complex2 | c | full LS | 10 | 1232.9 | 48.4 | 1340.6 | 10 | 445.8 | 497.5 | 10 | 0.220 | 0.035 |\n"
-    "| hu-complex2 | c | pose-only M1 | 10 | 1460.4 | 855.9 | 1340.6 | 7 | 1164.4 | 497.5 | 5 | 4.686 | 0.317 |\n"
-    "| hu-complex2 | c | pose-only M2 | 10 | 975.9 | 41.1 | 1340.6 | 10 | 426.1 | 497.5 | 10 | 0.311 | 0.044 |\n"
-    "| hu-complex2 | c | TORO-style (M2) | 10 | 2068.6 | 94.3 | 1340.6 | 0 | 493.3 | 497.5 | 8 | 0.650 | 0.072 |\n"
-    "\n"
+    'Measured with `slamrel study pose-only --runs 10 --worlds hu-simple1,hu-simple2,hu-complex1,hu-complex2 -o DIR` at commit 6004791 (hu-simple1/2 and hu-complex1 computed at 0cc8eb2; 6004791 changes TORO only at rounding level) (480 cases; the pose-only pair least squares started at the truth, as in the paper; TORO: 100 iterations). `±95%`: half-width of the 95 % Student-t interval of the mean over the 10 runs.\n'
+    '\n'
+    '| world | noise | method | runs | NEES1 mean | NEES1 ±95% | NEES1 gate | runs under gate | NEES2 mean | NEES2 ±95% | NEES2 dof | NEES3 mean | NEES3 ±95% | NEES3 dof | landmark NEES vs truth | landmark gate | landmark runs under gate | RMS position error [m] | RMS position ±95% | RMS heading error [rad] |\n'
+    '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+    '| hu-simple1 | a | full LS | 10 | 240.6 | 19.3 | 280.4 | 9 | 217.5 | 13.7 | 0 | 4341.0 | 65.3 | 4310 | 433.9 | 495.4 | 10 | 0.070 | 0.017 | 0.011 |\n'
+    '| hu-simple1 | a | pose-only M1 | 10 | 135.8 | 10.2 | 280.4 | 10 | 218.3 | 13.7 | 246 | 4716.0 | 68.7 | 4310 | 399.1 | 495.4 | 10 | 0.139 | 0.034 | 0.020 |\n'
+    '| hu-simple1 | a | pose-only M2 | 10 | 145.5 | 10.1 | 280.4 | 10 | 345.0 | 14.1 | 2354 | 4353.8 | 65.4 | 4310 | 419.6 | 495.4 | 10 | 0.072 | 0.027 | 0.012 |\n'
+    '| hu-simple1 | a | TORO (M2) | 10 | 316.8 | 42.6 | 280.4 | 2 | 425.4 | 32.5 | 2354 | 4502.5 | 94.6 | 4310 | 474.0 | 495.4 | 7 | 0.166 | 0.061 | 0.024 |\n'
+    '| hu-simple1 | b | full LS | 10 | 239.6 | 19.1 | 280.4 | 9 | 231.4 | 13.6 | 0 | 4341.9 | 64.8 | 4310 | 434.5 | 495.4 | 10 | 0.070 | 0.013 | 0.012 |\n'
+    '| hu-simple1 | b | pose-only M1 | 10 | 122.0 | 10.5 | 280.4 | 10 | 232.0 | 13.5 | 246 | 4618.6 | 92.2 | 4310 | 394.4 | 495.4 | 10 | 0.129 | 0.034 | 0.020 |\n'
+    '| hu-simple1 | b | pose-only M2 | 10 | 135.2 | 10.1 | 280.4 | 10 | 355.2 | 13.5 | 2354 | 4349.4 | 64.8 | 4310 | 419.8 | 495.4 | 10 | 0.069 | 0.017 | 0.012 |\n'
+    '| hu-simple1 | b | TORO (M2) | 10 | 305.3 | 42.1 | 280.4 | 4 | 422.7 | 28.1 | 2354 | 4480.6 | 92.9 | 4310 | 469.8 | 495.4 | 7 | 0.151 | 0.054 | 0.023 |\n'
+    '| hu-simple1 | c | full LS | 10 | 239.3 | 17.0 | 280.4 | 9 | 156.3 | 9.7 | 0 | 4342.7 | 63.8 | 4310 | 433.5 | 495.4 | 10 | 0.203 | 0.074 | 0.031 |\n'
+    '| hu-simple1 | c | pose-only M1 | 10 | 185.0 | 10.4 | 280.4 | 10 | 171.3 | 13.6 | 246 | 4780.4 | 67.1 | 4310 | 419.6 | 495.4 | 10 | 0.455 | 0.132 | 0.059 |\n'
+    '| hu-simple1 | c | pose-only M2 | 10 | 181.9 | 8.5 | 280.4 | 10 | 328.5 | 12.6 | 2354 | 4364.9 | 65.4 | 4310 | 423.7 | 495.4 | 10 | 0.264 | 0.116 | 0.037 |\n'
+    '| hu-simple1 | c | TORO (M2) | 10 | 424.5 | 100.4 | 280.4 | 0 | 510.2 | 98.6 | 2354 | 4707.0 | 214.8 | 4310 | 530.3 | 495.4 | 4 | 0.558 | 0.162 | 0.073 |\n'
+    '| hu-simple2 | a | full LS | 10 | 247.9 | 15.1 | 280.4 | 9 | 216.4 | 10.4 | 0 | 3921.4 | 64.1 | 3917 | 438.0 | 496.2 | 9 | 0.115 | 0.033 | 0.015 |\n'
+    '| hu-simple2 | a | pose-only M1 | 10 | 140.1 | 7.3 | 280.4 | 10 | 217.6 | 12.2 | 246 | 4119.7 | 74.9 | 3917 | 403.2 | 496.2 | 10 | 0.182 | 0.065 | 0.024 |\n'
+    '| hu-simple2 | a | pose-only M2 | 10 | 151.2 | 7.9 | 280.4 | 10 | 317.6 | 11.6 | 1917 | 3932.3 | 64.0 | 3917 | 423.5 | 496.2 | 9 | 0.115 | 0.038 | 0.015 |\n'
+    '| hu-simple2 | a | TORO (M2) | 10 | 266.2 | 25.6 | 280.4 | 8 | 372.3 | 23.7 | 1917 | 4023.4 | 83.1 | 3917 | 457.2 | 496.2 | 8 | 0.143 | 0.047 | 0.017 |\n'
+    '| hu-simple2 | b | full LS | 10 | 249.1 | 17.1 | 280.4 | 9 | 230.3 | 11.5 | 0 | 3920.2 | 65.6 | 3917 | 438.3 | 496.2 | 9 | 0.116 | 0.033 | 0.015 |\n'
+    '| hu-simple2 | b | pose-only M1 | 10 | 127.5 | 9.5 | 280.4 | 10 | 230.2 | 12.2 | 246 | 4046.2 | 71.1 | 3917 | 398.4 | 496.2 | 10 | 0.187 | 0.066 | 0.024 |\n'
+    '| hu-simple2 | b | pose-only M2 | 10 | 142.0 | 9.4 | 280.4 | 10 | 326.9 | 13.0 | 1917 | 3925.5 | 65.4 | 3917 | 423.1 | 496.2 | 9 | 0.114 | 0.034 | 0.015 |\n'
+    '| hu-simple2 | b | TORO (M2) | 10 | 258.1 | 24.0 | 280.4 | 8 | 367.1 | 21.5 | 1917 | 4000.9 | 82.7 | 3917 | 453.7 | 496.2 | 8 | 0.136 | 0.041 | 0.017 |\n'
+    '| hu-simple2 | c | full LS | 10 | 245.6 | 11.5 | 280.4 | 10 | 152.1 | 7.5 | 0 | 3923.9 | 58.5 | 3917 | 438.5 | 496.2 | 9 | 0.318 | 0.089 | 0.040 |\n'
+    '| hu-simple2 | c | pose-only M1 | 10 | 185.7 | 6.9 | 280.4 | 10 | 173.7 | 13.9 | 246 | 4191.9 | 74.5 | 3917 | 421.8 | 496.2 | 9 | 0.490 | 0.190 | 0.062 |\n'
+    '| hu-simple2 | c | pose-only M2 | 10 | 184.7 | 9.0 | 280.4 | 10 | 290.3 | 9.7 | 1917 | 3941.2 | 58.3 | 3917 | 426.9 | 496.2 | 9 | 0.335 | 0.114 | 0.042 |\n'
+    '| hu-simple2 | c | TORO (M2) | 10 | 366.2 | 74.4 | 280.4 | 0 | 443.5 | 73.5 | 1917 | 4200.6 | 177.6 | 3917 | 514.6 | 496.2 | 7 | 0.589 | 0.244 | 0.055 |\n'
+    '| hu-complex1 | a | full LS | 10 | 1251.4 | 36.3 | 1340.6 | 9 | 1014.8 | 42.9 | 0 | 9933.9 | 136.4 | 9957 | 438.0 | 498.8 | 10 | 0.243 | 0.057 | 0.027 |\n'
+    '| hu-complex1 | a | pose-only M1 | 10 | 903.8 | 84.3 | 1340.6 | 10 | 1026.6 | 47.4 | 1233 | 796408.3 | 571185.7 | 9957 | 849.2 | 498.8 | 6 | 2.784 | 0.714 | 0.176 |\n'
+    '| hu-complex1 | a | pose-only M2 | 10 | 854.6 | 30.6 | 1340.6 | 10 | 1372.0 | 47.1 | 17746 | 12653.2 | 2265.0 | 9957 | 494.3 | 498.8 | 7 | 1.027 | 0.459 | 0.080 |\n'
+    '| hu-complex1 | a | TORO (M2) | 10 | 1517.9 | 72.7 | 1340.6 | 1 | 1637.9 | 49.8 | 17746 | 13284.7 | 2503.1 | 9957 | 544.6 | 498.8 | 5 | 1.100 | 0.440 | 0.086 |\n'
+    '| hu-complex1 | b | full LS | 10 | 1259.4 | 38.7 | 1340.6 | 9 | 1154.7 | 50.3 | 0 | 9931.2 | 135.7 | 9957 | 442.1 | 498.8 | 10 | 0.328 | 0.113 | 0.048 |\n'
+    '| hu-complex1 | b | pose-only M1 | 10 | 845.5 | 124.1 | 1340.6 | 10 | 1144.5 | 48.8 | 1233 | 997061.4 | 402911.5 | 9957 | 1005.6 | 498.8 | 4 | 3.451 | 1.235 | 0.226 |\n'
+    '| hu-complex1 | b | pose-only M2 | 10 | 3042.7 | 2414.8 | 1340.6 | 7 | 1453.0 | 49.6 | 17746 | 47483.7 | 33383.8 | 9957 | 12168.2 | 498.8 | 2 | 3.737 | 1.835 | 0.309 |\n'
+    '| hu-complex1 | b | TORO (M2) | 10 | 4884.5 | 2520.5 | 1340.6 | 0 | 2438.6 | 163.4 | 17746 | 49886.5 | 33943.3 | 9957 | 12244.9 | 498.8 | 1 | 3.849 | 1.804 | 0.317 |\n'
+    '| hu-complex1 | c | full LS | 10 | 1254.3 | 40.3 | 1340.6 | 9 | 605.5 | 23.2 | 0 | 9934.4 | 135.1 | 9957 | 441.6 | 498.8 | 10 | 0.568 | 0.132 | 0.056 |\n'
+    '| hu-complex1 | c | pose-only M1 | 10 | 1441.8 | 362.6 | 1340.6 | 6 | 816.4 | 64.1 | 1233 | 368034.6 | 251534.4 | 9957 | 1545.7 | 498.8 | 3 | 5.369 | 1.559 | 0.350 |\n'
+    '| hu-complex1 | c | pose-only M2 | 10 | 1050.2 | 38.4 | 1340.6 | 10 | 1214.8 | 36.2 | 17746 | 10437.6 | 340.5 | 9957 | 441.7 | 498.8 | 9 | 1.377 | 0.437 | 0.104 |\n'
+    '| hu-complex1 | c | TORO (M2) | 10 | 1815.2 | 145.4 | 1340.6 | 0 | 1817.3 | 136.4 | 17746 | 11784.5 | 418.6 | 9957 | 589.8 | 498.8 | 1 | 1.585 | 0.431 | 0.127 |\n'
+    '| hu-complex2 | a | full LS | 10 | 1235.5 | 32.3 | 1340.6 | 10 | 1069.4 | 37.1 | 0 | 13803.1 | 337.0 | 13808 | 444.8 | 497.5 | 10 | 0.082 | 0.015 | 0.014 |\n'
+    '| hu-complex2 | a | pose-only M1 | 10 | 873.4 | 144.0 | 1340.6 | 9 | 1069.4 | 38.0 | 1257 | 967872.4 | 592340.8 | 13808 | 754.3 | 497.5 | 6 | 2.167 | 0.732 | 0.160 |\n'
+    '| hu-complex2 | a | pose-only M2 | 10 | 760.2 | 19.9 | 1340.6 | 10 | 1540.0 | 47.1 | 29775 | 14010.4 | 342.6 | 13808 | 413.4 | 497.5 | 10 | 0.112 | 0.039 | 0.018 |\n'
+    '| hu-complex2 | a | TORO (M2) | 10 | 1437.6 | 60.0 | 1340.6 | 1 | 1789.1 | 57.1 | 29775 | 14473.7 | 351.0 | 13808 | 472.6 | 497.5 | 8 | 0.205 | 0.065 | 0.027 |\n'
+    '| hu-complex2 | b | full LS | 10 | 53354.1 | 117880.6 | 1340.6 | 9 | 1247.2 | 139.5 | 0 | 15154.1 | 2962.2 | 13808 | 32019.3 | 497.5 | 9 | 0.412 | 0.741 | 0.091 |\n'
+    '| hu-complex2 | b | pose-only M1 | 10 | 737.3 | 53.1 | 1340.6 | 10 | 1179.3 | 46.4 | 1257 | 1138618.3 | 971382.3 | 13808 | 659.8 | 497.5 | 5 | 2.254 | 0.818 | 0.178 |\n'
+    '| hu-complex2 | b | pose-only M2 | 10 | 678.3 | 18.8 | 1340.6 | 10 | 1622.1 | 55.4 | 29775 | 14420.4 | 761.3 | 13808 | 408.4 | 497.5 | 10 | 0.125 | 0.040 | 0.026 |\n'
+    '| hu-complex2 | b | TORO (M2) | 10 | 1639.2 | 149.5 | 1340.6 | 0 | 1951.7 | 95.0 | 29775 | 15653.6 | 1235.7 | 13808 | 483.0 | 497.5 | 7 | 0.255 | 0.131 | 0.040 |\n'
+    '| hu-complex2 | c | full LS | 10 | 1232.9 | 36.5 | 1340.6 | 10 | 680.4 | 20.2 | 0 | 13807.4 | 338.9 | 13808 | 445.8 | 497.5 | 10 | 0.220 | 0.063 | 0.035 |\n'
+    '| hu-complex2 | c | pose-only M1 | 10 | 1460.4 | 645.4 | 1340.6 | 7 | 823.6 | 21.3 | 1257 | 489716.3 | 318192.9 | 13808 | 1164.4 | 497.5 | 5 | 4.686 | 1.427 | 0.317 |\n'
+    '| hu-complex2 | c | pose-only M2 | 10 | 975.9 | 31.0 | 1340.6 | 10 | 1382.9 | 39.5 | 29775 | 13957.7 | 337.7 | 13808 | 426.1 | 497.5 | 10 | 0.311 | 0.113 | 0.044 |\n'
+    '| hu-complex2 | c | TORO (M2) | 10 | 1733.5 | 99.1 | 1340.6 | 0 | 1966.5 | 83.4 | 29775 | 15078.4 | 395.5 | 13808 | 593.5 | 497.5 | 1 | 0.660 | 0.217 | 0.064 |\n'
+    '\n'
     "### The paper's findings, checked\n"
-    "\n"
-    "- **holds** — full LS and pose-only M2 pass the NEES1 gate in most runs.\n"
-    "  holds in all groups. hu-simple1/a: full 9/10, M2 10/10; hu-simple1/b: full 9/10, M2 10/10; hu-simple1/c: full 9/10, M2 10/10; hu-simple2/a: full 9/10, M2 10/10; hu-simple2/b: full 9/10, M2 10/10; hu-simple2/c: full 10/10, M2 10/10; hu-complex1/a: full 9/10, M2 10/10; hu-complex1/b: full 9/10, M2 7/10; hu-complex1/c: full 9/10, M2 10/10; hu-complex2/a: full 10/10, M2 10/10; hu-complex2/b: full 9/10, M2 10/10; hu-complex2/c: full 10/10, M2 10/10\n"
-    "\n"
-    "- **does not hold** — pose-only M2 is far more accurate than M1 (RMS position error at most half).\n"
-    "  fails in 7/12 groups. hu-simple1/a: M1 0.139 m, M2 0.072 m; hu-simple1/b: M1 0.129 m, M2 0.069 m; hu-simple1/c: M1 0.455 m, M2 0.264 m; hu-simple2/a: M1 0.182 m, M2 0.115 m; hu-simple2/b: M1 0.187 m, M2 0.114 m; hu-simple2/c: M1 0.490 m, M2 0.335 m; hu-complex1/a: M1 2.784 m, M2 1.027 m; hu-complex1/b: M1 3.451 m, M2 3.737 m; hu-complex1/c: M1 5.369 m, M2 1.377 m; hu-complex2/a: M1 2.167 m, M2 0.112 m; hu-complex2/b: M1 2.254 m, M2 0.125 m; hu-complex2/c: M1 4.686 m, M2 0.311 m\n"
-    "\n"
-    "- **holds** — the TORO-style optimiser is less consistent than pose-only LS (higher mean NEES1).\n"
-    "  holds in all groups. hu-simple1/a: M2 145, TORO 296; hu-simple1/b: M2 135, TORO 287; hu-simple1/c: M2 182, TORO 370; hu-simple2/a: M2 151, TORO 243; hu-simple2/b: M2 142, TORO 236; hu-simple2/c: M2 185, TORO 298; hu-complex1/a: M2 855, TORO 1833; hu-complex1/b: M2 3043, TORO 3822; hu-complex1/c: M2 1050, TORO 1898; hu-complex2/a: M2 760, TORO 2458; hu-complex2/b: M2 678, TORO 1784; hu-complex2/c: M2 976, TORO 2069\n"
-    "\n"
-    "- **does not hold** — the TORO-style optimiser is least consistent under noise c (NEES1 / gate).\n"
-    "  fails for hu-complex1, hu-complex2. hu-complex1: a 1.37, b 2.85, c 1.42; hu-complex2: a 1.83, b 1.33, c 1.54; hu-simple1: a 1.05, b 1.02, c 1.32; hu-simple2: a 0.87, b 0.84, c 1.06\n"
-    "\n"
-    "- **does not hold** — the map fitted to the pose-only M2 trajectory (NEES3) is about as consistent as full LS's map (NEES2): within 25 %.\n"
-    "  fails in 2/12 groups. hu-simple1/a: full 434, M2 420; hu-simple1/b: full 435, M2 420; hu-simple1/c: full 433, M2 424; hu-simple2/a: full 438, M2 423; hu-simple2/b: full 438, M2 423; hu-simple2/c: full 438, M2 427; hu-complex1/a: full 438, M2 494; hu-complex1/b: full 442, M2 12168; hu-complex1/c: full 442, M2 442; hu-complex2/a: full 445, M2 413; hu-complex2/b: full 32019, M2 408; hu-complex2/c: full 446, M2 426\n"
+    '\n'
+    '- **holds** — full LS and pose-only M2 pass the NEES1 gate in most runs.\n'
+    '  holds in all groups. hu-simple1/a: full 9/10, M2 10/10; hu-simple1/b: full 9/10, M2 10/10; hu-simple1/c: full 9/10, M2 10/10; hu-simple2/a: full 9/10, M2 10/10; hu-simple2/b: full 9/10, M2 10/10; hu-simple2/c: full 10/10, M2 10/10; hu-complex1/a: full 9/10, M2 10/10; hu-complex1/b: full 9/10, M2 7/10; hu-complex1/c: full 9/10, M2 10/10; hu-complex2/a: full 10/10, M2 10/10; hu-complex2/b: full 9/10, M2 10/10; hu-complex2/c: full 10/10, M2 10/10\n'
+    '\n'
+    '- **does not hold** — pose-only M2 is far more accurate than M1 (RMS position error at most half).\n'
+    '  fails in 1/12 groups. hu-simple1/a: M1 0.139 ± 0.034 m, M2 0.072 ± 0.027 m (undecided: paired difference -0.00286 ± 0.027 over 10 runs); hu-simple1/b: M1 0.129 ± 0.034 m, M2 0.069 ± 0.017 m (undecided: paired difference -0.00473 ± 0.024 over 10 runs); hu-simple1/c: M1 0.455 ± 0.13 m, M2 0.264 ± 0.12 m (undecided: paired difference -0.0364 ± 0.09 over 10 runs); hu-simple2/a: M1 0.182 ± 0.065 m, M2 0.115 ± 0.038 m (undecided: paired difference -0.0242 ± 0.031 over 10 runs); hu-simple2/b: M1 0.187 ± 0.066 m, M2 0.114 ± 0.034 m (undecided: paired difference -0.0206 ± 0.03 over 10 runs); hu-simple2/c: M1 0.490 ± 0.19 m, M2 0.335 ± 0.11 m (undecided: paired difference -0.0902 ± 0.09 over 10 runs); hu-complex1/a: M1 2.784 ± 0.71 m, M2 1.027 ± 0.46 m (undecided: paired difference 0.365 ± 0.51 over 10 runs); hu-complex1/b: M1 3.451 ± 1.2 m, M2 3.737 ± 1.8 m (fails: paired difference -2.01 ± 1.7 over 10 runs); hu-complex1/c: M1 5.369 ± 1.6 m, M2 1.377 ± 0.44 m (holds: paired difference 1.31 ± 0.81 over 10 runs); hu-complex2/a: M1 2.167 ± 0.73 m, M2 0.112 ± 0.039 m (holds: paired difference 0.972 ± 0.37 over 10 runs); hu-complex2/b: M1 2.254 ± 0.82 m, M2 0.125 ± 0.04 m (holds: paired difference 1 ± 0.42 over 10 runs); hu-complex2/c: M1 4.686 ± 1.4 m, M2 0.311 ± 0.11 m (holds: paired difference 2.03 ± 0.71 over 10 runs)\n'
+    '\n'
+    '- **holds** — TORO is less consistent than pose-only LS (higher NEES1).\n'
+    '  holds in all groups. hu-simple1/a: M2 145 ± 10, TORO 317 ± 43 (holds: paired difference 171 ± 41 over 10 runs); hu-simple1/b: M2 135 ± 10, TORO 305 ± 42 (holds: paired difference 170 ± 40 over 10 runs); hu-simple1/c: M2 182 ± 8.5, TORO 424 ± 1e+02 (holds: paired difference 243 ± 99 over 10 runs); hu-simple2/a: M2 151 ± 7.9, TORO 266 ± 26 (holds: paired difference 115 ± 25 over 10 runs); hu-simple2/b: M2 142 ± 9.4, TORO 258 ± 24 (holds: paired difference 116 ± 22 over 10 runs); hu-simple2/c: M2 185 ± 9, TORO 366 ± 74 (holds: paired difference 182 ± 78 over 10 runs); hu-complex1/a: M2 855 ± 31, TORO 1518 ± 73 (holds: paired difference 663 ± 54 over 10 runs); hu-complex1/b: M2 3043 ± 2.4e+03, TORO 4884 ± 2.5e+03 (holds: paired difference 1.84e+03 ± 3.8e+02 over 10 runs); hu-complex1/c: M2 1050 ± 38, TORO 1815 ± 1.5e+02 (holds: paired difference 765 ± 1.4e+02 over 10 runs); hu-complex2/a: M2 760 ± 20, TORO 1438 ± 60 (holds: paired difference 677 ± 59 over 10 runs); hu-complex2/b: M2 678 ± 19, TORO 1639 ± 1.5e+02 (holds: paired difference 961 ± 1.5e+02 over 10 runs); hu-complex2/c: M2 976 ± 31, TORO 1733 ± 99 (holds: paired difference 758 ± 1e+02 over 10 runs)\n'
+    '\n'
+    '- **holds** — NEES2 orders full LS below pose-only M2.\n'
+    '  holds in all groups. hu-simple1/a: full 217 ± 14, M2 345 ± 14 (holds: paired difference 128 ± 4 over 10 runs); hu-simple1/b: full 231 ± 14, M2 355 ± 13 (holds: paired difference 124 ± 3.8 over 10 runs); hu-simple1/c: full 156 ± 9.7, M2 329 ± 13 (holds: paired difference 172 ± 13 over 10 runs); hu-simple2/a: full 216 ± 10, M2 318 ± 12 (holds: paired difference 101 ± 4.8 over 10 runs); hu-simple2/b: full 230 ± 11, M2 327 ± 13 (holds: paired difference 96.5 ± 5 over 10 runs); hu-simple2/c: full 152 ± 7.5, M2 290 ± 9.7 (holds: paired difference 138 ± 5.1 over 10 runs); hu-complex1/a: full 1015 ± 43, M2 1372 ± 47 (holds: paired difference 357 ± 26 over 10 runs); hu-complex1/b: full 1155 ± 50, M2 1453 ± 50 (holds: paired difference 298 ± 29 over 10 runs); hu-complex1/c: full 606 ± 23, M2 1215 ± 36 (holds: paired difference 609 ± 23 over 10 runs); hu-complex2/a: full 1069 ± 37, M2 1540 ± 47 (holds: paired difference 471 ± 21 over 10 runs); hu-complex2/b: full 1247 ± 1.4e+02, M2 1622 ± 55 (holds: paired difference 375 ± 1.4e+02 over 10 runs); hu-complex2/c: full 680 ± 20, M2 1383 ± 40 (holds: paired difference 702 ± 34 over 10 runs)\n'
+    '\n'
+    '- **holds** — NEES2 orders pose-only M2 below TORO.\n'
+    '  holds in all groups. hu-simple1/a: M2 345 ± 14, TORO 425 ± 32 (holds: paired difference 80.4 ± 25 over 10 runs); hu-simple1/b: M2 355 ± 13, TORO 423 ± 28 (holds: paired difference 67.5 ± 23 over 10 runs); hu-simple1/c: M2 329 ± 13, TORO 510 ± 99 (holds: paired difference 182 ± 88 over 10 runs); hu-simple2/a: M2 318 ± 12, TORO 372 ± 24 (holds: paired difference 54.6 ± 23 over 10 runs); hu-simple2/b: M2 327 ± 13, TORO 367 ± 21 (holds: paired difference 40.2 ± 20 over 10 runs); hu-simple2/c: M2 290 ± 9.7, TORO 444 ± 73 (holds: paired difference 153 ± 76 over 10 runs); hu-complex1/a: M2 1372 ± 47, TORO 1638 ± 50 (holds: paired difference 266 ± 17 over 10 runs); hu-complex1/b: M2 1453 ± 50, TORO 2439 ± 1.6e+02 (holds: paired difference 986 ± 1.5e+02 over 10 runs); hu-complex1/c: M2 1215 ± 36, TORO 1817 ± 1.4e+02 (holds: paired difference 603 ± 1.3e+02 over 10 runs); hu-complex2/a: M2 1540 ± 47, TORO 1789 ± 57 (holds: paired difference 249 ± 25 over 10 runs); hu-complex2/b: M2 1622 ± 55, TORO 1952 ± 95 (holds: paired difference 330 ± 1.2e+02 over 10 runs); hu-complex2/c: M2 1383 ± 40, TORO 1966 ± 83 (holds: paired difference 584 ± 88 over 10 runs)\n'
+    '\n'
+    '- **undecided** — NEES3 orders full LS below pose-only M2.\n'
+    '  undecided in 1/12 groups. hu-simple1/a: full 4341 ± 65, M2 4354 ± 65 (holds: paired difference 12.8 ± 1 over 10 runs); hu-simple1/b: full 4342 ± 65, M2 4349 ± 65 (holds: paired difference 7.55 ± 0.78 over 10 runs); hu-simple1/c: full 4343 ± 64, M2 4365 ± 65 (holds: paired difference 22.2 ± 2.2 over 10 runs); hu-simple2/a: full 3921 ± 64, M2 3932 ± 64 (holds: paired difference 10.9 ± 0.52 over 10 runs); hu-simple2/b: full 3920 ± 66, M2 3926 ± 65 (holds: paired difference 5.33 ± 0.55 over 10 runs); hu-simple2/c: full 3924 ± 59, M2 3941 ± 58 (holds: paired difference 17.3 ± 0.73 over 10 runs); hu-complex1/a: full 9934 ± 1.4e+02, M2 12653 ± 2.3e+03 (holds: paired difference 2.72e+03 ± 2.2e+03 over 10 runs); hu-complex1/b: full 9931 ± 1.4e+02, M2 47484 ± 3.3e+04 (holds: paired difference 3.76e+04 ± 3.3e+04 over 10 runs); hu-complex1/c: full 9934 ± 1.4e+02, M2 10438 ± 3.4e+02 (holds: paired difference 503 ± 3.1e+02 over 10 runs); hu-complex2/a: full 13803 ± 3.4e+02, M2 14010 ± 3.4e+02 (holds: paired difference 207 ± 89 over 10 runs); hu-complex2/b: full 15154 ± 3e+03, M2 14420 ± 7.6e+02 (undecided: paired difference -734 ± 3.2e+03 over 10 runs); hu-complex2/c: full 13807 ± 3.4e+02, M2 13958 ± 3.4e+02 (holds: paired difference 150 ± 10 over 10 runs)\n'
+    '\n'
+    '- **holds** — NEES3 orders pose-only M2 below TORO.\n'
+    '  holds in all groups. hu-simple1/a: M2 4354 ± 65, TORO 4502 ± 95 (holds: paired difference 149 ± 49 over 10 runs); hu-simple1/b: M2 4349 ± 65, TORO 4481 ± 93 (holds: paired difference 131 ± 45 over 10 runs); hu-simple1/c: M2 4365 ± 65, TORO 4707 ± 2.1e+02 (holds: paired difference 342 ± 1.8e+02 over 10 runs); hu-simple2/a: M2 3932 ± 64, TORO 4023 ± 83 (holds: paired difference 91.1 ± 47 over 10 runs); hu-simple2/b: M2 3926 ± 65, TORO 4001 ± 83 (holds: paired difference 75.3 ± 41 over 10 runs); hu-simple2/c: M2 3941 ± 58, TORO 4201 ± 1.8e+02 (holds: paired difference 259 ± 1.5e+02 over 10 runs); hu-complex1/a: M2 12653 ± 2.3e+03, TORO 13285 ± 2.5e+03 (holds: paired difference 632 ± 3.3e+02 over 10 runs); hu-complex1/b: M2 47484 ± 3.3e+04, TORO 49887 ± 3.4e+04 (holds: paired difference 2.4e+03 ± 2.1e+03 over 10 runs); hu-complex1/c: M2 10438 ± 3.4e+02, TORO 11784 ± 4.2e+02 (holds: paired difference 1.35e+03 ± 4.4e+02 over 10 runs); hu-complex2/a: M2 14010 ± 3.4e+02, TORO 14474 ± 3.5e+02 (holds: paired difference 463 ± 70 over 10 runs); hu-complex2/b: M2 14420 ± 7.6e+02, TORO 15654 ± 1.2e+03 (holds: paired difference 1.23e+03 ± 6.3e+02 over 10 runs); hu-complex2/c: M2 13958 ± 3.4e+02, TORO 15078 ± 4e+02 (holds: paired difference 1.12e+03 ± 2.7e+02 over 10 runs)\n'
+    '\n'
+    '- **does not hold** — TORO is least consistent under noise c (mean NEES1 / gate; means only).\n'
+    '  fails for hu-complex1. hu-complex1: a 1.13, b 3.64, c 1.35; hu-complex2: a 1.07, b 1.22, c 1.29; hu-simple1: a 1.13, b 1.09, c 1.51; hu-simple2: a 0.95, b 0.92, c 1.31\n'
 )
 
 POSE_ONLY_STUDY = [
@@ -609,11 +618,24 @@ POSE_ONLY_STUDY = [
         "covariances × 2;\n"
         "* **pose-only M2** — constraints between every pair sharing ≥ 5 landmarks, each "
         "observation's covariance × the number of constraints using it;\n"
-        "* **TORO-style** — tree-parameterised stochastic gradient descent on the M2 graph with "
-        "spherical information.\n\n"
+        "* **TORO** — Grisetti et al.'s tree-parameterised stochastic gradient descent "
+        "(written from the paper: incremental tree, depth-ordered visits, per-iteration "
+        "preconditioner) on the M2 graph, 100 iterations.\n\n"
         "NEES1 is the whole trajectory's NEES with the joint covariance against the one-sided "
-        "gate χ²₀.₉₅(3(N−1)) (280.36 for 82 poses, 1340.59 for 420); the map NEES is NEES2 "
-        "for full LS and NEES3 (landmarks fitted with the poses held fixed) for the others."
+        "gate χ²₀.₉₅(3(N−1)) (280.36 for 82 poses, 1340.59 for 420). NEES2 and NEES3 are the "
+        "paper's, neither using ground truth: NEES2 the χ² of the relative-pose constraints "
+        "the method optimised, at its estimate (the odometry for full LS, the pose graph for "
+        "the others); NEES3 the χ² of all the odometry and observations with the landmarks "
+        "fitted to the fixed poses (full LS minimises exactly this, so its NEES3 sits at the "
+        "data dof 2(K − L)). The landmark NEES against the *true* landmarks is slamrel's own "
+        "check. `±95%` columns are half-widths of Student-t intervals of the mean over the "
+        "runs; findings compare methods on paired per-run differences and say *undecided* "
+        "when the interval contains no difference.\n\n"
+        "Our worlds follow the paper's stated set-up but not its observation counts (see "
+        "`slamrel/simulation/worlds.py`): hu-simple1 has 28–30 observations per pose and a "
+        "data dof of 4,100–4,500 where the paper's Table II implies about 330, so absolute "
+        "NEES2/NEES3 values are not comparable with the paper's; orderings and NEES against "
+        "its own dof are."
     ),
     new_markdown_cell(
         "## A reduced study, run here\n\n"
@@ -630,34 +652,50 @@ POSE_ONLY_STUDY = [
         "assert rc == 0\n"
         "print((out / 'table.md').read_text())"
     ),
-    new_code_cell(
-        "import csv\n"
-        "from slamrel.studies.pose_only import findings\n"
-        "def load(path):\n"
-        "    rows = list(csv.DictReader(path.open()))\n"
-        "    num = lambda v: int(v) if v.isdigit() else float(v)\n"
-        "    return [{k: (v if k in ('world', 'noise', 'method') else num(v)) for k, v in r.items()}\n"
-        "            for r in rows]\n"
-        "for title, holds, evidence in findings(load(out / 'table.csv')):\n"
-        "    print(f\"{'HOLDS' if holds else 'DOES NOT HOLD'}: {title}\\n    {evidence}\")"
-    ),
+    new_code_cell("print((out / 'findings.md').read_text())"),
     new_markdown_cell(
         "## The full-size study (10 runs, all worlds and noise types)\n\n" + POSE_ONLY_FULL_STUDY
     ),
     new_markdown_cell(
-        "## Where the findings do not hold, and why\n\n"
-        "* **M2 far more accurate than M1** holds on the complex worlds (M1 2.2–5.4 m, M2 "
-        "0.11–1.4 m RMS), except hu-complex1/b where both fail (3.5 / 3.7 m). On the simple "
-        "worlds Method 1's last–first constraint closes the single loop, so M1 is 1.4–1.9 × "
-        "M2's error: worse, but not by the factor 2 the check asks for.\n"
-        "* **TORO-style least consistent under noise c** holds on the simple worlds only. On the "
-        "complex ones it is inconsistent under every noise type (NEES1 / gate 1.3–2.9, 0 of 10 "
-        "runs under the gate) and worst under b on hu-complex1, where the Method 2 graph it "
-        "optimises already fails in 3 of 10 runs (0.2 rad a step of heading noise leaves parts "
-        "of the trajectory constrained by odometry alone), and under a on hu-complex2.\n"
-        "* **NEES3 close to NEES2** fails on hu-complex1/b (the same 3 pose-only failures) and on "
-        "hu-complex2/b, where it is full LS that fails once (seed 4: Levenberg–Marquardt from "
-        "the odometry stops at 3.4 m RMS error, NEES1 ≈ 5 × 10⁵), not pose-only."
+        "## What the runs decide, and what they do not\n\n"
+        "* **NEES2 and NEES3 order full LS < pose-only M2 < TORO** in every group, as in every "
+        "row of the paper's Table II, with paired 95 % intervals well clear of 0. Full LS's "
+        "NEES3 sits at its data dof (4,341 ± 65 against 4,310 on hu-simple1/a): it minimises "
+        "exactly that χ², so this is a check of the implementation and of the noise model, "
+        "not a finding.\n"
+        "* **M2 far more accurate than M1 (at most half the error)** is *undecided* on the "
+        "simple worlds: M2's error is 0.52–0.68 of M1's on average, and the paired interval "
+        "of `0.5 · M1 − M2` contains 0 in every group. With 2 runs the old notebook called "
+        "this \"does not hold\"; 10 runs do not decide it either way. On hu-complex1 it holds "
+        "under c, is undecided under a, and fails under b, where Method 2's graph itself "
+        "breaks in 3 of 10 runs (0.2 rad of heading noise a step leaves stretches held by "
+        "odometry alone: M2 NEES3 47,000 ± 33,000 against full LS's 9,931). On hu-complex2 it "
+        "holds under every noise type (M1 2.2–4.7 m, M2 0.11–0.31 m).\n"
+        "* **TORO less consistent than pose-only LS** holds everywhere (paired NEES1 "
+        "difference 115–243, intervals ±22–99). TORO here is Grisetti et al.'s algorithm: "
+        "after 100 iterations it is 1.15–1.46 × the optimum of the M2 graph's cost on "
+        "hu-simple1 (seed 0), where OpenSLAM's own `toro` stays at 2.3–3.1 × "
+        "(`benchmarks/bench_toro.py`), so the real TORO would be less consistent still.\n"        "* **TORO least consistent under noise c** holds on the simple worlds (NEES1 / gate "
+        "1.31–1.51 under c against 0.92–1.13 under a, b) and on hu-complex2 (1.29 against "
+        "1.07, 1.22), but not on hu-complex1, where it is worst under b (3.64), for the same "
+        "Method 2 failures.\n"
+        "* **Full LS fails once** on hu-complex2/b (seed 4: Levenberg–Marquardt from the "
+        "odometry stops in a poor minimum, NEES1 ≈ 5 × 10⁵), hence its mean NEES1 of 53,354 "
+        "± 117,881 there; its other 119 runs sit at the dof.\n"
+        "* **Full LS's NEES1 at its dof** (240.6 ± 19 against 3(N−1) = 243 on hu-simple1/a): "
+        "the simulator draws exactly the Gaussian noise the estimator assumes and the "
+        "problem is nearly linear at these noise levels, so E[NEES1] = 3(N−1). The paper's "
+        "full LS sits at ≈ 0.78 of its dof: its covariances overstate its errors by about "
+        "1.28 ×, i.e. its simulated noise was smaller than the noise its estimator was told "
+        "(the paper does not say how its noise was drawn, so which part is not known).\n"
+        "* **The paper's Table III repeats its rows 3a/3c as 4a/4c** (the complex2 rows for "
+        "noise a and c carry the complex1 numbers, as issue 28 notes), so the paper gives no "
+        "usable complex2 a/c values to compare with.\n"
+        "* **Our worlds are denser than the paper's**: 28–30 observations per pose and a data "
+        "dof of 3,900–4,500 on the simple worlds, where the paper's Table II implies about "
+        "330; the Method 2 graphs have 700–900 edges where the paper's NEES2 of 18–34 points "
+        "to far fewer. Absolute NEES2/NEES3 values are therefore not the paper's; the "
+        "orderings, and each NEES against its own dof, are comparable."
     ),
 ]
 
@@ -667,6 +705,7 @@ def main(argv: list[str] | None = None) -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--execute", action="store_true", help="run them and keep the outputs")
+    ap.add_argument("--only", metavar="NAME", help="write only this notebook (default: all)")
     args = ap.parse_args(argv)
     meta = {"kernelspec": {"name": "python3", "display_name": "Python 3", "language": "python"}}
     for name, cells in (
@@ -676,6 +715,8 @@ def main(argv: list[str] | None = None) -> None:
         ("mrclam", MRCLAM),
         ("pose_only_study", POSE_ONLY_STUDY),
     ):
+        if args.only and name != args.only:
+            continue
         for i, cell in enumerate(cells):
             cell.id = f"{name}-{i:02d}"  # stable ids: regenerating gives no diff
         nb = new_notebook(cells=cells, metadata=meta)

@@ -33,7 +33,7 @@ TRAJECTORY_FORMATS = ("plain", "tum", "carmen", "g2o", "csv", "kitti", "euroc", 
 COVARIANCE_LAYOUTS = ("tum-cov", "openvins", "se2-cov", "bag")
 #: Built-in simulated worlds of :func:`slamrel.simulation.worlds.make_world` ...
 WORLDS = ("simple1", "simple2", "complex1", "complex2")
-#: ... and Hu et al.'s worlds to the letter (82 / 420 poses).
+#: ... and Hu et al.'s worlds as stated (82 / 420 poses; observation counts differ: see worlds.py).
 PAPER_WORLDS = ("hu-simple1", "hu-simple2", "hu-complex1", "hu-complex2")
 #: Hu et al.'s noise types (Table I), the keys of ``slamrel.simulation.worlds.NOISE_TYPES``.
 NOISE_NAMES = ("a", "b", "c")

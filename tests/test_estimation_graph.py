@@ -16,7 +16,8 @@ from slamrel.backends.least_squares import (
     solve_graph_incremental,
 )
 from slamrel.cli import main
-from slamrel.formats.isam import NoiseConventionWarning, read_isam
+from slamrel.formats.isam import NoiseConventionWarning, is_isam, read_isam
+from slamrel.formats.text import SourceText
 
 
 def small_world(rng, n=30, m=8, noise=0.05):
@@ -256,6 +257,23 @@ def test_isam_reader_hand_example(tmp_path):
     sol = solve_graph(d.graph)
     # both sightings agree with a landmark at (2, 1): the solution keeps it there
     np.testing.assert_allclose(sol.landmarks[0], [2.0, 1.0], atol=1e-6)
+
+
+def test_isam_reader_takes_edge2_as_odometry(tmp_path):
+    # iSAM's city10000.txt spells ODOMETRY as EDGE2 (same fields): mixed spellings read as
+    # one file of ODOMETRY lines, in file order
+    mixed = ISAM.replace("ODOMETRY 1 3", "EDGE2 1 3")
+    (tmp_path / "a.txt").write_text(ISAM)
+    (tmp_path / "b.txt").write_text(mixed)
+    a = read_isam(tmp_path / "a.txt", noise="covariance").graph
+    b = read_isam(tmp_path / "b.txt", noise="covariance").graph
+    for name in ("poses", "landmarks", "pp_i", "pp_j", "pp_z", "pp_info", "pl_z"):
+        np.testing.assert_array_equal(getattr(b, name), getattr(a, name))
+    # a file of EDGE2 lines is iSAM text unless it has TORO's VERTEX2 records
+    edge = "EDGE2 0 1 1 0 0 10 0 10 20 0 0"
+    assert is_isam(SourceText("e", ["# city", edge, edge.replace("0 1 1", "1 2 1")], True))
+    assert not is_isam(SourceText("t", [edge, "VERTEX2 0 0 0 0", "VERTEX2 1 1 0 0"], True))
+    assert not is_isam(SourceText("t", ["VERTEX2 0 0 0 0", "VERTEX2 1 1 0 0", edge], True))
 
 
 @pytest.mark.parametrize(

@@ -45,7 +45,8 @@ import pytest
 
 from relation_metric import se2
 from slamrel.backends.least_squares import PoseGraph, initial_landmarks, solve_graph
-from slamrel.backends.toro_optimiser import spherical_information, toro_optimize
+from slamrel.backends.lever_sgd import lever_sgd_optimize as toro_optimize
+from slamrel.backends.toro_optimiser import spherical_information
 
 ROOT = Path(__file__).resolve().parent.parent
 VENV_PYTHON = ROOT / "benchmarks" / ".venv-gtsam" / "bin" / "python"

@@ -191,31 +191,46 @@ def test_study_on_a_separately_started_dask_scheduler_and_worker(tmp_path):
             p.wait(timeout=30)
 
 
-def test_findings_are_checked_per_group():
-    from slamrel.studies.pose_only import findings
+def test_findings_are_judged_on_paired_intervals_over_runs():
+    from slamrel.studies.pose_only import findings, interval_half_width, summary_rows
 
-    def row(world, noise, method, nees1, under, rmse, nmap, gate=280.4):
-        keys = ("world", "noise", "method", "nees1_mean", "nees1_under", "rmse_xy")
-        out = dict(zip(keys, (world, noise, method, nees1, under, rmse)))
-        return {**out, "runs": 4, "gate1": gate, "nees_map_mean": nmap}
+    jitter = (-1.0, 0.0, 1.0, 0.0)  # per-seed offsets: known sample standard deviations
 
-    rows = []
-    for noise, toro in (("a", 300.0), ("c", 400.0)):
-        rows += [
-            row("w", noise, "full LS", 240.0, 4, 0.1, 440.0),
-            row("w", noise, "pose-only M1", 130.0, 4, 0.5, 400.0),
-            row("w", noise, "pose-only M2", 150.0, 3, 0.12 if noise == "a" else 0.3, 420.0),
-            row("w", noise, "TORO-style (M2)", toro, 0, 0.3, 480.0),
-        ]
-    got = {title.split(" (")[0]: (holds, ev) for title, holds, ev in findings(rows)}
-    assert got["full LS and pose-only M2 pass the NEES1 gate in most runs"][0]
-    holds, ev = got["pose-only M2 is far more accurate than M1"]
-    assert (
-        not holds and ev.startswith("fails in 1/2 groups") and "w/c: M1 0.500 m, M2 0.300 m" in ev
-    )
-    assert got["the TORO-style optimiser is less consistent than pose-only LS"][0]
-    assert got["the TORO-style optimiser is least consistent under noise c"][0]
-    assert got["the map fitted to the pose-only M2 trajectory"][0]
+    def case(noise, method, seed, nees1, rmse, n2, n3):
+        d = jitter[seed]
+        return {"world": "w", "noise": noise, "method": method, "seed": seed,
+                "nees1": nees1 + 10 * d, "gate1": 280.4, "nees2": n2 + d, "dof2": 100,
+                "nees3": n3 + d, "dof3": 400, "landmark_nees": 50.0, "landmark_gate": 60.0,
+                "rmse_xy": rmse + 0.01 * d, "rmse_theta": 0.01, "seconds": 1.0}  # fmt: skip
+
+    results = []
+    for noise in ("a", "c"):
+        for seed in range(4):
+            # TORO's NEES1 against M2: clearly higher under a; under c it swings by ±60
+            # around M2's, so the paired interval contains 0
+            toro = 300.0 if noise == "a" else 150.0 + 60 * (-1) ** seed
+            results += [
+                case(noise, "full", seed, 240.0, 0.1, 200.0, 400.0),
+                case(noise, "m1", seed, 130.0, 0.5, 250.0, 420.0),
+                case(noise, "m2", seed, 150.0, 0.12 if noise == "a" else 0.3, 300.0, 410.0),
+                case(noise, "toro", seed, toro, 0.3, 400.0, 430.0),
+            ]
+    rows = summary_rows(results)
+    full_a = rows[0]
+    # the interval by hand: s = sqrt(2/3)·10 over 4 runs, t(0.975, 3) = 3.182446
+    assert full_a["nees1_ci"] == pytest.approx(3.182446 * 10 * (2 / 3) ** 0.5 / 2, rel=1e-6)
+    assert interval_half_width([5.0]) == 0.0
+    got = {title.split(" (")[0]: (v, ev) for title, v, ev in findings(rows)}
+    assert got["full LS and pose-only M2 pass the NEES1 gate in most runs"][0] is True
+    verdict, ev = got["pose-only M2 is far more accurate than M1"]
+    assert verdict is False and ev.startswith("fails in 1/2 groups")
+    assert "w/c: M1 0.500 ± 0.013 m, M2 0.300 ± 0.013 m (fails" in ev
+    verdict, ev = got["TORO is less consistent than pose-only LS"]
+    assert verdict is None and ev.startswith("undecided in 1/2 groups")
+    assert "w/a: M2 150 ± 13, TORO 300 ± 13 (holds" in ev
+    for label in ("NEES2", "NEES3"):
+        assert got[f"{label} orders full LS below pose-only M2"][0] is True
+        assert got[f"{label} orders pose-only M2 below TORO"][0] is True
 
 
 def test_the_study_folder_is_reused_only_when_it_is_a_study_folder(tmp_path, capsys):

@@ -72,6 +72,13 @@ __all__ = [
     "cartesian_observations",
     "full_least_squares",
     "pose_only_least_squares",
+    "pose_only_graph",
+    "ChiSquare",
+    "relative_pose_chi2",
+    "odometry_graph",
+    "data_chi2",
+    "pose_only_from_landmark_graph",
+    "LandmarkGraphPoseOnly",
     "PoseOnlyResult",
     "PairConstraints",
     "pair_constraints",
@@ -111,9 +118,13 @@ class LandmarkLog:
         Per-step standard deviations of ``[dx, dy, dθ]``.
     sigma_range, sigma_bearing : float
         Range-bearing noise (used when ``observation_covariance`` is None).
-    observation_covariance : ndarray, shape (2, 2), optional
+    observation_covariance : ndarray, shape (2, 2) or (K, 2, 2), optional
         Covariance of the Cartesian observation ``r [cos b, sin b]`` in the sensor frame
-        (the paper's sensor model); overrides the range-bearing noise.
+        (the paper's sensor model), one for all or one per measurement; overrides the
+        range-bearing noise.
+    odometry_information : ndarray, shape (N − 1, 3, 3), optional
+        Information of each odometry step; overrides ``sigma_odometry`` (a graph's own
+        factors, :meth:`from_graph`).
     """
 
     odometry: Trajectory
@@ -125,6 +136,56 @@ class LandmarkLog:
     sigma_range: float
     sigma_bearing: float
     observation_covariance: Array | None = None
+    odometry_information: Array | None = None
+
+    @classmethod
+    def from_graph(cls, graph: PoseGraph) -> tuple[LandmarkLog, NDArray[np.int64]]:
+        """A landmark graph (e.g. an iSAM or g2o file) as a log: the odometry is the
+        initial guess's poses, the odometry information that of the factors ``k → k+1``
+        (the first of each, in input order), the observations its pose–landmark factors
+        with their own covariances.
+
+        Returns
+        -------
+        log : LandmarkLog
+        other : ndarray of int
+            The pose–pose factors that are not an odometry step (loop closures, repeated
+            steps): a pose-only graph keeps them as they are (none are dropped).
+
+        Raises
+        ------
+        InputError
+            When a step ``k → k+1`` has no factor, or there are no landmark factors.
+        """
+        n = graph.n_poses
+        if graph.pl_k.size == 0:
+            raise InputError("the graph has no pose-landmark factors: nothing to extract")
+        step = np.full(max(n - 1, 0), -1, dtype=np.int64)
+        chain = np.flatnonzero(graph.pp_j == graph.pp_i + 1)[::-1]  # first in input order wins
+        step[graph.pp_i[chain]] = chain
+        gap = np.flatnonzero(step < 0)
+        if gap.size:
+            raise InputError(
+                f"no pose-pose factor from pose {int(gap[0])} to pose {int(gap[0]) + 1}: "
+                "a log needs an odometry step between consecutive poses"
+            )
+        other = np.setdiff1d(np.arange(graph.pp_i.size), step)
+        odo = se2.cumulative_compose(graph.pp_z[step], graph.poses[0]) if n > 1 else graph.poses
+        z = np.asarray(graph.pl_z)
+        order = np.argsort(graph.pl_k, kind="stable")  # observations in pose order
+        log = cls(
+            Trajectory.from_poses(odo),
+            graph.pl_k[order],
+            np.hypot(z[order, 0], z[order, 1]),
+            np.arctan2(z[order, 1], z[order, 0]),
+            graph.pl_l[order],
+            (float("nan"),) * 3,  # type: ignore[arg-type]
+            float("nan"),
+            float("nan"),
+            readonly(np.linalg.inv(graph.pl_info[order])),
+            readonly(np.asarray(graph.pp_info[step])),
+        )
+        return log, readonly(other, np.int64)
 
     @classmethod
     def from_world(cls, world: World) -> LandmarkLog:
@@ -149,8 +210,10 @@ def cartesian_observations(log: LandmarkLog) -> tuple[Array, Array]:
     c, s = np.cos(log.bearing), np.sin(log.bearing)
     z = np.column_stack((log.range * c, log.range * s))
     if log.observation_covariance is not None:
-        cov0 = np.asarray(log.observation_covariance, dtype=np.float64).reshape(2, 2)
-        return z, np.broadcast_to(np.linalg.inv(cov0), (z.shape[0], 2, 2)).copy()
+        cov0 = np.asarray(log.observation_covariance, dtype=np.float64)
+        if cov0.ndim == 3:
+            return z, np.asarray(np.linalg.inv(cov0), dtype=np.float64)
+        return z, np.broadcast_to(np.linalg.inv(cov0.reshape(2, 2)), (z.shape[0], 2, 2)).copy()
     j = np.empty((z.shape[0], 2, 2))
     j[:, 0, 0], j[:, 0, 1] = c, -log.range * s
     j[:, 1, 0], j[:, 1, 1] = s, log.range * c
@@ -162,6 +225,8 @@ def cartesian_observations(log: LandmarkLog) -> tuple[Array, Array]:
 def _odometry_factors(log: LandmarkLog) -> tuple[NDArray[np.int64], Array, Array]:
     p = log.odometry.poses
     i = np.arange(p.shape[0] - 1)
+    if log.odometry_information is not None:
+        return i, se2.between(p[:-1], p[1:]), np.array(log.odometry_information)
     info = np.diag(1.0 / np.square(log.sigma_odometry))
     return i, se2.between(p[:-1], p[1:]), np.broadcast_to(info, (i.size, 3, 3)).copy()
 
@@ -561,6 +626,34 @@ def pose_only_least_squares(
     PoseOnlyResult
         Pose 0 is held at odometry pose 0.
     """
+    graph, cons = pose_only_graph(
+        log,
+        method=method,
+        min_common=min_common,
+        close_loop=close_loop,
+        inflate=inflate,
+        odometry=odometry,
+        start=start,
+        truth=truth,
+        initial=initial,
+    )
+    return PoseOnlyResult(solve_graph(graph), graph, cons, int(method))
+
+
+def pose_only_graph(
+    log: LandmarkLog,
+    *,
+    method: Literal[1, 2] = 2,
+    min_common: int = METHOD2_MIN_COMMON,
+    close_loop: bool = True,
+    inflate: bool = True,
+    odometry: bool = True,
+    start: Start = "odometry",
+    truth: Trajectory | None = None,
+    initial: Literal["chained", "odometry"] = "chained",
+) -> tuple[PoseGraph, PairConstraints]:
+    """The pose graph of :func:`pose_only_least_squares` (same parameters), not solved:
+    the Method 1/2 constraints, then the odometry when used; and the constraints."""
     n = len(log.odometry)
     if n < 2:
         raise InputError("pose-only least squares needs at least 2 poses")
@@ -593,7 +686,59 @@ def pose_only_least_squares(
         pp_z=pp_z,
         pp_info=pp_info,
     )
-    return PoseOnlyResult(solve_graph(graph), graph, cons, int(method))
+    return graph, cons
+
+
+
+
+@dataclass(frozen=True)
+class LandmarkGraphPoseOnly:
+    """A landmark graph's pose-only problem (:func:`pose_only_from_landmark_graph`).
+
+    Attributes
+    ----------
+    graph : PoseGraph
+        The Method 1/2 constraints, the odometry steps, then the landmark graph's other
+        pose–pose factors (unchanged); started at the chained guess.
+    log : LandmarkLog
+        The landmark graph as a log (:meth:`LandmarkLog.from_graph`).
+    constraints : PairConstraints
+    kept : int
+        Pose–pose factors of the landmark graph other than the odometry steps, carried over.
+    """
+
+    graph: PoseGraph
+    log: LandmarkLog
+    constraints: PairConstraints
+    kept: int
+
+
+def pose_only_from_landmark_graph(
+    graph: PoseGraph,
+    *,
+    method: Literal[1, 2] = 2,
+    min_common: int = METHOD2_MIN_COMMON,
+    start: Start = "align",
+) -> LandmarkGraphPoseOnly:
+    """Hu et al.'s pose-only extraction on a user's landmark graph (e.g. Victoria Park):
+    the graph as a log, the Method 1/2 pair constraints from its observations (each pair's
+    least squares started at ``start``: by default the rigid alignment of the shared
+    landmarks' observations, since on a long run the odometry's relative pose of two
+    revisits can be too far off: on Victoria Park with ``k = 2`` the pair 718–3264 does not
+    converge from it), plus its odometry and any other
+    pose–pose factors. Optimise the result with least squares or TORO; fit the landmarks to
+    the poses afterwards with :func:`landmarks_given_poses`."""
+    log, other = LandmarkLog.from_graph(graph)
+    pg, cons = pose_only_graph(log, method=method, min_common=min_common, start=start)
+    merged = PoseGraph(
+        poses=pg.poses,
+        landmarks=np.empty((0, 2)),
+        pp_i=np.concatenate((pg.pp_i, graph.pp_i[other])),
+        pp_j=np.concatenate((pg.pp_j, graph.pp_j[other])),
+        pp_z=np.concatenate((pg.pp_z, graph.pp_z[other])),
+        pp_info=np.concatenate((pg.pp_info, graph.pp_info[other])),
+    )
+    return LandmarkGraphPoseOnly(merged, log, cons, int(other.size))
 
 
 def landmarks_given_poses(
@@ -661,6 +806,72 @@ def landmarks_given_poses(
         cov = cov + g @ px @ g.T
         cov = 0.5 * (cov + cov.T)
     return readonly(lm), readonly(cov), ids
+
+
+@dataclass(frozen=True)
+class ChiSquare:
+    """A χ² statistic of measurements at an estimate and its degrees of freedom.
+
+    Attributes
+    ----------
+    value : float
+        ``Σ eᵀ Ω e`` over the measurements.
+    dof : int
+        Measurement dimensions minus estimated dimensions (its expected value for a
+        consistent least-squares estimate).
+    measurements : int
+        Measurement dimensions.
+    """
+
+    value: float
+    dof: int
+    measurements: int
+
+
+def relative_pose_chi2(graph: PoseGraph, poses: ArrayLike) -> ChiSquare:
+    """Hu et al.'s NEES2: the χ² of a pose graph's relative-pose constraints at ``poses``,
+    ``Σ_c e_cᵀ Ω_c e_c`` with ``e_c = [R_iᵀ (t_j − t_i) − δ_t, wrap(θ_j − θ_i − δ_θ)]``.
+    No ground truth. Degrees of freedom ``3 E − 3 (N − 1)`` (pose 0 fixed).
+
+    For pose-only SLAM the graph is the one solved (pair constraints and odometry); for full
+    least squares, whose only relative-pose constraints are the odometry steps, the
+    odometry graph."""
+    x = np.asarray(poses, dtype=np.float64)
+    e = se2.between(x[graph.pp_i], x[graph.pp_j]) - graph.pp_z
+    e[:, 2] = se2.wrap_angle(e[:, 2])
+    value = float(np.einsum("ea,eab,eb->", e, graph.pp_info, e))
+    m = 3 * int(graph.pp_i.size)
+    return ChiSquare(value, m - 3 * (graph.n_poses - 1), m)
+
+
+def odometry_graph(log: LandmarkLog) -> PoseGraph:
+    """The log's odometry steps as a pose graph (full least squares' relative-pose
+    constraints, for :func:`relative_pose_chi2`)."""
+    i, u, info = _odometry_factors(log)
+    return PoseGraph(log.odometry.poses, np.empty((0, 2)), i, i + 1, u, info)
+
+
+def data_chi2(log: LandmarkLog, poses: ArrayLike) -> ChiSquare:
+    """Hu et al.'s NEES3: the χ² of *all* the original measurements — every odometry step
+    and every landmark observation — with the poses fixed at ``poses`` and the landmarks at
+    their least-squares fit to them (:func:`landmarks_given_poses`). No ground truth.
+
+    Degrees of freedom ``3 (N − 1) + 2 K − 3 (N − 1) − 2 L = 2 (K − L)`` (K observations, L
+    landmarks; the poses and landmarks estimated): full least squares minimises exactly this
+    χ², so its value is its final cost × 2 and ≈ the dof when its noise model is right; any
+    other estimate of the poses gives more."""
+    x = np.asarray(poses, dtype=np.float64)
+    lm, _, ids = landmarks_given_poses(log, x)
+    lookup = np.empty(int(ids.max()) + 1 if ids.size else 0, dtype=np.int64)
+    lookup[ids] = np.arange(ids.size)
+    z, info = cartesian_observations(log)
+    k = log.pose
+    pred = se2.inverse_transform_points(x[k], lm[lookup[log.landmark]])
+    e_o = pred - z
+    odo = relative_pose_chi2(odometry_graph(log), x)
+    value = odo.value + float(np.einsum("ka,kab,kb->", e_o, info, e_o))
+    m = odo.measurements + 2 * int(k.size)
+    return ChiSquare(value, m - 3 * (x.shape[0] - 1) - 2 * int(ids.size), m)
 
 
 def nees3(

@@ -1,50 +1,61 @@
-"""A TORO-style pose-graph optimiser: tree parameterisation and stochastic gradient descent.
+"""TORO: pose-graph optimisation by stochastic gradient descent on a tree parameterisation.
 
-Reimplemented from the papers (Olson, Leonard & Teller, ICRA 2006; Grisetti, Stachniss,
-Grzonka & Burgard, RSS 2007), not from TORO's code:
+Written from the papers (Olson, Leonard & Teller, ICRA 2006, "Fast iterative alignment of
+pose graphs with poor initial estimates"; Grisetti, Stachniss, Grzonka & Burgard, RSS 2007,
+"A tree parameterization for efficiently computing maximum likelihood maps using gradient
+descent"), not from TORO's code (CC BY-NC-SA). OpenSLAM's 2-D ``toro`` was built in a side
+folder only to measure against (``benchmarks/bench_toro.py``).
 
-* **Tree parameterisation** (Grisetti et al.). A spanning tree of the constraint graph is
-  grown breadth-first from pose 0 (so tree paths are short, unlike Olson's incremental
-  chain). Each pose's parameter is its difference from its parent in the global frame,
-  ``x_k = p_k − p_parent(k)`` (angle included and wrapped: ``se2.minus``), so ``p_k`` is the
-  sum of the parameters on the tree path from the root; the root is held fixed.
-* **Residual**. For a constraint ``(i, j)`` with measurement ``δ`` the residual is taken in the
-  global frame, ``r = (p_i ⊕ δ) − p_j`` (angle wrapped: ``se2.minus``). It depends only on
-  the parameters on the tree path ``P_ij`` between ``i`` and ``j`` (below their lowest common
-  ancestor), with Jacobian blocks ``±I``.
-* **Spherical covariances**. As in TORO, a constraint's information is replaced by
-  ``diag(ω_t, ω_t, ω_θ)`` (``ω_t`` the mean of the translational diagonal, ``ω_θ`` the angular
-  entry, cross terms dropped), which makes the global-frame residual's weight independent of
-  the frame it is expressed in.
-* **Preconditioner and update** (Olson et al.). One iteration visits every constraint in
-  turn; the parameters ``x_k`` on its path move by ``Δx_k = −λ M_k⁻¹ J_kᵀ Ω r`` with the
-  Jacobi preconditioner ``M = diag(Σ_c J_cᵀ Ω_c J_c)`` (constant here). ``J_k`` is ``−I`` on
-  the ``j`` side of the path and ``[[I, S R_i δ_t], [0, 1]]`` on the ``i`` side (a heading
-  change turns the measured translation), so the fixed point is the least-squares optimum
-  of the spherical problem. A visit never overshoots: the step is scaled so that the
-  predicted change ``−λ A Ω r`` of the constraint's own residual
-  (``A = Σ_k J_k M_k⁻¹ J_kᵀ``) has spectral radius at most 1 (Grisetti et al.'s clipping).
-* **Learning rate** ``λ_t = 1 / (γ ρ̃ t)`` in iteration ``t`` (the harmonic schedule of both
-  papers), with ``ρ̃`` the median over constraints of ``ρ_c``, the spectral radius of
-  ``A_c Ω_c`` (the fraction of its residual a unit-rate visit removes), so that ``γ`` does not
-  depend on how densely the graph is connected. ``γ = 0.1`` by default: best of 0.1 / 0.3 / 1
-  on a seeded 30-pose ring (best cost 1.33 / 1.31 / 1.37 × the optimum after 100 iterations)
-  and on the pose-only Method 2 graph of hu-simple1, noise a, seed 0 (1.04 / 1.15 / 1.80 ×).
-* **Result**: the iterate of lowest cost (stochastic steps make the cost fluctuate).
+* **Tree** (``tree=``). ``"incremental"`` (the papers' choice for data that arrive in
+  order, and TORO's default): poses are inserted in index order and pose ``k``'s parent is
+  the lowest-index pose it shares a constraint with (among those before it), so a loop
+  closure hangs a new pose below the old pose it revisits and tree paths stay short (on
+  ``city10000`` the mean path length is 11.25 poses, what the real ``toro`` prints).
+  ``"breadth-first"``: a breadth-first spanning tree from pose 0.
+* **Parameters**. Pose ``k``'s parameter is its difference from its parent in the global
+  frame, ``x_k = p_k − p_parent(k)`` (``x``, ``y`` and the unwrapped heading ``θ``), so
+  ``p_k`` is the sum of the parameters on the root-to-``k`` path; the root is fixed.
+* **Initial guess** (``initial=``). ``"tree"`` (TORO's default): the poses composed along
+  the tree's own constraints from the root (the first constraint of each tree edge, in
+  input order). ``"given"``: the graph's poses.
+* **Residual** of a constraint ``c = (i, j)`` with measurement ``δ``, in the global frame:
+  ``r_c = [t_i + R_i δ_t − t_j, wrap(θ_i + δ_θ − θ_j)]``. Its Jacobian with respect to the
+  parameters on the tree path ``P_c`` between ``i`` and ``j`` (the poses below their lowest
+  common ancestor) is ``+I`` on the ``i`` side and ``−I`` on the ``j`` side; the heading
+  change's lever on ``R_i δ_t`` is neglected, as in both papers, so headings are updated
+  from rotational residuals only.
+* **Weights**. The information rotated into the global frame, ``R_i Ω_c R_iᵀ``, reduced to
+  its diagonal ``W_c`` (per dimension; TORO's spherical ``diag(ω_t, ω_t, ω_θ)`` when the
+  translational block is isotropic, e.g. ``city10000``).
+* **Preconditioner**, recomputed at the start of every iteration (the headings change):
+  ``M_k = Σ_{c : k ∈ P_c} W_c`` per dimension, and ``γ = min_k M_k`` per dimension.
+* **Step** (Grisetti et al.'s update). In iteration ``t`` (from 1) a visit to ``c`` removes
+  the fraction ``f_c = min(1, 2 |P_c| W_c / (γ t))`` of each dimension of its residual,
+  split along its path in proportion to ``M_k⁻¹``:
+  ``Δx_k = ∓ f_c r_c M_k⁻¹ / Σ_{m ∈ P_c} M_m⁻¹`` (``−`` on the ``i`` side, ``+`` on the
+  ``j`` side), so the constraint's own residual becomes ``(1 − f_c) r_c`` exactly.
+* **Order** (``order=``). ``"depth"`` (the RSS paper's): the constraints sorted by their
+  level, the depth of the lowest common ancestor of their two poses, root side first (ties
+  in input order). ``"input"``: the input order.
 
-Positions and headings are separate parameters (the 2-D parameterisation of the RSS paper),
-so a heading change does not rotate the positions further down the tree. The result is an
-approximate optimum — stochastic gradient descent with a decaying rate stops short of the
-minimum — which is what Hu et al. compare with least squares (Tables II–IV).
+Vectorisation: visits are sequential in the paper's order, but two constraints whose
+paths share no pose do not touch each other's parameters, so their visits commute. The
+visits are therefore grouped into runs (:func:`_runs`) that keep the order of every two
+visits sharing a pose, and each run is applied at once (sparse products over the run): the
+same result as one visit at a time in the paper's order. The one quantity outside the paths,
+the heading of the lowest common ancestor in ``R_i``, is taken from the start of the
+iteration (a second-order effect, whatever the grouping).
 
-The visit of one constraint is sequential by the nature of stochastic gradient descent; its
-arithmetic is vectorised over the path.
+The result is the last iterate (the papers run a fixed number of iterations; the cost need
+not decrease monotonically). The cost reported is ``½ Σ eᵀ Ω e`` with the graph's own
+information and the local residual of :mod:`slamrel.backends.least_squares`, so that it is
+comparable with least squares'.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
@@ -57,27 +68,50 @@ from relation_metric.errors import InputError
 from relation_metric.trajectory import readonly
 from slamrel.backends.least_squares import PoseGraph
 
-__all__ = ["TreeSolution", "spherical_information", "spanning_tree", "toro_optimize"]
+__all__ = [
+    "TORO_TREES",
+    "TORO_ORDERS",
+    "TORO_INITIAL",
+    "TreeSolution",
+    "spherical_information",
+    "spanning_tree",
+    "incremental_tree",
+    "graph_cost",
+    "toro_optimize",
+]
+
+TreeKind = Literal["incremental", "breadth-first"]
+OrderKind = Literal["depth", "input"]
+InitialKind = Literal["tree", "given"]
+TORO_TREES: tuple[TreeKind, ...] = ("incremental", "breadth-first")
+TORO_ORDERS: tuple[OrderKind, ...] = ("depth", "input")
+TORO_INITIAL: tuple[InitialKind, ...] = ("tree", "given")
 
 
 @dataclass(frozen=True)
 class TreeSolution:
-    """Result of :func:`toro_optimize`.
+    """Result of :func:`toro_optimize` and of :mod:`~slamrel.backends.lever_sgd`.
 
     Attributes
     ----------
     poses : ndarray, shape (N, 3)
     cost : ndarray, shape (iterations + 1,)
-        ``½ Σ rᵀ Ω r`` with the spherical information after each iteration (first: the start).
+        ``½ Σ eᵀ Ω e`` after each iteration (first: the start).
     iterations : int
     parent : ndarray of int, shape (N,)
         The spanning tree (−1 at the root, pose 0).
+    mean_path_length : float
+        Mean over constraints of ``|P_c|``, the poses on the tree path between its two poses.
+    runs : int
+        Runs of constraints with disjoint paths applied at once per iteration (0 if unused).
     """
 
     poses: Array
     cost: Array
     iterations: int
     parent: NDArray[np.int64]
+    mean_path_length: float = float("nan")
+    runs: int = 0
 
 
 def spherical_information(info: Array) -> Array:
@@ -108,171 +142,268 @@ def spanning_tree(n: int, pp_i: NDArray[np.int64], pp_j: NDArray[np.int64]) -> N
     return parent
 
 
-def _ancestry(parent: NDArray[np.int64]) -> tuple[NDArray[np.int64], list[NDArray[np.int64]]]:
-    """Depth of each node and its root-to-node path (root excluded), built level by level."""
-    n = parent.size
-    depth = np.zeros(n, dtype=np.int64)
-    paths: list[NDArray[np.int64]] = [np.empty(0, np.int64)] * n
-    order = breadth_first_order(
-        sp.coo_matrix((np.ones(n - 1), (parent[1:], np.arange(1, n))), shape=(n, n)).tocsr(),
-        0,
-        directed=True,
-        return_predecessors=False,
-    )
-    for k in order[1:]:
-        p = parent[k]
-        depth[k] = depth[p] + 1
-        paths[k] = np.append(paths[p], k)
-    return depth, paths
+def incremental_tree(
+    n: int, pp_i: NDArray[np.int64], pp_j: NDArray[np.int64]
+) -> NDArray[np.int64]:
+    """Parents of the incremental tree (−1 at the root), shape (N,): pose ``k > 0`` hangs
+    below the lowest-index pose ``< k`` it shares a constraint with.
 
-
-def _poses_from_parameters(
-    x: Array, levels: list[NDArray[np.int64]], parent: NDArray[np.int64]
-) -> Array:
-    p = x.copy()
-    for nodes in levels[1:]:
-        p[nodes] += p[parent[nodes]]
-    return p
-
-
-def _cost(p: Array, g: PoseGraph, omega: Array) -> float:
-    r = se2.minus(se2.compose(p[g.pp_i], g.pp_z), p[g.pp_j])
-    return 0.5 * float(np.einsum("ea,eab,eb->", r, omega, r))
-
-
-def _constraint_sides(
-    anc: list[NDArray[np.int64]], pp_i: NDArray[np.int64], pp_j: NDArray[np.int64]
-) -> tuple[list[NDArray[np.int64]], list[NDArray[np.int64]]]:
-    """The path of each constraint below the lowest common ancestor of its two poses in the
-    tree (``anc``: root-first ancestors of each pose): the i side, then the j side."""
-    side_i: list[NDArray[np.int64]] = []
-    side_j: list[NDArray[np.int64]] = []
-    for i, j in zip(pp_i.tolist(), pp_j.tolist()):
-        ai, aj = anc[i], anc[j]
-        m = min(ai.size, aj.size)
-        common = int(np.argmin(np.append(ai[:m] == aj[:m], False)))  # shared prefix length
-        side_i.append(ai[common:])
-        side_j.append(aj[common:])
-    return side_i, side_j
-
-
-def _preconditioner(
-    n: int,
-    w: Array,
-    z: Array,
-    side_i: list[NDArray[np.int64]],
-    side_j: list[NDArray[np.int64]],
-) -> tuple[Array, Array]:
-    """``M⁻¹`` (shape ``(n, 3)``, the inverse of ``diag(Σ J_kᵀ Ω J_k)``, 0 where no constraint
-    acts) and ``ρ_c`` per constraint (shape ``(E,)``), the spectral radius of ``A_c Ω_c``.
-
-    On the i side the angle also turns ``R_i δ_t``, whose length ``|δ_t|`` does not depend on
-    the state, so ``M`` is constant. ``ρ_c`` says how much of its own residual a unit-rate
-    visit removes (rotation-invariant: ``M`` and ``Ω`` are spherical in x, y).
+    Raises
+    ------
+    InputError
+        When a pose has no constraint to an earlier pose (it cannot be inserted in order;
+        the breadth-first tree does not need the order).
     """
-    e_n = len(side_i)
-    lever = w[:, 0] * np.sum(z[:, :2] ** 2, axis=1)
-    m_diag = np.zeros((n, 3))
-    if e_n:
-        owner_i = np.repeat(np.arange(e_n), [q.size for q in side_i])
-        owner_j = np.repeat(np.arange(e_n), [q.size for q in side_j])
-        np.add.at(m_diag, np.concatenate(side_j), w[owner_j])
-        wi = w[owner_i].copy()
-        wi[:, 2] += lever[owner_i]
-        np.add.at(m_diag, np.concatenate(side_i), wi)
-    m_inv = np.zeros_like(m_diag)
-    np.divide(1.0, m_diag, out=m_inv, where=m_diag > 0)
-    sum_i = np.array([m_inv[q].sum(axis=0) for q in side_i]).reshape(-1, 3)
-    sum_j = np.array([m_inv[q].sum(axis=0) for q in side_j]).reshape(-1, 3)
-    jac = np.broadcast_to(np.eye(3), (e_n, 3, 3)).copy()
-    jac[:, 0, 2], jac[:, 1, 2] = -z[:, 1], z[:, 0]
-    a_all = (jac * sum_i[:, None, :]) @ np.swapaxes(jac, 1, 2) + sum_j[:, :, None] * np.eye(3)
-    rho_all = np.max(np.abs(np.linalg.eigvals(a_all * w[:, None, :])), axis=1) if e_n else w[:, 0]
-    return m_inv, rho_all
+    lo = np.minimum(pp_i, pp_j)
+    hi = np.maximum(pp_i, pp_j)
+    parent = np.full(n, n, dtype=np.int64)
+    np.minimum.at(parent, hi, lo)
+    parent[0] = -1
+    orphan = np.flatnonzero(parent[1:] == n)
+    if orphan.size:
+        raise InputError(
+            f"pose {int(orphan[0]) + 1} has no constraint to an earlier pose; the incremental "
+            "tree inserts poses in index order (use the breadth-first tree)"
+        )
+    return parent
+
+
+_TWO_PI = 2.0 * np.pi
+
+
+def _wrap(a: Array) -> Array:
+    """Angles to ``[−π, π)`` in three array operations (the hot loop's residual angles)."""
+    w = np.remainder(a + np.pi, _TWO_PI) - np.pi
+    w[w >= np.pi] -= _TWO_PI  # the remainder can round up to exactly 2π
+    return w
+
+
+def graph_cost(poses: Array, graph: PoseGraph) -> float:
+    """``½ Σ eᵀ Ω e`` of the pose–pose factors (local residual, the graph's information)."""
+    e = se2.between(poses[graph.pp_i], poses[graph.pp_j]) - graph.pp_z
+    e[:, 2] = se2.wrap_angle(e[:, 2])
+    return 0.5 * float(np.einsum("ea,eab,eb->", e, graph.pp_info, e))
+
+
+def _depths(parent: NDArray[np.int64]) -> tuple[NDArray[np.int64], list[NDArray[np.int64]]]:
+    """Depth of every node and the nodes of each level (level 0: the root)."""
+    n = parent.size
+    child = sp.csr_matrix((np.ones(n - 1), (parent[1:], np.arange(1, n))), shape=(n, n))
+    order = breadth_first_order(child, 0, directed=True, return_predecessors=False)
+    depth = np.zeros(n, dtype=np.int64)
+    for k in order[1:].tolist():  # once per solve; parents come first in BFS order
+        depth[k] = depth[parent[k]] + 1
+    levels = [np.flatnonzero(depth == d) for d in range(int(depth.max()) + 1)]
+    return depth, levels
+
+
+@dataclass(frozen=True)
+class _Paths:
+    """Tree paths of the constraints as a signed incidence matrix.
+
+    ``signed``: (E, N) CSR, ``+1`` for the ``i``-side poses of ``P_c``, ``−1`` for the
+    ``j`` side; ``lca``: (E,) lowest common ancestor; ``length``: (E,) ``|P_c|``.
+    """
+
+    signed: sp.csr_matrix
+    lca: NDArray[np.int64]
+    length: NDArray[np.int64]
+
+
+def _paths(
+    parent: NDArray[np.int64], depth: NDArray[np.int64], i: NDArray[np.int64], j: NDArray[np.int64]
+) -> _Paths:
+    """Climb from both ends of all constraints at once, the deeper end first, until they
+    meet (the lowest common ancestor); every pose left on the way is on the path."""
+    a, b = i.copy(), j.copy()
+    rows: list[NDArray[np.int64]] = []
+    cols: list[NDArray[np.int64]] = []
+    vals: list[NDArray[np.float64]] = []
+    live = np.flatnonzero(a != b)
+    while live.size:
+        up_a = depth[a[live]] >= depth[b[live]]
+        ca, cb = live[up_a], live[~up_a]
+        rows += [ca, cb]
+        cols += [a[ca], b[cb]]
+        vals += [np.ones(ca.size), -np.ones(cb.size)]
+        a[ca] = parent[a[ca]]
+        b[cb] = parent[b[cb]]
+        live = live[a[live] != b[live]]
+    e_n, n = i.size, parent.size
+    r = np.concatenate(rows) if rows else np.empty(0, np.int64)
+    signed = sp.csr_matrix(
+        (np.concatenate(vals) if vals else np.empty(0), (r, np.concatenate(cols) if cols else r)),
+        shape=(e_n, n),
+    )
+    signed.sort_indices()
+    return _Paths(signed, a, np.diff(signed.indptr).astype(np.int64))
+
+
+def _runs(signed: sp.csr_matrix, order: NDArray[np.int64]) -> list[NDArray[np.int64]]:
+    """Group the visits of ``order`` into runs applied at once, equivalent to visiting them
+    one by one in ``order``: a constraint goes into the run after the last run holding a
+    constraint whose path shares a pose with its own (visits with disjoint paths commute),
+    so every two visits that touch a common pose keep their order. The runs, in order, each
+    in visit order; their number is the longest chain of such dependencies."""
+    next_run = np.zeros(signed.shape[1], dtype=np.int64)
+    ptr, idx = signed.indptr, signed.indices
+    run_of = np.zeros(order.size, dtype=np.int64)
+    for pos, c in enumerate(order.tolist()):  # once per solve
+        nodes = idx[ptr[c] : ptr[c + 1]]
+        if nodes.size:
+            k = int(next_run[nodes].max())
+            run_of[pos] = k
+            next_run[nodes] = k + 1
+    by_run = np.argsort(run_of, kind="stable")
+    cuts = np.flatnonzero(np.diff(run_of[by_run])) + 1
+    return [order[g] for g in np.split(by_run, cuts) if g.size]
+
+
+def _tree_guess(
+    graph: PoseGraph, parent: NDArray[np.int64], levels: list[NDArray[np.int64]]
+) -> Array:
+    """Poses composed from the root along the first constraint of each tree edge."""
+    n = graph.n_poses
+    fwd = np.full(n, -1, dtype=np.int64)  # constraint parent → k
+    bwd = np.full(n, -1, dtype=np.int64)  # constraint k → parent
+    e = np.arange(graph.pp_i.size)[::-1]  # the first constraint in input order wins
+    hit = parent[graph.pp_j[e]] == graph.pp_i[e]
+    fwd[graph.pp_j[e[hit]]] = e[hit]
+    hit = parent[graph.pp_i[e]] == graph.pp_j[e]
+    bwd[graph.pp_i[e[hit]]] = e[hit]
+    use_fwd = (fwd >= 0) & ((bwd < 0) | (fwd <= np.where(bwd < 0, fwd, bwd)))
+    step = np.zeros((n, 3))
+    step[use_fwd] = graph.pp_z[fwd[use_fwd]]
+    back = ~use_fwd
+    back[0] = False
+    step[back] = se2.inverse(graph.pp_z[bwd[back]])
+    p = np.array(graph.poses, dtype=np.float64)
+    for nodes in levels[1:]:
+        p[nodes] = se2.compose(p[parent[nodes]], step[nodes])
+    return p
 
 
 def toro_optimize(
     graph: PoseGraph,
     *,
     iterations: int = 100,
-    gamma: float = 0.1,
+    tree: TreeKind = "incremental",
+    order: OrderKind = "depth",
+    initial: InitialKind = "tree",
 ) -> TreeSolution:
-    """Optimise a pose graph (pose–pose constraints only) TORO-style.
+    """Optimise a pose graph (pose–pose constraints only) as TORO does (module docstring).
 
     Parameters
     ----------
     graph : PoseGraph
-        Its poses are the start; pose 0 is the root and stays fixed. Landmark factors are not
-        supported (TORO optimises pose graphs).
+        Pose 0 is the root and stays fixed; landmark factors are refused.
     iterations : int
         Passes over all constraints.
-    gamma : float
-        Learning-rate scale, ``λ_t = 1 / (γ ρ̃ t)``.
+    tree : {"incremental", "breadth-first"}
+    order : {"depth", "input"}
+    initial : {"tree", "given"}
 
     Returns
     -------
     TreeSolution
+        The last iterate.
     """
     if graph.pl_k.size:
-        raise InputError("the TORO-style optimiser takes pose graphs only (no landmark factors)")
-    if iterations < 0 or gamma <= 0:
-        raise InputError(f"need iterations >= 0 and gamma > 0, got {iterations}, {float(gamma):g}")
+        raise InputError("the TORO optimiser takes pose graphs only (no landmark factors)")
+    if iterations < 0:
+        raise InputError(f"need iterations >= 0, got {iterations}")
+    for name, value, allowed in (
+        ("tree", tree, TORO_TREES),
+        ("order", order, TORO_ORDERS),
+        ("initial", initial, TORO_INITIAL),
+    ):
+        if value not in allowed:
+            raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
     n = graph.n_poses
-    parent = spanning_tree(n, graph.pp_i, graph.pp_j)
-    depth, anc = _ancestry(parent)
-    levels = [np.flatnonzero(depth == d) for d in range(int(depth.max()) + 1)]
-    omega = spherical_information(graph.pp_info)
-    w = np.column_stack((omega[:, 0, 0], omega[:, 1, 1], omega[:, 2, 2]))
-    p0 = np.array(graph.poses, dtype=np.float64)
+    pi, pj = graph.pp_i, graph.pp_j
+    parent = spanning_tree(n, pi, pj)  # first: a pose not connected to pose 0 is said as such
+    if tree == "incremental":
+        parent = incremental_tree(n, pi, pj)
+    depth, levels = _depths(parent)
+    paths = _paths(parent, depth, pi, pj)
+    visit = np.argsort(depth[paths.lca], kind="stable") if order == "depth" else np.arange(pi.size)
+    runs = _runs(paths.signed, visit)
+    # the runs laid end to end: constraint slots [c0, c1) and path entries [n0, n1) per run
+    concat = np.concatenate(runs) if runs else np.empty(0, np.int64)
+    sub = paths.signed[concat]
+    nodes_all = sub.indices.astype(np.int64)
+    sign_all = sub.data.astype(np.float64)
+    owner_all = np.repeat(np.arange(concat.size), np.diff(sub.indptr))
+    # per entry: (±1 for the path difference, 1 on the i side for the heading of i)
+    factor_all = np.stack((sign_all, (sign_all > 0).astype(np.float64)), axis=1)[:, None, :]
+    bounds = np.cumsum([0] + [r.size for r in runs])
+    blocks = []
+    for k in range(len(runs)):
+        c0, c1 = int(bounds[k]), int(bounds[k + 1])
+        n0, n1 = int(sub.indptr[c0]), int(sub.indptr[c1])
+        blocks.append(
+            (c0, c1, n0, n1, nodes_all[n0:n1], owner_all[n0:n1] - c0,
+             (sub.indptr[c0:c1] - n0).astype(np.int64), factor_all[n0:n1])
+        )  # fmt: skip
+    p0 = _tree_guess(graph, parent, levels) if initial == "tree" else np.array(graph.poses)
     x = p0.copy()
-    x[1:] = se2.minus(p0[1:], p0[parent[1:]])
-    e_n = graph.pp_i.size
+    x[1:] = p0[1:] - p0[parent[1:]]
+    x[1:, 2] = se2.wrap_angle(x[1:, 2])
     z = np.asarray(graph.pp_z)
-    side_i, side_j = _constraint_sides(anc, graph.pp_i, graph.pp_j)
-    m_inv, rho_all = _preconditioner(n, w, z, side_i, side_j)
-    scale = float(np.median(rho_all)) if e_n else 1.0
-    anc_i = [anc[i] for i in graph.pp_i.tolist()]
-    anc_j = [anc[j] for j in graph.pp_j.tolist()]
-    mi_i = [m_inv[q] for q in side_i]  # preconditioner rows of each path side
-    mi_j = [m_inv[q] for q in side_j]
-    zz = z.tolist()
-    ww = w.tolist()
-    inv_rho = (1.0 / rho_all).tolist()
-    rt = float(x[0, 2])  # the root heading (positions cancel in the residual)
-    costs = [_cost(_poses_from_parameters(x, levels, parent), graph, omega)]
-    best_cost, best_x = costs[0], x.copy()
+    info = np.asarray(graph.pp_info)
+    length = paths.length.astype(np.float64)
+    absolute = abs(paths.signed).T.tocsr()  # (N, E): sums of W over the constraints on k
+
+    def poses_of(params: Array) -> Array:
+        p = params.copy()
+        for nodes in levels[1:]:
+            p[nodes] += p[parent[nodes]]
+        return p
+
+    costs = [graph_cost(poses_of(x), graph)]
     for t in range(1, iterations + 1):
-        lam = 1.0 / (gamma * scale * t)
-        for e in range(e_n):
-            si, sj = side_i[e], side_j[e]
-            if si.size + sj.size == 0:
-                continue
-            pi = x[anc_i[e]].sum(axis=0).tolist()
-            pj = x[anc_j[e]].sum(axis=0).tolist()
-            th = rt + pi[2]
-            c, s_ = math.cos(th), math.sin(th)
-            zx, zy, zt = zz[e]
-            dx, dy = c * zx - s_ * zy, s_ * zx + c * zy  # R_i δ_t
-            r0 = pi[0] + dx - pj[0]
-            r1 = pi[1] + dy - pj[1]
-            r2 = se2.wrap_angle_float(pi[2] + zt - pj[2])
-            w0, w1, w2 = ww[e]
-            wr = np.array((w0 * r0, w1 * r1, w2 * r2))  # Ω r
-            # Jacobians: i side [[I, S R_i δ_t], [0, 1]], j side −I; the step is capped so
-            # that the predicted change −λ A Ω r of the constraint's own residual
-            # (A = Σ_k J_k M_k⁻¹ J_kᵀ) has spectral radius ≤ 1: ρ(A Ω) is rotation-invariant
-            # (M and Ω are spherical in x, y), so it was computed once
-            step = min(lam, inv_rho[e])
-            if si.size:
-                g_i = np.array((wr[0], wr[1], -dy * wr[0] + dx * wr[1] + wr[2]))
-                x[si] -= step * mi_i[e] * g_i
-            if sj.size:
-                x[sj] += step * mi_j[e] * wr
-        costs.append(_cost(_poses_from_parameters(x, levels, parent), graph, omega))
-        if costs[-1] < best_cost:
-            best_cost, best_x = costs[-1], x.copy()
-    p = _poses_from_parameters(best_x, levels, parent)
+        p = poses_of(x)
+        c, s_ = np.cos(p[pi, 2]), np.sin(p[pi, 2])
+        # diagonal of R Ω Rᵀ
+        wxx = c * c * info[:, 0, 0] - 2 * c * s_ * info[:, 0, 1] + s_ * s_ * info[:, 1, 1]
+        wyy = s_ * s_ * info[:, 0, 0] + 2 * c * s_ * info[:, 0, 1] + c * c * info[:, 1, 1]
+        w = np.column_stack((wxx, wyy, info[:, 2, 2]))
+        m = absolute @ w
+        active = m > 0
+        gamma = np.where(active.any(axis=0), np.where(active, m, np.inf).min(axis=0), 1.0)
+        m_inv = np.zeros_like(m)
+        np.divide(1.0, m, out=m_inv, where=active)
+        frac = np.minimum(1.0, 2.0 * length[:, None] * w / (gamma * t))
+        # what stays fixed within an iteration, in run order: the share of each path pose
+        # (M_k⁻¹ / Σ_P M⁻¹, signed), the fractions, the top poses' headings
+        mn = m_inv[nodes_all]
+        share = np.add.reduceat(mn, sub.indptr[:-1]) if concat.size else mn
+        split = np.zeros_like(mn)
+        np.divide(mn * sign_all[:, None], share[owner_all], out=split, where=share[owner_all] > 0)
+        neg_frac = -frac[concat]
+        th_top = p[paths.lca[concat], 2]
+        z_run = z[concat]
+        for c0, c1, n0, n1, nodes, owner, starts, factor in blocks:
+            xn = x[nodes]
+            # (t_i − t_j, θ_i − θ_j) over the path and Σ of the i side's parameters, at once
+            both = np.add.reduceat(xn[:, :, None] * factor, starts)
+            th = th_top[c0:c1] + both[:, 2, 1]
+            zr = z_run[c0:c1]
+            cr, sr = np.cos(th), np.sin(th)
+            r = both[:, :, 0]
+            r[:, 0] += cr * zr[:, 0] - sr * zr[:, 1]
+            r[:, 1] += sr * zr[:, 0] + cr * zr[:, 1]
+            r[:, 2] = _wrap(r[:, 2] + zr[:, 2])
+            r *= neg_frac[c0:c1]
+            x[nodes] = xn + split[n0:n1] * r[owner]  # the poses of a run are distinct
+        costs.append(graph_cost(poses_of(x), graph))
+    p = poses_of(x)
     p[:, 2] = se2.wrap_angle(p[:, 2])
     return TreeSolution(
-        readonly(p), readonly(np.asarray(costs)), int(iterations), readonly(parent, np.int64)
+        readonly(p),
+        readonly(np.asarray(costs)),
+        int(iterations),
+        readonly(parent, np.int64),
+        float(paths.length.mean()) if paths.length.size else 0.0,
+        len(runs),
     )

@@ -1,4 +1,11 @@
-"""``slamrel solve``: full least squares on a pose graph with landmarks."""
+"""``slamrel solve``: least squares or TORO on a pose graph, full or pose-only.
+
+``--method lm`` (default): Levenberg–Marquardt on the whole graph (poses and landmarks).
+``--method toro``: TORO (:mod:`slamrel.backends.toro_optimiser`) on a pose graph.
+``--pose-only m1|m2``: a landmark graph is first turned into Hu et al.'s pose-only graph
+(:func:`slamrel.backends.pose_only.pose_only_from_landmark_graph`), which ``--method``
+then optimises; the landmarks are fitted to the resulting poses.
+"""
 
 from __future__ import annotations
 
@@ -26,15 +33,21 @@ if TYPE_CHECKING:  # the library is imported where it is used: start-up stays li
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     s = sub.add_parser(
         "solve",
-        help="full least squares on a pose graph with landmarks (g2o or iSAM text)",
-        description="Levenberg-Marquardt from the file's initial guess: the whole graph "
+        help="least squares or TORO on a pose graph, full or pose-only (g2o, TORO or iSAM text)",
+        description="--method lm (default): Levenberg-Marquardt from the file's initial "
+        "guess: the whole graph "
         "first, given up when it stalls (a step removing less than half the cost while "
         "chi2/dof > 4); then on a problem grown in pose order, --batch poses first, the "
         "step multiplied by --growth each time, a step "
         "whose solution is far less consistent (chi2/dof) than the last undone and retried "
         "smaller (an incremental smoother's way to avoid the local minima a single batch "
-        "solve from chained odometry falls into on long runs such as Victoria Park); writes "
-        "trajectory.txt (t = pose index), landmarks.csv and solved.g2o into -o DIR.",
+        "solve from chained odometry falls into on long runs such as Victoria Park). "
+        "--method toro: TORO (Grisetti et al. 2007) on a pose graph, --toro-iterations "
+        "passes. --pose-only m1|m2: a landmark graph becomes the pose-only graph of Hu et "
+        "al. (Method 1: adjacent poses; Method 2: pose pairs sharing >= --min-common "
+        "landmarks) plus its odometry, optimised by --method; the landmarks are then fitted "
+        "to the poses. Writes trajectory.txt (t = pose index), landmarks.csv and solved.g2o "
+        "(the graph optimised, at its solution) into -o DIR.",
     )
     s.add_argument("graph", metavar="GRAPH", help="g2o graph or iSAM text file")
     s.add_argument("-o", "--output", required=True, metavar="DIR", help="directory to write")
@@ -67,6 +80,48 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="F",
         help="factor on the poses added per sub-problem (default 2; 1: a fixed step of --batch)",
     )
+    s.add_argument(
+        "--method",
+        choices=("lm", "toro"),
+        default="lm",
+        help="lm (default): Levenberg-Marquardt least squares; toro: TORO's stochastic "
+        "gradient descent on a tree parameterisation (pose graphs only)",
+    )
+    s.add_argument(
+        "--pose-only",
+        choices=("none", "m1", "m2"),
+        default="none",
+        help="none (default): optimise the graph as it is; m1/m2: extract Hu et al.'s "
+        "Method 1/2 relative-pose constraints from a landmark graph first",
+    )
+    s.add_argument(
+        "--min-common",
+        type=opt.int_range(2, 1000),
+        default=5,
+        metavar="K",
+        help="Method 2: pose pairs sharing at least K landmarks (default 5, the paper's)",
+    )
+    s.add_argument(
+        "--toro-iterations",
+        type=opt.nonnegative_int,
+        default=100,
+        metavar="N",
+        help="--method toro: passes over all constraints (default 100)",
+    )
+    s.add_argument(
+        "--toro-tree",
+        choices=("incremental", "breadth-first"),
+        default="incremental",
+        help="--method toro: incremental (default, TORO's: each pose below its lowest-index "
+        "earlier neighbour) or breadth-first spanning tree",
+    )
+    s.add_argument(
+        "--toro-order",
+        choices=("depth", "input"),
+        default="depth",
+        help="--method toro: visit constraints by tree depth of their top pose (default, "
+        "the paper's) or in input order",
+    )
     add_noise_argument(s)
     add_force_argument(s)
     s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
@@ -75,9 +130,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
     """The graph and its file's pose and landmark ids."""
+    import numpy as np
+
     from slamrel.formats.g2o import read_g2o_graph
     from slamrel.formats.isam import is_isam, read_isam
     from slamrel.formats.text import read_source
+    from slamrel.formats.toro import is_toro, read_toro_graph
 
     # the reader of `import isam`, and its rules (comments, byte order mark, missing file,
     # a folder, no permission): the same file gets the same verdict from both commands
@@ -86,12 +144,20 @@ def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
         with in_option_words(NOISE_WORDS):
             data = read_isam(path, noise=noise, source=src)  # type: ignore[arg-type]
         return data.graph, data.pose_ids, data.landmark_ids
+    if is_toro(src):
+        graph, ids = read_toro_graph(path)
+        return graph, ids, np.empty(0, np.int64)
     return read_g2o_graph(path, source=src)
 
 
 def run_solve(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from relation_metric.errors import InputError
     from relation_metric.trajectory import Trajectory
-    from slamrel.backends.least_squares import solve_graph, solve_graph_incremental
+    from slamrel.backends.least_squares import PoseGraph, solve_graph, solve_graph_incremental
+    from slamrel.backends.pose_only import landmarks_given_poses, pose_only_from_landmark_graph
+    from slamrel.backends.toro_optimiser import toro_optimize
     from slamrel.formats.g2o import write_g2o_graph
     from slamrel.formats.landmark_csv import write_landmark_csv
     from slamrel.formats.trajectories import write_trajectory
@@ -99,30 +165,87 @@ def run_solve(args: argparse.Namespace) -> int:
 
     check_outputs([], [args.graph], dirs=[args.output], force=args.force)
     graph, pose_ids, lm_ids = _load(args.graph, args.noise)
+    notes: list[str] = []
     with errors_about(args.graph):
-        if args.batch == 0:
-            sol = solve_graph(graph, max_iterations=args.max_iterations, tolerance=args.tolerance)
-        else:
-            sol = solve_graph_incremental(
-                graph,
-                batch=args.batch,
-                growth=args.growth,
-                max_iterations=args.max_iterations,
-                tolerance=args.tolerance,
+        log = None
+        if args.pose_only != "none":
+            if graph.pl_k.size == 0:
+                raise InputError(
+                    f"--pose-only {args.pose_only} extracts constraints from landmark "
+                    "observations, and this graph has none (a pose graph: drop --pose-only)"
+                )
+            po = pose_only_from_landmark_graph(
+                graph, method=1 if args.pose_only == "m1" else 2, min_common=args.min_common
             )
+            log = po.log
+            notes.append(
+                f"pose-only {args.pose_only.upper()}: {po.constraints.pairs.shape[0]} pair "
+                f"constraints from {graph.pl_k.size} observations, {graph.n_poses - 1} "
+                f"odometry steps, {po.kept} other pose-pose factors kept"
+            )
+            problem = po.graph
+        else:
+            problem = graph
+        if args.method == "toro":
+            if problem.pl_k.size:
+                raise InputError(
+                    f"TORO optimises pose graphs; this graph has {problem.pl_k.size} "
+                    "pose-landmark factors (--pose-only m1|m2 extracts a pose graph from them)"
+                )
+            tree = toro_optimize(
+                problem,
+                iterations=args.toro_iterations,
+                tree=args.toro_tree,
+                order=args.toro_order,
+            )
+            poses = np.asarray(tree.poses)
+            landmarks = np.asarray(problem.landmarks)
+            converged = True  # a fixed number of passes, as TORO runs
+            summary = (
+                f"TORO: {tree.iterations} iterations ({args.toro_tree} tree, mean path "
+                f"{tree.mean_path_length:.3g} poses, {args.toro_order} order): cost "
+                f"{tree.cost[0]:.6g} -> {tree.cost[-1]:.6g}"
+            )
+        else:
+            if args.batch == 0:
+                sol = solve_graph(
+                    problem, max_iterations=args.max_iterations, tolerance=args.tolerance
+                )
+            else:
+                sol = solve_graph_incremental(
+                    problem,
+                    batch=args.batch,
+                    growth=args.growth,
+                    max_iterations=args.max_iterations,
+                    tolerance=args.tolerance,
+                )
+            poses, landmarks = np.asarray(sol.poses), np.asarray(sol.landmarks)
+            converged = sol.converged
+            summary = (
+                f"{'converged' if sol.converged else 'NOT converged'} after {sol.iterations} "
+                f"iterations: cost {sol.cost[0]:.6g} -> {sol.cost[-1]:.6g} "
+                f"(sparse Cholesky: {sol.linear_solver})"
+            )
+        if log is not None:
+            fitted, _, fitted_ids = landmarks_given_poses(log, poses)
+            landmarks = np.zeros((graph.n_landmarks, 2))
+            landmarks[fitted_ids] = fitted
     out = Path(args.output)
+    written = PoseGraph(
+        poses, np.asarray(landmarks).reshape(-1, 2) if log is None else np.empty((0, 2)),
+        problem.pp_i, problem.pp_j, problem.pp_z, problem.pp_info,
+        problem.pl_k, problem.pl_l, problem.pl_z, problem.pl_info,
+    )  # fmt: skip
     with staged_directory(out, kind="solve", force=args.force) as tmp:
-        write_trajectory(tmp / "trajectory.txt", Trajectory.from_poses(sol.poses), format="plain")
-        write_landmark_csv(tmp / "landmarks.csv", lm_ids, sol.landmarks)
+        write_trajectory(tmp / "trajectory.txt", Trajectory.from_poses(poses), format="plain")
+        write_landmark_csv(tmp / "landmarks.csv", lm_ids, landmarks)
         write_g2o_graph(
             tmp / "solved.g2o",
-            graph,
-            poses=sol.poses,
-            landmarks=sol.landmarks,
+            written,
             pose_ids=pose_ids,
-            landmark_ids=lm_ids,
+            landmark_ids=lm_ids if log is None else np.empty(0, np.int64),
         )
-    if not sol.converged:
+    if not converged:
         # a result all the same (the last iterate is written), said even with -q
         warnings.warn(
             f"{args.graph}: NOT converged after {sol.iterations} iterations (cost "
@@ -132,12 +255,10 @@ def run_solve(args: argparse.Namespace) -> int:
             stacklevel=2,
         )
     if not args.quiet:
-        print(
-            f"{'converged' if sol.converged else 'NOT converged'} after {sol.iterations} "
-            f"iterations: cost {sol.cost[0]:.6g} -> {sol.cost[-1]:.6g} "
-            f"(sparse Cholesky: {sol.linear_solver}); wrote {out}/"
-        )
-        if sol.faster_solver == "cholmod":
+        for note in notes:
+            print(note)
+        print(f"{summary}; wrote {out}/")
+        if args.method == "lm" and sol.faster_solver == "cholmod":
             print(
                 "note: this graph has much fill-in; CHOLMOD's supernodal Cholesky would solve "
                 "it several times faster: install the optional `fast` extra (cvxopt, GPL-3.0)"

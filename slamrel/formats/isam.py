@@ -2,6 +2,11 @@
 
 ``ODOMETRY i j dx dy dθ`` + 6 values: the relative motion ``x_i⁻¹ ∘ x_j`` and the upper
 triangle, row-first (``xx xy xθ yy yθ θθ``), of its noise matrix.
+``EDGE2`` is read as a synonym of ``ODOMETRY`` (same fields, same noise order): iSAM's own
+``Loader`` accepts both, and its ``city10000.txt`` uses ``EDGE2`` throughout. A TORO file
+also has ``EDGE2`` records (with another information order, ``xx xy yy θθ xθ yθ``), but it
+always has ``VERTEX2`` records too: a file is iSAM text when its first data line is
+``ODOMETRY`` or ``LANDMARK``, or ``EDGE2`` and no line is a ``VERTEX2``/``VERTEX`` record.
 ``LANDMARK k l x y`` + 3 values: landmark ``l`` seen from pose ``k`` at ``(x, y)`` in the pose
 frame (``x_k⁻¹ · l``) and ``xx xy yy`` of its noise matrix.
 
@@ -22,6 +27,7 @@ names the other ``noise`` value.
 
 from __future__ import annotations
 
+import re
 import warnings
 from dataclasses import dataclass
 from typing import Literal
@@ -42,6 +48,7 @@ from slamrel.formats.text import PathLike, SourceText, read_keyword_records, rea
 __all__ = [
     "IsamData",
     "ISAM_RECORDS",
+    "ISAM_ODOMETRY_SYNONYM",
     "DEFAULT_NOISE",
     "NoiseConventionWarning",
     "is_isam",
@@ -55,6 +62,9 @@ DEFAULT_NOISE: NoiseConvention = "sqrt-information"
 """iSAM's own definition of the noise numbers (see the module docstring)."""
 ISAM_RECORDS = ("ODOMETRY", "LANDMARK")
 """The record names of the format; a file whose first data line is one of them is iSAM text."""
+ISAM_ODOMETRY_SYNONYM = "EDGE2"
+"""iSAM's other spelling of ``ODOMETRY`` (also TORO's edge record: see :func:`is_isam`)."""
+_TORO_VERTEX = re.compile(r"^[ \t\ufeff]*VERTEX2?[ \t]", re.MULTILINE)
 
 # Plausibility of the standard deviations a convention implies (per record, the median over
 # the file): a translation beyond _MAX_SIGMA_XY metres or a rotation beyond π radians is not
@@ -70,9 +80,13 @@ class NoiseConventionWarning(UserWarning):
 def is_isam(source: SourceText) -> bool:
     """Whether ``source`` is iSAM text: its first data line (after comments, blank lines and
     a byte order mark, by the rules of :class:`~slamrel.formats.text.SourceText`) starts
-    with one of :data:`ISAM_RECORDS`. The one test every command uses."""
+    with one of :data:`ISAM_RECORDS`, or with ``EDGE2`` in a file without TORO's
+    ``VERTEX2``/``VERTEX`` records. The one test every command uses."""
     for _, text in source.data_lines():
-        return text.split(None, 1)[0] in ISAM_RECORDS
+        first = text.split(None, 1)[0]
+        if first == ISAM_ODOMETRY_SYNONYM:
+            return not any(_TORO_VERTEX.search(line) for line in source.lines)
+        return first in ISAM_RECORDS
     return False
 
 
@@ -189,8 +203,16 @@ def read_isam(
         raise ValueError(f"noise must be 'sqrt-information' or 'covariance', got {noise!r}")
     src = read_source(path) if source is None else source
     path = src.path
-    recs = read_keyword_records(path, {"ODOMETRY": 12, "LANDMARK": 8}, source=src)
-    o_vals, o_lines = recs["ODOMETRY"]
+    recs = read_keyword_records(
+        path, {"ODOMETRY": 12, ISAM_ODOMETRY_SYNONYM: 12, "LANDMARK": 8}, source=src
+    )
+    # EDGE2 is ODOMETRY by another name: both kept, in file order
+    o_lines = np.concatenate((recs["ODOMETRY"][1], recs[ISAM_ODOMETRY_SYNONYM][1]))
+    in_file_order = np.argsort(o_lines, kind="stable")
+    o_lines = o_lines[in_file_order]
+    o_vals = np.concatenate(
+        (recs["ODOMETRY"][0].reshape(-1, 11), recs[ISAM_ODOMETRY_SYNONYM][0].reshape(-1, 11))
+    )[in_file_order]
     z_vals, z_lines = recs["LANDMARK"]
     for vals, lines, kind in ((o_vals, o_lines, "ODOMETRY"), (z_vals, z_lines, "LANDMARK")):
         for col in (0, 1):

@@ -16,15 +16,35 @@ from numpy.typing import ArrayLike, NDArray
 from relation_metric.errors import InputError
 from relation_metric.ids import refuse_self_loops, rows_of
 from slamrel.backends.least_squares import PoseGraph
-from slamrel.formats.text import NUMBER_FORMAT, PathLike, read_keyword_records, write_text_atomic
+from slamrel.formats.text import (
+    NUMBER_FORMAT,
+    PathLike,
+    SourceText,
+    read_keyword_records,
+    write_text_atomic,
+)
 
-__all__ = ["read_toro_graph", "write_toro_graph", "TORO_INFO_ORDER"]
+__all__ = ["is_toro", "read_toro_graph", "write_toro_graph", "TORO_INFO_ORDER"]
 
 _FIELDS = {"VERTEX2": 5, "EDGE2": 12, "VERTEX": 5, "EDGE": 12}
 # (row, column) of each information entry in TORO's order: xx xy yy θθ xθ yθ
 TORO_INFO_ORDER = ((0, 0), (0, 1), (1, 1), (2, 2), (0, 2), (1, 2))
 _ROWS = np.array([rc[0] for rc in TORO_INFO_ORDER])
 _COLS = np.array([rc[1] for rc in TORO_INFO_ORDER])
+
+
+def is_toro(source: SourceText) -> bool:
+    """Whether ``source`` is a TORO graph: its first data line is a ``VERTEX2``/``VERTEX``
+    record, or an ``EDGE2``/``EDGE`` record in a file that has ``VERTEX2``/``VERTEX`` records
+    (an ``EDGE2`` file without vertices is iSAM text: :func:`slamrel.formats.isam.is_isam`)."""
+    for _, text in source.data_lines():
+        first = text.split(None, 1)[0]
+        if first in ("VERTEX2", "VERTEX"):
+            return True
+        if first in ("EDGE2", "EDGE"):
+            return any(ln.split(None, 1)[:1] in (["VERTEX2"], ["VERTEX"]) for ln in source.lines)
+        return False
+    return False
 
 
 def read_toro_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64]]:
