@@ -115,8 +115,9 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
         "--global-search",
         choices=("never", "flagged", "always"),
         default="flagged",
-        help="when to run the correlative search around the guess: never, for pairs the "
-        "first alignment leaves failed/low-overlap/high-residual (default), or always",
+        help="when to run the correlative search around the guess: never, flagged (for "
+        "pairs the first alignment leaves failed, with low overlap or a high residual), or "
+        "always (default: %(default)s)",
     )
     a.add_argument(
         "--search-xy",
@@ -154,7 +155,7 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
         default=0.05,
         help="--at: largest gap between a relation time and its scan [s] (default 0.05)",
     )
-    a.add_argument("-q", "--quiet", action="store_true")
+    a.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     a.set_defaults(func=run_align)
 
 

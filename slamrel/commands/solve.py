@@ -119,8 +119,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "--toro-order",
         choices=("depth", "input"),
         default="depth",
-        help="--method toro: visit constraints by tree depth of their top pose (default, "
-        "the paper's) or in input order",
+        help="--method toro: visit constraints by tree depth of their top pose (depth, the "
+        "paper's) or in input order (default: %(default)s)",
     )
     add_noise_argument(s)
     add_force_argument(s)
