@@ -1,4 +1,4 @@
-"""trajectopy's relative drift on the seeded KITTI-like drive of ``tests/kitti_sim.py``.
+"""trajectopy's relative drift on the seeded KITTI-like drive of ``slamrel/simulation/kitti_drive.py``.
 
 Run in trajectopy's side venv (``benchmarks/.venv-trajectopy``: ``python -m venv`` it and
 ``pip install trajectopy``; never a project dependency)::
@@ -18,14 +18,9 @@ printed per length as JSON, are the segment count and the mean unnormalised erro
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-
-import kitti_sim  # noqa: E402
 import trajectopy  # noqa: E402
 from trajectopy.core.settings import (  # noqa: E402
     PairDistanceUnit,
@@ -34,6 +29,20 @@ from trajectopy.core.settings import (  # noqa: E402
 )
 from trajectopy.processing.evaluation import _compare_trajectories_relative  # noqa: E402
 
+
+def _load_drive():  # type: ignore[no-untyped-def]
+    """The drive generator by its file path: this side venv has numpy, not slamrel."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parent.parent / "slamrel" / "simulation" / "kitti_drive.py"
+    spec = importlib.util.spec_from_file_location("kitti_drive", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+kitti_drive = _load_drive()
 
 def _trajectory(poses: np.ndarray, name: str) -> object:
 
@@ -50,7 +59,7 @@ def _trajectory(poses: np.ndarray, name: str) -> object:
 
 
 def main() -> None:
-    gt, est = kitti_sim.drive()
+    gt, est = kitti_drive.drive()
     settings = RelativeComparisonSettings(
         pair_min_distance=100.0,
         pair_max_distance=800.0,

@@ -36,6 +36,7 @@ PLOTS, REVIEW, REPORT, IMPORTERS = (
     "slamrel.importers",
 )
 EVALUATION_OPTIONS, EVALUATION = "slamrel.evaluation_options", "slamrel.evaluation"
+SCANS, TRAJINFO = "slamrel.scans", "slamrel.trajinfo"
 PIPELINE, STUDIES, COMMANDS, CLI, MAIN = (
     "slamrel.pipeline",
     "slamrel.studies",
@@ -59,11 +60,15 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     # back-ends and the simulator are maths on records: the libraries only, no file I/O
     BACKENDS: LIBRARIES,
     SIMULATION: LIBRARIES,
+    # scan alignment: maths on the laser records of formats.laser (no file I/O of its own)
+    SCANS: (*LIBRARIES, FORMATS),
+    # the numbers of `slamrel traj info`: maths on a Trajectory
+    TRAJINFO: LIBRARIES,
     # the pose-graph files (g2o, TORO, iSAM) are read into least_squares.PoseGraph
     FORMATS: (*LIBRARIES, OUTPUTS, "slamrel.backends.least_squares"),
     IMPORTERS: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS),
     PLOTS: (*LIBRARIES, OUTPUTS, FORMATS),
-    REVIEW: (*LIBRARIES, OUTPUTS, FORMATS),
+    REVIEW: (*LIBRARIES, OUTPUTS, FORMATS, SCANS),
     REPORT: (*LIBRARIES, OUTPUTS, FORMATS, PLOTS),
     PIPELINE: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REVIEW, REPORT),
     STUDIES: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REPORT, PIPELINE),
@@ -83,6 +88,8 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         REPORT,
         PIPELINE,
         STUDIES,
+        SCANS,
+        TRAJINFO,
     ),
     CLI: (*LIBRARIES, COMMANDS, TOP),  # TOP: __version__
     MAIN: (CLI,),

@@ -227,8 +227,9 @@ def test_without_ground_truth_or_robust_update_the_keys_are_absent() -> None:
     rep = r.report()
     assert list(rep) == [
         "method", "map_uncertainty", "map_uncertainty_rule", "poses", "measurements",
-        "divergence", "nis",
+        "divergence", "nis", "iterations",  # the smoother's Gauss-Newton steps
     ]  # fmt: skip
+    assert 1 <= rep["iterations"] <= 10  # type: ignore[operator]
     assert "nees_stretches" not in rep["divergence"]  # type: ignore[operator]
     assert r.counts.downweighted == 0 and r.counts.downweight_loss == 0.0
     assert not r.diverged and r.divergence.as_dict()["count"] == 0
