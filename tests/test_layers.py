@@ -59,7 +59,8 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     EVALUATION_OPTIONS: ("relation_metric",),
     # back-ends and the simulator are maths on records: the libraries only, no file I/O
     BACKENDS: LIBRARIES,
-    SIMULATION: LIBRARIES,
+    # the laser simulator returns the laser reader's record (formats.laser.LaserScans)
+    SIMULATION: (*LIBRARIES, "slamrel.formats.laser"),
     # scan alignment: maths on the laser records of formats.laser (no file I/O of its own)
     SCANS: (*LIBRARIES, FORMATS),
     # the numbers of `slamrel traj info`: maths on a Trajectory
@@ -71,7 +72,19 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     REVIEW: (*LIBRARIES, OUTPUTS, FORMATS, SCANS),
     REPORT: (*LIBRARIES, OUTPUTS, FORMATS, PLOTS),
     PIPELINE: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REVIEW, REPORT),
-    STUDIES: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REPORT, PIPELINE),
+    # `slamrel batch` scores each run as `slamrel evaluate` does (studies.batch)
+    STUDIES: (
+        *LIBRARIES,
+        OUTPUTS,
+        FORMATS,
+        BACKENDS,
+        SIMULATION,
+        PLOTS,
+        REPORT,
+        PIPELINE,
+        EVALUATION_OPTIONS,
+        EVALUATION,
+    ),
     # what ``slamrel evaluate`` scores, as a library (the command writes the outputs)
     EVALUATION: (*LIBRARIES, FORMATS, EVALUATION_OPTIONS),
     COMMANDS: (
