@@ -250,14 +250,9 @@ def read_numeric_table(
     A cut-off last line (no final newline) is skipped with a :class:`TruncatedLineWarning`.
     """
     ncols = len(columns)
-    if source is None or source.path == os.fspath(path):
-        # the vectorised parser reads the file itself (an already-read source of the same
-        # file too: reading it again costs far less than np.loadtxt on its lines, 0.09 s for
-        # a 10^5-pose TUM file)
+    if source is None:
         fast = _fast_table(path, ncols, comment)
         if fast is not None and fast[0].shape[0] >= min_rows:
-            if source is not None and source.cut_off_line(comment) is not None:
-                source._warned.append(True)  # _fast_table said it: once per source
             return fast
     src = read_source(path) if source is None else source
     layout = " ".join(columns)
