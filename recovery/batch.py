@@ -88,6 +88,7 @@ covariance-form recursion: 3·10⁻⁷, against a sparse LU solve).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -104,7 +105,7 @@ from recovery.models import range_bearing
 from recovery.smoother import smoothed_covariances
 from relation_metric import se2
 from relation_metric.arrays import Array
-from relation_metric.errors import DivergenceError
+from relation_metric.errors import DivergenceError, InputError
 
 __all__ = [
     "BatchResult",
@@ -119,6 +120,11 @@ __all__ = [
 
 LAMBDA_INITIAL = 1e-14  # LM's first λ: nearly undamped (module doc)
 LAMBDA_MIN = 1e-16  # and its floor
+#: Dense (3N, r) arrays the joint problem holds at once at its peak: B = G L, the right-hand
+#: sides and the solution A⁻¹ B of one step, and V of the covariance pass.
+DENSE_COPIES = 4
+#: The share of the machine's physical memory the joint problem may take.
+MEMORY_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -566,6 +572,41 @@ def map_factor_of(inp: FilterInput) -> Array:
     return block_factor(inp.map_marginals)
 
 
+def memory_budget() -> float:
+    """Bytes the joint problem may use: :data:`MEMORY_SHARE` of the physical memory (8 GiB
+    where the system does not say)."""
+    try:
+        total = float(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        total = 16.0 * 2**30
+    return MEMORY_SHARE * total
+
+
+def check_joint_size(n_poses: int, rank: int) -> None:
+    """Refuse, before any work, a joint problem whose dense map terms exceed the memory budget.
+
+    The smoother and the batch hold :data:`DENSE_COPIES` arrays of ``3N × r`` doubles (``N``
+    grid poses, ``r`` the rank of the map covariance's factor, ``2M`` for ``M`` landmarks with
+    a full covariance). 10⁵ control steps with 2,000 landmarks need 41 GB: the process was
+    killed by the system's out-of-memory killer instead of saying so.
+
+    Raises
+    ------
+    InputError
+        Naming the sizes, the memory needed and the budget; the filter needs no such term.
+    """
+    need = 8.0 * DENSE_COPIES * 3 * n_poses * rank
+    budget = memory_budget()
+    if need > budget:
+        raise InputError(
+            f"the smoother and the batch would need {need / 2**30:.1f} GiB for the map's "
+            f"uncertainty ({DENSE_COPIES} arrays of 3 x {n_poses} poses x {rank} map "
+            f"directions), above the {budget / 2**30:.1f} GiB this machine allows them "
+            f"({MEMORY_SHARE:.0%} of its memory); expected a shorter log or fewer landmarks, "
+            "or recover with the filter alone (method filter), which holds no such arrays"
+        )
+
+
 def refine(
     inp: FilterInput,
     start: Array,
@@ -605,6 +646,7 @@ def refine(
     BatchResult
     """
     factor = map_factor_of(inp) if map_factor is None else map_factor
+    check_joint_size(int(np.asarray(start).shape[0]), int(np.asarray(factor).shape[1]))
     reg = regularised_sigma(inp.sigma)  # shared by the weights and the covariance pass
     problem = _JointProblem(inp, np.flatnonzero(used), weights, factor, regularised=reg)
     options = LMOptions(

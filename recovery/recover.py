@@ -827,6 +827,10 @@ def recover(
         raise InputError(f"gate probability must be in (0, 1), got {gate}")
     mu = map_uncertainty(bundle, map_mode)
     inp = filter_input(bundle, uncertainty=mu)
+    if method != "filter":  # before any work: the joint problem's dense map terms
+        from recovery.batch import check_joint_size
+
+        check_joint_size(int(inp.times.shape[0]), int(mu.factor.shape[1]))
     kw = dict(gate=gate, max_outlier_run=max_outlier_run, on_divergence=on_divergence)
     settings = None
     c_eff = None
