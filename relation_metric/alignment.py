@@ -296,35 +296,24 @@ def absolute_trajectory_error(
     group = estimate.group
     m = est.shape[0] if n_to_align is None else min(int(n_to_align), est.shape[0])
     p_est, p_ref = group.positions(est), group.positions(ref)
+    fitted: Alignment | AffineAlignment
     if align == "affine":
-        af = affine_fit(p_est[:m], p_ref[:m])
-        residual = p_ref - af.apply_points(p_est)
-        trans = np.linalg.norm(residual, axis=1)
-        rot = np.empty(0)
-        return ATEResult(
-            af,
-            trans,
-            rot,
-            summarize(trans),
-            summarize(rot),
-            int(ok.sum()),
-            AxisErrors(residual),
-            m,
-            estimate.timestamps[ok],
-        )
-    al = _rigid_alignment(align, group, est, ref, m)
-    moved = al.apply(est)
-    if group is SE3:
-        err = se3.between(moved, ref)  # evo's APE: E = P_est⁻¹ P_ref
-        residual = ref[:, :3] - moved[:, :3]
-        rot = se3.rotation_angle(err[:, 3:])
+        fitted = affine_fit(p_est[:m], p_ref[:m])
+        residual = p_ref - fitted.apply_points(p_est)
+        rot = np.empty(0)  # an affine map does not map orientations
     else:
-        residual = ref[:, :2] - moved[:, :2]
-        rot = np.abs(se2.wrap_angle(ref[:, 2] - moved[:, 2]))
+        fitted = _rigid_alignment(align, group, est, ref, m)
+        moved = fitted.apply(est)
+        if group is SE3:
+            err = se3.between(moved, ref)  # evo's APE: E = P_est⁻¹ P_ref
+            residual = ref[:, :3] - moved[:, :3]
+            rot = se3.rotation_angle(err[:, 3:])
+        else:
+            residual = ref[:, :2] - moved[:, :2]
+            rot = np.abs(se2.wrap_angle(ref[:, 2] - moved[:, 2]))
     trans = np.linalg.norm(residual, axis=1)
-    stamps = estimate.timestamps[ok]
     return ATEResult(
-        al,
+        fitted,
         trans,
         rot,
         summarize(trans),
@@ -332,7 +321,7 @@ def absolute_trajectory_error(
         int(ok.sum()),
         AxisErrors(residual),
         m,
-        stamps,
+        estimate.timestamps[ok],
     )
 
 

@@ -235,7 +235,7 @@ def test_bad_covariance_files(tmp_path, capsys):
     bad = tmp_path / "bad.txt"
     bad.write_text("\n".join([*lines[:2], " ".join(nums), *lines[3:]]) + "\n")
     assert main(["nees", str(ref), str(bad), "-q"]) == 3
-    assert f"{bad}:3: covariance not positive definite" in capsys.readouterr().err
+    assert f"{bad}:3: covariance: expected a positive definite" in capsys.readouterr().err
     short = tmp_path / "short.txt"
     short.write_text("0 1 2 3 4 5\n")
     assert main(["nees", str(ref), str(short), "-q"]) == 3

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
 from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
 from slamrel.constants import COVARIANCE_LAYOUTS
@@ -125,7 +126,7 @@ def read_pose_covariances(
                 line=int(lines[k]),
             )
         poses = np.column_stack((poses[:, :3], poses[:, 3:] / norms[:, None]))
-    _check_covariances(cov, lines, name)
+    check_covariances(cov, path=name, lines=lines, definite=True)  # NEES inverts it
     order, report = sort_by_time(t, lines=lines, path=name, what="pose")
     if report.out_of_order:
         warnings.warn(
@@ -181,25 +182,3 @@ def _read_text(
     return t, poses, cov, lines, layout
 
 
-def _check_covariances(cov: NDArray[np.float64], lines: NDArray[np.int64], name: str) -> None:
-    """Symmetric to 1e-9 relative and positive definite, else the first bad row is refused."""
-    scale = np.abs(cov).max(axis=(1, 2))
-    asym = np.abs(cov - np.swapaxes(cov, 1, 2)).max(axis=(1, 2))
-    bad = np.flatnonzero(asym > 1e-9 * np.maximum(scale, 1e-300))
-    if bad.size:
-        k = int(bad[0])
-        raise InputError(
-            f"covariance not symmetric (|P - Pᵀ| up to {asym[k]:.3g}); expected a symmetric matrix",
-            path=name,
-            line=int(lines[k]),
-        )
-    low = np.linalg.eigvalsh(cov)[:, 0]
-    bad = np.flatnonzero(~(low > 0))
-    if bad.size:
-        k = int(bad[0])
-        raise InputError(
-            f"covariance not positive definite (smallest eigenvalue {low[k]:.3g}); expected a "
-            "positive definite covariance",
-            path=name,
-            line=int(lines[k]),
-        )
