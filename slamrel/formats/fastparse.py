@@ -7,24 +7,34 @@ and returns ``None`` for anything else, so that the caller can fall back to the 
 diagnosing reader (:func:`slamrel.formats.text.read_numeric_table`).
 
 Accepted
-    Tokens ``-?D*(.D*)?`` with at least one digit (``12``, ``-0.5``, ``.5``, ``5.``), at most
-    18 digits in all, at most 16 before and 16 after the point, and an integer mantissa
-    (the digits without the point) below 2**53; fields separated by runs of blanks and tabs;
-    lines ended by ``\\n`` or ``\\r\\n``; blank lines; comments from the comment character to
-    the end of its line (whole comment lines, and trailing comments as ``np.loadtxt`` strips
-    them); a missing final newline when the last line is a complete row.
+    Tokens ``-?D*(.D*)?`` with at least one digit (``12``, ``-0.5``, ``.5``, ``5.``) are read
+    vectorised when they have at most 24 integer and 22 fraction digits and an integer
+    mantissa (the digits without the point) below 9·10**18 — every ``%.17g`` (``repr``) and
+    ``%.18g`` output without exponent. Other number tokens, :data:`ODD_TOKEN`
+    (``[-+]?(D+.?D*|.D+)([eE][-+]?D+)?``: exponents, a ``+`` sign, more digits), are
+    handed to ``float()`` one by one, as long as they are few (see :data:`ODD_SHARE`);
+    fields separated by runs of blanks and tabs; lines ended by ``\\n`` or ``\\r\\n``; blank
+    lines; comments from the comment character to the end of its line (whole comment
+    lines, and trailing comments as ``np.loadtxt`` strips them); a missing final newline
+    when the last line is a complete row.
 
 Refused (``None``)
-    Exponents, ``+`` signs, ``nan``/``inf``, hexadecimal, any other character outside a
-    comment, non-ASCII bytes, NUL bytes, a lone ``\\r``, rows with another number of fields,
-    more digits than above, an empty table, a final line without newline that holds a comment.
+    ``nan``/``inf`` and values that overflow to infinity, hexadecimal, any other character
+    outside a comment, non-ASCII bytes, NUL bytes, a lone ``\\r``, rows with another number
+    of fields, an empty table, a final line without newline that holds a comment, and a
+    table whose odd tokens are too many (numpy's parser is then faster).
 
 Exactness
-    A token with mantissa ``m < 2**53`` and ``f ≤ 16`` fraction digits is the real number
-    ``m / 10**f``. Both ``m`` and ``10**f`` (``f ≤ 22``) are exact doubles, and IEEE-754
-    division is correctly rounded, so ``float(m) / 10.0**f`` is the double nearest to the
-    decimal — bit for bit what ``float(token)`` (``strtod``) returns; the sign is applied
-    afterwards (``-0.0`` included).
+    A token with mantissa ``m < 2**53`` and ``f ≤ 22`` fraction digits is the real number
+    ``m / 10**f``. Both ``m`` and ``10**f`` are exact doubles, and IEEE-754 division is
+    correctly rounded, so ``float(m) / 10.0**f`` is the double nearest to the decimal — bit
+    for bit what ``float(token)`` (``strtod``) returns (Clinger's fast path). For
+    ``2**53 ≤ m < 2**63`` the same quotient is within 1.5 units in the last place; its
+    remainder ``m − q·10**f``, computed in double-double arithmetic (Dekker's exact product),
+    decides between it and its two neighbours, and the rare token that lies within
+    ``2**-21`` units of a midpoint (a tie such as ``9007199254740993``) or next to a power
+    of two goes to ``float()`` (:func:`_round_big`). The sign is applied afterwards
+    (``-0.0`` included). An odd token's value is ``float(token)`` itself.
 
 Method
     The bytes are scanned once for separators (``b <= 32``), points and control characters;
@@ -32,9 +42,10 @@ Method
     fraction digits are read right-aligned as little-endian 64-bit words (an unaligned strided
     view of the buffer), the bytes before the digits are replaced by ``'0'``, and eight ASCII
     digits are combined into their value with three multiply-shift steps (the SWAR method;
-    the multiplications wrap modulo 2**64 by design). Digits are validated per word. A second
-    word is read only for the tokens with more than eight integer or fraction digits; tokens
-    of at most eight characters are read as one word, the point squeezed out by a shift.
+    the multiplications wrap modulo 2**64 by design). Digits are validated per word (a word
+    that is not all digits marks its token odd). A second word (and a third) is read only
+    for the tokens with more than eight (sixteen) integer or fraction digits; tokens of at
+    most eight characters are read as one word, the point squeezed out by a shift.
     The file is processed in blocks of whole lines (2 MiB) so that the intermediate arrays
     stay in the CPU cache, and column by column inside a block (a column usually has one
     layout, so its tokens need not be split into short and long ones).
@@ -49,19 +60,27 @@ Speed
 
 from __future__ import annotations
 
+import math
 import os
+import re
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["parse_decimal_table", "read_decimal_table", "DecimalFile", "MAX_DIGITS", "UTF8_BOM"]
+__all__ = ["parse_decimal_table", "read_decimal_table", "DecimalFile", "MAX_FRACTION", "UTF8_BOM"]
 
 UTF8_BOM = b"\xef\xbb\xbf"
 """The UTF-8 byte order mark, ignored at the start of a file."""
 
-MAX_DIGITS = 18
-"""Most digits (integer and fraction together) a token may have on the fast path."""
+MAX_FRACTION = 22
+"""Most fraction digits a token may have on the vectorised path (``10**22`` is the largest
+exact power of ten in float64); a longer one goes to ``float()``."""
+
+MIN_ODD_ALLOWANCE = 256
+ODD_SHARE = 16
+"""A file with more odd tokens than ``max(MIN_ODD_ALLOWANCE, tokens // ODD_SHARE)`` is
+refused (``None``): one by one they cost more than numpy's parser."""
 
 _PRINTABLE = b"\t\r" + bytes(range(32, 128))
 _PAD = 16  # blanks before the data so that 16-byte look-behinds stay inside the buffer
@@ -81,9 +100,21 @@ _MUL3 = _U64(10000 * (1 << 32) + 1)
 _S8, _S16, _S32, _S64 = _U64(8), _U64(16), _U64(32), _U64(64)
 _ALL = _U64(0xFFFFFFFFFFFFFFFF)
 _E8 = _U64(10**8)
+_E16 = _U64(10**16)
 _TWO53 = _U64(1 << 53)
-_POW10_INT = np.array([10**k for k in range(MAX_DIGITS + 1)], dtype=np.uint64)
-_POW10_FLOAT = np.array([10.0**k for k in range(MAX_DIGITS + 1)], dtype=np.float64)
+_MAX_PART = 24  # digits of an integer or fraction part read as three 8-byte words
+_MAX_MANTISSA = 9e18  # below 2**63 ≈ 9.22e18 with room for the estimate's 1e-15 error
+_MARGIN = 2.0**-21  # guard band around a rounding midpoint, in units (see _round_big)
+_FRACTION_FIELD = _U64((1 << 52) - 1)
+_SPLITTER = float(2**27 + 1)  # Veltkamp's constant for float64
+_POW10_INT = np.array([10**k for k in range(20)], dtype=np.uint64)  # 10**19 < 2**64
+_POW10_FLOAT = np.array([float(10**k) for k in range(MAX_FRACTION + 1)])  # exact to 10**22
+_POW10_FLOAT_WIDE = np.array([float(10**k) for k in range(_MAX_PART + 1)])  # estimates only
+_POW10_HI = _POW10_FLOAT * _SPLITTER - (_POW10_FLOAT * _SPLITTER - _POW10_FLOAT)
+_POW10_LO = _POW10_FLOAT - _POW10_HI
+ODD_TOKEN = re.compile(rb"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?")
+"""Tokens the fast path hands to ``float()`` one by one (exponents, a ``+`` sign, many
+digits): what the exact path reads with the same value; anything else refuses the file."""
 
 
 def parse_decimal_table(
@@ -321,8 +352,10 @@ def _parse_fields(
     shape = (nrows, ncols)
     e, pt, w, fl = (a.reshape(shape) for a in (ends, point, width, frac_len))
     hp, neg = has_point.reshape(shape), negative.reshape(shape)
+    odd_rows: list[NDArray[np.intp]] = []
+    odd_cols: list[int] = []
     for col in range(ncols):
-        if not _parse_chunk(
+        odd = _parse_chunk(
             words,
             e[:, col],
             pt[:, col],
@@ -331,8 +364,22 @@ def _parse_fields(
             hp[:, col],
             neg[:, col],
             out=out[:, col],
-        ):
-            return None
+        )
+        if odd is not None:
+            odd_rows.append(np.flatnonzero(odd))
+            odd_cols.append(col)
+    if odd_rows:
+        count = sum(r.size for r in odd_rows)
+        if count > max(MIN_ODD_ALLOWANCE, ntok // ODD_SHARE):
+            return None  # mostly odd tokens: numpy's parser reads them faster
+        ends -= base
+        for rows, col in zip(odd_rows, odd_cols):
+            k = rows * ncols + col
+            tokens = [block[a:z].tobytes() for a, z in zip(starts[k].tolist(), ends[k].tolist())]
+            values = _odd_values(tokens)
+            if values is None:
+                return None
+            out[rows, col] = values
     return nrows
 
 
@@ -384,36 +431,98 @@ def _parse_chunk(
     negative: NDArray[np.bool_],
     *,
     out: NDArray[np.float64],
-) -> bool:
-    """Parse one chunk of tokens into ``out``; False when a token is outside the subset.
+) -> NDArray[np.bool_] | None:
+    """Parse one chunk of tokens into ``out``; the mask of its odd tokens, or ``None``.
 
     ``width`` counts the characters without the sign, ``frac_len`` the fraction digits.
+    An odd token (not plain digits, too many digits, an undecided rounding) is left for
+    :func:`_odd_values`; its place in ``out`` holds no meaningful value.
     """
     short = width <= 8
     if short.all():
-        mantissa = _short_mantissa(words, ends, width, frac_len, has_point)
+        mantissa, odd = _short_mantissa(words, ends, width, frac_len, has_point)
     elif not short.any():
-        mantissa = _long_mantissa(words, ends, point, width, frac_len)
+        mantissa, odd = _long_mantissa(words, ends, point, width, frac_len)
     else:
         mantissa = np.empty(ends.size, dtype=np.uint64)
+        odd = np.zeros(ends.size, dtype=bool)
         pick = np.flatnonzero(short)
-        part = _short_mantissa(words, ends[pick], width[pick], frac_len[pick], has_point[pick])
-        if part is None:
-            return False
+        part, part_odd = _short_mantissa(
+            words, ends[pick], width[pick], frac_len[pick], has_point[pick]
+        )
         mantissa[pick] = part
+        if part_odd is not None:
+            odd[pick] = part_odd
         pick = np.flatnonzero(~short)
-        part = _long_mantissa(words, ends[pick], point[pick], width[pick], frac_len[pick])
-        if part is None:
-            return False
+        part, part_odd = _long_mantissa(words, ends[pick], point[pick], width[pick], frac_len[pick])
         mantissa[pick] = part
-    if mantissa is None:
-        return False
+        if part_odd is not None:
+            odd[pick] |= part_odd
+        if not odd.any():
+            odd = None
+    power = np.minimum(frac_len, MAX_FRACTION)  # an odd token's value is replaced anyway
     values = mantissa.astype(np.float64)
-    values /= _POW10_FLOAT[frac_len]
+    values /= _POW10_FLOAT[power]  # exact for m < 2**53; q0 of the correction otherwise
+    is_big = mantissa >= _TWO53
+    if odd is not None:
+        is_big &= ~odd
+    if is_big.all():  # e.g. a column of %.17g numbers
+        values, undecided = _round_big(mantissa, values, power)
+        if undecided.any():
+            odd = undecided
+    elif is_big.any():
+        big = np.flatnonzero(is_big)
+        fixed, undecided = _round_big(mantissa[big], values[big], power[big])
+        values[big] = fixed
+        if undecided.any():
+            odd = np.zeros(ends.size, dtype=bool) if odd is None else odd
+            odd[big[undecided]] = True
     # The sign last: the magnitude is >= 0, so this also gives -0.0 for "-0".
     np.copysign(values, 0.5 - negative, out=values)
     out[...] = values
-    return True
+    return odd
+
+
+def _round_big(
+    mantissa: NDArray[np.uint64], q0: NDArray[np.float64], power: NDArray[np.intp]
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """The double nearest to ``mantissa / 10**power`` for ``2**53 <= mantissa < 2**63``.
+
+    ``q0 = fl(fl(m) / p)`` (``p = 10**power``, exact) is within 1.5 units in the last place
+    (``u``) of ``v = m / p``. The remainder ``r = m - q0·p`` is computed to about 2**-41
+    (``m = fl(m) + m_lo`` exactly, ``q0·p = ph + pl`` exactly by Dekker's product with
+    Veltkamp's split, ``fl(m) - ph`` exact by Sterbenz's lemma), while ``p·u ≥ 2**-53·m ≥ 1``;
+    so ``d = r / (p·u) = (v - q0) / u`` is known to about 2**-40 and the nearest double is
+    ``q0 + rint(d)·u``, unless ``d`` lies within 2**-21 of a midpoint (a tie or near-tie),
+    beyond ±1.5, or below zero next to a power of two (where ``u`` halves): those are
+    ``undecided`` and go to ``float()``.
+    """
+    m_hi = mantissa.astype(np.float64)
+    m_lo = mantissa.view(np.int64) - m_hi.astype(np.int64)
+    p = _POW10_FLOAT[power]
+    ph = q0 * p
+    c = q0 * _SPLITTER
+    q_hi = c - (c - q0)
+    q_lo = q0 - q_hi
+    p_hi, p_lo = _POW10_HI[power], _POW10_LO[power]
+    pl = q_hi * p_hi
+    pl -= ph
+    pl += q_hi * p_lo
+    pl += q_lo * p_hi
+    pl += q_lo * p_lo
+    r = m_hi - ph
+    r += m_lo - pl
+    u = np.spacing(q0)
+    r /= p * u  # d, in units of u
+    k = np.rint(r)
+    off = np.abs(r - k)
+    undecided = off > 0.5 - _MARGIN
+    undecided |= np.abs(k) > 1.0
+    # q0 a power of two (mantissa field 0) or just above one (field 1): u differs below.
+    undecided |= (r < 0.0) & ((q0.view(np.uint64) & _FRACTION_FIELD) <= _U64(1))
+    k *= u
+    k += q0
+    return k, undecided
 
 
 def _short_mantissa(
@@ -422,8 +531,9 @@ def _short_mantissa(
     width: NDArray[np.intp],
     frac_len: NDArray[np.intp],
     has_point: NDArray[np.bool_],
-) -> NDArray[np.uint64] | None:
-    """Digits of tokens of at most 8 characters (sign excluded) as one integer.
+) -> tuple[NDArray[np.uint64], NDArray[np.bool_] | None]:
+    """Digits of tokens of at most 8 characters (sign excluded) as one integer, and the
+    mask of tokens that are not digits (``None`` when all are).
 
     The token is the top ``width`` bytes of the word ending at ``ends``; the point is
     removed by moving the integer digits up one byte, under the ``frac_len`` fraction bytes.
@@ -447,55 +557,83 @@ def _long_mantissa(
     point: NDArray[np.intp],
     width: NDArray[np.intp],
     frac_len: NDArray[np.intp],
-) -> NDArray[np.uint64] | None:
-    """Digits of longer tokens: integer and fraction parts read separately, then combined."""
-    int_len = width - (ends - point)
-    digits = int_len + frac_len
-    if np.any(digits > MAX_DIGITS) or np.any(int_len > 16) or np.any(frac_len > 16):
-        return None
-    mantissa = _digits_ending_at(words, point, int_len)
-    if mantissa is None:
-        return None
-    frac_part = _digits_ending_at(words, ends, frac_len)
-    if frac_part is None:
-        return None
-    mantissa *= _POW10_INT[frac_len]
-    mantissa += frac_part  # < 10**18: no overflow
-    if np.any(mantissa >= _TWO53):
-        return None
-    return mantissa
+) -> tuple[NDArray[np.uint64], NDArray[np.bool_] | None]:
+    """Digits of longer tokens: integer and fraction parts read separately, then combined.
 
-
-def _digits_ending_at(
-    words: NDArray[np.uint64], end: NDArray[np.intp], length: NDArray[np.intp]
-) -> NDArray[np.uint64] | None:
-    """Value of the ``length`` (0..16) ASCII digits that end at byte ``end`` of each token.
-
-    ``None`` when one of those bytes is not a digit.
+    Odd (``True`` in the mask): a part longer than 24 digits, more than 22 fraction digits,
+    a non-digit, or a mantissa of 9·10**18 or more (beyond the 63 bits the rounding uses).
     """
-    value = _eight_digits(words[end - 8], np.minimum(length, 8))
-    if value is None:
-        return None
-    long = length > 8
-    if long.all():
-        high = _eight_digits(words[end - 16], length - 8)
-        if high is None:
-            return None
-        high *= _E8
-        value += high
-    elif long.any():
-        pick = np.flatnonzero(long)
-        high = _eight_digits(words[end[pick] - 16], length[pick] - 8)
-        if high is None:
-            return None
-        value[pick] += high * _E8
+    int_len = width - (ends - point)
+    odd = (int_len > _MAX_PART) | (frac_len > MAX_FRACTION)
+    int_len = np.minimum(int_len, _MAX_PART)
+    f_len = np.minimum(frac_len, _MAX_PART)
+    int_words, int_odd = _digit_words(words, point, int_len)
+    frac_words, frac_odd = _digit_words(words, ends, f_len)
+    for bad in (int_odd, frac_odd):
+        if bad is not None:
+            odd |= bad
+    long = np.flatnonzero(int_len + f_len > 18)  # < 10**18 otherwise: no overflow
+    if long.size:
+        # Every part exactly, the sum to 1e-15: safely below 2**63 ≈ 9.22e18 or odd.
+        w = [a[long].astype(np.float64) for a in (*int_words, *frac_words)]
+        scale = _POW10_FLOAT_WIDE[np.minimum(frac_len[long], _MAX_PART)]
+        estimate = (w[0] + w[1] * 1e8 + w[2] * 1e16) * scale
+        estimate += w[3] + w[4] * 1e8 + w[5] * 1e16
+        odd[long[~(estimate < _MAX_MANTISSA)]] = True
+    mantissa = _combine(frac_words)
+    mantissa += _combine(int_words) * _POW10_INT[np.minimum(frac_len, 19)]  # wraps if odd
+    return mantissa, odd if odd.any() else None
+
+
+def _combine(parts: tuple[NDArray[np.uint64], ...]) -> NDArray[np.uint64]:
+    """``low + 10**8 mid + 10**16 high`` (wraps modulo 2**64 for odd tokens, by design)."""
+    low, mid, high = parts
+    value = high * _E16
+    value += mid * _E8
+    value += low
     return value
 
 
-def _eight_digits(word: NDArray[np.uint64], length: NDArray[np.intp]) -> NDArray[np.uint64] | None:
-    """Value of the last ``length`` (0..8) bytes of each little-endian word, as digits.
+def _digit_words(
+    words: NDArray[np.uint64], end: NDArray[np.intp], length: NDArray[np.intp]
+) -> tuple[tuple[NDArray[np.uint64], ...], NDArray[np.bool_] | None]:
+    """The ``length`` (0..24) ASCII digits that end at byte ``end`` of each token, as the
+    values of their last, middle and first eight (low, mid, high), and the mask of
+    tokens with a non-digit among them (``None`` when there is none)."""
+    low, odd = _eight_digits(words[end - 8], np.minimum(length, 8))
+    parts = [low]
+    for k in (1, 2):
+        part = np.zeros(end.size, dtype=np.uint64)
+        more = length > 8 * k
+        count = np.minimum(length - 8 * k, 8)
+        if more.all():
+            part, bad = _eight_digits(words[end - 8 * (k + 1)], count)
+        elif more.any():
+            pick = np.flatnonzero(more)
+            part[pick], bad = _eight_digits(words[end[pick] - 8 * (k + 1)], count[pick])
+            if bad is not None:
+                bad = _scatter(bad, pick, end.size)
+        else:
+            bad = None
+        parts.append(part)
+        if bad is not None:
+            odd = bad if odd is None else odd | bad
+    return (parts[0], parts[1], parts[2]), odd
 
-    The earlier bytes are replaced by ``'0'``; ``None`` when a kept byte is not a digit.
+
+def _scatter(mask: NDArray[np.bool_], pick: NDArray[np.intp], size: int) -> NDArray[np.bool_]:
+    full = np.zeros(size, dtype=bool)
+    full[pick] = mask
+    return full
+
+
+def _eight_digits(
+    word: NDArray[np.uint64], length: NDArray[np.intp]
+) -> tuple[NDArray[np.uint64], NDArray[np.bool_] | None]:
+    """Value of the last ``length`` (0..8) bytes of each little-endian word, as digits, and
+    the mask of words where a kept byte is not a digit (``None`` when there is none).
+
+    The earlier bytes are replaced by ``'0'``.
     """
     shift = (8 - length).astype(np.uint64)
     shift *= _S8
@@ -507,8 +645,7 @@ def _eight_digits(word: NDArray[np.uint64], length: NDArray[np.intp]) -> NDArray
     check &= _HI_NIBBLES
     check >>= _U64(4)
     check |= word & _HI_NIBBLES
-    if np.any(check != _ALL3):
-        return None
+    bad = check != _ALL3
     word &= _LOW_NIBBLES
     word *= _MUL1
     word >>= _S8
@@ -518,4 +655,18 @@ def _eight_digits(word: NDArray[np.uint64], length: NDArray[np.intp]) -> NDArray
     word &= _MASK32
     word *= _MUL3
     word >>= _S32
-    return word
+    return word, bad if bad.any() else None
+
+
+def _odd_values(tokens: list[bytes]) -> list[float] | None:
+    """``float()`` of the odd tokens, or ``None`` when one is outside :data:`ODD_TOKEN` or
+    not finite (the exact path then diagnoses it)."""
+    values = []
+    for token in tokens:
+        if ODD_TOKEN.fullmatch(token) is None:
+            return None
+        value = float(token)
+        if not math.isfinite(value):
+            return None
+        values.append(value)
+    return values
