@@ -48,6 +48,7 @@ __all__ = [
     "TruncatedLineWarning",
     "SourceText",
     "read_source",
+    "read_head",
     "read_numeric_table",
     "atomic_write",
     "RowLines",
@@ -185,6 +186,31 @@ def read_source(path: PathLike) -> SourceText:
     return SourceText(path=name, lines=lines, ends_with_newline=ends)
 
 
+HEAD_BYTES = 1 << 16
+"""How much of a file :func:`read_head` reads."""
+
+
+def read_head(path: PathLike) -> SourceText:
+    """The complete lines among the first :data:`HEAD_BYTES` of a text file, to recognise
+    its format without reading all of it (the whole file when it is that short).
+
+    A file that cannot be read or decoded is read by :func:`read_source`, which says why.
+    """
+    name = os.fspath(path)
+    try:
+        with open(name, "rb") as handle:
+            raw = handle.read(HEAD_BYTES + 1)
+    except OSError:
+        return read_source(path)
+    if len(raw) <= HEAD_BYTES:
+        return read_source(path)
+    try:
+        text = _decode(raw[: raw.rfind(b"\n") + 1], name)
+    except InputError:
+        return read_source(path)
+    return SourceText(path=name, lines=text.splitlines(), ends_with_newline=True)
+
+
 def parse_float(token: str, *, source: SourceText, line: int, what: str) -> float:
     """Parse one finite float or raise :class:`InputError` naming ``what``.
 
@@ -279,7 +305,7 @@ def read_numeric_table(
         )
     if cut is not None:
         src.warn_cut_off(cut)
-    numbers = RowLines(body, comment)
+    numbers = RowLines(body, comment, cut)
     if values.size == 0:
         values = np.empty((0, ncols))
     if values.shape[0] < min_rows:
@@ -295,12 +321,20 @@ class RowLines:
 
     ``lines`` is the list of the file's lines, or a callable that produces it (so that a
     fast reader need not split the file unless a message needs a line number).
+    ``cut_off_line`` is the cut-off last line the reader skipped, if any.
     """
 
-    def __init__(self, lines: Sequence[str] | Callable[[], Sequence[str]], comment: str) -> None:
+    def __init__(
+        self,
+        lines: Sequence[str] | Callable[[], Sequence[str]],
+        comment: str,
+        cut_off_line: int | None = None,
+    ) -> None:
         self._lines = lines
         self._comment = comment
         self._numbers: NDArray[np.int64] | None = None
+        self.cut_off_line = cut_off_line
+        """1-based number of the cut-off last line that was skipped (``None``: none)."""
 
     def __call__(self, row: int) -> int:
         if self._numbers is None:
@@ -335,7 +369,7 @@ def _fast_table(
     if cut is not None:
         warnings.warn(cut_off_message(os.fspath(path), cut), TruncatedLineWarning, stacklevel=4)
     text_lines = lambda: bytes(text).decode("ascii").splitlines()  # noqa: E731
-    return values, RowLines(text_lines, comment)
+    return values, RowLines(text_lines, comment, cut)
 
 
 def _parse_lines(

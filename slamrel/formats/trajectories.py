@@ -79,6 +79,7 @@ from slamrel.formats.text import (
     SourceText,
     quote_token,
     read_csv_table,
+    read_head,
     read_numeric_table,
     read_source,
     write_text_atomic,
@@ -221,7 +222,7 @@ def detect_trajectory_format(path: PathLike, source: SourceText | None = None) -
     """
     ext = Path(os.fspath(path)).suffix.lower()
     if ext == ".csv":
-        src = read_source(path) if source is None else source
+        src = read_head(path) if source is None else source
         return "euroc" if _is_euroc_header(src) else "csv"
     if ext in TRAJECTORY_EXTENSIONS:
         return TRAJECTORY_EXTENSIONS[ext]
@@ -231,8 +232,11 @@ def detect_trajectory_format(path: PathLike, source: SourceText | None = None) -
             "to read it as a trajectory anyway",
             path=path,
         )
-    src = read_source(path) if source is None else source
+    src = read_head(path) if source is None else source
     fmt = sniff_trajectory_format(src)
+    if fmt is None and source is None:
+        src = read_source(path)  # the head held no data line
+        fmt = sniff_trajectory_format(src)
     if fmt is None:
         raise InputError(
             "cannot recognise the trajectory format (expected CARMEN records, VERTEX_SE2 "
@@ -324,50 +328,54 @@ def read_trajectory(
                 path=path,
             )
         return _read_bag(path, spec, dimension=dimension, what=what)
-    src = read_source(path)
-    fmt = format or detect_trajectory_format(path, src)
+    name = os.fspath(path)
+    fmt = format or detect_trajectory_format(path)
     if fmt not in TRAJECTORY_FORMATS:
         raise InputError(
             f"unknown trajectory format {fmt!r}; expected one of {', '.join(TRAJECTORY_FORMATS)}",
-            path=src.path,
+            path=name,
         )
     if dimension not in DIMENSIONS:
         raise InputError(f"dimension must be one of {', '.join(DIMENSIONS)}, got {dimension!r}")
     skipped: Counter[str] = Counter()
     discarded: list[OutOfPlane] = []
+    # The numeric tables (TUM, KITTI, plain) are read from the file by the table reader's
+    # fast path; the other formats are parsed from the decoded text.
+    src = None if fmt in ("tum", "kitti", "plain") else read_source(path)
+    cut: int | None
     if fmt in ("tum", "kitti", "euroc"):
-        t, poses, lines = _read_3d(
+        t, poses, lines, cut = _read_3d(
             src, fmt, path=path, times=times, dimension=dimension, discarded=discarded
         )
     elif fmt == "plain":
         values, lines = read_numeric_table(
-            path,
-            columns=("t", "x", "y", "theta"),
-            describe="a 't x y theta' trajectory",
-            source=src,
+            path, columns=("t", "x", "y", "theta"), describe="a 't x y theta' trajectory"
         )
-        t, poses = values[:, 0], values[:, 1:4]
-    elif fmt == "csv":
-        t, poses, line_of = _read_csv_trajectory(src)
-        lines = line_of.__getitem__  # type: ignore[assignment]
-    elif fmt == "carmen":
-        t, poses, line_of = _read_carmen(src, pose=pose, skip_invalid=skip_invalid, skipped=skipped)
-        lines = line_of.__getitem__  # type: ignore[assignment]
+        t, poses, cut = values[:, 0], values[:, 1:4], lines.cut_off_line
     else:
-        t, poses, line_of = _read_g2o(src, skipped=skipped)
+        assert src is not None
+        if fmt == "csv":
+            t, poses, line_of = _read_csv_trajectory(src)
+        elif fmt == "carmen":
+            t, poses, line_of = _read_carmen(
+                src, pose=pose, skip_invalid=skip_invalid, skipped=skipped
+            )
+        else:
+            t, poses, line_of = _read_g2o(src, skipped=skipped)
         lines = line_of.__getitem__  # type: ignore[assignment]
-    if src.cut_off_line() is not None:
+        cut = src.cut_off_line()
+    if cut is not None:
         skipped["truncated last line"] += 1
     if t.shape[0] == 0:
         hint = "" if format else "; pass format=... if that is not its format"
-        raise InputError(f"no poses found (read as {fmt}){hint}", path=src.path)
+        raise InputError(f"no poses found (read as {fmt}){hint}", path=name)
     positions = poses[:, :3] if poses.shape[1] == 7 else poses[:, :2]
-    check_coordinates(positions, what=what, path=src.path, line_of=lines)
-    order, report = sort_by_time(t, tolerance=max_step_back, lines=lines, path=src.path, what=what)
+    check_coordinates(positions, what=what, path=name, line_of=lines)
+    order, report = sort_by_time(t, tolerance=max_step_back, lines=lines, path=name, what=what)
     if report.out_of_order:
         t, poses = t[order], poses[order]
         warnings.warn(
-            f"{src.path}: {report.describe(what)}; put in time order",
+            f"{name}: {report.describe(what)}; put in time order",
             TimeOrderWarning,
             stacklevel=2,
         )
@@ -413,10 +421,9 @@ def _read_bag(
     if bad.size:
         raise InputError(f"message {int(bad[0]) + 1}: non-finite stamp", path=name)
     number = np.arange(1, t.size + 1)
-    src = SourceText(name, [], True)
-    q = _check_unit_quaternions(rows[:, 3:], src, number.__getitem__)
+    q = _check_unit_quaternions(rows[:, 3:], name, number.__getitem__)
     discarded: list[OutOfPlane] = []
-    poses = _poses_of_dimension(t, rows[:, :3], q, src, dimension, discarded)
+    poses = _poses_of_dimension(t, rows[:, :3], q, name, dimension, discarded)
     positions = poses[:, :3] if poses.shape[1] == 7 else poses[:, :2]
     check_coordinates(positions, what=what, path=name, line_of=number.__getitem__)
     order, report = sort_by_time(t, tolerance=None, lines=number, path=name, what=what)
@@ -449,26 +456,33 @@ def _is_euroc_header(src: SourceText) -> bool:
 
 
 def _read_3d(
-    src: SourceText,
+    src: SourceText | None,
     fmt: str,
     *,
     path: PathLike,
     times: PathLike | None,
     dimension: str,
     discarded: list[OutOfPlane],
-) -> tuple[NDArray, NDArray, Any]:
-    """TUM, KITTI or EuRoC: times, poses (``(N, 7)`` or ``(N, 3)``) and the row → line map."""
+) -> tuple[NDArray, NDArray, Any, int | None]:
+    """TUM, KITTI or EuRoC: times, poses (``(N, 7)`` or ``(N, 3)``), the row → line map and
+    the cut-off last line skipped (``None``: none).
+
+    ``src`` is the decoded text for EuRoC; TUM and KITTI are read from ``path`` by the table
+    reader (its fast path first).
+    """
     lines: Callable[[int], Any]
+    name = os.fspath(path)
     if fmt == "tum":
-        values, lines = read_numeric_table(
+        values, table_lines = read_numeric_table(
             path,
             columns=("t", "x", "y", "z", "qx", "qy", "qz", "qw"),
             describe="a TUM trajectory",
-            source=src,
         )
+        lines, cut = table_lines, table_lines.cut_off_line
         t, xyz, q = values[:, 0], values[:, 1:4], values[:, 4:8]
-        q = _check_unit_quaternions(q, src, lines)
+        q = _check_unit_quaternions(q, name, lines)
     elif fmt == "euroc":
+        assert src is not None
         first = next((k for k, line in enumerate(src.lines) if line.strip()), None)
         if first is None or not src.lines[first].lstrip().lower().startswith("#timestamp"):
             raise InputError(
@@ -491,14 +505,15 @@ def _read_3d(
         xyz = np.column_stack([c[k] for k in _EUROC_COLUMNS[1:4]])
         q = np.column_stack([c[k] for k in _EUROC_COLUMNS[5:8]] + [c[_EUROC_COLUMNS[4]]])
         lines = table.lines.__getitem__
-        q = _check_unit_quaternions(q, src, lines)
+        cut = src.cut_off_line()
+        q = _check_unit_quaternions(q, name, lines)
     else:  # kitti
-        values, lines = read_numeric_table(
+        values, table_lines = read_numeric_table(
             path,
             columns=tuple(f"r{i}{j}" for i in range(3) for j in range(4)),
             describe="a KITTI pose file (12 numbers: the 3x4 matrix [R | t], row by row)",
-            source=src,
         )
+        lines, cut = table_lines, table_lines.cut_off_line
         m = values.reshape(-1, 3, 4)
         r = m[:, :, :3]
         with np.errstate(over="ignore", invalid="ignore"):
@@ -509,18 +524,18 @@ def _read_3d(
             raise InputError(
                 f"the rotation block is not orthonormal (|RᵀR − I| up to {float(dev[k]):.3g}); "
                 "expected a KITTI pose [R | t] with a rotation matrix R",
-                path=src.path,
+                path=name,
                 line=lines(k),
             )
         from relation_metric import se3
 
         poses7 = se3.from_matrix(m) if m.shape[0] else np.zeros((0, 7))
         xyz, q = poses7[:, :3], poses7[:, 3:]
-        t = _kitti_times(times, m.shape[0], src.path)
-    return t, _poses_of_dimension(t, xyz, q, src, dimension, discarded), lines
+        t = _kitti_times(times, m.shape[0], name)
+    return t, _poses_of_dimension(t, xyz, q, name, dimension, discarded), lines, cut
 
 
-def _check_unit_quaternions(q: NDArray, src: SourceText, lines: Any) -> NDArray:
+def _check_unit_quaternions(q: NDArray, name: str, lines: Any) -> NDArray:
     """The quaternions divided by their norms; a norm off 1 by more than 1e-3 is refused.
 
     Every accepted quaternion is normalised here, before any path uses it: the planar yaw
@@ -533,7 +548,7 @@ def _check_unit_quaternions(q: NDArray, src: SourceText, lines: Any) -> NDArray:
         k = int(bad[0])
         raise InputError(
             f"quaternion norm {norms[k]:.6g}, expected a unit quaternion",
-            path=src.path,
+            path=name,
             line=lines(k),
         )
     return q / norms[:, None]
@@ -555,7 +570,7 @@ def _poses_of_dimension(
     t: NDArray,
     xyz: NDArray,
     q: NDArray,
-    src: SourceText,
+    name: str,
     dimension: str,
     discarded: list[OutOfPlane],
 ) -> NDArray:
@@ -578,7 +593,7 @@ def _poses_of_dimension(
     if not planar:
         discarded.append(oop)
         warnings.warn(
-            f'{src.path}: 3-D trajectory scored in 2-D (dimension="2d"): discarding its '
+            f'{name}: 3-D trajectory scored in 2-D (dimension="2d"): discarding its '
             f"out-of-plane motion ({oop.describe()})",
             PlanarProjectionWarning,
             stacklevel=4,
