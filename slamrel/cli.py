@@ -27,30 +27,35 @@ from types import FrameType
 
 from relation_metric.errors import OptionError, SlamrelError
 
-# Sub-command modules, in the order ``slamrel --help`` lists them.
-COMMAND_MODULES = (
-    "slamrel.commands.run",
-    "slamrel.commands.evaluate",
-    "slamrel.commands.traj",
-    "slamrel.commands.nees",
-    "slamrel.commands.recover",
-    "slamrel.commands.relations",
-    "slamrel.commands.map_compare",
-    "slamrel.commands.review",
-    "slamrel.commands.simulate",
-    "slamrel.commands.compare",
-    "slamrel.commands.importers",
-    "slamrel.commands.solve",
-    "slamrel.commands.example",
-    "slamrel.commands.study",
-    "slamrel.commands.batch",
-)
+# Sub-commands and their modules, in the order ``slamrel --help`` lists them. A command line
+# that names its command builds only that command's parser (the others' modules are not
+# imported): a start-up cost every command would pay otherwise.
+COMMANDS = {
+    "run": "slamrel.commands.run",
+    "evaluate": "slamrel.commands.evaluate",
+    "traj": "slamrel.commands.traj",
+    "nees": "slamrel.commands.nees",
+    "recover": "slamrel.commands.recover",
+    "relations": "slamrel.commands.relations",
+    "map-compare": "slamrel.commands.map_compare",
+    "review": "slamrel.commands.review",
+    "simulate": "slamrel.commands.simulate",
+    "slam": "slamrel.commands.simulate",
+    "compare": "slamrel.commands.compare",
+    "import": "slamrel.commands.importers",
+    "solve": "slamrel.commands.solve",
+    "example": "slamrel.commands.example",
+    "study": "slamrel.commands.study",
+    "batch": "slamrel.commands.batch",
+}
+COMMAND_MODULES = tuple(dict.fromkeys(COMMANDS.values()))
 
 EXIT_OK, EXIT_BUG, EXIT_USAGE, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The top-level parser with every sub-command registered."""
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The top-level parser with every sub-command registered, or only the module of
+    ``command`` (a name of :data:`COMMANDS`; the command line's first word)."""
     from slamrel import __version__
 
     parser = argparse.ArgumentParser(
@@ -61,7 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"slamrel {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name in COMMAND_MODULES:
+    modules = (COMMANDS[command],) if command in COMMANDS else COMMAND_MODULES
+    for name in modules:
         importlib.import_module(name).register(sub)
     _describe(sub)
     return parser
@@ -179,8 +185,9 @@ def _terminated(command: str, exc: Terminated) -> int:
 def _main(argv: Sequence[str] | None) -> int:
     command = "slamrel"
     try:
-        parser = build_parser()
-        args = parser.parse_args(argv)
+        words = sys.argv[1:] if argv is None else list(argv)
+        parser = build_parser(words[0] if words else None)
+        args = parser.parse_args(words)
         sub = [
             getattr(args, k) for k in ("import_command", "relations_command") if hasattr(args, k)
         ]

@@ -8,6 +8,7 @@ in numpy-free constants modules that their owners import too.
 
 from __future__ import annotations
 
+import ast
 import json
 import os
 import subprocess
@@ -156,6 +157,43 @@ def test_noise_types_are_keyed_by_the_noise_names() -> None:
 
     assert tuple(NOISE_TYPES) == NOISE_NAMES == ("a", "b", "c")
     assert NOISE_TYPES["b"].sigma_dtheta == 0.2 and NOISE_TYPES["c"].sigma_observation == 0.3
+
+
+def test_command_table_names_what_each_module_registers() -> None:
+    """cli.COMMANDS (read before any command module is imported) is what the modules
+    register, and a parser built for one command gives that command the same help."""
+    import argparse
+    import importlib
+
+    from slamrel import cli
+
+    registered = {}
+    for module in cli.COMMAND_MODULES:
+        sub = argparse.ArgumentParser().add_subparsers()
+        importlib.import_module(module).register(sub)
+        registered.update(dict.fromkeys(sub.choices, module))
+    assert registered == cli.COMMANDS
+    full = cli.build_parser()
+    full_choices = next(a for a in full._actions if isinstance(a, argparse._SubParsersAction))
+    assert list(full_choices.choices) == list(cli.COMMANDS)
+    for name in cli.COMMANDS:
+        one = cli.build_parser(name)
+        action = next(a for a in one._actions if isinstance(a, argparse._SubParsersAction))
+        assert name in action.choices and len(action.choices) <= 2  # simulate/slam share one
+        assert action.choices[name].format_help() == full_choices.choices[name].format_help()
+
+
+def test_a_named_command_imports_no_other_command_module() -> None:
+    probe = (
+        "import sys\n"
+        "from slamrel.cli import build_parser\n"
+        "build_parser('evaluate')\n"
+        "print(sorted(m for m in sys.modules if m.startswith('slamrel.commands.')))"
+    )
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    loaded = set(ast.literal_eval(out.stdout.strip()))
+    assert "slamrel.commands.evaluate" in loaded
+    assert not loaded & {"slamrel.commands.run", "slamrel.commands.study", "slamrel.commands.solve"}
 
 
 def test_import_commands_have_their_own_module() -> None:

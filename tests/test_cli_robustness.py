@@ -143,7 +143,7 @@ def test_hostile_inputs_give_one_clean_error_in_every_command(tmp_path, capsys, 
 
 
 def test_interrupt_during_start_up_exits_130(monkeypatch, capsys):
-    def interrupted():
+    def interrupted(command=None):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(cli, "build_parser", interrupted)
