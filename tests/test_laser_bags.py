@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import require_data
 
 from relation_metric import se3
 from relation_metric.errors import InputError
@@ -108,17 +109,17 @@ def _odometry(T, sec, nsec, pose, k, ros1):
     )
 
 
-def _scan(T, sec, nsec, ranges, k, ros1, frame="laser"):
-    sensor = (-math.pi / 2, math.pi / 360)
+def _scan(T, sec, nsec, ranges, k, ros1, sensor=(-math.pi / 2, math.pi / 360, RANGE_MIN, 80.0)):
+    """A LaserScan of frame laser; ``sensor`` is (angle_min, increment, range_min, range_max)."""
     return T[SCAN](
-        header=_header(T, sec, nsec, frame, k, ros1),
+        header=_header(T, sec, nsec, "laser", k, ros1),
         angle_min=sensor[0],
         angle_max=sensor[0] + sensor[1] * (ranges.size - 1),
         angle_increment=sensor[1],
         time_increment=0.0,
         scan_time=0.2,
-        range_min=RANGE_MIN,
-        range_max=80.0,
+        range_min=sensor[2],
+        range_max=sensor[3],
         ranges=np.asarray(ranges, dtype=np.float32),
         intensities=np.zeros(0, dtype=np.float32),
     )
@@ -313,3 +314,46 @@ def test_a_tilted_laser_is_refused(tmp_path, world):
     bag = _write(tmp_path / "flip.bag", "ros1", world, scans=world["ranges"][:2], laser=flipped)
     with pytest.raises(InputError, match=r"tilt of 180.0° against 'base_link'.*upside-down"):
         bag_laser_offset(str(bag), "base_link", "laser")
+
+
+def test_a_carmen_log_as_a_bag_gives_the_carmen_relations(tmp_path, capsys):
+    """Parity on real scans: mit-csail.clf's FLASER scans and odometry written as a ROS 2
+    bag (LaserScan, Odometry, an identity tf_static) give the relations of the CARMEN path at
+    the authors' first 40 timestamp pairs, up to the float32 of LaserScan.ranges."""
+    log = require_data("freiburg", "mit-csail.clf")
+    at = tmp_path / "first.relations"
+    at.write_text("".join(require_data("freiburg", "mit-csail.relations").open().readlines()[:40]))
+    s = read_laser_scans(log)
+    ts = get_typestore(Stores.LATEST)
+    T = ts.types
+    sec = np.floor(s.timestamps).astype(np.int64)
+    nsec = np.round((s.timestamps - sec) * 1e9).astype(np.int64)
+    assert (nsec < 10**9).all()
+    bag = tmp_path / "mit_mcap"
+    with _writer(bag, "mcap") as w:
+        c = w.add_connection("/tf_static", TF, typestore=ts)
+        same = _tf(T, "base_link", "laser", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), False)
+        w.write(c, 1, ts.serialize_cdr(T[TF](transforms=[same]), TF))
+        cs = w.add_connection("/scan", SCAN, typestore=ts)
+        co = w.add_connection("/odom", ODOM, typestore=ts)
+        for k in range(len(s)):
+            n = int(s.beams[k])
+            sensor = (s.start_angle[k], s.angular_resolution[k], 0.0, s.max_range[k])
+            scan = _scan(T, sec[k], nsec[k], s.ranges[k, :n], k, False, sensor)
+            t = int(sec[k]) * 10**9 + int(nsec[k])
+            w.write(cs, t, ts.serialize_cdr(scan, SCAN))
+            odom = _odometry(T, sec[k], nsec[k], s.odometry_pose[k], k, False)
+            w.write(co, t + 1, ts.serialize_cdr(odom, ODOM))
+    carmen, ours = tmp_path / "carmen.relations", tmp_path / "bag.relations"
+    args = ["relations", "align", "--at", str(at), "-q"]
+    assert main([*args, str(log), "-o", str(carmen), "--report", str(tmp_path / "c.csv")]) == 0
+    bag_args = [f"{bag}:/scan", "--estimate", f"{bag}:/odom", "--report", str(tmp_path / "b.csv")]
+    assert main([*args, *bag_args, "-o", str(ours)]) == 0
+    assert capsys.readouterr().err == ""  # the offset found, every scan with a pose
+    a, b = np.loadtxt(carmen), np.loadtxt(ours)
+    np.testing.assert_array_equal(a[:, :2], b[:, :2])
+    e = between(a[:, [2, 3, 7]], b[:, [2, 3, 7]])
+    assert np.hypot(e[:, 0], e[:, 1]).max() < 1e-5 and np.abs(e[:, 2]).max() < 1e-5
+    flags = [np.genfromtxt(tmp_path / f, delimiter=",", dtype=str, skip_header=1)[:, -1]
+             for f in ("c.csv", "b.csv")]  # fmt: skip
+    np.testing.assert_array_equal(flags[0], flags[1])
