@@ -77,10 +77,10 @@ def _header(T, sec, nsec, frame, k, ros1):
     return T["std_msgs/msg/Header"](**fields)
 
 
-def _tf(T, parent, child, xyz, rpy, ros1):
+def _tf(T, parent, child, xyz, rpy, ros1, sec=T0, nsec=0):
     q = se3.from_euler_zyx(np.asarray(rpy, dtype=np.float64))
     return T["geometry_msgs/msg/TransformStamped"](
-        header=_header(T, T0, 0, parent, 0, ros1),
+        header=_header(T, sec, nsec, parent, 0, ros1),
         child_frame_id=child,
         transform=T["geometry_msgs/msg/Transform"](
             translation=T["geometry_msgs/msg/Vector3"](x=xyz[0], y=xyz[1], z=xyz[2]),
@@ -135,7 +135,8 @@ def _writer(path: Path, storage: str):
 def _write(
     path: Path, storage: str, world: dict, *, tf_static: bool = True, scans=None, laser=LASER
 ) -> Path:
-    """/scan (LaserScan of frame laser), /odom (base_link), /tf_static (the two mount edges)."""
+    """/scan (LaserScan of frame laser), /odom (base_link; also as /tf odom->base_link),
+    /tf_static (the two mount edges)."""
     ros1 = storage == "ros1"
     ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.LATEST)
     if TF not in ts.types:  # the noetic store has no tf2_msgs: its one-line definition
@@ -157,12 +158,16 @@ def _write(
             w.write(c, 1, ser(T[TF](transforms=edges), TF))
         cs = w.add_connection("/scan", SCAN, typestore=ts)
         co = w.add_connection("/odom", ODOM, typestore=ts) if scans is None else None
+        ctf = w.add_connection("/tf", TF, typestore=ts) if scans is None else None
         for k, r in enumerate(ranges):
             t = 10**9 * int(sec[k]) + int(nsec[k])
             w.write(cs, t, ser(_scan(T, sec[k], nsec[k], r, k, ros1), SCAN))
-            if co is not None and k >= SKIP_ODOM:
+            if co is not None and ctf is not None and k >= SKIP_ODOM:
+                x, y, th = world["base_odom"][k]
                 odom = _odometry(T, sec[k], nsec[k], world["base_odom"][k], k, ros1)
                 w.write(co, t + 1, ser(odom, ODOM))
+                edge = _tf(T, "odom", "base_link", (x, y, 0.0), (0, 0, th), ros1, sec[k], nsec[k])
+                w.write(ctf, t + 2, ser(T[TF](transforms=[edge]), TF))
     return path
 
 
@@ -251,6 +256,18 @@ def test_align_from_a_bag_meets_the_simulated_targets(bags, world, storage, tmp_
     np.testing.assert_allclose(rows[:, 2:], between(odom[k[:, 0]], odom[k[:, 1]]), atol=1e-9)
 
 
+def test_a_tf_chain_estimate_names_the_base_frame(bags, tmp_path, capsys):
+    """BAG:/tf:odom.base_link: the chain's CHILD is the base frame, as an Odometry's child."""
+    bag = bags["sqlite3"]
+    outs = []
+    for est in ("/odom", "/tf:odom.base_link"):
+        outs.append(tmp_path / f"{len(outs)}.relations")
+        argv = ["relations", "align", f"{bag}:/scan", "--estimate", f"{bag}:{est}"]
+        assert main([*argv, "-o", str(outs[-1]), "--distance", "1"]) == 0
+        assert "offset [0.2 0.052 0.1] from tf_static base_link->laser" in capsys.readouterr().out
+    np.testing.assert_allclose(np.loadtxt(outs[0]), np.loadtxt(outs[1]), rtol=0, atol=1e-9)
+
+
 def test_without_tf_static_the_offset_is_zero_and_said(tmp_path, world, capsys):
     bag = _write(tmp_path / "no_tf.bag", "ros1", world, tf_static=False)
     out = tmp_path / "z.relations"
@@ -298,7 +315,14 @@ def test_bag_errors_exit_with_one_line(bags, world, tmp_path, capsys):
     # a bag without a topic: the topics listed
     with pytest.raises(InputError, match=r"name the laser as BAG:TOPIC.*/scan \(sensor_msgs"):
         read_laser_scans(bag)
-    assert {t.topic for t in bag_topics(bag)} == {"/scan", "/odom", "/tf_static"}
+    assert {t.topic for t in bag_topics(bag)} == {"/scan", "/odom", "/tf", "/tf_static"}
+    # an estimate that is not a trajectory
+    _one_line_error(
+        capsys,
+        [*align, f"{bag}:/scan", "--estimate", f"{bag}:/scan", "-o", out],
+        3,
+        "topic '/scan' holds sensor_msgs/LaserScan messages; expected one of",
+    )
 
 
 def test_without_rosbags_one_message_names_the_extra(bags, tmp_path, monkeypatch, capsys):
