@@ -381,3 +381,24 @@ def test_a_carmen_log_as_a_bag_gives_the_carmen_relations(tmp_path, capsys):
     flags = [np.genfromtxt(tmp_path / f, delimiter=",", dtype=str, skip_header=1)[:, -1]
              for f in ("c.csv", "b.csv")]  # fmt: skip
     np.testing.assert_array_equal(flags[0], flags[1])
+
+
+def test_a_clockwise_scanner_gives_the_same_returns(tmp_path, world):
+    """angle_increment < 0 (beams listed clockwise): the scan reversed, the same points."""
+    ts = get_typestore(Stores.LATEST)
+    T = ts.types
+    r = world["ranges"][:2]
+    for name, rows, sensor in (
+        ("ccw", r, (-math.pi / 2, math.pi / 360, RANGE_MIN, 80.0)),
+        ("cw", np.ascontiguousarray(r[:, ::-1]), (math.pi / 2, -math.pi / 360, RANGE_MIN, 80.0)),
+    ):
+        with _writer(tmp_path / name, "sqlite3") as w:
+            c = w.add_connection("/scan", SCAN, typestore=ts)
+            for k, row in enumerate(rows):
+                w.write(c, k + 1, ts.serialize_cdr(_scan(T, T0, k, row, k, False, sensor), SCAN))
+    ccw, cw = (
+        read_laser_scans(f"{next((tmp_path / n).glob('*.db3'))}:/scan") for n in ("ccw", "cw")
+    )
+    assert cw.angular_resolution[0] < 0
+    for k in range(2):
+        np.testing.assert_allclose(cw.points(k)[::-1], ccw.points(k), rtol=0, atol=1e-5)
