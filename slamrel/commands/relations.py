@@ -1,16 +1,25 @@
 """``slamrel relations generate``: select reference relations from a trajectory;
-``slamrel relations align``: make them from a laser log by scan alignment."""
+``slamrel relations align``: make them from a laser log (CARMEN, or a ROS bag's
+``sensor_msgs/LaserScan`` topic) by scan alignment."""
 
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING, Any
 
 from slamrel.commands.common import (
     add_strategy_arguments,
     check_outputs,
+    input_files,
     relations_from_args,
 )
 from slamrel.constants import TRAJECTORY_FORMATS
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from slamrel.formats.laser import LaserScans
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -42,12 +51,18 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
     a = rsub.add_parser(
         "align",
         help="make reference relations from a laser log by scan alignment",
-        description="Align pairs of laser scans of a CARMEN log (point-to-line ICP from an "
-        "initial guess, a correlative search where the guess is poor) and write the "
-        "relations as a Freiburg .relations file, with a per-relation quality report "
-        "(matched fraction, residual, degeneracy, flags) for review.",
+        description="Align pairs of laser scans of a CARMEN log or of a ROS bag's "
+        "sensor_msgs/LaserScan topic (point-to-line ICP from an initial guess, a "
+        "correlative search where the guess is poor) and write the relations of the laser's "
+        "poses as a Freiburg .relations file, with a per-relation quality report (matched "
+        "fraction, residual, degeneracy, flags) for review.",
     )
-    a.add_argument("log", metavar="LOG", help="CARMEN log with laser scans (.clf/.log)")
+    a.add_argument(
+        "log",
+        metavar="LOG",
+        help="CARMEN log with laser scans (.clf/.log), or a ROS bag's sensor_msgs/LaserScan "
+        "topic BAG:TOPIC (needs the 'bags' extra; give --estimate for its poses)",
+    )
     a.add_argument("-o", "--output", required=True, metavar="OUT", help="output .relations")
     a.add_argument(
         "--report",
@@ -69,7 +84,17 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
         "--estimate",
         metavar="TRAJ",
         help="trajectory whose laser poses give the initial guesses (default: the log's own "
-        "laser poses, i.e. its odometry)",
+        "laser poses, i.e. its odometry). A bag's scans have no poses: there TRAJ is required "
+        "and holds the robot's poses, e.g. BAG:/odom (nav_msgs/Odometry), interpolated at the "
+        "scan stamps and composed with the laser's offset (see --base-frame)",
+    )
+    a.add_argument(
+        "--base-frame",
+        metavar="FRAME",
+        help="bag LOG: the frame whose poses --estimate holds; the laser's pose in it is "
+        "composed from the bag's tf_static (FRAME -> the scans' frame_id). Default: the "
+        "estimate's child frame (an Odometry's child_frame_id, a tf chain's CHILD); without "
+        "one, or without that static transform, the offset is zero, with a warning",
     )
     a.add_argument("--estimate-format", choices=TRAJECTORY_FORMATS, help="format of TRAJ")
     a.add_argument(
@@ -182,6 +207,7 @@ def run_align(args: argparse.Namespace) -> int:
     import numpy as np
 
     from relation_metric.errors import OptionError
+    from slamrel.formats.bags import names_bag, split_bag_spec
     from slamrel.formats.laser import read_laser_scans
     from slamrel.formats.relations import read_relations, write_relations
     from slamrel.scans.correlative import CorrelativeOptions
@@ -200,9 +226,25 @@ def run_align(args: argparse.Namespace) -> int:
             raise OptionError(f"--{name.replace('_', '-')} must be positive")
     if args.max_range is not None and not args.max_range > 0:
         raise OptionError("--max-range must be positive")
-    check_outputs([args.output, args.report, args.review], [args.log, args.estimate, args.at])
+    bag = names_bag(args.log)
+    if bag:
+        if args.record:
+            raise OptionError("--record names a CARMEN laser record; a bag's laser is its topic")
+        if not args.estimate:
+            raise OptionError(
+                f"{args.log}: a bag's laser scans carry no poses; give --estimate TRAJ (the "
+                "robot's poses, e.g. BAG:/odom)"
+            )
+    elif args.base_frame:
+        raise OptionError("--base-frame applies to a ROS bag LOG (BAG:TOPIC) only")
+    check_outputs(
+        [args.output, args.report, args.review], input_files([args.log, args.estimate, args.at])
+    )
     scans = read_laser_scans(args.log, record=args.record)
-    if args.estimate:
+    if bag:
+        scans, poses, source = _bag_guesses(args, scans)
+        summary = f"{scans.frame_id or 'laser'} poses from {source}"
+    elif args.estimate:
         from slamrel.evaluation import load_trajectory
 
         est = load_trajectory(
@@ -212,9 +254,10 @@ def run_align(args: argparse.Namespace) -> int:
             skip_invalid=args.skip_invalid_poses,
         ).trajectory
         poses, corrected = estimate_at_scans(scans, est.timestamps, est.poses)
-        source = args.estimate
+        summary = f"guesses from {args.estimate}; {corrected} scan pose(s) odometry-corrected"
     else:
-        poses, corrected, source = scans.laser_pose, 0, "the log's laser poses"
+        summary = "guesses from the log's laser poses; 0 scan pose(s) odometry-corrected"
+        poses = scans.laser_pose
     if not np.isfinite(poses).all():
         raise OptionError(
             f"{args.log} has scans without poses ({scans.record}); give --estimate TRAJ"
@@ -258,16 +301,90 @@ def run_align(args: argparse.Namespace) -> int:
 
         from slamrel.review.scans import write_scan_review
 
-        write_scan_review(args.review, scans, result, poses, options, name=Path(args.log).name)
+        spec = split_bag_spec(args.log) if bag else None
+        name = Path(args.log).name if spec is None else f"{Path(spec.path).name}:{spec.topic}"
+        write_scan_review(args.review, scans, result, poses, options, name=name)
     if not args.quiet:
         flagged = int(result.flagged.sum())
         print(
             f"{len(result)} relations from {len(scans)} {scans.record} scans "
-            f"(guesses from {source}; {corrected} scan pose(s) odometry-corrected) "
-            f"-> {args.output}"
+            f"({summary}) -> {args.output}"
         )
         print(
             f"{flagged} flagged for review, {int((result.initialiser == 'correlative').sum())} "
             f"re-initialised by the correlative search"
         )
     return 0
+
+
+def _bag_guesses(
+    args: argparse.Namespace, scans: LaserScans
+) -> tuple[LaserScans, NDArray[np.float64], str]:
+    """A bag's scans with a pose (the others left out, counted), their laser poses from the
+    estimate and the laser offset, and what the poses came from (for the summary)."""
+    import warnings
+
+    import numpy as np
+
+    from relation_metric.errors import InputError
+    from slamrel.evaluation import load_trajectory
+    from slamrel.formats.bags import bag_topic_frames, split_bag_spec
+    from slamrel.formats.laser import BagScanWarning, bag_laser_offset
+    from slamrel.scans.report import laser_poses_at_stamps
+
+    est = load_trajectory(
+        args.estimate,
+        args.estimate_format,
+        role="estimate",
+        planar=True,
+        skip_invalid=args.skip_invalid_poses,
+    ).trajectory
+    base = args.base_frame
+    given = split_bag_spec(args.estimate)
+    if base is None and given is not None:
+        base = bag_topic_frames(given)[1] or None
+    spec = split_bag_spec(args.log)
+    assert spec is not None  # read_laser_scans refuses a bag without a topic
+    laser = scans.frame_id
+    offset: Any = None
+    if base is None:
+        why = f"{args.estimate} does not say which frame its poses are of"
+    elif not laser:
+        why = f"{args.log}: the scans have no frame_id"
+    else:
+        offset, text = bag_laser_offset(spec.path, base, laser)
+        why = f"no static transform {base}->{laser} in {spec.path} ({text})"
+    if offset is None:
+        warnings.warn(
+            f"{why}: the laser offset is taken as zero (the estimate's poses are the laser's); "
+            "state the robot's frame with --base-frame",
+            BagScanWarning,
+            stacklevel=2,
+        )
+        offset, text = np.zeros(3), "laser offset zero"
+    poses, inside = laser_poses_at_stamps(scans.timestamps, est, offset)
+    first, last = est.span()
+    if not inside.any():
+        raise InputError(
+            f"no scan lies within the estimate's time span ({first:.3f} … {last:.3f} s; the "
+            f"scans: {scans.timestamps.min():.3f} … {scans.timestamps.max():.3f} s)",
+            path=args.estimate,
+        )
+    if not inside.all():
+        out = int(np.count_nonzero(~inside))
+        warnings.warn(
+            f"{args.log}: {out} of {len(scans)} scans lie outside the time span of "
+            f"{args.estimate} ({first:.3f} … {last:.3f} s, ± 0.1 s); left out (an estimate is "
+            "not extrapolated)",
+            BagScanWarning,
+            stacklevel=2,
+        )
+        keep = np.flatnonzero(inside)
+        scans, poses = scans.take(keep), poses[keep]
+    x, y, th = (float(v) for v in offset)
+    source = (
+        f"{args.estimate} at the scan stamps; offset [{x:.4g} {y:.4g} {th:.4g}] from {text}"
+        if text != "laser offset zero"
+        else f"{args.estimate} at the scan stamps; laser offset zero"
+    )
+    return scans, poses, source

@@ -1,4 +1,5 @@
-"""Poses from ROS bags: ROS 1 ``.bag``, ROS 2 sqlite3 (``.db3`` or a bag directory) and MCAP.
+"""Poses and laser scans from ROS bags: ROS 1 ``.bag``, ROS 2 sqlite3 (``.db3`` or a bag
+directory) and MCAP.
 
 Read through `rosbags <https://gitlab.com/ternaris/rosbags>`_ (pure Python, Apache-2.0), the
 optional extra ``bags`` (``pip install 'slamrel[bags]'``); it is imported only when a bag is
@@ -30,6 +31,22 @@ scalar last: the pose of the message's child/body frame in ``header.frame_id``).
 Covariances are ROS's: row-major 6×6 over ``(x, y, z, rotation about X, about Y, about Z)``
 (``geometry_msgs/PoseWithCovariance``). A message whose covariance is all zero (ROS's "not
 filled in") is kept as a pose; the covariance of such a topic is then absent.
+
+Laser scans
+-----------
+``sensor_msgs/LaserScan``               ``ranges``, ``angle_min``, ``angle_increment``,
+                                        ``range_min``, ``range_max``, ``header.frame_id``
+
+:func:`read_bag_laser_scans` reads a scan topic named ``BAG:TOPIC`` as a trajectory topic is
+named (``slamrel.formats.laser.read_laser_scans`` turns it into the laser reader's record).
+The time of a scan is its ``header.stamp``; beam ``k`` points at ``angle_min + k ·
+angle_increment`` in the laser's frame (``angle_max`` is not needed). Readings are kept as
+recorded, NaN and ±inf included (REP 117's "no return" values); which of them are returns
+(``range_min < r < range_max``) the scan record decides, as it does for a CARMEN log's
+readings at or beyond the maximum range. One topic is one laser: a beam count or
+``frame_id`` that changes within it is refused. The laser's pose on the robot is not in a
+LaserScan; :func:`read_static_transform` composes it from the bag's ``tf_static`` (the static
+transforms alone, e.g. ``base_link → laser``), when they connect the two frames.
 
 tf chains
 ---------
@@ -72,6 +89,11 @@ __all__ = [
     "bag_topics",
     "describe_bag_topics",
     "read_bag_poses",
+    "LASER_MESSAGE_TYPES",
+    "BagScans",
+    "read_bag_laser_scans",
+    "read_static_transform",
+    "bag_topic_frames",
 ]
 
 #: Bag file extensions and their storage (a ROS 2 bag may also be a directory).
@@ -82,6 +104,9 @@ _POSE_COV = "geometry_msgs/msg/PoseWithCovarianceStamped"
 _ODOM = "nav_msgs/msg/Odometry"
 _TRANSFORM = "geometry_msgs/msg/TransformStamped"
 _TF = "tf2_msgs/msg/TFMessage"
+_LASER = "sensor_msgs/msg/LaserScan"
+#: The message types whose topics are laser scans (:func:`read_bag_laser_scans`).
+LASER_MESSAGE_TYPES = (_LASER,)
 #: The message types whose topics are trajectories (TFMessage through a ``PARENT.CHILD`` chain).
 POSE_MESSAGE_TYPES = (_POSE, _POSE_COV, _ODOM, _TRANSFORM, _TF)
 #: The types whose messages carry a pose covariance.
@@ -265,19 +290,7 @@ def read_bag_poses(spec: BagSpec) -> BagPoses:
     with _open(spec.path) as reader:
         topics = {t.topic: t for t in _topics(reader)}
         where = str(spec)
-        if spec.topic not in topics:
-            raise InputError(
-                f"no topic {spec.topic!r} in the bag; {describe_bag_topics(list(topics.values()))}",
-                path=spec.path,
-            )
-        info = topics[spec.topic]
-        if info.msgtype not in POSE_MESSAGE_TYPES:
-            names = ", ".join(t.replace("/msg/", "/") for t in POSE_MESSAGE_TYPES)
-            raise InputError(
-                f"topic {spec.topic!r} holds {info.msgtype.replace('/msg/', '/')} messages; "
-                f"expected one of {names}",
-                path=spec.path,
-            )
+        info = _typed_topic(topics, spec, POSE_MESSAGE_TYPES)
         if info.msgtype == _TF:
             if spec.frames is None:
                 raise InputError(
@@ -289,6 +302,26 @@ def read_bag_poses(spec: BagSpec) -> BagPoses:
         if info.count == 0:
             raise InputError(f"topic {spec.topic!r} has no messages", path=where)
         return _read_topic(reader, spec.topic, info.msgtype)
+
+
+def _typed_topic(topics: Mapping[str, BagTopic], spec: BagSpec, types: tuple[str, ...]) -> BagTopic:
+    """The topic ``spec`` names, refused when missing (the bag's topics listed) or of a type
+    not among ``types``."""
+    if spec.topic not in topics:
+        raise InputError(
+            f"no topic {spec.topic!r} in the bag; {describe_bag_topics(list(topics.values()))}",
+            path=spec.path,
+        )
+    info = topics[spec.topic]
+    if info.msgtype not in types:
+        names = ", ".join(t.replace("/msg/", "/") for t in types)
+        expected = f"one of {names}" if len(types) > 1 else names
+        raise InputError(
+            f"topic {spec.topic!r} holds {info.msgtype.replace('/msg/', '/')} messages; "
+            f"expected {expected}",
+            path=spec.path,
+        )
+    return info
 
 
 def _read_topic(reader: Any, topic: str, msgtype: str) -> BagPoses:
@@ -342,6 +375,8 @@ def _tf_edges(reader: Any, topics: Mapping[str, Any]) -> dict[str, _Edge]:
     tf_topics = [t for t, info in topics.items() if info.msgtype == _TF]
     connections = [c for c in reader.connections if c.topic in tf_topics]
     edges: dict[str, _Edge] = {}
+    if not connections:  # rosbags reads every topic for an empty list
+        return edges
     for connection, _, raw in reader.messages(connections=connections):
         static = connection.topic.lstrip("/") == "tf_static"
         msg = reader.deserialize(raw, connection.msgtype)
@@ -486,3 +521,148 @@ def _slerp(a: NDArray[np.float64], b: NDArray[np.float64], s: NDArray[np.float64
     wb = np.where(small, s, np.sin(s * theta) / sin)
     q = wa[:, None] * a + wb[:, None] * b
     return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+@dataclass(frozen=True)
+class BagScans:
+    """The scans of one ``sensor_msgs/LaserScan`` topic, in the bag's message order.
+
+    Attributes
+    ----------
+    timestamps : ndarray, shape (N,)
+        ``header.stamp`` in seconds.
+    ranges : ndarray, shape (N, B)
+        ``ranges`` as recorded (float32 widened to float64); NaN, ±inf and readings outside
+        ``range_min … range_max`` are kept as they are (REP 117's "no return" values).
+    angle_min, angle_increment, range_min, range_max : ndarray, shape (N,)
+        Each message's configuration [rad, rad, m, m].
+    frame_id : str
+        The laser's frame (``header.frame_id``, without a leading slash).
+    """
+
+    timestamps: NDArray[np.float64]
+    ranges: NDArray[np.float64]
+    angle_min: NDArray[np.float64]
+    angle_increment: NDArray[np.float64]
+    range_min: NDArray[np.float64]
+    range_max: NDArray[np.float64]
+    frame_id: str
+
+
+def read_bag_laser_scans(spec: BagSpec) -> BagScans:
+    """The scans of ``spec``'s ``sensor_msgs/LaserScan`` topic (see the module docstring).
+
+    Raises
+    ------
+    InputError
+        A missing topic (the bag's topics listed), a topic of another type, no messages, a
+        beam count or ``frame_id`` that changes within the topic (two lasers on one topic),
+        a configuration that is not finite (or a zero increment, or not
+        ``0 ≤ range_min < range_max``), rosbags not installed.
+    """
+    where = str(spec)
+    if spec.frames is not None:
+        raise InputError(
+            "a tf chain holds no laser scans; expected BAG:TOPIC of sensor_msgs/LaserScan",
+            path=spec.path,
+        )
+    with _open(spec.path) as reader:
+        info = _typed_topic({t.topic: t for t in _topics(reader)}, spec, LASER_MESSAGE_TYPES)
+        if info.count == 0:
+            raise InputError(f"topic {spec.topic!r} has no messages", path=where)
+        connections = [c for c in reader.connections if c.topic == spec.topic]
+        stamps: list[float] = []
+        config: list[tuple[float, float, float, float]] = []
+        rows: list[NDArray[np.float64]] = []
+        frame: str | None = None
+        for k, (connection, _, raw) in enumerate(reader.messages(connections=connections), 1):
+            msg = reader.deserialize(raw, connection.msgtype)
+            r = np.asarray(msg.ranges, dtype=np.float64)
+            if rows and r.size != rows[0].size:
+                raise InputError(
+                    f"message {k}: {r.size} beams, but the topic's first message has "
+                    f"{rows[0].size}; expected one beam count on a laser topic",
+                    path=where,
+                )
+            fid = msg.header.frame_id.lstrip("/")
+            if frame is not None and fid != frame:
+                raise InputError(
+                    f"message {k}: frame_id {fid!r}, but the first message's is {frame!r}; "
+                    "expected one laser on a laser topic",
+                    path=where,
+                )
+            frame = fid
+            s = msg.header.stamp
+            stamps.append(s.sec + s.nanosec * 1e-9)
+            config.append((msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max))
+            rows.append(r)
+    cfg = np.asarray(config, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(cfg).all(axis=1) | (cfg[:, 1] == 0) | ~(cfg[:, 2] >= 0)
+        bad |= ~(cfg[:, 2] < cfg[:, 3])
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        a0, da, lo, hi = cfg[k]
+        raise InputError(
+            f"message {k + 1}: angle_min {a0}, angle_increment {da}, range_min {lo}, range_max "
+            f"{hi}; expected finite numbers, a non-zero increment and 0 ≤ range_min < range_max",
+            path=where,
+        )
+    if rows[0].size == 0:
+        raise InputError(f"topic {spec.topic!r}: the scans have no ranges", path=where)
+    return BagScans(
+        np.asarray(stamps, dtype=np.float64),
+        np.stack(rows),
+        cfg[:, 0].copy(),
+        cfg[:, 1].copy(),
+        cfg[:, 2].copy(),
+        cfg[:, 3].copy(),
+        frame or "",
+    )
+
+
+def read_static_transform(
+    path: str | os.PathLike[str], parent: str, child: str
+) -> tuple[NDArray[np.float64] | None, str]:
+    """The pose ``[x, y, z, qx, qy, qz, qw]`` of frame ``child`` in ``parent`` composed from
+    the static transforms (``tf_static``) alone, or None when they do not connect the two
+    frames; and the bag's static transforms as text (``its static transforms: a->b, ...``).
+
+    The chain is walked as :func:`read_bag_poses` walks a tf chain (edges backwards are
+    inverted); a frame is its own identity.
+    """
+    from relation_metric import se3
+
+    with _open(os.fspath(path)) as reader:
+        topics = {t.topic: t for t in _topics(reader)}
+        edges = {c: e for c, e in _tf_edges(reader, topics).items() if e.static}
+    pairs = sorted(f"{e.parent}->{e.child}" for e in edges.values())
+    text = "its static transforms: " + (", ".join(pairs) if pairs else "none")
+    parent, child = parent.lstrip("/"), child.lstrip("/")
+    if parent == child:
+        return se3.identity(), text
+    chain = _chain(edges, parent, child)
+    if not chain:
+        return None, text
+    pose = se3.identity()
+    for e, forward in chain:
+        step = np.asarray(e.rows[-1], dtype=np.float64)
+        pose = se3.compose(pose, step if forward else se3.inverse(step))
+    return se3.normalize(pose), text
+
+
+def bag_topic_frames(spec: BagSpec) -> tuple[str, str]:
+    """``(frame_id, child_frame_id)`` of the first message of ``spec``'s topic (PARENT and
+    CHILD of a tf chain); ``""`` for what the type does not carry (a PoseStamped's child)."""
+    with _open(spec.path) as reader:
+        topics = {t.topic: t for t in _topics(reader)}
+        if spec.frames is not None:
+            edges = _tf_edges(reader, topics)
+            known = set(edges) | {e.parent for e in edges.values()}
+            return _split_frames(spec.frames, known, spec.path)
+        connections = [c for c in reader.connections if c.topic == spec.topic]
+        for connection, _, raw in reader.messages(connections=connections) if connections else ():
+            msg = reader.deserialize(raw, connection.msgtype)
+            child = getattr(msg, "child_frame_id", "")
+            return msg.header.frame_id.lstrip("/"), str(child).lstrip("/")
+    return "", ""

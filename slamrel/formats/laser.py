@@ -1,4 +1,5 @@
-"""Laser scans from CARMEN logs (``FLASER``, ``RLASER``, ``ROBOTLASER1/2``, ``RAWLASER1..4``).
+"""Laser scans from CARMEN logs (``FLASER``, ``RLASER``, ``ROBOTLASER1/2``, ``RAWLASER1..4``)
+and from ROS bags (``sensor_msgs/LaserScan``, named ``BAG:TOPIC``).
 
 The record layouts are the ones of the trajectory reader
 (:class:`slamrel.formats.trajectories.CarmenLayout`): one description of the CARMEN format,
@@ -28,6 +29,19 @@ with an estimate by time). The time of a scan is its ipc timestamp, as for poses
 Input rule: a record whose counts or numbers are wrong raises :class:`InputError` with file
 and line; a log with more than one kind of laser record needs ``record=`` (no guess which
 sensor is meant); other records are skipped and counted in :attr:`LaserScans.skipped`.
+
+ROS bags
+--------
+A ``sensor_msgs/LaserScan`` topic (:func:`slamrel.formats.bags.read_bag_laser_scans`) gives
+the same record: ``record`` ``"LaserScan"``, the time ``header.stamp``, ``start_angle`` =
+``angle_min``, ``angular_resolution`` = ``angle_increment`` (negative for a scanner that
+turns clockwise), ``max_range`` = ``range_max`` and :attr:`LaserScans.min_range` =
+``range_min``, the laser's :attr:`LaserScans.frame_id`. Readings are kept as recorded and
+judged as a CARMEN log's are: a return is ``range_min < r < range_max`` (so NaN, ±inf and
+readings outside the range are no returns, masked by :meth:`LaserScans.points`, never
+replaced). A LaserScan carries no pose: ``laser_pose`` and ``odometry_pose`` are NaN (as for
+RAWLASER; pair the scans with an estimate by time), and ``lines`` is the 1-based message
+index on the topic.
 """
 
 from __future__ import annotations
@@ -35,13 +49,22 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric.errors import InputError
 from relation_metric.se2 import between
+from slamrel.formats.bags import (
+    BagSpec,
+    bag_topics,
+    describe_bag_topics,
+    is_bag,
+    read_bag_laser_scans,
+    read_static_transform,
+    split_bag_spec,
+)
 from slamrel.formats.text import PathLike, SourceText, read_source
 from slamrel.formats.trajectories import (
     CARMEN_LASER_RECORDS,
@@ -55,10 +78,22 @@ __all__ = [
     "nearest_times",
     "guess_laser_config",
     "FLASER_MAX_RANGE",
+    "MAX_LASER_TILT",
+    "bag_laser_offset",
+    "BagScanWarning",
 ]
 
 FLASER_MAX_RANGE = 80.0
 """The maximum range CARMEN assumes for FLASER/RLASER records [m]."""
+
+
+class BagScanWarning(UserWarning):
+    """A bag's scans: the laser offset could not be composed from tf_static (taken as zero),
+    or scans had no pose of the estimate (left out, counted)."""
+
+
+MAX_LASER_TILT = 0.1
+"""The largest tilt of a bag's laser against its base frame's plane [rad] (≈ 5.7°)."""
 
 
 def guess_laser_config(beams: int) -> tuple[float, float]:
@@ -99,6 +134,11 @@ class LaserScans:
         True when the configuration is CARMEN's guess from the beam count (FLASER/RLASER).
     skipped : Mapping[str, int]
         Records not read, by kind.
+    frame_id : str
+        The laser's frame (ROS bags; ``""`` for CARMEN logs, which name none).
+    min_range : (N,) float or None
+        The scans' own minimum range [m] (a LaserScan's ``range_min``); None for CARMEN logs,
+        which state none.
     """
 
     path: str
@@ -114,6 +154,8 @@ class LaserScans:
     lines: NDArray[np.int64]
     guessed_config: bool
     skipped: Mapping[str, int] = field(default_factory=dict)
+    frame_id: str = ""
+    min_range: NDArray[np.float64] | None = None
 
     def __len__(self) -> int:
         return int(self.timestamps.shape[0])
@@ -134,17 +176,41 @@ class LaserScans:
         """Cartesian returns of scan ``i`` in the laser frame, ``(M, 2)``, in beam order.
 
         A reading is a return when ``min_range < r < max_range`` (``max_range`` defaults to the
-        scan's own maximum range). NaN rows mark the beams that are not returns, so that beam
-        adjacency survives (:mod:`slamrel.scans.matching` needs neighbours along the scan).
+        scan's own maximum range; ``min_range`` is raised to the scan's own minimum when it has
+        one, :attr:`min_range`; NaN and ±inf are never returns). NaN rows mark the beams that
+        are not returns, so that beam adjacency survives (:mod:`slamrel.scans.matching` needs
+        neighbours along the scan).
         """
         n = int(self.beams[i])
         r = self.ranges[i, :n]
         top = float(self.max_range[i]) if max_range is None else min(max_range, self.max_range[i])
+        low = min_range if self.min_range is None else max(min_range, float(self.min_range[i]))
         a = self.angles(i)
-        ok = (r > min_range) & (r < top)
-        pts = np.column_stack((r * np.cos(a), r * np.sin(a)))
+        with np.errstate(invalid="ignore"):
+            ok = (r > low) & (r < top)
+            pts = np.column_stack((r * np.cos(a), r * np.sin(a)))
         pts[~ok] = np.nan
         return pts
+
+    def take(self, index: NDArray[np.int64]) -> LaserScans:
+        """The scans at ``index`` (in that order), every per-scan array taken alike."""
+        index = np.asarray(index, dtype=np.int64)
+        per_scan = {
+            name: getattr(self, name)[index]
+            for name in (
+                "timestamps",
+                "ranges",
+                "beams",
+                "start_angle",
+                "angular_resolution",
+                "max_range",
+                "laser_pose",
+                "odometry_pose",
+                "lines",
+            )
+        }
+        low = None if self.min_range is None else self.min_range[index]
+        return replace(self, **per_scan, min_range=low)
 
     def nearest(self, t: NDArray[np.float64]) -> NDArray[np.int64]:
         """Index of the scan nearest in time to each of ``t`` (:func:`nearest_times`)."""
@@ -169,7 +235,8 @@ def nearest_times(
 
 
 def read_laser_scans(path: PathLike, *, record: str | None = None) -> LaserScans:
-    """Read the laser scans of a CARMEN log.
+    """Read the laser scans of a CARMEN log, or of a ROS bag's ``sensor_msgs/LaserScan``
+    topic named ``BAG:TOPIC`` (see the module docstring).
 
     Parameters
     ----------
@@ -177,12 +244,16 @@ def read_laser_scans(path: PathLike, *, record: str | None = None) -> LaserScans
     record : str, optional
         Which laser record to read (one of ``FLASER``, ``RLASER``, ``ROBOTLASER1``,
         ``ROBOTLASER2``, ``RAWLASER1``..``RAWLASER4``). When omitted the log must hold one kind
-        only; with several kinds an :class:`InputError` lists them.
+        only; with several kinds an :class:`InputError` lists them. Not for bags (the topic
+        names the laser).
 
     Returns
     -------
     LaserScans
     """
+    spec = split_bag_spec(path)
+    if spec is not None or is_bag(path):
+        return _read_bag_scans(path, spec, record)
     src = read_source(path)
     if record is not None and record not in CARMEN_LASER_RECORDS:
         raise InputError(
@@ -286,3 +357,74 @@ def _scans_from_rows(
         guessed_config=guessed,
         skipped=skipped,
     )
+
+
+def _read_bag_scans(path: PathLike, spec: BagSpec | None, record: str | None) -> LaserScans:
+    """A bag's LaserScan topic as the laser record (NaN poses, the scans' own range_min)."""
+    if spec is None:
+        raise InputError(
+            "is a ROS bag, which holds many topics: name the laser as BAG:TOPIC; "
+            f"{describe_bag_topics(bag_topics(path))}",
+            path=str(path),
+        )
+    if record is not None:
+        raise InputError(
+            f"record={record!r} names a CARMEN laser record; a bag's laser is named by its "
+            "topic (BAG:TOPIC)",
+            path=str(spec),
+        )
+    got = read_bag_laser_scans(spec)
+    n, b = got.ranges.shape
+    no_pose = np.full((n, 3), np.nan)
+    return LaserScans(
+        path=str(spec),
+        record="LaserScan",
+        timestamps=got.timestamps,
+        ranges=got.ranges,
+        beams=np.full(n, b, dtype=np.int64),
+        start_angle=got.angle_min,
+        angular_resolution=got.angle_increment,
+        max_range=got.range_max,
+        laser_pose=no_pose,
+        odometry_pose=no_pose.copy(),
+        lines=np.arange(1, n + 1, dtype=np.int64),
+        guessed_config=False,
+        frame_id=got.frame_id,
+        min_range=got.range_min,
+    )
+
+
+def bag_laser_offset(bag: str, base: str, laser: str) -> tuple[NDArray[np.float64] | None, str]:
+    """The laser's pose ``[x, y, θ]`` in frame ``base`` from the bag's ``tf_static``, or None
+    when the static transforms do not connect the two frames; and a text for messages (the
+    chain's frames and what the projection onto the plane dropped, or the bag's static
+    transforms when there is no chain).
+
+    The static chain ``base → laser`` (:func:`slamrel.formats.bags.read_static_transform`) is
+    projected onto the plane: ``x, y`` and the yaw; ``z`` is dropped, and so are roll and pitch
+    up to :data:`MAX_LASER_TILT` (the scans are planar in the base frame to within
+    ``1 − cos(tilt)`` of each range).
+
+    Raises
+    ------
+    InputError
+        The laser is tilted by more than :data:`MAX_LASER_TILT` (an upside-down laser too:
+        its scans would be mirrored, which slamrel does not undo).
+    """
+    from relation_metric import se3
+
+    pose, text = read_static_transform(bag, base, laser)
+    if pose is None:
+        return None, text
+    up = se3.quat_rotate(pose[3:], np.array([0.0, 0.0, 1.0]))
+    tilt = float(np.arccos(np.clip(up[2], -1.0, 1.0)))
+    if tilt > MAX_LASER_TILT:
+        raise InputError(
+            f"tf_static puts the laser frame {laser!r} at a tilt of {math.degrees(tilt):.1f}° "
+            f"against {base!r}; expected a level laser (within "
+            f"{math.degrees(MAX_LASER_TILT):.1f}°; an upside-down laser is not supported)",
+            path=bag,
+        )
+    planar = se3.to_planar(pose)
+    dropped = f"z {pose[2]:.3g} m and a tilt of {math.degrees(tilt):.2g}° dropped"
+    return planar, f"tf_static {base}->{laser}; {dropped}"

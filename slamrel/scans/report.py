@@ -5,6 +5,12 @@ in time, and when it is more than ``tolerance`` away the odometry motion between
 nearest to that pose and the scan itself is composed onto it,
 ``x̂_k = x_n ∘ (o_{s(n)}⁻¹ ∘ o_k)`` (``o`` the log's laser poses, ``s(n)`` the scan nearest to
 pose ``n``).
+
+:func:`laser_poses_at_stamps` is the rule for scans without poses of their own (a ROS bag's
+``sensor_msgs/LaserScan``): the estimate of the robot's base frame interpolated at each
+scan's stamp (:meth:`Trajectory.poses_at <relation_metric.trajectory.Trajectory.poses_at>`,
+constant twist between the two poses around it), composed with the laser's offset on the
+robot, ``x̂_k = b(t_k) ∘ o``.
 """
 
 from __future__ import annotations
@@ -13,10 +19,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric.se2 import between, compose
+from relation_metric.trajectory import Trajectory
 from slamrel.formats.laser import LaserScans, nearest_times
 from slamrel.scans.relations import ScanRelations
 
-__all__ = ["estimate_at_scans", "format_report", "REPORT_COLUMNS"]
+__all__ = ["estimate_at_scans", "laser_poses_at_stamps", "format_report", "REPORT_COLUMNS"]
 
 REPORT_COLUMNS = (
     "t1,t2,x,y,theta,guess_x,guess_y,guess_theta,sd_x,sd_y,sd_theta,matched_fraction,"
@@ -40,6 +47,29 @@ def estimate_at_scans(
         motion = between(scans.laser_pose[s], scans.laser_pose[far])
         out[far] = compose(out[far], motion)
     return out, int(far.sum())
+
+
+def laser_poses_at_stamps(
+    stamps: NDArray[np.float64],
+    base: Trajectory,
+    offset: NDArray[np.float64],
+    *,
+    tolerance: float = 0.1,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Laser poses ``(N, 3)`` at ``stamps`` from a planar estimate ``base`` of the robot and
+    the laser's pose ``offset`` ``[x, y, θ]`` on it, and which stamps have one.
+
+    A stamp more than ``tolerance`` [s] before the first or after the last pose of ``base``
+    has none (NaN row, False): an estimate is not extrapolated. Within ``tolerance`` of an
+    end the end pose is used.
+    """
+    stamps = np.asarray(stamps, dtype=np.float64)
+    first, last = base.span()
+    inside = (stamps >= first - tolerance) & (stamps <= last + tolerance)
+    out = np.full((stamps.size, 3), np.nan)
+    if inside.any():
+        out[inside] = compose(base.poses_at(stamps[inside]), np.asarray(offset, dtype=np.float64))
+    return out, inside
 
 
 def format_report(result: ScanRelations) -> str:
