@@ -11,6 +11,7 @@ written into tf_static, and the simulator's true laser poses for the relations.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import sys
@@ -402,3 +403,19 @@ def test_a_clockwise_scanner_gives_the_same_returns(tmp_path, world):
     assert cw.angular_resolution[0] < 0
     for k in range(2):
         np.testing.assert_allclose(cw.points(k)[::-1], ccw.points(k), rtol=0, atol=1e-5)
+
+
+def test_traj_topics_says_what_each_topic_is_read_as(bags, tmp_path, capsys):
+    from slamrel.cli import main
+
+    j = tmp_path / "topics.json"
+    assert main(["traj", "topics", str(bags["ros1"]), "--json", str(j)]) == 0
+    rows = {r["topic"]: r["read_as"] for r in json.loads(j.read_text())["topics"]}
+    assert rows == {
+        "/scan": "laser scans",
+        "/odom": "trajectory",
+        "/tf": "trajectory",
+        "/tf_static": "trajectory",
+    }
+    out = capsys.readouterr().out
+    assert "laser scans (relations align)" in out

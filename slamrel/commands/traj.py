@@ -113,16 +113,17 @@ def run_topics(args: argparse.Namespace) -> int:
                 "type": t.msgtype,
                 "messages": t.count,
                 "trajectory": t.is_trajectory,
+                "read_as": t.read_as,
             }
             for t in topics
         ]
         write_json(args.json, {"bag": args.bag, "topics": rows})
     width = max([len(t.topic) for t in topics] + [5])
     tw = max([len(t.msgtype) for t in topics] + [4])
-    print(f"{'topic':<{width}}  {'type':<{tw}}  {'messages':>8}  trajectory")
+    print(f"{'topic':<{width}}  {'type':<{tw}}  {'messages':>8}  slamrel reads")
     for t in topics:
-        yes = "yes" if t.is_trajectory else "no"
-        print(f"{t.topic:<{width}}  {t.msgtype:<{tw}}  {t.count:>8d}  {yes}")
+        use = {"trajectory": "trajectory", "laser scans": "laser scans (relations align)"}
+        print(f"{t.topic:<{width}}  {t.msgtype:<{tw}}  {t.count:>8d}  {use.get(t.read_as, '-')}")
     return 0
 
 

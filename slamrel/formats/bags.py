@@ -150,6 +150,16 @@ class BagTopic:
         """Whether slamrel reads poses from it (:data:`POSE_MESSAGE_TYPES`)."""
         return self.msgtype in POSE_MESSAGE_TYPES
 
+    @property
+    def is_laser(self) -> bool:
+        """Whether slamrel reads laser scans from it (:data:`LASER_MESSAGE_TYPES`)."""
+        return self.msgtype in LASER_MESSAGE_TYPES
+
+    @property
+    def read_as(self) -> str | None:
+        """What slamrel reads from the topic: ``"trajectory"``, ``"laser scans"`` or None."""
+        return "trajectory" if self.is_trajectory else "laser scans" if self.is_laser else None
+
 
 @dataclass(frozen=True)
 class BagPoses:
