@@ -218,6 +218,23 @@ def test_many_blocks(monkeypatch, rng):
     assert same_bits(values, python_table(text))
 
 
+@pytest.mark.parametrize("workers", [1, 3])
+def test_blocks_in_threads_equal_one_by_one(monkeypatch, rng, workers):
+    """Blocks parsed by several threads (or one) fill the rows in order, the gaps of blank
+    and comment lines closed."""
+    monkeypatch.setattr(fastparse, "_BLOCK", 64)
+    monkeypatch.setattr(fastparse, "_workers", lambda: workers)
+    rows = rng.normal(0, 10, (300, 2))
+    lines = [
+        ("# c\n\n" if k % 4 == 0 else "") + f"{a!r} {b:.3f}\n"
+        for k, (a, b) in enumerate(rows.tolist())
+    ]
+    text = "".join(lines)
+    values = parse_decimal_table(text.encode(), 2)
+    assert values is not None
+    assert same_bits(values, python_table(text))
+
+
 @pytest.mark.parametrize("name", ["aces", "fr079", "intel", "mit-csail"])
 def test_real_relations_files(name):
     path = require_data("freiburg", f"{name}.relations")

@@ -63,6 +63,7 @@ from __future__ import annotations
 import math
 import os
 import re
+from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
 import numpy as np
@@ -76,6 +77,9 @@ UTF8_BOM = b"\xef\xbb\xbf"
 MAX_FRACTION = 22
 """Most fraction digits a token may have on the vectorised path (``10**22`` is the largest
 exact power of ten in float64); a longer one goes to ``float()``."""
+
+MAX_WORKERS = 4
+"""Most threads that parse the blocks of one file at once."""
 
 MIN_ODD_ALLOWANCE = 256
 ODD_SHARE = 16
@@ -260,14 +264,40 @@ def _parse_padded(
         cuts.append(b.size if cut == 0 else cut)
     # At most one row per line: blocks write their rows straight into ``values``.
     values = np.empty((ncols, buf.count(b"\n")), dtype=np.float64).T  # contiguous columns
-    nrows = 0
-    for lo, hi in zip(cuts[:-1], cuts[1:]):
+    spans = list(zip(cuts[:-1], cuts[1:]))
+    # Each block writes from the first row its lines could start at; blank and comment
+    # lines leave gaps, closed afterwards.
+    firsts = np.cumsum([0] + [buf.count(b"\n", lo, hi) for lo, hi in spans[:-1]]).tolist()
+
+    def block(k: int) -> int | None:
+        lo, hi = spans[k]
         marked = has_comment and buf.find(cbyte, lo, hi) >= 0
-        rows = _parse_block(b, words, lo, hi, cbyte[0] if marked else None, values[nrows:])
+        return _parse_block(b, words, lo, hi, cbyte[0] if marked else None, values[firsts[k] :])
+
+    workers = min(len(spans), _workers())
+    if workers > 1:  # numpy releases the GIL inside its loops: blocks overlap on cores
+        with ThreadPoolExecutor(workers) as pool:
+            counts = list(pool.map(block, range(len(spans))))
+    else:
+        counts = [block(k) for k in range(len(spans))]
+    nrows = 0
+    for first, rows in zip(firsts, counts):
         if rows is None:
             return None
+        if first != nrows:
+            values[nrows : nrows + rows] = values[first : first + rows]
         nrows += rows
     return values[:nrows] if nrows else None
+
+
+def _workers() -> int:
+    """Threads for the blocks of one file: the cores this process may use, at most
+    :data:`MAX_WORKERS`."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, MAX_WORKERS))
 
 
 def _parse_block(
