@@ -104,7 +104,7 @@ def test_equals_python_float_bit_for_bit(table):
 
 
 @settings(max_examples=200, deadline=None)
-@given(tables(st.text("0123456789.-+eE", min_size=1, max_size=22)))
+@given(tables(st.text("0123456789.-+eE:/;x", min_size=1, max_size=22)))
 def test_accepts_exactly_the_subset(table):
     """Arbitrary tokens: parsed bit-exactly when all are in the subset, refused otherwise."""
     text, ncols = table
@@ -287,6 +287,19 @@ def test_real_relations_files(name):
 )
 def test_refuses_what_it_cannot_do_exactly(text):
     assert parse_decimal_table(text.encode(), 2) is None
+
+
+def test_every_non_digit_byte_in_every_position_is_caught():
+    """Exhaustive over printable ASCII: one foreign byte anywhere in a token of 8, 16 or 24
+    digits (read as one, two or three words) refuses the table."""
+    foreign = [chr(c) for c in range(33, 127) if not chr(c).isdigit() and chr(c) not in "#."]
+    for digits in ("12345678", "9" * 16, "1234567890" * 2 + "1234"):
+        for k in range(len(digits)):
+            for c in foreign:
+                token = digits[:k] + c + digits[k + 1 :]
+                if NUMBER.fullmatch(token):
+                    continue  # e.g. "1234e678": a number (odd token), not a foreign byte
+                assert parse_decimal_table(f"1 {token}\n".encode(), 2) is None, token
 
 
 def test_comment_character_must_not_be_part_of_numbers():

@@ -92,10 +92,8 @@ _BLOCK = 1 << 21  # bytes per block of whole lines: a block's arrays stay in the
 
 _U64 = np.uint64
 _ZEROS = _U64(0x3030303030303030)  # eight ASCII '0'
-_HI_NIBBLES = _U64(0xF0F0F0F0F0F0F0F0)
-_PLUS6 = _U64(0x0606060606060606)
-_ALL3 = _U64(0x3333333333333333)
-_LOW_NIBBLES = _U64(0x0F0F0F0F0F0F0F0F)
+_PLUS118 = _U64(0x7676767676767676)
+_TOP_BITS = _U64(0x8080808080808080)
 _MASK16 = _U64(0x00FF00FF00FF00FF)
 _MASK32 = _U64(0x0000FFFF0000FFFF)
 _MUL1 = _U64(10 * (1 << 8) + 1)
@@ -670,13 +668,15 @@ def _eight_digits(
     word >>= shift
     word <<= shift
     word |= _ZEROS >> (_S64 - shift)  # '0' in the replaced bytes (shift by 64 gives 0)
-    # Every byte in '0'..'9': high nibble 3, and adding 6 keeps it 3.
-    check = word + _PLUS6
-    check &= _HI_NIBBLES
-    check >>= _U64(4)
-    check |= word & _HI_NIBBLES
-    bad = check != _ALL3
-    word &= _LOW_NIBBLES
+    # Digit values: '0'..'9' become 0..9. A byte below '0' borrows and ends at 0xF1 or
+    # above; one above '9' ends at 0x0A or above, which adding 0x76 takes to 0x80 (or,
+    # after a borrow from below, the byte below shows it): every non-digit leaves some
+    # byte of ``check`` with its top bit set, and none is set when all are digits.
+    word -= _ZEROS
+    check = word + _PLUS118
+    check |= word
+    check &= _TOP_BITS
+    bad = check != _U64(0)
     word *= _MUL1
     word >>= _S8
     word &= _MASK16
