@@ -175,13 +175,6 @@ def incremental_tree(n: int, pp_i: NDArray[np.int64], pp_j: NDArray[np.int64]) -
 _TWO_PI = 2.0 * np.pi
 
 
-def _wrap(a: Array) -> Array:
-    """Angles to ``[−π, π)`` in three array operations (the hot loop's residual angles)."""
-    w = np.remainder(a + np.pi, _TWO_PI) - np.pi
-    w[w >= np.pi] -= _TWO_PI  # the remainder can round up to exactly 2π
-    return w
-
-
 def graph_cost(poses: Array, graph: PoseGraph) -> float:
     """``½ Σ eᵀ Ω e`` of the pose–pose factors (local residual, the graph's information)."""
     e = se2.between(poses[graph.pp_i], poses[graph.pp_j]) - graph.pp_z
@@ -476,13 +469,21 @@ def toro_optimize(
     # per entry: (±1 for the path difference, 1 on the i side for the heading of i)
     factor_all = np.stack((sign_all, (sign_all > 0).astype(np.float64)), axis=1)[:, None, :]
     bounds = np.cumsum([0] + [r.size for r in runs])
+    z_run = np.asarray(graph.pp_z)[concat]
+    # per iteration, filled in place: each path entry's step per unit residual (the signed
+    # share times −f) and each constraint's top heading; the runs hold views of them
+    step_all = np.zeros((nodes_all.size, 3))
+    th_top = np.zeros(concat.size)
+    rot_a = z_run[:, :2].copy()  # R δ_t = cos θ (δx, δy) + sin θ (−δy, δx)
+    rot_b = np.column_stack((-z_run[:, 1], z_run[:, 0]))
     blocks = []
     for k in range(len(runs)):
         c0, c1 = int(bounds[k]), int(bounds[k + 1])
         n0, n1 = int(sub.indptr[c0]), int(sub.indptr[c1])
         blocks.append(
-            (c0, c1, n0, n1, nodes_all[n0:n1], owner_all[n0:n1] - c0,
-             (sub.indptr[c0:c1] - n0).astype(np.int64), factor_all[n0:n1])
+            (nodes_all[n0:n1], owner_all[n0:n1] - c0, (sub.indptr[c0:c1] - n0).astype(np.int64),
+             factor_all[n0:n1], step_all[n0:n1], th_top[c0:c1], rot_a[c0:c1], rot_b[c0:c1],
+             z_run[c0:c1, 2])
         )  # fmt: skip
     p0 = _tree_guess(graph, parent, levels) if initial == "tree" else np.array(graph.poses)
     x = p0.copy()
@@ -529,22 +530,20 @@ def toro_optimize(
         share = np.add.reduceat(mn, sub.indptr[:-1]) if concat.size else mn
         split = np.zeros_like(mn)
         np.divide(mn * sign_all[:, None], share[owner_all], out=split, where=share[owner_all] > 0)
-        neg_frac = -frac[concat]
-        th_top = p[paths.lca[concat], 2]
-        z_run = z[concat]
-        for c0, c1, n0, n1, nodes, owner, starts, factor in blocks:
+        np.multiply(split, -frac[concat][owner_all], out=step_all)
+        np.take(p[:, 2], paths.lca[concat], out=th_top)
+        for nodes, owner, starts, factor, step, top, za, zb, z_th in blocks:
             xn = x[nodes]
             # (t_i − t_j, θ_i − θ_j) over the path and Σ of the i side's parameters, at once
             both = np.add.reduceat(xn[:, :, None] * factor, starts)
-            th = th_top[c0:c1] + both[:, 2, 1]
-            zr = z_run[c0:c1]
-            cr, sr = np.cos(th), np.sin(th)
+            th = both[:, 2, 1]
+            th += top
             r = both[:, :, 0]
-            r[:, 0] += cr * zr[:, 0] - sr * zr[:, 1]
-            r[:, 1] += sr * zr[:, 0] + cr * zr[:, 1]
-            r[:, 2] = _wrap(r[:, 2] + zr[:, 2])
-            r *= neg_frac[c0:c1]
-            x[nodes] = xn + split[n0:n1] * r[owner]  # the poses of a run are distinct
+            r[:, :2] += np.cos(th)[:, None] * za + np.sin(th)[:, None] * zb
+            a = r[:, 2]
+            a += z_th
+            a -= _TWO_PI * np.rint(a / _TWO_PI)  # wrapped
+            x[nodes] = xn + step * r[owner]  # the poses of a run are distinct
 
     sweep = None
     if _fixed_weights(info):
