@@ -388,8 +388,9 @@ class _TriangularSweep:
         frac = np.minimum(1.0, self.scale / t)
         fs = np.zeros_like(frac)
         np.divide(frac, self.share, out=fs, where=self.share > 0)  # r → the path's step
+        sx = self.signed @ x  # S x⁰, the path sums at the start
         # headings
-        b = self.signed @ x[:, 2] + self.z[:, 2]
+        b = sx[:, 2] + self.z[:, 2]
         live = fs[:, 1] > 0
         if self.offset is None:  # the residuals before the visits; later, the last iteration's
             self.offset = -np.floor((b + np.pi) / _TWO_PI)
@@ -406,12 +407,11 @@ class _TriangularSweep:
         # translations, with the headings each visit saw
         c, s_ = np.cos(th), np.sin(th)
         zx, zy = self.z[:, 0], self.z[:, 1]
-        b2 = self.signed @ x[:, :2]
+        b2 = sx[:, :2]
         b2[:, 0] += c * zx - s_ * zy
         b2[:, 1] += s_ * zx + c * zy
         u_t = fs[:, :1] * self._solve(0, fs[:, 0], b2)
-        x[:, :2] -= self.m_inv[:, :1] * (self.signed_t @ u_t)
-        x[:, 2] -= self.m_inv[:, 1] * (self.signed_t @ u_th)
+        x -= self.m_inv[:, [0, 0, 1]] * (self.signed_t @ np.column_stack((u_t, u_th)))
         return True
 
 
