@@ -12,7 +12,7 @@ files with the same number of iterations and their defaults; this script reports
   to least squares' optimum of the same graph, and slamrel's as a ratio to real TORO's;
 * time per iteration: slamrel's ``toro_optimize`` (set-up excluded, best of the runs; the
   set-up, ``iterations=0``, printed beside it) and real TORO's (``TOTAL TIME`` it prints,
-  set-up excluded), and their ratio.
+  set-up excluded, best of as many runs), and their ratio.
 
 Usage: ``python benchmarks/bench_toro.py [--toro PATH] [--iterations 100 300]``.
 Without a TORO binary only slamrel's numbers are printed (no ratios).
@@ -52,23 +52,28 @@ def aligned_ate(est: np.ndarray, truth: np.ndarray) -> float:
     return float(np.sqrt((d**2).sum(axis=1).mean()))
 
 
-def real_toro(binary: str, graph: PoseGraph, iterations: int) -> tuple[np.ndarray, float]:
-    """Poses after ``iterations`` of the real ``toro`` (its defaults) and its seconds per
-    iteration (the optimisation time it prints)."""
+def real_toro(
+    binary: str, graph: PoseGraph, iterations: int, repeat: int
+) -> tuple[np.ndarray, float]:
+    """Poses after ``iterations`` of the real ``toro`` (its defaults) and its best seconds per
+    iteration over ``repeat`` runs (the optimisation time it prints)."""
+    best = float("inf")
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "g.graph"
         write_toro_graph(path, graph)
-        done = subprocess.run(
-            [binary, "-i", str(iterations), "-nde", str(path)],
-            capture_output=True,
-            text=True,
-            check=True,
-            cwd=tmp,
-        )
-        out = done.stdout + done.stderr
-        seconds = float(re.search(r"TOTAL TIME\s*=\s*([0-9.eE+-]+)", out).group(1))  # type: ignore[union-attr]
+        for _ in range(repeat):
+            done = subprocess.run(
+                [binary, "-i", str(iterations), "-nde", str(path)],
+                capture_output=True,
+                text=True,
+                check=True,
+                cwd=tmp,
+            )
+            out = done.stdout + done.stderr
+            found = re.search(r"TOTAL TIME\s*=\s*([0-9.eE+-]+)", out)
+            best = min(best, float(found.group(1)))  # type: ignore[union-attr]
         poses = np.asarray(read_toro_graph(Path(tmp) / "g-treeopt-final.graph")[0].poses)
-    return poses, seconds / max(iterations, 1)
+    return poses, best / max(iterations, 1)
 
 
 def slamrel_toro(graph: PoseGraph, iterations: int, repeat: int) -> tuple[np.ndarray, float, float]:
@@ -107,7 +112,7 @@ def city(binary: str | None, iterations: list[int], repeat: int) -> None:
             f"{aligned_ate(mine, truth):.3f} m, {per * 1e3:.1f} ms/it (set-up {setup:.2f} s)"
         )
         if binary:
-            ref, ref_per = real_toro(binary, g, it)
+            ref, ref_per = real_toro(binary, g, it, repeat)
             rc = graph_cost(ref, g)
             line += (
                 f" | real TORO cost {rc:,.0f}, ATE {aligned_ate(ref, truth):.3f} m, "
@@ -133,7 +138,7 @@ def m2_graphs(binary: str | None, worlds: list[str], iterations: int, repeat: in
                 f"{graph_cost(mine, g) / opt:.2f}x, {per * 1e3:.2f} ms/it"
             )
             if binary:
-                ref, ref_per = real_toro(binary, g, iterations)
+                ref, ref_per = real_toro(binary, g, iterations, repeat)
                 ratio = graph_cost(mine, g) / graph_cost(ref, g)
                 line += f" | real TORO {graph_cost(ref, g) / opt:.2f}x, {ref_per * 1e3:.2f} ms/it | slamrel/real {ratio:.2f}"
             print(line)
@@ -144,7 +149,9 @@ def main() -> int:
     ap.add_argument("--toro", default=os.environ.get("SLAMREL_TORO"), help="the real toro binary")
     ap.add_argument("--iterations", type=int, nargs="+", default=[100, 300])
     ap.add_argument("--worlds", nargs="*", default=["hu-simple1", "hu-complex1"])
-    ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument(
+        "--repeat", type=int, default=1, help="runs of each timing, both tools; the best is kept"
+    )
     args = ap.parse_args()
     city(args.toro, args.iterations, args.repeat)
     m2_graphs(args.toro, args.worlds, args.iterations[0], args.repeat)
