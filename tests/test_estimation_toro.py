@@ -249,6 +249,10 @@ def test_toro_triangular_sweep_is_the_run_after_run_visits(rng, monkeypatch, ini
     assert swept.cost[-1] < 0.5 * swept.cost[0]
     np.testing.assert_allclose(swept.cost, runs.cost, rtol=1e-10)
     np.testing.assert_allclose(swept.poses, runs.poses, rtol=0, atol=1e-10)
+    monkeypatch.setattr(toro_optimiser, "_COMPILED_TRIANGULAR", False)  # SciPy < 1.14
+    older = toro_optimize(g, iterations=40, initial=initial)  # the runs, poses level by level
+    assert len(steps) == 40
+    np.testing.assert_allclose(older.cost, runs.cost, rtol=1e-12)
 
 
 def test_toro_options_are_checked(rng):

@@ -59,10 +59,12 @@ comparable with least squares'.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+import scipy
 import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import breadth_first_order
@@ -294,6 +296,9 @@ def _fixed_weights(info: Array) -> bool:
 #: Most entries, over the tree paths' poses, of ``Σ_k n_k²`` (``n_k`` the paths through
 #: pose ``k``, the work of the coupling products) for which :class:`_TriangularSweep` is used.
 _TRIANGULAR_BUDGET = 80_000_000
+#: Whether SciPy solves sparse triangular systems in compiled code (SuperLU, from 1.14);
+#: before, ``spsolve_triangular`` loops over the rows in Python, slower than the runs.
+_COMPILED_TRIANGULAR = tuple(int(v) for v in re.findall(r"\d+", scipy.__version__)[:2]) >= (1, 14)
 #: Triangular solves per iteration for the heading wraps before the runs take over.
 _WRAP_PASSES = 8
 
@@ -361,9 +366,10 @@ class _TriangularSweep:
         info: Array,
     ) -> _TriangularSweep | None:
         """The sweep for the constraints of ``signed`` (rows in visit order), or ``None``
-        when the coupling products exceed :data:`_TRIANGULAR_BUDGET`."""
+        when the coupling products exceed :data:`_TRIANGULAR_BUDGET` or SciPy's triangular
+        solve is not compiled (:data:`_COMPILED_TRIANGULAR`)."""
         per_pose = np.diff(signed.tocsc().indptr).astype(np.float64)
-        if float(per_pose @ per_pose) > _TRIANGULAR_BUDGET:
+        if not _COMPILED_TRIANGULAR or float(per_pose @ per_pose) > _TRIANGULAR_BUDGET:
             return None
         weight = np.column_stack((info[:, 0, 0], info[:, 2, 2]))
         m = abs(signed).T @ weight
@@ -509,7 +515,12 @@ def toro_optimize(
     compose.sort_indices()
 
     def poses_of(params: Array) -> Array:
-        return np.asarray(spsolve_triangular(compose, params[tree_order], lower=True))[rank]
+        if _COMPILED_TRIANGULAR:
+            return np.asarray(spsolve_triangular(compose, params[tree_order], lower=True))[rank]
+        p = params.copy()
+        for nodes in levels[1:]:
+            p[nodes] += p[parent[nodes]]
+        return p
 
     def visit_runs(p: Array, t: int) -> None:
         """Iteration ``t`` in place on ``x`` (poses ``p`` at its start), run after run."""
