@@ -339,10 +339,16 @@ class _TriangularSweep:
         self.lower: list[sp.csc_matrix] = []
         self.unit: list[Array] = []  # the values of L for f/σ = 1
         self.counts: list[NDArray[np.int64]] = []  # entries per column
-        for d in range(2):
-            lower = self._coupling(signed, m_inv[:, d])
+        # both dimensions from one product: translation real, heading imaginary (the sums
+        # of each part are those of a real product; ±1 times a complex number is exact)
+        both = self._coupling(signed, m_inv[:, 0] + 1j * m_inv[:, 1])
+        for part in (both.data.real, both.data.imag):
+            lower = sp.csc_matrix(
+                (part.copy(), both.indices.copy(), both.indptr.copy()), shape=both.shape
+            )
+            lower.has_sorted_indices = True
             self.lower.append(lower)
-            self.unit.append(lower.data.copy())
+            self.unit.append(part.copy())
             self.counts.append(np.diff(lower.indptr))
         self.heading = sp.tril(self.i_side @ sp.diags(m_inv[:, 1]) @ signed.T, k=-1, format="csr")
         self.offset: Array | None = None  # 2π wraps of the heading residuals, per visit
@@ -351,7 +357,7 @@ class _TriangularSweep:
     def _coupling(signed: sp.csr_matrix, m_inv: Array) -> sp.csc_matrix:
         n = signed.shape[0]
         lower = sp.tril(signed @ sp.diags(m_inv) @ signed.T, k=-1, format="csc")
-        lower = (lower + sp.eye(n, format="csc")).tocsc()
+        lower = (lower + sp.eye(n, dtype=m_inv.dtype, format="csc") * (1 + 1j)).tocsc()
         lower.sum_duplicates()
         lower.sort_indices()
         return lower
@@ -421,6 +427,86 @@ class _TriangularSweep:
         return True
 
 
+class _Runs:
+    """The visits of an iteration run after run (:func:`_runs`), any weights."""
+
+    def __init__(
+        self,
+        paths: _Paths,
+        visit: NDArray[np.int64],
+        i: NDArray[np.int64],
+        z: Array,
+        info: Array,
+    ) -> None:
+        runs = _runs(paths.signed, visit)
+        # the runs laid end to end: constraint slots [c0, c1) and path entries [n0, n1) per run
+        concat = np.concatenate(runs) if runs else np.empty(0, np.int64)
+        sub = paths.signed[concat]
+        self.lca, self.i, self.info = paths.lca[concat], i[concat], info[concat]
+        self.nodes = sub.indices.astype(np.int64)
+        self.sign = sub.data.astype(np.float64)
+        self.starts = sub.indptr[:-1]
+        self.owner = np.repeat(np.arange(concat.size), np.diff(sub.indptr))
+        self.length = paths.length[concat].astype(np.float64)
+        self.absolute = abs(sub).T.tocsr()  # (N, E): sums of W over the constraints on k
+        # per entry: (±1 for the path difference, 1 on the i side for the heading of i)
+        factor = np.stack((self.sign, (self.sign > 0).astype(np.float64)), axis=1)[:, None, :]
+        bounds = np.cumsum([0] + [r.size for r in runs])
+        z_run = np.asarray(z)[concat]
+        # per iteration, filled in place: each path entry's step per unit residual (the
+        # signed share times −f) and each constraint's top heading; the runs hold views
+        self.step_all = np.zeros((self.nodes.size, 3))
+        self.th_top = np.zeros(concat.size)
+        rot_a = z_run[:, :2].copy()  # R δ_t = cos θ (δx, δy) + sin θ (−δy, δx)
+        rot_b = np.column_stack((-z_run[:, 1], z_run[:, 0]))
+        self.blocks = []
+        for k in range(len(runs)):
+            c0, c1 = int(bounds[k]), int(bounds[k + 1])
+            n0, n1 = int(sub.indptr[c0]), int(sub.indptr[c1])
+            self.blocks.append(
+                (self.nodes[n0:n1], self.owner[n0:n1] - c0,
+                 (sub.indptr[c0:c1] - n0).astype(np.int64), factor[n0:n1],
+                 self.step_all[n0:n1], self.th_top[c0:c1], rot_a[c0:c1], rot_b[c0:c1],
+                 z_run[c0:c1, 2])
+            )  # fmt: skip
+
+    def step(self, x: Array, p: Array, t: int) -> None:
+        """Iteration ``t`` in place on the parameters ``x`` (poses ``p`` at its start)."""
+        info = self.info
+        c, s_ = np.cos(p[self.i, 2]), np.sin(p[self.i, 2])
+        # diagonal of R Ω Rᵀ
+        wxx = c * c * info[:, 0, 0] - 2 * c * s_ * info[:, 0, 1] + s_ * s_ * info[:, 1, 1]
+        wyy = s_ * s_ * info[:, 0, 0] + 2 * c * s_ * info[:, 0, 1] + c * c * info[:, 1, 1]
+        w = np.column_stack((wxx, wyy, info[:, 2, 2]))
+        m = self.absolute @ w
+        active = m > 0
+        gamma = np.where(active.any(axis=0), np.where(active, m, np.inf).min(axis=0), 1.0)
+        m_inv = np.zeros_like(m)
+        np.divide(1.0, m, out=m_inv, where=active)
+        frac = np.minimum(1.0, 2.0 * self.length[:, None] * w / (gamma * t))
+        # what stays fixed within an iteration: the share of each path pose
+        # (M_k⁻¹ / Σ_P M⁻¹, signed), the fractions, the top poses' headings
+        mn = m_inv[self.nodes]
+        share = np.add.reduceat(mn, self.starts) if self.lca.size else mn
+        split = np.zeros_like(mn)
+        own = share[self.owner]
+        np.divide(mn * self.sign[:, None], own, out=split, where=own > 0)
+        np.multiply(split, -frac[self.owner], out=self.step_all)
+        np.take(p[:, 2], self.lca, out=self.th_top)
+        for nodes, owner, starts, factor, step, top, za, zb, z_th in self.blocks:
+            xn = x[nodes]
+            # (t_i − t_j, θ_i − θ_j) over the path and Σ of the i side's parameters, at once
+            both = np.add.reduceat(xn[:, :, None] * factor, starts)
+            th = both[:, 2, 1]
+            th += top
+            r = both[:, :, 0]
+            r[:, :2] += np.cos(th)[:, None] * za + np.sin(th)[:, None] * zb
+            a = r[:, 2]
+            a += z_th
+            a -= _TWO_PI * np.rint(a / _TWO_PI)  # wrapped
+            x[nodes] = xn + step * r[owner]  # the poses of a run are distinct
+
+
 def toro_optimize(
     graph: PoseGraph,
     *,
@@ -465,32 +551,6 @@ def toro_optimize(
     depth, levels = _depths(parent)
     paths = _paths(parent, depth, pi, pj)
     visit = np.argsort(depth[paths.lca], kind="stable") if order == "depth" else np.arange(pi.size)
-    runs = _runs(paths.signed, visit)
-    # the runs laid end to end: constraint slots [c0, c1) and path entries [n0, n1) per run
-    concat = np.concatenate(runs) if runs else np.empty(0, np.int64)
-    sub = paths.signed[concat]
-    nodes_all = sub.indices.astype(np.int64)
-    sign_all = sub.data.astype(np.float64)
-    owner_all = np.repeat(np.arange(concat.size), np.diff(sub.indptr))
-    # per entry: (±1 for the path difference, 1 on the i side for the heading of i)
-    factor_all = np.stack((sign_all, (sign_all > 0).astype(np.float64)), axis=1)[:, None, :]
-    bounds = np.cumsum([0] + [r.size for r in runs])
-    z_run = np.asarray(graph.pp_z)[concat]
-    # per iteration, filled in place: each path entry's step per unit residual (the signed
-    # share times −f) and each constraint's top heading; the runs hold views of them
-    step_all = np.zeros((nodes_all.size, 3))
-    th_top = np.zeros(concat.size)
-    rot_a = z_run[:, :2].copy()  # R δ_t = cos θ (δx, δy) + sin θ (−δy, δx)
-    rot_b = np.column_stack((-z_run[:, 1], z_run[:, 0]))
-    blocks = []
-    for k in range(len(runs)):
-        c0, c1 = int(bounds[k]), int(bounds[k + 1])
-        n0, n1 = int(sub.indptr[c0]), int(sub.indptr[c1])
-        blocks.append(
-            (nodes_all[n0:n1], owner_all[n0:n1] - c0, (sub.indptr[c0:c1] - n0).astype(np.int64),
-             factor_all[n0:n1], step_all[n0:n1], th_top[c0:c1], rot_a[c0:c1], rot_b[c0:c1],
-             z_run[c0:c1, 2])
-        )  # fmt: skip
     p0 = _tree_guess(graph, parent, levels) if initial == "tree" else np.array(graph.poses)
     x = p0.copy()
     x[1:] = p0[1:] - p0[parent[1:]]
@@ -498,7 +558,6 @@ def toro_optimize(
     z = np.asarray(graph.pp_z)
     info = np.asarray(graph.pp_info)
     length = paths.length.astype(np.float64)
-    absolute = abs(paths.signed).T.tocsr()  # (N, E): sums of W over the constraints on k
 
     # the poses from the parameters, p_k = x_k + p_parent(k): one forward substitution in
     # breadth-first order (parents first), where it is p_k = x_k − (−1)·p_parent(k)
@@ -522,50 +581,19 @@ def toro_optimize(
             p[nodes] += p[parent[nodes]]
         return p
 
-    def visit_runs(p: Array, t: int) -> None:
-        """Iteration ``t`` in place on ``x`` (poses ``p`` at its start), run after run."""
-        c, s_ = np.cos(p[pi, 2]), np.sin(p[pi, 2])
-        # diagonal of R Ω Rᵀ
-        wxx = c * c * info[:, 0, 0] - 2 * c * s_ * info[:, 0, 1] + s_ * s_ * info[:, 1, 1]
-        wyy = s_ * s_ * info[:, 0, 0] + 2 * c * s_ * info[:, 0, 1] + c * c * info[:, 1, 1]
-        w = np.column_stack((wxx, wyy, info[:, 2, 2]))
-        m = absolute @ w
-        active = m > 0
-        gamma = np.where(active.any(axis=0), np.where(active, m, np.inf).min(axis=0), 1.0)
-        m_inv = np.zeros_like(m)
-        np.divide(1.0, m, out=m_inv, where=active)
-        frac = np.minimum(1.0, 2.0 * length[:, None] * w / (gamma * t))
-        # what stays fixed within an iteration, in run order: the share of each path pose
-        # (M_k⁻¹ / Σ_P M⁻¹, signed), the fractions, the top poses' headings
-        mn = m_inv[nodes_all]
-        share = np.add.reduceat(mn, sub.indptr[:-1]) if concat.size else mn
-        split = np.zeros_like(mn)
-        np.divide(mn * sign_all[:, None], share[owner_all], out=split, where=share[owner_all] > 0)
-        np.multiply(split, -frac[concat][owner_all], out=step_all)
-        np.take(p[:, 2], paths.lca[concat], out=th_top)
-        for nodes, owner, starts, factor, step, top, za, zb, z_th in blocks:
-            xn = x[nodes]
-            # (t_i − t_j, θ_i − θ_j) over the path and Σ of the i side's parameters, at once
-            both = np.add.reduceat(xn[:, :, None] * factor, starts)
-            th = both[:, 2, 1]
-            th += top
-            r = both[:, :, 0]
-            r[:, :2] += np.cos(th)[:, None] * za + np.sin(th)[:, None] * zb
-            a = r[:, 2]
-            a += z_th
-            a -= _TWO_PI * np.rint(a / _TWO_PI)  # wrapped
-            x[nodes] = xn + step * r[owner]  # the poses of a run are distinct
-
     sweep = None
     if _fixed_weights(info):
         sweep = _TriangularSweep.build(
-            sub, paths.lca[concat], length[concat], z[concat], info[concat]
+            paths.signed[visit], paths.lca[visit], length[visit], z[visit], info[visit]
         )
+    runs: _Runs | None = None  # built when first needed
     p = poses_of(x)
     costs = [graph_cost(p, graph)]
     for t in range(1, iterations + 1):
         if sweep is None or not sweep.step(x, p, t):
-            visit_runs(p, t)
+            if runs is None:
+                runs = _Runs(paths, visit, pi, z, info)
+            runs.step(x, p, t)
         p = poses_of(x)
         costs.append(graph_cost(p, graph))
     p[:, 2] = se2.wrap_angle(p[:, 2])
@@ -575,5 +603,5 @@ def toro_optimize(
         int(iterations),
         readonly(parent, np.int64),
         float(paths.length.mean()) if paths.length.size else 0.0,
-        len(runs),
+        len(runs.blocks) if runs is not None else 0,
     )
