@@ -7,6 +7,7 @@ import pytest
 
 from relation_metric import se2
 from relation_metric.errors import InputError
+from slamrel.backends import toro_optimiser
 from slamrel.backends.least_squares import PoseGraph, solve_graph
 from slamrel.backends.lever_sgd import lever_sgd_optimize
 from slamrel.backends.toro_optimiser import (
@@ -208,6 +209,50 @@ def test_toro_approaches_the_least_squares_optimum(rng, tree, order):
     np.testing.assert_array_equal(sol.poses[0], g.poses[0])
     d = se2.minus(np.asarray(sol.poses), np.asarray(opt.poses))
     assert np.abs(d[:, :2]).max() < 0.2 and np.abs(d[:, 2]).max() < 0.05
+
+
+@pytest.mark.parametrize(("initial", "passes"), [("tree", 8), ("given", 8), ("given", 1)])
+def test_toro_triangular_sweep_is_the_run_after_run_visits(rng, monkeypatch, initial, passes):
+    # isotropic weights (fixed preconditioner): the iterations are triangular solves, which
+    # must give what the visits give run after run; headings 2.5 rad off make residuals
+    # wrap (from the given poses, some iterations need a second solve for the wraps; with
+    # one solve allowed they go back to the runs); one constraint without heading weight
+    g = seeded_graph(rng)
+    info = np.array(spherical_information(g.pp_info))
+    info[7, 2, 2] = 0.0
+    start = np.asarray(g.poses) + rng.normal(0, 1, g.poses.shape) * [0.5, 0.5, 2.5]
+    g = PoseGraph(start, np.empty((0, 2)), g.pp_i, g.pp_j, g.pp_z, info)
+    steps: list[bool] = []
+    solves: list[int] = []
+    real_step = toro_optimiser._TriangularSweep.step
+    real_solve = toro_optimiser._TriangularSweep._solve
+
+    def step(self, x, p, t):
+        solves.append(0)
+        steps.append(real_step(self, x, p, t))
+        return steps[-1]
+
+    def solve(self, d, fs, rhs):
+        solves[-1] += d == 1  # the heading solves of this iteration
+        return real_solve(self, d, fs, rhs)
+
+    monkeypatch.setattr(toro_optimiser._TriangularSweep, "step", step)
+    monkeypatch.setattr(toro_optimiser._TriangularSweep, "_solve", solve)
+    monkeypatch.setattr(toro_optimiser, "_WRAP_PASSES", passes)
+    swept = toro_optimize(g, iterations=40, initial=initial)
+    assert len(steps) == 40 and any(steps)
+    assert all(steps) == (passes > 1)
+    assert (max(solves) > 1) == (initial == "given" and passes > 1)
+    monkeypatch.setattr(toro_optimiser, "_TRIANGULAR_BUDGET", -1)  # no sweep: the runs
+    runs = toro_optimize(g, iterations=40, initial=initial)
+    assert len(steps) == 40
+    assert swept.cost[-1] < 0.5 * swept.cost[0]
+    np.testing.assert_allclose(swept.cost, runs.cost, rtol=1e-10)
+    np.testing.assert_allclose(swept.poses, runs.poses, rtol=0, atol=1e-10)
+    monkeypatch.setattr(toro_optimiser, "_COMPILED_TRIANGULAR", False)  # SciPy < 1.14
+    older = toro_optimize(g, iterations=40, initial=initial)  # the runs, poses level by level
+    assert len(steps) == 40
+    np.testing.assert_allclose(older.cost, runs.cost, rtol=1e-12)
 
 
 def test_toro_options_are_checked(rng):
