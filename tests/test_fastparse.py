@@ -8,6 +8,7 @@ exact reader (``read_numeric_table(..., source=read_source(path))`` skips every 
 from __future__ import annotations
 
 import math
+import os
 import re
 import warnings
 from decimal import ROUND_DOWN, ROUND_UP, Decimal, localcontext
@@ -233,6 +234,27 @@ def test_blocks_in_threads_equal_one_by_one(monkeypatch, rng, workers):
     values = parse_decimal_table(text.encode(), 2)
     assert values is not None
     assert same_bits(values, python_table(text))
+
+
+def _parse_many_blocks(text: str) -> np.ndarray | None:
+    fastparse._BLOCK = 64
+    fastparse._workers = lambda: 2  # type: ignore[assignment]
+    return parse_decimal_table(text.encode(), 2)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork")
+def test_a_forked_child_parses_with_its_own_threads(monkeypatch):
+    """A process forked after the parent started its parsing threads (as Dask's and
+    multiprocessing's workers are) has no copy of them: it must start its own, not wait."""
+    import multiprocessing
+
+    text = "".join(f"{k}.5 {k}.25\n" for k in range(400))
+    monkeypatch.setattr(fastparse, "_BLOCK", 64)
+    monkeypatch.setattr(fastparse, "_workers", lambda: 2)
+    assert parse_decimal_table(text.encode(), 2) is not None  # the parent's pool exists
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        child = pool.apply_async(_parse_many_blocks, (text,)).get(timeout=60)
+    assert child is not None and same_bits(child, python_table(text))
 
 
 @pytest.mark.parametrize("name", ["aces", "fr079", "intel", "mit-csail"])

@@ -261,21 +261,20 @@ def _parse_padded(
         cut = buf.find(b"\n", cuts[-1] + _BLOCK) + 1
         cuts.append(b.size if cut == 0 else cut)
     # At most one row per line: blocks write their rows straight into ``values``.
-    values = np.empty((ncols, buf.count(b"\n")), dtype=np.float64).T  # contiguous columns
     spans = list(zip(cuts[:-1], cuts[1:]))
     # Each block writes from the first row its lines could start at; blank and comment
     # lines leave gaps, closed afterwards.
-    firsts = np.cumsum([0] + [buf.count(b"\n", lo, hi) for lo, hi in spans[:-1]]).tolist()
+    lines = [buf.count(b"\n", lo, hi) for lo, hi in spans]
+    firsts = np.cumsum([0] + lines[:-1]).tolist()
+    values = np.empty((ncols, sum(lines)), dtype=np.float64).T  # contiguous columns
 
     def block(k: int) -> int | None:
         lo, hi = spans[k]
         marked = has_comment and buf.find(cbyte, lo, hi) >= 0
         return _parse_block(b, words, lo, hi, cbyte[0] if marked else None, values[firsts[k] :])
 
-    workers = min(len(spans), _workers())
-    if workers > 1:  # numpy releases the GIL inside its loops: blocks overlap on cores
-        with ThreadPoolExecutor(workers) as pool:
-            counts = list(pool.map(block, range(len(spans))))
+    if len(spans) > 1 and _workers() > 1:  # numpy releases the GIL inside its loops
+        counts = list(_pool().map(block, range(len(spans))))
     else:
         counts = [block(k) for k in range(len(spans))]
     nrows = 0
@@ -286,6 +285,18 @@ def _parse_padded(
             values[nrows : nrows + rows] = values[first : first + rows]
         nrows += rows
     return values[:nrows] if nrows else None
+
+
+_POOL: tuple[int, ThreadPoolExecutor] | None = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    """The threads that parse blocks, started once per process (a forked child, whose
+    copy of the pool has no threads, starts its own)."""
+    global _POOL
+    if _POOL is None or _POOL[0] != os.getpid():
+        _POOL = (os.getpid(), ThreadPoolExecutor(_workers(), thread_name_prefix="fastparse"))
+    return _POOL[1]
 
 
 def _workers() -> int:
