@@ -243,7 +243,7 @@ def run_slamrel(path: Path, out: Path, extra: list[str], core: bool = False) -> 
     argv = [*python, "solve", str(path), "-o", str(out), "--force"]
     r, wall, cpu = timed([*argv, *extra])
     r.check_returncode()
-    m = re.search(r"after (\d+) iterations: cost \S+ -> (\S+);", r.stdout)
+    m = re.search(r"after (\d+) iterations: cost \S+ -> ([^\s;]+)", r.stdout)
     assert m, r.stdout
     poses = np.loadtxt(out / "trajectory.txt")[:, 1:4]
     return {"wall_s": wall, "cpu_s": cpu, "iterations": int(m.group(1)), "poses": poses}

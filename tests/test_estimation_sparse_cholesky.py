@@ -303,3 +303,25 @@ def test_least_squares_on_a_manhattan_graph_same_on_every_backend(monkeypatch):
         assert got.iterations == reference.iterations
         np.testing.assert_allclose(got.poses, reference.poses, rtol=0, atol=1e-9)
         np.testing.assert_allclose(got.cost, reference.cost, rtol=1e-9)
+
+
+@pytest.mark.parametrize("width", [1, 5])
+def test_supernodal_with_given_blocks_solves_the_same(rng, width):
+    """Groups given instead of found: single columns, or groups of 5 that cut across the
+    matrix's 2 × 2 and 3 × 3 blocks (each group then stands for the union of its columns'
+    patterns: more fill, the same solution)."""
+    from slamrel.backends.supernodal import SupernodalCholesky
+
+    a = random_spd_blocks(rng, n_blocks=60, n_edges=120)
+    m = pattern_of(a)
+    n = a.shape[0]
+    blocks = np.full(n // width, width)
+    blocks[-1] += n - blocks.sum()
+    found = SupernodalCholesky(m.indptr, m.indices, n)
+    given = SupernodalCholesky(m.indptr, m.indices, n, blocks=blocks)
+    b = rng.normal(size=n)
+    for chol in (found, given):
+        chol.factor(m.data)
+        np.testing.assert_allclose(chol.solve(b), np.linalg.solve(a, b), rtol=1e-9, atol=1e-12)
+    with pytest.raises(ValueError, match="summing to"):
+        SupernodalCholesky(m.indptr, m.indices, n, blocks=blocks[:-1])

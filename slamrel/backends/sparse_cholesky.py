@@ -54,7 +54,7 @@ from numpy.typing import NDArray
 
 from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError
-from slamrel.backends.supernodal import SupernodalCholesky
+from slamrel.backends.supernodal import SupernodalCholesky, symbolic_factor
 
 __all__ = [
     "SparseCholesky",
@@ -76,9 +76,13 @@ __all__ = [
 CHOLMOD_MIN_FLOPS = 1e7
 
 #: Expected flops (as for :data:`CHOLMOD_MIN_FLOPS`) above which the core ``"supernodal"``
-#: back-end beats QDLDL, when CHOLMOD is not installed. Measured per factorisation + solve
-#: (``benchmarks/bench_sparse_cholesky.py``, benchmarks/README.md): see there.
-SUPERNODAL_MIN_FLOPS = 1e7
+#: back-end beats QDLDL, when CHOLMOD is not installed: for its analysis (once per pattern)
+#: and about seven factorisations + solves, as one LM solve does. Measured
+#: (``benchmarks/bench_sparse_cholesky.py``, CPU ms, analysis + first / each later, supernodal
+#: vs QDLDL, 2026-12-02): Manhattan 3.5·10³ (2.7·10⁷ flops) 69 / 11.6 vs 32 / 9.2 — QDLDL
+#: ahead; 5·10³ (10⁸) 118 / 21 vs 68 / 29 — even over seven; 7·10³ (2.8·10⁸) 115 / 36 vs
+#: 106 / 78; 10⁴ (1.36·10⁹) 83 per factorisation vs 480. Victoria Park (3.4·10⁶): 18.5 vs 3.6.
+SUPERNODAL_MIN_FLOPS = 1e8
 
 _SINGULAR = "the normal equations are singular (unobserved states?)"
 
@@ -143,15 +147,13 @@ def factor_flops(pattern: sp.spmatrix) -> float:
         order: QDLDL's AMD when installed (no pivot test needed: the values used are
         diagonally dominant), else SuperLU's symmetric minimum degree.
     """
-    a = sp.csc_matrix(pattern, dtype=np.float64, copy=True)
-    a.data[:] = 1.0
-    a = (a + sp.diags(np.asarray(abs(a).sum(axis=0)).ravel() + 1.0)).tocsc()
-    if "qdldl" in BACKENDS:
-        import qdldl
-
-        lower = qdldl.Solver(sp.triu(a, format="csc"), upper=True).factors()[0].tocsc()
+    if "qdldl" in BACKENDS:  # kept: the supernodal analysis of the same graph reuses it
+        lower = symbolic_factor(pattern)[0]
         counts = np.diff(lower.indptr) + 1.0  # QDLDL's L is unit lower: diagonal not stored
     else:
+        a = sp.csc_matrix(pattern, dtype=np.float64, copy=True)
+        a.data[:] = 1.0
+        a = (a + sp.diags(np.asarray(abs(a).sum(axis=0)).ravel() + 1.0)).tocsc()
         lu = spla.splu(
             a, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
         )
@@ -174,6 +176,9 @@ class SparseCholesky:
         Default: :func:`choose_backend` of ``flops``.
     flops : float, optional
         Expected factorisation work, for the default back-end.
+    blocks : array_like of int, optional
+        Widths of consecutive groups of variables (3 per pose, 2 per landmark), for the
+        supernodal back-end's ordering (:class:`~slamrel.backends.supernodal.SupernodalCholesky`).
 
     Notes
     -----
@@ -195,8 +200,10 @@ class SparseCholesky:
         *,
         backend: str | None = None,
         flops: float | None = None,
+        blocks: NDArray[np.integer] | None = None,
     ) -> None:
         self.size = int(size)
+        self._blocks = blocks
         self.indptr = np.asarray(indptr, dtype=np.int32)
         indices = np.asarray(indices, dtype=np.int32)
         self.backend = choose_backend(flops) if backend is None else backend
@@ -241,7 +248,9 @@ class SparseCholesky:
             self._full.data[:] = data  # for the residual check in solve
         elif self.backend == "supernodal":
             if self._factor is None:  # ordering + analysis, once per pattern
-                self._factor = SupernodalCholesky(self.indptr, self.indices, self.size)
+                self._factor = SupernodalCholesky(
+                    self.indptr, self.indices, self.size, blocks=self._blocks
+                )
             self._factor.factor(data)
         elif self.backend == "cholmod":
             import cvxopt

@@ -42,6 +42,7 @@ from __future__ import annotations
 import ctypes
 import glob
 import os
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -55,7 +56,7 @@ from scipy.sparse import csgraph
 from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError
 
-__all__ = ["RELAX", "SupernodalCholesky"]
+__all__ = ["RELAX", "SupernodalCholesky", "symbolic_factor"]
 
 #: Relaxed amalgamation (Ashcraft & Grimes' rule, scalar columns): a child joins its parent
 #: when the merged supernode has at most ``RELAX[0]`` columns and a fraction of explicit
@@ -101,6 +102,20 @@ def _one_blas_thread() -> Iterator[None]:
         _SET_LOCAL_THREADS(before)
 
 
+_SCRATCH = threading.local()
+
+
+def _scratch(name: str, size: int, dtype: type) -> NDArray[Any]:
+    """A work array of at least ``size`` elements, kept for the thread's later calls (and
+    later patterns: LM's growing graphs), first touched in order when (re)allocated."""
+    have: NDArray[Any] | None = getattr(_SCRATCH, name, None)
+    if have is None or have.size < size:
+        have = np.zeros(max(size, 1), dtype=dtype)
+        have.fill(0)
+        setattr(_SCRATCH, name, have)
+    return have
+
+
 def _ranges(starts: NDArray[np.int64], widths: NDArray[np.int64]) -> NDArray[np.int64]:
     """``starts[i], …, starts[i] + widths[i] − 1`` for every ``i``, concatenated."""
     offsets = np.cumsum(widths) - widths
@@ -126,26 +141,73 @@ def _supervariables(
 
 
 def _block_factor(
-    indptr: NDArray[np.int64], indices: NDArray[np.int64], n: int
+    indptr: NDArray[np.int64],
+    indices: NDArray[np.int64],
+    n: int,
+    blocks: NDArray[np.int64] | None,
 ) -> tuple[sp.csc_matrix, NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
     """The compressed graph's factor pattern (AMD order), that order (compressed node at each
-    position), each node's first column and width."""
+    position), each node's first column and width. Nodes: the given ``blocks`` (widths of
+    consecutive columns; a node's pattern is the union of its columns'), else runs of
+    identical columns."""
+    col = np.repeat(np.arange(n), np.diff(indptr))
+    if blocks is None:
+        group, gstart = _supervariables(indptr, indices, n)
+        keep = np.isin(col, gstart)  # the first column of each group stands for the group
+    else:
+        gstart = np.cumsum(blocks) - blocks
+        group = np.repeat(np.arange(gstart.size), blocks)
+        keep = np.ones(col.size, dtype=bool)
+    ng = gstart.size
+    b = sp.csc_matrix(
+        (np.ones(int(keep.sum())), (group[indices[keep]], group[col[keep]])), shape=(ng, ng)
+    )
+    lower, order = symbolic_factor(b)
+    width = np.diff(np.append(gstart, n))
+    return lower, order, gstart, width
+
+
+#: the last :func:`symbolic_factor`: its pattern's key and result
+_LAST_SYMBOLIC: list[Any] = [None, None]
+
+
+def symbolic_factor(pattern: sp.spmatrix) -> tuple[sp.csc_matrix, NDArray[np.int64]]:
+    """QDLDL's AMD order of a symmetric pattern and the pattern of its factor ``L`` there.
+
+    Parameters
+    ----------
+    pattern : sparse matrix, shape (n, n)
+        Symmetric pattern (values ignored; the diagonal need not be stored).
+
+    Returns
+    -------
+    lower : csc_matrix
+        Strictly lower triangle of ``L`` in the new order (sorted rows).
+    order : ndarray of int
+        The original index at each new position.
+
+    Notes
+    -----
+    QDLDL factorises a diagonally dominant matrix with the pattern (no pivot test needed).
+    The last result is kept: :func:`~slamrel.backends.sparse_cholesky.factor_flops` on a
+    block graph and the supernodal analysis of the same graph's scalar matrix ask for the
+    same one (one LM problem: 40–50 ms saved on Manhattan 10⁴).
+    """
     import qdldl
 
-    col = np.repeat(np.arange(n), np.diff(indptr))
-    group, gstart = _supervariables(indptr, indices, n)
-    ng = gstart.size
-    first = np.isin(col, gstart)  # the first column of each group stands for the group
-    b = sp.csc_matrix(
-        (np.ones(int(first.sum())), (group[indices[first]], group[col[first]])), shape=(ng, ng)
-    )
-    b.data[:] = 1.0
-    b = (b + sp.diags(np.asarray(b.sum(axis=0)).ravel() + 1.0)).tocsc()  # SPD, same pattern
-    lower, _, order = qdldl.Solver(sp.triu(b, format="csc"), upper=True).factors()
-    lower = sp.csc_matrix(lower)
-    lower.sort_indices()
-    width = np.diff(np.append(gstart, n))
-    return lower, np.asarray(order, dtype=np.int64), gstart, width
+    a = sp.csc_matrix(pattern, dtype=np.float64, copy=True)
+    a.data[:] = 1.0
+    a = (a + sp.diags(np.asarray(abs(a).sum(axis=0)).ravel() + 1.0)).tocsc()
+    upper = sp.triu(a, format="csc")
+    upper.sort_indices()
+    key = (upper.shape, upper.indptr.tobytes(), upper.indices.tobytes())
+    if _LAST_SYMBOLIC[0] != key:
+        lower, _, order = qdldl.Solver(upper, upper=True).factors()
+        lower = sp.csc_matrix(lower)
+        lower.sort_indices()
+        _LAST_SYMBOLIC[:] = [key, (lower, np.asarray(order, dtype=np.int64))]
+    result: tuple[sp.csc_matrix, NDArray[np.int64]] = _LAST_SYMBOLIC[1]
+    return result
 
 
 class SupernodalCholesky:
@@ -160,6 +222,10 @@ class SupernodalCholesky:
         ``n``.
     relax : tuple, optional
         Amalgamation limits (:data:`RELAX`).
+    blocks : array_like of int, optional
+        Widths of consecutive groups of columns that are eliminated together (3 per pose,
+        2 per landmark); default: runs of identical columns, found. Either way the AMD
+        ordering is of the graph of the groups.
     """
 
     def __init__(
@@ -169,12 +235,16 @@ class SupernodalCholesky:
         size: int,
         *,
         relax: tuple[float, ...] = RELAX,
+        blocks: NDArray[np.integer] | None = None,
     ) -> None:
         n = int(size)
         ip = np.asarray(indptr, dtype=np.int64)
         ix = np.asarray(indices, dtype=np.int64)
         self.size = n
-        lb, p, gstart, width = _block_factor(ip, ix, n)
+        widths = None if blocks is None else np.asarray(blocks, dtype=np.int64)
+        if widths is not None and (widths.sum() != n or (widths < 1).any()):
+            raise ValueError(f"blocks of widths summing to {widths.sum()} for {n} columns")
+        lb, p, gstart, width = _block_factor(ip, ix, n, widths)
         ng = gstart.size
         # --- elimination tree, postordered -----------------------------------------------
         cnt = np.diff(lb.indptr)
@@ -249,13 +319,13 @@ class SupernodalCholesky:
         self.below = [below[boff[s] : boff[s + 1]] for s in range(ns)]
         rows = [np.concatenate((np.arange(c0[s], c1[s]), self.below[s])) for s in range(ns)]
         # --- extend-add maps: flat (column-major) positions of a child's update in its parent
-        self.emap: list[NDArray[np.int64] | None] = [None] * ns
+        # (kept as row positions; factor() expands them to flat positions in one reused
+        # array: maps for every child, 14·10⁶ integers on Manhattan 10⁴, cost more in page
+        # faults when first written than their expansion at every factorisation)
+        self.rel: list[NDArray[np.int64] | None] = [None] * ns
         for s in range(ns):
-            q = spar[s]
-            if q >= 0 and bsz[s]:
-                rel = np.searchsorted(rows[q], self.below[s])
-                # row-major (j, i) is column-major (i, j): no transposed copy
-                self.emap[s] = (m[q] * rel[:, None] + rel[None, :]).ravel()
+            if spar[s] >= 0 and bsz[s]:
+                self.rel[s] = np.searchsorted(rows[spar[s]], self.below[s])
         self.children: list[list[int]] = [[] for _ in range(ns)]
         for s, q in enumerate(spar.tolist()):
             if q >= 0:
@@ -291,21 +361,22 @@ class SupernodalCholesky:
             depth = max(depth, top)
         self._stack_size = depth
         self._front_size = int((m**2).max()) if ns else 0
+        self._map_size = int((bsz**2).max()) if ns else 0
         self._l: Array | None = None  # L panels (column-major, m × k each), after factor()
-        self._work: tuple[Array, Array] | None = None
         self._views: tuple[list[Array], list[Array | None]] | None = None
         self._factored = False
 
     def factor(self, data: Array) -> None:
         """Numeric factorisation with values ``data`` (in the constructor's pattern order)."""
         vals = np.asarray(data, dtype=np.float64)[self._src]
-        fpos, aoff, emap, children = self._fpos, self._aoff, self.emap, self.children
-        if self._work is None:  # fronts and updates reuse two arrays (no page faults per call)
-            self._work = (np.empty(self._front_size), np.empty(self._stack_size))
-            self._l = np.empty(self._l_off[-1])
-        frontbuf, stack = self._work
+        fpos, aoff, rel, children = self._fpos, self._aoff, self.rel, self.children
+        if self._l is None:  # touched in order once (scattered first touches: page faults)
+            self._l = np.zeros(self._l_off[-1])
+            self._l.fill(0.0)
+        frontbuf = _scratch("front", self._front_size, np.float64)
+        stack = _scratch("stack", self._stack_size, np.float64)
+        mapbuf = _scratch("map", self._map_size, np.int64)
         lbuf = self._l
-        assert lbuf is not None
         l_off, u_off = self._l_off, self._u_off
         self._factored = False
         with _one_blas_thread():
@@ -317,10 +388,14 @@ class SupernodalCholesky:
                 front = flat.reshape((m, m), order="F")
                 flat[fpos[aoff[s] : aoff[s + 1]]] = vals[aoff[s] : aoff[s + 1]]
                 for c in children[s]:
-                    e = emap[c]
-                    if e is not None:
+                    r = rel[c]
+                    if r is not None:  # extend-add: U_c[i, j] into F[r_i, r_j]
+                        size = r.size * r.size
+                        e = mapbuf[:size]
+                        # row-major (j, i) is column-major (i, j)
+                        np.add(m * r[:, None], r[None, :], out=e.reshape((r.size, r.size)))
                         o = u_off[c]
-                        np.add.at(flat, e, stack[o : o + e.size])
+                        np.add.at(flat, e, stack[o : o + size])
                 l11 = lbuf[l_off[s] : l_off[s] + k * k].reshape((k, k), order="F")
                 l11[:] = front[:k, :k]
                 if lapack.dpotrf(l11, lower=1, clean=0, overwrite_a=1)[1] != 0:
