@@ -172,12 +172,8 @@ _LAST_SYMBOLIC: list[Any] = [None, None]
 
 
 def symbolic_factor(pattern: sp.spmatrix) -> tuple[sp.csc_matrix, NDArray[np.int64]]:
-    """QDLDL's AMD order of a symmetric pattern and the pattern of its factor ``L`` there.
-
-    Parameters
-    ----------
-    pattern : sparse matrix, shape (n, n)
-        Symmetric pattern (values ignored; the diagonal need not be stored).
+    """QDLDL's AMD order of a symmetric ``pattern`` (shape ``(n, n)``; values ignored, the
+    diagonal optional) and the pattern of its factor ``L`` in that order.
 
     Returns
     -------
