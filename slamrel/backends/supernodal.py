@@ -61,11 +61,13 @@ __all__ = ["RELAX", "SupernodalCholesky", "symbolic_factor"]
 #: Relaxed amalgamation (Ashcraft & Grimes' rule, scalar columns): a child joins its parent
 #: when the merged supernode has at most ``RELAX[0]`` columns and a fraction of explicit
 #: zeros below ``RELAX[1]``, or at most ``RELAX[2]`` and ``RELAX[3]``, or at most
-#: ``RELAX[4]`` and ``RELAX[5]``. Chosen on Manhattan 10⁴ (``bench_sparse_cholesky.py``):
-#: from CHOLMOD-like limits (8, 0.8, 32, 0.1, 96, 0.05) to these, 4,783 → 1,275 supernodes,
-#: 1.36 → 1.51·10⁹ flops, factorisation 143 → 83 ms and solve 31 → 14 ms (Python's cost per
-#: supernode outweighs the added flops).
-RELAX = (24, 0.9, 64, 0.4, 160, 0.15)
+#: ``RELAX[4]`` and ``RELAX[5]``. Chosen on Manhattan 10⁴ (CPU ms per factorisation / solve,
+#: 2026-12-02, ``bench_sparse_cholesky.py``'s matrix): CHOLMOD-like limits (8, 0.8, 32, 0.1,
+#: 96, 0.05) gave 4,783 supernodes, 1.36·10⁹ flops, 143 / 31 ms (an earlier version of the
+#: numeric phase); (24, 0.9, 64, 0.4, 160, 0.15) 1,275 supernodes, 1.51·10⁹ flops, 84 / 13.9;
+#: these 642, 1.92·10⁹, 83 / 10.6 (less extend-add and fewer Python steps for the added
+#: flops); (64, 0.95, 160, 0.6, 400, 0.3) 489, 2.18·10⁹, 99 / 10.0.
+RELAX = (48, 0.9, 128, 0.5, 320, 0.25)
 
 _NOT_PD = "the normal equations are singular or not positive definite (unobserved states?)"
 
@@ -369,16 +371,16 @@ class SupernodalCholesky:
         if self._l is None:  # touched in order once (scattered first touches: page faults)
             self._l = np.zeros(self._l_off[-1])
             self._l.fill(0.0)
+            self._views = None
         frontbuf = _scratch("front", self._front_size, np.float64)
         stack = _scratch("stack", self._stack_size, np.float64)
         mapbuf = _scratch("map", self._map_size, np.int64)
-        lbuf = self._l
-        l_off, u_off = self._l_off, self._u_off
+        l11s, l21s = self._panels()
+        u_off = self._u_off
+        add, add_at, potrf, trsm, syrk = np.add, np.add.at, lapack.dpotrf, blas.dtrsm, blas.dsyrk
         self._factored = False
         with _one_blas_thread():
-            for s in range(self.n_supernodes):
-                m, k = self.m[s], self.k[s]
-                b = m - k
+            for s, (m, k, l11, l21) in enumerate(zip(self.m, self.k, l11s, l21s, strict=True)):
                 flat = frontbuf[: m * m]
                 flat.fill(0.0)
                 front = flat.reshape((m, m), order="F")
@@ -386,24 +388,21 @@ class SupernodalCholesky:
                 for c in children[s]:
                     r = rel[c]
                     if r is not None:  # extend-add: U_c[i, j] into F[r_i, r_j]
-                        size = r.size * r.size
-                        e = mapbuf[:size]
+                        b = r.size
+                        e = mapbuf[: b * b]
                         # row-major (j, i) is column-major (i, j)
-                        np.add(m * r[:, None], r[None, :], out=e.reshape((r.size, r.size)))
-                        o = u_off[c]
-                        np.add.at(flat, e, stack[o : o + size])
-                l11 = lbuf[l_off[s] : l_off[s] + k * k].reshape((k, k), order="F")
+                        add(m * r[:, None], r[None, :], out=e.reshape((b, b)))
+                        add_at(flat, e, stack[u_off[c] : u_off[c] + b * b])
                 l11[:] = front[:k, :k]
-                if lapack.dpotrf(l11, lower=1, clean=0, overwrite_a=1)[1] != 0:
+                if potrf(l11, lower=1, clean=0, overwrite_a=1)[1] != 0:
                     raise DivergenceError(_NOT_PD)
-                if b:
-                    l21 = lbuf[l_off[s] + k * k : l_off[s + 1]].reshape((b, k), order="F")
+                if l21 is not None:
+                    b = m - k
                     l21[:] = front[k:, :k]
-                    blas.dtrsm(1.0, l11, l21, side=1, lower=1, trans_a=1, overwrite_b=1)
-                    o = u_off[s]
-                    u = stack[o : o + b * b].reshape((b, b), order="F")
+                    trsm(1.0, l11, l21, side=1, lower=1, trans_a=1, overwrite_b=1)
+                    u = stack[u_off[s] : u_off[s] + b * b].reshape((b, b), order="F")
                     u[:] = front[k:, k:]
-                    blas.dsyrk(-1.0, l21, beta=1.0, c=u, lower=1, overwrite_c=1)
+                    syrk(-1.0, l21, beta=1.0, c=u, lower=1, overwrite_c=1)
         self._factored = True
 
     def _panels(self) -> tuple[list[Array], list[Array | None]]:
