@@ -289,19 +289,19 @@ class SupernodalCholesky:
                 spar[sid[kids[f]]] = sid[f]
         mem = np.array([m for f in tops for m in merged[f]], dtype=np.int64)
         nmem = np.array([len(merged[f]) for f in tops])
-        blocks = _ranges(fstart[mem], fend[mem] - fstart[mem] + 1)
+        block_order = _ranges(fstart[mem], fend[mem] - fstart[mem] + 1)
         relabel = np.empty(ng, dtype=np.int64)
-        relabel[blocks] = np.arange(ng)
+        relabel[block_order] = np.arange(ng)
         nblk = np.bincount(
             np.repeat(np.arange(ns), nmem), weights=fend[mem] - fstart[mem] + 1, minlength=ns
         ).astype(np.int64)
-        w = w[blocks]
+        w = w[block_order]
         cw = np.concatenate(([0], np.cumsum(w)))
         bend = np.cumsum(nblk)
         c0, c1 = cw[bend - nblk], cw[bend]
         k = c1 - c0
         # --- scalar numbering and rows of every supernode -----------------------------------
-        self.perm = _ranges(gstart[order[blocks]], w)  # original column at each new position
+        self.perm = _ranges(gstart[order[block_order]], w)  # original column at each new position
         self.iperm = np.empty(n, dtype=np.int64)
         self.iperm[self.perm] = np.arange(n)
         last = fend[np.array(tops)]  # the top member's last block: its rows below are the front's
