@@ -4,8 +4,9 @@ The matrices: ``H + 1e-4 diag(H)`` at the initial guess (Levenberg–Marquardt's
 step) of Victoria Park (``/work/shared/data/victoria_park``, 2.1·10⁴ unknowns) and of the
 generated Manhattan pose graphs of ``bench_least_squares.py`` (10³, 3.5·10³, 10⁴ poses).
 For each back-end of :mod:`slamrel.backends.sparse_cholesky` that is installed: the first
-factorisation (QDLDL: ordering + symbolic + numeric) and the best of three later ones
-(QDLDL: numeric only, the symbolic factorisation reused), each with one solve, and the
+factorisation (QDLDL, supernodal, CHOLMOD: ordering + analysis + numeric) and the best of
+``--repeat`` later ones (numeric only, the analysis reused), each with one solve, in wall
+and CPU milliseconds, and the
 relative difference of the solution to SuperLU's (SuperLU as the fallback runs it: on the
 block minimum-degree pre-permutation). Also the expected work ``27 Σ c²`` from
 the block graph, which :func:`~slamrel.backends.sparse_cholesky.choose_backend` uses.
@@ -50,7 +51,7 @@ def first_trial_matrix(g: PoseGraph) -> tuple[_NormalEquations, np.ndarray, np.n
     return normal, h, -grad
 
 
-def measure(name: str, g: PoseGraph) -> None:
+def measure(name: str, g: PoseGraph, args: argparse.Namespace) -> None:
     normal, data, rhs = first_trial_matrix(g)
     rows = np.repeat(np.arange(normal.size), np.diff(normal.indptr))
     pattern = sp.csc_matrix((np.ones(data.size), (normal.indices, rows)))
@@ -66,22 +67,24 @@ def measure(name: str, g: PoseGraph) -> None:
     finally:
         sparse_cholesky.BACKENDS = installed
     reference = None
-    for backend in ("superlu", "qdldl", "cholmod"):
+    for backend in ("superlu", "qdldl", "supernodal", "cholmod"):
         if backend not in installed:
             print(f"  {backend:8s} not installed")
             continue
         ne, values, b = fallback if backend == "superlu" else (normal, data, rhs)
         chol = sparse_cholesky.SparseCholesky(ne.indptr, ne.indices, ne.size, backend=backend)
-        times = []
-        for _ in range(4):
-            start = time.perf_counter()
+        times, cpus = [], []
+        for _ in range(args.repeat + 1):
+            start, cpu = time.perf_counter(), time.process_time()
             chol.factor(values)
             x = chol.solve(b)[ne.perm]  # in the natural order
             times.append(time.perf_counter() - start)
+            cpus.append(time.process_time() - cpu)
         reference = x if reference is None else reference
         rel = float(np.linalg.norm(x - reference) / np.linalg.norm(reference))
         print(
-            f"  {backend:8s} first {times[0] * 1e3:8.1f} ms  then {min(times[1:]) * 1e3:8.1f} ms"
+            f"  {backend:10s} first {times[0] * 1e3:7.1f} ms ({cpus[0] * 1e3:7.1f} CPU)  then "
+            f"{min(times[1:]) * 1e3:7.1f} ms ({min(cpus[1:]) * 1e3:7.1f} CPU)"
             f"  relative difference to SuperLU {rel:.1e}"
         )
 
@@ -89,11 +92,14 @@ def measure(name: str, g: PoseGraph) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="*", default=[1000, 3500, 10_000])
+    parser.add_argument(
+        "--repeat", type=int, default=3, help="later factorisations (analysis reused), best kept"
+    )
     args = parser.parse_args()
     if VP.is_file():
-        measure("Victoria Park", read_isam(VP).graph)
+        measure("Victoria Park", read_isam(VP).graph, args)
     for n in args.sizes:
-        measure(f"Manhattan {n}", manhattan(n))
+        measure(f"Manhattan {n}", manhattan(n), args)
 
 
 if __name__ == "__main__":

@@ -396,7 +396,10 @@ def test_cli_solve_tolerance_option(tmp_path, capsys, rng):
     assert loose.cost[-1] <= best.cost[-1] * (1 + 1e-3)
 
 
-@pytest.mark.parametrize("installed", [("qdldl", "superlu"), ("cholmod", "qdldl", "superlu")])
+@pytest.mark.parametrize(
+    "installed",
+    [("qdldl", "superlu"), ("supernodal", "qdldl", "superlu"), ("cholmod", "qdldl", "superlu")],
+)
 def test_cli_solve_names_its_sparse_cholesky_and_the_missing_faster_one(
     tmp_path, capsys, rng, monkeypatch, installed
 ):
@@ -409,6 +412,7 @@ def test_cli_solve_names_its_sparse_cholesky_and_the_missing_faster_one(
         pytest.skip("cvxopt (the `fast` extra) is not installed")
     monkeypatch.setattr(sparse_cholesky, "BACKENDS", installed)
     monkeypatch.setattr(sparse_cholesky, "CHOLMOD_MIN_FLOPS", 0.0)  # any graph "has much fill"
+    monkeypatch.setattr(sparse_cholesky, "SUPERNODAL_MIN_FLOPS", 0.0)
     g, _, _ = small_world(rng, n=30, m=8)
     path = tmp_path / "g.g2o"
     write_g2o_graph(path, g)
@@ -422,4 +426,5 @@ def test_cli_solve_names_its_sparse_cholesky_and_the_missing_faster_one(
     assert printed.count("optional `fast` extra") == (0 if "cholmod" in installed else 1)
     np.testing.assert_allclose(np.loadtxt(out / "trajectory.txt")[:, 1:4], sol.poses, atol=1e-9)
     monkeypatch.setattr(sparse_cholesky, "CHOLMOD_MIN_FLOPS", np.inf)  # a graph with little fill
+    monkeypatch.setattr(sparse_cholesky, "SUPERNODAL_MIN_FLOPS", np.inf)
     assert solve_graph(g).faster_solver is None

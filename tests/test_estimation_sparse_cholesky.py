@@ -13,7 +13,9 @@ from slamrel.backends import sparse_cholesky
 from slamrel.backends.least_squares import _NormalEquations, solve_graph
 from slamrel.backends.sparse_cholesky import SparseCholesky, choose_backend, factor_flops
 
-BACKENDS = [b for b in ("qdldl", "cholmod", "superlu") if b in sparse_cholesky.BACKENDS]
+BACKENDS = [
+    b for b in ("qdldl", "supernodal", "cholmod", "superlu") if b in sparse_cholesky.BACKENDS
+]
 
 
 def random_spd_blocks(rng, n_blocks=40, n_edges=80):
@@ -121,9 +123,23 @@ def test_factor_flops_match_hand_counts(monkeypatch, have):
 
 
 def test_choose_backend(monkeypatch):
-    big, small = 10 * sparse_cholesky.CHOLMOD_MIN_FLOPS, 0.1 * sparse_cholesky.CHOLMOD_MIN_FLOPS
-    monkeypatch.setattr(sparse_cholesky, "BACKENDS", ("cholmod", "qdldl", "superlu"))
-    assert [choose_backend(f) for f in (big, small, None)] == ["cholmod", "qdldl", "qdldl"]
+    monkeypatch.setattr(sparse_cholesky, "CHOLMOD_MIN_FLOPS", 1e7)
+    monkeypatch.setattr(sparse_cholesky, "SUPERNODAL_MIN_FLOPS", 1e8)
+    big, mid, small = 1e9, 3e7, 1e6
+    monkeypatch.setattr(sparse_cholesky, "BACKENDS", ("cholmod", "supernodal", "qdldl", "superlu"))
+    assert [choose_backend(f) for f in (big, mid, small, None)] == [
+        "cholmod",
+        "cholmod",
+        "qdldl",
+        "qdldl",
+    ]
+    monkeypatch.setattr(sparse_cholesky, "BACKENDS", ("supernodal", "qdldl", "superlu"))
+    assert [choose_backend(f) for f in (big, mid, small, None)] == [
+        "supernodal",
+        "qdldl",
+        "qdldl",
+        "qdldl",
+    ]
     monkeypatch.setattr(sparse_cholesky, "BACKENDS", ("qdldl", "superlu"))
     assert choose_backend(big) == "qdldl"
     monkeypatch.setattr(sparse_cholesky, "BACKENDS", ("superlu",))
@@ -137,6 +153,7 @@ def test_choose_backend(monkeypatch):
         (("superlu",), None, "superlu"),  # neither library installed: the fallback
         (("qdldl", "superlu"), None, "qdldl"),
         (("cholmod", "qdldl", "superlu"), 0.0, "cholmod"),
+        (("supernodal", "qdldl", "superlu"), 0.0, "supernodal"),
     ],
 )
 def test_least_squares_same_minimum_on_every_backend(rng, monkeypatch, have, expected, min_flops):
@@ -149,6 +166,7 @@ def test_least_squares_same_minimum_on_every_backend(rng, monkeypatch, have, exp
     monkeypatch.setattr(sparse_cholesky, "BACKENDS", have)
     if min_flops is not None:
         monkeypatch.setattr(sparse_cholesky, "CHOLMOD_MIN_FLOPS", min_flops)
+        monkeypatch.setattr(sparse_cholesky, "SUPERNODAL_MIN_FLOPS", min_flops)
     normal = _NormalEquations(g, g.n_poses, g.n_landmarks)
     assert normal.cholesky.backend == expected
     perm_is_identity = bool((normal.perm == np.arange(normal.size)).all())
@@ -166,9 +184,9 @@ def test_available_backends_follow_the_installed_libraries(monkeypatch):
 
     for missing, expected in (
         ({"cvxopt", "qdldl"}, ("superlu",)),
-        ({"cvxopt"}, ("qdldl", "superlu")),
-        ({"qdldl"}, ("cholmod", "superlu")),
-        (set(), ("cholmod", "qdldl", "superlu")),
+        ({"cvxopt"}, ("supernodal", "qdldl", "superlu")),
+        ({"qdldl"}, ("cholmod", "superlu")),  # the supernodal back-end orders with QDLDL
+        (set(), ("cholmod", "supernodal", "qdldl", "superlu")),
     ):
         found = object()  # stands for a module spec
         monkeypatch.setattr(
@@ -177,3 +195,133 @@ def test_available_backends_follow_the_installed_libraries(monkeypatch):
             lambda name, *a, m=missing, f=found: None if name in m else f,
         )
         assert sparse_cholesky.available_backends() == expected
+
+
+# --- the supernodal back-end (slamrel.backends.supernodal) ---------------------------------
+
+NO_AMALGAMATION = (0, 0.0, 0, 0.0, 0, 0.0)
+EVERYTHING_MERGED = (10**9, 1.01, 10**9, 1.01, 10**9, 1.01)
+
+
+def structural_entries(a, perm):
+    """Entries of ``L`` (diagonal included) of the pattern of ``a`` eliminated in the order
+    ``perm``: the graph model of Gaussian elimination on a dense boolean matrix (every
+    pair of a pivot's later neighbours becomes adjacent)."""
+    p = (a != 0)[np.ix_(perm, perm)]
+    count = 0
+    for j in range(len(perm)):  # an oracle on small matrices, not a hot path
+        rows = np.flatnonzero(p[j:, j]) + j
+        count += rows.size
+        p[np.ix_(rows[1:], rows[1:])] = True
+    return count
+
+
+@pytest.mark.parametrize("relax", [NO_AMALGAMATION, None, EVERYTHING_MERGED])
+def test_supernodal_equals_dense_cholesky_on_block_patterns(rng, relax):
+    """Random SPD matrices on block graphs with much fill (poses' 3 × 3 and landmarks'
+    2 × 2 blocks): the solution equals scipy's dense Cholesky solve, for new values in the
+    same pattern too; without amalgamation ``L`` stores exactly the structural nonzeros of
+    the elimination in its order, with everything merged one supernode per component."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    from slamrel.backends.supernodal import RELAX, SupernodalCholesky
+
+    a = random_spd_blocks(rng, n_blocks=120, n_edges=260)
+    m = pattern_of(a)
+    n = a.shape[0]
+    chol = SupernodalCholesky(m.indptr, m.indices, n, relax=RELAX if relax is None else relax)
+    components = sp.csgraph.connected_components(m, directed=False)[0]
+    if relax == NO_AMALGAMATION:
+        assert chol.entries == structural_entries(a, chol.perm)
+        assert chol.n_supernodes > components
+    elif relax == EVERYTHING_MERGED:
+        assert chol.n_supernodes == components
+    else:
+        assert components < chol.n_supernodes < n
+    col = np.repeat(np.arange(n), np.diff(m.indptr))
+    for trial in range(3):
+        d = rng.uniform(0.5, 2.0, n)
+        data = m.data * d[m.indices] * d[col] + trial * (m.indices == col)
+        dense = sp.csc_matrix((data, m.indices, m.indptr), shape=a.shape).toarray()
+        chol.factor(data)
+        b = rng.normal(size=(n, 3))
+        expected = cho_solve(cho_factor(dense, lower=True), b)
+        np.testing.assert_allclose(chol.solve(b), expected, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(chol.solve(b[:, 0]), expected[:, 0], rtol=1e-9, atol=1e-12)
+
+
+def test_supernodal_refuses_an_indefinite_matrix(rng):
+    """Nonsingular but indefinite (the lowest eigenvalues shifted below zero, none to zero):
+    DivergenceError, like CHOLMOD (QDLDL would solve it as an LDLᵀ); the next positive
+    definite values factorise again."""
+    a = random_spd_blocks(rng, n_blocks=30, n_edges=60)
+    m = pattern_of(a)
+    n = a.shape[0]
+    eig = np.linalg.eigvalsh(a)
+    above = eig[eig > eig[0] * (1 + 1e-6)][0]
+    shift = 0.5 * (eig[0] + above)  # between two distinct eigenvalues: a nonsingular A − sI
+    assert (eig < shift).any() and np.abs(eig - shift).min() > 1e-6
+    col = np.repeat(np.arange(n), np.diff(m.indptr))
+    chol = SparseCholesky(m.indptr, m.indices, n, backend="supernodal")
+    with pytest.raises(DivergenceError, match="not positive definite"):
+        chol.factor(m.data - shift * (m.indices == col))
+    with pytest.raises(RuntimeError, match="before factor"):
+        chol.solve(np.ones(n))  # no stale factor is used
+    chol.factor(m.data)
+    np.testing.assert_allclose(chol.solve(np.ones(n)), np.linalg.solve(a, np.ones(n)), rtol=1e-9)
+
+
+def _manhattan():  # type: ignore[no-untyped-def]
+    """benchmarks/bench_least_squares.py's Manhattan-world pose graph generator."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_least_squares.py"
+    spec = importlib.util.spec_from_file_location("bench_least_squares_for_tests", path)
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    return module.manhattan
+
+
+def test_least_squares_on_a_manhattan_graph_same_on_every_backend(monkeypatch):
+    """A 600-pose Manhattan graph (loop closures on a grid: much fill) solved with the
+    supernodal back-end and with QDLDL (and CHOLMOD, when installed): the same minimum."""
+    g = _manhattan()(600, size=12)
+    monkeypatch.setattr(sparse_cholesky, "SUPERNODAL_MIN_FLOPS", 0.0)
+    monkeypatch.setattr(sparse_cholesky, "CHOLMOD_MIN_FLOPS", 0.0)
+    results = {}
+    for have in (("supernodal", "qdldl", "superlu"), ("qdldl", "superlu"), ("cholmod", "qdldl")):
+        if have[0] not in sparse_cholesky.available_backends():
+            continue
+        monkeypatch.setattr(sparse_cholesky, "BACKENDS", have)
+        got = solve_graph(g)
+        assert got.linear_solver == have[0] and got.converged
+        results[have[0]] = got
+    assert {"supernodal", "qdldl"} <= results.keys()
+    reference = results.pop("qdldl")
+    for got in results.values():
+        assert got.iterations == reference.iterations
+        np.testing.assert_allclose(got.poses, reference.poses, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(got.cost, reference.cost, rtol=1e-9)
+
+
+@pytest.mark.parametrize("width", [1, 5])
+def test_supernodal_with_given_blocks_solves_the_same(rng, width):
+    """Groups given instead of found: single columns, or groups of 5 that cut across the
+    matrix's 2 × 2 and 3 × 3 blocks (each group then stands for the union of its columns'
+    patterns: more fill, the same solution)."""
+    from slamrel.backends.supernodal import SupernodalCholesky
+
+    a = random_spd_blocks(rng, n_blocks=60, n_edges=120)
+    m = pattern_of(a)
+    n = a.shape[0]
+    blocks = np.full(n // width, width)
+    blocks[-1] += n - blocks.sum()
+    found = SupernodalCholesky(m.indptr, m.indices, n)
+    given = SupernodalCholesky(m.indptr, m.indices, n, blocks=blocks)
+    b = rng.normal(size=n)
+    for chol in (found, given):
+        chol.factor(m.data)
+        np.testing.assert_allclose(chol.solve(b), np.linalg.solve(a, b), rtol=1e-9, atol=1e-12)
+    with pytest.raises(ValueError, match="summing to"):
+        SupernodalCholesky(m.indptr, m.indices, n, blocks=blocks[:-1])

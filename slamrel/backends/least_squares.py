@@ -396,7 +396,12 @@ class _NormalEquations:
         self.nnz = uniq.size
         self.diag = np.flatnonzero(row == col)  # slots of H_vv, v in the new numbering
         self.grad_index = np.concatenate((pi.ravel(), pj.ravel(), pk.ravel(), pl.ravel(), p0))
-        self.cholesky = sparse_cholesky.SparseCholesky(self.indptr, self.indices, size, flops=flops)
+        # the blocks in the natural order: the supernodal analysis orders the block graph
+        # that factor_flops has just ordered (kept, not redone)
+        blocks = None if flops is None else np.concatenate((np.full(n, 3), np.full(m, 2)))
+        self.cholesky = sparse_cholesky.SparseCholesky(
+            self.indptr, self.indices, size, flops=flops, blocks=blocks
+        )
 
     def assemble(self, lin: _Linearised) -> tuple[Array, Array]:
         """``H.data`` (in the stored pattern) and the gradient ``Jᵀr``, both in the new order."""

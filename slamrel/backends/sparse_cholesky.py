@@ -11,6 +11,15 @@ Back-ends, chosen when the object is built:
     (``Solver.update``: numeric factorisation only). No supernodes, so its time grows with
     the flops: the right choice for graphs with little fill (a pose chain with landmarks,
     such as Victoria Park: an order of magnitude faster than SuperLU).
+``"supernodal"`` (core: numpy + scipy, and QDLDL's AMD for the ordering)
+    slamrel's own supernodal multifrontal Cholesky (:mod:`slamrel.backends.supernodal`):
+    supervariables, elimination tree, fundamental and relaxed supernodes and every index
+    map computed once per pattern; per factorisation, dense ``dpotrf``/``dtrsm``/``dsyrk``
+    on each supernode's front (scipy's LAPACK/BLAS) and a vectorised extend-add. For
+    graphs with much fill, where QDLDL's scalar up-looking factorisation is an order of
+    magnitude slower (Manhattan 10⁴: 83–102 against 480–600 ms CPU per factorisation);
+    CHOLMOD, when installed, is still 1.5–1.8× faster (53–57 ms: its work around the dense
+    calls is C, and it stores fewer explicit zeros).
 ``"cholmod"`` (optional extra ``fast``: the ``cvxopt`` wheel)
     CHOLMOD's supernodal Cholesky (BLAS-3 on dense supernodes) through ``cvxopt.cholmod``:
     the ordering (CHOLMOD's AMD) and the symbolic analysis once per pattern
@@ -21,7 +30,7 @@ Back-ends, chosen when the object is built:
     cvxopt is GPL-3.0 and bundles CHOLMOD's GPL-2.0+ Supernodal module, so it is an extra,
     not a core dependency of this BSD-3 package. (Before: the ``cholespy`` wheel, which
     re-ran the analysis at every factorisation and took no ordering: slower there.)
-    Timings of all three: benchmarks/README.md.
+    Timings of all four: benchmarks/README.md.
 ``"superlu"`` (fallback: scipy only)
     scipy's SuperLU in symmetric mode, no pivoting, minimum-degree ordering on ``A + Aᵀ``
     (an LU with a Cholesky's fill); no reuse between factorisations. Used when neither
@@ -29,7 +38,8 @@ Back-ends, chosen when the object is built:
 
 :func:`choose_backend` picks ``"cholmod"`` when it is installed and the expected
 factorisation work (``flops``, e.g. from a symbolic factorisation of the block graph) is
-above :data:`CHOLMOD_MIN_FLOPS`, else ``"qdldl"``, else ``"superlu"``. Every back-end solves
+above :data:`CHOLMOD_MIN_FLOPS`, else ``"supernodal"`` above :data:`SUPERNODAL_MIN_FLOPS`,
+else ``"qdldl"``, else ``"superlu"``. Every back-end solves
 to working precision (measured: relative difference ≤ 1.3e-13 between them on both
 problems above), so the choice moves results by rounding only.
 """
@@ -46,6 +56,7 @@ from numpy.typing import NDArray
 
 from relation_metric.arrays import Array
 from relation_metric.errors import DivergenceError
+from slamrel.backends.supernodal import SupernodalCholesky, symbolic_factor
 
 __all__ = [
     "SparseCholesky",
@@ -54,6 +65,7 @@ __all__ = [
     "factor_flops",
     "BACKENDS",
     "CHOLMOD_MIN_FLOPS",
+    "SUPERNODAL_MIN_FLOPS",
 ]
 
 #: Expected flops (``Σ_j c_j²`` over the columns of the Cholesky factor) above which CHOLMOD's
@@ -65,6 +77,15 @@ __all__ = [
 #: ahead (below, QDLDL keeps Victoria Park's results as they were).
 CHOLMOD_MIN_FLOPS = 1e7
 
+#: Expected flops (as for :data:`CHOLMOD_MIN_FLOPS`) above which the core ``"supernodal"``
+#: back-end beats QDLDL, when CHOLMOD is not installed: for its analysis (once per pattern)
+#: and about seven factorisations + solves, as one LM solve does. Measured
+#: (``benchmarks/bench_sparse_cholesky.py``, CPU ms, analysis + first / each later, supernodal
+#: vs QDLDL, 2026-12-02): Manhattan 3.5·10³ (2.7·10⁷ flops) 69 / 11.6 vs 32 / 9.2 — QDLDL
+#: ahead; 5·10³ (10⁸) 118 / 21 vs 68 / 29 — even over seven; 7·10³ (2.8·10⁸) 115 / 36 vs
+#: 106 / 78; 10⁴ (1.36·10⁹) 83 per factorisation vs 480. Victoria Park (3.4·10⁶): 18.5 vs 3.6.
+SUPERNODAL_MIN_FLOPS = 1e8
+
 _SINGULAR = "the normal equations are singular (unobserved states?)"
 
 
@@ -75,6 +96,8 @@ def available_backends() -> tuple[str, ...]:
         for name, module in (("cholmod", "cvxopt"), ("qdldl", "qdldl"))
         if importlib.util.find_spec(module) is not None
     ]
+    if "qdldl" in found:  # the supernodal back-end takes QDLDL's AMD ordering
+        found.insert(found.index("qdldl"), "supernodal")
     return (*found, "superlu")
 
 
@@ -83,7 +106,7 @@ BACKENDS: tuple[str, ...] = available_backends()
 
 
 #: Every back-end this module knows, fastest first.
-ALL_BACKENDS: tuple[str, ...] = ("cholmod", "qdldl", "superlu")
+ALL_BACKENDS: tuple[str, ...] = ("cholmod", "supernodal", "qdldl", "superlu")
 
 
 def choose_backend(flops: float | None = None, *, have: tuple[str, ...] | None = None) -> str:
@@ -92,7 +115,8 @@ def choose_backend(flops: float | None = None, *, have: tuple[str, ...] | None =
     Parameters
     ----------
     flops : float, optional
-        Expected factorisation work; ``None``: unknown (CHOLMOD is then not chosen).
+        Expected factorisation work; ``None``: unknown (neither CHOLMOD nor the supernodal
+        back-end is then chosen).
     have : tuple of str, optional
         The back-ends to choose from; default: those installed (:data:`BACKENDS`).
         ``have=ALL_BACKENDS`` tells which one would be chosen if every library were installed.
@@ -100,11 +124,13 @@ def choose_backend(flops: float | None = None, *, have: tuple[str, ...] | None =
     Returns
     -------
     str
-        ``"cholmod"``, ``"qdldl"`` or ``"superlu"``.
+        ``"cholmod"``, ``"supernodal"``, ``"qdldl"`` or ``"superlu"``.
     """
     have = BACKENDS if have is None else have
     if "cholmod" in have and flops is not None and flops >= CHOLMOD_MIN_FLOPS:
         return "cholmod"
+    if "supernodal" in have and flops is not None and flops >= SUPERNODAL_MIN_FLOPS:
+        return "supernodal"
     return "qdldl" if "qdldl" in have else "superlu"
 
 
@@ -123,15 +149,13 @@ def factor_flops(pattern: sp.spmatrix) -> float:
         order: QDLDL's AMD when installed (no pivot test needed: the values used are
         diagonally dominant), else SuperLU's symmetric minimum degree.
     """
-    a = sp.csc_matrix(pattern, dtype=np.float64, copy=True)
-    a.data[:] = 1.0
-    a = (a + sp.diags(np.asarray(abs(a).sum(axis=0)).ravel() + 1.0)).tocsc()
-    if "qdldl" in BACKENDS:
-        import qdldl
-
-        lower = qdldl.Solver(sp.triu(a, format="csc"), upper=True).factors()[0].tocsc()
+    if "qdldl" in BACKENDS:  # kept: the supernodal analysis of the same graph reuses it
+        lower = symbolic_factor(pattern)[0]
         counts = np.diff(lower.indptr) + 1.0  # QDLDL's L is unit lower: diagonal not stored
     else:
+        a = sp.csc_matrix(pattern, dtype=np.float64, copy=True)
+        a.data[:] = 1.0
+        a = (a + sp.diags(np.asarray(abs(a).sum(axis=0)).ravel() + 1.0)).tocsc()
         lu = spla.splu(
             a, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
         )
@@ -150,10 +174,13 @@ class SparseCholesky:
         every diagonal entry stored).
     size : int
         ``n``.
-    backend : {"qdldl", "cholmod", "superlu"}, optional
+    backend : {"qdldl", "supernodal", "cholmod", "superlu"}, optional
         Default: :func:`choose_backend` of ``flops``.
     flops : float, optional
         Expected factorisation work, for the default back-end.
+    blocks : array_like of int, optional
+        Widths of consecutive groups of variables (3 per pose, 2 per landmark), for the
+        supernodal back-end's ordering (:class:`~slamrel.backends.supernodal.SupernodalCholesky`).
 
     Notes
     -----
@@ -161,9 +188,10 @@ class SparseCholesky:
     then :meth:`solve` any number of times. An exactly zero pivot raises
     :class:`~relation_metric.errors.DivergenceError` (QDLDL: its factorisation, or a solve
     whose residual ``‖Ax − b‖₁`` exceeds ``1e-8 (max|A| ‖x‖₁ + ‖b‖₁)``, which catches its
-    refactorisation stopping silently; SuperLU: its factorisation); CHOLMOD raises it for
-    any matrix that is not numerically positive definite. QDLDL and SuperLU (no pivoting)
-    solve symmetric indefinite systems with nonzero pivots as they are.
+    refactorisation stopping silently; SuperLU: its factorisation); CHOLMOD and the
+    supernodal back-end raise it for any matrix that is not numerically positive
+    definite. QDLDL and SuperLU (no pivoting) solve symmetric indefinite systems with
+    nonzero pivots as they are.
     """
 
     def __init__(
@@ -174,12 +202,14 @@ class SparseCholesky:
         *,
         backend: str | None = None,
         flops: float | None = None,
+        blocks: NDArray[np.integer] | None = None,
     ) -> None:
         self.size = int(size)
+        self._blocks = blocks
         self.indptr = np.asarray(indptr, dtype=np.int32)
         indices = np.asarray(indices, dtype=np.int32)
         self.backend = choose_backend(flops) if backend is None else backend
-        if self.backend not in ("qdldl", "cholmod", "superlu"):
+        if self.backend not in ALL_BACKENDS:
             raise ValueError(f"unknown sparse Cholesky back-end {self.backend}")
         col = np.repeat(np.arange(self.size, dtype=np.int32), np.diff(self.indptr))
         # valid CSC may list a column's rows in any order; SuperLU and cvxopt's spmatrix.V
@@ -218,6 +248,12 @@ class SparseCholesky:
             except RuntimeError:  # an exactly zero pivot ("not quasi-definite")
                 raise DivergenceError(_SINGULAR) from None
             self._full.data[:] = data  # for the residual check in solve
+        elif self.backend == "supernodal":
+            if self._factor is None:  # ordering + analysis, once per pattern
+                self._factor = SupernodalCholesky(
+                    self.indptr, self.indices, self.size, blocks=self._blocks
+                )
+            self._factor.factor(data)
         elif self.backend == "cholmod":
             import cvxopt
             from cvxopt import cholmod
@@ -261,7 +297,7 @@ class SparseCholesky:
             x = cvxopt.matrix(np.asfortranarray(b))
             cholmod.solve(self._factor, x)
             return np.array(x).reshape(b.shape)
-        if self.backend != "qdldl":
+        if self.backend != "qdldl":  # SuperLU, supernodal
             return self._factor.solve(b)
         if b.ndim == 2:
             x = np.column_stack([self._factor.solve(b[:, k]) for k in range(b.shape[1])])

@@ -260,7 +260,8 @@ def run_solve(args: argparse.Namespace) -> int:
         print(f"{summary}; wrote {out}/")
         if args.method == "lm" and sol.faster_solver == "cholmod":
             print(
-                "note: this graph has much fill-in; CHOLMOD's supernodal Cholesky would solve "
-                "it several times faster: install the optional `fast` extra (cvxopt, GPL-3.0)"
+                "note: this graph has much fill-in; CHOLMOD's supernodal Cholesky would "
+                "factorise it faster than the core back-ends: install the optional `fast` "
+                "extra (cvxopt, GPL-3.0)"
             )
     return 0
