@@ -123,7 +123,8 @@ def run_topics(args: argparse.Namespace) -> int:
     print(f"{'topic':<{width}}  {'type':<{tw}}  {'messages':>8}  slamrel reads")
     for t in topics:
         use = {"trajectory": "trajectory", "laser scans": "laser scans (relations align)"}
-        print(f"{t.topic:<{width}}  {t.msgtype:<{tw}}  {t.count:>8d}  {use.get(t.read_as, '-')}")
+        reads = use.get(t.read_as or "", "-")
+        print(f"{t.topic:<{width}}  {t.msgtype:<{tw}}  {t.count:>8d}  {reads}")
     return 0
 
 
