@@ -161,6 +161,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     traceback.
     """
     command = "slamrel"
+    _single_threaded_blas()
     try:
         with _stop_signals():
             try:
@@ -174,6 +175,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"{command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+
+
+#: The BLAS thread count a command runs with unless the user's environment sets one.
+BLAS_THREADS = "1"
+
+
+def _single_threaded_blas() -> None:
+    """One BLAS thread per ``slamrel`` process unless ``OPENBLAS_NUM_THREADS`` is set.
+
+    numpy's and scipy's OpenBLAS start a thread per core at import, and those threads spin
+    idle for a while: about 0.1 s of CPU per process on 2 cores (``import numpy`` and 0.2 s
+    of work: 0.40 s user against 0.29 s), taken from the command's own work. slamrel's
+    dense work gains nothing from them at the sizes it meets (EKF-SLAM at 400 landmarks,
+    state 803: 2.79–3.02 s single-threaded against 2.99–3.07 s; benchmarks/README.md).
+    Set only before numpy is imported (it is read then), and never over the user's value.
+    """
+    if "numpy" not in sys.modules:
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", BLAS_THREADS)
 
 
 def _terminated(command: str, exc: Terminated) -> int:

@@ -275,3 +275,26 @@ def test_import_isam_bundle_refused_writes_nothing(
     err = capsys.readouterr().err
     assert f"slamrel import isam: error: {src}: {reason}" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]
+
+
+@pytest.mark.parametrize("preset", [None, "2"])
+def test_one_blas_thread_unless_the_user_says(preset) -> None:
+    """A slamrel process runs OpenBLAS on one thread unless OPENBLAS_NUM_THREADS is set;
+    numpy, once imported, is left as it is."""
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if preset:
+        env["OPENBLAS_NUM_THREADS"] = preset
+    probe = (
+        "import os, sys\n"
+        "from slamrel import cli\n"
+        "cli._single_threaded_blas()\n"
+        "first = os.environ.get('OPENBLAS_NUM_THREADS')\n"
+        "del os.environ['OPENBLAS_NUM_THREADS']\n"
+        "import numpy\n"
+        "cli._single_threaded_blas()\n"
+        "print(first, os.environ.get('OPENBLAS_NUM_THREADS'))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, env=env, check=True
+    )
+    assert out.stdout.split() == [preset or "1", "None"]
