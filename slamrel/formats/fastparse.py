@@ -54,7 +54,10 @@ Speed
     A 10^6-line, 91 MB ``.relations`` file is read faster than by ``np.loadtxt`` and about
     as fast as by pandas' C reader (timings in benchmarks/README.md). The table is allocated
     column by column (an F-ordered ``(N, ncols)`` array): each column is written and later
-    read contiguously. This module needs numpy only, and its
+    read contiguously. The blocks of a file are parsed by up to :data:`MAX_WORKERS`
+    threads of one pool per process (numpy releases the GIL inside its loops); each block
+    writes its rows from the first row its lines could start at, and the gaps left by
+    blank and comment lines are closed afterwards. This module needs numpy only, and its
     exactness follows from the argument above. See ``benchmarks/bench_relation_metric.py``.
 """
 
