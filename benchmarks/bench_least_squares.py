@@ -431,7 +431,7 @@ def main() -> None:
         )
         # --- Victoria Park ---------------------------------------------------------------
         if VP.is_file():
-            vp = read_isam(VP).graph
+            vp = read_isam(VP, noise="covariance").graph  # GTSAM's copy: covariances
             runs, gt_runs = [], []
             routes = {
                 "LM from odometry": "lm",
@@ -439,7 +439,7 @@ def main() -> None:
                 "iSAM2 + final LM": "isam2",
             }
             for _ in range(args.repeat):
-                runs.append(run_slamrel(VP, tmp / "vp_out", [], args.core))
+                runs.append(run_slamrel(VP, tmp / "vp_out", ["--noise", "covariance"], args.core))
                 if python:
                     gt_runs.append({k: run_gtsam(python, vp, r, tmp) for k, r in routes.items()})
             ours = best_of(runs)

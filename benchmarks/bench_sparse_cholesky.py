@@ -97,7 +97,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     if VP.is_file():
-        measure("Victoria Park", read_isam(VP).graph, args)
+        measure("Victoria Park", read_isam(VP, noise="covariance").graph, args)
     for n in args.sizes:
         measure(f"Manhattan {n}", manhattan(n), args)
 
