@@ -419,3 +419,27 @@ def test_traj_topics_says_what_each_topic_is_read_as(bags, tmp_path, capsys):
     }
     out = capsys.readouterr().out
     assert "laser scans (relations align)" in out
+
+
+def test_scans_in_a_gap_of_the_estimate_are_counted(bags, world, tmp_path, capsys):
+    """Guesses interpolated across a gap of the estimate (2.2 s, here: 10 odometry poses
+    removed) are counted in a warning; scans at an estimate pose's own time are not."""
+    bag = bags["ros1"]
+    tum = tmp_path / "odom.tum"
+    assert main(["traj", "convert", f"{bag}:/odom", "-o", str(tum)]) == 0
+    rows = np.loadtxt(tum)
+    kept = np.delete(rows, np.arange(20, 30), axis=0)  # poses 20..29 after the first one
+    gapped = tmp_path / "gapped.tum"
+    np.savetxt(gapped, kept, fmt="%.17g")
+    capsys.readouterr()
+    argv = ["relations", "align", f"{bag}:/scan", "--estimate", str(gapped), "--base-frame"]
+    assert main([*argv, "base_link", "-o", str(tmp_path / "g.relations"), "-q"]) == 0
+    err = capsys.readouterr().err
+    gap = kept[20, 0] - kept[19, 0]
+    assert f"10 of {world['n'] - SKIP_ODOM} scans fall in gaps of {gapped}" in err
+    assert f"the longest {gap:.3g} s" in err
+    full = tmp_path / "full.tum"
+    np.savetxt(full, rows, fmt="%.17g")
+    argv[4] = str(full)
+    assert main([*argv, "base_link", "-o", str(tmp_path / "f.relations"), "-q"]) == 0
+    assert "fall in gaps" not in capsys.readouterr().err
