@@ -443,3 +443,13 @@ def test_scans_in_a_gap_of_the_estimate_are_counted(bags, world, tmp_path, capsy
     argv[4] = str(full)
     assert main([*argv, "base_link", "-o", str(tmp_path / "f.relations"), "-q"]) == 0
     assert "fall in gaps" not in capsys.readouterr().err
+
+
+def test_interpolation_gaps_by_hand():
+    from slamrel.scans.report import interpolation_gaps
+
+    t = np.array([0.0, 1.0, 4.0, 4.5])
+    stamps = np.array([-1.0, 0.0, 0.5, 1.0, 2.0, 4.0, 4.2, 5.0])
+    np.testing.assert_array_equal(
+        interpolation_gaps(t, stamps), [0.0, 0.0, 1.0, 0.0, 3.0, 0.0, 0.5, 0.0]
+    )

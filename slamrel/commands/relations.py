@@ -184,26 +184,6 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
     a.set_defaults(func=run_align)
 
 
-#: A scan whose two bracketing estimate poses are farther apart than this [s] gets a guess
-#: interpolated across a gap: counted in a warning.
-GUESS_GAP = 1.0
-
-
-def _bracketing_gaps(times: Any, stamps: Any) -> Any:
-    """The time between the two estimate poses around each stamp: 0 at a pose's own time
-    (nothing is interpolated) and at or beyond an end (the end pose is used)."""
-    import numpy as np
-
-    t = np.asarray(times, dtype=np.float64)
-    stamps = np.asarray(stamps, dtype=np.float64)
-    if t.size < 2:
-        return np.zeros(stamps.size)
-    k = np.clip(np.searchsorted(t, stamps), 1, t.size - 1)
-    gap = t[k] - t[k - 1]
-    at_pose = (t[k] == stamps) | (t[k - 1] == stamps)
-    return np.where(at_pose | (stamps <= t[0]) | (stamps >= t[-1]), 0.0, gap)
-
-
 def run_generate(args: argparse.Namespace) -> int:
     from slamrel.evaluation import load_trajectory
     from slamrel.formats.relations import write_relations
@@ -350,7 +330,7 @@ def _bag_guesses(
     from slamrel.evaluation import load_trajectory
     from slamrel.formats.bags import bag_topic_frames, split_bag_spec
     from slamrel.formats.laser import BagScanWarning, bag_laser_offset
-    from slamrel.scans.report import laser_poses_at_stamps
+    from slamrel.scans.report import GUESS_GAP, interpolation_gaps, laser_poses_at_stamps
 
     est = load_trajectory(
         args.estimate,
@@ -401,7 +381,7 @@ def _bag_guesses(
         )
         keep = np.flatnonzero(inside)
         scans, poses = scans.take(keep), poses[keep]
-    gaps = _bracketing_gaps(est.timestamps, scans.timestamps)
+    gaps = interpolation_gaps(est.timestamps, scans.timestamps)
     wide = gaps > GUESS_GAP
     if wide.any():
         warnings.warn(

@@ -37,6 +37,7 @@ from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
 from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
 from slamrel.constants import COVARIANCE_LAYOUTS
+from slamrel.formats.trajectories import unit_quaternions
 
 __all__ = ["COVARIANCE_LAYOUTS", "DEFAULT_FRAME", "PosesWithCovariance", "read_pose_covariances"]
 
@@ -116,16 +117,7 @@ def read_pose_covariances(
     else:
         t, poses, cov, lines, fmt = _read_text(name, layout)
     if poses.shape[1] == 7:
-        norms = np.linalg.norm(poses[:, 3:], axis=1)
-        bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
-        if bad.size:
-            k = int(bad[0])
-            raise InputError(
-                f"quaternion norm {norms[k]:.6g}, expected a unit quaternion",
-                path=name,
-                line=int(lines[k]),
-            )
-        poses = np.column_stack((poses[:, :3], poses[:, 3:] / norms[:, None]))
+        poses = np.column_stack((poses[:, :3], unit_quaternions(poses[:, 3:], name, lines)))
     check_covariances(cov, path=name, lines=lines, definite=True)  # NEES inverts it
     order, report = sort_by_time(t, lines=lines, path=name, what="pose")
     if report.out_of_order:

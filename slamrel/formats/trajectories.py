@@ -99,6 +99,7 @@ __all__ = [
     "without_exact_repeats",
     "read_trajectory",
     "write_trajectory",
+    "unit_quaternions",
     "yaw_from_quaternion",
     "quaternion_from_yaw",
 ]
@@ -421,7 +422,7 @@ def _read_bag(
     if bad.size:
         raise InputError(f"message {int(bad[0]) + 1}: non-finite stamp", path=name)
     number = np.arange(1, t.size + 1)
-    q = _check_unit_quaternions(rows[:, 3:], name, number.__getitem__)
+    q = unit_quaternions(rows[:, 3:], name, number.__getitem__)
     discarded: list[OutOfPlane] = []
     poses = _poses_of_dimension(t, rows[:, :3], q, name, dimension, discarded)
     positions = poses[:, :3] if poses.shape[1] == 7 else poses[:, :2]
@@ -480,7 +481,7 @@ def _read_3d(
         )
         lines, cut = table_lines, table_lines.cut_off_line
         t, xyz, q = values[:, 0], values[:, 1:4], values[:, 4:8]
-        q = _check_unit_quaternions(q, name, lines)
+        q = unit_quaternions(q, name, lines)
     elif fmt == "euroc":
         assert src is not None
         first = next((k for k, line in enumerate(src.lines) if line.strip()), None)
@@ -506,7 +507,7 @@ def _read_3d(
         q = np.column_stack([c[k] for k in _EUROC_COLUMNS[5:8]] + [c[_EUROC_COLUMNS[4]]])
         lines = table.lines.__getitem__
         cut = src.cut_off_line()
-        q = _check_unit_quaternions(q, name, lines)
+        q = unit_quaternions(q, name, lines)
     else:  # kitti
         values, table_lines = read_numeric_table(
             path,
@@ -535,11 +536,12 @@ def _read_3d(
     return t, _poses_of_dimension(t, xyz, q, name, dimension, discarded), lines, cut
 
 
-def _check_unit_quaternions(q: NDArray, name: str, lines: Any) -> NDArray:
-    """The quaternions divided by their norms; a norm off 1 by more than 1e-3 is refused.
+def unit_quaternions(q: NDArray, name: str, lines: Any) -> NDArray:
+    """The quaternions ``(N, 4)`` divided by their norms; a norm off 1 by more than 1e-3 is
+    refused with :class:`InputError` naming ``name`` and ``lines(k)`` (or ``lines[k]``).
 
-    Every accepted quaternion is normalised here, before any path uses it: the planar yaw
-    formula assumes ``‖q‖ = 1`` and is off by about ``2 (‖q‖ − 1)`` otherwise.
+    Every reader of quaternions normalises them here, before any path uses them: the planar
+    yaw formula assumes ``‖q‖ = 1`` and is off by about ``2 (‖q‖ − 1)`` otherwise.
     """
     with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
         norms = np.linalg.norm(q, axis=1)
@@ -549,7 +551,7 @@ def _check_unit_quaternions(q: NDArray, name: str, lines: Any) -> NDArray:
         raise InputError(
             f"quaternion norm {norms[k]:.6g}, expected a unit quaternion",
             path=name,
-            line=lines(k),
+            line=int(lines(k) if callable(lines) else lines[k]),
         )
     return q / norms[:, None]
 

@@ -23,7 +23,14 @@ from relation_metric.trajectory import Trajectory
 from slamrel.formats.laser import LaserScans, nearest_times
 from slamrel.scans.relations import ScanRelations
 
-__all__ = ["estimate_at_scans", "laser_poses_at_stamps", "format_report", "REPORT_COLUMNS"]
+__all__ = [
+    "estimate_at_scans",
+    "laser_poses_at_stamps",
+    "interpolation_gaps",
+    "GUESS_GAP",
+    "format_report",
+    "REPORT_COLUMNS",
+]
 
 REPORT_COLUMNS = (
     "t1,t2,x,y,theta,guess_x,guess_y,guess_theta,sd_x,sd_y,sd_theta,matched_fraction,"
@@ -70,6 +77,27 @@ def laser_poses_at_stamps(
     if inside.any():
         out[inside] = compose(base.poses_at(stamps[inside]), np.asarray(offset, dtype=np.float64))
     return out, inside
+
+
+#: A scan whose two bracketing estimate poses are farther apart than this [s] gets a guess
+#: interpolated across a gap (``relations align`` counts them in a warning).
+GUESS_GAP = 1.0
+
+
+def interpolation_gaps(
+    times: NDArray[np.float64], stamps: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The time [s] between the two poses (at ``times``, sorted) that an interpolation at
+    each of ``stamps`` spans: 0 at a pose's own time (nothing is interpolated) and at or
+    beyond an end (the end pose is used)."""
+    t = np.asarray(times, dtype=np.float64)
+    stamps = np.asarray(stamps, dtype=np.float64)
+    if t.size < 2:
+        return np.zeros(stamps.size)
+    k = np.clip(np.searchsorted(t, stamps), 1, t.size - 1)
+    gap = t[k] - t[k - 1]
+    at_pose = (t[k] == stamps) | (t[k - 1] == stamps)
+    return np.where(at_pose | (stamps <= t[0]) | (stamps >= t[-1]), 0.0, gap)
 
 
 def format_report(result: ScanRelations) -> str:
