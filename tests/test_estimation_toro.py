@@ -277,3 +277,121 @@ def test_toro_says_a_disconnected_pose_before_an_out_of_order_one():
     with pytest.raises(InputError, match="pose 2 has no constraint to an earlier pose"):
         toro_optimize(g)
     np.testing.assert_array_equal(toro_optimize(g, tree="breadth-first").parent, [-1, 0, 3, 0])
+
+
+# --- TORO's own rules (rules="toro"), against hand computations and OpenSLAM's toro -------
+
+
+def _triangle(edges, infos):
+    pi = np.array([e[0] for e in edges])
+    pj = np.array([e[1] for e in edges])
+    z = np.array([e[2] for e in edges], dtype=float)
+    return PoseGraph(np.zeros((3, 3)), np.empty((0, 2)), pi, pj, z, np.array(infos, float))
+
+
+_LOOP = (1, 2, (1.0, 0.2, 0.0))  # no heading residual: the headings stay 0, the steps linear
+_TREE = [(0, 1, (1.0, 0.0, 0.0)), (0, 2, (1.0, 1.0, 0.0))]
+
+
+@pytest.mark.parametrize(
+    ("rules", "loop_first", "moved"),
+    [
+        # loop first: it is removed whole (f = 1), then each tree edge takes back
+        # f_T = 2·1·1/(γ(t+1)) of node 1's move with γ = min W = 1 (TORO), 2·1·1/(γt) with
+        # γ = min M = 2 (papers); iteration 1 (f_T = 1) undoes the loop's step in both
+        ("toro", True, [0.0, 1 / 6, 1 / 4]),  # (1/2)(1 − 2/(t+1)), t = 1, 2, 3
+        ("papers", True, [0.0, 1 / 4, None]),  # (1/2)(1 − 1/t) at t = 2
+        # loop last: the tree edges (no residual at the start) do nothing, the loop is removed
+        ("toro", False, [1 / 2, 1 / 2, 1 / 2]),
+    ],
+)
+def test_triangle_steps_by_hand(rules, loop_first, moved):
+    edges = [_LOOP, *_TREE] if loop_first else [*_TREE, _LOOP]
+    g = _triangle(edges, [np.eye(3)] * 3)
+    r = np.array([1.0, -0.8, 0.0])  # the loop's residual at the tree guess, in the global frame
+    for t, share in enumerate(moved, start=1):
+        if share is None:
+            continue
+        p = np.asarray(toro_optimize(g, iterations=t, rules=rules).poses)
+        np.testing.assert_allclose(p[1] - [1, 0, 0], -share * r, atol=1e-12)
+        np.testing.assert_allclose(p[2] - [1, 1, 0], share * r, atol=1e-12)
+
+
+_A = (0, 1, (1.0, 0.0, 0.3))
+_B = (0, 2, (1.0, 1.0, -0.4))
+_L = (1, 2, (1.0, 0.2, 0.1))
+
+
+def _info(xx, yy, tt, xy=0.0):
+    return [[xx, xy, 0.0], [xy, yy, 0.0], [0.0, 0.0, tt]]
+
+
+#: OpenSLAM's toro (built in a side folder, run as ``toro -i N``; it prints 6 digits) on
+#: three triangles with anisotropic, correlated information: poses 1 and 2 after N iterations
+REAL_TORO = [
+    (
+        [_L, _A, _B],
+        [_info(1, 3, 5), _info(2, 1, 1), _info(2, 2, 1)],
+        {
+            1: [[1.0, 0.022698, 0.3], [1.0, 1.0, -0.4]],
+            3: [[0.990551, 0.216867, 0.1], [1.00918, 0.981094, -0.2]],
+            8: [[0.822085, 0.44461, -0.011111], [1.17277, 0.8574, -0.088889]],
+        },
+    ),
+    (
+        [_L, _A, _B],
+        [_info(1, 3, 5, 0.5), _info(1, 1, 1), _info(1, 1, 1)],
+        {
+            1: [[1.0, 0.0, 0.3], [1.0, 1.0, -0.4]],
+            3: [[0.804203, 0.159219, 0.1], [1.1958, 0.840781, -0.2]],
+            8: [[0.736158, 0.29606, -0.011111], [1.26384, 0.70394, -0.088889]],
+        },
+    ),
+    (
+        [_A, _L, _B],
+        [_info(2, 1, 1, 0.3), _info(4, 1, 2), _info(1, 1, 1)],
+        {
+            1: [[0.58306, -0.104541, -0.1], [1.0, 1.0, -0.4]],
+            3: [[0.609894, 0.32158, -0.161111], [1.29717, 0.869382, -0.230556]],
+            8: [[0.622232, 0.408774, -0.124164], [1.48964, 0.770001, -0.123915]],
+        },
+    ),
+]
+
+
+@pytest.mark.parametrize(("edges", "infos", "after"), REAL_TORO)
+def test_rules_toro_reproduce_openslam_toro(edges, infos, after):
+    g = _triangle(edges, infos)
+    for t, want in after.items():
+        got = np.asarray(toro_optimize(g, iterations=t).poses)[1:]
+        np.testing.assert_allclose(got, want, atol=1e-5)  # toro's 6 printed digits
+        papers = np.asarray(toro_optimize(g, iterations=t, rules="papers").poses)[1:]
+        if t == 8:  # the papers' rules are another optimiser: told apart by the same data
+            assert np.abs(papers - np.asarray(want)).max() > 1e-3
+
+
+def test_one_constraint_per_pose_pair_and_the_cost_counts_all():
+    keep = toro_optimiser.first_per_pair(np.array([0, 1, 0, 2, 1, 3]), np.array([1, 2, 1, 1, 2, 0]))
+    np.testing.assert_array_equal(keep, [True, True, False, False, False, True])
+    g = _triangle([_A, _B, _L, (1, 2, (0.8, 0.4, 0.0))], [np.eye(3)] * 4)
+    sol = toro_optimize(g, iterations=5)
+    assert sol.dropped == 1
+    alone = toro_optimize(_triangle([_A, _B, _L], [np.eye(3)] * 3), iterations=5)
+    np.testing.assert_array_equal(sol.poses, alone.poses)  # the later parallel one unused
+    assert sol.cost[-1] == pytest.approx(graph_cost(np.asarray(sol.poses), g), rel=1e-12)
+    assert sol.cost[-1] > graph_cost(
+        np.asarray(sol.poses), _triangle([_A, _B, _L], [np.eye(3)] * 3)
+    )
+    assert toro_optimize(g, iterations=5, rules="papers").dropped == 0
+
+
+def test_measurement_weights_are_the_information_turned_by_the_measured_rotation():
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(6, 3, 3))
+    info = a @ a.transpose(0, 2, 1) + np.eye(3)
+    z = rng.uniform(-3, 3, size=(6, 3))
+    c, s = np.cos(z[:, 2]), np.sin(z[:, 2])
+    rot = np.zeros((6, 3, 3))
+    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1], rot[:, 2, 2] = c, -s, s, c, 1
+    want = np.diagonal(rot @ info @ rot.transpose(0, 2, 1), axis1=1, axis2=2)
+    np.testing.assert_allclose(toro_optimiser.measurement_weights(z, info), want, rtol=1e-12)

@@ -34,6 +34,22 @@ folder only to measure against (``benchmarks/bench_toro.py``).
   split along its path in proportion to ``M_k⁻¹``:
   ``Δx_k = ∓ f_c r_c M_k⁻¹ / Σ_{m ∈ P_c} M_m⁻¹`` (``−`` on the ``i`` side, ``+`` on the
   ``j`` side), so the constraint's own residual becomes ``(1 − f_c) r_c`` exactly.
+* **Rules** (``rules=``). The bullets above are the papers' update (``"papers"``). The
+  default, ``"toro"``, is what OpenSLAM's ``toro`` does, measured on it as a black box
+  (tiny graphs run for 1–20 iterations and its output compared to 6 digits; its code was
+  not read): (1) one constraint per pose pair, the first in the input
+  (:func:`first_per_pair`; ``dropped`` counts the others, which the cost still counts);
+  (2) fixed weights ``W_c = diag(R(δ_θ) Ω_c R(δ_θ)ᵀ)``, the information turned by the
+  measurement's own rotation (:func:`measurement_weights`), so ``M`` is fixed; (3) ``γ`` is
+  the smallest ``W_c`` over the constraints (per dimension), not the smallest ``M_k``;
+  (4) a visit's correction is ``u = 2|P_c| γ⁻¹ (R_i Ω_c R_iᵀ) r_c / (t + 1)`` with the
+  whole rotated information, and a dimension with ``|u| > |r|`` takes ``u = r``; it is
+  split along the path as above. On isotropic diagonal information (``city10000``) this is
+  the papers' fraction with ``γ = min W`` and ``t + 1``. Reproduced: the three triangles of
+  ``tests/test_estimation_toro.py`` to ``toro``'s printed digits; ``city10000`` after 100
+  and 300 iterations within 0.11 % of ``toro``'s cost; the pose-only study's Method 2 graphs
+  within 1–7 % of ``toro``'s cost ratio on hu-simple1 (noise a, c) and hu-complex1 c, but
+  2.3× above it on hu-complex1 a (see ``benchmarks/bench_toro.py``).
 * **Order** (``order=``). ``"depth"`` (the RSS paper's): the constraints sorted by their
   level, the depth of the lowest common ancestor of their two poses, root side first (ties
   in input order). ``"input"``: the input order.
@@ -80,6 +96,7 @@ __all__ = [
     "TORO_TREES",
     "TORO_ORDERS",
     "TORO_INITIAL",
+    "TORO_RULES",
     "TreeSolution",
     "spherical_information",
     "spanning_tree",
@@ -91,9 +108,11 @@ __all__ = [
 TreeKind = Literal["incremental", "breadth-first"]
 OrderKind = Literal["depth", "input"]
 InitialKind = Literal["tree", "given"]
+RulesKind = Literal["toro", "papers"]
 TORO_TREES: tuple[TreeKind, ...] = ("incremental", "breadth-first")
 TORO_ORDERS: tuple[OrderKind, ...] = ("depth", "input")
 TORO_INITIAL: tuple[InitialKind, ...] = ("tree", "given")
+TORO_RULES: tuple[RulesKind, ...] = ("toro", "papers")
 
 
 @dataclass(frozen=True)
@@ -112,6 +131,9 @@ class TreeSolution:
         Mean over constraints of ``|P_c|``, the poses on the tree path between its two poses.
     runs : int
         Runs of constraints with disjoint paths applied at once per iteration (0 if unused).
+    dropped : int
+        Constraints left out of the optimisation because an earlier one joins the same two
+        poses (``rules="toro"``: one constraint per pose pair); the cost still counts them.
     """
 
     poses: Array
@@ -120,6 +142,7 @@ class TreeSolution:
     parent: NDArray[np.int64]
     mean_path_length: float = float("nan")
     runs: int = 0
+    dropped: int = 0
 
 
 def spherical_information(info: Array) -> Array:
@@ -293,6 +316,56 @@ def _fixed_weights(info: Array) -> bool:
     )
 
 
+def _smallest(values: Array) -> Array:
+    """Per column, the smallest positive entry of ``values`` (2-D; 1 where there is none)."""
+    active = values > 0
+    return np.where(active.any(axis=0), np.where(active, values, np.inf).min(axis=0), 1.0)
+
+
+def _diagonal_information(info: Array) -> bool:
+    """Whether every information is ``diag(ω_t, ω_t, ω_θ)``: the same in every frame, so
+    TORO's step (the rotated information times the residual) is a fixed fraction of each
+    dimension of the residual."""
+    return _fixed_weights(info) and bool(
+        np.all(info[:, 0, 2] == 0)
+        and np.all(info[:, 1, 2] == 0)
+        and np.all(info[:, 2, 0] == 0)
+        and np.all(info[:, 2, 1] == 0)
+    )
+
+
+def first_per_pair(pp_i: NDArray[np.int64], pp_j: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Which constraints TORO keeps, shape (E,): a constraint ``(i, j)`` is left out when an
+    earlier one joins ``i`` and ``j`` (in either direction).
+
+    Measured on OpenSLAM's ``toro`` (it loads the study's Method 2 graphs, whose odometry
+    and landmark constraints share 81 consecutive pose pairs, as 727 edges of 808, and its
+    iterates equal those of the first constraint of each pair alone). One difference is
+    known: ``toro`` keeps a later ``(j, i)`` with ``i < j`` beside an earlier ``(i, j)``;
+    this keeps the first only.
+    """
+    lo = np.minimum(pp_i, pp_j).astype(np.int64)
+    hi = np.maximum(pp_i, pp_j).astype(np.int64)
+    keep = np.zeros(lo.size, dtype=bool)
+    if lo.size:
+        _, first = np.unique(lo * (int(hi.max()) + 1) + hi, return_index=True)
+        keep[first] = True
+    return keep
+
+
+def measurement_weights(z: Array, info: Array) -> Array:
+    """TORO's weights, shape (E, 3): the diagonal of ``R(δ_θ) Ω R(δ_θ)ᵀ``, the information
+    turned by the constraint's own measured rotation (not by a pose's heading), so they are
+    the same in every iteration. Measured on OpenSLAM's ``toro``: its first steps on
+    anisotropic constraints fit this rotation to 7·10⁻⁶ (its output precision) and no other
+    of 14 candidates (the headings of ``i`` or ``j``, ``±δ_θ``, sums of these, none) to
+    better than 0.06."""
+    c, s_ = np.cos(z[:, 2]), np.sin(z[:, 2])
+    wxx = c * c * info[:, 0, 0] - 2 * c * s_ * info[:, 0, 1] + s_ * s_ * info[:, 1, 1]
+    wyy = s_ * s_ * info[:, 0, 0] + 2 * c * s_ * info[:, 0, 1] + c * c * info[:, 1, 1]
+    return np.column_stack((wxx, wyy, info[:, 2, 2]))
+
+
 #: Largest ``Σ_k n_k²`` (``n_k`` the tree paths through pose ``k``: the work of the coupling
 #: products and a bound on their entries) for which :class:`_TriangularSweep` is used;
 #: 36.5 M on ``city10000`` (1.36 M entries per coupling matrix, 213 MB peak in all).
@@ -374,17 +447,19 @@ class _TriangularSweep:
         length: Array,
         z: Array,
         info: Array,
+        rules: RulesKind,
     ) -> _TriangularSweep | None:
         """The sweep for the constraints of ``signed`` (rows in visit order), or ``None``
         when the coupling products exceed :data:`_TRIANGULAR_BUDGET` or SciPy's triangular
-        solve is not compiled (:data:`_COMPILED_TRIANGULAR`)."""
+        solve is not compiled (:data:`_COMPILED_TRIANGULAR`). ``γ`` is the smallest ``M_k``
+        (``rules="papers"``) or the smallest weight of a constraint (``"toro"``)."""
         per_pose = np.diff(signed.tocsc().indptr).astype(np.float64)
         if not _COMPILED_TRIANGULAR or float(per_pose @ per_pose) > _TRIANGULAR_BUDGET:
             return None
         weight = np.column_stack((info[:, 0, 0], info[:, 2, 2]))
         m = abs(signed).T @ weight
         active = m > 0
-        gamma = np.where(active.any(axis=0), np.where(active, m, np.inf).min(axis=0), 1.0)
+        gamma = _smallest(m if rules == "papers" else weight[length > 0])
         m_inv = np.zeros_like(m)
         np.divide(1.0, m, out=m_inv, where=active)
         return cls(signed, lca, length, z, weight, m_inv, gamma)
@@ -397,10 +472,10 @@ class _TriangularSweep:
             spsolve_triangular(lower, rhs, lower=True, unit_diagonal=True, overwrite_A=True)
         )
 
-    def step(self, x: Array, p: Array, t: int) -> bool:
-        """Iteration ``t`` in place on the parameters ``x`` (poses ``p`` at its start);
-        ``False``, with ``x`` untouched, when the wraps took more than :data:`_WRAP_PASSES`
-        solves (the caller then visits run after run)."""
+    def step(self, x: Array, p: Array, t: float) -> bool:
+        """An iteration with fractions ``min(1, scale / t)``, in place on the parameters
+        ``x`` (poses ``p`` at its start); ``False``, with ``x`` untouched, when the wraps
+        took more than :data:`_WRAP_PASSES` solves (the caller then visits run after run)."""
         frac = np.minimum(1.0, self.scale / t)
         fs = np.zeros_like(frac)
         np.divide(frac, self.share, out=fs, where=self.share > 0)  # r → the path's step
@@ -441,7 +516,9 @@ class _Runs:
         i: NDArray[np.int64],
         z: Array,
         info: Array,
+        rules: RulesKind,
     ) -> None:
+        self.rules = rules
         runs = _runs(paths.signed, visit)
         # the runs laid end to end: constraint slots [c0, c1) and path entries [n0, n1) per run
         concat = np.concatenate(runs) if runs else np.empty(0, np.int64)
@@ -461,6 +538,7 @@ class _Runs:
         # signed share times −f) and each constraint's top heading; the runs hold views
         self.step_all = np.zeros((self.nodes.size, 3))
         self.th_top = np.zeros(concat.size)
+        self.gain = np.zeros((concat.size, 3))  # rules="toro": 2|P|/γ per dimension
         rot_a = z_run[:, :2].copy()  # R δ_t = cos θ (δx, δy) + sin θ (−δy, δx)
         rot_b = np.column_stack((-z_run[:, 1], z_run[:, 0]))
         self.blocks = []
@@ -471,11 +549,30 @@ class _Runs:
                 (self.nodes[n0:n1], self.owner[n0:n1] - c0,
                  (sub.indptr[c0:c1] - n0).astype(np.int64), factor[n0:n1],
                  self.step_all[n0:n1], self.th_top[c0:c1], rot_a[c0:c1], rot_b[c0:c1],
-                 z_run[c0:c1, 2])
+                 z_run[c0:c1, 2], self.info[c0:c1], self.gain[c0:c1])
             )  # fmt: skip
+        if rules == "toro":  # fixed weights: the splits and each constraint's gain, once
+            w = measurement_weights(z_run, self.info)
+            gamma = _smallest(w[self.length > 0])
+            self._set_split(self.absolute @ w)
+            self.gain[:] = 2.0 * self.length[:, None] / gamma  # times Ω r / (t + 1)
+            self.step_all[:] = self.split
+
+    def _set_split(self, m: Array) -> None:
+        """Each path entry's signed share ``±M_k⁻¹ / Σ_P M⁻¹`` (per dimension) from ``M``."""
+        m_inv = np.zeros_like(m)
+        np.divide(1.0, m, out=m_inv, where=m > 0)
+        mn = m_inv[self.nodes]
+        share = np.add.reduceat(mn, self.starts) if self.lca.size else mn
+        self.split = np.zeros_like(mn)
+        own = share[self.owner]
+        np.divide(mn * self.sign[:, None], own, out=self.split, where=own > 0)
 
     def step(self, x: Array, p: Array, t: int) -> None:
         """Iteration ``t`` in place on the parameters ``x`` (poses ``p`` at its start)."""
+        if self.rules == "toro":
+            self._toro_step(x, p, t)
+            return
         info = self.info
         c, s_ = np.cos(p[self.i, 2]), np.sin(p[self.i, 2])
         # diagonal of R Ω Rᵀ
@@ -483,21 +580,13 @@ class _Runs:
         wyy = s_ * s_ * info[:, 0, 0] + 2 * c * s_ * info[:, 0, 1] + c * c * info[:, 1, 1]
         w = np.column_stack((wxx, wyy, info[:, 2, 2]))
         m = self.absolute @ w
-        active = m > 0
-        gamma = np.where(active.any(axis=0), np.where(active, m, np.inf).min(axis=0), 1.0)
-        m_inv = np.zeros_like(m)
-        np.divide(1.0, m, out=m_inv, where=active)
-        frac = np.minimum(1.0, 2.0 * self.length[:, None] * w / (gamma * t))
+        frac = np.minimum(1.0, 2.0 * self.length[:, None] * w / (_smallest(m) * t))
         # what stays fixed within an iteration: the share of each path pose
         # (M_k⁻¹ / Σ_P M⁻¹, signed), the fractions, the top poses' headings
-        mn = m_inv[self.nodes]
-        share = np.add.reduceat(mn, self.starts) if self.lca.size else mn
-        split = np.zeros_like(mn)
-        own = share[self.owner]
-        np.divide(mn * self.sign[:, None], own, out=split, where=own > 0)
-        np.multiply(split, -frac[self.owner], out=self.step_all)
+        self._set_split(m)
+        np.multiply(self.split, -frac[self.owner], out=self.step_all)
         np.take(p[:, 2], self.lca, out=self.th_top)
-        for nodes, owner, starts, factor, step, top, za, zb, z_th in self.blocks:
+        for nodes, owner, starts, factor, step, top, za, zb, z_th, _, _ in self.blocks:
             xn = x[nodes]
             # (t_i − t_j, θ_i − θ_j) over the path and Σ of the i side's parameters, at once
             both = np.add.reduceat(xn[:, :, None] * factor, starts)
@@ -510,6 +599,31 @@ class _Runs:
             a -= _TWO_PI * np.rint(a / _TWO_PI)  # wrapped
             x[nodes] = xn + step * r[owner]  # the poses of a run are distinct
 
+    def _toro_step(self, x: Array, p: Array, t: int) -> None:
+        """TORO's iteration ``t``: a visit moves its path by ``u = 2|P| γ⁻¹ (R_i Ω Rᵢᵀ) r_c /
+        (t + 1)`` (per dimension ``γ``), where a dimension with ``|u| > |r|`` takes ``u = r``,
+        split along the path by the fixed shares."""
+        np.take(p[:, 2], self.lca, out=self.th_top)
+        scale = 1.0 / (t + 1.0)
+        for nodes, owner, starts, factor, split, top, za, zb, z_th, info, gain in self.blocks:
+            xn = x[nodes]
+            both = np.add.reduceat(xn[:, :, None] * factor, starts)
+            th = both[:, 2, 1]
+            th += top
+            c, s_ = np.cos(th), np.sin(th)
+            r = both[:, :, 0]
+            r[:, :2] += c[:, None] * za + s_[:, None] * zb
+            a = r[:, 2]
+            a += z_th
+            a -= _TWO_PI * np.rint(a / _TWO_PI)  # wrapped
+            # (R Ω Rᵀ) r: into the frame of i, through Ω, back
+            loc = np.column_stack((c * r[:, 0] + s_ * r[:, 1], c * r[:, 1] - s_ * r[:, 0], a))
+            g = np.einsum("eab,eb->ea", info, loc)
+            g[:, 0], g[:, 1] = c * g[:, 0] - s_ * g[:, 1], s_ * g[:, 0] + c * g[:, 1]
+            u = g * gain * scale
+            np.copyto(u, r, where=np.abs(u) > np.abs(r))
+            x[nodes] = xn - split * u[owner]
+
 
 def toro_optimize(
     graph: PoseGraph,
@@ -518,6 +632,7 @@ def toro_optimize(
     tree: TreeKind = "incremental",
     order: OrderKind = "depth",
     initial: InitialKind = "tree",
+    rules: RulesKind = "toro",
 ) -> TreeSolution:
     """Optimise a pose graph (pose–pose constraints only) as TORO does (module docstring).
 
@@ -530,11 +645,16 @@ def toro_optimize(
     tree : {"incremental", "breadth-first"}
     order : {"depth", "input"}
     initial : {"tree", "given"}
+    rules : {"toro", "papers"}
+        ``"toro"``: the step, weights, ``γ`` and one constraint per pose pair of OpenSLAM's
+        ``toro``, as measured on it; ``"papers"``: the update as the papers state it (module
+        docstring).
 
     Returns
     -------
     TreeSolution
-        The last iterate.
+        The last iterate; its cost counts every constraint of ``graph``, also those
+        ``rules="toro"`` left out (``dropped``).
     """
     if graph.pl_k.size:
         raise InputError("the TORO optimiser takes pose graphs only (no landmark factors)")
@@ -544,10 +664,18 @@ def toro_optimize(
         ("tree", tree, TORO_TREES),
         ("order", order, TORO_ORDERS),
         ("initial", initial, TORO_INITIAL),
+        ("rules", rules, TORO_RULES),
     ):
         if value not in allowed:
             raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
     n = graph.n_poses
+    full = graph
+    keep = first_per_pair(graph.pp_i, graph.pp_j) if rules == "toro" else None
+    if keep is not None and not keep.all():
+        graph = PoseGraph(
+            graph.poses, graph.landmarks, graph.pp_i[keep], graph.pp_j[keep],
+            graph.pp_z[keep], graph.pp_info[keep],
+        )  # fmt: skip
     pi, pj = graph.pp_i, graph.pp_j
     parent = spanning_tree(n, pi, pj)  # first: a pose not connected to pose 0 is said as such
     if tree == "incremental":
@@ -586,20 +714,21 @@ def toro_optimize(
         return p
 
     sweep = None
-    if _fixed_weights(info):
+    if _fixed_weights(info) if rules == "papers" else _diagonal_information(info):
         sweep = _TriangularSweep.build(
-            paths.signed[visit], paths.lca[visit], length[visit], z[visit], info[visit]
+            paths.signed[visit], paths.lca[visit], length[visit], z[visit], info[visit], rules
         )
     runs: _Runs | None = None  # built when first needed
     p = poses_of(x)
-    costs = [graph_cost(p, graph)]
+    costs = [graph_cost(p, full)]
     for t in range(1, iterations + 1):
-        if sweep is None or not sweep.step(x, p, t):
+        # TORO's fraction in iteration t is 2|P|W/(γ(t + 1)) (measured), the papers' /(γt)
+        if sweep is None or not sweep.step(x, p, t + 1 if rules == "toro" else t):
             if runs is None:
-                runs = _Runs(paths, visit, pi, z, info)
+                runs = _Runs(paths, visit, pi, z, info, rules)
             runs.step(x, p, t)
         p = poses_of(x)
-        costs.append(graph_cost(p, graph))
+        costs.append(graph_cost(p, full))
     p[:, 2] = se2.wrap_angle(p[:, 2])
     return TreeSolution(
         readonly(p),
@@ -608,4 +737,5 @@ def toro_optimize(
         readonly(parent, np.int64),
         float(paths.length.mean()) if paths.length.size else 0.0,
         len(runs.blocks) if runs is not None else 0,
+        int(keep.size - keep.sum()) if keep is not None else 0,
     )

@@ -122,6 +122,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="--method toro: visit constraints by tree depth of their top pose (depth, the "
         "paper's) or in input order (default: %(default)s)",
     )
+    s.add_argument(
+        "--toro-rules",
+        choices=("toro", "papers"),
+        default="toro",
+        help="--method toro: the step, weights and one constraint per pose pair of "
+        "OpenSLAM's toro as measured on it (toro), or the update as the papers state it "
+        "(papers) (default: %(default)s)",
+    )
     add_noise_argument(s)
     add_force_argument(s)
     s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
@@ -197,13 +205,20 @@ def run_solve(args: argparse.Namespace) -> int:
                 iterations=args.toro_iterations,
                 tree=args.toro_tree,
                 order=args.toro_order,
+                rules=args.toro_rules,
             )
+            if tree.dropped:
+                notes.append(
+                    f"TORO used one constraint per pose pair, the first: {tree.dropped} later "
+                    "parallel constraints were left out of the steps (the cost counts them)"
+                )
             poses = np.asarray(tree.poses)
             landmarks = np.asarray(problem.landmarks)
             converged = True  # a fixed number of passes, as TORO runs
             summary = (
                 f"TORO: {tree.iterations} iterations ({args.toro_tree} tree, mean path "
-                f"{tree.mean_path_length:.3g} poses, {args.toro_order} order): cost "
+                f"{tree.mean_path_length:.3g} poses, {args.toro_order} order, "
+                f"{args.toro_rules} rules): cost "
                 f"{tree.cost[0]:.6g} -> {tree.cost[-1]:.6g}"
             )
         else:
