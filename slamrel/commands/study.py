@@ -109,6 +109,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="method toro: iterations of the TORO solver (default: %(default)s)",
     )
     s.add_argument(
+        "--toro-rules",
+        choices=("toro", "papers"),
+        default="toro",
+        help="method toro: OpenSLAM toro's step as measured on it (toro), or the papers' "
+        "update (papers) (default: %(default)s)",
+    )
+    s.add_argument(
         "--workers",
         type=opt.positive_int,
         default=1,
@@ -150,6 +157,7 @@ def run_study(args: argparse.Namespace) -> int:
         pair_start=args.pair_start,
         min_common=args.min_common,
         toro_iterations=args.toro_iterations,
+        toro_rules=args.toro_rules,
     )
 
     def progress(line: str) -> None:

@@ -85,6 +85,7 @@ def run_case(
     pair_start: str = "truth",
     min_common: int = 5,
     toro_iterations: int = 100,
+    toro_rules: str = "papers",
     details: bool = False,
 ) -> dict[str, Any]:
     """One case of the study (pure: the same inputs give the same numbers).
@@ -99,6 +100,10 @@ def run_case(
     min_common : int
         Method 2's ``k``.
     toro_iterations : int
+    toro_rules : {"papers", "toro"}
+        :func:`~slamrel.backends.toro_optimiser.toro_optimize`'s ``rules``. The default
+        here is the papers' update, which the cases stored before ``toro_rules`` existed
+        (keyed without it) were computed with; :func:`study_tasks` asks for TORO's own.
     details : bool
         Also return per-pose errors and standard deviations (for the Fig. 1 analogue).
 
@@ -143,9 +148,7 @@ def run_case(
         constraints = int(graph.pp_i.size)
         relative = po.graph
         if method == "toro":
-            # the papers' update: the tables of notebooks/pose_only_study.ipynb were measured
-            # with it; TORO's own rules (the optimiser's default) await their regeneration
-            tree = toro_optimize(graph, iterations=toro_iterations, rules="papers")
+            tree = toro_optimize(graph, iterations=toro_iterations, rules=toro_rules)  # type: ignore[arg-type]
             graph = PoseGraph(
                 tree.poses,
                 np.empty((0, 2)),
@@ -208,8 +211,11 @@ def study_tasks(
     pair_start: str = "truth",
     min_common: int = 5,
     toro_iterations: int = 100,
+    toro_rules: str = "toro",
 ) -> list[Task]:
-    """The sweep's tasks, in table order; run 0 of each world/noise keeps per-pose details."""
+    """The sweep's tasks, in table order; run 0 of each world/noise keeps per-pose details.
+    ``toro_rules`` is in the TORO tasks' keys only when it is not ``"papers"``, so that the
+    cases stored before it existed are found again with ``"papers"``."""
     tasks = []
     for world in worlds:
         for noise in noises:
@@ -226,6 +232,8 @@ def study_tasks(
                     }
                     if method == "toro":
                         kwargs["toro_iterations"] = toro_iterations
+                        if toro_rules != "papers":
+                            kwargs["toro_rules"] = toro_rules
                     tasks.append(
                         Task(
                             f"{world}_{noise}_{seed:04d}_{method}",
