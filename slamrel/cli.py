@@ -164,7 +164,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = "slamrel"
     _single_threaded_blas()
     _no_huge_page_requests()
-    gc.set_threshold(GC_YOUNG_THRESHOLD, *gc.get_threshold()[1:])
+    thresholds = gc.get_threshold()
+    gc.set_threshold(GC_YOUNG_THRESHOLD, *thresholds[1:])
     try:
         with _stop_signals():
             try:
@@ -173,6 +174,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 outputs = sys.modules.get("slamrel.outputs")  # imported by commands that write
                 if outputs is not None:
                     outputs.release_claims()  # the lock files of folder outputs
+                gc.set_threshold(*thresholds)  # a caller's own (main called in process)
     except Terminated as exc:  # arrived between the command's end and the handlers' reset
         return _terminated("slamrel", exc)
     except KeyboardInterrupt:

@@ -308,22 +308,23 @@ def test_process_defaults_unless_the_user_says(preset, variable, setter, default
     assert out.stdout.split() == [preset or default, "None"]
 
 
-def test_a_command_collects_its_young_objects_less_often() -> None:
+def test_a_command_collects_its_young_objects_less_often(monkeypatch) -> None:
     """A slamrel command runs with Python's youngest-generation threshold raised to
-    GC_YOUNG_THRESHOLD (fewer collections while numpy, scipy and its modules load); the
-    older generations keep Python's thresholds."""
-    probe = (
-        "import gc\n"
-        "from slamrel import cli\n"
-        "before = gc.get_threshold()\n"
-        "try:\n"
-        "    cli.main(['--help'])\n"
-        "except SystemExit:\n"
-        "    pass\n"
-        "print(before, gc.get_threshold(), cli.GC_YOUNG_THRESHOLD)"
-    )
-    out = subprocess.run(
-        [sys.executable, "-c", probe], capture_output=True, text=True, check=True
-    ).stdout
-    # Python's defaults before; the young threshold raised after, the older ones kept
-    assert out.strip().splitlines()[-1] == "(700, 10, 10) (10000, 10, 10) 10000"
+    GC_YOUNG_THRESHOLD (fewer collections while numpy, scipy and its modules load), the
+    older generations at the caller's; the caller's thresholds are back afterwards."""
+    import gc
+
+    from slamrel import cli
+
+    seen = []
+    monkeypatch.setattr(cli, "_main", lambda argv: seen.append(gc.get_threshold()) or 0)
+    before = gc.get_threshold()
+    try:
+        gc.set_threshold(321, 7, 9)
+        assert cli.main([]) == 0
+        after = gc.get_threshold()
+    finally:
+        gc.set_threshold(*before)
+    assert cli.GC_YOUNG_THRESHOLD == 10_000
+    assert seen == [(10_000, 7, 9)]
+    assert after == (321, 7, 9)
