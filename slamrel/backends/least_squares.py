@@ -664,8 +664,9 @@ def solve_graph_incremental(
 
     Why this scheme: a fixed step (``growth=1``) is robust but solves ``N/batch``
     ever larger problems, O(N²/batch) work (14 solves on Victoria Park); one batch is
-    fastest where it works (7 iterations on a 10⁴-pose Manhattan graph against 34 grown)
-    but falls into the wrong minimum on Victoria Park (68 iterations to cost 2.5e5). So the
+    fastest where it works (7 iterations on a 10⁴-pose Manhattan graph against 34 grown,
+    LM starting at λ = 1e-4; 6 from :data:`LAMBDA_INITIAL`) but falls into the wrong minimum
+    on Victoria Park (68 iterations to cost 2.5e5). So the
     whole graph is tried first and abandoned as soon as it stalls (on Victoria Park at its
     2nd step, a few per cent of the run); then geometric growth solves O(log N)
     sub-problems whose sizes sum to about twice the last, each warm (the solved part starts
