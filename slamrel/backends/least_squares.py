@@ -57,9 +57,9 @@ never more iterations, the same cost to 10 digits and poses within 2.4·10⁻⁶
 a pose-only study graph) on Manhattan 10³ / 3.5·10³ / 10⁴ (seeds 0–2; one iteration fewer on
 8 of 9, e.g. 7 → 6 on 10⁴), Victoria Park (86 → 83, cost 3091.9662), city10000 (7 and 7,
 cost 15965.706), Victoria Park's pose-only M1/M2 graphs and 16 study graphs (hu-simple1/2,
-hu-complex1/2, noise a and c, two seeds; full and M2: 4 of 32 one or more fewer, none more).
-The graphs start from chained odometry, whose first Gauss–Newton steps are good: less damping
-takes them whole.
+hu-complex1/2, noise a and c, two seeds; full and M2: 5 of 32 one or more fewer, e.g.
+12 → 6, none more). The graphs start from chained odometry, whose first Gauss–Newton steps
+are good: less damping takes them whole.
 """
 
 
