@@ -278,23 +278,53 @@ def test_import_isam_bundle_refused_writes_nothing(
 
 
 @pytest.mark.parametrize("preset", [None, "2"])
-def test_one_blas_thread_unless_the_user_says(preset) -> None:
-    """A slamrel process runs OpenBLAS on one thread unless OPENBLAS_NUM_THREADS is set;
-    numpy, once imported, is left as it is."""
-    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+@pytest.mark.parametrize(
+    ("variable", "setter", "default"),
+    [
+        ("OPENBLAS_NUM_THREADS", "_single_threaded_blas", "1"),
+        ("NUMPY_MADVISE_HUGEPAGE", "_no_huge_page_requests", "0"),
+    ],
+)
+def test_process_defaults_unless_the_user_says(preset, variable, setter, default) -> None:
+    """A slamrel process runs OpenBLAS on one thread unless OPENBLAS_NUM_THREADS is set, and
+    asks numpy for no huge pages unless NUMPY_MADVISE_HUGEPAGE is set; numpy, once imported,
+    is left as it is."""
+    env = {k: v for k, v in os.environ.items() if k != variable}
     if preset:
-        env["OPENBLAS_NUM_THREADS"] = preset
+        env[variable] = preset
     probe = (
         "import os, sys\n"
         "from slamrel import cli\n"
-        "cli._single_threaded_blas()\n"
-        "first = os.environ.get('OPENBLAS_NUM_THREADS')\n"
-        "del os.environ['OPENBLAS_NUM_THREADS']\n"
+        f"cli.{setter}()\n"
+        f"first = os.environ.get('{variable}')\n"
+        f"del os.environ['{variable}']\n"
         "import numpy\n"
-        "cli._single_threaded_blas()\n"
-        "print(first, os.environ.get('OPENBLAS_NUM_THREADS'))"
+        f"cli.{setter}()\n"
+        f"print(first, os.environ.get('{variable}'))"
     )
     out = subprocess.run(
         [sys.executable, "-c", probe], capture_output=True, text=True, env=env, check=True
     )
-    assert out.stdout.split() == [preset or "1", "None"]
+    assert out.stdout.split() == [preset or default, "None"]
+
+
+def test_a_command_collects_its_young_objects_less_often(monkeypatch) -> None:
+    """A slamrel command runs with Python's youngest-generation threshold raised to
+    GC_YOUNG_THRESHOLD (fewer collections while numpy, scipy and its modules load), the
+    older generations at the caller's; the caller's thresholds are back afterwards."""
+    import gc
+
+    from slamrel import cli
+
+    seen = []
+    monkeypatch.setattr(cli, "_main", lambda argv: seen.append(gc.get_threshold()) or 0)
+    before = gc.get_threshold()
+    try:
+        gc.set_threshold(321, 7, 9)
+        assert cli.main([]) == 0
+        after = gc.get_threshold()
+    finally:
+        gc.set_threshold(*before)
+    assert cli.GC_YOUNG_THRESHOLD == 10_000
+    assert seen == [(10_000, 7, 9)]
+    assert after == (321, 7, 9)

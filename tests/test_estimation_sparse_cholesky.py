@@ -81,6 +81,35 @@ def test_unsorted_rows_within_columns_solve_the_same(rng, backend):
         np.testing.assert_allclose(chol.solve(b), expected, rtol=1e-9, atol=1e-12)
 
 
+def test_sorted_rows_check_matches_the_sort(rng):
+    """The check that lets a sorted pattern skip the sort answers as the sort would (its
+    order is the identity), on random CSC patterns with empty and one-entry columns, rows
+    falling across a column boundary, and a repeated row."""
+    from slamrel.backends.sparse_cholesky import _sorted_rows
+
+    seen = set()
+    for _ in range(300):
+        n = int(rng.integers(1, 6))
+        counts = rng.integers(0, 4, n)
+        indptr = np.concatenate(([0], np.cumsum(counts))).astype(np.int32)
+        rows = [np.sort(rng.choice(8, c, replace=False)) for c in counts]
+        if rng.random() < 0.4 and indptr[-1] > 1:  # shuffle one column, or repeat a row
+            j = int(rng.integers(n))
+            rows[j] = rng.permutation(rows[j]) if rng.random() < 0.5 else np.full(counts[j], 3)
+        indices = np.concatenate([*rows, np.empty(0, int)]).astype(np.int32)
+        col = np.repeat(np.arange(n), counts)
+        # strictly rising in every column <=> lexsort changes nothing and no row repeats
+        expected = bool(
+            np.array_equal(np.lexsort((indices, col)), np.arange(indices.size))
+            and all(np.unique(r).size == r.size for r in rows)
+        )
+        assert _sorted_rows(indptr, indices) == expected
+        seen.add(expected)
+    assert seen == {True, False}
+    # a drop across a column boundary is sorted: column 0 holds rows 0, 5; column 1 rows 1, 2
+    assert _sorted_rows(np.array([0, 2, 4], np.int32), np.array([0, 5, 1, 2], np.int32))
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_singular_matrix_is_a_divergence(backend):
     a = np.array([[2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 0.0, 1.0]])

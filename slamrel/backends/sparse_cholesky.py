@@ -163,6 +163,14 @@ def factor_flops(pattern: sp.spmatrix) -> float:
     return float(counts @ counts)
 
 
+def _sorted_rows(indptr: NDArray[np.integer], indices: NDArray[np.integer]) -> bool:
+    """Whether every column of the CSC pattern lists its rows strictly increasing."""
+    rising = np.diff(indices) > 0
+    ends = indptr[1:-1]  # a column's first entry: the pair before it spans two columns
+    rising[ends[(ends > 0) & (ends < indices.size)] - 1] = True
+    return bool(rising.all())
+
+
 class SparseCholesky:
     """Factorise and solve ``A x = b``, ``A`` SPD with a fixed CSC pattern.
 
@@ -214,9 +222,10 @@ class SparseCholesky:
         col = np.repeat(np.arange(self.size, dtype=np.int32), np.diff(self.indptr))
         # valid CSC may list a column's rows in any order; SuperLU and cvxopt's spmatrix.V
         # assume them sorted, so the pattern is sorted once and factor() permutes the values
-        order = np.lexsort((indices, col))
-        self._order = None if np.array_equal(order, np.arange(order.size)) else order
-        self.indices = indices if self._order is None else indices[order]
+        # (unless it is sorted already, as least squares builds it: an O(nnz) check, not
+        # the sort, 0.5 against 18 ms on Manhattan 10⁴)
+        self._order = None if _sorted_rows(self.indptr, indices) else np.lexsort((indices, col))
+        self.indices = indices if self._order is None else indices[self._order]
         upper = self.indices <= col
         self._upper = np.flatnonzero(upper)  # slots of the upper triangle, in CSC order
         upper_indptr = np.concatenate(([0], np.cumsum(np.bincount(col[upper], minlength=size))))

@@ -368,9 +368,8 @@ class SupernodalCholesky:
         """Numeric factorisation with values ``data`` (in the constructor's pattern order)."""
         vals = np.asarray(data, dtype=np.float64)[self._src]
         fpos, aoff, rel, children = self._fpos, self._aoff, self.rel, self.children
-        if self._l is None:  # touched in order once (scattered first touches: page faults)
-            self._l = np.zeros(self._l_off[-1])
-            self._l.fill(0.0)
+        if self._l is None:  # every entry is written below, in storage order
+            self._l = np.empty(self._l_off[-1])
             self._views = None
         frontbuf = _scratch("front", self._front_size, np.float64)
         stack = _scratch("stack", self._stack_size, np.float64)
