@@ -53,9 +53,10 @@ folder only to measure against (``benchmarks/bench_toro.py``).
   hu-complex1. On the complex worlds the iterates of either program depend on the last bits
   of the data (the cap is discontinuous where ``u ≈ −r``): measurements changed by 1e-12
   move slamrel's cost after one iteration on hu-complex2 by 1.1 % and after five
-  (hu-complex1 and 2) by 10–20 %, as much as it differs from ``toro``'s. Compared by the median over the graph and five such
-  copies, slamrel's cost after 100 iterations over ``toro``'s is 1.01 on hu-complex1 a and
-  0.95 on hu-complex2 a (``benchmarks/bench_toro.py``).
+  (hu-complex1 and 2) by 10–20 %, as much as it differs from ``toro``'s. Compared by the
+  median over the graph and five such copies, slamrel's cost after 100 iterations over
+  ``toro``'s is 0.89–1.01 on the eight graphs of the four worlds with noise a and c
+  (``benchmarks/bench_toro.py``; on the graphs alone 0.58–1.24).
 * **Order** (``order=``). ``"depth"`` (the RSS paper's): the constraints sorted by their
   level, the depth of the lowest common ancestor of their two poses, root side first (ties
   in input order). ``"input"``: the input order.
