@@ -275,20 +275,25 @@ def _paths(
     return _Paths(signed, a, np.diff(signed.indptr).astype(np.int64))
 
 
-def _root_paths(
-    parent: NDArray[np.int64], levels: list[NDArray[np.int64]], nodes: NDArray[np.int64]
-) -> sp.csr_matrix:
+def _root_paths(parent: NDArray[np.int64], nodes: NDArray[np.int64]) -> sp.csr_matrix:
     """Rows of ones over the root-to-``k`` path (``k`` and the root included) of every ``k``
-    in ``nodes``, shape (len(nodes), N): ``p_k = Σ`` of the parameters on it."""
-    n = parent.size
-    up: list[NDArray[np.int64]] = [np.zeros(1, dtype=np.int64)] + [np.empty(0, np.int64)] * (n - 1)
-    for level in levels[1:]:
-        for k in level.tolist():  # once per solve, Σ depth entries
-            up[k] = np.append(up[parent[k]], k)
-    rows = [up[k] for k in nodes.tolist()]
-    indptr = np.concatenate(([0], np.cumsum([r.size for r in rows])))
-    indices = np.concatenate(rows) if rows else np.empty(0, np.int64)
-    return sp.csr_matrix((np.ones(indices.size), indices, indptr), shape=(nodes.size, n))
+    in ``nodes``, shape (len(nodes), N): ``p_k = Σ`` of the parameters on it. All the
+    paths are climbed at once, one level a step."""
+    rows: list[NDArray[np.int64]] = []
+    cols: list[NDArray[np.int64]] = []
+    live = np.arange(nodes.size)
+    at = nodes.astype(np.int64)
+    while live.size:
+        rows.append(live)
+        cols.append(at)
+        up = parent[at]
+        keep = up >= 0
+        live, at = live[keep], up[keep]
+    r = np.concatenate(rows) if rows else np.empty(0, np.int64)
+    c = np.concatenate(cols) if cols else r
+    out = sp.csr_matrix((np.ones(r.size), (r, c)), shape=(nodes.size, parent.size))
+    out.sort_indices()
+    return out
 
 
 def _runs(
@@ -317,7 +322,7 @@ def _runs(
                 seen = ridx[rptr[c] : rptr[c + 1]]
                 k = max(int(next_run[nodes].max()), int(next_run[seen].max(initial=0)),
                         int(last_read[nodes].max()))  # fmt: skip
-                np.maximum.at(last_read, seen, k)
+                last_read[seen] = np.maximum(last_read[seen], k)  # distinct poses
             run_of[pos] = k
             next_run[nodes] = k + 1
     by_run = np.argsort(run_of, kind="stable")
@@ -404,7 +409,12 @@ def measurement_weights(z: Array, info: Array) -> Array:
     anisotropic constraints fit this rotation to 7·10⁻⁶ (its output precision) and no other
     of 14 candidates (the headings of ``i`` or ``j``, ``±δ_θ``, sums of these, none) to
     better than 0.06."""
-    c, s_ = np.cos(z[:, 2]), np.sin(z[:, 2])
+    return _turned_diagonal(z[:, 2], info)
+
+
+def _turned_diagonal(theta: Array, info: Array) -> Array:
+    """The diagonal of ``R(θ) Ω Rᵀ(θ)`` for every constraint, shape (E, 3)."""
+    c, s_ = np.cos(theta), np.sin(theta)
     wxx = c * c * info[:, 0, 0] - 2 * c * s_ * info[:, 0, 1] + s_ * s_ * info[:, 1, 1]
     wyy = s_ * s_ * info[:, 0, 0] + 2 * c * s_ * info[:, 0, 1] + c * c * info[:, 1, 1]
     return np.column_stack((wxx, wyy, info[:, 2, 2]))
@@ -562,11 +572,10 @@ class _Runs:
         info: Array,
         rules: RulesKind,
         parent: NDArray[np.int64],
-        levels: list[NDArray[np.int64]],
     ) -> None:
         self.rules = rules
         # TORO's rules read the top pose's heading as the visit finds it: its root path
-        reads = _root_paths(parent, levels, paths.lca) if rules == "toro" else None
+        reads = _root_paths(parent, paths.lca) if rules == "toro" else None
         runs = _runs(paths.signed, visit, reads)
         # the runs laid end to end: constraint slots [c0, c1) and path entries [n0, n1) per run
         concat = np.concatenate(runs) if runs else np.empty(0, np.int64)
@@ -626,12 +635,7 @@ class _Runs:
         if self.rules == "toro":
             self._toro_step(x, p, t)
             return
-        info = self.info
-        c, s_ = np.cos(p[self.i, 2]), np.sin(p[self.i, 2])
-        # diagonal of R Ω Rᵀ
-        wxx = c * c * info[:, 0, 0] - 2 * c * s_ * info[:, 0, 1] + s_ * s_ * info[:, 1, 1]
-        wyy = s_ * s_ * info[:, 0, 0] + 2 * c * s_ * info[:, 0, 1] + c * c * info[:, 1, 1]
-        w = np.column_stack((wxx, wyy, info[:, 2, 2]))
+        w = _turned_diagonal(p[self.i, 2], self.info)  # the global frame's weights
         m = self.absolute @ w
         frac = np.minimum(1.0, 2.0 * self.length[:, None] * w / (_smallest(m) * t))
         # what stays fixed within an iteration: the share of each path pose
@@ -779,7 +783,7 @@ def toro_optimize(
         # TORO's fraction in iteration t is 2|P|W/(γ(t + 1)) (measured), the papers' /(γt)
         if sweep is None or not sweep.step(x, p, t + 1 if rules == "toro" else t):
             if runs is None:
-                runs = _Runs(paths, visit, pi, z, info, rules, parent, levels)
+                runs = _Runs(paths, visit, pi, z, info, rules, parent)
             runs.step(x, p, t)
         p = poses_of(x)
         costs.append(graph_cost(p, full))
