@@ -12,6 +12,9 @@ import pytest
 
 from slamrel.pipeline import run_pipeline, write_report
 
+# the full tier: a real browser (chromium under Selenium) takes seconds to start and to drive
+pytestmark = pytest.mark.slow
+
 
 def _chromium() -> str:
     for name in ("chromium", "chromium-browser", "google-chrome"):

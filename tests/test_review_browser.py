@@ -22,6 +22,9 @@ from landmark_graph.maps import LandmarkMap
 from slamrel.cli import main
 from slamrel.formats.landmark_maps import write_map
 
+# the full tier: a real browser (chromium under Selenium) takes seconds to start and to drive
+pytestmark = pytest.mark.slow
+
 
 def _missing(message: str) -> None:
     message += "; .ci/run installs chromium and chromium-driver, pip install '.[test]' selenium"

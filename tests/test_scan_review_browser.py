@@ -10,10 +10,14 @@ must come back to the Python matcher's answer), save, and feed the saved file to
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from conftest import require_data
 from test_review_browser import _keys, _no_errors, _shot, browser  # noqa: F401 (fixture)
 
 from slamrel.cli import main
+
+# the full tier: a real browser (chromium under Selenium) takes seconds to start and to drive
+pytestmark = pytest.mark.slow
 
 
 def _relations(d):
