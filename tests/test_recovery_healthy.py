@@ -89,6 +89,15 @@ N_EFF = {"joint": 2, "marginal": 12}
 #: How far above the band the controls must be ("clearly above").
 CLEARLY = 1.5
 
+# Tiers: the default runs one run's acceptance (simple1, seed 0, both forms) and the cheap
+# control that the band can fail (simple1, map error ignored). The full tier (``--full``)
+# adds complex1, the other seeds, the pooled acceptance over all seeds with the controls of
+# its band and agreement, and the 3 x map-error control (the slowest: its smoother and batch
+# work against a map 3 x worse than stated): minutes of recoveries, hence not by default.
+FULL = pytest.mark.slow
+WORLD_TIERS = [pytest.param(w, marks=FULL if w != "simple1" else ()) for w in WORLDS]
+SEED_TIERS = [pytest.param(s, marks=FULL if s else ()) for s in SEEDS]
+
 
 @cache
 def _bundle(world: str, seed: int, form: str, scale: float = 1.0):  # type: ignore[no-untyped-def]
@@ -127,8 +136,8 @@ def _pooled_band(form: str, probability: float = 0.95) -> tuple[float, float]:
 
 
 @pytest.mark.parametrize("form", FORMS)
-@pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize("world", WORLDS)
+@pytest.mark.parametrize("seed", SEED_TIERS)
+@pytest.mark.parametrize("world", WORLD_TIERS)
 def test_acceptance_run(world: str, seed: int, form: str) -> None:
     """ACCEPTANCE (issue 23): one run, every method, both robust settings:
     NEES in the wide per-run band, smoother error ≤ filter's, batch ≤ 1.05 × smoother's."""
@@ -173,6 +182,7 @@ def _disagreement(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return abs(float(d.mean())) - AGREEMENT * 3.0, AGREEMENT_Z * se
 
 
+@FULL
 @pytest.mark.parametrize("form", FORMS)
 @pytest.mark.parametrize("world", WORLDS)
 def test_acceptance_mean_nees_in_band(world: str, form: str) -> None:
@@ -206,6 +216,7 @@ def test_acceptance_mean_nees_in_band(world: str, form: str) -> None:
 CAUGHT_FACTOR = {"joint": 3.0, "marginal": 2.0}
 
 
+@FULL
 @pytest.mark.parametrize("form", FORMS)
 def test_control_the_agreement_test_catches_a_method_whose_covariance_is_too_small(
     form: str,
@@ -225,6 +236,7 @@ def test_control_the_agreement_test_catches_a_method_whose_covariance_is_too_sma
 # ----------------------------------------------------------------- controls (pass on main)
 
 
+@FULL
 @pytest.mark.parametrize("form", FORMS)
 @pytest.mark.parametrize("world", WORLDS)
 def test_control_band_admits_a_consistent_recovery(world: str, form: str) -> None:
@@ -243,6 +255,7 @@ def test_control_band_admits_a_consistent_recovery(world: str, form: str) -> Non
         assert lo <= np.mean(v) <= hi, (robust, np.mean(v), (lo, hi), v)
 
 
+@FULL
 @pytest.mark.parametrize("form", FORMS)
 @pytest.mark.parametrize("world", WORLDS)
 def test_control_map_error_three_times_stated_is_caught(world: str, form: str) -> None:
@@ -258,7 +271,7 @@ def test_control_map_error_three_times_stated_is_caught(world: str, form: str) -
 
 
 @pytest.mark.parametrize("form", FORMS)
-@pytest.mark.parametrize("world", WORLDS)
+@pytest.mark.parametrize("world", WORLD_TIERS)
 def test_control_ignoring_the_map_error_is_caught(world: str, form: str) -> None:
     """Healthy bundles taken as exact maps (``map_mode="ignore"``): clearly above the band."""
     hi = _pooled_band(form)[1]

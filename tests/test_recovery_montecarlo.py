@@ -29,6 +29,7 @@ def _rmse(r, b) -> float:  # type: ignore[no-untyped-def]
     return float(np.sqrt(np.mean(np.sum(e * e, axis=1))))
 
 
+@pytest.mark.slow  # 50 runs x three methods: the smoother and the batch make it the full tier's
 @pytest.mark.parametrize("motion", ["velocity", "odometry"])
 def test_perfect_map_filter_consistent_smoother_and_batch_better(motion: str) -> None:
     nees = {m: [] for m in ("filter", "smoother", "batch")}

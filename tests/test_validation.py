@@ -73,6 +73,7 @@ def test_ate_at_reference_times_is_alignment_invariant():
     assert ate_at_reference_times(t_est, noisy, ref) == pytest.approx(0.05 * np.sqrt(2), rel=0.1)
 
 
+@pytest.mark.slow  # four recovery variants on robot 5's log: the full tier's
 def test_robust_recovery_on_mrclam_robot5():
     """Real data (MRCLAM dataset 7, robot 5, surveyed map): the plain EKF is thrown off by
     outliers (and with re-entry the divergence is reported), the Cauchy M-estimator is as good
@@ -91,7 +92,10 @@ def test_robust_recovery_on_mrclam_robot5():
     assert 0.0 < rows["cauchy"]["downweight_loss"] < rows["cauchy"]["downweighted_fraction"]
 
 
-@pytest.mark.parametrize("robot", [1, 2, 3, 4, 5])
+# robot 1 in the default tier; the other four (three recoveries each) in the full tier
+@pytest.mark.parametrize(
+    "robot", [1, *(pytest.param(r, marks=pytest.mark.slow) for r in (2, 3, 4, 5))]
+)
 def test_default_recovery_meets_issue_12_on_mrclam(robot: int) -> None:
     """The default's acceptance (MRCLAM dataset 7, fitted noise, surveyed map): the default
     filter's position ATE after SE(2) alignment at the Vicon times is ≤ 1.05 × min(plain EKF,
