@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 import pytest
@@ -100,3 +101,62 @@ def pytest_terminal_summary(
 def rng() -> np.random.Generator:
     """A seeded generator; tests that need several streams derive them from it."""
     return np.random.default_rng(20091122)
+
+
+# ------------------------------------------------------------------ runs many tests read
+#
+# A pipeline run with its report takes seconds (the figures are half of it); these are the
+# runs several test modules read without changing them, each computed once per session.
+# Tests that change what they read (write into the folder, monkeypatch the pipeline) make
+# their own.
+
+
+class SharedRun(NamedTuple):
+    """One ``slamrel run``: its report folder, what it printed, and the ``RunResult``."""
+
+    folder: Path
+    printed: str
+    result: Any  # slamrel.pipeline.RunResult (imported when the fixture runs)
+
+    @property
+    def html(self) -> Path:
+        return self.folder / "report.html"
+
+
+def _cli_run(folder: Path, argv: list[str]) -> SharedRun:
+    """``slamrel run ARGV -o FOLDER`` through the CLI, keeping the ``RunResult`` the report
+    was written from (a spy on :func:`slamrel.pipeline.run_pipeline`, which the command
+    calls once)."""
+    import contextlib
+    import io
+
+    import slamrel.pipeline as pipeline
+    from slamrel.cli import main
+
+    real = pipeline.run_pipeline
+    results = []
+
+    def spy(*args: Any, **kwargs: Any) -> Any:
+        results.append(real(*args, **kwargs))
+        return results[-1]
+
+    printed = io.StringIO()
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(printed):
+        mp.setattr(pipeline, "run_pipeline", spy)
+        code = main(["run", *argv, "-o", str(folder)])
+    assert code == 0, printed.getvalue()
+    assert len(results) == 1, f"slamrel run called run_pipeline {len(results)} times, not once"
+    return SharedRun(folder, printed.getvalue(), results[0])
+
+
+@pytest.fixture(scope="session")
+def quickstart_run(tmp_path_factory: pytest.TempPathFactory) -> SharedRun:
+    """``slamrel run`` as the quick start runs it: simple1, noise a, seed 0."""
+    return _cli_run(tmp_path_factory.mktemp("quickstart") / "report", ["simple1"])
+
+
+@pytest.fixture(scope="session")
+def broken_run(tmp_path_factory: pytest.TempPathFactory) -> SharedRun:
+    """``slamrel run simple1 --corrupt 0.1``: 10 % wrong associations in the reference
+    EKF-SLAM, a broken map with stretches where it and the log disagree."""
+    return _cli_run(tmp_path_factory.mktemp("broken") / "report", ["simple1", "--corrupt", "0.1"])

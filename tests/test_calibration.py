@@ -77,13 +77,13 @@ def _non_green(result) -> dict[str, str]:
     return {j.key: j.level for j in v.lines if j.level not in ("green", INFO)}
 
 
-def test_the_quick_start_verdict_is_pinned():
+def test_the_quick_start_verdict_is_pinned(quickstart_run):
     """``slamrel run`` (simple1, noise a, seed 0): the reference EKF-SLAM's online estimate is
     conservative (online NEES q 0.47: its covariance twice its error), which the calibration
     reports for this filter on noise a (q 0.47–0.94 over seeds 0–2); every other lamp is
     green, and the agreement line inherits the online lamp. A new default that changes any
     of this must change this test with a reason."""
-    r = run_pipeline("simple1")
+    r = quickstart_run.result
     assert _non_green(r) == {"online_consistency": "amber", "online": "amber"}
     v = run_verdict(RunFacts.of(r))
     assert v.level == "amber"

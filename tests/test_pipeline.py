@@ -78,12 +78,10 @@ def test_run_on_a_bundle_directory(tmp_path):
     assert main(["run", str(slam), "-o", str(tmp_path / "rep2"), "-q"]) == 3
 
 
-def test_run_on_a_broken_slam_run_reports_divergence(tmp_path, capsys):
+def test_run_on_a_broken_slam_run_reports_divergence(tmp_path, capsys, broken_run):
     """Divergence is a finding: exit 0, a report with the stretches; --fail-on-divergence
     exits 3 but still writes the report, scoring dead reckoning (and the online estimate)."""
-    out = tmp_path / "rep"
-    assert main(["run", "simple1", "--corrupt", "0.1", "-o", str(out)]) == 0
-    text = capsys.readouterr().out
+    out, text = broken_run.folder, broken_run.printed  # slamrel run simple1 --corrupt 0.1
     assert "DISAGREE" in text and "np.float64" not in text
     m = json.loads((out / "metrics.json").read_text())
     assert m["trajectory_source"] == "recovered" and m["recovery_error"] is None

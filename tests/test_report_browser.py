@@ -10,8 +10,6 @@ import subprocess
 import numpy as np
 import pytest
 
-from slamrel.pipeline import run_pipeline, write_report
-
 # the full tier: a real browser (chromium under Selenium) takes seconds to start and to drive
 pytestmark = pytest.mark.slow
 
@@ -27,9 +25,9 @@ def _chromium() -> str:
     pytest.skip(message)
 
 
-def test_report_renders_in_headless_chromium(tmp_path):
+def test_report_renders_in_headless_chromium(tmp_path, quickstart_run):
     browser = _chromium()
-    html = write_report(run_pipeline("simple1", noise="a", seed=0), tmp_path / "report")
+    html = quickstart_run.html
     shot = tmp_path / "shot.png"
     cmd = [
         browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

@@ -83,12 +83,9 @@ def test_nees_is_never_drawn_against_times_it_does_not_have() -> None:
 
 
 @pytest.fixture(scope="module")
-def simulated(tmp_path_factory: pytest.TempPathFactory):
-    from slamrel.pipeline import run_pipeline, write_report
-
-    result = run_pipeline("simple1", noise="a", seed=0, corrupt_fraction=0.1)
-    out = write_report(result, tmp_path_factory.mktemp("rep") / "report")
-    return result, out.read_text()
+def simulated(broken_run):
+    """simple1, noise a, seed 0, 10 % corrupted associations: the result and its page."""
+    return broken_run.result, broken_run.html.read_text()
 
 
 def test_nees_figure_spans_the_run_at_the_recovered_times(simulated) -> None:
@@ -175,10 +172,8 @@ def test_a_landmark_fit_beyond_c_does_not_place_the_map() -> None:
     assert "it does not place the map" in report_figures(result).trajectories.caption
 
 
-def test_a_good_landmark_fit_places_the_map_frame_estimates() -> None:
-    from slamrel.pipeline import run_pipeline
-
-    result = run_pipeline("simple1", noise="a", seed=0)
+def test_a_good_landmark_fit_places_the_map_frame_estimates(quickstart_run) -> None:
+    result = quickstart_run.result
     frames = result.display_frames
     assert frames["recovered"].short == frames["map"].short == "landmark fit"
     assert frames["dead_reckoning"].short == "SE(2) fit on the truth"

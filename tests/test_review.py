@@ -185,10 +185,8 @@ def test_saved_csv_format_is_what_map_compare_reads(tmp_path, rng):
     assert a.estimate_rows.size == 5 and ref.ids[a.missed].tolist() == [5]
 
 
-def test_run_report_links_the_review(tmp_path):
-    from slamrel.pipeline import run_pipeline, write_report
-
-    html = write_report(run_pipeline("simple1", noise="a", seed=0), tmp_path / "report")
+def test_run_report_links_the_review(quickstart_run):
+    html = quickstart_run.html
     assert '<a href="review.html">' in html.read_text()
     blob = page_data((html.parent / "review.html").read_text())
     assert blob["pairs"]["estimate"]  # the SLAM map against the true landmarks

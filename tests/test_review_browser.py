@@ -287,11 +287,9 @@ def test_two_thousand_landmarks_paint_and_filter_within_a_second(browser, tmp_pa
     )
 
 
-def test_report_opens_with_its_verdict_and_links_the_review(browser, tmp_path):
-    from slamrel.pipeline import run_pipeline, write_report
-
+def test_report_opens_with_its_verdict_and_links_the_review(browser, tmp_path, quickstart_run):
     d = browser
-    html = write_report(run_pipeline("simple1", noise="a", seed=0), tmp_path / "report")
+    html = quickstart_run.html
     d.get(html.as_uri())
     verdict = d.find_element("id", "verdict")
     # the verdict is the first thing under the title, inside the first screen

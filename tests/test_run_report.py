@@ -11,8 +11,6 @@ from typing import Any
 
 import pytest
 
-from slamrel.cli import main
-
 
 class _Page(html.parser.HTMLParser):
     """Section headings, tables (caption → rows of cell texts) and embedded images."""
@@ -53,10 +51,9 @@ class _Page(html.parser.HTMLParser):
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, _Page, dict[str, Any]]:
-    """One run with a broken map (stretches), through the CLI."""
-    out = tmp_path_factory.mktemp("run") / "rep"
-    assert main(["run", "simple1", "--corrupt", "0.1", "-o", str(out), "-q"]) == 0
+def report(broken_run: Any) -> tuple[Path, _Page, dict[str, Any]]:
+    """One run with a broken map (stretches), through the CLI (conftest's ``broken_run``)."""
+    out = broken_run.folder
     page = _Page()
     page.feed((out / "report.html").read_text())
     return out, page, json.loads((out / "metrics.json").read_text())
@@ -132,23 +129,34 @@ def test_map_tables_equal_metrics(report: tuple[Path, _Page, dict[str, Any]]) ->
     assert _close(assoc[6], mp["ospa"]["c"]) and _close(assoc[7], mp["ospa"]["p"])
 
 
+@pytest.fixture(scope="module")
+def rescored(report: tuple[Path, _Page, dict[str, Any]]) -> tuple[Any, Any]:
+    """The report's bundle read back and scored again by ``run_pipeline``, with the readers
+    made to fail while it runs: (the RunInput, the RunResult)."""
+    import slamrel.pipeline as pipeline
+
+    out, _, _ = report
+    inp = pipeline.read_run_input(out / "bundle")  # the report's bundle: map + ground truth
+
+    def no_io(*a: object, **k: object) -> None:
+        raise AssertionError("run_pipeline read a file")
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(pipeline, "read_bundle", no_io)
+        mp.setattr(pipeline, "read_online", no_io)
+        return inp, pipeline.run_pipeline(inp)
+
+
 def test_result_holds_the_map_once_and_reads_nothing(
-    report: tuple[Path, _Page, dict[str, Any]], monkeypatch: pytest.MonkeyPatch
+    report: tuple[Path, _Page, dict[str, Any]], rescored: tuple[Any, Any]
 ) -> None:
     """``run_pipeline`` on a RunInput does no I/O; the map JSON is derived from the comparison."""
     import slamrel.pipeline as pipeline
     from slamrel.report.run_page import RunSections
 
-    out, _, m = report
-    inp = pipeline.read_run_input(out / "bundle")  # the report's bundle: map + ground truth
+    _, _, m = report
+    inp, result = rescored
     assert inp.bundle.groundtruth is not None and inp.online is None
-
-    def no_io(*a: object, **k: object) -> None:
-        raise AssertionError("run_pipeline read a file")
-
-    monkeypatch.setattr(pipeline, "read_bundle", no_io)
-    monkeypatch.setattr(pipeline, "read_online", no_io)
-    result = pipeline.run_pipeline(inp)
     assert result.map == result.map_comparison.as_dict()  # type: ignore[union-attr]
     assert "map" not in {f.name for f in pipeline.RunResult.__dataclass_fields__.values()}
     # the same bundle scored again: the same map numbers as the first report
@@ -156,15 +164,11 @@ def test_result_holds_the_map_once_and_reads_nothing(
     assert set(RunSections._fields) == {"summary", "consistency", "agreement", "map"}
 
 
-def test_verdict_reads_the_numbers_metrics_holds(
-    report: tuple[Path, _Page, dict[str, Any]],
-) -> None:
+def test_verdict_reads_the_numbers_metrics_holds(rescored: tuple[Any, Any]) -> None:
     """The verdict judges the typed results; each is the number ``metrics.json`` writes."""
-    import slamrel.pipeline as pipeline
     from slamrel.report.verdict import RunFacts
 
-    out, _, _ = report
-    result = pipeline.run_pipeline(pipeline.read_run_input(out / "bundle"))
+    _, result = rescored
     m = json.loads(json.dumps(result.metrics()))
     f = RunFacts.of(result)
     assert f.main == m["trajectory_source"] == "recovered"
