@@ -52,6 +52,9 @@ from slamrel.report.tables import ResultErrors, compare_results
 ALPHA = 0.05
 SIGMA = np.array([0.02, 0.01, 0.004])  # drift step: x, y [m], θ [rad]
 PARTS = ("translation", "rotation")
+# Monte Carlo studies of the test's level and power (200 and 60 repetitions): the full tier;
+# tests/test_significance.py and tests/test_compare.py check the test itself by default
+pytestmark = pytest.mark.slow
 
 
 def drive(n: int) -> Trajectory:

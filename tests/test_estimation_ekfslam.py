@@ -21,6 +21,7 @@ def run(world, **kw):
     return ekf_slam_bundle(world_bundle(world), **kw)[1]
 
 
+@pytest.mark.slow  # 20 EKF-SLAM runs: Monte Carlo, the full tier's
 def test_online_pose_is_consistent_over_monte_carlo_runs():
     """Average NEES of the online pose over 20 seeded runs lies in the 95% χ² band."""
     runs = 20

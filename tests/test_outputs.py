@@ -79,6 +79,18 @@ FILE: dict[str, Argv] = {
     "import-isam": lambda r, o: ["import", "isam", str(r / "a.txt"), "-o", o],
 }
 
+
+def _written() -> list[object]:
+    """(kind, command) of every command that writes, for the failed-write and umask tests:
+    ``slamrel run`` renders a report with four figures each time, so its cases there are the
+    full tier's; its ``--force`` case and every refusal stay in the default tier."""
+    folders = [
+        pytest.param("folder", c, marks=pytest.mark.slow) if c == "run" else ("folder", c)
+        for c in RUNNABLE_FOLDER
+    ]
+    return folders + [("file", c) for c in FILE]
+
+
 # The function that does each command's first real work (reading inputs or computing).
 HEAVY = {  # the module that owns it: commands import the library inside their run functions
     "run": ("slamrel.pipeline", "read_run_input"),  # SOURCE is a bundle folder here
@@ -342,9 +354,7 @@ FAILURES = {
 
 
 @pytest.mark.parametrize("failure", FAILURES)
-@pytest.mark.parametrize(
-    "kind,command", [("folder", c) for c in RUNNABLE_FOLDER] + [("file", c) for c in FILE]
-)
+@pytest.mark.parametrize("kind,command", _written())
 def test_a_failed_write_leaves_the_previous_output_intact(
     kind: str,
     command: str,
@@ -374,9 +384,7 @@ def test_a_failed_write_leaves_the_previous_output_intact(
 
 
 @pytest.mark.parametrize("mask", [0o022, 0o077], ids=["022", "077"])
-@pytest.mark.parametrize(
-    "kind,command", [("folder", c) for c in RUNNABLE_FOLDER] + [("file", c) for c in FILE]
-)
+@pytest.mark.parametrize("kind,command", _written())
 def test_outputs_follow_the_umask(
     kind: str, command: str, mask: int, root: Path, umask: Callable[[int], None]
 ) -> None:
