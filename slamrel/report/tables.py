@@ -39,7 +39,8 @@ from relation_metric.significance import (
     paired_difference,
 )
 from relation_metric.stats import Summary, summarize
-from slamrel.formats.text import PathLike, read_csv_table, read_csv_text_column, read_source
+from slamrel.formats.results import read_per_relation_csv
+from slamrel.formats.text import PathLike
 
 __all__ = [
     "ALL_RELATIONS",
@@ -179,54 +180,20 @@ class ResultErrors:
 
 
 def read_per_relation(path: PathLike, *, dataset: str, algorithm: str) -> ResultErrors:
-    """Read a per-relation CSV of ``slamrel evaluate`` (only valid relations are kept).
+    """A per-relation CSV of ``slamrel evaluate`` as compared (only valid relations are kept).
 
-    Relations are keyed by their times ``t1 t2`` (as numbers, so that ``1.50`` and ``1.5``
-    pair) and, when the file has a ``set`` column, their relation set (without it every
-    relation is in the set :data:`ALL_RELATIONS`); the errors of invalid relations may be
-    empty.
+    The file is read by the format's one reader,
+    :func:`slamrel.formats.results.read_per_relation_csv`. Relations are keyed by their
+    times ``t1 t2`` (as numbers, so that ``1.50`` and ``1.5`` pair) and, when the file has a
+    ``set`` column, their relation set (without it every relation is in the set
+    :data:`ALL_RELATIONS`); a relation twice in one set cannot be paired and is refused.
     """
-    rot_names = ("rot_error_rad", "rot_error_deg")
-    src = read_source(path)
-    table = read_csv_table(
-        path,
-        required=("t1", "t2", "trans_error", rot_names, "valid"),
-        empty_ok=("trans_error", *rot_names),
-        describe="the per-relation CSV of slamrel evaluate",
-        source=src,
-    )
-    c, lines = table
-    set_column = read_csv_text_column(src, "set")
-    rot_col = next(n for n in rot_names if n in c)
-    valid = c["valid"]
-    bad = np.flatnonzero((valid != 0) & (valid != 1))
-    if bad.size:
-        raise InputError(
-            f"column 'valid': expected 0 or 1, got {float(valid[bad[0]]):g}",
-            path=path,
-            line=int(lines[bad[0]]),
-        )
-    if set_column is not None:
-        unnamed = np.flatnonzero(set_column == "")
-        if unnamed.size:
-            raise InputError(
-                "column 'set': an empty cell; expected the name of the relation set",
-                path=path,
-                line=int(lines[unnamed[0]]),
-            )
-    keep = valid == 1
-    trans, rot = c["trans_error"][keep], c[rot_col][keep]
-    empty = np.flatnonzero(np.isnan(trans) | np.isnan(rot))
-    if empty.size:
-        raise InputError(
-            "a valid relation without an error value; expected numbers in trans_error and "
-            f"{rot_col}",
-            path=path,
-            line=int(lines[keep][empty[0]]),
-        )
-    t1, t2 = c["t1"][keep], c["t2"][keep]
+    table = read_per_relation_csv(path)
+    keep, lines = table.valid, table.lines
+    trans, rot = table.translation[keep], table.rotation[keep]
+    t1, t2 = table.t1[keep], table.t2[keep]
     k = np.char.add(np.char.add(t1.astype(str), " "), t2.astype(str))
-    sets = None if set_column is None else set_column[keep]
+    sets = None if table.relation_set is None else table.relation_set[keep]
     paired = k if sets is None else np.char.add(np.char.add(sets, _SEP), k)
     uniq, counts = np.unique(paired, return_counts=True)
     if (counts > 1).any():
@@ -238,7 +205,7 @@ def read_per_relation(path: PathLike, *, dataset: str, algorithm: str) -> Result
             line=int(lines[keep][dup]),
         )
     return ResultErrors(
-        dataset, algorithm, k, trans, rot, rot_col.removeprefix("rot_error_"),
+        dataset, algorithm, k, trans, rot, table.rotation_unit,
         t1=t1, t2=t2, relation_set=sets,
     )  # fmt: skip
 
