@@ -9,7 +9,8 @@ and part (translation, rotation): the mean paired difference of the abs errors A
 confidence interval and a two-sided p-value from a circular block bootstrap over the
 relations in time order (:func:`relation_metric.significance.paired_difference`: relations
 that share a stretch of the run are dependent, and the blocks keep that dependence), the
-p-values Holm-adjusted over all tests of the table.
+p-values Holm-adjusted over all tests of the table
+(:func:`relation_metric.significance.holm_adjust`).
 
 Inputs are the per-relation CSV files of ``slamrel evaluate --per-relation`` (or of
 ``slamrel run``); relations are paired by their relation set and ``(t1, t2)`` as written
@@ -36,6 +37,7 @@ from relation_metric.significance import (
     MIN_BLOCKS,
     OVERLAP_FACTOR,
     PairedDifference,
+    holm_adjust,
     paired_difference,
 )
 from relation_metric.stats import Summary, summarize
@@ -49,7 +51,6 @@ __all__ = [
     "PairTest",
     "Comparison",
     "compare_results",
-    "holm",
 ]
 
 ALL_RELATIONS = "all"
@@ -479,19 +480,6 @@ def _tex(s: str) -> str:
     return "".join(_TEX_SPECIAL.get(c, c) for c in s)
 
 
-def holm(p: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Holm–Bonferroni adjusted p-values (step-down, monotone, capped at 1)."""
-    p = np.asarray(p, dtype=np.float64)
-    m = p.size
-    if m == 0:
-        return p
-    order = np.argsort(p)
-    adj = np.maximum.accumulate((m - np.arange(m)) * p[order])
-    out = np.empty(m)
-    out[order] = np.minimum(adj, 1.0)
-    return out
-
-
 def _test_seed(seed: int, *names: str) -> np.random.SeedSequence:
     """The bootstrap seed of one test: from ``seed`` and the test's names (not its position,
     so adding a result to a table leaves the other tests' resamples as they were)."""
@@ -585,7 +573,7 @@ def compare_results(
                     raw.append((ds, name, a.algorithm, b.algorithm, part, diff))
     tested = np.array([x[5].tested for x in raw], dtype=bool)
     p_holm = np.full(len(raw), np.nan)
-    p_holm[tested] = holm(np.array([x[5].p_value for x in raw])[tested])
+    p_holm[tested] = holm_adjust(np.array([x[5].p_value for x in raw])[tested])
     tests = [
         PairTest(
             ds,
