@@ -298,7 +298,7 @@ def test_a_joint_problem_beyond_memory_is_refused_before_any_work(
     budget (half the machine's memory) they are refused with the sizes, before the filter runs,
     instead of the out-of-memory killer ending the process (10^5 steps, 2,000 landmarks: 41 GB);
     the filter needs no such arrays and still runs."""
-    import recovery.batch as rb
+    import recovery.batch_refinement as rb
     from recovery.recover import recover
     from relation_metric.errors import InputError
     from slamrel.formats.bundle import read_bundle
