@@ -448,7 +448,7 @@ class MapComparison:
         well = e.corner_angle[~self.mesh.thin].ravel()
 
         def summ(v: Any) -> dict[str, Any]:
-            return {k: s.as_dict() for k, s in error_summaries(v).items()}
+            return error_summaries(v).as_dict()
 
         on = self.observable_set
         k_obs = int(self.observable.sum())

@@ -49,7 +49,7 @@ RELATION_METRIC = [
         "                     ('global', {'count': 2000, 'seed': 1})]:\n"
         "    rel = generate_relations(reference, strategy, **kw)\n"
         "    ev = evaluate(rel, estimate)\n"
-        "    t, r = ev.translation['abs'], ev.rotation['abs']\n"
+        "    t, r = ev.translation.abs, ev.rotation.abs\n"
         "    rows.append((strategy, len(rel), t.mean, t.std, r.mean))\n"
         "    print(f'{strategy:12s} {len(rel):5d} relations: trans {t.mean:.4f} ± {t.std:.4f} m, rot {r.mean:.4f} rad')\n"
         "assert rows[2][2] > 5 * rows[0][2]  # global relations expose the drift"
@@ -87,7 +87,7 @@ RELATION_METRIC = [
         "    odo = read_trajectory(data / 'mit-csail.clf', pose='odometry').trajectory\n"
         "    ev = evaluate(read_relations(data / 'mit-csail.relations'), est, odometry=odo,\n"
         "                  mode='metricevaluator', weights='1,1,0,0,0,0')\n"
-        "    s = ev.combined['abs']\n"
+        "    s = ev.combined.abs\n"
         "    print(f'{s.mean:.6f} ± {s.std:.6f} m, min {s.min:.6f}, max {s.max:.6f}, n = {s.count}')\n"
         "    assert f'{s.mean:.6f}' == '0.030205'\n"
         "else:\n"
@@ -125,7 +125,7 @@ RUN_WALKTHROUGH = [
         "recovered = Trajectory(truth.timestamps, rec.trajectory.poses[k])\n"
         "rel = generate_relations(truth, 'global', count=2000, seed=0)\n"
         "for name, est in [('recovered', recovered), ('dead reckoning', world.odometry)]:\n"
-        "    print(f\"{name:15s} {evaluate(rel, est).translation['abs'].mean:.4f} m\")\n"
+        "    print(f\"{name:15s} {evaluate(rel, est).translation.abs.mean:.4f} m\")\n"
         "rec.report()['measurements']"
     ),
     new_markdown_cell(
@@ -140,7 +140,7 @@ RUN_WALKTHROUGH = [
         "for gate in (None, 0.999):\n"
         "    r = recover(broken, method='smoother', gate=gate, max_outlier_run=None)\n"
         "    k = np.searchsorted(r.trajectory.timestamps, truth.timestamps)\n"
-        "    e = evaluate(rel, Trajectory(truth.timestamps, r.trajectory.poses[k])).translation['abs'].mean\n"
+        "    e = evaluate(rel, Trajectory(truth.timestamps, r.trajectory.poses[k])).translation.abs.mean\n"
         '    print(f"gate {gate}: global error {e:.3f} m, gated {100 * r.counts.gated_fraction:.1f}% of the measurements")'
     ),
     new_markdown_cell(
@@ -399,7 +399,7 @@ MRCLAM = [
         "        for name, est in (('recovered', rec.trajectory), ('dead reckoning', dead), ('raw odometry', dead_raw)):\n"
         "            for rs, rel in sets.items():\n"
         "                ev = evaluate(rel, est, max_time_diff=0.05, interpolate=True)\n"
-        "                t = ev.translation['abs']\n"
+        "                t = ev.translation.abs\n"
         "                print(f'{name:15s} {rs:16s} {t.mean:.4f} ± {t.std:.4f} m over {t.count} relations')\n"
         "    print(rec.report()['measurements'])"
     ),
@@ -508,7 +508,7 @@ MRCLAM = [
         "    x = np.arange(1, 6)\n"
         "    for ax, rs in zip(axes[:2], ('1 s', 'loops')):\n"
         "        for k, name in enumerate(('EKF-SLAM + recovery', 'dead reckoning')):\n"
-        "            st_ = [comparison.stats[f'robot {r} {rs}', name]['translation']['abs'] for r in x]\n"
+        "            st_ = [comparison.stats[f'robot {r} {rs}', name].translation.abs for r in x]\n"
         "            ax.bar(x + (k - 0.5) * 0.38, [q.mean for q in st_], 0.38, yerr=[q.std for q in st_], label=name)\n"
         "        ax.set_title(f'{rs} relations'); ax.set_xlabel('robot'); ax.set_ylabel('translation error [m]')\n"
         "    axes[1].set_yscale('log'); axes[0].legend(fontsize=8)\n"

@@ -18,7 +18,7 @@ from relation_metric.errors import AssociationError, InputError
 from relation_metric.groups import SE3
 from relation_metric.metric import Mode, RelationErrors, relation_errors
 from relation_metric.relations import RelationSet
-from relation_metric.stats import Summary, summarize_with_squares
+from relation_metric.stats import ErrorStats, summarize_with_squares
 from relation_metric.time_association import REASONS, SAME_POSE, Association, associate
 from relation_metric.trajectory import Trajectory
 
@@ -55,16 +55,16 @@ class Evaluation:
         Estimate poses of both ends of every relation.
     errors : RelationErrors
         Per-relation errors over all relations (NaN where unassociated).
-    translation, rotation, combined : dict of {"abs", "sqr"} → Summary
-        Statistics over the associated relations; rotation in radians.
+    translation, rotation, combined : ErrorStats
+        Statistics over the associated relations (``.abs``, ``.sqr``); rotation in radians.
     """
 
     relations: RelationSet
     association: Association
     errors: RelationErrors
-    translation: dict[str, Summary]
-    rotation: dict[str, Summary]
-    combined: dict[str, Summary]
+    translation: ErrorStats
+    rotation: ErrorStats
+    combined: ErrorStats
 
     @property
     def valid(self) -> NDArray[np.bool_]:
@@ -74,7 +74,7 @@ class Evaluation:
     @property
     def epsilon(self) -> float:
         """Kümmerle et al. Eq. 2: ε = 1/N Σ trans(e)² + rot(e)² (m² + rad²)."""
-        return self.translation["sqr"].mean + self.rotation["sqr"].mean
+        return self.translation.sqr.mean + self.rotation.sqr.mean
 
     def as_dict(self, *, degrees: bool = False) -> dict[str, Any]:
         """The JSON structure of ``slamrel evaluate --json`` (NaN written as ``null``)."""
@@ -91,9 +91,9 @@ class Evaluation:
             "rotation_unit": "deg" if degrees else "rad",
             "mode": self.errors.mode,
             "weights": list(self.errors.weights),
-            "translation": {k: v.as_dict() for k, v in self.translation.items()},
-            "rotation": {k: v.as_dict() for k, v in rot.items()},
-            "combined": {k: v.as_dict() for k, v in self.combined.items()},
+            "translation": self.translation.as_dict(),
+            "rotation": rot.as_dict(),
+            "combined": self.combined.as_dict(),
             "epsilon": _json_float(self.epsilon),
         }
 
@@ -166,10 +166,9 @@ def _json_float(x: float) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def error_summaries(values: ArrayLike) -> dict[str, Summary]:
-    """``{"abs": summarize(|e|), "sqr": summarize(e²)}`` of non-negative errors ``e``."""
-    abs_part, sqr_part = summarize_with_squares(values)
-    return {"abs": abs_part, "sqr": sqr_part}
+def error_summaries(values: ArrayLike) -> ErrorStats:
+    """``ErrorStats(abs=summarize(|e|), sqr=summarize(e²))`` of non-negative errors ``e``."""
+    return ErrorStats(*summarize_with_squares(values))
 
 
 def evaluate(

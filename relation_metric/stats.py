@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["Summary", "summarize", "summarize_with_squares", "STAT_NAMES"]
+__all__ = ["Summary", "ErrorStats", "summarize", "summarize_with_squares", "STAT_NAMES"]
 
 STAT_NAMES = ("mean", "std", "min", "max", "median", "rmse", "count")
 
@@ -38,6 +38,28 @@ class Summary:
                 if isinstance(value, float) and not math.isfinite(value):
                     out[key] = None
         return out
+
+
+@dataclass(frozen=True)
+class ErrorStats:
+    """Statistics of one error part (translation, rotation, ...): of the absolute errors
+    ``|e|`` (``abs``) and of their squares ``e²`` (``sqr``), as the metricEvaluator prints
+    them without and with ``-q``.
+
+    Attributes
+    ----------
+    abs : Summary
+        Of ``|e|``.
+    sqr : Summary
+        Of ``e²`` (its ``mean`` is the part's share of Kümmerle et al.'s ε).
+    """
+
+    abs: Summary
+    sqr: Summary
+
+    def as_dict(self) -> dict[str, dict[str, float | int | None]]:
+        """The JSON form ``{"abs": {...}, "sqr": {...}}`` (NaN written as ``None``)."""
+        return {"abs": self.abs.as_dict(), "sqr": self.sqr.as_dict()}
 
 
 def summarize(values: ArrayLike) -> Summary:

@@ -372,8 +372,8 @@ class MapSummary:
     def of(cls, mc: MapComparison) -> MapSummary:
         a = mc.association
         return cls(
-            edge=error_summaries(mc.errors.edge_length)["abs"],
-            corner=error_summaries(mc.errors.corner_angle.ravel())["abs"],
+            edge=error_summaries(mc.errors.edge_length).abs,
+            corner=error_summaries(mc.errors.corner_angle.ravel()).abs,
             matched=int(a.estimate_rows.size),
             missed=int(mc.missed.size),
             spurious=int(a.spurious.size),

@@ -62,7 +62,7 @@ def _seeds(text: str) -> list[int]:
 
 def _error(bundle, recovery) -> float:  # type: ignore[no-untyped-def]
     rel = slamrel.generate_relations(bundle.groundtruth, "global", count=500, seed=0)
-    return float(slamrel.evaluate(rel, recovery.trajectory).translation["abs"].mean)
+    return float(slamrel.evaluate(rel, recovery.trajectory).translation.abs.mean)
 
 
 def table(worlds, seeds, forms, scale: float, map_mode: str | None) -> None:  # type: ignore[no-untyped-def]

@@ -36,7 +36,7 @@ def test_clearly_different_algorithms_are_significant(rng):
     assert not tests[("good", "same", "rotation")].significant  # identical: p = 1
     assert tests[("good", "same", "rotation")].p_value == 1.0
     assert {t.relation_set for t in comp.tests} == {"all"}  # no set column: one set
-    st = comp.stats[("d", "bad")]["translation"]["abs"]
+    st = comp.stats[("d", "bad")].translation.abs
     assert st.mean == pytest.approx(np.mean(base * 3)) and st.count == 200
 
 
@@ -50,8 +50,8 @@ def test_pairs_only_common_relations():
     # two relations are no basis for a test: said, not a p-value
     assert not t.difference.tested and np.isnan(t.p_value) and not t.significant
     # means side by side are over the same two relations (hand: a 0.25, b 0.15), counted
-    assert comp.stats[("d", "a")]["translation"]["abs"].mean == pytest.approx(0.25)
-    assert comp.stats[("d", "b")]["translation"]["abs"].mean == pytest.approx(0.15)
+    assert comp.stats[("d", "a")].translation.abs.mean == pytest.approx(0.25)
+    assert comp.stats[("d", "b")].translation.abs.mean == pytest.approx(0.15)
     assert comp.left_out == {("d", "a"): 1, ("d", "b"): 1}
     assert "left out" in comp.markdown()
 

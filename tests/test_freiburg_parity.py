@@ -57,7 +57,7 @@ def test_summary_equals_metricevaluator(run, part):
     name, bench, relations, est, odo = run
     ev = evaluate(relations, est, odometry=odo, mode="metricevaluator", weights=WEIGHTS[part])
     mean, std, mn, mx, n = reference_stats(bench / f"stdVar{part}.errors")
-    s = ev.combined["abs"]
+    s = ev.combined.abs
     assert s.count == n
     assert (f"{s.mean:.6f}", f"{s.std:.6f}", f"{s.min:.6f}", f"{s.max:.6f}") == (
         f"{mean:.6f}",
@@ -89,8 +89,8 @@ def test_run_08_uses_odometry_and_paper_mode_agrees():
     ev = evaluate(relations, est, odometry=odo)
     assert ev.as_dict()["associated_by_odometry"] > 0
     # on planar data the paper's δ ⊖ δ* has the same translational norm
-    assert f"{ev.translation['abs'].mean:.6f}" == "0.030205"
-    assert f"{ev.rotation['abs'].mean:.6f}" == "0.007309"
+    assert f"{ev.translation.abs.mean:.6f}" == "0.030205"
+    assert f"{ev.rotation.abs.mean:.6f}" == "0.007309"
 
 
 @pytest.mark.realdata

@@ -115,7 +115,7 @@ def _run(
     b = _bundle(world, seed, form, scale)
     r = recover(b, method=method, robust=robust, map_mode=map_mode)
     assert r.nees_stats is not None and r.nees_stats.mean is not None
-    err = slamrel.evaluate(_relations(world, seed), r.trajectory).translation["abs"].mean
+    err = slamrel.evaluate(_relations(world, seed), r.trajectory).translation.abs.mean
     return float(r.nees_stats.mean), float(err)
 
 

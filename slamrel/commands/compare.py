@@ -139,11 +139,11 @@ def _figure(comp, path: Path) -> None:  # type: ignore[no-untyped-def]
     ):
         for k, alg in enumerate(algorithms):
             means = [
-                comp.stats[(ds, alg)][part]["abs"].mean if (ds, alg) in comp.stats else np.nan
+                comp.stats[(ds, alg)].part(part, "abs").mean if (ds, alg) in comp.stats else np.nan
                 for ds in datasets
             ]
             stds = [
-                comp.stats[(ds, alg)][part]["abs"].std if (ds, alg) in comp.stats else np.nan
+                comp.stats[(ds, alg)].part(part, "abs").std if (ds, alg) in comp.stats else np.nan
                 for ds in datasets
             ]
             ax.bar(x + k * width - 0.4 + width / 2, means, width, yerr=stds, capsize=3, label=alg)

@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
                 if set_name in evs:
                     ev = evs[set_name]
                     print(
-                        f"{name:16s}{set_name:>13s}{ev.translation['abs'].mean:16.4f}{ev.rotation['abs'].mean:16.4f}"
+                        f"{name:16s}{set_name:>13s}{ev.translation.abs.mean:16.4f}{ev.rotation.abs.mean:16.4f}"
                     )
         ms = result.map_summary
         if ms is not None:

@@ -188,7 +188,7 @@ def _errors_over_time(ax_t: Axes, ev: Evaluation, estimate: Trajectory, degrees:
     ax_r = ax_t.twinx()
     ax_r.plot(x_axis, rot, ".", ms=3, color="tab:red", alpha=0.6)
     ax_r.set_ylabel(f"rotational error [{'deg' if degrees else 'rad'}]", color="tab:red")
-    s = ev.translation["abs"]
+    s = ev.translation.abs
     ax_t.set_title(
         f"{s.count} relations scored, {int((~valid).sum())} unassociated; "
         f"translation {s.mean:.4g} ± {s.std:.4g} m"

@@ -350,8 +350,8 @@ def _stats_table(result: RunResult, part: str) -> Table:
     rows = []
     for name, evs in result.evaluations.items():
         for set_name, ev in evs.items():
-            s = getattr(ev, part)["abs"]
-            q = getattr(ev, part)["sqr"]
+            s = getattr(ev, part).abs
+            q = getattr(ev, part).sqr
             rows.append([name, set_name, s.mean, s.std, q.mean, s.max, s.count])
     u = "m" if part == "translation" else "rad"
     return Table(

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric.errors import InputError
+from relation_metric.evaluate import error_summaries
 from relation_metric.significance import (
     DEFAULT_RESAMPLES,
     MIN_BLOCKS,
@@ -40,7 +41,7 @@ from relation_metric.significance import (
     holm_adjust,
     paired_difference,
 )
-from relation_metric.stats import Summary, summarize
+from relation_metric.stats import ErrorStats, Summary
 from slamrel.formats.results import read_per_relation_csv
 from slamrel.formats.text import PathLike
 
@@ -263,10 +264,25 @@ class PairTest:
 
 
 @dataclass(frozen=True)
+class ResultStats:
+    """The statistics of one result's common relations: translation [m] and rotation (in
+    the comparison's unit), each of ``|e|`` and ``e²``."""
+
+    translation: ErrorStats
+    rotation: ErrorStats
+
+    def part(self, part: str, kind: str) -> Summary:
+        """``part`` ("translation" or "rotation"), ``kind`` ("abs" or "sqr"): for tables
+        that walk the columns."""
+        stats: ErrorStats = getattr(self, part)
+        return stats.abs if kind == "abs" else stats.sqr
+
+
+@dataclass(frozen=True)
 class Comparison:
     """Statistics per (dataset, algorithm) and pairwise tests per dataset and relation set."""
 
-    stats: dict[tuple[str, str], dict[str, dict[str, Summary]]]
+    stats: dict[tuple[str, str], ResultStats]
     tests: list[PairTest]
     alpha: float
     rotation_unit: str
@@ -280,8 +296,8 @@ class Comparison:
             row: list[Any] = [ds, alg]
             for part in ("translation", "rotation"):
                 for kind in ("abs", "sqr"):
-                    row += [st[part][kind].mean, st[part][kind].std]
-            row.append(st["translation"]["abs"].count)
+                    row += [st.part(part, kind).mean, st.part(part, kind).std]
+            row.append(st.translation.abs.count)
             out.append(row)
         return out
 
@@ -407,7 +423,7 @@ class Comparison:
         body = []
         for (ds, alg), st in self.stats.items():
             cells = [
-                f"${st[p][k].mean:.4g} \\pm {st[p][k].std:.4g}$"
+                f"${st.part(p, k).mean:.4g} \\pm {st.part(p, k).std:.4g}$"
                 for p in ("translation", "rotation")
                 for k in ("abs", "sqr")
             ]
@@ -547,12 +563,11 @@ def compare_results(
         seen.add(key)
         _check_errors(r)
     results, left_out = _common_relations(results)
-    stats: dict[tuple[str, str], dict[str, dict[str, Summary]]] = {}
+    stats: dict[tuple[str, str], ResultStats] = {}
     for r in results:
-        stats[(r.dataset, r.algorithm)] = {
-            "translation": {"abs": summarize(r.translation), "sqr": summarize(r.translation**2)},
-            "rotation": {"abs": summarize(r.rotation), "sqr": summarize(r.rotation**2)},
-        }
+        stats[(r.dataset, r.algorithm)] = ResultStats(
+            error_summaries(r.translation), error_summaries(r.rotation)
+        )
     raw: list[tuple[str, str, str, str, str, PairedDifference]] = []
     for ds in dict.fromkeys(r.dataset for r in results):
         group = [r for r in results if r.dataset == ds]

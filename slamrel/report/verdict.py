@@ -285,7 +285,7 @@ class RunFacts:
         return cls(
             main=main,
             translation_errors={
-                k: evs["all"].translation["abs"].mean for k, evs in result.evaluations.items()
+                k: evs["all"].translation.abs.mean for k, evs in result.evaluations.items()
             },
             relations=int(scored.valid.sum()),
             nees=None if curve is None else curve.summary,

@@ -149,7 +149,7 @@ def faithfulness_study(
         div = r.recovery.get("divergence") or {}
         rows.append(
             [
-                r.evaluations[k][s].translation["abs"].mean
+                r.evaluations[k][s].translation.abs.mean
                 for k in ("online", "recovered")
                 for s in ("global", "consecutive")
             ]
@@ -280,7 +280,7 @@ def _mean_translation_error(
 
     with warnings.catch_warnings():  # relations beyond the estimate's span are reported, not used
         warnings.simplefilter("ignore")
-        return float(evaluate(rel, Trajectory(times, poses)).translation["abs"].mean)
+        return float(evaluate(rel, Trajectory(times, poses)).translation.abs.mean)
 
 
 def recovery_variants_table(
