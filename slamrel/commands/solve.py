@@ -27,7 +27,8 @@ from slamrel.commands.common import (
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     import numpy as np
 
-    from slamrel.backends.least_squares import GraphSolution, PoseGraph
+    from slamrel.backends.graph import PoseGraph
+    from slamrel.backends.least_squares import GraphSolution
     from slamrel.backends.pose_only import LandmarkLog
 
 
@@ -315,7 +316,7 @@ def _write_solution(
     import numpy as np
 
     from relation_metric.trajectory import Trajectory
-    from slamrel.backends.least_squares import PoseGraph
+    from slamrel.backends.graph import PoseGraph
     from slamrel.formats.g2o import write_g2o_graph
     from slamrel.formats.landmark_csv import write_landmark_csv
     from slamrel.formats.trajectories import write_trajectory
