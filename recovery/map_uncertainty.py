@@ -135,7 +135,8 @@ def covariance_factor(cov: Array) -> Array:
     entry, else from its eigendecomposition with the small eigenvalues dropped (r < 2M).
 
     Any ``L`` with ``L Lᵀ = Σ_m`` gives the same map error law ``L η``, ``η ~ N(0, I)``: the
-    factor only chooses the coordinates ``η`` (Cholesky is ~10× faster than ``eigh``).
+    factor only chooses the coordinates ``η``; Cholesky, when it succeeds, is the cheaper one
+    (benchmarks/README.md).
     """
     if cov.size == 0:
         return np.zeros((cov.shape[0], 0))

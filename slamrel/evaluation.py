@@ -91,7 +91,7 @@ def evaluate_files(
 
     The files are read and scored exactly as the command does (REFERENCE a ``.relations``
     file, a reference trajectory or a bundle directory; the time-order rule; repeated
-    reference times and zero-length relations dropped; see the README), with ``options``
+    reference times and zero-length relations dropped; see docs/formats.md), with ``options``
     (default: the command's defaults) and each field of :class:`EvaluateOptions` given as a
     keyword overriding it, e.g. ``evaluate_files(ref, est, strategy="loops", radius=2.0,
     max_time_diff=0.05)``. What is dropped or reordered on the way is said in warnings.

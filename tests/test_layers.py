@@ -1,4 +1,4 @@
-"""The import layers README.md's Layout section promises, read from the source (every import
+"""The import layers docs/design.md promises, read from the source (every import
 statement, also those inside functions and under ``TYPE_CHECKING``).
 
 A *layer* is one of the three libraries, or one sub-package or top-level module of
@@ -6,7 +6,7 @@ A *layer* is one of the three libraries, or one sub-package or top-level module 
 layers of ours each layer may import besides itself; an entry narrower than a layer (a
 module, such as ``slamrel.backends.graph``) allows that module only.
 :data:`TYPE_ONLY` adds imports made only for annotations (under ``if TYPE_CHECKING:``),
-which never run. The same rules, in words, are in README.md ("Who may import whom").
+which never run. The same rules, in words, are in docs/design.md ("Who may import whom").
 """
 
 from __future__ import annotations

@@ -28,17 +28,17 @@ one-sided χ² gate in most runs, :func:`relation_metric.consistency.nees1`); Me
 more accurate than Method 1, which throws away the information between non-adjacent poses;
 pose-only LS is somewhat less accurate than full LS; and the map fitted to the pose-only
 trajectory (NEES3) is about as consistent as full LS's map (NEES2). Without the inflation
-(``inflate=False``) Method 2 reuses information and is over-confident (measured on simple1:
-whole-trajectory NEES ≈ 1000 against a gate ≈ 280; see ``docs/design.md``).
+(``inflate=False``) Method 2 reuses information and is over-confident: its whole-trajectory
+NEES lies far beyond the χ² gate (``docs/design.md``, measured pitfalls; the figures in
+benchmarks/README.md).
 
 Where the per-pair least squares starts (``start``): the paper starts it at the ground
 truth (``"truth"``, pass ``truth=``), which a reader with real data does not have. The default
-is ``"odometry"`` (the odometry's relative pose): measured on simple1 and complex2, noise a–c,
-seeds 0–1 (12 problems, 700–9925 pairs each), every pair reached the same minimum as from the
-truth (largest difference 3e-10). ``"align"`` (the closed-form 2-D rigid alignment of the
-shared landmarks' observations, needing neither) agreed on 11 problems but reached another
-minimum on 1 of 9741 pairs of complex2 / noise c / seed 0, where 5 landmarks 0.3 m noisy
-make the alignment ambiguous.
+is ``"odometry"`` (the odometry's relative pose): on the simulated worlds every pair reached
+the same minimum from it as from the truth. ``"align"`` (the closed-form 2-D rigid alignment
+of the shared landmarks' observations, needing neither) reached another minimum on a rare
+pair whose few, noisy shared landmarks make the alignment ambiguous (the problems measured:
+benchmarks/README.md).
 
 Observations are relative positions ``z = r [cos b, sin b]``: with a Cartesian covariance
 (``LandmarkLog.observation_covariance``, the paper's sensor model) as given, otherwise the
@@ -612,9 +612,8 @@ def pose_only_least_squares(
     initial : {"chained", "odometry"}
         Start of the pose graph: :func:`chained_start` (default) or the raw odometry. Under
         noise b (0.2 rad a step) the odometry is far enough off that Levenberg–Marquardt
-        stops in a poor minimum: measured in the 10-run study, Method 2 on hu-complex1/b
-        reached RMS errors of 5.8–8.7 m in 3 of 10 runs, Method 1 on hu-simple1/b and
-        hu-simple2/b 5.2 m and 17.5 m in 1 of 10 (full LS: none).
+        stops in a poor minimum in some runs of the study, for Method 1 and Method 2 but not
+        for full LS (the runs and errors: benchmarks/README.md).
 
     Returns
     -------
@@ -719,9 +718,9 @@ def pose_only_from_landmark_graph(
     the graph as a log, the Method 1/2 pair constraints from its observations (each pair's
     least squares started at ``start``: by default the rigid alignment of the shared
     landmarks' observations, since on a long run the odometry's relative pose of two
-    revisits can be too far off: on Victoria Park with ``k = 2`` the pair 718–3264 does not
-    converge from it), plus its odometry and any other
-    pose–pose factors. Optimise the result with least squares or TORO; fit the landmarks to
+    revisits can be too far off to converge from, as on Victoria Park: benchmarks/README.md),
+    plus its odometry and any other pose–pose factors. Optimise the result with least
+    squares or TORO; fit the landmarks to
     the poses afterwards with :func:`landmarks_given_poses`."""
     log, other = LandmarkLog.from_graph(graph)
     pg, cons = pose_only_graph(log, method=method, min_common=min_common, start=start)
