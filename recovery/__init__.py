@@ -24,8 +24,8 @@ _EXPORTS: dict[str, str] = {
     "run_filter": "recovery.ekf",
     "SmootherResult": "recovery.smoother",
     "smooth": "recovery.smoother",
-    "BatchResult": "recovery.batch",
-    "refine": "recovery.batch",
+    "BatchResult": "recovery.batch_refinement",
+    "refine": "recovery.batch_refinement",
 }
 
 __all__ = [
@@ -44,7 +44,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on first use
-    from recovery.batch import BatchResult, refine
+    from recovery.batch_refinement import BatchResult, refine
     from recovery.bundle import Bundle
     from recovery.ekf import FilterInput, FilterResult, run_filter
     from recovery.models import MotionModel, SensorModel

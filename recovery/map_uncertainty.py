@@ -15,7 +15,7 @@ landmarks in ``map.csv`` order, ``[x, y]`` each):
 Every estimator uses that one ``Σ_m`` the same way, as the covariance of a map error that is
 fixed over the run: the filter as a Schmidt ("consider") state (the pose–map
 cross-covariance is carried, the map never changed: :mod:`recovery.ekf`), the smoother and
-the batch as a prior on a map correction estimated with the poses (:mod:`recovery.batch`:
+the batch as a prior on a map correction estimated with the poses (:mod:`recovery.batch_refinement`:
 ``m = m̂ + L η``, ``η ~ N(0, I)``, ``Σ_m = L Lᵀ``). :attr:`MapUncertainty.factor` is that
 ``L``: the eigenvectors of ``Σ_m`` scaled by the square roots of its eigenvalues, those below
 ``RANK_TOLERANCE`` times the largest dropped (exact directions carry no correction), one

@@ -4,7 +4,7 @@ Burgard et al. 2009 recover the trajectory of an EKF-SLAM run "by localisation: 
 localisation given the landmark locations, data associations, and motion/sensor model used
 during SLAM". :func:`recover` does that (:mod:`recovery.ekf`), and, the recovery being
 offline, smooths it or refines it as a batch MAP problem over the poses and a correction of
-the map (:mod:`recovery.batch`). The map's uncertainty enters all three by one rule
+the map (:mod:`recovery.batch_refinement`). The map's uncertainty enters all three by one rule
 (:mod:`recovery.map_uncertainty`), stated in every report. Gated measurements are counted
 and reported: a large gated fraction is a finding about the map, not noise.
 
@@ -176,7 +176,7 @@ def filter_input(
     )
 
 
-#: How :func:`recovery.batch.refine` stops for each method: the smoother at the data's
+#: How :func:`recovery.batch_refinement.refine` stops for each method: the smoother at the data's
 #: statistical resolution (a step changing χ² by less than one unit), the batch numerically.
 _SMOOTHER_STOP = {
     "max_iterations": SMOOTHER_MAX_ITERATIONS,
@@ -207,7 +207,7 @@ def recover(
     method : {"filter", "smoother", "batch"}
         EKF only (Schmidt update with the map uncertainty); the smoother: the extended RTS
         smoother of the filter run, then Gauss–Newton steps over all poses and the map
-        correction until one lowers χ² by less than one unit (:mod:`recovery.batch`: the
+        correction until one lowers χ² by less than one unit (:mod:`recovery.batch_refinement`: the
         map-augmented fixed-interval smoother, relinearised); the batch: that problem
         iterated to numerical convergence. All three use the one map uncertainty of
         :func:`recovery.map_uncertainty.map_uncertainty`.
@@ -257,7 +257,7 @@ def recover(
     mu = map_uncertainty(bundle, map_mode)
     inp = filter_input(bundle, uncertainty=mu)
     if method != "filter":  # before any work: the joint problem's dense map terms
-        from recovery.batch import check_joint_size
+        from recovery.batch_refinement import check_joint_size
 
         check_joint_size(int(inp.times.shape[0]), int(mu.factor.shape[1]))
     kw = dict(gate=gate, max_outlier_run=max_outlier_run, on_divergence=on_divergence)
@@ -352,13 +352,14 @@ def _estimate(
     """The filter's poses, or the smoother's or batch's refinement of them.
 
     The smoother and the batch start from the RTS smoother of the filter run (it linearises
-    along the run) and step over all poses and the map correction (:func:`recovery.batch.refine`,
-    the filter's re-entries as extra process noise: :func:`reentry_relaxed`), the smoother
-    until a step changes χ² by less than one unit, the batch to numerical convergence.
+    along the run) and step over all poses and the map correction
+    (:func:`recovery.batch_refinement.refine`, the filter's re-entries as extra process noise:
+    :func:`reentry_relaxed`), the smoother until a step changes χ² by less than one unit, the
+    batch to numerical convergence.
     """
     if method == "filter":
         return _Estimate(fr.poses, fr.covariances)
-    from recovery.batch import refine
+    from recovery.batch_refinement import refine
 
     br = refine(
         reentry_relaxed(inp, fr),

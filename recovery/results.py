@@ -357,7 +357,8 @@ class RobustSettings:
 
 @dataclass(frozen=True)
 class BatchCosts:
-    """The batch refinement's cost ``½ Σ rᵀ W r`` over its factors (:mod:`recovery.batch`).
+    """The cost ``½ Σ rᵀ W r`` of the batch refinement over its factors
+    (:mod:`recovery.batch_refinement`).
 
     Attributes
     ----------

@@ -28,6 +28,7 @@ __all__ = [
     "evaluate",
     "pose_errors",
     "UnassociatedRelationsWarning",
+    "SamePoseWarning",
     "error_summaries",
     "on_common_group",
 ]
@@ -35,6 +36,11 @@ __all__ = [
 
 class UnassociatedRelationsWarning(UserWarning):
     """Some relations could not be associated and were left out of the statistics."""
+
+
+class SamePoseWarning(UserWarning):
+    """Some relations had both ends at one estimate pose and were scored as zero motion
+    (``mode="metricevaluator"``, as the C++ metricEvaluator scores them)."""
 
 
 @dataclass(frozen=True)
@@ -95,12 +101,21 @@ class Evaluation:
         """Relations whose two times found one estimate pose, and what was done with them."""
         a = self.association
         same = a.same_pose if a.same_pose is not None else np.zeros(len(self.relations), bool)
-        interpolated = int(np.count_nonzero(same & a.valid))
         count = int(np.count_nonzero(same))
+        if self.errors.mode == "metricevaluator":
+            return {
+                "count": count,
+                "interpolated": 0,
+                "unassociated": 0,
+                "zero_motion": count,
+                "rule": "scored as zero estimated motion, as the C++ metricEvaluator scores "
+                "them (mode metricevaluator)",
+            }
+        interpolated = int(np.count_nonzero(same & a.interpolated))
         return {
             "count": count,
             "interpolated": interpolated,
-            "unassociated": count - interpolated,
+            "unassociated": int(np.count_nonzero(same & ~a.valid)),
             "rule": "both ends interpolated (interpolate=True) where the poses around them allow, "
             "otherwise unassociated; never scored as zero motion",
         }
@@ -183,7 +198,10 @@ def evaluate(
     odometry, max_time_diff, interpolate, max_interpolation_gap :
         Timestamp association, see :func:`relation_metric.time_association.associate`.
     mode, weights :
-        Error definition, see :func:`relation_metric.metric.relation_errors`.
+        Error definition, see :func:`relation_metric.metric.relation_errors`. The
+        ``metricevaluator`` mode also associates as the C++ tool does: a relation whose two
+        times find one estimate pose is scored as zero estimated motion (counted, and said in
+        a :class:`SamePoseWarning`), where the ``paper`` mode interpolates or leaves it out.
     strict : bool
         Raise :class:`AssociationError` when any relation is unassociated (otherwise they
         are excluded, counted and named in an :class:`UnassociatedRelationsWarning`).
@@ -228,6 +246,17 @@ def evaluate(
             max_time_diff=max_time_diff,
             interpolate=interpolate,
             max_interpolation_gap=max_interpolation_gap,
+            same_pose="zero_motion" if mode == "metricevaluator" else "separate",
+        )
+    if mode == "metricevaluator" and assoc.same_pose is not None and assoc.same_pose.any():
+        where = f"{estimate_name}: " if estimate_name else ""
+        warnings.warn(
+            f"{where}{int(assoc.same_pose.sum())} of {len(relations)} relations{of_relations} "
+            "have both ends at one estimate pose and are scored as zero estimated motion, as "
+            "the C++ metricEvaluator scores them (the default mode interpolates or leaves "
+            "them out)",
+            SamePoseWarning,
+            stacklevel=2,
         )
     valid = assoc.valid
     n_bad = int((~valid).sum())

@@ -19,13 +19,16 @@ half the reference rate: both ends of a 0.1 s relation nearest to one pose) woul
 as zero motion. Such relations are counted (``Association.same_pose``): with
 ``interpolate=True`` both ends are interpolated on the estimate's group (when the poses around
 each lie within ``max_interpolation_gap``); otherwise, or when they cannot be, the relation
-is unassociated with the reason ``SAME_POSE``.
+is unassociated with the reason ``SAME_POSE``. With ``same_pose="zero_motion"`` they are kept
+as they are, zero estimated motion, as the C++ metricEvaluator scores them (the
+``metricevaluator`` mode of :func:`relation_metric.evaluate.evaluate`), and still counted.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,6 +49,9 @@ __all__ = [
 
 # Why an endpoint could not be associated (codes of Association.reason).
 OK, OUTSIDE_SPAN, TOO_FAR, BAD_INDEX, SAME_POSE = 0, 1, 2, 3, 4
+# What is done with a relation whose two different times find one estimate pose.
+SamePoseRule = Literal["separate", "zero_motion"]
+SAME_POSE_RULES: tuple[SamePoseRule, ...] = ("separate", "zero_motion")
 REASONS = {
     OK: "associated",
     OUTSIDE_SPAN: "outside the estimate's time span",
@@ -75,8 +81,9 @@ class Association:
         0 when valid, otherwise a key of :data:`REASONS` (the first failing end's).
     same_pose : ndarray of bool, shape (M,), optional
         Relations whose two different times found one nearest estimate pose: interpolated
-        (``interpolated``) or unassociated (reason ``SAME_POSE``). ``None``: none possible
-        (relations by index).
+        (``interpolated``), unassociated (reason ``SAME_POSE``), or, with
+        ``same_pose="zero_motion"``, scored as zero motion (valid, neither interpolated nor
+        corrected). ``None``: none possible (relations by index).
     """
 
     pose_first: NDArray[np.float64]
@@ -211,6 +218,7 @@ def associate(
     max_time_diff: float = 0.1,
     interpolate: bool = False,
     max_interpolation_gap: float = 1.0,
+    same_pose: SamePoseRule = "separate",
 ) -> Association:
     """Find the estimate poses of both ends of every relation.
 
@@ -230,6 +238,11 @@ def associate(
         poses around an end beyond the tolerance.
     max_interpolation_gap : float
         Seconds; longest gap between two estimate poses that is interpolated over.
+    same_pose : {"separate", "zero_motion"}
+        Relations whose two different times find one estimate pose: ``"separate"``
+        interpolates both ends (``interpolate=True``) or leaves the relation unassociated
+        (reason ``SAME_POSE``); ``"zero_motion"`` keeps both ends at that pose, zero estimated
+        motion, as the C++ metricEvaluator does. Counted in ``same_pose`` either way.
 
     Returns
     -------
@@ -241,6 +254,8 @@ def associate(
     ):
         if not (math.isfinite(value) and value >= 0.0):
             raise InputError(f"{name} must be a finite number of seconds >= 0, got {value}")
+    if same_pose not in SAME_POSE_RULES:
+        raise InputError(f"same_pose must be one of {SAME_POSE_RULES}, got {same_pose!r}")
     m = len(relations)
     width = estimate.group.width
     if odometry is not None and odometry.group is not estimate.group:
@@ -281,8 +296,9 @@ def associate(
     same = None
     if relations.key == "time" and len(estimate):
         same = _separate_same_pose(
-            relations, estimate, poses, idx, reason, odo, interp, interpolate,
-            max_interpolation_gap,
+            relations, estimate, poses, idx, reason, odo, interp,
+            interpolate and same_pose == "separate", max_interpolation_gap,
+            keep=same_pose == "zero_motion",
         )  # fmt: skip
     r1, r2 = reason[:m], reason[m:]
     valid = (r1 == OK) & (r2 == OK)
@@ -309,8 +325,11 @@ def _separate_same_pose(
     interp: NDArray[np.bool_],
     interpolate: bool,
     max_gap: float,
+    *,
+    keep: bool = False,
 ) -> NDArray[np.bool_]:
-    """Relations whose two different times took one estimate pose: interpolated or refused.
+    """Relations whose two different times took one estimate pose: interpolated or refused
+    (or, with ``keep``, left at that pose: zero motion).
 
     Works in place on the per-end arrays (length 2M, first ends then second ends); returns
     the mask (M,) of such relations.
@@ -326,7 +345,7 @@ def _separate_same_pose(
         & ~own[m:]
         & (relations.first != relations.second)
     )
-    if not same.any():
+    if keep or not same.any():
         return same
     rows = np.flatnonzero(same)
     ends = np.concatenate((rows, rows + m))

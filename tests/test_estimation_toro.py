@@ -8,7 +8,8 @@ import pytest
 from relation_metric import se2
 from relation_metric.errors import InputError
 from slamrel.backends import toro_optimiser
-from slamrel.backends.least_squares import PoseGraph, solve_graph
+from slamrel.backends.graph import PoseGraph
+from slamrel.backends.least_squares import solve_graph
 from slamrel.backends.lever_sgd import lever_sgd_optimize
 from slamrel.backends.toro_optimiser import (
     graph_cost,

@@ -4,11 +4,11 @@
 A *layer* is one of the three libraries, or one sub-package or top-level module of
 ``slamrel`` (``slamrel.formats``, ``slamrel.pipeline``, ...). :data:`ALLOWED` says which
 layers of ours each layer may import besides itself; an entry narrower than a layer (a
-module, such as ``slamrel.backends.least_squares``) allows that module only. An import made
-only for annotations (under ``if TYPE_CHECKING:``) obeys the same rules: a type a layer
-needs from above it moves down (as the run's result types did, into ``slamrel.runs``) or is
-stated as a Protocol (``slamrel.backends.pose_only.SimulatedLog``). The same rules, in
-words, are in docs/design.md ("Who may import whom").
+module, such as ``slamrel.backends.graph``) allows that module only. An import made only for
+annotations (under ``if TYPE_CHECKING:``) obeys the same rules: a type a layer needs from
+above it moves down (as the run's result types did, into ``slamrel.runs``) or is stated as a
+Protocol (``slamrel.backends.pose_only.SimulatedLog``). The same rules, in words, are in
+docs/design.md ("Who may import whom").
 """
 
 from __future__ import annotations
@@ -69,8 +69,8 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     SCANS: (*LIBRARIES, FORMATS),
     # the numbers of `slamrel traj info`: maths on a Trajectory
     TRAJINFO: LIBRARIES,
-    # the pose-graph files (g2o, TORO, iSAM) are read into least_squares.PoseGraph
-    FORMATS: (*LIBRARIES, OUTPUTS, "slamrel.backends.least_squares"),
+    # the pose-graph files (g2o, TORO, iSAM) are read into the record graph.PoseGraph
+    FORMATS: (*LIBRARIES, OUTPUTS, "slamrel.backends.graph"),
     IMPORTERS: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS),
     PLOTS: (*LIBRARIES, OUTPUTS, FORMATS),
     REVIEW: (*LIBRARIES, OUTPUTS, FORMATS, SCANS),
@@ -217,7 +217,8 @@ def test_import_scan_sees_nested_and_type_only_imports(tmp_path: Path) -> None:
         Import(9, "", False, relative=True),
     ]
     assert not _is_allowed(SIMULATION, Import(1, "slamrel.backends.pose_only", False))
-    assert _is_allowed(FORMATS, Import(1, "slamrel.backends.least_squares", False))
+    assert _is_allowed(FORMATS, Import(1, "slamrel.backends.graph", False))
+    assert not _is_allowed(FORMATS, Import(1, "slamrel.backends.least_squares", False))
     assert not _is_allowed(FORMATS, Import(1, "slamrel.backends.ekf_slam", False))
     assert not _is_allowed(REPORT, Import(1, "slamrel.pipeline", False))
     assert not _is_allowed(REPORT, Import(1, "slamrel.pipeline", True))  # no type-only pass

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from recovery.batch import normal_equations
+from recovery.batch_refinement import normal_equations
 from recovery.ekf import GATED, REENTRY, ROBUST_C, USED, run_filter
 from recovery.recover import filter_input, recover
 from relation_metric.consistency import NeesBlowup, flag_runs, nees_blowups

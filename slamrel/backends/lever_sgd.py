@@ -63,7 +63,7 @@ from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.errors import InputError
 from relation_metric.trajectory import readonly
-from slamrel.backends.least_squares import PoseGraph
+from slamrel.backends.graph import PoseGraph
 from slamrel.backends.toro_optimiser import TreeSolution, spanning_tree, spherical_information
 
 __all__ = ["lever_sgd_optimize"]

@@ -59,13 +59,8 @@ from relation_metric.arrays import Array
 from relation_metric.consistency import JointNees, nees2
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import Trajectory, readonly
-from slamrel.backends.least_squares import (
-    GraphSolution,
-    PoseGraph,
-    initial_landmarks,
-    joint_covariance,
-    solve_graph,
-)
+from slamrel.backends.graph import PoseGraph, initial_landmarks
+from slamrel.backends.least_squares import GraphSolution, joint_covariance, solve_graph
 
 __all__ = [
     "LandmarkLog",

@@ -104,7 +104,7 @@ from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.errors import InputError
 from relation_metric.trajectory import readonly
-from slamrel.backends.least_squares import PoseGraph
+from slamrel.backends.graph import PoseGraph
 
 __all__ = [
     "TORO_TREES",

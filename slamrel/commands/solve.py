@@ -27,7 +27,7 @@ from slamrel.commands.common import (
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     import numpy as np
 
-    from slamrel.backends.least_squares import PoseGraph
+    from slamrel.backends.graph import PoseGraph
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -163,7 +163,8 @@ def run_solve(args: argparse.Namespace) -> int:
 
     from relation_metric.errors import InputError
     from relation_metric.trajectory import Trajectory
-    from slamrel.backends.least_squares import PoseGraph, solve_graph, solve_graph_incremental
+    from slamrel.backends.graph import PoseGraph
+    from slamrel.backends.least_squares import solve_graph, solve_graph_incremental
     from slamrel.backends.pose_only import landmarks_given_poses, pose_only_from_landmark_graph
     from slamrel.backends.toro_optimiser import toro_optimize
     from slamrel.formats.g2o import write_g2o_graph

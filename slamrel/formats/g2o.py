@@ -49,7 +49,7 @@ from slamrel.formats.text import (
 )
 
 if TYPE_CHECKING:
-    from slamrel.backends.least_squares import PoseGraph
+    from slamrel.backends.graph import PoseGraph
 
 __all__ = [
     "G2O_RECORDS",
@@ -203,7 +203,7 @@ def read_g2o_graph(
     pose_ids, landmark_ids : ndarray of int
         The file's vertex ids of the graph's poses and landmarks.
     """
-    from slamrel.backends.least_squares import PoseGraph
+    from slamrel.backends.graph import PoseGraph
 
     exact: dict[str, NDArray[np.int64]] = {}
     recs = read_g2o_records(path, source=source, ids=exact)

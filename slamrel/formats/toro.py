@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.errors import InputError
 from relation_metric.ids import refuse_self_loops, rows_of
-from slamrel.backends.least_squares import PoseGraph
+from slamrel.backends.graph import PoseGraph
 from slamrel.formats.text import (
     NUMBER_FORMAT,
     PathLike,

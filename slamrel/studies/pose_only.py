@@ -37,7 +37,8 @@ from numpy.typing import ArrayLike
 from relation_metric import se2
 from relation_metric.consistency import nees1, nees2
 from relation_metric.errors import InputError
-from slamrel.backends.least_squares import PoseGraph, joint_covariance, solve_graph
+from slamrel.backends.graph import PoseGraph
+from slamrel.backends.least_squares import joint_covariance, solve_graph
 from slamrel.backends.pose_only import (
     LandmarkLog,
     data_chi2,

@@ -36,7 +36,9 @@ linear-Gaussian model one step from any start is the exact minimum, i.e. the fix
 information form, relinearised where the model is not linear. One step alone was not enough:
 on hu-complex1 the second still removed tens of χ² units, and stopping after the first left
 an error its covariance did not hold (mean NEES 3.52 against 3.006 after the second).
-``method="batch"`` iterates to numerical convergence (``tolerance``).
+``method="batch"`` iterates to numerical convergence (``tolerance``). (The module is named
+for that method; ``slamrel batch``, the scoring of many runs, is another thing:
+``slamrel.studies.batch``.)
 
 The minimiser is the estimation layer's :func:`~recovery.lm.levenberg_marquardt`
 (Marquardt's damping ``λ diag(H)``, ×10 on a rejected step, ÷10 on an accepted one, up to
