@@ -17,8 +17,8 @@ _EXPORTS: dict[str, str] = {
     "Bundle": "recovery.bundle",
     "MotionModel": "recovery.models",
     "SensorModel": "recovery.models",
-    "Recovery": "recovery.recover",
-    "Stretch": "recovery.recover",
+    "Recovery": "recovery.results",
+    "Stretch": "recovery.results",
     "FilterInput": "recovery.ekf",
     "FilterResult": "recovery.ekf",
     "run_filter": "recovery.ekf",
@@ -48,7 +48,7 @@ if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on 
     from recovery.bundle import Bundle
     from recovery.ekf import FilterInput, FilterResult, run_filter
     from recovery.models import MotionModel, SensorModel
-    from recovery.recover import Recovery, Stretch
+    from recovery.results import Recovery, Stretch
     from recovery.smoother import SmootherResult, smooth
 else:
     __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)

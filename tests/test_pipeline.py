@@ -90,7 +90,9 @@ def test_run_on_a_broken_slam_run_reports_divergence(tmp_path, capsys):
     d = m["divergence"]
     assert d["diverged"] and d["count"] == len(d["stretches"]) >= 1
     assert 0.0 < d["fraction_of_log"] <= 1.0
-    assert d == m["recovery"]["divergence"] and m["recovery"]["nis"]["mean"] > 2.0
+    # written once, at the top level (with the NEES blow-ups), not again in the recovery's part
+    assert "divergence" not in m["recovery"] and m["recovery"]["nis"]["mean"] > 2.0
+    assert "nees_stretches" in d
     # a broken run scores as broken: recovered far-apart error near the online one
     rec = m["trajectory"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]
     onl = m["online"]["by_relation_set"]["global"]["translation"]["abs"]["mean"]

@@ -48,7 +48,7 @@ range-bearing covariance linearised, ``J diag(σ_r², σ_b²) Jᵀ``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import Literal, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -64,6 +64,7 @@ from slamrel.backends.least_squares import GraphSolution, joint_covariance, solv
 
 __all__ = [
     "LandmarkLog",
+    "SimulatedLog",
     "cartesian_observations",
     "full_least_squares",
     "pose_only_least_squares",
@@ -87,10 +88,51 @@ __all__ = [
     "METHOD2_MIN_COMMON",
 ]
 
-if TYPE_CHECKING:
-    from slamrel.simulation.worlds import World
-
 Start = Literal["align", "odometry", "truth"]
+
+
+class _NoiseSigmas(Protocol):
+    """The standard deviations of a simulated noise type (``simulation.worlds.NoiseType``)."""
+
+    @property
+    def sigma_dx(self) -> float: ...
+    @property
+    def sigma_dy(self) -> float: ...
+    @property
+    def sigma_dtheta(self) -> float: ...
+    @property
+    def sigma_range(self) -> float: ...
+    @property
+    def sigma_bearing(self) -> float: ...
+
+
+class _Sightings(Protocol):
+    """Range-bearing observations, one row each (``simulation.worlds.Observations``)."""
+
+    @property
+    def pose(self) -> NDArray[np.int64]: ...
+    @property
+    def range(self) -> NDArray[np.float64]: ...
+    @property
+    def bearing(self) -> NDArray[np.float64]: ...
+    @property
+    def landmark(self) -> NDArray[np.int64]: ...
+
+
+class SimulatedLog(Protocol):
+    """What :meth:`LandmarkLog.from_world` reads of a simulated world
+    (``slamrel.simulation.worlds.World`` has it): stated here, so that the back-ends need not
+    import the simulator, which sits beside them."""
+
+    @property
+    def odometry(self) -> Trajectory: ...
+    @property
+    def observations(self) -> _Sightings: ...
+    @property
+    def noise_params(self) -> _NoiseSigmas: ...
+    @property
+    def observation_covariance(self) -> NDArray[np.float64] | None: ...
+
 
 METHOD1_INFLATION = 2.0  # Hu et al.: each observation is used by two adjacent-pair constraints
 METHOD2_MIN_COMMON = 5  # Hu et al.: pairs sharing at least 5 landmarks (DLR data)
@@ -183,7 +225,7 @@ class LandmarkLog:
         return log, readonly(other, np.int64)
 
     @classmethod
-    def from_world(cls, world: World) -> LandmarkLog:
+    def from_world(cls, world: SimulatedLog) -> LandmarkLog:
         """The odometry and observations of a simulated world, with its noise model."""
         nt = world.noise_params
         o = world.observations

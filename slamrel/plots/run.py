@@ -1,7 +1,7 @@
 """Figures of the end-to-end report (matplotlib, Agg; no statistics computed here).
 
 Every time axis is in seconds since the run's start (the caller passes times on that axis,
-or the run's start ``t0`` to subtract: :class:`slamrel.pipeline.TimeBase`).
+or the run's start ``t0`` to subtract: :class:`slamrel.runs.time_base.TimeBase`).
 """
 
 from __future__ import annotations

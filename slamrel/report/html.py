@@ -101,7 +101,7 @@ def format_intervals(intervals: Sequence[tuple[float, float]], *, unit: str = "s
     it takes for distinct intervals to print distinctly (and for ``a < b`` to show).
 
     The intervals are expected on a readable axis (seconds since the run's start, not Unix
-    time: :class:`slamrel.pipeline.TimeBase`).
+    time: :class:`slamrel.runs.time_base.TimeBase`).
     """
     iv = [(float(a), float(b)) for a, b in intervals]
     for decimals in (1, 2, 3):

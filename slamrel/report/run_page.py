@@ -3,19 +3,20 @@
 :func:`report_figures` draws the four figures (:class:`RunFigures`, one attribute each, the
 map figure only with a map comparison); :func:`report_sections` writes the four sections
 (:class:`RunSections`). Every number in a table is read from the same structures
-``metrics.json`` is written from (:meth:`slamrel.pipeline.RunResult.metrics`), so the page
+``metrics.json`` is written from (:meth:`slamrel.runs.result.RunResult.metrics`), so the page
 and the file cannot disagree. :func:`slamrel.pipeline.write_report` writes the folder.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
-from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, NisStats
-from relation_metric.consistency import OUTLIER_PROBABILITY
+from recovery.ekf import DEFAULT_MAX_OUTLIER_RUN
+from recovery.results import Divergence, NisStats
+from relation_metric.consistency import OUTLIER_PROBABILITY, NeesBlowup
 from relation_metric.evaluate import pose_errors
 from relation_metric.trajectory import Trajectory
 from slamrel.plots.maps import map_figure
@@ -30,10 +31,7 @@ from slamrel.plots.run import (
     trajectories_figure,
 )
 from slamrel.report.html import Figure, Section, Table, figure_png, format_intervals
-
-if TYPE_CHECKING:
-    from recovery.recover import Divergence
-    from slamrel.pipeline import MapSummary, RunResult
+from slamrel.runs.result import MapSummary, RunResult
 
 __all__ = ["RunFigures", "RunSections", "report_figures", "report_sections"]
 
@@ -403,11 +401,13 @@ def _agreement_section(result: RunResult) -> Section:
             for w, s in zip(when, shown)
         ]
         tables.append(Table("stretches where the map and the log disagree", _STRETCH_COLUMNS, rows))
-    return Section("Map–log agreement", paragraphs=_agreement_paragraphs(a, tb.t0), tables=tables)
+    paragraphs = _agreement_paragraphs(a, result.nees_blowups or (), tb.t0)
+    return Section("Map–log agreement", paragraphs=paragraphs, tables=tables)
 
 
-def _agreement_paragraphs(a: Divergence, t0: float) -> list[str]:
-    """The rule and the counts; ``t0``: the run's start (intervals are printed since it)."""
+def _agreement_paragraphs(a: Divergence, ns: Sequence[NeesBlowup], t0: float) -> list[str]:
+    """The rule and the counts, and the NEES blow-ups ``ns``; ``t0``: the run's start
+    (intervals are printed since it)."""
     st = a.stretches
     paragraphs = [
         "EKF localisation in the final map checks every innovation against its covariance: "
@@ -424,7 +424,6 @@ def _agreement_paragraphs(a: Divergence, t0: float) -> list[str]:
             else "The map and the log agree: no stretch of outlying innovations."
         ),
     ]
-    ns = a.nees_blowups or ()
     if ns:
         paragraphs.append(
             f"Against the ground truth, the recovered pose's NEES blows up {len(ns)} time(s): "

@@ -34,7 +34,7 @@ Lamps (``green`` / ``amber`` / ``red``):
   ``max_outlier_run`` poses): an excursion says the covariance is locally optimistic, a
   blow-up that the estimate is lost;
 * **map–log agreement** — the innovations of the recovery's filter (its NIS, χ²(2) for
-  consistent models, :class:`recovery.recover.NisStats`): the mean over 2, ``q``, and the
+  consistent models, :class:`recovery.results.NisStats`): the mean over 2, ``q``, and the
   tail, the innovations beyond the 99.9 % bound (plus the gated ones) against the 0.1 % a
   consistent filter has (a Poisson count). Red when ``q`` is outside ``[0.5, 1.5]`` or the
   tail exceeds its Poisson 99.99 % quantile and 0.5 % of the innovations; amber when ``q`` is
@@ -58,7 +58,7 @@ information of the ``huber``/``cauchy`` updates (iterated weights: no closed exp
 
 The overall level is the worst lamp; "how sure" states the evidence (relations, poses,
 matched landmarks). The verdict judges typed results (:class:`RunFacts`, read from a
-:class:`slamrel.pipeline.RunResult`), the same the tables and ``metrics.json`` are written
+:class:`slamrel.runs.result.RunResult`), the same the tables and ``metrics.json`` are written
 from.
 """
 
@@ -81,8 +81,8 @@ from relation_metric.consistency import (
 )
 
 if TYPE_CHECKING:
-    from recovery.recover import RecoveryCounts, RobustSettings
-    from slamrel.pipeline import MapSummary, RunResult
+    from recovery.results import RecoveryCounts, RobustSettings
+    from slamrel.runs.result import MapSummary, RunResult
 
 __all__ = [
     "Judgement",
