@@ -43,7 +43,7 @@ from recovery.steps import build_steps
 from relation_metric import se2
 from relation_metric.consistency import NeesSummary
 from relation_metric.errors import InputError, SlamrelError
-from relation_metric.evaluate import Evaluation, UnassociatedRelationsWarning, evaluate
+from relation_metric.evaluate import UnassociatedRelationsWarning, evaluate
 from relation_metric.relations import RelationSet, generate_relations
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.ekf_slam import ekf_slam_bundle
@@ -55,7 +55,7 @@ from slamrel.report.notes import map_notes, nees_notes, run_notes
 from slamrel.report.run_page import report_figures, report_sections
 from slamrel.report.verdict import RunFacts, run_verdict
 from slamrel.runs.nees import NeesCurve, at_truth_times, estimate_nees, placed_frame
-from slamrel.runs.result import RelationSetRule, RunResult
+from slamrel.runs.result import RelationSetRule, RunResult, SetEvaluations
 from slamrel.runs.time_base import TimeBase
 from slamrel.simulation.bundles import world_bundle
 from slamrel.simulation.worlds import make_world
@@ -193,25 +193,23 @@ class RunInput:
     dead_reckoning: Trajectory | None = None
 
 
-def _evaluate_sets(sets: dict[str, RelationSet], est: Trajectory) -> dict[str, Evaluation]:
+def _evaluate_sets(sets: dict[str, RelationSet], est: Trajectory) -> SetEvaluations:
     # estimates are sampled at ground-truth times where they can be (exact association);
     # otherwise (real logs) the nearest pose within 0.1 s, or SE(2) interpolation
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UnassociatedRelationsWarning)  # counted in the JSON
         # an empty set is reported as such (relation_sets says why), not refused
         kw: dict[str, Any] = {"max_time_diff": 0.1, "interpolate": True, "allow_empty": True}
-        out = {"all": evaluate(_merge(sets), est, **kw)}
-        for k, rel in sets.items():
-            out[k] = evaluate(rel, est, **kw)
-    return out
+        merged = evaluate(_merge(sets), est, **kw)
+        return SetEvaluations(merged, {k: evaluate(rel, est, **kw) for k, rel in sets.items()})
 
 
-def _set_labels(evs: dict[str, Evaluation]) -> NDArray[np.str_]:
-    """The relation set of each relation of ``evs["all"]`` (:func:`_evaluate_sets` merged
-    the sets in the order of ``evs``), for the ``set`` column of the per-relation CSV."""
-    names = [k for k in evs if k != "all"]
+def _set_labels(evs: SetEvaluations) -> NDArray[np.str_]:
+    """The relation set of each relation of ``evs.all`` (:func:`_evaluate_sets` merged the
+    sets in the order of ``evs.sets``), for the ``set`` column of the per-relation CSV."""
+    names = evs.sets
     labels = np.repeat(np.array(names, dtype=np.str_), [len(evs[k].relations) for k in names])
-    if labels.size != len(evs["all"].relations):
+    if labels.size != len(evs.all.relations):
         raise RuntimeError("the merged relations are not the relation sets in order")
     return labels
 
@@ -517,7 +515,7 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
         write_json(tmp / "metrics.json", metrics)
         for name, evs in result.evaluations.items():
             write_per_relation_csv(
-                tmp / f"relations_{name}.csv", evs["all"], relation_sets=_set_labels(evs)
+                tmp / f"relations_{name}.csv", evs.all, relation_sets=_set_labels(evs)
             )
         figures = report_figures(result)
         for k, fig in enumerate(figures.in_order()):

@@ -215,6 +215,14 @@ def test_result_holds_the_map_once_and_reads_nothing(
     # the same bundle scored again: the same map numbers as the first report
     assert result.metrics()["map"] == m["map"]
     assert set(RunSections._fields) == {"summary", "consistency", "agreement", "map"}
+    # typed access: the recovered scores by attribute, the same numbers metrics.json holds
+    rec = result.recovered
+    assert rec is not None and rec is result.evaluations["recovered"]
+    assert result.main_estimate == "recovered" and result.online is None
+    assert rec.sets == tuple(m["trajectory"]["by_relation_set"]) and list(rec)[0] == "all"
+    assert rec.all.translation.abs.mean == m["trajectory"]["translation"]["abs"]["mean"]
+    loops = m["trajectory"]["by_relation_set"]["loops"]
+    assert rec["loops"].rotation.sqr.mean == loops["rotation"]["sqr"]["mean"]
 
 
 def test_verdict_reads_the_numbers_metrics_holds(

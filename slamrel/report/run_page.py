@@ -121,7 +121,7 @@ def _errors_figure(
     evs = result.evaluations[main]
     tb = result.time_base
     names = [(r.name, r.absent) for r in result.relation_sets] or [
-        (k, "") for k in evs if k != "all"
+        (k, "") for k in evs.sets
     ]
     est = drawn[main]
     panels = []

@@ -281,11 +281,11 @@ class RunFacts:
         rec = result.recovery_result
         curve = result.nees.get(main)
         online = result.nees.get("online") if main != "online" else None
-        scored = result.evaluations[main]["all"]
+        scored = result.evaluations[main].all
         return cls(
             main=main,
             translation_errors={
-                k: evs["all"].translation.abs.mean for k, evs in result.evaluations.items()
+                k: evs.all.translation.abs.mean for k, evs in result.evaluations.items()
             },
             relations=int(scored.valid.sum()),
             nees=None if curve is None else curve.summary,

@@ -7,6 +7,7 @@ so the page and the file are written from the same numbers.
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -27,7 +28,44 @@ from relation_metric.trajectory import Trajectory
 from slamrel.runs.nees import NeesCurve, blowups, truth_at
 from slamrel.runs.time_base import TimeBase
 
-__all__ = ["DisplayFrame", "MapSummary", "RelationSetRule", "RunResult"]
+__all__ = ["DisplayFrame", "MapSummary", "RelationSetRule", "RunResult", "SetEvaluations"]
+
+
+class SetEvaluations(Mapping[str, Evaluation]):
+    """One estimate's scores: :attr:`all` (every relation set merged) and one
+    :class:`~relation_metric.evaluate.Evaluation` per relation set.
+
+    A read-only mapping from set name to evaluation, ``"all"`` first and then the sets in the
+    order they were merged (the order of the per-relation CSV's ``set`` column), for the
+    tables that walk them; ``scores.all`` and ``scores["loops"]`` name one.
+    """
+
+    def __init__(self, all: Evaluation, sets: Mapping[str, Evaluation]) -> None:
+        if "all" in sets:
+            raise ValueError('"all" names the merged sets; a relation set cannot take it')
+        self._by_name: dict[str, Evaluation] = {"all": all, **sets}
+
+    @property
+    def all(self) -> Evaluation:
+        """The evaluation of every relation set merged."""
+        return self._by_name["all"]
+
+    @property
+    def sets(self) -> tuple[str, ...]:
+        """The relation sets' names, in merge order (``"all"`` not included)."""
+        return tuple(self._by_name)[1:]
+
+    def __getitem__(self, name: str) -> Evaluation:
+        return self._by_name[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._by_name)
+
+    def __len__(self) -> int:
+        return len(self._by_name)
+
+    def __repr__(self) -> str:
+        return f"SetEvaluations(sets={self.sets!r})"
 
 
 @dataclass(frozen=True)
@@ -175,7 +213,9 @@ class RunResult:
         The SLAM result bundle (map, covariance, associations, log, ground truth).
     estimates : dict of name → Trajectory
         ``"recovered"`` (when a recovery ran), ``"dead_reckoning"``, ``"online"``.
-    evaluations : dict of name → dict of relation-set name → Evaluation
+    evaluations : dict of name → SetEvaluations
+        Per estimate, its scores by relation set; also as :attr:`recovered`, :attr:`online`
+        and :attr:`dead_reckoning`.
     nees : dict of name → NeesCurve
         In the frame ``nees_frame`` (the map frame anchored to the truth on the landmarks,
         when it can be).
@@ -206,7 +246,7 @@ class RunResult:
     name: str
     bundle: Bundle
     estimates: dict[str, Trajectory]
-    evaluations: dict[str, dict[str, Evaluation]]
+    evaluations: dict[str, SetEvaluations]
     nees: dict[str, NeesCurve]
     recovery_result: Recovery | None
     map_comparison: MapComparison | None = None
@@ -276,6 +316,21 @@ class RunResult:
         return out
 
     @property
+    def recovered(self) -> SetEvaluations | None:
+        """The recovered trajectory's scores (``None`` when no trajectory was recovered)."""
+        return self.evaluations.get("recovered")
+
+    @property
+    def online(self) -> SetEvaluations | None:
+        """The filter's online estimate's scores (``None`` without ``online.csv``)."""
+        return self.evaluations.get("online")
+
+    @property
+    def dead_reckoning(self) -> SetEvaluations | None:
+        """Dead reckoning's scores (``None`` when the log gives none)."""
+        return self.evaluations.get("dead_reckoning")
+
+    @property
     def main_estimate(self) -> str:
         """The estimate scored as ``trajectory``: recovered, else online, else dead reckoning."""
         return next(k for k in ("recovered", "online", "dead_reckoning") if k in self.evaluations)
@@ -334,8 +389,8 @@ class RunResult:
         main_name = self.main_estimate
         for name, evs in self.evaluations.items():
             key = "trajectory" if name == main_name else name
-            out[key] = evs["all"].as_dict()
-            out[key]["by_relation_set"] = {k: v.as_dict() for k, v in evs.items() if k != "all"}
+            out[key] = evs.all.as_dict()
+            out[key]["by_relation_set"] = {k: evs[k].as_dict() for k in evs.sets}
         out["trajectory_source"] = main_name
         out["map"] = self.map
         out["recovery"] = self.recovery
