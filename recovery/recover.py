@@ -228,14 +228,11 @@ def recover(
         same weights. The down-weighted fraction is reported in ``counts``
         (:class:`RecoveryCounts`). ``None`` (or
         ``"none"``) is the plain EKF. Default :data:`DEFAULT_ROBUST` (``"redescending"``,
-        ``c = 1.75``), chosen on MRCLAM dataset 7 and the validation grid (numbers in
-        notebooks/validation.ipynb): its filter's position ATE after SE(2) alignment at
-        the Vicon times is 0.87–1.03 × min(plain EKF, 99.9%-gated EKF) on robots 1–5 and its
-        smoother is below its filter on the 1 s relations of all five (on the aligned ATE of
-        four: robot 4's biased measurements), while broken maps keep their error (grid:
-        recovered ≥ 0.58 × online for every broken run). Smaller ``c`` fits MRCLAM a little
-        better and makes over-confident healthy runs of the grid look broken (1.25: 1.71 ×
-        online).
+        ``c = 1.75``), chosen on MRCLAM dataset 7 and the validation grid: about as accurate
+        as the better of the plain and the gated EKF on real data, while broken maps keep
+        their error; a smaller ``c`` makes over-confident healthy runs look broken (the
+        figures: notebooks/validation.ipynb and benchmarks/README.md, "Figures the code's
+        design relies on").
     robust_threshold : float, optional
         The M-estimator's ``c`` on the standardised Mahalanobis distance ``d / ŝ`` (default
         :data:`ROBUST_DEFAULTS` of the kind).

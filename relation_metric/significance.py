@@ -6,7 +6,7 @@ Relations that share a stretch of the trajectory are not independent: the drift 
 accumulates between two poses enters every relation that spans them, so M overlapping
 relations carry far less evidence than M independent pairs, and a test that treats them as
 independent (the Wilcoxon signed-rank test on the pairs) rejects a true null most of the
-time (``tests/test_compare_dependence.py`` measures it: 30–90 % at α = 0.05).
+time (``tests/test_compare_dependence.py`` shows it on simulated estimates).
 
 Here the differences, ordered by the start time of their relation, are resampled with the
 **circular block bootstrap** (Politis & Romano, "A circular block-resampling procedure for

@@ -244,8 +244,8 @@ class _NormalEquations:
     fallback):
 
     * QDLDL (AMD) and CHOLMOD (AMD) order the scalar matrix themselves: the variables
-      keep their natural order (measured with QDLDL on a 10⁴-pose Manhattan graph: 3.03·10⁶
-      entries in L from the natural order, 3.16·10⁶ from the block order below). The
+      keep their natural order (which gave a sparser factor than the block order below on a
+      10⁴-pose Manhattan graph; benchmarks/README.md). The
       expected work ``27 Σ c²`` (``c``: column counts of the Cholesky factor of the *block*
       graph, one node per pose and landmark, 3 × 3 blocks) picks between the two
       (:func:`~slamrel.backends.sparse_cholesky.choose_backend`; CHOLMOD only when
@@ -481,8 +481,8 @@ def _levenberg_marquardt(
     A stall is an accepted step that removes less than half the cost while the normalised
     cost ``2·cost/dof`` is still above ``stall_chi2``: far from a consistent solution and
     no longer converging fast, the signature of the wrong basin (Victoria Park from
-    odometry: 35% off 4.3e7 at the 2nd step; where one batch works, each step removes
-    most of the cost until χ²/dof is near 1).
+    odometry stalls at its 2nd step; where one batch works, each step removes most of the
+    cost until χ²/dof is near 1; benchmarks/README.md).
     """
     dof = _dof(graph)
 
@@ -530,8 +530,8 @@ def solve_graph_incremental(
 
     Batch least squares started from chained odometry can stop in a poor local minimum on
     long runs: on Victoria Park the accumulated heading error makes revisited landmarks pull
-    the wrong way (measured: cost 2.5e5 from odometry against 3.1e3 from a good start, after
-    68 iterations; GTSAM's LM stops in the same minimum). An incremental smoother (iSAM)
+    the wrong way (a cost about 80 times the one from a good start; GTSAM's LM stops in the
+    same minimum; benchmarks/README.md). An incremental smoother (iSAM)
     never sees that guess, because each new pose is linearised next to already-optimised
     ones. This driver first tries the whole graph, and grows sub-problems when that stalls:
 
@@ -549,21 +549,18 @@ def solve_graph_incremental(
        next is multiplied by ``growth`` (the first sub-problem has ``batch`` poses);
     4. *stall check*: a sub-problem whose solution has a normalised cost
        ``χ²/dof = 2·cost / (residuals − unknowns)`` above ``gate · max(1, previous χ²/dof)``
-       fell into a wrong minimum (on Victoria Park: 21.8 against 1.0 before, when 3,969
-       odometry poses are added at once); it is undone and retried with the step divided
+       fell into a wrong minimum (as on Victoria Park when thousands of odometry poses are
+       added at once); it is undone and retried with the step divided
        by ``growth²`` (not below ``batch``, where it is accepted as it is).
 
     Why this scheme: a fixed step (``growth=1``) is robust but solves ``N/batch``
-    ever larger problems, O(N²/batch) work (14 solves on Victoria Park); one batch is
-    fastest where it works (7 iterations on a 10⁴-pose Manhattan graph against 34 grown,
-    LM starting at λ = 1e-4; 6 from :data:`LAMBDA_INITIAL`) but falls into the wrong minimum
-    on Victoria Park (68 iterations to cost 2.5e5). So the
-    whole graph is tried first and abandoned as soon as it stalls (on Victoria Park at its
-    2nd step, a few per cent of the run); then geometric growth solves O(log N)
-    sub-problems whose sizes sum to about twice the last, each warm (the solved part starts
-    at its optimum), and the χ² check catches a step that grew too far, at the price of one
-    wasted sub-solve. Measured on Victoria Park: ``batch=500``: ``growth=1`` 135 iterations
-    over 14 sub-problems, ``growth=2`` 85 over 4; the same minimum (cost 3091.97).
+    ever larger problems, O(N²/batch) work; one batch is fastest where it works (a
+    Manhattan grid) but falls into the wrong minimum on Victoria Park. So the whole graph
+    is tried first and abandoned as soon as it stalls (a few per cent of the run); then
+    geometric growth solves O(log N) sub-problems whose sizes sum to about twice the last,
+    each warm (the solved part starts at its optimum), and the χ² check catches a step that
+    grew too far, at the price of one wasted sub-solve. ``growth=2`` reaches the same
+    minimum as ``growth=1`` in fewer iterations (the figures: benchmarks/README.md).
 
     Poses must be indexed in time order (as :func:`~slamrel.formats.isam.read_isam` and
     the g2o reader give them). Landmarks that no pose observes keep their initial guess out

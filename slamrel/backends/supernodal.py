@@ -32,9 +32,8 @@ A pivot that is not positive (``dpotrf``'s ``info > 0``) raises
 :class:`~relation_metric.errors.DivergenceError`, as CHOLMOD does. The BLAS calls run on one
 thread (OpenBLAS's thread-local setting, when scipy's OpenBLAS offers it): with many small
 dense blocks the second thread's wake-ups cost more than it computes, and on a machine
-whose cores are busy a two-thread call waits for a core (Manhattan 10⁴: 1.0–1.7 s per
-factorisation with two threads against 0.12 s with one, on 2 shared cores).
-Timings: benchmarks/README.md (``bench_sparse_cholesky.py``).
+whose cores are busy a two-thread call waits for a core (an order of magnitude slower on
+2 shared cores). Timings: benchmarks/README.md (``bench_sparse_cholesky.py``).
 """
 
 from __future__ import annotations
@@ -189,7 +188,7 @@ def symbolic_factor(pattern: sp.spmatrix) -> tuple[sp.csc_matrix, NDArray[np.int
     QDLDL factorises a diagonally dominant matrix with the pattern (no pivot test needed).
     The last result is kept: :func:`~slamrel.backends.sparse_cholesky.factor_flops` on a
     block graph and the supernodal analysis of the same graph's scalar matrix ask for the
-    same one (one LM problem: 40–50 ms saved on Manhattan 10⁴).
+    same one (a second symbolic analysis per LM problem saved; benchmarks/README.md).
     """
     import qdldl
 

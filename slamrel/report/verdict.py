@@ -24,8 +24,8 @@ Lamps (``green`` / ``amber`` / ``red``):
   ``OVERCONFIDENT[1]`` (3). Conservative: amber below the 99 % interval and below
   :data:`CONSERVATIVE` ``[0]`` (0.5), red below ``CONSERVATIVE[1]`` (0.1: covariances ten
   times the error's say nothing). The allowances are the recovery's approximations
-  (linearisation; with a joint map covariance the recovered covariance is conservative by
-  up to 2×, measured);
+  (linearisation; with a joint map covariance the recovered covariance is conservative,
+  docs/verdict.md gives the calibration);
 * **NEES excursions** — runs of at least :data:`MIN_EXCURSION` consecutive steps with NEES
   above the 95 % single-pose band (:func:`nees_excursions`, no merging of runs), as a share
   of the steps: green ≤ 5 %, amber ≤ 20 %, red above. A consistent estimator is above the
