@@ -47,15 +47,17 @@ from relation_metric.evaluate import UnassociatedRelationsWarning, evaluate
 from relation_metric.relations import RelationSet, generate_relations
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.ekf_slam import ekf_slam_bundle
+from slamrel.constants import EVALUATE_DEFAULTS
 from slamrel.formats.bundle import read_bundle, read_online, write_bundle
 from slamrel.formats.results import write_json, write_per_relation_csv
+from slamrel.formats.trajectories import write_trajectory
 from slamrel.outputs import staged_directory, write_text_atomic
 from slamrel.report.html import render_html
-from slamrel.report.notes import map_notes, nees_notes, run_notes
+from slamrel.report.notes import map_notes, nees_notes, no_truth_notes, run_notes
 from slamrel.report.run_page import report_figures, report_sections
 from slamrel.report.verdict import RunFacts, run_verdict
 from slamrel.runs.nees import NeesCurve, at_truth_times, estimate_nees, placed_frame
-from slamrel.runs.result import RelationSetRule, RunResult, SetEvaluations
+from slamrel.runs.result import ReferenceScores, RelationSetRule, RunResult, SetEvaluations
 from slamrel.runs.time_base import TimeBase
 from slamrel.simulation.bundles import world_bundle
 from slamrel.simulation.worlds import make_world
@@ -175,7 +177,8 @@ class RunInput:
     Attributes
     ----------
     bundle : Bundle
-        With ground truth (``groundtruth.csv``): required to score.
+        With ground truth (``groundtruth.csv``) the estimates are scored on relations drawn
+        from it; without, the report holds what needs no truth (module docstring).
     name : str
         Shown in the report's title.
     online : Trajectory or None
@@ -184,6 +187,14 @@ class RunInput:
         Its pose covariances, one per pose of ``online``.
     dead_reckoning : Trajectory or None
         Odometry alone; ``None``: chained from the bundle's log.
+    reference_relations : RelationSet or None
+        Reference relations (Freiburg ``.relations``, read as ``slamrel evaluate`` reads
+        them) that every estimate is scored on too, with ground truth or without.
+    reference_relations_name : str
+        Where they came from (the file), for the report.
+    reference_map : LandmarkMap or None
+        A reference landmark map (a survey) the SLAM map is compared with, for a bundle
+        without ``landmarks_groundtruth.csv``.
     """
 
     bundle: Bundle
@@ -191,6 +202,9 @@ class RunInput:
     online: Trajectory | None = None
     online_covariance: NDArray[np.float64] | None = None
     dead_reckoning: Trajectory | None = None
+    reference_relations: RelationSet | None = None
+    reference_relations_name: str = ""
+    reference_map: LandmarkMap | None = None
 
 
 def _evaluate_sets(sets: dict[str, RelationSet], est: Trajectory) -> SetEvaluations:
@@ -312,25 +326,33 @@ def score_bundle(
     When the recovery fails (``on_divergence="raise"`` on a run where map and log disagree,
     or numerically impossible input), the result still scores dead reckoning (and the online
     estimate) and says why in ``recovery_error``: a report is always written. The map is
-    compared with the true landmarks by :func:`map_comparison` (``associate``, ``align``);
-    when no association can be made the report says why instead.
+    compared with the true landmarks (or ``inp.reference_map``) by :func:`map_comparison`
+    (``associate``, ``align``); when no association can be made the report says why instead.
+
+    Without ground truth nothing is scored on relations drawn from it and there is no NEES;
+    the recovery, where the map and the log disagree, the robust weights' loss, the map
+    comparison with a reference map and the scores on ``inp.reference_relations`` need no
+    truth and are all there; the online estimate is compared with the recovered one
+    (:func:`_online_against_recovered`).
     """
     bundle = inp.bundle
     truth = bundle.groundtruth
-    if truth is None:
+    if inp.reference_map is not None and bundle.landmarks_groundtruth is not None:
         raise InputError(
-            "the bundle has no groundtruth.csv: nothing to score against", path=bundle.path
+            "the bundle has its own landmarks_groundtruth.csv; a reference map would replace "
+            "it: give one or the other",
+            path=bundle.path,
         )
-    _check_truth_overlaps(bundle, truth)
-    relations = default_relations(truth, seed=seed)
-    sets = relations.sets
+    if truth is not None:
+        _check_truth_overlaps(bundle, truth)
+    relations = None if truth is None else default_relations(truth, seed=seed)
     map_cmp, failed_map = None, []
     try:
-        map_cmp = map_comparison(bundle, associate=associate, align=align)
+        map_cmp = map_comparison(
+            bundle, associate=associate, align=align, reference=inp.reference_map
+        )
     except InputError as exc:  # no pair at all, or maps too small to associate: a finding
         failed_map.append(f"No map comparison: {exc.message}.")
-    # the NEES frame's landmark fit on the comparison's pairs (none when it failed)
-    frame = placed_frame(bundle) if map_cmp is None else landmark_frame(bundle, map_cmp)[0]
     rec_error = None
     try:
         rec = recover(
@@ -341,18 +363,37 @@ def score_bundle(
         if isinstance(exc, InputError):
             raise
         rec, rec_error = None, str(exc)
-    estimates, nees, nees_truth = _estimates_at_truth(inp, rec, frame)
+    own = _own_estimates(inp, rec)
     notes = run_notes(rec, rec_error, method, has_online=inp.online is not None)
-    notes += nees_notes(
-        frame, nees, nees_truth,
-        online_without_covariances=inp.online is not None and inp.online_covariance is None,
-    )  # fmt: skip
-    notes += failed_map if map_cmp is None else map_notes(map_cmp)
+    frame, estimates, evaluations = None, own, {}
+    nees: dict[str, NeesCurve] = {}
+    nees_truth: dict[str, NeesSummary] = {}
+    online_vs_recovered = None
+    if truth is not None and relations is not None:
+        # the NEES frame's landmark fit on the comparison's pairs (none when it failed)
+        frame = placed_frame(bundle) if map_cmp is None else landmark_frame(bundle, map_cmp)[0]
+        estimates, nees, nees_truth = _estimates_at_truth(inp, own, rec, frame)
+        evaluations = {k: _evaluate_sets(relations.sets, est) for k, est in estimates.items()}
+        notes += nees_notes(
+            frame, nees, nees_truth,
+            online_without_covariances=inp.online is not None and inp.online_covariance is None,
+        )  # fmt: skip
+    else:
+        online_vs_recovered = _online_against_recovered(own, seed=seed)
+        notes += no_truth_notes(
+            relations=inp.reference_relations is not None, online=online_vs_recovered is not None
+        )
+    if map_cmp is None:
+        notes += failed_map
+    elif inp.reference_map is not None:
+        notes += map_notes(map_cmp, reference="the reference map (--reference-map)")
+    else:
+        notes += map_notes(map_cmp)
     return RunResult(
         name=inp.name,
         bundle=bundle,
         estimates=estimates,
-        evaluations={k: _evaluate_sets(sets, est) for k, est in estimates.items()},
+        evaluations=evaluations,
         nees=nees,
         recovery_result=rec,
         map_comparison=map_cmp,
@@ -360,8 +401,44 @@ def score_bundle(
         recovery_error=rec_error,
         nees_frame=frame,
         nees_truth_frame=nees_truth,
-        relation_sets=relations.rules,
+        relation_sets=() if relations is None else relations.rules,
+        reference=_reference_scores(inp, own),
+        online_vs_recovered=online_vs_recovered,
     )
+
+
+def _reference_scores(inp: RunInput, own: dict[str, Trajectory]) -> ReferenceScores | None:
+    """Every estimate (whole, at its own times) scored on the reference relations as
+    ``slamrel evaluate RELATIONS ESTIMATE`` scores them with its default options."""
+    rel = inp.reference_relations
+    if rel is None:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnassociatedRelationsWarning)  # counted in the JSON
+        kw: dict[str, Any] = {
+            "max_time_diff": EVALUATE_DEFAULTS["max_time_diff"],
+            "interpolate": EVALUATE_DEFAULTS["interpolate"],
+            "max_interpolation_gap": EVALUATE_DEFAULTS["max_interpolation_gap"],
+            "mode": EVALUATE_DEFAULTS["mode"],
+            "allow_empty": True,
+        }
+        scores = {k: evaluate(rel, est, **kw) for k, est in own.items()}
+    return ReferenceScores(inp.reference_relations_name, len(rel), scores)
+
+
+def _online_against_recovered(
+    own: dict[str, Trajectory], *, seed: int = 0
+) -> SetEvaluations | None:
+    """The online estimate scored on relations drawn from the recovered trajectory by
+    :func:`default_relations` (without ground truth, the two estimates' difference: not an
+    error of either); ``None`` without one of them."""
+    rec, online = own.get("recovered"), own.get("online")
+    if rec is None or online is None or len(rec) < 2:
+        return None
+    sets = default_relations(rec, seed=seed).sets
+    if not sets:
+        return None
+    return _evaluate_sets(sets, online)
 
 
 def _check_truth_overlaps(bundle: Bundle, truth: Trajectory) -> None:
@@ -397,8 +474,10 @@ def map_comparison(
     align: bool = True,
     cutoff: float = 1.0,
     seed: int = 0,
+    reference: LandmarkMap | None = None,
 ) -> MapComparison | None:
-    """The SLAM map against the bundle's true landmarks (``None`` when it has none).
+    """The SLAM map against the bundle's true landmarks, or the ``reference`` map when given
+    (``None`` when there is neither).
 
     :func:`landmark_graph.map_compare.compare_maps` with the frame rule (the map moved onto
     the true landmarks by the fit on the pairs, unless ``align=False``) and ``associate``
@@ -408,10 +487,12 @@ def map_comparison(
     (:func:`landmark_graph.observability.within_reach`) are the observable ones; without
     ground truth or measurements every true landmark is.
     """
-    if bundle.landmarks_groundtruth is None:
-        return None
+    ref = reference
+    if ref is None:
+        if bundle.landmarks_groundtruth is None:
+            return None
+        ref = LandmarkMap(*bundle.landmarks_groundtruth)
     est = LandmarkMap(bundle.map_ids, bundle.map_xy)
-    ref = LandmarkMap(*bundle.landmarks_groundtruth)
     reach = sensor_reach(bundle)
     observable = None
     if reach is not None and bundle.groundtruth is not None:
@@ -453,22 +534,36 @@ def landmark_frame(
     return placed_frame(bundle, anchor_on_landmarks(*pairs, association=how)), assoc
 
 
-def _estimates_at_truth(
-    inp: RunInput, rec: Recovery | None, frame: NeesFrame
-) -> tuple[dict[str, Trajectory], dict[str, NeesCurve], dict[str, NeesSummary]]:
-    """Recovered, dead-reckoning and online estimates at the ground-truth times, and NEES.
-
-    The NEES of each estimate with covariances (:func:`slamrel.runs.nees.estimate_nees`) in
-    ``frame`` and, unaligned, in the truth frame (summaries only).
-    """
-    bundle, truth = inp.bundle, inp.bundle.groundtruth
-    assert truth is not None
+def _own_estimates(inp: RunInput, rec: Recovery | None) -> dict[str, Trajectory]:
+    """The recovered (when a recovery ran), dead-reckoning and online (when given) estimates,
+    whole, at their own times; dead reckoning chained from the log when the input has none."""
+    bundle = inp.bundle
     dead_reckoning = inp.dead_reckoning
     if dead_reckoning is None:
         steps = build_steps(bundle)
         dead_reckoning = Trajectory(
             steps.times, se2.cumulative_compose(steps.u, start=bundle.initial_pose)
         )
+    own: dict[str, Trajectory] = {}
+    if rec is not None:
+        own["recovered"] = rec.trajectory
+    own["dead_reckoning"] = dead_reckoning
+    if inp.online is not None:
+        own["online"] = inp.online
+    return own
+
+
+def _estimates_at_truth(
+    inp: RunInput, own: dict[str, Trajectory], rec: Recovery | None, frame: NeesFrame
+) -> tuple[dict[str, Trajectory], dict[str, NeesCurve], dict[str, NeesSummary]]:
+    """Recovered, dead-reckoning and online estimates (``own``, :func:`_own_estimates`) at
+    the ground-truth times, and NEES.
+
+    The NEES of each estimate with covariances (:func:`slamrel.runs.nees.estimate_nees`) in
+    ``frame`` and, unaligned, in the truth frame (summaries only).
+    """
+    truth = inp.bundle.groundtruth
+    assert truth is not None
     estimates: dict[str, Trajectory] = {}
     nees: dict[str, NeesCurve] = {}
     unaligned: dict[str, NeesSummary] = {}
@@ -477,12 +572,12 @@ def _estimates_at_truth(
         nees[name], unaligned[name] = estimate_nees(truth, est, covs, frame)
 
     if rec is not None:
-        recovered, rec_rows = _at_truth_times(rec.trajectory, truth)
+        recovered, rec_rows = _at_truth_times(own["recovered"], truth)
         estimates["recovered"] = recovered
         score("recovered", recovered, rec.covariances[rec_rows])
-    estimates["dead_reckoning"] = _at_truth_times(dead_reckoning, truth)[0]
-    if inp.online is not None:
-        online_t, online_rows = _at_truth_times(inp.online, truth)
+    estimates["dead_reckoning"] = _at_truth_times(own["dead_reckoning"], truth)[0]
+    if "online" in own:
+        online_t, online_rows = _at_truth_times(own["online"], truth)
         estimates["online"] = online_t
         if inp.online_covariance is not None:
             score("online", online_t, inp.online_covariance[online_rows])
@@ -504,15 +599,18 @@ def write_report(result: RunResult, directory: str | Path, *, force: bool = True
     """Write the report folder, swapped in whole; returns the path of ``report.html``.
 
     The folder holds ``bundle/``, ``metrics.json`` (:meth:`RunResult.metrics`, the numbers
-    every table of the page shows), ``relations_<estimate>.csv``, ``figure_<k>.png`` and,
-    with a map comparison, ``review.html``. ``force``: may an existing report folder (one
-    slamrel wrote) be replaced?
+    every table of the page shows), ``recovered.txt`` (the recovered trajectory at every
+    pose, as ``slamrel recover -o recovered.txt`` writes it), ``relations_<estimate>.csv``
+    (with ground truth), ``figure_<k>.png`` and, with a map comparison, ``review.html``.
+    ``force``: may an existing report folder (one slamrel wrote) be replaced?
     """
     target = Path(directory)
     metrics = result.metrics()
     with staged_directory(target, kind="report", force=force) as tmp:
         write_bundle(tmp / "bundle", result.bundle)
         write_json(tmp / "metrics.json", metrics)
+        if result.recovery_result is not None:  # whole, as `slamrel recover -o FILE.txt`
+            write_trajectory(tmp / "recovered.txt", result.recovery_result.trajectory)
         for name, evs in result.evaluations.items():
             write_per_relation_csv(
                 tmp / f"relations_{name}.csv", evs.all, relation_sets=_set_labels(evs)

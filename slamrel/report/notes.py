@@ -17,7 +17,7 @@ from relation_metric.consistency import NeesSummary
 from slamrel.report.verdict import expected_downweight_loss
 from slamrel.runs.nees import NeesCurve
 
-__all__ = ["map_notes", "nees_notes", "recovery_notes", "run_notes"]
+__all__ = ["map_notes", "nees_notes", "no_truth_notes", "recovery_notes", "run_notes"]
 
 
 def run_notes(
@@ -115,12 +115,38 @@ def nees_notes(
     return notes
 
 
-def map_notes(mc: MapComparison) -> list[str]:
-    """The report's notes on the map comparison: association, frame, unobserved landmarks."""
+def no_truth_notes(*, relations: bool, online: bool) -> list[str]:
+    """The report's notes for a bundle without ground truth: what is judged without it and
+    what is not (``relations``: reference relations were given; ``online``: the online
+    estimate was compared with the recovered one)."""
+    notes = [
+        "The bundle has no ground truth (groundtruth.csv): nothing is scored on relations drawn "
+        "from it and there is no NEES. What needs no truth is all here: the recovered "
+        "trajectory, where the map and the log disagree (the innovations' NIS), the robust "
+        "weights' loss"
+        + (", the online estimate against the recovered one" if online else "")
+        + ". The figures draw every estimate as estimated, in the SLAM map's frame."
+    ]
+    if relations:
+        notes.append(
+            "Every estimate is scored on the reference relations given (--relations) as "
+            "slamrel evaluate scores them; their accuracy is that of the relations."
+        )
+    if online:
+        notes.append(
+            "Online against recovered: the online estimate scored on relations drawn from the "
+            "recovered trajectory — how far the two estimates differ, not the error of either."
+        )
+    return notes
+
+
+def map_notes(mc: MapComparison, *, reference: str = "the true landmarks") -> list[str]:
+    """The report's notes on the map comparison: association, frame, unobserved landmarks
+    (``reference``: what the map is compared with, in words)."""
     al = mc.alignment
     how = SOURCE_WORDS[mc.association_source]
     text = (
-        f"The map is compared with the true landmarks associated {how} "
+        f"The map is compared with {reference} associated {how} "
         f"({mc.association.estimate_rows.size} pairs); OSPA, GOSPA and the map figure are in "
         f"the frame: {mc.frame}"
     )

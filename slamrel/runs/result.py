@@ -28,7 +28,14 @@ from relation_metric.trajectory import Trajectory
 from slamrel.runs.nees import NeesCurve, blowups, truth_at
 from slamrel.runs.time_base import TimeBase
 
-__all__ = ["DisplayFrame", "MapSummary", "RelationSetRule", "RunResult", "SetEvaluations"]
+__all__ = [
+    "DisplayFrame",
+    "MapSummary",
+    "ReferenceScores",
+    "RelationSetRule",
+    "RunResult",
+    "SetEvaluations",
+]
 
 
 class SetEvaluations(Mapping[str, Evaluation]):
@@ -104,6 +111,34 @@ class RelationSetRule:
             "generated": self.generated,
             "absent": self.absent or None,
             "parameters": dict(self.parameters),
+        }
+
+
+@dataclass(frozen=True)
+class ReferenceScores:
+    """Every estimate scored on reference relations the user gave (``slamrel run
+    --relations``), as ``slamrel evaluate RELATIONS ESTIMATE`` scores them.
+
+    Attributes
+    ----------
+    source : str
+        Where the relations came from (the file).
+    relations : int
+        Relations in the file (after the drops ``slamrel evaluate`` makes).
+    scores : dict of name → Evaluation
+        Per estimate (``recovered``, ``dead_reckoning``, ``online``), at its own times.
+    """
+
+    source: str
+    relations: int
+    scores: dict[str, Evaluation]
+
+    def as_dict(self) -> dict[str, Any]:
+        """``metrics.json`` ``reference_relations``."""
+        return {
+            "source": self.source,
+            "relations": self.relations,
+            "estimates": {k: ev.as_dict() for k, ev in self.scores.items()},
         }
 
 
@@ -233,6 +268,15 @@ class RunResult:
         The same NEES with the poses compared with the ground truth as they are (unaligned).
     relation_sets : tuple of RelationSetRule
         How each relation set was made (:func:`default_relations`), absent sets included.
+    reference : ReferenceScores or None
+        The estimates scored on reference relations the user gave (with truth or without).
+    online_vs_recovered : SetEvaluations or None
+        Without ground truth: the online estimate scored on relations drawn from the
+        recovered trajectory (their difference, not an error of either).
+
+    Without ground truth (``bundle.groundtruth`` ``None``, :attr:`has_truth`) ``estimates``
+    are the whole trajectories at their own times, ``evaluations``, ``nees`` and
+    ``nees_truth_frame`` are empty and ``nees_frame`` is ``None``.
 
     Derived (computed once, on first use): ``recovery``, ``divergence`` and ``map``, the JSON
     of the recovery, of where the map and the log disagree and of the map comparison
@@ -255,6 +299,13 @@ class RunResult:
     nees_frame: NeesFrame | None = None
     nees_truth_frame: dict[str, NeesSummary] = field(default_factory=dict)
     relation_sets: tuple[RelationSetRule, ...] = ()
+    reference: ReferenceScores | None = None
+    online_vs_recovered: SetEvaluations | None = None
+
+    @property
+    def has_truth(self) -> bool:
+        """Whether the bundle has a ground-truth trajectory (``groundtruth.csv``)."""
+        return self.bundle.groundtruth is not None
 
     @cached_property
     def time_base(self) -> TimeBase:
@@ -273,10 +324,17 @@ class RunResult:
         saw the map, and every estimate without a usable landmark fit, are moved by the SE(2)
         least-squares fit of their positions on the ground truth's at the same times (the map
         then follows the main estimate). Drawing only: every score is frame-free or says its
-        frame.
+        frame. Without ground truth every estimate and the map are drawn as they are, in the
+        SLAM map's frame.
         """
         truth = self.bundle.groundtruth
-        assert truth is not None
+        if truth is None:
+            as_is = DisplayFrame(
+                Alignment(0.0, np.zeros(2), 1.0),
+                "as estimated, in the SLAM map's frame (no ground truth to align to)",
+                "map frame",
+            )
+            return {**{k: as_is for k in self.estimates}, "map": as_is}
         m = None if self.nees_frame is None else self.nees_frame.map_anchoring
         cutoff = 1.0 if self.map_comparison is None else self.map_comparison.cutoff
         out: dict[str, DisplayFrame] = {}
@@ -332,8 +390,10 @@ class RunResult:
 
     @property
     def main_estimate(self) -> str:
-        """The estimate scored as ``trajectory``: recovered, else online, else dead reckoning."""
-        return next(k for k in ("recovered", "online", "dead_reckoning") if k in self.evaluations)
+        """The estimate scored as ``trajectory``: recovered, else online, else dead reckoning
+        (without ground truth, the first of them the run has)."""
+        have = self.evaluations if self.evaluations else self.estimates
+        return next(k for k in ("recovered", "online", "dead_reckoning") if k in have)
 
     @cached_property
     def recovery(self) -> dict[str, Any]:
@@ -402,4 +462,10 @@ class RunResult:
         out["time_base"] = self.time_base.as_dict()
         out["relation_sets"] = [r.as_dict() for r in self.relation_sets]
         out["notes"] = self.notes
+        if self.reference is not None:
+            out["reference_relations"] = self.reference.as_dict()
+        if self.online_vs_recovered is not None:
+            ev = self.online_vs_recovered
+            out["online_vs_recovered"] = ev.all.as_dict()
+            out["online_vs_recovered"]["by_relation_set"] = {k: ev[k].as_dict() for k in ev.sets}
         return out
