@@ -134,7 +134,8 @@ def run(args: argparse.Namespace) -> int:
     html = write_report(result, args.output, force=args.force)
     if not args.quiet:
         print(f"slamrel run {result.name} ({time.perf_counter() - start:.1f} s)")
-        print(f"{'estimate':16s}{'relations':>13s}{'trans mean [m]':>16s}{'rot mean [rad]':>16s}")
+        if result.evaluations or result.reference is not None:
+            print(f"{'estimate':16s}{'relations':>13s}{'trans mean [m]':>16s}{'rot mean [rad]':>16s}")
         for name, evs in result.evaluations.items():
             for set_name in ("consecutive", "loops", "global"):
                 if set_name in evs:
@@ -147,7 +148,8 @@ def run(args: argparse.Namespace) -> int:
                 t, r = ev.translation.abs.mean, ev.rotation.abs.mean
                 print(f"{name:16s}{'reference':>13s}{t:16.4f}{r:16.4f}")
         if not result.has_truth:
-            print("no ground truth: scored only on --relations; NEES not judged (see the report)")
+            scored = "nothing scored" if result.reference is None else "scored only on --relations"
+            print(f"no ground truth: {scored}; NEES not judged (see the report)")
         ms = result.map_summary
         if ms is not None:
             extra = f", {ms.unobserved} never within reach" if ms.unobserved else ""
