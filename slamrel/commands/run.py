@@ -135,7 +135,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(f"slamrel run {result.name} ({time.perf_counter() - start:.1f} s)")
         if result.evaluations or result.reference is not None:
-            print(f"{'estimate':16s}{'relations':>13s}{'trans mean [m]':>16s}{'rot mean [rad]':>16s}")
+            head = f"{'relations':>13s}{'trans mean [m]':>16s}{'rot mean [rad]':>16s}"
+            print(f"{'estimate':16s}{head}")
         for name, evs in result.evaluations.items():
             for set_name in ("consecutive", "loops", "global"):
                 if set_name in evs:
