@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.arrays import PathLike
 from relation_metric.errors import InputError
+from relation_metric.ids import integer_ids
 from slamrel.formats.fastparse import UTF8_BOM, read_decimal_table
 from slamrel.outputs import (
     atomic_write,
@@ -58,6 +59,7 @@ __all__ = [
     "read_csv_id_column",
     "exact_integer_tokens",
     "record_id_tokens",
+    "exact_record_ids",
     "format_csv_table",
     "write_csv_table",
     "parse_float",
@@ -636,6 +638,34 @@ def record_id_tokens(
     text = source.lines
     cells = np.array([text[n - 1].split()[field] for n in lines.tolist()], dtype=np.str_)
     return exact_integer_tokens(cells, lines, source.path, column, hint="an integer")
+
+
+# From 2**53 on a double no longer holds every integer: such ids are re-read from the text.
+_EXACT_FLOAT_IDS = 2.0**53
+
+
+def exact_record_ids(
+    values: NDArray[np.float64],
+    lines: NDArray[np.int64],
+    source: SourceText,
+    field: int,
+    column: str,
+) -> NDArray[np.int64]:
+    """An id column of keyword records (field ``field``, the keyword being field 0) as exact
+    int64: through the parsed floats where they hold every integer (``|id| < 2**53``),
+    re-read from the text where they do not.
+
+    The one id rule of the keyword-record graph readers (g2o, TORO): a value that is not an
+    integer (``3.5``) or does not fit in int64 raises :class:`InputError` at its line, so no
+    id is ever rounded or truncated onto another.
+    """
+    big = np.abs(values) >= _EXACT_FLOAT_IDS
+    if not big.any():
+        return integer_ids(values, lines, source.path, column)
+    out = np.empty(values.shape[0], dtype=np.int64)
+    out[~big] = integer_ids(values[~big], lines[~big], source.path, column)
+    out[big] = record_id_tokens(source, lines[big], field, column)
+    return out
 
 
 def _column_name(c: Column) -> str:
