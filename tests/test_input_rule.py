@@ -12,6 +12,14 @@ from pathlib import Path
 import pytest
 
 from slamrel.cli import main
+from tests.test_readers_fuzz import BUNDLE
+
+
+def _write(root: Path, files: dict[str, str]) -> Path:
+    root.mkdir(parents=True, exist_ok=True)
+    for name, text in files.items():
+        (root / name).write_text(text)
+    return root
 
 
 def _refused(argv: list[str], capsys: pytest.CaptureFixture[str], *needles: str) -> str:
@@ -88,3 +96,41 @@ def test_toro_records_follow_the_g2o_rules(tmp_path, capsys, text, needles):
     """The g2o reader's checks, from the same functions: id range, repeated ids (across
     both spellings, at the second line), coordinates, information matrices, edge ends."""
     _refused(_toro(tmp_path, text), capsys, *needles)
+
+
+# ---------------------------------------------------------------- 2. repeated CSV column names
+
+
+def test_bundle_map_with_a_repeated_column_is_refused(tmp_path, capsys):
+    """``x,landmark,x,y``: every landmark used to be placed at the first column's x."""
+    rows = BUNDLE["map.csv"].splitlines()[1:]
+    cells = [r.split(",") for r in rows]
+    text = "x,landmark,X,y\n" + "".join(f"99,{c[0]},{c[1]},{c[2]}\n" for c in cells)
+    b = _write(tmp_path / "b", dict(BUNDLE, **{"map.csv": text}))
+    _refused(
+        ["recover", str(b), "-o", str(tmp_path / "o.tum")],
+        capsys,
+        "map.csv:1:",
+        "names column 'x' twice (columns 1 and 3)",
+    )
+    assert not (tmp_path / "o.tum").exists()
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "argv"),
+    [
+        # trajectory CSV (the header after a comment line: the refusal names its line)
+        ("t.csv", "# made by hand\nt,x,y,theta,t\n0,0,0,0,5\n1,1,0,0,6\n2,2,0,0,7\n",
+         ["evaluate", "{f}", "{f}", "-q"]),
+        # landmark map
+        ("m.csv", "landmark,x,y,y\n1,0,0,9\n2,1,0,9\n3,0,1,9\n", ["map-compare", "{f}", "{f}"]),
+    ],
+)  # fmt: skip
+def test_every_csv_reader_refuses_a_repeated_column(tmp_path, capsys, name, text, argv):
+    f = tmp_path / name
+    f.write_text(text)
+    line = 2 if text.startswith("#") else 1
+    repeated = "t" if name == "t.csv" else "y"
+    _refused(
+        [a.format(f=f) for a in argv], capsys, f"{name}:{line}:", f"column {repeated!r} twice"
+    )

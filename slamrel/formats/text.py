@@ -55,6 +55,7 @@ __all__ = [
     "RowLines",
     "CsvTable",
     "read_csv_table",
+    "csv_header",
     "read_csv_text_column",
     "read_csv_id_column",
     "exact_integer_tokens",
@@ -461,8 +462,9 @@ def read_csv_table(
     Raises
     ------
     InputError
-        An empty file, a missing required column (at the header line), a row with another
-        number of fields or a cell that is not a finite number (at its line).
+        An empty file, a column name given twice or a missing required column (at the
+        header line), a row with another number of fields or a cell that is not a finite
+        number (at its line).
     """
     src = read_source(path) if source is None else source
     name = src.path
@@ -472,7 +474,7 @@ def read_csv_table(
     if not data:
         raise InputError(f"empty file{kind}: expected a header {expected}", path=name)
     head_line, head_text = data[0]
-    header = [h.strip().lower() for h in head_text.split(",")]
+    header = csv_header(head_text, path=name, line=head_line, kind=kind)
     missing = [c for c in required if _find(header, c) is None]
     if missing:
         raise InputError(
@@ -522,6 +524,28 @@ def read_csv_table(
     return CsvTable({c: values[:, i] for i, c in enumerate(wanted)}, numbers)
 
 
+def csv_header(text: str, *, path: str, line: int, kind: str = "") -> list[str]:
+    """The column names of a CSV header line: lower case, stripped of surrounding blanks.
+
+    A name given twice is refused (:class:`InputError` at ``line`` naming it): a reader
+    looks a column up by its name, so the second column of that name would be ignored
+    without a word. Empty names (cells of no column a reader asks for) may repeat.
+    """
+    header = [h.strip().lower() for h in text.split(",")]
+    seen: dict[str, int] = {}
+    for k, h in enumerate(header):
+        if h and h in seen:
+            raise InputError(
+                f"the header{kind} names column {h!r} twice (columns {seen[h] + 1} and "
+                f"{k + 1}); expected each column name once (names are matched case-"
+                "insensitively)",
+                path=path,
+                line=line,
+            )
+        seen.setdefault(h, k)
+    return header
+
+
 def read_csv_text_column(source: SourceText, name: str) -> NDArray[np.str_] | None:
     """The cells of a text column ``name`` of a header CSV, row by row (``None`` if absent).
 
@@ -533,7 +557,7 @@ def read_csv_text_column(source: SourceText, name: str) -> NDArray[np.str_] | No
     first = next(data, None)
     if first is None:
         return None
-    header = [h.strip().lower() for h in first[1].split(",")]
+    header = csv_header(first[1], path=source.path, line=first[0])
     if name not in header:
         return None
     k = header.index(name)
