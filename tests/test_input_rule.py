@@ -134,3 +134,39 @@ def test_every_csv_reader_refuses_a_repeated_column(tmp_path, capsys, name, text
     _refused(
         [a.format(f=f) for a in argv], capsys, f"{name}:{line}:", f"column {repeated!r} twice"
     )
+
+
+# ---------------------------------------------------------------- 3. repeated JSON keys
+
+
+def test_bundle_json_with_a_repeated_key_is_refused(tmp_path, capsys):
+    """The second ``sigma_v`` used to win silently; which one the writer meant is unknown."""
+    text = BUNDLE["bundle.json"].replace(
+        '"sigma_v": 0.1,', '"sigma_v": 0.1,\n    "sigma_v": 5.0,'
+    )
+    assert text != BUNDLE["bundle.json"]
+    b = _write(tmp_path / "b", dict(BUNDLE, **{"bundle.json": text}))
+    line = text.splitlines().index('    "sigma_v": 5.0,') + 1
+    _refused(
+        ["recover", str(b), "-o", str(tmp_path / "o.tum")],
+        capsys,
+        f"bundle.json:{line}:",
+        "key 'sigma_v' is given twice in one object (first on line",
+    )
+    # the same key in two different objects is not a repeat
+    assert main(["recover", str(_write(tmp_path / "c", BUNDLE)), "-o", str(tmp_path / "o.tum"),
+                 "-q"]) == 0  # fmt: skip
+
+
+def test_study_record_with_a_repeated_key_is_damaged(tmp_path):
+    """A stored study result is slamrel's input on resume: a repeated key makes it damaged
+    (recomputed, or named when only loaded), never half-trusted."""
+    from relation_metric.errors import InputError
+    from slamrel.studies.sweep import Task, load_results
+
+    t = Task("x", "math:hypot", {})
+    (tmp_path / f"{t.key}.json").write_text(
+        f'{{"key": "{t.key}", "result": {{"a": 1,\n "a": 2}}}}'
+    )
+    with pytest.raises(InputError, match="damaged study result: key 'a' is given twice"):
+        load_results(tmp_path, [t])

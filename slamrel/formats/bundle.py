@@ -54,6 +54,7 @@ from slamrel.constants import BUNDLE_FORMAT as FORMAT
 from slamrel.formats.landmark_csv import read_landmark_csv, write_landmark_csv
 from slamrel.formats.text import (
     format_csv_table,
+    loads_json,
     read_csv_id_column,
     read_csv_table,
     read_source,
@@ -372,7 +373,7 @@ def _read_manifest(path: Path) -> dict[str, Any]:
     name = str(path)
     text = read_text(path)
     try:
-        doc = json.loads(text)
+        doc: Any = loads_json(text, path=name)
     except json.JSONDecodeError as exc:
         raise InputError(f"not valid JSON: {exc.msg}", path=name, line=exc.lineno) from None
     except RecursionError:

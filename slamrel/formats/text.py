@@ -21,6 +21,7 @@ tables are read by :func:`read_csv_table` and written by :func:`write_csv_table`
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -64,6 +65,7 @@ __all__ = [
     "format_csv_table",
     "write_csv_table",
     "parse_float",
+    "loads_json",
     "quote_token",
     "write_text_atomic",
     "write_bytes_atomic",
@@ -915,3 +917,67 @@ def read_keyword_records(
         )
         for k, n in fields.items()
     }
+
+
+# ------------------------------------------------------------------ JSON documents
+
+
+class _RepeatedKey(Exception):
+    """Raised inside :func:`json.loads` by :func:`_unique_pairs` (caught by :func:`loads_json`)."""
+
+
+def _unique_pairs(pairs: list[tuple[str, object]]) -> dict[str, object]:
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        raise _RepeatedKey
+    return out
+
+
+# a JSON string, or one of the structural characters that matter for finding keys
+_JSON_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"|[{}\[\]]')
+
+
+def _repeated_key(text: str) -> tuple[str, int, int]:
+    """The first key (in document order) given twice in one object of valid JSON ``text``:
+    ``(key, its first line, its second line)``."""
+    stack: list[dict[str, int] | None] = []
+    for m in _JSON_TOKEN.finditer(text):
+        token = m.group()
+        if token == "{":
+            stack.append({})
+        elif token == "[":
+            stack.append(None)
+        elif token in "}]":
+            stack.pop()
+        else:
+            keys = stack[-1] if stack else None
+            rest = text[m.end() :].lstrip()
+            if keys is None or not rest.startswith(":"):
+                continue  # a value, not a key
+            key = json.loads(token)
+            line = text.count("\n", 0, m.start()) + 1
+            if key in keys:
+                return key, keys[key], line
+            keys[key] = line
+    raise AssertionError("no repeated key found in a document json refused for one")
+
+
+def loads_json(text: str, *, path: str) -> object:
+    """``json.loads(text)``, refusing a key given twice in one object.
+
+    :func:`json.loads` keeps the last value of a repeated key without a word, so an edited
+    file could silently lose the value its reader meant; every JSON document slamrel reads
+    as input goes through here. Raises :class:`InputError` naming ``path``, the key and the
+    line of its second occurrence; :class:`json.JSONDecodeError` and :class:`RecursionError`
+    pass through for the caller to word.
+    """
+    try:
+        return json.loads(text, object_pairs_hook=_unique_pairs)
+    except _RepeatedKey:
+        key, first, line = _repeated_key(text)
+        raise InputError(
+            f"key {key!r} is given twice in one object (first on line {first}); expected "
+            "each key once (JSON keeps only the last value, silently)",
+            path=path,
+            line=line,
+        ) from None
