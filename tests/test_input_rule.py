@@ -170,3 +170,38 @@ def test_study_record_with_a_repeated_key_is_damaged(tmp_path):
     )
     with pytest.raises(InputError, match="damaged study result: key 'a' is given twice"):
         load_results(tmp_path, [t])
+
+
+# ---------------------------------------------------------------- 4. an estimate beside the log
+
+
+def _carmen(times: list[float]) -> str:
+    """FLASER scans of a robot moving 0.1 m a scan along x in a round room (every range
+    1 m): laser pose = odometry pose, one line a scan."""
+    ranges = " ".join(["1.00"] * 181)
+    return "".join(
+        f"FLASER 181 {ranges} {0.1 * k} 0 0 {0.1 * k} 0 0 {t} host {t}\n"
+        for k, t in enumerate(times)
+    )
+
+
+def _tum(times: list[float]) -> str:
+    return "".join(f"{t} {0.1 * k} 0 0 0 0 0 1\n" for k, t in enumerate(times))
+
+
+def test_align_refuses_an_estimate_beside_the_log(tmp_path, capsys):
+    """Times 100 … 101 s against scans at 10 … 11 s: every guess used to be the log's own
+    motion from the estimate's end pose ("guesses from EST", exit 0). Refused as the bag path
+    refuses it; an overlapping estimate still gives the guesses."""
+    scan_times = [10.0 + 0.2 * k for k in range(6)]
+    log, est = tmp_path / "log.clf", tmp_path / "est.tum"
+    log.write_text(_carmen(scan_times))
+    est.write_text(_tum([t + 90.0 for t in scan_times]))
+    out = tmp_path / "out.relations"
+    argv = ["relations", "align", str(log), "--estimate", str(est), "-o", str(out)]
+    _refused(argv, capsys, f"{est}:", "no scan lies within the estimate's time span",
+             "100.000 … 101.000 s", "10.000 … 11.000 s")  # fmt: skip
+    assert not out.exists()
+    est.write_text(_tum(scan_times))
+    assert main(argv) == 0
+    assert f"guesses from {est}; 0 scan pose(s) odometry-corrected" in capsys.readouterr().out
