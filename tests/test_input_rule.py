@@ -205,3 +205,46 @@ def test_align_refuses_an_estimate_beside_the_log(tmp_path, capsys):
     est.write_text(_tum(scan_times))
     assert main(argv) == 0
     assert f"guesses from {est}; 0 scan pose(s) odometry-corrected" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------- 5. skipped and reordered, said
+
+
+def test_skipped_3d_pose_vertices_are_warned(tmp_path, capsys):
+    """Only VERTEX_SE2 poses make a g2o trajectory; a skipped VERTEX_SE3 used to be counted
+    only in --json."""
+    g2o = tmp_path / "t.g2o"
+    g2o.write_text(
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE3:QUAT 1 1 0 0 0 0 0 1\nVERTEX_SE2 2 2 0 0\n"
+        "VERTEX_SE3:QUAT 4 1 0 0 0 0 0 1\nVERTEX_SE2 3 3 0 0\nEDGE_SE2 0 2 1 0 0 1 0 0 1 0 1\n"
+    )
+    ref = tmp_path / "r.tum"
+    ref.write_text("0 0 0 0 0 0 0 1\n2 2 0 0 0 0 0 1\n3 3 0 0 0 0 0 1\n")
+    assert main(["evaluate", str(ref), str(g2o), "-q"]) == 0
+    err = capsys.readouterr().err
+    assert (
+        f"warning: {g2o}: skipped 2 VERTEX_SE3:QUAT record(s) (3-D poses, first at line 2); "
+        "the g2o trajectory format reads VERTEX_SE2 poses only"
+    ) in err
+    # the records a g2o trajectory always skips (edges, landmarks) stay silent
+    g2o.write_text("VERTEX_SE2 0 0 0 0\nVERTEX_XY 7 1 1\nVERTEX_SE2 2 2 0 0\nVERTEX_SE2 3 3 0 0\n")
+    assert main(["evaluate", str(ref), str(g2o), "-q"]) == 0
+    assert "skipped" not in capsys.readouterr().err
+
+
+def test_align_warns_of_scans_out_of_time_order(tmp_path, capsys):
+    """Scans 4 and 6 step back in time (10.3 after 10.4, 10.6 after 10.8): the warning
+    counts 2 and names line 4; the scans stay in file order, as before."""
+    log = tmp_path / "log.clf"
+    log.write_text(_carmen([10.0, 10.2, 10.4, 10.3, 10.8, 10.6, 11.0]))
+    out = tmp_path / "out.relations"
+    assert main(["relations", "align", str(log), "-o", str(out), "-q"]) == 0
+    err = capsys.readouterr().err
+    assert (
+        f"{log}: 2 FLASER scans out of time order (largest step back 0.200000 s, first at "
+        "line 4); kept in file order"
+    ) in err
+    log.write_text(_carmen([10.0, 10.2, 10.3, 10.4, 10.6, 10.8, 11.0]))
+    out.unlink()
+    assert main(["relations", "align", str(log), "-o", str(out), "-q"]) == 0
+    assert "out of time order" not in capsys.readouterr().err
