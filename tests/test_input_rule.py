@@ -248,3 +248,39 @@ def test_align_warns_of_scans_out_of_time_order(tmp_path, capsys):
     out.unlink()
     assert main(["relations", "align", str(log), "-o", str(out), "-q"]) == 0
     assert "out of time order" not in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- 6. crashes on valid input
+
+
+@pytest.mark.parametrize(("storage", "name"), [("ros1", "run.bag"), ("sqlite3", "run_db3"),
+                                               ("mcap", "run_mcap")])  # fmt: skip
+def test_bag_message_that_does_not_deserialize_is_named(tmp_path, capsys, rng, storage, name):
+    """Message 3 of /pose is cut off (half its bytes): an "internal error" before; now the
+    bag, the topic and the message's index on it, exit 3 (ROS 1, db3, MCAP alike)."""
+    pytest.importorskip("rosbags")
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
+    from rosbags.typesys import Stores, get_typestore
+
+    from tests.test_bags import TYPES, _messages, _truth
+
+    ros1 = storage == "ros1"
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.LATEST)
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    bag = tmp_path / name
+    writer = Writer1(bag) if ros1 else Writer2(bag, version=9, storage_plugin=plugin)
+    with writer as w:
+        c = w.add_connection("/pose", TYPES["pose"], typestore=ts)
+        for i, m in enumerate(_messages(ts, _truth(rng), "pose")):
+            raw = (ts.serialize_ros1 if ros1 else ts.serialize_cdr)(m, TYPES["pose"])
+            w.write(c, 10**9 * (i + 1), raw[: len(raw) // 2] if i == 2 else raw)
+    ref = tmp_path / "ref.tum"
+    ref.write_text("".join(f"{1_500_000_000 + k} {k} 0 0 0 0 0 1\n" for k in range(6)))
+    _refused(
+        ["evaluate", str(ref), f"{bag}:/pose", "-q"],
+        capsys,
+        str(bag),
+        "topic '/pose', message 3: does not deserialize as geometry_msgs/PoseStamped",
+    )
