@@ -284,3 +284,31 @@ def test_bag_message_that_does_not_deserialize_is_named(tmp_path, capsys, rng, s
         str(bag),
         "topic '/pose', message 3: does not deserialize as geometry_msgs/PoseStamped",
     )
+
+
+def test_compare_draws_names_with_dollars_literally(tmp_path, capsys):
+    """Dataset and algorithm names are the user's words, not mathtext: ``a$\\frac$`` used to
+    end in an internal error while drawing errors.png."""
+    from slamrel.plots.relation_errors import literal_text
+
+    ref, est = tmp_path / "ref.tum", tmp_path / "est.tum"
+    ref.write_text("".join(f"{k} {k} 0 0 0 0 0 1\n" for k in range(12)))
+    est.write_text("".join(f"{k} {k + 0.01 * (k % 3)} 0 0 0 0 0 1\n" for k in range(12)))
+    per = {}
+    for name, traj in (("est", est), ("ref", ref)):
+        per[name] = tmp_path / f"{name}.csv"
+        argv = ["evaluate", str(ref), str(traj), "--strategy", "consecutive",
+                "--per-relation", str(per[name]), "-q"]  # fmt: skip
+        assert main(argv) == 0
+    out = tmp_path / "cmp"
+    argv = ["compare", f"a$\\frac$:b$x$={per['est']}", f"a$\\frac$:$c={per['ref']}",
+            "-o", str(out), "-q"]  # fmt: skip
+    assert main(argv) == 0, capsys.readouterr().err
+    assert (out / "errors.png").stat().st_size > 0
+    assert "| a\\$\\\\frac\\$ | b\\$x\\$ |" in (out / "table.md").read_text()
+    # what matplotlib is given: each $ escaped, so no pair opens mathtext
+    assert literal_text("a$\\frac$") == "a\\$\\frac\\$"
+    from matplotlib.text import Text
+
+    shown = Text(text=literal_text("a$\\frac$"))._preprocess_math(literal_text("a$\\frac$"))
+    assert shown == ("a$\\frac$", False)  # drawn as the name itself, not as math
