@@ -312,3 +312,27 @@ def test_compare_draws_names_with_dollars_literally(tmp_path, capsys):
 
     shown = Text(text=literal_text("a$\\frac$"))._preprocess_math(literal_text("a$\\frac$"))
     assert shown == ("a$\\frac$", False)  # drawn as the name itself, not as math
+
+
+@pytest.mark.parametrize("key", ["sigma_range", "sigma_bearing"])
+def test_sensor_sigma_whose_variance_is_not_a_double_is_refused(tmp_path, capsys, key):
+    """σ = 1e-300 squares to 1e-600, which float64 holds only as 0: the smoother and batch
+    inverted that zero (LinAlgError, "internal error"). Refused where it is read, for every
+    method alike (the filter ran the σ = 0 model a bundle may not state); 1e-150 is read."""
+    import json
+
+    meta = json.loads(BUNDLE["bundle.json"])
+    meta["sensor_model"][key] = 1e-300
+    text = json.dumps(meta, indent=2) + "\n"
+    b = _write(tmp_path / "b", dict(BUNDLE, **{"bundle.json": text}))
+    line = next(n for n, t in enumerate(text.splitlines(), 1) if f'"{key}"' in t)
+    for method in ("smoother", "batch", "filter"):
+        out = tmp_path / f"{method}.tum"
+        _refused(["recover", str(b), "-o", str(out), "--method", method], capsys,
+                 f"bundle.json:{line}:", f"sensor_model.{key}: 1e-300 is below 1e-150",
+                 "expected a standard deviation of at least 1e-150")  # fmt: skip
+        assert not out.exists()
+    meta["sensor_model"][key] = 1e-150
+    b = _write(tmp_path / "c", dict(BUNDLE, **{"bundle.json": json.dumps(meta, indent=2)}))
+    assert main(["recover", str(b), "-o", str(tmp_path / "f.tum"), "--method", "filter",
+                 "-q"]) == 0  # fmt: skip

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recovery.bundle import Bundle
-from recovery.constants import MAX_SIGMA, MAX_VARIANCE
+from recovery.constants import MAX_SIGMA, MAX_VARIANCE, MIN_SENSOR_SIGMA
 from recovery.models import (
     CONTROL_STAMPS,
     INTEGRATIONS,
@@ -352,6 +352,15 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
         if v <= 0:
             raise InputError(
                 f"sensor_model.{n}: expected a positive number, got {v}",
+                path=path,
+                line=_line_of_key(text, n),
+            )
+        if v < MIN_SENSOR_SIGMA:
+            raise InputError(
+                f"sensor_model.{n}: {v:g} is below {MIN_SENSOR_SIGMA:g}: its variance "
+                f"{v:g}² is not a float64 number (it rounds to {v * v:g}, the noise-free "
+                "sensor that 0 states, whose measurements would weigh infinitely); expected a "
+                f"standard deviation of at least {MIN_SENSOR_SIGMA:g}",
                 path=path,
                 line=_line_of_key(text, n),
             )
