@@ -336,3 +336,22 @@ def test_sensor_sigma_whose_variance_is_not_a_double_is_refused(tmp_path, capsys
     b = _write(tmp_path / "c", dict(BUNDLE, **{"bundle.json": json.dumps(meta, indent=2)}))
     assert main(["recover", str(b), "-o", str(tmp_path / "f.tum"), "--method", "filter",
                  "-q"]) == 0  # fmt: skip
+
+
+def test_align_refuses_a_pose_that_no_correlative_search_can_reach(tmp_path, capsys):
+    """A scan pose at 1e20 m: the correlative search's table from the reference to the guess
+    had a negative size (an internal error). The scans cannot overlap anywhere in the window
+    and the table would be ~7e23 cells: refused, naming the scan's line. A pose only 10 m
+    off (no overlap either, a small table) still runs, as before."""
+    log = tmp_path / "log.clf"
+    text = _carmen([10.0 + 0.2 * k for k in range(6)]).splitlines(keepends=True)
+    far = text[3].replace(" 0.30000000000000004 0 0 0.30000000000000004 ", " 1e20 0 0 1e20 ")
+    assert far != text[3]
+    log.write_text("".join(text[:3] + [far] + text[4:]))
+    out = tmp_path / "out.relations"
+    _refused(["relations", "align", str(log), "-o", str(out)], capsys, f"{log}:4:",
+             "the guess puts the scan of line 4 1e+20 m from the scan of line 1",
+             "no placement it tries lets them overlap")  # fmt: skip
+    assert not out.exists()
+    log.write_text("".join(text[:3] + [far.replace("1e20", "10")] + text[4:]))
+    assert main(["relations", "align", str(log), "-o", str(out), "-q"]) == 0
