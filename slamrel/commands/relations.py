@@ -293,7 +293,7 @@ def _align_guesses(
     import numpy as np
 
     from relation_metric.errors import OptionError
-    from slamrel.scans.report import estimate_at_scans
+    from slamrel.scans.report import estimate_at_scans, within_span
 
     if bag:
         scans, poses, source = _bag_guesses(args, scans)
@@ -307,6 +307,9 @@ def _align_guesses(
             role="estimate",
             skip_invalid=args.skip_invalid_poses,
         ).trajectory
+        _refuse_disjoint(
+            args.estimate, scans, est.timestamps, within_span(scans.timestamps, est.timestamps)
+        )
         poses, corrected = estimate_at_scans(scans, est.timestamps, est.poses)
         summary = f"guesses from {args.estimate}; {corrected} scan pose(s) odometry-corrected"
     else:
@@ -317,6 +320,24 @@ def _align_guesses(
             f"{args.log} has scans without poses ({scans.record}); give --estimate TRAJ"
         )
     return scans, poses, summary
+
+
+def _refuse_disjoint(
+    estimate: str, scans: LaserScans, times: NDArray[np.float64], inside: NDArray[np.bool_]
+) -> None:
+    """Refuse an estimate (its pose ``times``) whose time span holds none of the scans
+    (``inside``: which it holds): its poses would guess nothing, and any guess would be the
+    log's own motion presented as the estimate's."""
+    if inside.any():
+        return
+    from relation_metric.errors import InputError
+
+    first, last = (float(times[0]), float(times[-1])) if times.size else (float("nan"),) * 2
+    raise InputError(
+        f"no scan lies within the estimate's time span ({first:.3f} … {last:.3f} s; the "
+        f"scans: {scans.timestamps.min():.3f} … {scans.timestamps.max():.3f} s)",
+        path=estimate,
+    )
 
 
 def _align_pairs(
@@ -400,7 +421,6 @@ def _bag_guesses(
 
     import numpy as np
 
-    from relation_metric.errors import InputError
     from slamrel.evaluation import load_trajectory
     from slamrel.formats.bags import bag_topic_frames, split_bag_spec
     from slamrel.formats.laser import BagScanWarning, bag_laser_offset
@@ -437,13 +457,8 @@ def _bag_guesses(
         )
         offset, text = np.zeros(3), "laser offset zero"
     poses, inside = laser_poses_at_stamps(scans.timestamps, est, offset)
+    _refuse_disjoint(args.estimate, scans, est.timestamps, inside)
     first, last = est.span()
-    if not inside.any():
-        raise InputError(
-            f"no scan lies within the estimate's time span ({first:.3f} … {last:.3f} s; the "
-            f"scans: {scans.timestamps.min():.3f} … {scans.timestamps.max():.3f} s)",
-            path=args.estimate,
-        )
     if not inside.all():
         out = int(np.count_nonzero(~inside))
         warnings.warn(
