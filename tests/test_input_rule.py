@@ -57,14 +57,10 @@ def test_toro_ids_beyond_2_53_are_exact(tmp_path, capsys):
     """2**60 and 2**60 + 1 are one double: an edge to the missing 2**60 used to land on
     vertex 2**60 + 1 (exit 0). Read exactly, the edge's end is unknown, at its line."""
     big = 2**60
-    argv = _toro(
-        tmp_path, f"VERTEX2 0 0 0 0\nVERTEX2 {big + 1} 1 0 0\nEDGE2 0 {big} {_EDGE}\n"
-    )
+    argv = _toro(tmp_path, f"VERTEX2 0 0 0 0\nVERTEX2 {big + 1} 1 0 0\nEDGE2 0 {big} {_EDGE}\n")
     _refused(argv, capsys, "g.graph:3:", f"unknown vertex {big}")
     # the same ids, all present, solve: exact ids are kept, not refused
-    argv = _toro(
-        tmp_path, f"VERTEX2 0 0 0 0\nVERTEX2 {big + 1} 1 0 0\nEDGE2 0 {big + 1} {_EDGE}\n"
-    )
+    argv = _toro(tmp_path, f"VERTEX2 0 0 0 0\nVERTEX2 {big + 1} 1 0 0\nEDGE2 0 {big + 1} {_EDGE}\n")
     assert main(argv) == 0
     solved = (tmp_path / "out" / "solved.g2o").read_text().split("\n")
     assert solved[1].split()[:2] == ["VERTEX_SE2", str(big + 1)]  # was written as 2**60
@@ -131,9 +127,7 @@ def test_every_csv_reader_refuses_a_repeated_column(tmp_path, capsys, name, text
     f.write_text(text)
     line = 2 if text.startswith("#") else 1
     repeated = "t" if name == "t.csv" else "y"
-    _refused(
-        [a.format(f=f) for a in argv], capsys, f"{name}:{line}:", f"column {repeated!r} twice"
-    )
+    _refused([a.format(f=f) for a in argv], capsys, f"{name}:{line}:", f"column {repeated!r} twice")
 
 
 # ---------------------------------------------------------------- 3. repeated JSON keys
@@ -141,9 +135,7 @@ def test_every_csv_reader_refuses_a_repeated_column(tmp_path, capsys, name, text
 
 def test_bundle_json_with_a_repeated_key_is_refused(tmp_path, capsys):
     """The second ``sigma_v`` used to win silently; which one the writer meant is unknown."""
-    text = BUNDLE["bundle.json"].replace(
-        '"sigma_v": 0.1,', '"sigma_v": 0.1,\n    "sigma_v": 5.0,'
-    )
+    text = BUNDLE["bundle.json"].replace('"sigma_v": 0.1,', '"sigma_v": 0.1,\n    "sigma_v": 5.0,')
     assert text != BUNDLE["bundle.json"]
     b = _write(tmp_path / "b", dict(BUNDLE, **{"bundle.json": text}))
     line = text.splitlines().index('    "sigma_v": 5.0,') + 1
@@ -165,9 +157,7 @@ def test_study_record_with_a_repeated_key_is_damaged(tmp_path):
     from slamrel.studies.sweep import Task, load_results
 
     t = Task("x", "math:hypot", {})
-    (tmp_path / f"{t.key}.json").write_text(
-        f'{{"key": "{t.key}", "result": {{"a": 1,\n "a": 2}}}}'
-    )
+    (tmp_path / f"{t.key}.json").write_text(f'{{"key": "{t.key}", "result": {{"a": 1,\n "a": 2}}}}')
     with pytest.raises(InputError, match="damaged study result: key 'a' is given twice"):
         load_results(tmp_path, [t])
 

@@ -725,8 +725,6 @@ def pose_only_graph(
     return graph, cons
 
 
-
-
 @dataclass(frozen=True)
 class LandmarkGraphPoseOnly:
     """A landmark graph's pose-only problem (:func:`pose_only_from_landmark_graph`).

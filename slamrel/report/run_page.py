@@ -138,9 +138,7 @@ def _errors_figure(
     main = result.main_estimate
     evs = result.evaluations[main]
     tb = result.time_base
-    names = [(r.name, r.absent) for r in result.relation_sets] or [
-        (k, "") for k in evs.sets
-    ]
+    names = [(r.name, r.absent) for r in result.relation_sets] or [(k, "") for k in evs.sets]
     est = drawn[main]
     panels = []
     for name, absent in names:
@@ -272,8 +270,12 @@ def report_sections(
             *(
                 [
                     "Relation metric (Kümmerle et al. 2009): relative motions of each estimate "
-                    + ("against ground-truth relations" if truth else "against the reference "
-                       "relations given (the bundle has no ground truth)")
+                    + (
+                        "against ground-truth relations"
+                        if truth
+                        else "against the reference "
+                        "relations given (the bundle has no ground truth)"
+                    )
                     + ", ε = 1/N Σ ‖δ_ij ⊖ δ*_ij‖²."
                 ]
                 if truth or result.reference is not None
@@ -367,8 +369,15 @@ def _reference_tables(result: RunResult) -> list[Table]:
             Table(
                 f"relation error on the reference relations ({ref.source}, {ref.relations} "
                 "relations; scored as slamrel evaluate scores them)",
-                ["estimate", "scored", "unassociated", "trans abs mean [m]", "trans abs std [m]",
-                 "rot abs mean [rad]", "rot abs std [rad]"],
+                [
+                    "estimate",
+                    "scored",
+                    "unassociated",
+                    "trans abs mean [m]",
+                    "trans abs std [m]",
+                    "rot abs mean [rad]",
+                    "rot abs std [rad]",
+                ],
                 rows,
             )  # fmt: skip
         )
@@ -378,10 +387,25 @@ def _reference_tables(result: RunResult) -> list[Table]:
             Table(
                 "online against recovered: the online estimate on relations drawn from the "
                 "recovered trajectory (their difference, not an error)",
-                ["relations", "count", "trans abs mean [m]", "trans abs max [m]",
-                 "rot abs mean [rad]", "rot abs max [rad]"],
-                [[k, ev.translation.abs.count, ev.translation.abs.mean, ev.translation.abs.max,
-                  ev.rotation.abs.mean, ev.rotation.abs.max] for k, ev in diff.items()],
+                [
+                    "relations",
+                    "count",
+                    "trans abs mean [m]",
+                    "trans abs max [m]",
+                    "rot abs mean [rad]",
+                    "rot abs max [rad]",
+                ],
+                [
+                    [
+                        k,
+                        ev.translation.abs.count,
+                        ev.translation.abs.mean,
+                        ev.translation.abs.max,
+                        ev.rotation.abs.mean,
+                        ev.rotation.abs.max,
+                    ]
+                    for k, ev in diff.items()
+                ],
             )  # fmt: skip
         )
     return tables

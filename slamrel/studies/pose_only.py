@@ -320,8 +320,7 @@ def summary_rows(results: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 "rmse_theta": float(col["rmse_theta"].mean()),
                 "seconds": float(np.mean([r["seconds"] for r in rs])),
                 "per_run": {
-                    m: dict(zip((int(r["seed"]) for r in rs), col[m].tolist()))
-                    for m in RUN_METRICS
+                    m: dict(zip((int(r["seed"]) for r in rs), col[m].tolist())) for m in RUN_METRICS
                 },
             }
         )
