@@ -210,3 +210,108 @@ def test_same_numbers_as_evo(case, evo_bin: Path, inputs: dict, tmp_path: Path) 
     np.testing.assert_allclose(e_ours, e_evo, rtol=TOL, atol=1e-15, err_msg=name)
     assert i_ours["title"] == i_evo["title"]
     assert i_ours["label"] == i_evo["label"]
+
+
+# What evo 1.38.1 wrote (`--save_results`, stats.json and the error count) for three command
+# lines, on the TUM sequences: evo_ape tum fr2_desk_groundtruth.txt fr2_desk_ORB.txt -as;
+# evo_rpe tum (fr2) -d 0.5 -u m --all_pairs; evo_rpe tum freiburg1_xyz-groundtruth.txt
+# freiburg1_xyz-rgbdslam.txt -d 5 -u d -r angle_deg.
+EVO = {
+    ("ape", "fr2", ("-as",)): (
+        {
+            "rmse": 0.006123163030157291,
+            "mean": 0.005586197318706158,
+            "median": 0.005305225075852879,
+            "std": 0.0025074937707530087,
+            "min": 0.0001897958096084112,
+            "max": 0.021476785562787627,
+            "sse": 0.08151005482370602,
+        },
+        2174,
+    ),
+    ("rpe", "fr2", ("-d", "0.5", "-u", "m", "--all_pairs")): (
+        {
+            "rmse": 0.008989520953905159,
+            "mean": 0.008302033623749436,
+            "median": 0.007998807730659705,
+            "std": 0.003447857985885397,
+            "min": 0.0005867444322175406,
+            "max": 0.02265137274312376,
+            "sse": 0.1615421624744191,
+        },
+        1999,
+    ),
+    ("rpe", "fr1", ("-d", "5", "-u", "d", "-r", "angle_deg")): (
+        {
+            "rmse": 0.7147370717532202,
+            "mean": 0.61680501800854,
+            "median": 0.5485987623152174,
+            "std": 0.3611103037824489,
+            "min": 0.07960641186954612,
+            "max": 1.412087018943947,
+            "sse": 43.422171947761264,
+        },
+        85,
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(EVO), ids=["ape_as", "rpe_0.5m_all", "rpe_5d"])
+def test_numbers_evo_printed(case, tmp_path: Path) -> None:
+    metric, key, options = case
+    tum = require_data("tum_rgbd")
+    files = {
+        "fr1": ["freiburg1_xyz-groundtruth.txt", "freiburg1_xyz-rgbdslam.txt"],
+        "fr2": ["fr2_desk_groundtruth.txt", "fr2_desk_ORB.txt"],
+    }[key]
+    out = tmp_path / "r.zip"
+    _slamrel(metric, "tum", [*(str(tum / f) for f in files), *options], out)
+    stats, errors, _ = _read_zip(out)
+    expected, count = EVO[case]
+    assert errors.size == count
+    _assert_close(stats, expected, str(case))
+
+
+def test_printed_like_evo(capsys: pytest.CaptureFixture[str]) -> None:
+    """evo's layout: the title, a blank line, the statistics by name, %.6f after a tab."""
+    tum = require_data("tum_rgbd")
+    args = [str(tum / "fr2_desk_groundtruth.txt"), str(tum / "fr2_desk_ORB.txt"), "-as"]
+    assert main(["ape", "tum", *args]) == 0
+    expected = (
+        "APE w.r.t. translation part (m)\n(with Sim(3) Umeyama alignment)\n\n"
+        "       max\t0.021477\n      mean\t0.005586\n    median\t0.005305\n"
+        "       min\t0.000190\n      rmse\t0.006123\n       sse\t0.081510\n"
+        "       std\t0.002507\n\n"
+    )
+    assert capsys.readouterr().out == expected
+
+
+@pytest.mark.parametrize("metric", ["ape", "rpe"])
+def test_help_lists_every_option_with_its_default(
+    metric: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit):
+        main([metric, "tum", "--help"])
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps the lines
+    words = ["--pose_relation", "--align", "--correct_scale", "--align_origin", "--n_to_align"]
+    words += ["--project_to_plane", "--t_max_diff", "--t_offset", "--t_start", "--t_end"]
+    words += ["--save_results", "(default: -1", "(default: 0.01)", "(default: trans_part)"]
+    if metric == "rpe":
+        words += ["--delta ", "--delta_unit", "--all_pairs", "--pairs_from_reference"]
+        words += ["(default: f)", "(default: 1.0)", "(default: 0.1)"]
+    for word in words:
+        assert word in text, word
+
+
+def test_kitti_needs_as_many_poses(tmp_path: Path) -> None:
+    gt, est = _kitti_pair(tmp_path)
+    short = tmp_path / "short.kitti"
+    short.write_text("".join(est.read_text().splitlines(keepends=True)[:-3]))
+    assert main(["ape", "kitti", str(gt), str(short)]) == 3
+
+
+def test_align_and_align_origin_exclude_each_other(tmp_path: Path) -> None:
+    gt, est = _kitti_pair(tmp_path)
+    with pytest.raises(SystemExit) as stop:
+        main(["ape", "kitti", str(gt), str(est), "-a", "--align_origin"])
+    assert stop.value.code == 2
