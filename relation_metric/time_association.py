@@ -400,7 +400,7 @@ def match_nearest_times(
 
 
 def synchronize(
-    reference: Trajectory, estimate: Trajectory, *, max_diff: float = 0.01
+    reference: Trajectory, estimate: Trajectory, *, max_diff: float = 0.01, offset: float = 0.0
 ) -> tuple[Trajectory, Trajectory]:
     """Pose-by-pose association of two trajectories, as ``evo`` does it (``t_max_diff``).
 
@@ -409,6 +409,11 @@ def synchronize(
     without a match within ``max_diff`` seconds are dropped. Relations on the result are
     then named by index (``key="index"``): pose ``k`` of both is one matched pair. This is
     ``evo.core.sync.associate_trajectories(reference, estimate, max_diff=...)``.
+
+    ``offset`` (seconds, evo's ``offset_2``, ``--t_offset``) is added to the estimate's
+    times for the matching only, with evo's arithmetic (to the estimate's times when it is
+    the longer trajectory, subtracted from the reference's otherwise); both results keep
+    their own times.
 
     Returns
     -------
@@ -424,9 +429,14 @@ def synchronize(
 
     if not (math.isfinite(max_diff) and max_diff >= 0.0):
         raise InputError(f"max_diff must be a finite number of seconds >= 0, got {max_diff}")
+    if not math.isfinite(offset):
+        raise InputError(f"offset must be a finite number of seconds, got {offset}")
     second_longer = len(estimate) > len(reference)
     short, long_ = (reference, estimate) if second_longer else (estimate, reference)
-    i_short, i_long = match_nearest_times(short.timestamps, long_.timestamps, max_diff)
+    long_times = long_.timestamps
+    if offset != 0.0:
+        long_times = long_times + (offset if second_longer else -offset)
+    i_short, i_long = match_nearest_times(short.timestamps, long_times, max_diff)
     if i_short.size == 0:
         raise AssociationError(
             f"no reference and estimate poses lie within {max_diff:g} s of each other (the "

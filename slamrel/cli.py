@@ -34,6 +34,8 @@ from relation_metric.errors import OptionError, SlamrelError
 COMMANDS = {
     "run": "slamrel.commands.run",
     "evaluate": "slamrel.commands.evaluate",
+    "ape": "slamrel.commands.evo_cli",
+    "rpe": "slamrel.commands.evo_cli",
     "traj": "slamrel.commands.traj",
     "nees": "slamrel.commands.nees",
     "recover": "slamrel.commands.recover",
@@ -239,7 +241,8 @@ def _main(argv: Sequence[str] | None) -> int:
         parser = build_parser(words[0] if words else None)
         args = parser.parse_args(words)
         sub = [
-            getattr(args, k) for k in ("import_command", "relations_command") if hasattr(args, k)
+            getattr(args, k) for k in ("import_command", "relations_command", "evo_kind")
+            if hasattr(args, k)
         ]
         command = " ".join(["slamrel", args.command, *sub])
         with warnings.catch_warnings():

@@ -41,6 +41,8 @@ EVALUATION_OPTIONS, EVALUATION = "slamrel.evaluation_options", "slamrel.evaluati
 # the run's result types and its NEES: below the pipeline and the report, which both read them
 RUNS = "slamrel.runs"
 SCANS, TRAJINFO = "slamrel.scans", "slamrel.trajinfo"
+# files scored as evo_ape/evo_rpe score them (`slamrel ape`/`rpe`), on evaluation's readers
+EVO = "slamrel.evo_metrics"
 PIPELINE, STUDIES, COMMANDS, CLI, MAIN = (
     "slamrel.pipeline",
     "slamrel.studies",
@@ -93,6 +95,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     ),
     # what ``slamrel evaluate`` scores, as a library (the command writes the outputs)
     EVALUATION: (*LIBRARIES, FORMATS, EVALUATION_OPTIONS),
+    EVO: (*LIBRARIES, FORMATS, EVALUATION_OPTIONS, EVALUATION),
     COMMANDS: (
         *LIBRARIES,
         OUTPUTS,
@@ -110,6 +113,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         STUDIES,
         SCANS,
         TRAJINFO,
+        EVO,
     ),
     CLI: (*LIBRARIES, COMMANDS, TOP),  # TOP: __version__
     MAIN: (CLI,),

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.errors import InputError
 from relation_metric.evaluate import Evaluation
+from relation_metric.stats import evo_statistics
 from slamrel.formats.text import (
     NUMBER_FORMAT,
     PathLike,
@@ -35,6 +36,7 @@ __all__ = [
     "read_per_relation_csv",
     "write_evo_zip",
     "write_evo_ape_zip",
+    "write_evo_result",
     "evo_stats",
     "EvoDelta",
     "evo_delta",
@@ -214,17 +216,9 @@ def read_per_relation_csv(path: PathLike) -> PerRelationTable:
 
 
 def evo_stats(errors: np.ndarray) -> dict[str, float]:
-    """Statistics as evo computes them (population std, ``sse``)."""
-    e = np.asarray(errors, dtype=np.float64)
-    return {
-        "rmse": float(np.sqrt(np.mean(e**2))),
-        "mean": float(np.mean(e)),
-        "median": float(np.median(e)),
-        "std": float(np.std(e)),
-        "min": float(np.min(e)),
-        "max": float(np.max(e)),
-        "sse": float(np.sum(e**2)),
-    }
+    """Statistics as evo computes them (population std, ``sse``):
+    :func:`relation_metric.stats.evo_statistics`."""
+    return evo_statistics(errors)
 
 
 @dataclass(frozen=True)
@@ -377,11 +371,37 @@ def write_evo_ape_zip(
     _write_evo_archive(path, info, e, t, t - t.min())
 
 
+def write_evo_result(
+    path: PathLike,
+    info: dict[str, Any],
+    errors: ArrayLike,
+    timestamps: ArrayLike | None = None,
+    seconds_from_start: ArrayLike | None = None,
+) -> None:
+    """Write an evo result zip with the given ``info`` (evo's ``title``, ``ref_name``,
+    ``est_name``, ``label``), as ``evo_ape``/``evo_rpe --save_results`` do: what ``slamrel
+    ape``/``rpe`` write. ``timestamps`` and ``seconds_from_start`` (K,) are the estimate's
+    times of the errors (None: trajectories without times, as KITTI's; evo's zips then hold
+    no time arrays either)."""
+    e = np.asarray(errors, dtype=np.float64)
+    if e.size == 0:
+        raise InputError("no error value: an evo result needs at least one error", path=path)
+    t = None if timestamps is None else np.asarray(timestamps, dtype=np.float64)
+    s = None if seconds_from_start is None else np.asarray(seconds_from_start, dtype=np.float64)
+    _write_evo_archive(path, info, e, t, s)
+
+
 def _write_evo_archive(
-    path: PathLike, info: dict[str, Any], errors: NDArray, timestamps: NDArray, seconds: NDArray
+    path: PathLike,
+    info: dict[str, Any],
+    errors: NDArray,
+    timestamps: NDArray | None,
+    seconds: NDArray | None,
 ) -> None:
     """The zip evo's ``file_interface.save_res_file`` writes: info, stats and the arrays."""
-    arrays = {"error_array": errors, "timestamps": timestamps, "seconds_from_start": seconds}
+    arrays = {"error_array": errors}
+    if timestamps is not None and seconds is not None:
+        arrays.update(timestamps=timestamps, seconds_from_start=seconds)
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as archive:
         archive.writestr("info.json", json.dumps(info))
