@@ -241,7 +241,8 @@ def _main(argv: Sequence[str] | None) -> int:
         parser = build_parser(words[0] if words else None)
         args = parser.parse_args(words)
         sub = [
-            getattr(args, k) for k in ("import_command", "relations_command", "evo_kind")
+            getattr(args, k)
+            for k in ("import_command", "relations_command", "evo_kind")
             if hasattr(args, k)
         ]
         command = " ".join(["slamrel", args.command, *sub])
