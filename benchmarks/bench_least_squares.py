@@ -62,7 +62,8 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 
 from relation_metric import se2  # noqa: E402
-from slamrel.backends.least_squares import PoseGraph, _residuals, _upper_sqrt  # noqa: E402
+from slamrel.backends.graph import PoseGraph  # noqa: E402
+from slamrel.backends.least_squares import _residuals, _upper_sqrt  # noqa: E402
 from slamrel.formats.g2o import write_g2o_graph  # noqa: E402
 from slamrel.formats.isam import read_isam  # noqa: E402
 

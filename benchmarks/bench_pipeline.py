@@ -36,8 +36,8 @@ def main() -> None:
                 result = run_pipeline(world, noise=noise)
                 write_report(result, Path(tmp) / "report")
             t_run = time.perf_counter() - t
-            rec = result.evaluations["recovered"]["global"].translation["abs"].mean
-            dr = result.evaluations["dead_reckoning"]["global"].translation["abs"].mean
+            rec = result.recovered["global"].translation.abs.mean
+            dr = result.dead_reckoning["global"].translation.abs.mean
             print(
                 f"{world:10s}{noise:>6s}{t_run:10.2f}{t_slam:14.2f}{t_run / t_slam:8.1f}"
                 f"{rec:22.4f}{dr:20.4f}"

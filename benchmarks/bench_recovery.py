@@ -11,7 +11,7 @@ rows). Measured in the same run:
   residual);
 * ours: :func:`recovery.ekf.run_filter` + :func:`recovery.smoother.smooth`;
 * also peak memory (tracemalloc) of ours;
-* batch recovery (:func:`recovery.batch.refine` from the smoothed trajectory, its covariance
+* batch recovery (:func:`recovery.batch_refinement.refine` from the smoothed trajectory, its covariance
   pass included; ``slamrel recover --method batch`` runs filter + smoother + this): its time
   over filter + smoother's, and — with ``--scaling`` — both at three sizes a factor √10 apart
   (``steps/10 … steps``) with the exponent ``b`` of ``t ≈ a·steps^b`` fitted on the logs.
@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from timing import best_wall_cpu  # noqa: E402
 
 from recovery.baseline import filterpy_localisation  # noqa: E402
-from recovery.batch import refine  # noqa: E402
+from recovery.batch_refinement import refine  # noqa: E402
 from recovery.ekf import USED, run_filter  # noqa: E402
 from recovery.recover import filter_input  # noqa: E402
 from recovery.smoother import smooth  # noqa: E402
@@ -133,7 +133,7 @@ def time_batch(bundle, repeat: int):  # type: ignore[no-untyped-def]
     """Best times (:class:`timing.Timed`) of filter + smoother and of the batch refinement
     from its result."""
     # the exact map, as in main(): with the map's covariance (2,000 landmarks at 10^5 steps)
-    # the joint problem's dense map terms would need 41 GB (recovery.batch.check_joint_size)
+    # the joint problem's dense map terms would need 41 GB (recovery.batch_refinement.check_joint_size)
     inp = filter_input(bundle, map_mode="ignore")
     fs = best_wall_cpu(lambda: (lambda f: (f, smooth(f)))(run_filter(inp)), repeat)
     fr, sm = fs.result

@@ -335,127 +335,130 @@ def main() -> None:
     args = parser.parse_args()
     table: list[Row] = []
     if not args.no_evo:
-        e3 = bench_evo_3d()
-        if e3 is None:
-            table.append(("[4] 3-D RPE, 10^5 poses", "-", "evo unavailable", "-", "not measured"))
-        else:
-            agree = max(e3["max_abs_diff_trans"], e3["max_abs_diff_rot"]) < 1e-9
-            table.append(
-                (
-                    "[4] 3-D RPE delta 1 frame, 10^5 SE(3) poses (generate + trans + rot)",
-                    f"{e3['slamrel_s']:.4f} s",
-                    f"evo RPE API {e3['evo_s']:.2f} s",
-                    f"{e3['ratio']:.0f}x",
-                    f">= 100x: {'met' if e3['ratio'] >= 100 else 'MISSED'}",
-                )
-            )
-            table.append(
-                (
-                    "    max |slamrel - evo| (m, rad)",
-                    f"{e3['max_abs_diff_trans']:.1e}, {e3['max_abs_diff_rot']:.1e}",
-                    "",
-                    "",
-                    "agree" if agree else "DISAGREE",
-                )
-            )
+        table += _rows_evo_3d()
     if args.only_3d:
         _print_table(table)
         return
+    table += _rows_throughput()
+    if not args.no_evo:
+        table += _rows_evo()
+    table += _rows_read()
+    _print_table(table)
+
+
+def _rows_evo_3d() -> list[Row]:
+    """Benchmark 4: 3-D RPE against evo's API, and whether the errors agree."""
+    e3 = bench_evo_3d()
+    if e3 is None:
+        return [("[4] 3-D RPE, 10^5 poses", "-", "evo unavailable", "-", "not measured")]
+    agree = max(e3["max_abs_diff_trans"], e3["max_abs_diff_rot"]) < 1e-9
+    return [
+        (
+            "[4] 3-D RPE delta 1 frame, 10^5 SE(3) poses (generate + trans + rot)",
+            f"{e3['slamrel_s']:.4f} s",
+            f"evo RPE API {e3['evo_s']:.2f} s",
+            f"{e3['ratio']:.0f}x",
+            f">= 100x: {'met' if e3['ratio'] >= 100 else 'MISSED'}",
+        ),
+        (
+            "    max |slamrel - evo| (m, rad)",
+            f"{e3['max_abs_diff_trans']:.1e}, {e3['max_abs_diff_rot']:.1e}",
+            "",
+            "",
+            "agree" if agree else "DISAGREE",
+        ),
+    ]
+
+
+def _rows_throughput() -> list[Row]:
+    """Benchmark 1: the metric's throughput against the naive numpy metric."""
     thr = bench_throughput()
-    table.append(
+    return [
         (
             "[1] evaluate 10^6 index relations (assoc + errors + all stats)",
             f"{thr['index_relations_s']:.3f} s",
             f"naive numpy {thr['naive_s']:.3f} s",
             f"{thr['naive_s'] / thr['index_relations_s']:.2f}x",
             f"< 0.25 s: {'met' if thr['index_relations_s'] < 0.25 else 'MISSED'}",
-        )
-    )
-    table.append(
+        ),
         (
             "    same, CPU time (process_time; less sensitive to load)",
             f"{thr['index_relations_cpu_s']:.3f} s",
             f"naive numpy {thr['naive_cpu_s']:.3f} s",
             f"{thr['naive_cpu_s'] / thr['index_relations_cpu_s']:.2f}x",
             "",
-        )
-    )
-    table.append(
+        ),
         (
             "    same, timestamp relations (nearest-pose association)",
             f"{thr['time_relations_s']:.3f} s",
             "-",
             "-",
             "(no target)",
-        )
-    )
-    if not args.no_evo:
-        evo = bench_evo()
-        if evo is None:
-            table.append(
-                ("[2] RPE delta 1 frame, 10^5 poses", "-", "evo unavailable", "-", "not measured")
-            )
-        else:
-            agree = max(evo["max_abs_diff_trans"], evo["max_abs_diff_rot"]) < 1e-9
-            evo_total = evo["evo_trans_s"] + evo["evo_rot_s"]
-            table.append(
-                (
-                    "[2] RPE delta 1 frame, 10^5 poses (trans + rot)",
-                    f"{evo['slamrel_s']:.4f} s",
-                    f"evo RPE {evo_total:.2f} s",
-                    f"{evo['ratio']:.0f}x",
-                    f">= 100x: {'met' if evo['ratio'] >= 100 else 'MISSED'}",
-                )
-            )
-            table.append(
-                (
-                    "    max |slamrel - evo| (m, rad)",
-                    f"{evo['max_abs_diff_trans']:.1e}, {evo['max_abs_diff_rot']:.1e}",
-                    "",
-                    "",
-                    "agree" if agree else "DISAGREE",
-                )
-            )
+        ),
+    ]
+
+
+def _rows_evo() -> list[Row]:
+    """Benchmark 2: 2-D RPE against evo, and whether the errors agree."""
+    evo = bench_evo()
+    if evo is None:
+        return [("[2] RPE delta 1 frame, 10^5 poses", "-", "evo unavailable", "-", "not measured")]
+    agree = max(evo["max_abs_diff_trans"], evo["max_abs_diff_rot"]) < 1e-9
+    evo_total = evo["evo_trans_s"] + evo["evo_rot_s"]
+    return [
+        (
+            "[2] RPE delta 1 frame, 10^5 poses (trans + rot)",
+            f"{evo['slamrel_s']:.4f} s",
+            f"evo RPE {evo_total:.2f} s",
+            f"{evo['ratio']:.0f}x",
+            f">= 100x: {'met' if evo['ratio'] >= 100 else 'MISSED'}",
+        ),
+        (
+            "    max |slamrel - evo| (m, rad)",
+            f"{evo['max_abs_diff_trans']:.1e}, {evo['max_abs_diff_rot']:.1e}",
+            "",
+            "",
+            "agree" if agree else "DISAGREE",
+        ),
+    ]
+
+
+def _rows_read() -> list[Row]:
+    """Benchmark 3: reading a .relations file against np.loadtxt (and pandas, if present)."""
     rd = bench_read()
     warm = rd["read_relations_warm_s"]
-    table.append(
+    rows: list[Row] = [
         (
             f"[3] read_relations, 10^6 lines ({rd['megabytes']:.0f} MB), warm",
             f"{warm:.3f} s",
             f"np.loadtxt {rd['np_loadtxt_s']:.3f} s",
             f"{rd['np_loadtxt_s'] / warm:.1f}x",
             f"< 1 s: {'met' if warm < 1 else 'MISSED'}",
-        )
-    )
-    table.append(
+        ),
         (
             "    same, CPU time (process_time; less sensitive to load)",
             f"{rd['read_relations_cpu_s']:.3f} s",
             f"np.loadtxt {rd['np_loadtxt_cpu_s']:.3f} s",
             f"{rd['np_loadtxt_cpu_s'] / rd['read_relations_cpu_s']:.1f}x",
             "",
-        )
-    )
-    table.append(
+        ),
         (
             "    read_relations, first call in the process",
             f"{rd['read_relations_cold_s']:.3f} s",
             "",
             "",
             f"< 1 s: {'met' if rd['read_relations_cold_s'] < 1 else 'MISSED'}",
-        )
-    )
-    table.append(
+        ),
         (
             "    fastparse.read_decimal_table alone",
             f"{rd['fastparse_s']:.3f} s",
             f"np.loadtxt {rd['np_loadtxt_s']:.3f} s",
             f"{rd['np_loadtxt_s'] / rd['fastparse_s']:.1f}x",
             "bit-identical to loadtxt" if rd["bit_identical_to_loadtxt"] else "DIFFERS",
-        )
-    )
+        ),
+    ]
     if "pandas_read_csv_s" in rd:
-        table.append(
+        rows.append(
             (
                 "    (for reference) pandas.read_csv, C engine",
                 f"{rd['pandas_read_csv_s']:.3f} s",
@@ -464,7 +467,7 @@ def main() -> None:
                 "",
             )
         )
-    _print_table(table)
+    return rows
 
 
 def _print_table(table: list[Row]) -> None:

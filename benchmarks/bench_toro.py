@@ -38,7 +38,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from relation_metric import se2  # noqa: E402
-from slamrel.backends.least_squares import PoseGraph, solve_graph  # noqa: E402
+from slamrel.backends.graph import PoseGraph  # noqa: E402
+from slamrel.backends.least_squares import solve_graph  # noqa: E402
 from slamrel.backends.toro_optimiser import graph_cost, toro_optimize  # noqa: E402
 from slamrel.formats.toro import read_toro_graph, write_toro_graph  # noqa: E402
 

@@ -44,6 +44,7 @@ def _load_drive():  # type: ignore[no-untyped-def]
 
 kitti_drive = _load_drive()
 
+
 def _trajectory(poses: np.ndarray, name: str) -> object:
 
     from trajectopy.core.positions import Positions
@@ -68,7 +69,8 @@ def main() -> None:
         use_all_pose_pairs=True,
     )
     res = _compare_trajectories_relative(
-        trajectory=_trajectory(est, "est"), other=_trajectory(gt, "gt"),
+        trajectory=_trajectory(est, "est"),
+        other=_trajectory(gt, "gt"),
         relative_comparison_settings=settings,
     )
     dev = res.rpe_dev
@@ -78,9 +80,12 @@ def main() -> None:
         t = np.asarray(dev.pos_dev[length]) * dist
         r = np.asarray(dev.rot_dev[length]) * dist
         out["per_length"].append(
-            {"length": float(length), "count": int(dist.size),
-             "mean_t": float(t.mean()) if t.size else None,
-             "mean_r": float(r.mean()) if r.size else None}
+            {
+                "length": float(length),
+                "count": int(dist.size),
+                "mean_t": float(t.mean()) if t.size else None,
+                "mean_r": float(r.mean()) if r.size else None,
+            }
         )
     out["pos_rpe_percent"] = res.pos_rpe
     print(json.dumps(out, indent=1))

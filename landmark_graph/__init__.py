@@ -24,8 +24,8 @@ _EXPORTS: dict[str, str] = {
     "Association": "landmark_graph.landmark_association",
     "associate_by_id": "landmark_graph.landmark_association",
     "associate_auto": "landmark_graph.landmark_association",
-    "ospa": "landmark_graph.landmark_association",
-    "gospa": "landmark_graph.landmark_association",
+    "ospa": "landmark_graph.set_distances",
+    "gospa": "landmark_graph.set_distances",
     "Mesh": "landmark_graph.mesh",
     "delaunay_mesh": "landmark_graph.mesh",
     "MeshErrors": "landmark_graph.mesh_relations",
@@ -63,8 +63,6 @@ if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on 
         Association,
         associate_auto,
         associate_by_id,
-        gospa,
-        ospa,
     )
     from landmark_graph.map_compare import (
         MapAlignment,
@@ -82,5 +80,6 @@ if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on 
         pose_landmark_errors,
         pose_landmark_relations,
     )
+    from landmark_graph.set_distances import gospa, ospa
 else:
     __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)

@@ -1,20 +1,13 @@
-"""Landmark association between an estimated and a reference map, and OSPA / GOSPA.
+"""Landmark association between an estimated and a reference map.
 
 Association modes: by id (optionally through an id map), from a user CSV
 (``estimate,reference`` id pairs, overriding everything else), or automatic: a robust rigid
 alignment (seeded RANSAC over pairs of points with matching distances, refined by Umeyama on
-the inliers) followed by the optimal assignment (``scipy.optimize.linear_sum_assignment``) on
-the aligned distances with a cut-off.
+the inliers) followed by the optimal assignment on the aligned distances with a cut-off
+(:func:`landmark_graph.matching.sparse_matching`, on the pairs within the cut-off).
 
-OSPA (Schuhmacher, Vo & Vo 2008) and GOSPA with α = 2 (Rahmathullah, García-Fernández &
-Svensson 2017) for sets X (m points) and Y (n points), ``m ≤ n``, cut-off ``c`` and order
-``p``, over the assignment π that minimises ``Σ min(d, c)^p``:
-
-    OSPA  = ( (1/n) [ Σ_i min(d(x_i, y_π(i)), c)^p + c^p (n − m) ] )^(1/p)
-    GOSPA = ( Σ_i min(d(x_i, y_π(i)), c)^p + (c^p / 2) (n − m) )^(1/p)
-
-The assignment is computed on ``min(d, c)^p`` — not on ``min(d, c)``, which is only the same
-problem for ``p = 1``.
+OSPA and GOSPA, the distances of two maps over their own optimal assignment, are in
+:mod:`landmark_graph.set_distances`.
 """
 
 from __future__ import annotations
@@ -22,26 +15,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linear_sum_assignment
+from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from landmark_graph.maps import LandmarkMap
+from landmark_graph.matching import sparse_matching
 from relation_metric.alignment import Alignment, umeyama
 from relation_metric.errors import InputError
 
 _MAX_SMALL_HYPOTHESES = 20_000
-#: OSPA and GOSPA solve the dense ``m × n`` assignment up to this many pairs (32 MB of
-#: distances; the results of all earlier versions, bit for bit) and the sparse one on the
-#: pairs within the cut-off beyond (20,000 landmarks a side: 3.2 GB dense per matrix).
-DENSE_ASSIGNMENT_PAIRS = 4_000_000
 
 __all__ = [
     "Association",
     "associate_by_id",
     "associate_auto",
-    "ospa",
-    "gospa",
 ]
 
 
@@ -225,134 +212,11 @@ def _sparse_assignment(
     ``p = 2`` (the default) is the least-squares objective of the Umeyama alignment, so that
     alternating the two never increases ``Σ min(d, c)²``.
     """
-    er, rr, _ = _sparse_matching(
+    er, rr, _ = sparse_matching(
         x, y, cutoff, power=power, cost_x=cutoff**power, cost_y=cutoff**power
     )
     return er, rr
 
 
-def _sparse_matching(
-    x: NDArray[np.float64],
-    y: NDArray[np.float64],
-    cutoff: float,
-    *,
-    power: float,
-    cost_x: float,
-    cost_y: float,
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-    """Min-weight matching on the pairs closer than ``cutoff``: ``d^power`` per pair,
-    ``cost_x`` per unmatched ``x``, ``cost_y`` per unmatched ``y``; the matched rows and
-    their distances. The square augmentation ``[[D^p, cost_x I], [cost_y I, (D^p)ᵀ-pattern at
-    ~0]]`` always has a full matching (the two identities); the pair weights get a tiny
-    ``eps`` (and a zero cost is ``eps``) so that none is an implicit zero of the sparse
-    matrix."""
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import min_weight_full_bipartite_matching
-
-    m, n = x.shape[0], y.shape[0]
-    d = cKDTree(x).sparse_distance_matrix(cKDTree(y), cutoff, output_type="coo_matrix")
-    keep = d.data < cutoff
-    i, j, dist = d.row[keep], d.col[keep], d.data[keep]
-    w = dist**power
-    eps = 1e-9 * max(cutoff**power, 1e-300)
-    rows = np.concatenate((i, np.arange(m), m + np.arange(n), m + j))
-    cols = np.concatenate((j, n + np.arange(m), np.arange(n), n + i))
-    cx, cy = (cost if cost > 0 else eps for cost in (cost_x, cost_y))
-    vals = np.concatenate((w + eps, np.full(m, cx), np.full(n, cy), np.full(i.size, eps)))
-    g = sp.csr_matrix((vals, (rows, cols)), shape=(m + n, m + n))
-    left, right = min_weight_full_bipartite_matching(g)
-    real = (left < m) & (right < n)
-    er, rr = left[real].astype(np.int64), right[real].astype(np.int64)
-    return er, rr, np.hypot(*(x[er] - y[rr]).T)
-
-
 def _apply(al: Alignment, xy: NDArray[np.float64]) -> NDArray[np.float64]:
     return al.apply(np.column_stack((xy, np.zeros(xy.shape[0]))))[:, :2]
-
-
-def _optimal_terms(
-    x: NDArray[np.float64], y: NDArray[np.float64], c: float, p: float
-) -> tuple[NDArray[np.float64], int, int]:
-    """``p · log(min(d, c)/c)`` of the pairs of the optimal assignment, and ``m ≤ n``.
-
-    The distances are scaled by the cut-off, ``u = min(d, c)/c ∈ [0, 1]``: the assignment
-    minimises ``Σ (u/u_max)^p`` (``u_max`` the largest ``u`` of the matrix; the order of the
-    costs is that of ``Σ min(d, c)^p``, the factor ``(c u_max)^p`` is common), and the sums of
-    OSPA/GOSPA are formed from the logarithms (:func:`_log_sum_exp`). So a large order ``p``
-    does not underflow ``u^p`` to 0 and report two different maps as equal.
-    """
-    if not (np.isfinite(c) and c > 0):
-        raise InputError(f"the OSPA/GOSPA cut-off c must be a positive number, got {c}")
-    if not (np.isfinite(p) and p >= 1):
-        raise InputError(f"the OSPA/GOSPA order p must be a number ≥ 1, got {p}")
-    if x.shape[0] > y.shape[0]:
-        x, y = y, x
-    m, n = x.shape[0], y.shape[0]
-    if m == 0:
-        return np.empty(0), m, n
-    if m * n > DENSE_ASSIGNMENT_PAIRS:
-        # large sets: only pairs closer than c can cost less than c^p (_within_cutoff_terms)
-        return _within_cutoff_terms(x, y, c, p), m, n
-    d = np.hypot(x[:, None, 0] - y[None, :, 0], x[:, None, 1] - y[None, :, 1])
-    u = np.minimum(d, c) / c
-    top = float(u.max())
-    if top == 0.0:
-        return np.full(m, -np.inf), m, n
-    r, s = linear_sum_assignment((u / top) ** p)
-    with np.errstate(divide="ignore"):
-        return p * np.log(u[r, s]), m, n
-
-
-def _within_cutoff_terms(
-    x: NDArray[np.float64], y: NDArray[np.float64], c: float, p: float
-) -> NDArray[np.float64]:
-    """The terms of :func:`_optimal_terms` (``|x| ≤ |y|``) from the pairs closer than ``c``.
-
-    A full assignment's pairs at ``d ≥ c`` cost ``c^p`` each, as an unassigned ``x`` would;
-    and a partial matching on pairs closer than ``c`` completes (``|x| ≤ |y|``) to a full
-    assignment whose added pairs cost at most ``c^p`` each. So the optimum is the min-weight
-    partial matching on the within-``c`` pairs with ``d^p`` per pair and ``c^p`` per
-    unmatched ``x`` (an unmatched ``y`` costs nothing): a sparse problem of ``O(m + n +
-    pairs)`` memory, solved as the full matching of the square augmentation of
-    :func:`_sparse_assignment` by ``min_weight_full_bipartite_matching``. Each unmatched
-    ``x`` gives the term 0 (``u = 1``).
-    """
-    # in units of c: the costs u^p ≤ 1 and 1 per unmatched x cannot overflow for any p
-    er, rr, u = _sparse_matching(x / c, y / c, 1.0, power=p, cost_x=1.0, cost_y=0.0)
-    with np.errstate(divide="ignore"):
-        matched = p * np.log(np.minimum(u, 1.0))
-    return np.concatenate((matched, np.zeros(x.shape[0] - er.size)))
-
-
-def _log_sum_exp(terms: NDArray[np.float64]) -> float:
-    """``log Σ exp(terms)`` without overflow or underflow (−inf for no or only −inf terms)."""
-    if terms.size == 0:
-        return -np.inf
-    top = float(terms.max())
-    if not np.isfinite(top):
-        return top
-    return top + float(np.log(np.exp(terms - top).sum()))
-
-
-def ospa(x: ArrayLike, y: ArrayLike, *, c: float, p: float = 2.0) -> float:
-    """OSPA distance of two point sets (see the module docstring).
-
-    Computed as ``c · ((1/n) Σ u^p)^(1/p)`` with ``u = min(d, c)/c`` (1 for each unmatched
-    point) in logarithms: exact for any order ``p``, no underflow to 0.
-    """
-    terms, m, n = _optimal_terms(
-        np.asarray(x, float).reshape(-1, 2), np.asarray(y, float).reshape(-1, 2), c, p
-    )
-    if n == 0:
-        return 0.0
-    log_sum = _log_sum_exp(np.concatenate((terms, np.zeros(n - m))))
-    return float(c * np.exp((log_sum - np.log(n)) / p))
-
-
-def gospa(x: ArrayLike, y: ArrayLike, *, c: float, p: float = 2.0) -> float:
-    """GOSPA distance with α = 2 (see the module docstring), in logarithms as :func:`ospa`."""
-    terms, m, n = _optimal_terms(
-        np.asarray(x, float).reshape(-1, 2), np.asarray(y, float).reshape(-1, 2), c, p
-    )
-    log_sum = _log_sum_exp(np.concatenate((terms, np.full(n - m, -np.log(2.0)))))
-    return float(c * np.exp(log_sum / p))

@@ -51,17 +51,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from landmark_graph.constants import ASSOCIATE_MODES, DEFAULT_ASSOCIATE
-from landmark_graph.landmark_association import (
-    Association,
-    associate_auto,
-    associate_by_id,
-    gospa,
-    ospa,
-)
+from landmark_graph.landmark_association import Association, associate_auto, associate_by_id
 from landmark_graph.maps import LandmarkMap
 from landmark_graph.mesh import Mesh, delaunay_mesh
 from landmark_graph.mesh_relations import MeshErrors, mesh_errors
 from landmark_graph.observability import SensorReach
+from landmark_graph.set_distances import gospa, ospa
 from relation_metric import se2
 from relation_metric.alignment import Alignment, umeyama
 from relation_metric.errors import InputError
@@ -453,7 +448,7 @@ class MapComparison:
         well = e.corner_angle[~self.mesh.thin].ravel()
 
         def summ(v: Any) -> dict[str, Any]:
-            return {k: s.as_dict() for k, s in error_summaries(v).items()}
+            return error_summaries(v).as_dict()
 
         on = self.observable_set
         k_obs = int(self.observable.sum())

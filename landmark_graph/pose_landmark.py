@@ -88,7 +88,7 @@ class PoseLandmarkErrors:
         return {
             "relations": int(self.error.size),
             "unassociated": self.unassociated,
-            "translation": {k: v.as_dict() for k, v in error_summaries(self.error).items()},
+            "translation": error_summaries(self.error).as_dict(),
         }
 
 

@@ -49,7 +49,7 @@ RELATION_METRIC = [
         "                     ('global', {'count': 2000, 'seed': 1})]:\n"
         "    rel = generate_relations(reference, strategy, **kw)\n"
         "    ev = evaluate(rel, estimate)\n"
-        "    t, r = ev.translation['abs'], ev.rotation['abs']\n"
+        "    t, r = ev.translation.abs, ev.rotation.abs\n"
         "    rows.append((strategy, len(rel), t.mean, t.std, r.mean))\n"
         "    print(f'{strategy:12s} {len(rel):5d} relations: trans {t.mean:.4f} ± {t.std:.4f} m, rot {r.mean:.4f} rad')\n"
         "assert rows[2][2] > 5 * rows[0][2]  # global relations expose the drift"
@@ -87,7 +87,7 @@ RELATION_METRIC = [
         "    odo = read_trajectory(data / 'mit-csail.clf', pose='odometry').trajectory\n"
         "    ev = evaluate(read_relations(data / 'mit-csail.relations'), est, odometry=odo,\n"
         "                  mode='metricevaluator', weights='1,1,0,0,0,0')\n"
-        "    s = ev.combined['abs']\n"
+        "    s = ev.combined.abs\n"
         "    print(f'{s.mean:.6f} ± {s.std:.6f} m, min {s.min:.6f}, max {s.max:.6f}, n = {s.count}')\n"
         "    assert f'{s.mean:.6f}' == '0.030205'\n"
         "else:\n"
@@ -125,7 +125,7 @@ RUN_WALKTHROUGH = [
         "recovered = Trajectory(truth.timestamps, rec.trajectory.poses[k])\n"
         "rel = generate_relations(truth, 'global', count=2000, seed=0)\n"
         "for name, est in [('recovered', recovered), ('dead reckoning', world.odometry)]:\n"
-        "    print(f\"{name:15s} {evaluate(rel, est).translation['abs'].mean:.4f} m\")\n"
+        '    print(f"{name:15s} {evaluate(rel, est).translation.abs.mean:.4f} m")\n'
         "rec.report()['measurements']"
     ),
     new_markdown_cell(
@@ -140,7 +140,7 @@ RUN_WALKTHROUGH = [
         "for gate in (None, 0.999):\n"
         "    r = recover(broken, method='smoother', gate=gate, max_outlier_run=None)\n"
         "    k = np.searchsorted(r.trajectory.timestamps, truth.timestamps)\n"
-        "    e = evaluate(rel, Trajectory(truth.timestamps, r.trajectory.poses[k])).translation['abs'].mean\n"
+        "    e = evaluate(rel, Trajectory(truth.timestamps, r.trajectory.poses[k])).translation.abs.mean\n"
         '    print(f"gate {gate}: global error {e:.3f} m, gated {100 * r.counts.gated_fraction:.1f}% of the measurements")'
     ),
     new_markdown_cell(
@@ -399,7 +399,7 @@ MRCLAM = [
         "        for name, est in (('recovered', rec.trajectory), ('dead reckoning', dead), ('raw odometry', dead_raw)):\n"
         "            for rs, rel in sets.items():\n"
         "                ev = evaluate(rel, est, max_time_diff=0.05, interpolate=True)\n"
-        "                t = ev.translation['abs']\n"
+        "                t = ev.translation.abs\n"
         "                print(f'{name:15s} {rs:16s} {t.mean:.4f} ± {t.std:.4f} m over {t.count} relations')\n"
         "    print(rec.report()['measurements'])"
     ),
@@ -508,7 +508,7 @@ MRCLAM = [
         "    x = np.arange(1, 6)\n"
         "    for ax, rs in zip(axes[:2], ('1 s', 'loops')):\n"
         "        for k, name in enumerate(('EKF-SLAM + recovery', 'dead reckoning')):\n"
-        "            st_ = [comparison.stats[f'robot {r} {rs}', name]['translation']['abs'] for r in x]\n"
+        "            st_ = [comparison.stats[f'robot {r} {rs}', name].translation.abs for r in x]\n"
         "            ax.bar(x + (k - 0.5) * 0.38, [q.mean for q in st_], 0.38, yerr=[q.std for q in st_], label=name)\n"
         "        ax.set_title(f'{rs} relations'); ax.set_xlabel('robot'); ax.set_ylabel('translation error [m]')\n"
         "    axes[1].set_yscale('log'); axes[0].legend(fontsize=8)\n"
@@ -529,83 +529,83 @@ MRCLAM = [
 # pasted as text because it takes about an hour on 2 cores (see the cell that recomputes it).
 POSE_ONLY_FULL_STUDY = (
     "Measured with `slamrel study pose-only --runs 10 --worlds hu-simple1,hu-simple2,hu-complex1,hu-complex2 -o DIR` (480 cases; the pose-only pair least squares started at the truth, as in the paper; TORO: 100 iterations with TORO's own rules, `--toro-rules toro`). The 120 TORO cases were computed at commit 47b1330; the full LS, M1 and M2 cases were reused from the study at 6004791 (hu-simple1/2 and hu-complex1 computed at 0cc8eb2): the TORO change leaves them alone. `±95%`: half-width of the 95 % Student-t interval of the mean over the 10 runs.\n"
-    '\n'
-    '| world | noise | method | runs | NEES1 mean | NEES1 ±95% | NEES1 gate | runs under gate | NEES2 mean | NEES2 ±95% | NEES2 dof | NEES3 mean | NEES3 ±95% | NEES3 dof | landmark NEES vs truth | landmark gate | landmark runs under gate | RMS position error [m] | RMS position ±95% | RMS heading error [rad] |\n'
-    '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
-    '| hu-simple1 | a | full LS | 10 | 240.6 | 19.3 | 280.4 | 9 | 217.5 | 13.7 | 0 | 4341.0 | 65.3 | 4310 | 433.9 | 495.4 | 10 | 0.070 | 0.017 | 0.011 |\n'
-    '| hu-simple1 | a | pose-only M1 | 10 | 135.8 | 10.2 | 280.4 | 10 | 218.3 | 13.7 | 246 | 4716.0 | 68.7 | 4310 | 399.1 | 495.4 | 10 | 0.139 | 0.034 | 0.020 |\n'
-    '| hu-simple1 | a | pose-only M2 | 10 | 145.5 | 10.1 | 280.4 | 10 | 345.0 | 14.1 | 2354 | 4353.8 | 65.4 | 4310 | 419.6 | 495.4 | 10 | 0.072 | 0.027 | 0.012 |\n'
-    '| hu-simple1 | a | TORO (M2) | 10 | 753.1 | 144.6 | 280.4 | 0 | 816.5 | 135.5 | 2354 | 5156.8 | 264.7 | 4310 | 499.2 | 495.4 | 6 | 0.136 | 0.068 | 0.030 |\n'
-    '| hu-simple1 | b | full LS | 10 | 239.6 | 19.1 | 280.4 | 9 | 231.4 | 13.6 | 0 | 4341.9 | 64.8 | 4310 | 434.5 | 495.4 | 10 | 0.070 | 0.013 | 0.012 |\n'
-    '| hu-simple1 | b | pose-only M1 | 10 | 122.0 | 10.5 | 280.4 | 10 | 232.0 | 13.5 | 246 | 4618.6 | 92.2 | 4310 | 394.4 | 495.4 | 10 | 0.129 | 0.034 | 0.020 |\n'
-    '| hu-simple1 | b | pose-only M2 | 10 | 135.2 | 10.1 | 280.4 | 10 | 355.2 | 13.5 | 2354 | 4349.4 | 64.8 | 4310 | 419.8 | 495.4 | 10 | 0.069 | 0.017 | 0.012 |\n'
-    '| hu-simple1 | b | TORO (M2) | 10 | 707.1 | 136.3 | 280.4 | 0 | 776.7 | 130.0 | 2354 | 5117.1 | 259.1 | 4310 | 498.1 | 495.4 | 6 | 0.136 | 0.068 | 0.030 |\n'
-    '| hu-simple1 | c | full LS | 10 | 239.3 | 17.0 | 280.4 | 9 | 156.3 | 9.7 | 0 | 4342.7 | 63.8 | 4310 | 433.5 | 495.4 | 10 | 0.203 | 0.074 | 0.031 |\n'
-    '| hu-simple1 | c | pose-only M1 | 10 | 185.0 | 10.4 | 280.4 | 10 | 171.3 | 13.6 | 246 | 4780.4 | 67.1 | 4310 | 419.6 | 495.4 | 10 | 0.455 | 0.132 | 0.059 |\n'
-    '| hu-simple1 | c | pose-only M2 | 10 | 181.9 | 8.5 | 280.4 | 10 | 328.5 | 12.6 | 2354 | 4364.9 | 65.4 | 4310 | 423.7 | 495.4 | 10 | 0.264 | 0.116 | 0.037 |\n'
-    '| hu-simple1 | c | TORO (M2) | 10 | 1234.3 | 221.9 | 280.4 | 0 | 1277.5 | 208.9 | 2354 | 5615.8 | 324.1 | 4310 | 521.2 | 495.4 | 3 | 0.449 | 0.189 | 0.097 |\n'
-    '| hu-simple2 | a | full LS | 10 | 247.9 | 15.1 | 280.4 | 9 | 216.4 | 10.4 | 0 | 3921.4 | 64.1 | 3917 | 438.0 | 496.2 | 9 | 0.115 | 0.033 | 0.015 |\n'
-    '| hu-simple2 | a | pose-only M1 | 10 | 140.1 | 7.3 | 280.4 | 10 | 217.6 | 12.2 | 246 | 4119.7 | 74.9 | 3917 | 403.2 | 496.2 | 10 | 0.182 | 0.065 | 0.024 |\n'
-    '| hu-simple2 | a | pose-only M2 | 10 | 151.2 | 7.9 | 280.4 | 10 | 317.6 | 11.6 | 1917 | 3932.3 | 64.0 | 3917 | 423.5 | 496.2 | 9 | 0.115 | 0.038 | 0.015 |\n'
-    '| hu-simple2 | a | TORO (M2) | 10 | 448.6 | 52.7 | 280.4 | 0 | 535.4 | 29.9 | 1917 | 4261.3 | 47.7 | 3917 | 461.6 | 496.2 | 8 | 0.139 | 0.038 | 0.024 |\n'
-    '| hu-simple2 | b | full LS | 10 | 249.1 | 17.1 | 280.4 | 9 | 230.3 | 11.5 | 0 | 3920.2 | 65.6 | 3917 | 438.3 | 496.2 | 9 | 0.116 | 0.033 | 0.015 |\n'
-    '| hu-simple2 | b | pose-only M1 | 10 | 127.5 | 9.5 | 280.4 | 10 | 230.2 | 12.2 | 246 | 4046.2 | 71.1 | 3917 | 398.4 | 496.2 | 10 | 0.187 | 0.066 | 0.024 |\n'
-    '| hu-simple2 | b | pose-only M2 | 10 | 142.0 | 9.4 | 280.4 | 10 | 326.9 | 13.0 | 1917 | 3925.5 | 65.4 | 3917 | 423.1 | 496.2 | 9 | 0.114 | 0.034 | 0.015 |\n'
-    '| hu-simple2 | b | TORO (M2) | 10 | 412.4 | 49.4 | 280.4 | 0 | 502.3 | 31.5 | 1917 | 4228.2 | 50.0 | 3917 | 460.7 | 496.2 | 8 | 0.139 | 0.038 | 0.024 |\n'
-    '| hu-simple2 | c | full LS | 10 | 245.6 | 11.5 | 280.4 | 10 | 152.1 | 7.5 | 0 | 3923.9 | 58.5 | 3917 | 438.5 | 496.2 | 9 | 0.318 | 0.089 | 0.040 |\n'
-    '| hu-simple2 | c | pose-only M1 | 10 | 185.7 | 6.9 | 280.4 | 10 | 173.7 | 13.9 | 246 | 4191.9 | 74.5 | 3917 | 421.8 | 496.2 | 9 | 0.490 | 0.190 | 0.062 |\n'
-    '| hu-simple2 | c | pose-only M2 | 10 | 184.7 | 9.0 | 280.4 | 10 | 290.3 | 9.7 | 1917 | 3941.2 | 58.3 | 3917 | 426.9 | 496.2 | 9 | 0.335 | 0.114 | 0.042 |\n'
-    '| hu-simple2 | c | TORO (M2) | 10 | 854.4 | 106.5 | 280.4 | 0 | 922.8 | 73.2 | 1917 | 4658.1 | 66.8 | 3917 | 473.2 | 496.2 | 8 | 0.424 | 0.106 | 0.073 |\n'
-    '| hu-complex1 | a | full LS | 10 | 1251.4 | 36.3 | 1340.6 | 9 | 1014.8 | 42.9 | 0 | 9933.9 | 136.4 | 9957 | 438.0 | 498.8 | 10 | 0.243 | 0.057 | 0.027 |\n'
-    '| hu-complex1 | a | pose-only M1 | 10 | 903.8 | 84.3 | 1340.6 | 10 | 1026.6 | 47.4 | 1233 | 796408.3 | 571185.7 | 9957 | 849.2 | 498.8 | 6 | 2.784 | 0.714 | 0.176 |\n'
-    '| hu-complex1 | a | pose-only M2 | 10 | 854.6 | 30.6 | 1340.6 | 10 | 1372.0 | 47.1 | 17746 | 12653.2 | 2265.0 | 9957 | 494.3 | 498.8 | 7 | 1.027 | 0.459 | 0.080 |\n'
-    '| hu-complex1 | a | TORO (M2) | 10 | 9042.9 | 8500.7 | 1340.6 | 0 | 5749.4 | 3898.1 | 17746 | 20780.2 | 7269.2 | 9957 | 834.3 | 498.8 | 0 | 1.210 | 0.386 | 0.102 |\n'
-    '| hu-complex1 | b | full LS | 10 | 1259.4 | 38.7 | 1340.6 | 9 | 1154.7 | 50.3 | 0 | 9931.2 | 135.7 | 9957 | 442.1 | 498.8 | 10 | 0.328 | 0.113 | 0.048 |\n'
-    '| hu-complex1 | b | pose-only M1 | 10 | 845.5 | 124.1 | 1340.6 | 10 | 1144.5 | 48.8 | 1233 | 997061.4 | 402911.5 | 9957 | 1005.6 | 498.8 | 4 | 3.451 | 1.235 | 0.226 |\n'
-    '| hu-complex1 | b | pose-only M2 | 10 | 3042.7 | 2414.8 | 1340.6 | 7 | 1453.0 | 49.6 | 17746 | 47483.7 | 33383.8 | 9957 | 12168.2 | 498.8 | 2 | 3.737 | 1.835 | 0.309 |\n'
-    '| hu-complex1 | b | TORO (M2) | 10 | 6227.6 | 4264.7 | 1340.6 | 0 | 3410.1 | 2226.8 | 17746 | 52601.9 | 34948.0 | 9957 | 12356.1 | 498.8 | 0 | 3.825 | 1.822 | 0.314 |\n'
-    '| hu-complex1 | c | full LS | 10 | 1254.3 | 40.3 | 1340.6 | 9 | 605.5 | 23.2 | 0 | 9934.4 | 135.1 | 9957 | 441.6 | 498.8 | 10 | 0.568 | 0.132 | 0.056 |\n'
-    '| hu-complex1 | c | pose-only M1 | 10 | 1441.8 | 362.6 | 1340.6 | 6 | 816.4 | 64.1 | 1233 | 368034.6 | 251534.4 | 9957 | 1545.7 | 498.8 | 3 | 5.369 | 1.559 | 0.350 |\n'
-    '| hu-complex1 | c | pose-only M2 | 10 | 1050.2 | 38.4 | 1340.6 | 10 | 1214.8 | 36.2 | 17746 | 10437.6 | 340.5 | 9957 | 441.7 | 498.8 | 9 | 1.377 | 0.437 | 0.104 |\n'
-    '| hu-complex1 | c | TORO (M2) | 10 | 7133.9 | 1322.6 | 1340.6 | 0 | 6442.7 | 896.2 | 17746 | 16730.0 | 1267.1 | 9957 | 703.3 | 498.8 | 0 | 2.153 | 0.517 | 0.180 |\n'
-    '| hu-complex2 | a | full LS | 10 | 1235.5 | 32.3 | 1340.6 | 10 | 1069.4 | 37.1 | 0 | 13803.1 | 337.0 | 13808 | 444.8 | 497.5 | 10 | 0.082 | 0.015 | 0.014 |\n'
-    '| hu-complex2 | a | pose-only M1 | 10 | 873.4 | 144.0 | 1340.6 | 9 | 1069.4 | 38.0 | 1257 | 967872.4 | 592340.8 | 13808 | 754.3 | 497.5 | 6 | 2.167 | 0.732 | 0.160 |\n'
-    '| hu-complex2 | a | pose-only M2 | 10 | 760.2 | 19.9 | 1340.6 | 10 | 1540.0 | 47.1 | 29775 | 14010.4 | 342.6 | 13808 | 413.4 | 497.5 | 10 | 0.112 | 0.039 | 0.018 |\n'
-    '| hu-complex2 | a | TORO (M2) | 10 | 3778.9 | 658.2 | 1340.6 | 0 | 3690.7 | 664.1 | 29775 | 18634.2 | 1779.8 | 13808 | 671.2 | 497.5 | 0 | 0.301 | 0.132 | 0.048 |\n'
-    '| hu-complex2 | b | full LS | 10 | 53354.1 | 117880.6 | 1340.6 | 9 | 1247.2 | 139.5 | 0 | 15154.1 | 2962.2 | 13808 | 32019.3 | 497.5 | 9 | 0.412 | 0.741 | 0.091 |\n'
-    '| hu-complex2 | b | pose-only M1 | 10 | 737.3 | 53.1 | 1340.6 | 10 | 1179.3 | 46.4 | 1257 | 1138618.3 | 971382.3 | 13808 | 659.8 | 497.5 | 5 | 2.254 | 0.818 | 0.178 |\n'
-    '| hu-complex2 | b | pose-only M2 | 10 | 678.3 | 18.8 | 1340.6 | 10 | 1622.1 | 55.4 | 29775 | 14420.4 | 761.3 | 13808 | 408.4 | 497.5 | 10 | 0.125 | 0.040 | 0.026 |\n'
-    '| hu-complex2 | b | TORO (M2) | 10 | 5734.9 | 5370.5 | 1340.6 | 0 | 4357.3 | 2594.6 | 29775 | 20972.5 | 5199.8 | 13808 | 741.0 | 497.5 | 0 | 0.259 | 0.090 | 0.058 |\n'
-    '| hu-complex2 | c | full LS | 10 | 1232.9 | 36.5 | 1340.6 | 10 | 680.4 | 20.2 | 0 | 13807.4 | 338.9 | 13808 | 445.8 | 497.5 | 10 | 0.220 | 0.063 | 0.035 |\n'
-    '| hu-complex2 | c | pose-only M1 | 10 | 1460.4 | 645.4 | 1340.6 | 7 | 823.6 | 21.3 | 1257 | 489716.3 | 318192.9 | 13808 | 1164.4 | 497.5 | 5 | 4.686 | 1.427 | 0.317 |\n'
-    '| hu-complex2 | c | pose-only M2 | 10 | 975.9 | 31.0 | 1340.6 | 10 | 1382.9 | 39.5 | 29775 | 13957.7 | 337.7 | 13808 | 426.1 | 497.5 | 10 | 0.311 | 0.113 | 0.044 |\n'
-    '| hu-complex2 | c | TORO (M2) | 10 | 8204.2 | 1295.8 | 1340.6 | 0 | 7784.2 | 1019.5 | 29775 | 22303.8 | 1704.9 | 13808 | 795.1 | 497.5 | 0 | 0.740 | 0.221 | 0.131 |\n'
-    '\n'
+    "\n"
+    "| world | noise | method | runs | NEES1 mean | NEES1 ±95% | NEES1 gate | runs under gate | NEES2 mean | NEES2 ±95% | NEES2 dof | NEES3 mean | NEES3 ±95% | NEES3 dof | landmark NEES vs truth | landmark gate | landmark runs under gate | RMS position error [m] | RMS position ±95% | RMS heading error [rad] |\n"
+    "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+    "| hu-simple1 | a | full LS | 10 | 240.6 | 19.3 | 280.4 | 9 | 217.5 | 13.7 | 0 | 4341.0 | 65.3 | 4310 | 433.9 | 495.4 | 10 | 0.070 | 0.017 | 0.011 |\n"
+    "| hu-simple1 | a | pose-only M1 | 10 | 135.8 | 10.2 | 280.4 | 10 | 218.3 | 13.7 | 246 | 4716.0 | 68.7 | 4310 | 399.1 | 495.4 | 10 | 0.139 | 0.034 | 0.020 |\n"
+    "| hu-simple1 | a | pose-only M2 | 10 | 145.5 | 10.1 | 280.4 | 10 | 345.0 | 14.1 | 2354 | 4353.8 | 65.4 | 4310 | 419.6 | 495.4 | 10 | 0.072 | 0.027 | 0.012 |\n"
+    "| hu-simple1 | a | TORO (M2) | 10 | 753.1 | 144.6 | 280.4 | 0 | 816.5 | 135.5 | 2354 | 5156.8 | 264.7 | 4310 | 499.2 | 495.4 | 6 | 0.136 | 0.068 | 0.030 |\n"
+    "| hu-simple1 | b | full LS | 10 | 239.6 | 19.1 | 280.4 | 9 | 231.4 | 13.6 | 0 | 4341.9 | 64.8 | 4310 | 434.5 | 495.4 | 10 | 0.070 | 0.013 | 0.012 |\n"
+    "| hu-simple1 | b | pose-only M1 | 10 | 122.0 | 10.5 | 280.4 | 10 | 232.0 | 13.5 | 246 | 4618.6 | 92.2 | 4310 | 394.4 | 495.4 | 10 | 0.129 | 0.034 | 0.020 |\n"
+    "| hu-simple1 | b | pose-only M2 | 10 | 135.2 | 10.1 | 280.4 | 10 | 355.2 | 13.5 | 2354 | 4349.4 | 64.8 | 4310 | 419.8 | 495.4 | 10 | 0.069 | 0.017 | 0.012 |\n"
+    "| hu-simple1 | b | TORO (M2) | 10 | 707.1 | 136.3 | 280.4 | 0 | 776.7 | 130.0 | 2354 | 5117.1 | 259.1 | 4310 | 498.1 | 495.4 | 6 | 0.136 | 0.068 | 0.030 |\n"
+    "| hu-simple1 | c | full LS | 10 | 239.3 | 17.0 | 280.4 | 9 | 156.3 | 9.7 | 0 | 4342.7 | 63.8 | 4310 | 433.5 | 495.4 | 10 | 0.203 | 0.074 | 0.031 |\n"
+    "| hu-simple1 | c | pose-only M1 | 10 | 185.0 | 10.4 | 280.4 | 10 | 171.3 | 13.6 | 246 | 4780.4 | 67.1 | 4310 | 419.6 | 495.4 | 10 | 0.455 | 0.132 | 0.059 |\n"
+    "| hu-simple1 | c | pose-only M2 | 10 | 181.9 | 8.5 | 280.4 | 10 | 328.5 | 12.6 | 2354 | 4364.9 | 65.4 | 4310 | 423.7 | 495.4 | 10 | 0.264 | 0.116 | 0.037 |\n"
+    "| hu-simple1 | c | TORO (M2) | 10 | 1234.3 | 221.9 | 280.4 | 0 | 1277.5 | 208.9 | 2354 | 5615.8 | 324.1 | 4310 | 521.2 | 495.4 | 3 | 0.449 | 0.189 | 0.097 |\n"
+    "| hu-simple2 | a | full LS | 10 | 247.9 | 15.1 | 280.4 | 9 | 216.4 | 10.4 | 0 | 3921.4 | 64.1 | 3917 | 438.0 | 496.2 | 9 | 0.115 | 0.033 | 0.015 |\n"
+    "| hu-simple2 | a | pose-only M1 | 10 | 140.1 | 7.3 | 280.4 | 10 | 217.6 | 12.2 | 246 | 4119.7 | 74.9 | 3917 | 403.2 | 496.2 | 10 | 0.182 | 0.065 | 0.024 |\n"
+    "| hu-simple2 | a | pose-only M2 | 10 | 151.2 | 7.9 | 280.4 | 10 | 317.6 | 11.6 | 1917 | 3932.3 | 64.0 | 3917 | 423.5 | 496.2 | 9 | 0.115 | 0.038 | 0.015 |\n"
+    "| hu-simple2 | a | TORO (M2) | 10 | 448.6 | 52.7 | 280.4 | 0 | 535.4 | 29.9 | 1917 | 4261.3 | 47.7 | 3917 | 461.6 | 496.2 | 8 | 0.139 | 0.038 | 0.024 |\n"
+    "| hu-simple2 | b | full LS | 10 | 249.1 | 17.1 | 280.4 | 9 | 230.3 | 11.5 | 0 | 3920.2 | 65.6 | 3917 | 438.3 | 496.2 | 9 | 0.116 | 0.033 | 0.015 |\n"
+    "| hu-simple2 | b | pose-only M1 | 10 | 127.5 | 9.5 | 280.4 | 10 | 230.2 | 12.2 | 246 | 4046.2 | 71.1 | 3917 | 398.4 | 496.2 | 10 | 0.187 | 0.066 | 0.024 |\n"
+    "| hu-simple2 | b | pose-only M2 | 10 | 142.0 | 9.4 | 280.4 | 10 | 326.9 | 13.0 | 1917 | 3925.5 | 65.4 | 3917 | 423.1 | 496.2 | 9 | 0.114 | 0.034 | 0.015 |\n"
+    "| hu-simple2 | b | TORO (M2) | 10 | 412.4 | 49.4 | 280.4 | 0 | 502.3 | 31.5 | 1917 | 4228.2 | 50.0 | 3917 | 460.7 | 496.2 | 8 | 0.139 | 0.038 | 0.024 |\n"
+    "| hu-simple2 | c | full LS | 10 | 245.6 | 11.5 | 280.4 | 10 | 152.1 | 7.5 | 0 | 3923.9 | 58.5 | 3917 | 438.5 | 496.2 | 9 | 0.318 | 0.089 | 0.040 |\n"
+    "| hu-simple2 | c | pose-only M1 | 10 | 185.7 | 6.9 | 280.4 | 10 | 173.7 | 13.9 | 246 | 4191.9 | 74.5 | 3917 | 421.8 | 496.2 | 9 | 0.490 | 0.190 | 0.062 |\n"
+    "| hu-simple2 | c | pose-only M2 | 10 | 184.7 | 9.0 | 280.4 | 10 | 290.3 | 9.7 | 1917 | 3941.2 | 58.3 | 3917 | 426.9 | 496.2 | 9 | 0.335 | 0.114 | 0.042 |\n"
+    "| hu-simple2 | c | TORO (M2) | 10 | 854.4 | 106.5 | 280.4 | 0 | 922.8 | 73.2 | 1917 | 4658.1 | 66.8 | 3917 | 473.2 | 496.2 | 8 | 0.424 | 0.106 | 0.073 |\n"
+    "| hu-complex1 | a | full LS | 10 | 1251.4 | 36.3 | 1340.6 | 9 | 1014.8 | 42.9 | 0 | 9933.9 | 136.4 | 9957 | 438.0 | 498.8 | 10 | 0.243 | 0.057 | 0.027 |\n"
+    "| hu-complex1 | a | pose-only M1 | 10 | 903.8 | 84.3 | 1340.6 | 10 | 1026.6 | 47.4 | 1233 | 796408.3 | 571185.7 | 9957 | 849.2 | 498.8 | 6 | 2.784 | 0.714 | 0.176 |\n"
+    "| hu-complex1 | a | pose-only M2 | 10 | 854.6 | 30.6 | 1340.6 | 10 | 1372.0 | 47.1 | 17746 | 12653.2 | 2265.0 | 9957 | 494.3 | 498.8 | 7 | 1.027 | 0.459 | 0.080 |\n"
+    "| hu-complex1 | a | TORO (M2) | 10 | 9042.9 | 8500.7 | 1340.6 | 0 | 5749.4 | 3898.1 | 17746 | 20780.2 | 7269.2 | 9957 | 834.3 | 498.8 | 0 | 1.210 | 0.386 | 0.102 |\n"
+    "| hu-complex1 | b | full LS | 10 | 1259.4 | 38.7 | 1340.6 | 9 | 1154.7 | 50.3 | 0 | 9931.2 | 135.7 | 9957 | 442.1 | 498.8 | 10 | 0.328 | 0.113 | 0.048 |\n"
+    "| hu-complex1 | b | pose-only M1 | 10 | 845.5 | 124.1 | 1340.6 | 10 | 1144.5 | 48.8 | 1233 | 997061.4 | 402911.5 | 9957 | 1005.6 | 498.8 | 4 | 3.451 | 1.235 | 0.226 |\n"
+    "| hu-complex1 | b | pose-only M2 | 10 | 3042.7 | 2414.8 | 1340.6 | 7 | 1453.0 | 49.6 | 17746 | 47483.7 | 33383.8 | 9957 | 12168.2 | 498.8 | 2 | 3.737 | 1.835 | 0.309 |\n"
+    "| hu-complex1 | b | TORO (M2) | 10 | 6227.6 | 4264.7 | 1340.6 | 0 | 3410.1 | 2226.8 | 17746 | 52601.9 | 34948.0 | 9957 | 12356.1 | 498.8 | 0 | 3.825 | 1.822 | 0.314 |\n"
+    "| hu-complex1 | c | full LS | 10 | 1254.3 | 40.3 | 1340.6 | 9 | 605.5 | 23.2 | 0 | 9934.4 | 135.1 | 9957 | 441.6 | 498.8 | 10 | 0.568 | 0.132 | 0.056 |\n"
+    "| hu-complex1 | c | pose-only M1 | 10 | 1441.8 | 362.6 | 1340.6 | 6 | 816.4 | 64.1 | 1233 | 368034.6 | 251534.4 | 9957 | 1545.7 | 498.8 | 3 | 5.369 | 1.559 | 0.350 |\n"
+    "| hu-complex1 | c | pose-only M2 | 10 | 1050.2 | 38.4 | 1340.6 | 10 | 1214.8 | 36.2 | 17746 | 10437.6 | 340.5 | 9957 | 441.7 | 498.8 | 9 | 1.377 | 0.437 | 0.104 |\n"
+    "| hu-complex1 | c | TORO (M2) | 10 | 7133.9 | 1322.6 | 1340.6 | 0 | 6442.7 | 896.2 | 17746 | 16730.0 | 1267.1 | 9957 | 703.3 | 498.8 | 0 | 2.153 | 0.517 | 0.180 |\n"
+    "| hu-complex2 | a | full LS | 10 | 1235.5 | 32.3 | 1340.6 | 10 | 1069.4 | 37.1 | 0 | 13803.1 | 337.0 | 13808 | 444.8 | 497.5 | 10 | 0.082 | 0.015 | 0.014 |\n"
+    "| hu-complex2 | a | pose-only M1 | 10 | 873.4 | 144.0 | 1340.6 | 9 | 1069.4 | 38.0 | 1257 | 967872.4 | 592340.8 | 13808 | 754.3 | 497.5 | 6 | 2.167 | 0.732 | 0.160 |\n"
+    "| hu-complex2 | a | pose-only M2 | 10 | 760.2 | 19.9 | 1340.6 | 10 | 1540.0 | 47.1 | 29775 | 14010.4 | 342.6 | 13808 | 413.4 | 497.5 | 10 | 0.112 | 0.039 | 0.018 |\n"
+    "| hu-complex2 | a | TORO (M2) | 10 | 3778.9 | 658.2 | 1340.6 | 0 | 3690.7 | 664.1 | 29775 | 18634.2 | 1779.8 | 13808 | 671.2 | 497.5 | 0 | 0.301 | 0.132 | 0.048 |\n"
+    "| hu-complex2 | b | full LS | 10 | 53354.1 | 117880.6 | 1340.6 | 9 | 1247.2 | 139.5 | 0 | 15154.1 | 2962.2 | 13808 | 32019.3 | 497.5 | 9 | 0.412 | 0.741 | 0.091 |\n"
+    "| hu-complex2 | b | pose-only M1 | 10 | 737.3 | 53.1 | 1340.6 | 10 | 1179.3 | 46.4 | 1257 | 1138618.3 | 971382.3 | 13808 | 659.8 | 497.5 | 5 | 2.254 | 0.818 | 0.178 |\n"
+    "| hu-complex2 | b | pose-only M2 | 10 | 678.3 | 18.8 | 1340.6 | 10 | 1622.1 | 55.4 | 29775 | 14420.4 | 761.3 | 13808 | 408.4 | 497.5 | 10 | 0.125 | 0.040 | 0.026 |\n"
+    "| hu-complex2 | b | TORO (M2) | 10 | 5734.9 | 5370.5 | 1340.6 | 0 | 4357.3 | 2594.6 | 29775 | 20972.5 | 5199.8 | 13808 | 741.0 | 497.5 | 0 | 0.259 | 0.090 | 0.058 |\n"
+    "| hu-complex2 | c | full LS | 10 | 1232.9 | 36.5 | 1340.6 | 10 | 680.4 | 20.2 | 0 | 13807.4 | 338.9 | 13808 | 445.8 | 497.5 | 10 | 0.220 | 0.063 | 0.035 |\n"
+    "| hu-complex2 | c | pose-only M1 | 10 | 1460.4 | 645.4 | 1340.6 | 7 | 823.6 | 21.3 | 1257 | 489716.3 | 318192.9 | 13808 | 1164.4 | 497.5 | 5 | 4.686 | 1.427 | 0.317 |\n"
+    "| hu-complex2 | c | pose-only M2 | 10 | 975.9 | 31.0 | 1340.6 | 10 | 1382.9 | 39.5 | 29775 | 13957.7 | 337.7 | 13808 | 426.1 | 497.5 | 10 | 0.311 | 0.113 | 0.044 |\n"
+    "| hu-complex2 | c | TORO (M2) | 10 | 8204.2 | 1295.8 | 1340.6 | 0 | 7784.2 | 1019.5 | 29775 | 22303.8 | 1704.9 | 13808 | 795.1 | 497.5 | 0 | 0.740 | 0.221 | 0.131 |\n"
+    "\n"
     "### The paper's findings, checked\n"
-    '\n'
-    '- **holds** — full LS and pose-only M2 pass the NEES1 gate in most runs.\n'
-    '  holds in all groups. hu-simple1/a: full 9/10, M2 10/10; hu-simple1/b: full 9/10, M2 10/10; hu-simple1/c: full 9/10, M2 10/10; hu-simple2/a: full 9/10, M2 10/10; hu-simple2/b: full 9/10, M2 10/10; hu-simple2/c: full 10/10, M2 10/10; hu-complex1/a: full 9/10, M2 10/10; hu-complex1/b: full 9/10, M2 7/10; hu-complex1/c: full 9/10, M2 10/10; hu-complex2/a: full 10/10, M2 10/10; hu-complex2/b: full 9/10, M2 10/10; hu-complex2/c: full 10/10, M2 10/10\n'
-    '\n'
-    '- **does not hold** — pose-only M2 is far more accurate than M1 (RMS position error at most half).\n'
-    '  fails in 1/12 groups. hu-simple1/a: M1 0.139 ± 0.034 m, M2 0.072 ± 0.027 m (undecided: paired difference -0.00286 ± 0.027 over 10 runs); hu-simple1/b: M1 0.129 ± 0.034 m, M2 0.069 ± 0.017 m (undecided: paired difference -0.00473 ± 0.024 over 10 runs); hu-simple1/c: M1 0.455 ± 0.13 m, M2 0.264 ± 0.12 m (undecided: paired difference -0.0364 ± 0.09 over 10 runs); hu-simple2/a: M1 0.182 ± 0.065 m, M2 0.115 ± 0.038 m (undecided: paired difference -0.0242 ± 0.031 over 10 runs); hu-simple2/b: M1 0.187 ± 0.066 m, M2 0.114 ± 0.034 m (undecided: paired difference -0.0206 ± 0.03 over 10 runs); hu-simple2/c: M1 0.490 ± 0.19 m, M2 0.335 ± 0.11 m (undecided: paired difference -0.0902 ± 0.09 over 10 runs); hu-complex1/a: M1 2.784 ± 0.71 m, M2 1.027 ± 0.46 m (undecided: paired difference 0.365 ± 0.51 over 10 runs); hu-complex1/b: M1 3.451 ± 1.2 m, M2 3.737 ± 1.8 m (fails: paired difference -2.01 ± 1.7 over 10 runs); hu-complex1/c: M1 5.369 ± 1.6 m, M2 1.377 ± 0.44 m (holds: paired difference 1.31 ± 0.81 over 10 runs); hu-complex2/a: M1 2.167 ± 0.73 m, M2 0.112 ± 0.039 m (holds: paired difference 0.972 ± 0.37 over 10 runs); hu-complex2/b: M1 2.254 ± 0.82 m, M2 0.125 ± 0.04 m (holds: paired difference 1 ± 0.42 over 10 runs); hu-complex2/c: M1 4.686 ± 1.4 m, M2 0.311 ± 0.11 m (holds: paired difference 2.03 ± 0.71 over 10 runs)\n'
-    '\n'
-    '- **undecided** — TORO is less consistent than pose-only LS (higher NEES1).\n'
-    '  undecided in 2/12 groups. hu-simple1/a: M2 145 ± 10, TORO 753 ± 1.4e+02 (holds: paired difference 608 ± 1.5e+02 over 10 runs); hu-simple1/b: M2 135 ± 10, TORO 707 ± 1.4e+02 (holds: paired difference 572 ± 1.4e+02 over 10 runs); hu-simple1/c: M2 182 ± 8.5, TORO 1234 ± 2.2e+02 (holds: paired difference 1.05e+03 ± 2.2e+02 over 10 runs); hu-simple2/a: M2 151 ± 7.9, TORO 449 ± 53 (holds: paired difference 297 ± 48 over 10 runs); hu-simple2/b: M2 142 ± 9.4, TORO 412 ± 49 (holds: paired difference 270 ± 44 over 10 runs); hu-simple2/c: M2 185 ± 9, TORO 854 ± 1.1e+02 (holds: paired difference 670 ± 1.1e+02 over 10 runs); hu-complex1/a: M2 855 ± 31, TORO 9043 ± 8.5e+03 (undecided: paired difference 8.19e+03 ± 8.5e+03 over 10 runs); hu-complex1/b: M2 3043 ± 2.4e+03, TORO 6228 ± 4.3e+03 (holds: paired difference 3.18e+03 ± 2.8e+03 over 10 runs); hu-complex1/c: M2 1050 ± 38, TORO 7134 ± 1.3e+03 (holds: paired difference 6.08e+03 ± 1.3e+03 over 10 runs); hu-complex2/a: M2 760 ± 20, TORO 3779 ± 6.6e+02 (holds: paired difference 3.02e+03 ± 6.5e+02 over 10 runs); hu-complex2/b: M2 678 ± 19, TORO 5735 ± 5.4e+03 (undecided: paired difference 5.06e+03 ± 5.4e+03 over 10 runs); hu-complex2/c: M2 976 ± 31, TORO 8204 ± 1.3e+03 (holds: paired difference 7.23e+03 ± 1.3e+03 over 10 runs)\n'
-    '\n'
-    '- **holds** — NEES2 orders full LS below pose-only M2.\n'
-    '  holds in all groups. hu-simple1/a: full 217 ± 14, M2 345 ± 14 (holds: paired difference 128 ± 4 over 10 runs); hu-simple1/b: full 231 ± 14, M2 355 ± 13 (holds: paired difference 124 ± 3.8 over 10 runs); hu-simple1/c: full 156 ± 9.7, M2 329 ± 13 (holds: paired difference 172 ± 13 over 10 runs); hu-simple2/a: full 216 ± 10, M2 318 ± 12 (holds: paired difference 101 ± 4.8 over 10 runs); hu-simple2/b: full 230 ± 11, M2 327 ± 13 (holds: paired difference 96.5 ± 5 over 10 runs); hu-simple2/c: full 152 ± 7.5, M2 290 ± 9.7 (holds: paired difference 138 ± 5.1 over 10 runs); hu-complex1/a: full 1015 ± 43, M2 1372 ± 47 (holds: paired difference 357 ± 26 over 10 runs); hu-complex1/b: full 1155 ± 50, M2 1453 ± 50 (holds: paired difference 298 ± 29 over 10 runs); hu-complex1/c: full 606 ± 23, M2 1215 ± 36 (holds: paired difference 609 ± 23 over 10 runs); hu-complex2/a: full 1069 ± 37, M2 1540 ± 47 (holds: paired difference 471 ± 21 over 10 runs); hu-complex2/b: full 1247 ± 1.4e+02, M2 1622 ± 55 (holds: paired difference 375 ± 1.4e+02 over 10 runs); hu-complex2/c: full 680 ± 20, M2 1383 ± 40 (holds: paired difference 702 ± 34 over 10 runs)\n'
-    '\n'
-    '- **undecided** — NEES2 orders pose-only M2 below TORO.\n'
-    '  undecided in 1/12 groups. hu-simple1/a: M2 345 ± 14, TORO 816 ± 1.4e+02 (holds: paired difference 471 ± 1.3e+02 over 10 runs); hu-simple1/b: M2 355 ± 13, TORO 777 ± 1.3e+02 (holds: paired difference 422 ± 1.2e+02 over 10 runs); hu-simple1/c: M2 329 ± 13, TORO 1277 ± 2.1e+02 (holds: paired difference 949 ± 2e+02 over 10 runs); hu-simple2/a: M2 318 ± 12, TORO 535 ± 30 (holds: paired difference 218 ± 27 over 10 runs); hu-simple2/b: M2 327 ± 13, TORO 502 ± 31 (holds: paired difference 175 ± 29 over 10 runs); hu-simple2/c: M2 290 ± 9.7, TORO 923 ± 73 (holds: paired difference 633 ± 69 over 10 runs); hu-complex1/a: M2 1372 ± 47, TORO 5749 ± 3.9e+03 (holds: paired difference 4.38e+03 ± 3.9e+03 over 10 runs); hu-complex1/b: M2 1453 ± 50, TORO 3410 ± 2.2e+03 (undecided: paired difference 1.96e+03 ± 2.2e+03 over 10 runs); hu-complex1/c: M2 1215 ± 36, TORO 6443 ± 9e+02 (holds: paired difference 5.23e+03 ± 9e+02 over 10 runs); hu-complex2/a: M2 1540 ± 47, TORO 3691 ± 6.6e+02 (holds: paired difference 2.15e+03 ± 6.5e+02 over 10 runs); hu-complex2/b: M2 1622 ± 55, TORO 4357 ± 2.6e+03 (holds: paired difference 2.74e+03 ± 2.6e+03 over 10 runs); hu-complex2/c: M2 1383 ± 40, TORO 7784 ± 1e+03 (holds: paired difference 6.4e+03 ± 1e+03 over 10 runs)\n'
-    '\n'
-    '- **undecided** — NEES3 orders full LS below pose-only M2.\n'
-    '  undecided in 1/12 groups. hu-simple1/a: full 4341 ± 65, M2 4354 ± 65 (holds: paired difference 12.8 ± 1 over 10 runs); hu-simple1/b: full 4342 ± 65, M2 4349 ± 65 (holds: paired difference 7.55 ± 0.78 over 10 runs); hu-simple1/c: full 4343 ± 64, M2 4365 ± 65 (holds: paired difference 22.2 ± 2.2 over 10 runs); hu-simple2/a: full 3921 ± 64, M2 3932 ± 64 (holds: paired difference 10.9 ± 0.52 over 10 runs); hu-simple2/b: full 3920 ± 66, M2 3926 ± 65 (holds: paired difference 5.33 ± 0.55 over 10 runs); hu-simple2/c: full 3924 ± 59, M2 3941 ± 58 (holds: paired difference 17.3 ± 0.73 over 10 runs); hu-complex1/a: full 9934 ± 1.4e+02, M2 12653 ± 2.3e+03 (holds: paired difference 2.72e+03 ± 2.2e+03 over 10 runs); hu-complex1/b: full 9931 ± 1.4e+02, M2 47484 ± 3.3e+04 (holds: paired difference 3.76e+04 ± 3.3e+04 over 10 runs); hu-complex1/c: full 9934 ± 1.4e+02, M2 10438 ± 3.4e+02 (holds: paired difference 503 ± 3.1e+02 over 10 runs); hu-complex2/a: full 13803 ± 3.4e+02, M2 14010 ± 3.4e+02 (holds: paired difference 207 ± 89 over 10 runs); hu-complex2/b: full 15154 ± 3e+03, M2 14420 ± 7.6e+02 (undecided: paired difference -734 ± 3.2e+03 over 10 runs); hu-complex2/c: full 13807 ± 3.4e+02, M2 13958 ± 3.4e+02 (holds: paired difference 150 ± 10 over 10 runs)\n'
-    '\n'
-    '- **undecided** — NEES3 orders pose-only M2 below TORO.\n'
-    '  undecided in 1/12 groups. hu-simple1/a: M2 4354 ± 65, TORO 5157 ± 2.6e+02 (holds: paired difference 803 ± 2.3e+02 over 10 runs); hu-simple1/b: M2 4349 ± 65, TORO 5117 ± 2.6e+02 (holds: paired difference 768 ± 2.3e+02 over 10 runs); hu-simple1/c: M2 4365 ± 65, TORO 5616 ± 3.2e+02 (holds: paired difference 1.25e+03 ± 3e+02 over 10 runs); hu-simple2/a: M2 3932 ± 64, TORO 4261 ± 48 (holds: paired difference 329 ± 50 over 10 runs); hu-simple2/b: M2 3926 ± 65, TORO 4228 ± 50 (holds: paired difference 303 ± 52 over 10 runs); hu-simple2/c: M2 3941 ± 58, TORO 4658 ± 67 (holds: paired difference 717 ± 92 over 10 runs); hu-complex1/a: M2 12653 ± 2.3e+03, TORO 20780 ± 7.3e+03 (holds: paired difference 8.13e+03 ± 6.9e+03 over 10 runs); hu-complex1/b: M2 47484 ± 3.3e+04, TORO 52602 ± 3.5e+04 (undecided: paired difference 5.12e+03 ± 6.6e+03 over 10 runs); hu-complex1/c: M2 10438 ± 3.4e+02, TORO 16730 ± 1.3e+03 (holds: paired difference 6.29e+03 ± 1.3e+03 over 10 runs); hu-complex2/a: M2 14010 ± 3.4e+02, TORO 18634 ± 1.8e+03 (holds: paired difference 4.62e+03 ± 1.8e+03 over 10 runs); hu-complex2/b: M2 14420 ± 7.6e+02, TORO 20973 ± 5.2e+03 (holds: paired difference 6.55e+03 ± 5.2e+03 over 10 runs); hu-complex2/c: M2 13958 ± 3.4e+02, TORO 22304 ± 1.7e+03 (holds: paired difference 8.35e+03 ± 1.7e+03 over 10 runs)\n'
-    '\n'
-    '- **does not hold** — TORO is least consistent under noise c (mean NEES1 / gate; means only).\n'
-    '  fails for hu-complex1. hu-complex1: a 6.75, b 4.65, c 5.32; hu-complex2: a 2.82, b 4.28, c 6.12; hu-simple1: a 2.69, b 2.52, c 4.40; hu-simple2: a 1.60, b 1.47, c 3.05\n'
+    "\n"
+    "- **holds** — full LS and pose-only M2 pass the NEES1 gate in most runs.\n"
+    "  holds in all groups. hu-simple1/a: full 9/10, M2 10/10; hu-simple1/b: full 9/10, M2 10/10; hu-simple1/c: full 9/10, M2 10/10; hu-simple2/a: full 9/10, M2 10/10; hu-simple2/b: full 9/10, M2 10/10; hu-simple2/c: full 10/10, M2 10/10; hu-complex1/a: full 9/10, M2 10/10; hu-complex1/b: full 9/10, M2 7/10; hu-complex1/c: full 9/10, M2 10/10; hu-complex2/a: full 10/10, M2 10/10; hu-complex2/b: full 9/10, M2 10/10; hu-complex2/c: full 10/10, M2 10/10\n"
+    "\n"
+    "- **does not hold** — pose-only M2 is far more accurate than M1 (RMS position error at most half).\n"
+    "  fails in 1/12 groups. hu-simple1/a: M1 0.139 ± 0.034 m, M2 0.072 ± 0.027 m (undecided: paired difference -0.00286 ± 0.027 over 10 runs); hu-simple1/b: M1 0.129 ± 0.034 m, M2 0.069 ± 0.017 m (undecided: paired difference -0.00473 ± 0.024 over 10 runs); hu-simple1/c: M1 0.455 ± 0.13 m, M2 0.264 ± 0.12 m (undecided: paired difference -0.0364 ± 0.09 over 10 runs); hu-simple2/a: M1 0.182 ± 0.065 m, M2 0.115 ± 0.038 m (undecided: paired difference -0.0242 ± 0.031 over 10 runs); hu-simple2/b: M1 0.187 ± 0.066 m, M2 0.114 ± 0.034 m (undecided: paired difference -0.0206 ± 0.03 over 10 runs); hu-simple2/c: M1 0.490 ± 0.19 m, M2 0.335 ± 0.11 m (undecided: paired difference -0.0902 ± 0.09 over 10 runs); hu-complex1/a: M1 2.784 ± 0.71 m, M2 1.027 ± 0.46 m (undecided: paired difference 0.365 ± 0.51 over 10 runs); hu-complex1/b: M1 3.451 ± 1.2 m, M2 3.737 ± 1.8 m (fails: paired difference -2.01 ± 1.7 over 10 runs); hu-complex1/c: M1 5.369 ± 1.6 m, M2 1.377 ± 0.44 m (holds: paired difference 1.31 ± 0.81 over 10 runs); hu-complex2/a: M1 2.167 ± 0.73 m, M2 0.112 ± 0.039 m (holds: paired difference 0.972 ± 0.37 over 10 runs); hu-complex2/b: M1 2.254 ± 0.82 m, M2 0.125 ± 0.04 m (holds: paired difference 1 ± 0.42 over 10 runs); hu-complex2/c: M1 4.686 ± 1.4 m, M2 0.311 ± 0.11 m (holds: paired difference 2.03 ± 0.71 over 10 runs)\n"
+    "\n"
+    "- **undecided** — TORO is less consistent than pose-only LS (higher NEES1).\n"
+    "  undecided in 2/12 groups. hu-simple1/a: M2 145 ± 10, TORO 753 ± 1.4e+02 (holds: paired difference 608 ± 1.5e+02 over 10 runs); hu-simple1/b: M2 135 ± 10, TORO 707 ± 1.4e+02 (holds: paired difference 572 ± 1.4e+02 over 10 runs); hu-simple1/c: M2 182 ± 8.5, TORO 1234 ± 2.2e+02 (holds: paired difference 1.05e+03 ± 2.2e+02 over 10 runs); hu-simple2/a: M2 151 ± 7.9, TORO 449 ± 53 (holds: paired difference 297 ± 48 over 10 runs); hu-simple2/b: M2 142 ± 9.4, TORO 412 ± 49 (holds: paired difference 270 ± 44 over 10 runs); hu-simple2/c: M2 185 ± 9, TORO 854 ± 1.1e+02 (holds: paired difference 670 ± 1.1e+02 over 10 runs); hu-complex1/a: M2 855 ± 31, TORO 9043 ± 8.5e+03 (undecided: paired difference 8.19e+03 ± 8.5e+03 over 10 runs); hu-complex1/b: M2 3043 ± 2.4e+03, TORO 6228 ± 4.3e+03 (holds: paired difference 3.18e+03 ± 2.8e+03 over 10 runs); hu-complex1/c: M2 1050 ± 38, TORO 7134 ± 1.3e+03 (holds: paired difference 6.08e+03 ± 1.3e+03 over 10 runs); hu-complex2/a: M2 760 ± 20, TORO 3779 ± 6.6e+02 (holds: paired difference 3.02e+03 ± 6.5e+02 over 10 runs); hu-complex2/b: M2 678 ± 19, TORO 5735 ± 5.4e+03 (undecided: paired difference 5.06e+03 ± 5.4e+03 over 10 runs); hu-complex2/c: M2 976 ± 31, TORO 8204 ± 1.3e+03 (holds: paired difference 7.23e+03 ± 1.3e+03 over 10 runs)\n"
+    "\n"
+    "- **holds** — NEES2 orders full LS below pose-only M2.\n"
+    "  holds in all groups. hu-simple1/a: full 217 ± 14, M2 345 ± 14 (holds: paired difference 128 ± 4 over 10 runs); hu-simple1/b: full 231 ± 14, M2 355 ± 13 (holds: paired difference 124 ± 3.8 over 10 runs); hu-simple1/c: full 156 ± 9.7, M2 329 ± 13 (holds: paired difference 172 ± 13 over 10 runs); hu-simple2/a: full 216 ± 10, M2 318 ± 12 (holds: paired difference 101 ± 4.8 over 10 runs); hu-simple2/b: full 230 ± 11, M2 327 ± 13 (holds: paired difference 96.5 ± 5 over 10 runs); hu-simple2/c: full 152 ± 7.5, M2 290 ± 9.7 (holds: paired difference 138 ± 5.1 over 10 runs); hu-complex1/a: full 1015 ± 43, M2 1372 ± 47 (holds: paired difference 357 ± 26 over 10 runs); hu-complex1/b: full 1155 ± 50, M2 1453 ± 50 (holds: paired difference 298 ± 29 over 10 runs); hu-complex1/c: full 606 ± 23, M2 1215 ± 36 (holds: paired difference 609 ± 23 over 10 runs); hu-complex2/a: full 1069 ± 37, M2 1540 ± 47 (holds: paired difference 471 ± 21 over 10 runs); hu-complex2/b: full 1247 ± 1.4e+02, M2 1622 ± 55 (holds: paired difference 375 ± 1.4e+02 over 10 runs); hu-complex2/c: full 680 ± 20, M2 1383 ± 40 (holds: paired difference 702 ± 34 over 10 runs)\n"
+    "\n"
+    "- **undecided** — NEES2 orders pose-only M2 below TORO.\n"
+    "  undecided in 1/12 groups. hu-simple1/a: M2 345 ± 14, TORO 816 ± 1.4e+02 (holds: paired difference 471 ± 1.3e+02 over 10 runs); hu-simple1/b: M2 355 ± 13, TORO 777 ± 1.3e+02 (holds: paired difference 422 ± 1.2e+02 over 10 runs); hu-simple1/c: M2 329 ± 13, TORO 1277 ± 2.1e+02 (holds: paired difference 949 ± 2e+02 over 10 runs); hu-simple2/a: M2 318 ± 12, TORO 535 ± 30 (holds: paired difference 218 ± 27 over 10 runs); hu-simple2/b: M2 327 ± 13, TORO 502 ± 31 (holds: paired difference 175 ± 29 over 10 runs); hu-simple2/c: M2 290 ± 9.7, TORO 923 ± 73 (holds: paired difference 633 ± 69 over 10 runs); hu-complex1/a: M2 1372 ± 47, TORO 5749 ± 3.9e+03 (holds: paired difference 4.38e+03 ± 3.9e+03 over 10 runs); hu-complex1/b: M2 1453 ± 50, TORO 3410 ± 2.2e+03 (undecided: paired difference 1.96e+03 ± 2.2e+03 over 10 runs); hu-complex1/c: M2 1215 ± 36, TORO 6443 ± 9e+02 (holds: paired difference 5.23e+03 ± 9e+02 over 10 runs); hu-complex2/a: M2 1540 ± 47, TORO 3691 ± 6.6e+02 (holds: paired difference 2.15e+03 ± 6.5e+02 over 10 runs); hu-complex2/b: M2 1622 ± 55, TORO 4357 ± 2.6e+03 (holds: paired difference 2.74e+03 ± 2.6e+03 over 10 runs); hu-complex2/c: M2 1383 ± 40, TORO 7784 ± 1e+03 (holds: paired difference 6.4e+03 ± 1e+03 over 10 runs)\n"
+    "\n"
+    "- **undecided** — NEES3 orders full LS below pose-only M2.\n"
+    "  undecided in 1/12 groups. hu-simple1/a: full 4341 ± 65, M2 4354 ± 65 (holds: paired difference 12.8 ± 1 over 10 runs); hu-simple1/b: full 4342 ± 65, M2 4349 ± 65 (holds: paired difference 7.55 ± 0.78 over 10 runs); hu-simple1/c: full 4343 ± 64, M2 4365 ± 65 (holds: paired difference 22.2 ± 2.2 over 10 runs); hu-simple2/a: full 3921 ± 64, M2 3932 ± 64 (holds: paired difference 10.9 ± 0.52 over 10 runs); hu-simple2/b: full 3920 ± 66, M2 3926 ± 65 (holds: paired difference 5.33 ± 0.55 over 10 runs); hu-simple2/c: full 3924 ± 59, M2 3941 ± 58 (holds: paired difference 17.3 ± 0.73 over 10 runs); hu-complex1/a: full 9934 ± 1.4e+02, M2 12653 ± 2.3e+03 (holds: paired difference 2.72e+03 ± 2.2e+03 over 10 runs); hu-complex1/b: full 9931 ± 1.4e+02, M2 47484 ± 3.3e+04 (holds: paired difference 3.76e+04 ± 3.3e+04 over 10 runs); hu-complex1/c: full 9934 ± 1.4e+02, M2 10438 ± 3.4e+02 (holds: paired difference 503 ± 3.1e+02 over 10 runs); hu-complex2/a: full 13803 ± 3.4e+02, M2 14010 ± 3.4e+02 (holds: paired difference 207 ± 89 over 10 runs); hu-complex2/b: full 15154 ± 3e+03, M2 14420 ± 7.6e+02 (undecided: paired difference -734 ± 3.2e+03 over 10 runs); hu-complex2/c: full 13807 ± 3.4e+02, M2 13958 ± 3.4e+02 (holds: paired difference 150 ± 10 over 10 runs)\n"
+    "\n"
+    "- **undecided** — NEES3 orders pose-only M2 below TORO.\n"
+    "  undecided in 1/12 groups. hu-simple1/a: M2 4354 ± 65, TORO 5157 ± 2.6e+02 (holds: paired difference 803 ± 2.3e+02 over 10 runs); hu-simple1/b: M2 4349 ± 65, TORO 5117 ± 2.6e+02 (holds: paired difference 768 ± 2.3e+02 over 10 runs); hu-simple1/c: M2 4365 ± 65, TORO 5616 ± 3.2e+02 (holds: paired difference 1.25e+03 ± 3e+02 over 10 runs); hu-simple2/a: M2 3932 ± 64, TORO 4261 ± 48 (holds: paired difference 329 ± 50 over 10 runs); hu-simple2/b: M2 3926 ± 65, TORO 4228 ± 50 (holds: paired difference 303 ± 52 over 10 runs); hu-simple2/c: M2 3941 ± 58, TORO 4658 ± 67 (holds: paired difference 717 ± 92 over 10 runs); hu-complex1/a: M2 12653 ± 2.3e+03, TORO 20780 ± 7.3e+03 (holds: paired difference 8.13e+03 ± 6.9e+03 over 10 runs); hu-complex1/b: M2 47484 ± 3.3e+04, TORO 52602 ± 3.5e+04 (undecided: paired difference 5.12e+03 ± 6.6e+03 over 10 runs); hu-complex1/c: M2 10438 ± 3.4e+02, TORO 16730 ± 1.3e+03 (holds: paired difference 6.29e+03 ± 1.3e+03 over 10 runs); hu-complex2/a: M2 14010 ± 3.4e+02, TORO 18634 ± 1.8e+03 (holds: paired difference 4.62e+03 ± 1.8e+03 over 10 runs); hu-complex2/b: M2 14420 ± 7.6e+02, TORO 20973 ± 5.2e+03 (holds: paired difference 6.55e+03 ± 5.2e+03 over 10 runs); hu-complex2/c: M2 13958 ± 3.4e+02, TORO 22304 ± 1.7e+03 (holds: paired difference 8.35e+03 ± 1.7e+03 over 10 runs)\n"
+    "\n"
+    "- **does not hold** — TORO is least consistent under noise c (mean NEES1 / gate; means only).\n"
+    "  fails for hu-complex1. hu-complex1: a 6.75, b 4.65, c 5.32; hu-complex2: a 2.82, b 4.28, c 6.12; hu-simple1: a 2.69, b 2.52, c 4.40; hu-simple2: a 1.60, b 1.47, c 3.05\n"
 )
 
 POSE_ONLY_STUDY = [
@@ -668,7 +668,7 @@ POSE_ONLY_STUDY = [
         "* **M2 far more accurate than M1 (at most half the error)** is *undecided* on the "
         "simple worlds: M2's error is 0.52–0.68 of M1's on average, and the paired interval "
         "of `0.5 · M1 − M2` contains 0 in every group. With 2 runs the old notebook called "
-        "this \"does not hold\"; 10 runs do not decide it either way. On hu-complex1 it holds "
+        'this "does not hold"; 10 runs do not decide it either way. On hu-complex1 it holds '
         "under c, is undecided under a, and fails under b, where Method 2's graph itself "
         "breaks in 3 of 10 runs (0.2 rad of heading noise a step leaves stretches held by "
         "odometry alone: M2 NEES3 47,000 ± 33,000 against full LS's 9,931). On hu-complex2 it "

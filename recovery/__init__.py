@@ -17,15 +17,15 @@ _EXPORTS: dict[str, str] = {
     "Bundle": "recovery.bundle",
     "MotionModel": "recovery.models",
     "SensorModel": "recovery.models",
-    "Recovery": "recovery.recover",
-    "Stretch": "recovery.recover",
+    "Recovery": "recovery.results",
+    "Stretch": "recovery.results",
     "FilterInput": "recovery.ekf",
     "FilterResult": "recovery.ekf",
     "run_filter": "recovery.ekf",
     "SmootherResult": "recovery.smoother",
     "smooth": "recovery.smoother",
-    "BatchResult": "recovery.batch",
-    "refine": "recovery.batch",
+    "BatchResult": "recovery.batch_refinement",
+    "refine": "recovery.batch_refinement",
 }
 
 __all__ = [
@@ -44,11 +44,11 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on first use
-    from recovery.batch import BatchResult, refine
+    from recovery.batch_refinement import BatchResult, refine
     from recovery.bundle import Bundle
     from recovery.ekf import FilterInput, FilterResult, run_filter
     from recovery.models import MotionModel, SensorModel
-    from recovery.recover import Recovery, Stretch
+    from recovery.results import Recovery, Stretch
     from recovery.smoother import SmootherResult, smooth
 else:
     __getattr__, __dir__ = lazy_exports(globals(), _EXPORTS)

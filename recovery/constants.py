@@ -18,6 +18,7 @@ __all__ = [
     "DEFAULT_MAX_OUTLIER_RUN",
     "MAX_SIGMA",
     "MAX_VARIANCE",
+    "MIN_SENSOR_SIGMA",
 ]
 
 #: ``method`` of :func:`recovery.recover.recover`: EKF only, EKF + RTS smoother, smoother
@@ -52,3 +53,10 @@ DEFAULT_MAX_OUTLIER_RUN = 10
 MAX_SIGMA = 1e30
 #: The largest covariance entry a model or an initial covariance accepts: ``MAX_SIGMA²``.
 MAX_VARIANCE = MAX_SIGMA**2
+#: The smallest sensor standard deviation a bundle accepts. The sensor noise enters every
+#: method as the variance σ², and the smoother and batch weigh each measurement by its
+#: inverse: from σ = 1e-150 the variance (1e-300) and the information (1e300) are doubles
+#: with room to spare, while σ = 1e-300 squares to 1e-600, which float64 holds only as 0 —
+#: the noise-free sensor that σ = 0 states, whose information is infinite (the smoother's
+#: and batch's LinAlgError). Far below any physical noise in metres or radians.
+MIN_SENSOR_SIGMA = 1e-150

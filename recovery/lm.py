@@ -3,10 +3,10 @@
 Every least squares of the package runs through :func:`levenberg_marquardt`: full SLAM and
 pose-only least squares (:func:`slamrel.backends.least_squares.solve_graph`,
 :func:`~slamrel.backends.least_squares.solve_graph_incremental`) and batch trajectory recovery
-(:func:`recovery.batch.refine`). What differs between them is the *problem*: how residuals and
-the Gauss–Newton matrix are computed and stored (a fixed sparse pattern, a band) and how the
-damped normal equations are solved (sparse LU in a fill-reducing order, banded Cholesky). The
-loop — damping, acceptance, stopping — is this one.
+(:func:`recovery.batch_refinement.refine`). What differs between them is the *problem*: how
+residuals and the Gauss–Newton matrix are computed and stored (a fixed sparse pattern, a
+band) and how the damped normal equations are solved (sparse LU in a fill-reducing order,
+banded Cholesky). The loop — damping, acceptance, stopping — is this one.
 
 The problem is to minimise ``c(x) = ½ Σ rᵀ W r`` over a state ``x`` (poses ``[x, y, θ]`` and
 Euclidean variables such as landmarks). One iteration at ``x``:
@@ -25,10 +25,10 @@ Damping rule: Marquardt's multiplicative update with ``ν = 10`` (``λ`` falls o
 step, rises on a rejected one), the rule both earlier loops used, so their results stay the
 same. Nielsen's gain-ratio rule (``λ ← λ max(⅓, 1 − (2ρ − 1)³)``, ``ρ`` the actual over the
 predicted decrease; ``ν`` doubling on rejections) was tried on batch recovery and took more
-steps to the same minimum: 17 against 11 iterations at 10⁴ steps, 20 against 16 at 10⁵
-(here the steps are nearly Gauss–Newton, ``λ`` ends at ``λ_min``, and Nielsen's rule lowers it
-more slowly; measured when batch recovery started at ``λ = 1e-6`` — it now starts nearly
-undamped and takes 4 iterations, see :mod:`recovery.batch`).
+steps to the same minimum (here the steps are nearly Gauss–Newton, ``λ`` ends at ``λ_min``,
+and Nielsen's rule lowers it more slowly; measured when batch recovery started at
+``λ = 1e-6``, before it started nearly undamped, see :mod:`recovery.batch_refinement`; the
+iteration counts are in benchmarks/README.md).
 
 Stopping rules, checked in this order after each iteration:
 

@@ -15,7 +15,7 @@ landmarks in ``map.csv`` order, ``[x, y]`` each):
 Every estimator uses that one ``Σ_m`` the same way, as the covariance of a map error that is
 fixed over the run: the filter as a Schmidt ("consider") state (the pose–map
 cross-covariance is carried, the map never changed: :mod:`recovery.ekf`), the smoother and
-the batch as a prior on a map correction estimated with the poses (:mod:`recovery.batch`:
+the batch as a prior on a map correction estimated with the poses (:mod:`recovery.batch_refinement`:
 ``m = m̂ + L η``, ``η ~ N(0, I)``, ``Σ_m = L Lᵀ``). :attr:`MapUncertainty.factor` is that
 ``L``: the eigenvectors of ``Σ_m`` scaled by the square roots of its eigenvalues, those below
 ``RANK_TOLERANCE`` times the largest dropped (exact directions carry no correction), one
@@ -135,7 +135,8 @@ def covariance_factor(cov: Array) -> Array:
     entry, else from its eigendecomposition with the small eigenvalues dropped (r < 2M).
 
     Any ``L`` with ``L Lᵀ = Σ_m`` gives the same map error law ``L η``, ``η ~ N(0, I)``: the
-    factor only chooses the coordinates ``η`` (Cholesky is ~10× faster than ``eigh``).
+    factor only chooses the coordinates ``η``; Cholesky, when it succeeds, is the cheaper one
+    (benchmarks/README.md).
     """
     if cov.size == 0:
         return np.zeros((cov.shape[0], 0))

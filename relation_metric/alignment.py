@@ -207,7 +207,7 @@ class AxisErrors:
 
 
 #: The alignments of :func:`absolute_trajectory_error` (``align``).
-ALIGNMENTS = ("none", "se2", "sim2", "se3", "sim3", "4dof", "origin", "affine")
+ALIGNMENTS = ("none", "se2", "sim2", "se3", "sim3", "4dof", "origin", "affine", "scale")
 
 
 @dataclass(frozen=True)
@@ -266,7 +266,9 @@ def absolute_trajectory_error(
       (position and orientation) on the first matched reference pose (evo's
       ``--align_origin``);
     - ``"affine"``: the affine map minimising the sum (:func:`affine_fit`), the lower bound
-      of the others; positions only, so no rotation errors.
+      of the others; positions only, so no rotation errors;
+    - ``"scale"``: the scale ``c`` of the similarity (Umeyama) alone, ``A(p) = c p``, no
+      rotation or translation (evo's ``--correct_scale`` without ``--align``).
 
     ``n_to_align`` fits the alignment on the first ``n_to_align`` matched poses only (≥ 2;
     evo's ``--n_to_align``) and applies it to all; None: on all.
@@ -344,4 +346,7 @@ def _rigid_alignment(
     if align == "4dof" and three_d:
         return umeyama_yaw(est[:m, :3], ref[:m, :3])
     pos = slice(0, dim)
+    if align == "scale":
+        c = umeyama(est[:m, pos], ref[:m, pos], with_scale=True).scale
+        return Alignment(0.0, np.zeros(dim), c, np.eye(3) if three_d else None)
     return umeyama(est[:m, pos], ref[:m, pos], with_scale=align in ("sim2", "sim3"))

@@ -47,6 +47,8 @@ __all__ = [
     "nees_band",
     "NeesSummary",
     "summarize_nees",
+    "NeesBlowup",
+    "nees_blowups",
     "chi2_quantile",
     "nees_gate",
     "joint_nees",
@@ -281,6 +283,60 @@ def _chi2_3_quantile(p: float, z: float) -> float:
             return x_new
         x = x_new
     return x
+
+
+@dataclass(frozen=True)
+class NeesBlowup:
+    """A NEES blow-up: a run of poses whose NEES against ground truth is outlying.
+
+    Found by :func:`nees_blowups`: at least ``min_run`` consecutive poses (of those with a
+    NEES) whose NEES exceeds ``χ²⁻¹(OUTLIER_PROBABILITY; 3)`` (the single-pose bound, 3 dof),
+    runs fewer than ``min_run`` poses apart merged. An estimate whose NEES stays beyond a
+    bound a consistent one exceeds once in 10 000 poses, for many poses in a row, is lost, not
+    merely over-confident (which the report's verdict judges on the 95 % band instead:
+    :func:`slamrel.report.verdict.nees_excursions`).
+
+    Attributes
+    ----------
+    t0, t1 : float
+        Times of its first and last pose [s].
+    poses : int
+        Poses with a NEES in ``[t0, t1]`` (merged gaps included).
+    nees_max : float
+        The largest NEES in it (χ², 3 dof).
+    """
+
+    t0: float
+    t1: float
+    poses: int
+    nees_max: float
+
+    def as_dict(self) -> dict[str, float | int]:
+        return {"t0": self.t0, "t1": self.t1, "poses": self.poses, "nees_max": self.nees_max}
+
+
+def nees_blowups(times: ArrayLike, nees: ArrayLike, *, min_run: int) -> list[NeesBlowup]:
+    """The :class:`NeesBlowup` s of a pose NEES curve ``nees`` (N,) at ``times`` (N,) [s].
+
+    Poses without a NEES (non-finite values) are left out before the runs are found, so a run
+    goes on across them. ``min_run`` (``≥ 1``): the shortest run, and the longest gap merged
+    plus one.
+    """
+    t = np.asarray(times, dtype=np.float64)
+    v_all = np.asarray(nees, dtype=np.float64)
+    ok = np.flatnonzero(np.isfinite(v_all))
+    v = v_all[ok]
+    m = max(1, int(min_run))
+    st, en = flag_runs(v > chi2_quantile(OUTLIER_PROBABILITY, 3), m, max_gap=m - 1)
+    return [
+        NeesBlowup(
+            t0=float(t[ok[a]]),
+            t1=float(t[ok[b]]),
+            poses=int(b - a + 1),
+            nees_max=float(v[a : b + 1].max()),
+        )
+        for a, b in zip(st.tolist(), en.tolist())
+    ]
 
 
 def nees_gate(dof: int, probability: float = 0.95) -> float:

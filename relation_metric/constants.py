@@ -14,6 +14,9 @@ __all__ = [
     "BOOTSTRAP_RESAMPLES",
     "MIN_BLOCKS",
     "OVERLAP_FACTOR",
+    "POSE_RELATIONS",
+    "DELTA_UNITS",
+    "PLANES",
 ]
 
 #: Error definitions of :func:`relation_metric.metric.relation_errors` (``mode``).
@@ -31,3 +34,9 @@ MIN_BLOCKS = 20
 #: Blocks are at least this many times the overlap range of the relations (1 + the mean
 #: number of later relations a relation overlaps in time).
 OVERLAP_FACTOR = 3
+#: evo's pose relations (``--pose_relation``) of :mod:`relation_metric.pose_error`.
+POSE_RELATIONS = ("full", "trans_part", "rot_part", "angle_deg", "angle_rad", "point_distance")
+#: evo's RPE delta units (``--delta_unit``): frames, degrees, radians, metres.
+DELTA_UNITS = ("f", "d", "r", "m")
+#: evo's projection planes (``--project_to_plane``).
+PLANES = ("xy", "xz", "yz")

@@ -18,7 +18,7 @@ from relation_metric.errors import AssociationError, InputError
 from relation_metric.groups import SE3
 from relation_metric.metric import Mode, RelationErrors, relation_errors
 from relation_metric.relations import RelationSet
-from relation_metric.stats import Summary, summarize_with_squares
+from relation_metric.stats import ErrorStats, summarize_with_squares
 from relation_metric.time_association import REASONS, SAME_POSE, Association, associate
 from relation_metric.trajectory import Trajectory
 
@@ -28,6 +28,7 @@ __all__ = [
     "evaluate",
     "pose_errors",
     "UnassociatedRelationsWarning",
+    "SamePoseWarning",
     "error_summaries",
     "on_common_group",
 ]
@@ -35,6 +36,11 @@ __all__ = [
 
 class UnassociatedRelationsWarning(UserWarning):
     """Some relations could not be associated and were left out of the statistics."""
+
+
+class SamePoseWarning(UserWarning):
+    """Some relations had both ends at one estimate pose and were scored as zero motion
+    (``mode="metricevaluator"``, as the C++ metricEvaluator scores them)."""
 
 
 @dataclass(frozen=True)
@@ -49,16 +55,16 @@ class Evaluation:
         Estimate poses of both ends of every relation.
     errors : RelationErrors
         Per-relation errors over all relations (NaN where unassociated).
-    translation, rotation, combined : dict of {"abs", "sqr"} → Summary
-        Statistics over the associated relations; rotation in radians.
+    translation, rotation, combined : ErrorStats
+        Statistics over the associated relations (``.abs``, ``.sqr``); rotation in radians.
     """
 
     relations: RelationSet
     association: Association
     errors: RelationErrors
-    translation: dict[str, Summary]
-    rotation: dict[str, Summary]
-    combined: dict[str, Summary]
+    translation: ErrorStats
+    rotation: ErrorStats
+    combined: ErrorStats
 
     @property
     def valid(self) -> NDArray[np.bool_]:
@@ -68,7 +74,7 @@ class Evaluation:
     @property
     def epsilon(self) -> float:
         """Kümmerle et al. Eq. 2: ε = 1/N Σ trans(e)² + rot(e)² (m² + rad²)."""
-        return self.translation["sqr"].mean + self.rotation["sqr"].mean
+        return self.translation.sqr.mean + self.rotation.sqr.mean
 
     def as_dict(self, *, degrees: bool = False) -> dict[str, Any]:
         """The JSON structure of ``slamrel evaluate --json`` (NaN written as ``null``)."""
@@ -85,9 +91,9 @@ class Evaluation:
             "rotation_unit": "deg" if degrees else "rad",
             "mode": self.errors.mode,
             "weights": list(self.errors.weights),
-            "translation": {k: v.as_dict() for k, v in self.translation.items()},
-            "rotation": {k: v.as_dict() for k, v in rot.items()},
-            "combined": {k: v.as_dict() for k, v in self.combined.items()},
+            "translation": self.translation.as_dict(),
+            "rotation": rot.as_dict(),
+            "combined": self.combined.as_dict(),
             "epsilon": _json_float(self.epsilon),
         }
 
@@ -95,12 +101,21 @@ class Evaluation:
         """Relations whose two times found one estimate pose, and what was done with them."""
         a = self.association
         same = a.same_pose if a.same_pose is not None else np.zeros(len(self.relations), bool)
-        interpolated = int(np.count_nonzero(same & a.valid))
         count = int(np.count_nonzero(same))
+        if self.errors.mode == "metricevaluator":
+            return {
+                "count": count,
+                "interpolated": 0,
+                "unassociated": 0,
+                "zero_motion": count,
+                "rule": "scored as zero estimated motion, as the C++ metricEvaluator scores "
+                "them (mode metricevaluator)",
+            }
+        interpolated = int(np.count_nonzero(same & a.interpolated))
         return {
             "count": count,
             "interpolated": interpolated,
-            "unassociated": count - interpolated,
+            "unassociated": int(np.count_nonzero(same & ~a.valid)),
             "rule": "both ends interpolated (interpolate=True) where the poses around them allow, "
             "otherwise unassociated; never scored as zero motion",
         }
@@ -151,10 +166,9 @@ def _json_float(x: float) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def error_summaries(values: ArrayLike) -> dict[str, Summary]:
-    """``{"abs": summarize(|e|), "sqr": summarize(e²)}`` of non-negative errors ``e``."""
-    abs_part, sqr_part = summarize_with_squares(values)
-    return {"abs": abs_part, "sqr": sqr_part}
+def error_summaries(values: ArrayLike) -> ErrorStats:
+    """``ErrorStats(abs=summarize(|e|), sqr=summarize(e²))`` of non-negative errors ``e``."""
+    return ErrorStats(*summarize_with_squares(values))
 
 
 def evaluate(
@@ -183,7 +197,10 @@ def evaluate(
     odometry, max_time_diff, interpolate, max_interpolation_gap :
         Timestamp association, see :func:`relation_metric.time_association.associate`.
     mode, weights :
-        Error definition, see :func:`relation_metric.metric.relation_errors`.
+        Error definition, see :func:`relation_metric.metric.relation_errors`. The
+        ``metricevaluator`` mode also associates as the C++ tool does: a relation whose two
+        times find one estimate pose is scored as zero estimated motion (counted, and said in
+        a :class:`SamePoseWarning`), where the ``paper`` mode interpolates or leaves it out.
     strict : bool
         Raise :class:`AssociationError` when any relation is unassociated (otherwise they
         are excluded, counted and named in an :class:`UnassociatedRelationsWarning`).
@@ -228,6 +245,17 @@ def evaluate(
             max_time_diff=max_time_diff,
             interpolate=interpolate,
             max_interpolation_gap=max_interpolation_gap,
+            same_pose="zero_motion" if mode == "metricevaluator" else "separate",
+        )
+    if mode == "metricevaluator" and assoc.same_pose is not None and assoc.same_pose.any():
+        where = f"{estimate_name}: " if estimate_name else ""
+        warnings.warn(
+            f"{where}{int(assoc.same_pose.sum())} of {len(relations)} relations{of_relations} "
+            "have both ends at one estimate pose and are scored as zero estimated motion, as "
+            "the C++ metricEvaluator scores them (the default mode interpolates or leaves "
+            "them out)",
+            SamePoseWarning,
+            stacklevel=2,
         )
     valid = assoc.valid
     n_bad = int((~valid).sum())

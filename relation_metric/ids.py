@@ -18,7 +18,14 @@ from numpy.typing import ArrayLike, NDArray
 from relation_metric.arrays import PathLike
 from relation_metric.errors import InputError
 
-__all__ = ["integer_ids", "rows_of", "first_missing", "first_repeat", "refuse_self_loops"]
+__all__ = [
+    "integer_ids",
+    "rows_of",
+    "first_missing",
+    "first_repeat",
+    "refuse_repeated_ids",
+    "refuse_self_loops",
+]
 
 _MAX_EXACT_ID = 2.0**53  # from it on a double no longer holds every integer (2**53 + 1 rounds)
 
@@ -127,6 +134,25 @@ def first_repeat(
     if not dup.size:
         return None
     return int(order[dup[0]]), int(order[dup[0] + 1])
+
+
+def refuse_repeated_ids(
+    ids: NDArray[np.int64],
+    lines: NDArray[np.int64],
+    path: PathLike | None,
+    what: str,
+) -> None:
+    """Raise at the second definition of the first repeated id of ``ids`` (``lines[k]`` is
+    the file line of ``ids[k]``): ``vertex id 5 is defined twice (first on line 2)``. An id
+    defined twice would silently keep one of its two values."""
+    repeat = first_repeat(ids, tiebreak=lines)
+    if repeat is not None:
+        first, k = repeat
+        raise InputError(
+            f"{what} {int(ids[k])} is defined twice (first on line {int(lines[first])})",
+            path=path,
+            line=int(lines[k]),
+        )
 
 
 def refuse_self_loops(

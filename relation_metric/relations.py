@@ -33,6 +33,7 @@ from relation_metric.trajectory import Trajectory, readonly, readonly_fresh
 __all__ = [
     "RelationSet",
     "generate_relations",
+    "chain_from_zero",
     "STRATEGIES",
 ]
 
@@ -239,7 +240,7 @@ min_distance, seed, seconds :
         s = reference.path_length()
         j = np.searchsorted(s, s + distance, side="left")
         if chained:
-            ids = _chain_from_zero(j, n)
+            ids = chain_from_zero(j, n)
             i, j = ids[:-1], ids[1:]
         else:
             i = np.arange(n)
@@ -274,7 +275,7 @@ min_distance, seed, seconds :
     return RelationSet.from_trajectory_pairs(reference, i[order], j[order], key=key)
 
 
-def _chain_from_zero(successor: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+def chain_from_zero(successor: NDArray[np.int64], n: int) -> NDArray[np.int64]:
     """``0, f(0), f(f(0)), ...`` while below ``n`` (``f = successor``, ``f(k) > k``).
 
     Pointer doubling: ``log₂`` of the chain length vectorised steps, no loop per pose.

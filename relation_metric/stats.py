@@ -8,7 +8,15 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["Summary", "summarize", "summarize_with_squares", "STAT_NAMES"]
+__all__ = [
+    "Summary",
+    "ErrorStats",
+    "summarize",
+    "summarize_with_squares",
+    "evo_statistics",
+    "STAT_NAMES",
+    "EVO_STAT_NAMES",
+]
 
 STAT_NAMES = ("mean", "std", "min", "max", "median", "rmse", "count")
 
@@ -38,6 +46,28 @@ class Summary:
                 if isinstance(value, float) and not math.isfinite(value):
                     out[key] = None
         return out
+
+
+@dataclass(frozen=True)
+class ErrorStats:
+    """Statistics of one error part (translation, rotation, ...): of the absolute errors
+    ``|e|`` (``abs``) and of their squares ``e²`` (``sqr``), as the metricEvaluator prints
+    them without and with ``-q``.
+
+    Attributes
+    ----------
+    abs : Summary
+        Of ``|e|``.
+    sqr : Summary
+        Of ``e²`` (its ``mean`` is the part's share of Kümmerle et al.'s ε).
+    """
+
+    abs: Summary
+    sqr: Summary
+
+    def as_dict(self) -> dict[str, dict[str, float | int | None]]:
+        """The JSON form ``{"abs": {...}, "sqr": {...}}`` (NaN written as ``None``)."""
+        return {"abs": self.abs.as_dict(), "sqr": self.sqr.as_dict()}
 
 
 def summarize(values: ArrayLike) -> Summary:
@@ -115,3 +145,29 @@ def summarize_with_squares(values: ArrayLike) -> tuple[Summary, Summary]:
         count=n,
     )
     return abs_part, sqr_part
+
+
+#: The statistics evo computes of an error array, in evo's order (``StatisticsType``).
+EVO_STAT_NAMES = ("rmse", "mean", "median", "std", "min", "max", "sse")
+
+
+def evo_statistics(values: ArrayLike) -> dict[str, float]:
+    """The statistics of an error array as evo computes them (``PE.get_all_statistics``).
+
+    ``rmse = sqrt(mean(e²))``, ``sse = Σ e²`` and ``std`` the *population* standard
+    deviation (``ddof=0``, numpy's default, which evo uses), unlike :class:`Summary`'s
+    sample ``std``; keys in evo's order (:data:`EVO_STAT_NAMES`). Needs at least one value.
+    """
+    e = np.asarray(values, dtype=np.float64).ravel()
+    if e.size == 0:
+        raise ValueError("evo's statistics need at least one error value")
+    sq = e**2
+    return {
+        "rmse": float(np.sqrt(np.mean(sq))),
+        "mean": float(np.mean(e)),
+        "median": float(np.median(e)),
+        "std": float(np.std(e)),
+        "min": float(np.min(e)),
+        "max": float(np.max(e)),
+        "sse": float(np.sum(sq)),
+    }

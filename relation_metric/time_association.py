@@ -19,13 +19,16 @@ half the reference rate: both ends of a 0.1 s relation nearest to one pose) woul
 as zero motion. Such relations are counted (``Association.same_pose``): with
 ``interpolate=True`` both ends are interpolated on the estimate's group (when the poses around
 each lie within ``max_interpolation_gap``); otherwise, or when they cannot be, the relation
-is unassociated with the reason ``SAME_POSE``.
+is unassociated with the reason ``SAME_POSE``. With ``same_pose="zero_motion"`` they are kept
+as they are, zero estimated motion, as the C++ metricEvaluator scores them (the
+``metricevaluator`` mode of :func:`relation_metric.evaluate.evaluate`), and still counted.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,6 +49,9 @@ __all__ = [
 
 # Why an endpoint could not be associated (codes of Association.reason).
 OK, OUTSIDE_SPAN, TOO_FAR, BAD_INDEX, SAME_POSE = 0, 1, 2, 3, 4
+# What is done with a relation whose two different times find one estimate pose.
+SamePoseRule = Literal["separate", "zero_motion"]
+SAME_POSE_RULES: tuple[SamePoseRule, ...] = ("separate", "zero_motion")
 REASONS = {
     OK: "associated",
     OUTSIDE_SPAN: "outside the estimate's time span",
@@ -75,8 +81,9 @@ class Association:
         0 when valid, otherwise a key of :data:`REASONS` (the first failing end's).
     same_pose : ndarray of bool, shape (M,), optional
         Relations whose two different times found one nearest estimate pose: interpolated
-        (``interpolated``) or unassociated (reason ``SAME_POSE``). ``None``: none possible
-        (relations by index).
+        (``interpolated``), unassociated (reason ``SAME_POSE``), or, with
+        ``same_pose="zero_motion"``, scored as zero motion (valid, neither interpolated nor
+        corrected). ``None``: none possible (relations by index).
     """
 
     pose_first: NDArray[np.float64]
@@ -211,6 +218,7 @@ def associate(
     max_time_diff: float = 0.1,
     interpolate: bool = False,
     max_interpolation_gap: float = 1.0,
+    same_pose: SamePoseRule = "separate",
 ) -> Association:
     """Find the estimate poses of both ends of every relation.
 
@@ -230,6 +238,11 @@ def associate(
         poses around an end beyond the tolerance.
     max_interpolation_gap : float
         Seconds; longest gap between two estimate poses that is interpolated over.
+    same_pose : {"separate", "zero_motion"}
+        Relations whose two different times find one estimate pose: ``"separate"``
+        interpolates both ends (``interpolate=True``) or leaves the relation unassociated
+        (reason ``SAME_POSE``); ``"zero_motion"`` keeps both ends at that pose, zero estimated
+        motion, as the C++ metricEvaluator does. Counted in ``same_pose`` either way.
 
     Returns
     -------
@@ -241,6 +254,8 @@ def associate(
     ):
         if not (math.isfinite(value) and value >= 0.0):
             raise InputError(f"{name} must be a finite number of seconds >= 0, got {value}")
+    if same_pose not in SAME_POSE_RULES:
+        raise InputError(f"same_pose must be one of {SAME_POSE_RULES}, got {same_pose!r}")
     m = len(relations)
     width = estimate.group.width
     if odometry is not None and odometry.group is not estimate.group:
@@ -281,8 +296,9 @@ def associate(
     same = None
     if relations.key == "time" and len(estimate):
         same = _separate_same_pose(
-            relations, estimate, poses, idx, reason, odo, interp, interpolate,
-            max_interpolation_gap,
+            relations, estimate, poses, idx, reason, odo, interp,
+            interpolate and same_pose == "separate", max_interpolation_gap,
+            keep=same_pose == "zero_motion",
         )  # fmt: skip
     r1, r2 = reason[:m], reason[m:]
     valid = (r1 == OK) & (r2 == OK)
@@ -309,8 +325,11 @@ def _separate_same_pose(
     interp: NDArray[np.bool_],
     interpolate: bool,
     max_gap: float,
+    *,
+    keep: bool = False,
 ) -> NDArray[np.bool_]:
-    """Relations whose two different times took one estimate pose: interpolated or refused.
+    """Relations whose two different times took one estimate pose: interpolated or refused
+    (or, with ``keep``, left at that pose: zero motion).
 
     Works in place on the per-end arrays (length 2M, first ends then second ends); returns
     the mask (M,) of such relations.
@@ -326,7 +345,7 @@ def _separate_same_pose(
         & ~own[m:]
         & (relations.first != relations.second)
     )
-    if not same.any():
+    if keep or not same.any():
         return same
     rows = np.flatnonzero(same)
     ends = np.concatenate((rows, rows + m))
@@ -381,7 +400,7 @@ def match_nearest_times(
 
 
 def synchronize(
-    reference: Trajectory, estimate: Trajectory, *, max_diff: float = 0.01
+    reference: Trajectory, estimate: Trajectory, *, max_diff: float = 0.01, offset: float = 0.0
 ) -> tuple[Trajectory, Trajectory]:
     """Pose-by-pose association of two trajectories, as ``evo`` does it (``t_max_diff``).
 
@@ -390,6 +409,11 @@ def synchronize(
     without a match within ``max_diff`` seconds are dropped. Relations on the result are
     then named by index (``key="index"``): pose ``k`` of both is one matched pair. This is
     ``evo.core.sync.associate_trajectories(reference, estimate, max_diff=...)``.
+
+    ``offset`` (seconds, evo's ``offset_2``, ``--t_offset``) is added to the estimate's
+    times for the matching only, with evo's arithmetic (to the estimate's times when it is
+    the longer trajectory, subtracted from the reference's otherwise); both results keep
+    their own times.
 
     Returns
     -------
@@ -405,9 +429,14 @@ def synchronize(
 
     if not (math.isfinite(max_diff) and max_diff >= 0.0):
         raise InputError(f"max_diff must be a finite number of seconds >= 0, got {max_diff}")
+    if not math.isfinite(offset):
+        raise InputError(f"offset must be a finite number of seconds, got {offset}")
     second_longer = len(estimate) > len(reference)
     short, long_ = (reference, estimate) if second_longer else (estimate, reference)
-    i_short, i_long = match_nearest_times(short.timestamps, long_.timestamps, max_diff)
+    long_times = long_.timestamps
+    if offset != 0.0:
+        long_times = long_times + (offset if second_longer else -offset)
+    i_short, i_long = match_nearest_times(short.timestamps, long_times, max_diff)
     if i_short.size == 0:
         raise AssociationError(
             f"no reference and estimate poses lie within {max_diff:g} s of each other (the "

@@ -46,7 +46,7 @@ _EXPORTS: dict[str, str] = {
     "MotionModel": "recovery.models",
     "SensorModel": "recovery.models",
     "recover": "recovery.recover",
-    "Recovery": "recovery.recover",
+    "Recovery": "recovery.results",
     # landmark maps
     "LandmarkMap": "landmark_graph.maps",
     "read_map": "slamrel.formats.landmark_maps",
@@ -101,7 +101,8 @@ if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on 
     from landmark_graph.maps import LandmarkMap
     from recovery.bundle import Bundle
     from recovery.models import MotionModel, SensorModel
-    from recovery.recover import Recovery, recover
+    from recovery.recover import recover
+    from recovery.results import Recovery
     from relation_metric.alignment import Alignment, ATEResult, absolute_trajectory_error, umeyama
     from relation_metric.errors import AssociationError, DivergenceError, InputError, SlamrelError
     from relation_metric.evaluate import Evaluation, evaluate

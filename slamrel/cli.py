@@ -34,6 +34,8 @@ from relation_metric.errors import OptionError, SlamrelError
 COMMANDS = {
     "run": "slamrel.commands.run",
     "evaluate": "slamrel.commands.evaluate",
+    "ape": "slamrel.commands.evo_cli",
+    "rpe": "slamrel.commands.evo_cli",
     "traj": "slamrel.commands.traj",
     "nees": "slamrel.commands.nees",
     "recover": "slamrel.commands.recover",
@@ -201,11 +203,10 @@ def _single_threaded_blas() -> None:
     """One BLAS thread per ``slamrel`` process unless ``OPENBLAS_NUM_THREADS`` is set.
 
     numpy's and scipy's OpenBLAS start a thread per core at import, and those threads spin
-    idle for a while: about 0.1 s of CPU per process on 2 cores (``import numpy`` and 0.2 s
-    of work: 0.40 s user against 0.29 s), taken from the command's own work. slamrel's
-    dense work gains nothing from them at the sizes it meets (EKF-SLAM at 400 landmarks,
-    state 803: 2.79–3.02 s single-threaded against 2.99–3.07 s; benchmarks/README.md).
-    Set only before numpy is imported (it is read then), and never over the user's value.
+    idle for a while: CPU time taken from the command's own work in every process. slamrel's
+    dense work gains nothing from them at the sizes it meets (EKF-SLAM at 400 landmarks
+    measured no faster with them; the figures: benchmarks/README.md). Set only before numpy
+    is imported (it is read then), and never over the user's value.
     """
     if "numpy" not in sys.modules:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", BLAS_THREADS)
@@ -217,10 +218,11 @@ def _no_huge_page_requests() -> None:
     numpy calls ``madvise`` for huge pages on every array of 4 MiB or more. Where the kernel
     answers such a request by compacting memory on the first touch (Linux's THP ``defrag``
     setting ``madvise``, a common default), that touch waits while the kernel moves pages:
-    on a busy machine the first supernodal factorisation of Manhattan 10⁴ (80 MB of new
-    buffers) took 0.10–0.48 s, 0.3 s of it in the kernel, against 0.11–0.12 s with ordinary
-    pages; later factorisations and the other steps measured the same either way. Set only
-    before numpy is imported (it is read then), and never over the user's value.
+    on a busy machine the first supernodal factorisation of a large graph (tens of MB of new
+    buffers) took up to several times as long, most of the extra in the kernel, as with
+    ordinary pages; later factorisations and the other steps measured the same either way
+    (the figures: benchmarks/README.md). Set only before numpy is imported (it is read
+    then), and never over the user's value.
     """
     if "numpy" not in sys.modules:
         os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", NUMPY_MADVISE_HUGEPAGE)
@@ -239,7 +241,9 @@ def _main(argv: Sequence[str] | None) -> int:
         parser = build_parser(words[0] if words else None)
         args = parser.parse_args(words)
         sub = [
-            getattr(args, k) for k in ("import_command", "relations_command") if hasattr(args, k)
+            getattr(args, k)
+            for k in ("import_command", "relations_command", "evo_kind")
+            if hasattr(args, k)
         ]
         command = " ".join(["slamrel", args.command, *sub])
         with warnings.catch_warnings():

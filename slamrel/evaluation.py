@@ -91,7 +91,7 @@ def evaluate_files(
 
     The files are read and scored exactly as the command does (REFERENCE a ``.relations``
     file, a reference trajectory or a bundle directory; the time-order rule; repeated
-    reference times and zero-length relations dropped; see the README), with ``options``
+    reference times and zero-length relations dropped; see docs/formats.md), with ``options``
     (default: the command's defaults) and each field of :class:`EvaluateOptions` given as a
     keyword overriding it, e.g. ``evaluate_files(ref, est, strategy="loops", radius=2.0,
     max_time_diff=0.05)``. What is dropped or reordered on the way is said in warnings.
@@ -140,18 +140,7 @@ def score_files(
     notes: dict[str, Any] = {}
     relations, ref_traj = load_reference(reference, options, notes)
     skip = options.skip_invalid_poses or options.mode == "metricevaluator"
-    loaded = load_trajectory(
-        estimate,
-        options.format,
-        skip_invalid=skip,
-        role="estimate",
-        planar=options.planar,
-        times=options.times,
-    )
-    _refuse_if_strict(options, loaded, estimate)
-    _note_projection(notes, "estimate", loaded)
-    notes["estimate_out_of_order"] = loaded.time_order.as_dict()
-    notes["estimate_repeated_times"] = loaded.repeated.as_dict()
+    loaded = _load_estimate(estimate, options, skip, notes)
     odometry = _load_odometry(options, skip, notes) if options.odometry else None
     scored = _windowed(
         _offset(loaded.trajectory, options.t_offset), options, notes, estimate, "estimate"
@@ -206,6 +195,62 @@ def score_files(
     if loaded.skipped:
         result["estimate_records_skipped"] = dict(loaded.skipped)
     result.update(notes)
+    _add_extras(
+        result,
+        ev,
+        ate_pair,
+        ref_traj,
+        reference,
+        options.max_time_diff,
+        ate=ate,
+        n_to_align=n_to_align,
+        axes=axes,
+        drift=drift,
+    )
+    generated = None if ref_traj is None else (options.strategy or "consecutive")
+    pair = None if ate_pair[1] is None else (ate_pair[0], ate_pair[1])
+    return FileEvaluation(
+        ev, ev_estimate, result, relation_set=generated, ate_inputs=pair, reference=ref_traj
+    )
+
+
+def _load_estimate(
+    estimate: str, options: EvaluateOptions, skip: bool, notes: dict[str, Any]
+) -> LoadedTrajectory:
+    """ESTIMATE read as a trajectory (``skip``: records with non-finite values skipped and
+    counted), refused with ``strict`` when not in time order or with a time repeated; what
+    reading it projected, reordered or dropped is said in ``notes``."""
+    loaded = load_trajectory(
+        estimate,
+        options.format,
+        skip_invalid=skip,
+        role="estimate",
+        planar=options.planar,
+        times=options.times,
+    )
+    _refuse_if_strict(options, loaded, estimate)
+    _note_projection(notes, "estimate", loaded)
+    notes["estimate_out_of_order"] = loaded.time_order.as_dict()
+    notes["estimate_repeated_times"] = loaded.repeated.as_dict()
+    return loaded
+
+
+def _add_extras(
+    result: dict[str, Any],
+    ev: Evaluation,
+    ate_pair: tuple[Trajectory, Trajectory | None],
+    ref_traj: Trajectory | None,
+    reference: str,
+    tol: float,
+    *,
+    ate: bool,
+    n_to_align: int | None,
+    axes: bool,
+    drift: bool,
+) -> None:
+    """Add to ``result`` what :func:`score_files` was asked for beyond the relation metric:
+    the aligned ATE, the per-axis relation errors, the KITTI drift (the first and the last
+    on the scored pose pairs ``ate_pair``: they need the reference trajectory ``ref_traj``)."""
     if ate:
         if ref_traj is None:
             raise OptionError(
@@ -214,7 +259,7 @@ def score_files(
             )
         ate_estimate, ate_reference = ate_pair
         assert ate_reference is not None  # the reference (just checked) or its synchronised copy
-        result["ate"] = _ate(ate_estimate, ate_reference, options.max_time_diff, n_to_align)
+        result["ate"] = _ate(ate_estimate, ate_reference, tol, n_to_align)
     if axes:
         result["relation_axes"] = {k: v.as_dict() for k, v in relation_axes(ev).items()}
     if drift:
@@ -223,12 +268,7 @@ def score_files(
                 f"needs a reference trajectory, not a .relations file ({reference})",
                 option="--kitti-drift",
             )
-        result["kitti_drift"] = _kitti_drift(ate_pair, options.max_time_diff, reference)
-    generated = None if ref_traj is None else (options.strategy or "consecutive")
-    pair = None if ate_pair[1] is None else (ate_pair[0], ate_pair[1])
-    return FileEvaluation(
-        ev, ev_estimate, result, relation_set=generated, ate_inputs=pair, reference=ref_traj
-    )
+        result["kitti_drift"] = _kitti_drift(ate_pair, tol, reference)
 
 
 def _why_no_relations(

@@ -60,7 +60,7 @@ def test_readme_example_runs_and_its_numbers_hold(
     ref, est = namespace["reference"], namespace["estimate"]
     result = namespace["result"]
     oracle = _relation_rmse(ref.poses, est.poses)  # type: ignore[attr-defined]
-    assert result.translation["abs"].rmse == pytest.approx(oracle, rel=1e-12)  # type: ignore[attr-defined]
+    assert result.translation.abs.rmse == pytest.approx(oracle, rel=1e-12)  # type: ignore[attr-defined]
 
     out = tmp_path / "e.json"
     from slamrel.cli import main
@@ -69,7 +69,7 @@ def test_readme_example_runs_and_its_numbers_hold(
     assert main([*argv, "-q", "--json", str(out)]) == 0
     cli = json.loads(out.read_text())
     on_files = namespace["on_files"]
-    assert on_files.translation["abs"].rmse == cli["translation"]["abs"]["rmse"]  # type: ignore[attr-defined]
+    assert on_files.translation.abs.rmse == cli["translation"]["abs"]["rmse"]  # type: ignore[attr-defined]
     assert on_files.epsilon == cli["epsilon"]  # type: ignore[attr-defined]
 
 
@@ -139,15 +139,15 @@ def test_evaluate_files_takes_the_commands_options(tmp_path: Path) -> None:
     assert main([*argv, "--seed", "3", "-q", "--json", str(out)]) == 0
     cli = json.loads(out.read_text())
     assert len(ev.relations) == cli["relations"] == 50
-    assert ev.translation["sqr"].mean == cli["translation"]["sqr"]["mean"]
-    assert ev.rotation["abs"].max == cli["rotation"]["abs"]["max"]
+    assert ev.translation.sqr.mean == cli["translation"]["sqr"]["mean"]
+    assert ev.rotation.abs.max == cli["rotation"]["abs"]["max"]
     with pytest.raises(TypeError, match="json"):
         slamrel.evaluate_files(ref, est, json="x.json")
     options = slamrel.EvaluateOptions(strategy="global", count=50, seed=3)
     again = slamrel.evaluate_files(ref, est, options)
-    assert again.translation["sqr"].mean == ev.translation["sqr"].mean
+    assert again.translation.sqr.mean == ev.translation.sqr.mean
     moved = slamrel.evaluate_files(ref, est, options, seed=4)  # a keyword overrides options
-    assert moved.translation["sqr"].mean != ev.translation["sqr"].mean
+    assert moved.translation.sqr.mean != ev.translation.sqr.mean
 
 
 def test_evaluate_parser_defaults_are_the_options_defaults() -> None:

@@ -33,7 +33,7 @@ def test_tolerance_and_unassociated_are_counted():
         match=r"2 of 3 relations .*#1 .*within the time tolerance.*#2 .*outside",
     ):
         ev = evaluate(rel, est)
-    assert ev.translation["abs"].count == 1
+    assert ev.translation.abs.count == 1
     assert ev.as_dict()["unassociated"] == 2
     with pytest.raises(AssociationError, match=r"\(strict=True\)$"):
         evaluate(rel, est, strict=True)
@@ -84,7 +84,7 @@ def test_index_relations(rng):
     np.testing.assert_array_equal(a.valid, [True, False, True])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        assert evaluate(rel, est).translation["abs"].count == 2
+        assert evaluate(rel, est).translation.abs.count == 2
 
 
 def _evo_matching(query, times, max_diff):

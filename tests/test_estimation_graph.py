@@ -8,8 +8,8 @@ from scipy.optimize import least_squares
 
 from relation_metric import se2
 from relation_metric.errors import InputError
+from slamrel.backends.graph import PoseGraph
 from slamrel.backends.least_squares import (
-    PoseGraph,
     _residuals_and_jacobian,
     _upper_sqrt,
     solve_graph,
@@ -128,7 +128,7 @@ def _drifted_loop():
     """Two laps of a 20 m circle whose odometry heading is biased by 0.02 rad a step (16 rad
     over the run), 40 landmarks seen within 8 m; the guess is the chained odometry.
     Returns the graph, the true landmarks and the dof (residuals minus unknowns)."""
-    from slamrel.backends.least_squares import initial_landmarks
+    from slamrel.backends.graph import initial_landmarks
 
     rng = np.random.default_rng(1)
     n, m, sd, sd_th = 400, 40, 0.02, 0.01

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from recovery.batch import _factors, _weights, normal_equations
+from recovery.batch_refinement import _factors, _weights, normal_equations
 from recovery.ekf import USED, run_filter
 from recovery.lm import (
     Linearisation,

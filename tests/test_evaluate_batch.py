@@ -58,7 +58,7 @@ def test_batch_table_equals_evaluate_per_run_and_hand_statistics(tmp_path, capsy
         ev = evaluate_files(
             tmp_path / "runs" / f"ref{k}.txt", tmp_path / "runs" / f"est{k}.txt", step=2
         )
-        assert float(runs[k]["trans_mean"]) == ev.translation["abs"].mean
+        assert float(runs[k]["trans_mean"]) == ev.translation.abs.mean
         assert int(runs[k]["relations"]) == len(ev.relations) == 38
     # the group statistics by hand (statistics module: sample std, n - 1)
     for d, a in (("d0", "a0"), ("d1", "a1")):

@@ -44,7 +44,8 @@ import numpy as np
 import pytest
 
 from relation_metric import se2
-from slamrel.backends.least_squares import PoseGraph, initial_landmarks, solve_graph
+from slamrel.backends.graph import PoseGraph, initial_landmarks
+from slamrel.backends.least_squares import solve_graph
 from slamrel.backends.lever_sgd import lever_sgd_optimize as toro_optimize
 from slamrel.backends.toro_optimiser import spherical_information
 

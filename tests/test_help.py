@@ -55,9 +55,7 @@ def test_every_command_and_option_has_help(name, parser):
     assert parser.description, f"{name}: no description"
     assert "fit_noise" not in (parser.description or "")  # no Python function as the answer
     missing = [
-        a.option_strings[0] if a.option_strings else a.dest
-        for a in _options(parser)
-        if not a.help
+        a.option_strings[0] if a.option_strings else a.dest for a in _options(parser) if not a.help
     ]
     assert not missing, f"{name}: options without help: {missing}"
 

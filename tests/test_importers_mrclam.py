@@ -213,7 +213,7 @@ def test_dataset7_slam_and_recovery_beat_dead_reckoning():
                 for name, est in (("rec", rec.trajectory), ("dr", dead))
                 for kind, rel in (("loops", loops), ("cons", cons))
             }
-        mean = {k: v.translation["abs"].mean for k, v in e.items()}
+        mean = {k: v.translation.abs.mean for k, v in e.items()}
         assert mean["rec", "loops"] < 0.5 * mean["dr", "loops"], robot
         ok = e["rec", "cons"].valid & e["dr", "cons"].valid
         a = e["rec", "cons"].errors.translation[ok]
@@ -221,7 +221,7 @@ def test_dataset7_slam_and_recovery_beat_dead_reckoning():
         p_less = wilcoxon(a, c, alternative="less").pvalue
         assert p_less < 1e-3 and mean["rec", "cons"] < mean["dr", "cons"], robot
         # and the loop errors' median too (robot 4's dead reckoning is exact while at rest)
-        med = {k: v.translation["abs"].median for k, v in e.items()}
+        med = {k: v.translation.abs.median for k, v in e.items()}
         assert med["rec", "loops"] < med["dr", "loops"], robot
 
 

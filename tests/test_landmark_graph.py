@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 from conftest import require_data
 
-from landmark_graph.landmark_association import associate_auto, gospa, ospa
+from landmark_graph.landmark_association import associate_auto
 from landmark_graph.map_compare import compare_maps
 from landmark_graph.maps import LandmarkMap
 from landmark_graph.mesh import delaunay_mesh
 from landmark_graph.mesh_relations import mesh_errors
+from landmark_graph.set_distances import gospa, ospa
 from relation_metric import se2
 from relation_metric.errors import InputError
 from slamrel.cli import main

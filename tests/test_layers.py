@@ -1,12 +1,14 @@
-"""The import layers README.md's Layout section promises, read from the source (every import
-statement, also those inside functions and under ``TYPE_CHECKING``).
+"""The import layers docs/design.md promises ("Who may import whom"), read from the source
+(every import statement, also those inside functions and under ``TYPE_CHECKING``).
 
 A *layer* is one of the three libraries, or one sub-package or top-level module of
 ``slamrel`` (``slamrel.formats``, ``slamrel.pipeline``, ...). :data:`ALLOWED` says which
 layers of ours each layer may import besides itself; an entry narrower than a layer (a
-module, such as ``slamrel.backends.least_squares``) allows that module only.
-:data:`TYPE_ONLY` adds imports made only for annotations (under ``if TYPE_CHECKING:``),
-which never run. The same rules, in words, are in README.md ("Who may import whom").
+module, such as ``slamrel.backends.graph``) allows that module only. An import made only for
+annotations (under ``if TYPE_CHECKING:``) obeys the same rules: a type a layer needs from
+above it moves down (as the run's result types did, into ``slamrel.runs``) or is stated as a
+Protocol (``slamrel.backends.pose_only.SimulatedLog``). The same rules, in words, are in
+docs/design.md ("Who may import whom").
 """
 
 from __future__ import annotations
@@ -36,7 +38,11 @@ PLOTS, REVIEW, REPORT, IMPORTERS = (
     "slamrel.importers",
 )
 EVALUATION_OPTIONS, EVALUATION = "slamrel.evaluation_options", "slamrel.evaluation"
+# the run's result types and its NEES: below the pipeline and the report, which both read them
+RUNS = "slamrel.runs"
 SCANS, TRAJINFO = "slamrel.scans", "slamrel.trajinfo"
+# files scored as evo_ape/evo_rpe score them (`slamrel ape`/`rpe`), on evaluation's readers
+EVO = "slamrel.evo_metrics"
 PIPELINE, STUDIES, COMMANDS, CLI, MAIN = (
     "slamrel.pipeline",
     "slamrel.studies",
@@ -65,13 +71,14 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     SCANS: (*LIBRARIES, FORMATS),
     # the numbers of `slamrel traj info`: maths on a Trajectory
     TRAJINFO: LIBRARIES,
-    # the pose-graph files (g2o, TORO, iSAM) are read into least_squares.PoseGraph
-    FORMATS: (*LIBRARIES, OUTPUTS, "slamrel.backends.least_squares"),
+    # the pose-graph files (g2o, TORO, iSAM) are read into the record graph.PoseGraph
+    FORMATS: (*LIBRARIES, OUTPUTS, "slamrel.backends.graph"),
     IMPORTERS: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS),
     PLOTS: (*LIBRARIES, OUTPUTS, FORMATS),
     REVIEW: (*LIBRARIES, OUTPUTS, FORMATS, SCANS),
-    REPORT: (*LIBRARIES, OUTPUTS, FORMATS, PLOTS),
-    PIPELINE: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REVIEW, REPORT),
+    RUNS: LIBRARIES,
+    REPORT: (*LIBRARIES, OUTPUTS, FORMATS, PLOTS, RUNS),
+    PIPELINE: (*LIBRARIES, OUTPUTS, FORMATS, BACKENDS, SIMULATION, PLOTS, REVIEW, RUNS, REPORT),
     # `slamrel batch` scores each run as `slamrel evaluate` does (studies.batch)
     STUDIES: (
         *LIBRARIES,
@@ -80,6 +87,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         BACKENDS,
         SIMULATION,
         PLOTS,
+        RUNS,
         REPORT,
         PIPELINE,
         EVALUATION_OPTIONS,
@@ -87,6 +95,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
     ),
     # what ``slamrel evaluate`` scores, as a library (the command writes the outputs)
     EVALUATION: (*LIBRARIES, FORMATS, EVALUATION_OPTIONS),
+    EVO: (*LIBRARIES, FORMATS, EVALUATION_OPTIONS, EVALUATION),
     COMMANDS: (
         *LIBRARIES,
         OUTPUTS,
@@ -98,11 +107,13 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         IMPORTERS,
         PLOTS,
         REVIEW,
+        RUNS,
         REPORT,
         PIPELINE,
         STUDIES,
         SCANS,
         TRAJINFO,
+        EVO,
     ),
     CLI: (*LIBRARIES, COMMANDS, TOP),  # TOP: __version__
     MAIN: (CLI,),
@@ -112,11 +123,6 @@ ALLOWED: dict[str, tuple[str, ...]] = {
 for _layer in ALLOWED:
     if _layer.startswith("slamrel.") and _layer not in (CONSTANTS, TOP):
         ALLOWED[_layer] = (*ALLOWED[_layer], CONSTANTS)
-# layer -> what of ours it may import for annotations only (``if TYPE_CHECKING:``)
-TYPE_ONLY: dict[str, tuple[str, ...]] = {
-    BACKENDS: (SIMULATION,),  # pose_only's functions take a simulation.worlds.World
-    REPORT: (PIPELINE,),  # run_page's builders take the pipeline's RunResult, Agreement
-}
 
 
 class Import(NamedTuple):
@@ -185,8 +191,7 @@ def _is_allowed(layer: str, imp: Import) -> bool:
     target = _target(imp.module)
     if target.split(".")[0] not in OURS or _within(target, layer):
         return True
-    allowed = ALLOWED[layer] + (TYPE_ONLY.get(layer, ()) if imp.type_only else ())
-    return any(_within(target, a) for a in allowed)
+    return any(_within(target, a) for a in ALLOWED[layer])
 
 
 def _sources(package: str) -> list[Path]:
@@ -216,10 +221,13 @@ def test_import_scan_sees_nested_and_type_only_imports(tmp_path: Path) -> None:
         Import(9, "", False, relative=True),
     ]
     assert not _is_allowed(SIMULATION, Import(1, "slamrel.backends.pose_only", False))
-    assert _is_allowed(FORMATS, Import(1, "slamrel.backends.least_squares", False))
+    assert _is_allowed(FORMATS, Import(1, "slamrel.backends.graph", False))
+    assert not _is_allowed(FORMATS, Import(1, "slamrel.backends.least_squares", False))
     assert not _is_allowed(FORMATS, Import(1, "slamrel.backends.ekf_slam", False))
     assert not _is_allowed(REPORT, Import(1, "slamrel.pipeline", False))
-    assert _is_allowed(REPORT, Import(1, "slamrel.pipeline", True))
+    assert not _is_allowed(REPORT, Import(1, "slamrel.pipeline", True))  # no type-only pass
+    assert _is_allowed(REPORT, Import(1, "slamrel.runs.result", True))
+    assert not _is_allowed(BACKENDS, Import(1, "slamrel.simulation.worlds", True))
     assert not _is_allowed(COMMANDS, Import(1, "slamrel", False))
     assert _is_allowed(CLI, Import(1, "slamrel", False))
 

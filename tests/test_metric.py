@@ -36,9 +36,9 @@ def test_zero_for_identical_trajectories(rng):
     ref = random_walk(rng)
     rel = all_pairs_relations(ref, rng)
     ev = evaluate(rel, ref)
-    assert ev.translation["abs"].max < 1e-12
-    assert ev.rotation["abs"].max < 1e-12
-    assert ev.translation["abs"].count == len(rel)
+    assert ev.translation.abs.max < 1e-12
+    assert ev.rotation.abs.max < 1e-12
+    assert ev.translation.abs.count == len(rel)
 
 
 @settings(max_examples=40, deadline=None)
@@ -125,8 +125,8 @@ def test_seed_example_rotation_error_early_vs_late():
     np.testing.assert_allclose(
         np.sort(early.errors.rotation), np.sort(late.errors.rotation), atol=1e-12
     )
-    assert early.rotation["abs"].mean == pytest.approx(late.rotation["abs"].mean)
-    assert early.translation["abs"].mean == pytest.approx(late.translation["abs"].mean, abs=1e-12)
+    assert early.rotation.abs.mean == pytest.approx(late.rotation.abs.mean)
+    assert early.translation.abs.mean == pytest.approx(late.translation.abs.mean, abs=1e-12)
     ate_early, ate_late = (absolute_trajectory_error(e, ref, align="none") for e in ests)
     assert ate_early.translation_stats.rmse > 10 * ate_late.translation_stats.rmse
     # alignment rescues the early error (one rotation explains it) but not the late one:

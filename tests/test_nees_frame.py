@@ -17,6 +17,7 @@ from relation_metric import se2
 from relation_metric.errors import InputError
 from slamrel.formats.bundle import read_bundle
 from slamrel.pipeline import RunInput, landmark_frame, score_bundle
+from slamrel.runs.nees import frame_by_id, recovery_nees
 
 SIM = Path(__file__).resolve().parents[1] / "data" / "sim-bundle"
 # the pose of the shifted map frame in the truth frame: (2.5 m, -1.0 m, 20 deg)
@@ -93,8 +94,7 @@ def test_shifted_map_frame_gives_the_same_nees() -> None:
     base = read_bundle(SIM)
     shifted = in_shifted_frame(base)
     r0, r1 = recover(base), recover(shifted)
-    f0, f1 = r0.nees_frame, r1.nees_frame
-    assert f0 is not None and f1 is not None
+    f0, f1 = frame_by_id(base), frame_by_id(shifted)
     assert f0.anchoring is None and f1.anchoring is not None  # sim-bundle starts at the truth
     assert f1.description == "map frame placed in the truth frame by the run's start pose"
     # the reported anchoring is the applied shift, exactly
@@ -104,19 +104,19 @@ def test_shifted_map_frame_gives_the_same_nees() -> None:
     m0, m1 = f0.map_anchoring, f1.map_anchoring
     assert m0 is not None and m1 is not None and m1.rms_residual == pytest.approx(m0.rms_residual)
     # the NEES does not depend on the frame the run chose (pose 0, the prior, left out) ...
-    assert r0.nees is not None and r1.nees is not None
-    assert r1.nees[1:] == pytest.approx(r0.nees[1:], rel=1e-4)  # rounding of the rotation
+    g0, g1 = recovery_nees(base, r0, f0), recovery_nees(shifted, r1, f1)
+    assert g0 is not None and g1 is not None
+    (c0, u0), (c1, u1) = g0, g1
+    assert c1.values == pytest.approx(c0.values, rel=1e-4)  # rounding of the rotation
     # ... while the unplaced one blows up
-    t1, s0 = r1.nees_stats_truth_frame, r0.nees_stats
-    assert t1 is not None and t1.mean is not None and s0 is not None and s0.mean is not None
-    assert t1.mean > 1000 * s0.mean
-    rep = r1.report()
-    assert rep["nees_frame"] == f1.as_dict() and rep["nees_truth_frame"] == t1.as_dict()
-    # the run's NEES (at the ground-truth times) and metrics.json say the same
+    assert u1.mean > 1000 * c0.summary.mean and u0 == c0.summary
+    # slamrel run's NEES (the same computation, its frame fitted on the map comparison's
+    # pairs) and metrics.json say the same
     res0 = score_bundle(RunInput(base, "base"))
     res1 = score_bundle(RunInput(shifted, "shifted"))
     n0, n1 = res0.nees["recovered"].summary, res1.nees["recovered"].summary
     assert n1.mean == pytest.approx(n0.mean, rel=1e-3)
+    assert n0 == c0.summary and n1.mean == pytest.approx(c1.summary.mean, rel=1e-12)
     m = res1.metrics()
     assert m["nees_frame"]["frame"] == f1.description
     assert m["nees_frame"]["anchoring"]["dtheta_deg"] == pytest.approx(20.0)

@@ -1,4 +1,4 @@
-"""The output rule of every command, driven through the CLI (README.md, "Outputs").
+"""The output rule of every command, driven through the CLI (docs/commands.md, "Outputs").
 
 One test per class, parametrised over the commands: outputs that are, lie inside or contain an
 input are refused and nothing on disk changes; a foreign folder is never replaced; a slamrel

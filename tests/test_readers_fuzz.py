@@ -535,12 +535,12 @@ def test_estimate_with_repeated_timestamps_scores_the_clean_estimate_or_is_refus
     est.write_text("".join(" ".join(f"{v:.17g}" for v in r) + "\n" for r in table))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        expected = evaluate_files(ref, clean).translation["abs"].mean
+        expected = evaluate_files(ref, clean).translation.abs.mean
         if any(differ for _, differ in repeats):
             with pytest.raises(InputError) as err:
                 evaluate_files(ref, est)
             assert f"{est}:" in str(err.value) and "two different estimate poses" in str(err.value)
         else:
-            assert evaluate_files(ref, est).translation["abs"].mean == expected
+            assert evaluate_files(ref, est).translation.abs.mean == expected
             with pytest.raises(InputError, match="--strict|strict"):
                 evaluate_files(ref, est, strict=True)

@@ -12,14 +12,15 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from recovery.batch import normal_equations
+from recovery.batch_refinement import normal_equations
 from recovery.ekf import GATED, REENTRY, ROBUST_C, USED, run_filter
-from recovery.recover import NeesBlowup, filter_input, recover
-from relation_metric.consistency import flag_runs
+from recovery.recover import filter_input, recover
+from relation_metric.consistency import NeesBlowup, flag_runs, nees_blowups
 from relation_metric.errors import DivergenceError
 from slamrel.cli import main
 from slamrel.formats.bundle import read_bundle, write_bundle
 from slamrel.formats.trajectories import read_trajectory
+from slamrel.runs.nees import blowups, recovery_nees
 from slamrel.simulation.bundles import simulate_bundle
 
 
@@ -334,9 +335,7 @@ def test_smoothed_covariance_check_is_the_one_of_relation_metric_checks() -> Non
     assert fixed[0][1, 0] == pytest.approx(0.5e-6, rel=1e-9)
 
 
-def test_nees_blowups_against_ground_truth() -> None:
-    from recovery.recover import nees_blowups
-
+def test_nees_blowups_against_ground_truth(tmp_path: Path) -> None:
     t = np.arange(40.0)
     nees = np.full(40, 1.0)
     nees[5:20] = 1e3  # 15 poses beyond the bound
@@ -347,5 +346,13 @@ def test_nees_blowups_against_ground_truth() -> None:
     assert out == [NeesBlowup(t0=5.0, t1=19.0, poses=15, nees_max=1e3)]
     bad, _ = _inject(simulate_bundle(4, steps=600), 20.0, 22.0, 4)
     r = recover(bad, method="filter")
-    ns = r.divergence.nees_blowups
-    assert ns is not None and len(ns) == 1 and 19.0 <= ns[0].t0 <= 21.0 and ns[0].t1 <= 26.0
+    got = recovery_nees(bad, r)
+    assert got is not None
+    ns = blowups(got[0], r.divergence.max_outlier_run)
+    assert len(ns) == 1 and 19.0 <= ns[0].t0 <= 21.0 and ns[0].t1 <= 26.0
+    # recover --report writes them in its divergence, as metrics.json does
+    write_bundle(tmp_path / "b", bad)
+    rep = tmp_path / "r.json"
+    argv = ["recover", str(tmp_path / "b"), "-o", str(tmp_path / "t.txt"), "--method", "filter"]
+    assert main([*argv, "--report", str(rep), "-q"]) == 0
+    assert json.loads(rep.read_text())["divergence"]["nees_stretches"] == [ns[0].as_dict()]

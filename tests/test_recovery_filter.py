@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from recovery.baseline import filterpy_localisation
-from recovery.batch import normal_equations, refine
+from recovery.batch_refinement import normal_equations, refine
 from recovery.ekf import GATED, USED, run_filter
 from recovery.models import process_noise, range_bearing
 from recovery.recover import filter_input, recover

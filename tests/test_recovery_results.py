@@ -1,7 +1,8 @@
 """The recovery's typed results and their JSON: each record's ``as_dict()`` against the dict
 the report wrote before the records existed, rebuilt here from the recovery's raw arrays
-(status, weights, NIS, NEES, stretches) with scipy's χ² quantiles; and the one runs-of-flags
-helper on hand-computed cases."""
+(status, weights, NIS, stretches) with scipy's χ² quantiles; the recovery's NEES against the
+ground truth (computed outside the recovery, by slamrel.runs.nees) against a pose-by-pose
+loop; and the one runs-of-flags helper on hand-computed cases."""
 
 from __future__ import annotations
 
@@ -12,9 +13,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from recovery.bundle import Bundle
 from recovery.ekf import GATED, OUTSIDE, UNASSOCIATED, USED
-from recovery.recover import NisStats, Recovery, recover
+from recovery.recover import recover
+from recovery.results import NisStats, Recovery
 from relation_metric.consistency import OUTLIER_PROBABILITY, flag_runs
+from slamrel.runs.nees import blowups, recovery_nees
 from slamrel.simulation.bundles import simulate_bundle
 
 # ---------------------------------------------------------------------------- flag_runs
@@ -86,7 +90,7 @@ def test_flag_runs_agrees_with_a_loop() -> None:
 
 
 @pytest.fixture(scope="module")
-def broken() -> Recovery:
+def broken_bundle() -> Bundle:
     """A simulated run whose associations are wrong for 2 s (stretches, NEES blow-ups)."""
     b = simulate_bundle(4, steps=400)
     rng = np.random.default_rng(4)
@@ -94,7 +98,12 @@ def broken() -> Recovery:
     w = (b.measurement_times >= 15.0) & (b.measurement_times < 17.0)
     idx = np.searchsorted(b.map_ids, lm[w])
     lm[w] = b.map_ids[(idx + rng.integers(1, len(b.map_ids), w.sum())) % len(b.map_ids)]
-    return recover(replace(b, measurement_landmarks=lm), method="batch", robust="huber")
+    return replace(b, measurement_landmarks=lm)
+
+
+@pytest.fixture(scope="module")
+def broken(broken_bundle: Bundle) -> Recovery:
+    return recover(broken_bundle, method="batch", robust="huber")
 
 
 def _json_native(d: object) -> object:
@@ -148,33 +157,48 @@ def test_nis_stats_without_measurements_writes_three_keys() -> None:
     assert d == {"count": 0, "mean": None, "median": None}
 
 
-def test_nees_stats_as_dict_from_the_nees(broken: Recovery) -> None:
-    assert broken.nees is not None and broken.nees_stats is not None
-    v = broken.nees[np.isfinite(broken.nees)]
-    bound = chi2.ppf(0.9999, 3)
-    expected = {
-        "mean": v.mean(),
-        "poses": v.size,
-        "band95_single_pose": [chi2.ppf(0.025, 3), chi2.ppf(0.975, 3)],
-        "bound9999_single_pose": bound,
-        "fraction_beyond_bound": (v > bound).mean(),
-    }
-    d = broken.nees_stats.as_dict()
-    assert list(d) == list(expected)
-    for k, x in expected.items():
-        assert d[k] == pytest.approx(x, rel=1e-9), k
-    assert _json_native(d) == d
+def test_recovery_nees_is_the_pose_by_pose_nees_after_the_prior(
+    broken_bundle: Bundle, broken: Recovery
+) -> None:
+    got = recovery_nees(broken_bundle, broken)
+    assert got is not None
+    curve, unaligned = got
+    truth = broken_bundle.groundtruth
+    assert truth is not None
+    # oracle: a loop over the grid poses at a ground-truth time, the first (the prior) left out
+    t, poses, covs = broken.trajectory.timestamps, broken.trajectory.poses, broken.covariances
+    expected, times = [], []
+    for k in range(1, t.size):
+        j = int(np.argmin(np.abs(truth.timestamps - t[k])))
+        if abs(truth.timestamps[j] - t[k]) > 1e-6:
+            continue
+        e = truth.poses[j] - poses[k]
+        e[2] = (e[2] + np.pi) % (2 * np.pi) - np.pi
+        expected.append(float(e @ np.linalg.solve(covs[k], e)))
+        times.append(t[k])
+    assert curve.times is not None and curve.times.tolist() == times
+    np.testing.assert_allclose(curve.values, expected, rtol=1e-9)
+    assert curve.summary.mean == pytest.approx(np.mean(expected), rel=1e-12)
+    assert curve.summary.band == pytest.approx(tuple(chi2.ppf([0.025, 0.975], 3)), rel=1e-9)
+    # simulated runs start at the true pose: the frame is the truth frame, unaligned the same
+    assert unaligned == curve.summary
+    # the injection shows as a NEES blow-up too, beyond the single-pose bound
+    ns = blowups(curve, broken.divergence.max_outlier_run)
+    assert ns and all(15.0 <= b.t1 and b.t0 <= 25.0 for b in ns)
+    bound = chi2.ppf(OUTLIER_PROBABILITY, 3)
+    assert all(b.nees_max > bound and b.poses >= 10 for b in ns)
+    assert _json_native([b.as_dict() for b in ns]) == [b.as_dict() for b in ns]
 
 
 def test_divergence_as_dict_from_its_stretches(broken: Recovery) -> None:
     dv = broken.divergence
     st = dv.stretches
-    assert st and dv.nees_blowups  # the injection shows in both
+    assert st  # the injection shows
     d = dv.as_dict()
     assert list(d) == [
         "diverged", "rule", "max_outlier_run", "outlier_bound", "stretches", "count",
         "duration", "fraction_of_log", "fraction_of_measurements", "events", "event_times",
-        "covariances_repaired", "nees_stretches",
+        "covariances_repaired",
     ]  # fmt: skip
     assert d["diverged"] is True and d["count"] == len(st) and d["max_outlier_run"] == 10
     assert d["duration"] == pytest.approx(sum(s.t1 - s.t0 for s in st))
@@ -189,9 +213,6 @@ def test_divergence_as_dict_from_its_stretches(broken: Recovery) -> None:
     span = broken.trajectory.timestamps[-1] - broken.trajectory.timestamps[0]
     assert d["fraction_of_log"] == pytest.approx(d["duration"] / span)  # type: ignore[operator]
     assert sum(d["events"].values()) == len(d["event_times"]) == dv.event_count  # type: ignore[attr-defined,arg-type]
-    assert d["nees_stretches"] == [
-        {"t0": b.t0, "t1": b.t1, "poses": b.poses, "nees_max": b.nees_max} for b in dv.nees_blowups
-    ]
     assert _json_native(d) == d
 
 
@@ -199,15 +220,11 @@ def test_report_is_the_parts_in_order(broken: Recovery) -> None:
     rep = broken.report()
     assert list(rep) == [
         "method", "map_uncertainty", "map_uncertainty_rule", "poses", "measurements",
-        "divergence", "nis", "nees", "nees_frame", "nees_truth_frame", "iterations", "robust",
-        "batch",
+        "divergence", "nis", "iterations", "robust", "batch",
     ]  # fmt: skip
     assert broken.map_uncertainty is not None
     assert rep["map_uncertainty_rule"] == broken.map_uncertainty.rule
     assert rep["measurements"] == broken.counts.as_dict()
-    frame, unaligned = broken.nees_frame, broken.nees_stats_truth_frame
-    assert frame is not None and unaligned is not None
-    assert rep["nees_frame"] == frame.as_dict() and rep["nees_truth_frame"] == unaligned.as_dict()
     assert rep["divergence"] == broken.divergence.as_dict()
     rb, bc = broken.robust, broken.batch
     assert rb is not None and bc is not None
@@ -223,7 +240,7 @@ def test_report_is_the_parts_in_order(broken: Recovery) -> None:
 def test_without_ground_truth_or_robust_update_the_keys_are_absent() -> None:
     b = replace(simulate_bundle(5, steps=200), groundtruth=None)
     r = recover(b, method="smoother", robust=None)
-    assert r.nees is None and r.nees_stats is None and r.divergence.nees_blowups is None
+    assert recovery_nees(b, r) is None
     rep = r.report()
     assert list(rep) == [
         "method", "map_uncertainty", "map_uncertainty_rule", "poses", "measurements",

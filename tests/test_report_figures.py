@@ -105,7 +105,7 @@ def test_nees_figure_spans_the_run_at_the_recovered_times(simulated) -> None:
 
 def test_page_counts_and_describes_the_relation_sets(simulated) -> None:
     result, page = simulated
-    ev = result.evaluations["recovered"]["all"]
+    ev = result.recovered.all
     scored, unassociated = int(ev.valid.sum()), int((~ev.valid).sum())
     assert f"Based on {scored} scored relations" in page
     assert "relation sets (from the ground truth; scored for the recovered estimate)" in page

@@ -11,6 +11,9 @@ from typing import Any
 
 import pytest
 
+from slamrel.cli import main
+from slamrel.runs.result import RunResult
+
 
 class _Page(html.parser.HTMLParser):
     """Section headings, tables (caption → rows of cell texts) and embedded images."""
@@ -113,6 +116,66 @@ def test_nees_nis_and_stretch_tables_equal_metrics(
     assert len({row[0] for row in rows}) == len(rows)  # no two intervals print alike
 
 
+def _key_paths(node: object, path: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
+    """The path of every key of every dict in a JSON tree (list items add no step)."""
+    out: list[tuple[str, ...]] = []
+    if isinstance(node, dict):
+        for k, v in node.items():
+            out += [(*path, k), *_key_paths(v, (*path, k))]
+    elif isinstance(node, list):
+        for v in node:
+            out += _key_paths(v, path)
+    return out
+
+
+def test_each_nees_and_divergence_key_is_written_once(
+    report: tuple[Path, _Page, dict[str, Any]],
+) -> None:
+    _, _, m = report
+    paths = _key_paths(m)
+    for key in ("nees", "nees_frame", "nees_truth_frame", "divergence", "nees_stretches"):
+        assert [p for p in paths if p[-1] == key] == [
+            ("divergence", key) if key == "nees_stretches" else (key,)
+        ], key
+    # no other key of the file is named after the NEES
+    assert {p for p in paths if "nees" in p[-1]} == {
+        ("nees",), ("nees_frame",), ("nees_truth_frame",), ("divergence", "nees_stretches"),
+        ("divergence", "nees_stretches", "nees_max"),  # the blow-ups (this run has some)
+    }  # fmt: skip
+
+
+def test_one_nees_per_estimate_the_one_the_page_shows(
+    report: tuple[Path, _Page, dict[str, Any]], tmp_path: Path
+) -> None:
+    """metrics.json's NEES of each estimate is the page's, and the recovered one is the NEES
+    of the trajectory and covariances ``slamrel recover`` writes for the same bundle, computed
+    here pose by pose against groundtruth.csv with the prior (the first pose) left out."""
+    import numpy as np
+
+    out, page, m = report
+    rows = page.tables["NEES (3 dof) of the pose estimates"]
+    assert sorted(m["nees"]) == sorted(row[0] for row in rows) == ["online", "recovered"]
+    for row in rows:
+        assert _close(row[1], m["nees"][row[0]]["mean"])
+        assert _close(row[5], m["nees_truth_frame"][row[0]]["mean"])
+    traj, cov, rep = tmp_path / "t.txt", tmp_path / "c.npy", tmp_path / "r.json"
+    argv = ["recover", str(out / "bundle"), "-o", str(traj), "--covariances", str(cov)]
+    assert main([*argv, "--report", str(rep), "-q"]) == 0
+    est, covs = np.loadtxt(traj), np.load(cov)
+    truth = np.loadtxt(out / "bundle" / "groundtruth.csv", delimiter=",", skiprows=1)
+    values = []
+    for k in range(1, est.shape[0]):  # 0: the prior
+        j = int(np.argmin(np.abs(truth[:, 0] - est[k, 0])))
+        if abs(truth[j, 0] - est[k, 0]) > 1e-6:  # no ground truth at this pose
+            continue
+        e = truth[j, 1:4] - est[k, 1:4]
+        e[2] = np.arctan2(np.sin(e[2]), np.cos(e[2]))
+        values.append(e @ np.linalg.solve(covs[k], e))
+    assert m["nees_frame"]["anchoring"] is None  # the truth frame: nothing to place
+    assert m["nees"]["recovered"]["mean"] == pytest.approx(np.mean(values), rel=1e-9)
+    assert json.loads(rep.read_text())["nees"] == m["nees"]["recovered"]
+
+
 def test_map_tables_equal_metrics(report: tuple[Path, _Page, dict[str, Any]]) -> None:
     _, page, m = report
     mp = m["map"]
@@ -151,17 +214,24 @@ def test_result_holds_the_map_once_and_reads_nothing(
     report: tuple[Path, _Page, dict[str, Any]], rescored: tuple[Any, Any]
 ) -> None:
     """``run_pipeline`` on a RunInput does no I/O; the map JSON is derived from the comparison."""
-    import slamrel.pipeline as pipeline
     from slamrel.report.run_page import RunSections
 
     _, _, m = report
     inp, result = rescored
     assert inp.bundle.groundtruth is not None and inp.online is None
     assert result.map == result.map_comparison.as_dict()  # type: ignore[union-attr]
-    assert "map" not in {f.name for f in pipeline.RunResult.__dataclass_fields__.values()}
+    assert "map" not in {f.name for f in RunResult.__dataclass_fields__.values()}
     # the same bundle scored again: the same map numbers as the first report
     assert result.metrics()["map"] == m["map"]
     assert set(RunSections._fields) == {"summary", "consistency", "agreement", "map"}
+    # typed access: the recovered scores by attribute, the same numbers metrics.json holds
+    rec = result.recovered
+    assert rec is not None and rec is result.evaluations["recovered"]
+    assert result.main_estimate == "recovered" and result.online is None
+    assert rec.sets == tuple(m["trajectory"]["by_relation_set"]) and list(rec)[0] == "all"
+    assert rec.all.translation.abs.mean == m["trajectory"]["translation"]["abs"]["mean"]
+    loops = m["trajectory"]["by_relation_set"]["loops"]
+    assert rec["loops"].rotation.sqr.mean == loops["rotation"]["sqr"]["mean"]
 
 
 def test_verdict_reads_the_numbers_metrics_holds(rescored: tuple[Any, Any]) -> None:

@@ -13,6 +13,7 @@ from relation_metric.significance import (
     MIN_BLOCKS,
     block_length,
     circular_block_means,
+    holm_adjust,
     paired_difference,
     politis_white_block_length,
 )
@@ -185,3 +186,35 @@ def test_bad_input_is_refused(kwargs, match):
             "b": np.zeros(4)} | kwargs  # fmt: skip
     with pytest.raises(InputError, match=match):
         paired_difference(**args)
+
+
+@pytest.mark.parametrize(
+    ("p", "adjusted"),
+    [
+        # m = 3: sorted (0.01, 0.03, 0.04) x (3, 2, 1) = (0.03, 0.06, 0.04), running max
+        # (0.03, 0.06, 0.06), back in the input's order
+        ([0.04, 0.01, 0.03], [0.06, 0.03, 0.06]),
+        # m = 4: sorted (0.005, 0.01, 0.03, 0.04) x (4, 3, 2, 1) = (0.02, 0.03, 0.06, 0.04)
+        ([0.01, 0.04, 0.03, 0.005], [0.03, 0.06, 0.06, 0.02]),
+        # the larger p-value's own product 0.6 exceeds the running max 0.4
+        ([0.6, 0.2], [0.6, 0.4]),
+        # clipped to 1: (0.5, 0.9) x (2, 1) = (1.0, 0.9), max 1.0 for both
+        ([0.5, 0.9], [1.0, 1.0]),
+        ([0.7, 0.9], [1.0, 1.0]),
+        # ties: (0.02, 0.02, 0.5) x (3, 2, 1) = (0.06, 0.04, 0.5): both tied get 0.06
+        ([0.02, 0.5, 0.02], [0.06, 0.5, 0.06]),
+        ([0.0, 1.0], [0.0, 1.0]),
+        ([0.037], [0.037]),  # one test: nothing to adjust
+        ([], []),
+    ],
+)
+def test_holm_against_hand_values(p, adjusted):
+    got = holm_adjust(np.array(p))
+    assert got.shape == (len(p),)
+    np.testing.assert_allclose(got, adjusted, rtol=1e-15, atol=0)
+
+
+@pytest.mark.parametrize("p", [[0.1, float("nan")], [0.1, 1.5], [-0.01], [[0.1, 0.2]]])
+def test_holm_refuses_what_is_not_p_values(p):
+    with pytest.raises(InputError, match="p-values must"):
+        holm_adjust(np.array(p))

@@ -254,8 +254,8 @@ def test_evaluate_api_refuses_no_relations_unless_asked() -> None:
     with pytest.raises(InputError, match="no relations to score of ref.relations"):
         slamrel.evaluate(empty, traj, relations_name="ref.relations")
     ev = slamrel.evaluate(empty, traj, allow_empty=True)
-    assert ev.translation["abs"].count == 0
-    assert slamrel.evaluate(rel, traj).translation["abs"].count == len(rel)
+    assert ev.translation.abs.count == 0
+    assert slamrel.evaluate(rel, traj).translation.abs.count == len(rel)
 
 
 def test_evo_zip_of_no_scored_relation_is_refused(tmp_path: Path) -> None:

@@ -79,7 +79,7 @@ def test_solve_refusals(tmp_path, capsys, rng, extra, said):
 
 def test_a_landmark_graph_as_a_log_keeps_every_factor():
     from relation_metric.errors import InputError
-    from slamrel.backends.least_squares import PoseGraph
+    from slamrel.backends.graph import PoseGraph
     from slamrel.backends.pose_only import pose_only_from_landmark_graph
 
     w = make_world("hu-simple1", noise="a", seed=2)

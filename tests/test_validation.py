@@ -153,7 +153,7 @@ def test_robust_recovery_does_not_hide_a_broken_map():
 
     def score(tr):  # type: ignore[no-untyped-def]
         k = np.searchsorted(tr.timestamps, truth.timestamps)
-        return evaluate(rel, Trajectory(truth.timestamps, tr.poses[k])).translation["abs"].mean
+        return evaluate(rel, Trajectory(truth.timestamps, tr.poses[k])).translation.abs.mean
 
     online = score(slam.online)
     hidden = score(recover(broken, gate=0.999, max_outlier_run=None).trajectory)

@@ -13,10 +13,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from recovery.recover import RecoveryCounts, RobustSettings
+from recovery.results import RecoveryCounts, RobustSettings
 from relation_metric.consistency import summarize_nees
 from relation_metric.stats import summarize
-from slamrel.pipeline import MapSummary
 from slamrel.report.html import Section, _number, render_html
 from slamrel.report.verdict import (
     INFO,
@@ -27,6 +26,7 @@ from slamrel.report.verdict import (
     nees_excursions,
     run_verdict,
 )
+from slamrel.runs.result import MapSummary
 
 RNG = np.random.default_rng(24)
 HEALTHY_NEES = RNG.chisquare(3, 400)

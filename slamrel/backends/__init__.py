@@ -1,10 +1,16 @@
 """Estimation back-ends: the reference SLAM solvers the pipelines run and score.
 
-``lm``         the one Levenberg–Marquardt (full LS, pose-only LS and batch recovery run on it),
-``graph``      pose graphs and full least squares (poses and landmarks),
-``pose_only``  pose-only SLAM (Hu, Huang & Dissanayake): pairwise relative poses, then a pose graph,
-``toro``       TORO (Grisetti et al. 2007) written from the paper; ``lever_sgd`` an earlier variant,
-``ekfslam``    EKF-SLAM over range–bearing observations.
+``graph``            the :class:`~slamrel.backends.graph.PoseGraph` record (poses, landmarks,
+                     factors) that the solvers take and the graph file readers build,
+``least_squares``    full least squares over poses and landmarks (on :mod:`recovery.lm`),
+``pose_only``        pose-only SLAM (Hu, Huang & Dissanayake): pairwise relative poses, then a
+                     pose graph,
+``toro_optimiser``   TORO (Grisetti et al. 2007) written from the paper; ``lever_sgd`` an
+                     earlier variant,
+``ekf_slam``         EKF-SLAM over range–bearing observations,
+``sparse_cholesky``  the sparse Cholesky factorisations least squares runs on (with
+                     ``supernodal``, the numpy-only one).
 
-Libraries only: no command-line code, no file output except through ``recovery.graph_formats``.
+Maths on records only: no command-line code and no file I/O (the graph files are
+:mod:`slamrel.formats`' ``g2o``, ``toro`` and ``isam``).
 """

@@ -18,15 +18,16 @@ scaled (``noise_scale``). :func:`ekf_slam_bundle` runs the filter on a log bundl
 the result bundle a filter-based SLAM system would leave behind.
 
 The optional validation gate on known associations (``outlier_gate``): real sensors have
-outliers that a Gaussian filter cannot absorb (MRCLAM: a few per cent beyond 5 σ); a gate
-trades them for the risk of rejecting good data when the filter is overconfident, so the
-rejected count is always reported (rejected measurements get association −1, so recovery
-does not use them either). After ``max_rejected_run`` consecutive rejections the next
-measurement is taken whatever its innovation: a run of rejections means the pose, not the
-measurements, is wrong (a bump, wheel slip); without this rule a gated filter never recovers
-from it (MRCLAM dataset 7, robot 5, ~700 s: 0.9 rad of unmodelled turn). The recovery
-filter's ``max_outlier_run`` (:func:`recovery.ekf.run_filter`) answers the same symptom the
-other way: it inflates the pose covariance and re-enters, and reports the stretch.
+outliers that a Gaussian filter cannot absorb (MRCLAM's residuals have a heavy tail:
+benchmarks/README.md); a gate trades them for the risk of rejecting good data when the
+filter is overconfident, so the rejected count is always reported (rejected measurements get
+association −1, so recovery does not use them either). After ``max_rejected_run``
+consecutive rejections the next measurement is taken whatever its innovation: a run of
+rejections means the pose, not the measurements, is wrong (a bump, wheel slip); without this
+rule a gated filter never recovers from it (seen on MRCLAM dataset 7: benchmarks/README.md).
+The recovery filter's ``max_outlier_run`` (:func:`recovery.ekf.run_filter`) answers the same
+symptom the other way: it inflates the pose covariance and re-enters, and reports the
+stretch.
 
 The filter keeps no trajectory by design; ``online`` poses (the pose estimate after each
 step's updates) are stored for validation only.

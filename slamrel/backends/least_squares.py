@@ -19,7 +19,7 @@ extra on graphs with much fill; SuperLU as the fallback): see there for the choi
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -33,13 +33,12 @@ from relation_metric.arrays import Array
 from relation_metric.errors import InputError
 from relation_metric.trajectory import readonly
 from slamrel.backends import sparse_cholesky
+from slamrel.backends.graph import PoseGraph, first_of_each
 
 __all__ = [
-    "PoseGraph",
     "GraphSolution",
     "solve_graph",
     "solve_graph_incremental",
-    "initial_landmarks",
     "pose_covariances",
     "joint_covariance",
     "ABSOLUTE_COST_TOLERANCE",
@@ -61,93 +60,6 @@ hu-complex1/2, noise a and c, two seeds; full and M2: 5 of 32 one or more fewer,
 12 → 6, none more). The graphs start from chained odometry, whose first Gauss–Newton steps
 are good: less damping takes them whole.
 """
-
-
-@dataclass(frozen=True)
-class PoseGraph:
-    """A planar pose graph with landmarks.
-
-    Parameters
-    ----------
-    poses : array_like, shape (N, 3)
-        Initial guess of the poses.
-    landmarks : array_like, shape (L, 2)
-        Initial guess of the landmarks (see :func:`initial_landmarks`).
-    pp_i, pp_j : array_like of int, shape (E,)
-        Pose–pose factors ``x_i⁻¹ ∘ x_j``.
-    pp_z : array_like, shape (E, 3)
-    pp_info : array_like, shape (E, 3, 3)
-        Information (inverse covariance) of each pose–pose measurement.
-    pl_k, pl_l : array_like of int, shape (F,)
-        Pose–landmark factors: pose index, landmark index.
-    pl_z : array_like, shape (F, 2)
-        The landmark in the pose frame, ``x_k⁻¹ · l``.
-    pl_info : array_like, shape (F, 2, 2)
-    """
-
-    poses: Array
-    landmarks: Array
-    pp_i: NDArray[np.int64]
-    pp_j: NDArray[np.int64]
-    pp_z: Array
-    pp_info: Array
-    pl_k: NDArray[np.int64] = field(default_factory=lambda: np.empty(0, np.int64))
-    pl_l: NDArray[np.int64] = field(default_factory=lambda: np.empty(0, np.int64))
-    pl_z: Array = field(default_factory=lambda: np.empty((0, 2)))
-    pl_info: Array = field(default_factory=lambda: np.empty((0, 2, 2)))
-
-    def __post_init__(self) -> None:
-        n = np.asarray(self.poses).shape[0]
-        m = np.asarray(self.landmarks).reshape(-1, 2).shape[0]
-        conv = {
-            "poses": ((n, 3), np.float64),
-            "landmarks": ((m, 2), np.float64),
-            "pp_i": (None, np.int64),
-            "pp_j": (None, np.int64),
-            "pp_z": (None, np.float64),
-            "pp_info": (None, np.float64),
-            "pl_k": (None, np.int64),
-            "pl_l": (None, np.int64),
-            "pl_z": (None, np.float64),
-            "pl_info": (None, np.float64),
-        }
-        for name, (_, dtype) in conv.items():
-            arr = np.asarray(getattr(self, name), dtype=dtype)
-            if name == "landmarks":
-                arr = arr.reshape(-1, 2)
-            object.__setattr__(self, name, readonly(arr, dtype))
-        e = self.pp_i.shape[0]
-        f = self.pl_k.shape[0]
-        shapes = {
-            "pp_j": (e,),
-            "pp_z": (e, 3),
-            "pp_info": (e, 3, 3),
-            "pl_l": (f,),
-            "pl_z": (f, 2),
-            "pl_info": (f, 2, 2),
-        }
-        for name, shape in shapes.items():
-            if getattr(self, name).shape != shape:
-                raise InputError(f"{name} must have shape {shape}, got {getattr(self, name).shape}")
-        for name, idx, size in (
-            ("pose-pose i", self.pp_i, n),
-            ("pose-pose j", self.pp_j, n),
-            ("pose-landmark pose", self.pl_k, n),
-            ("pose-landmark landmark", self.pl_l, m),
-        ):
-            if idx.size and (idx.min() < 0 or idx.max() >= size):
-                raise InputError(f"{name} index out of range 0..{size - 1}")
-        for name in ("poses", "landmarks", "pp_z", "pp_info", "pl_z", "pl_info"):
-            if not np.isfinite(getattr(self, name)).all():
-                raise InputError(f"{name} contains non-finite values")
-
-    @property
-    def n_poses(self) -> int:
-        return int(self.poses.shape[0])
-
-    @property
-    def n_landmarks(self) -> int:
-        return int(self.landmarks.shape[0])
 
 
 @dataclass(frozen=True)
@@ -179,27 +91,6 @@ class GraphSolution:
     converged: bool
     linear_solver: str
     faster_solver: str | None
-
-
-def initial_landmarks(
-    poses: ArrayLike, pl_k: ArrayLike, pl_l: ArrayLike, pl_z: ArrayLike, n_landmarks: int
-) -> Array:
-    """Landmark guesses from their first observation: ``x_k · z`` (vectorised)."""
-    k = np.asarray(pl_k, dtype=np.int64)
-    lm = np.asarray(pl_l, dtype=np.int64)
-    out = np.full((n_landmarks, 2), np.nan)
-    first = _first_of_each(lm, np.arange(lm.size))
-    out[lm[first]] = se2.transform_points(np.asarray(poses)[k[first]], np.asarray(pl_z)[first])
-    missing = np.flatnonzero(~np.isfinite(out[:, 0]))
-    if missing.size:
-        raise InputError(f"landmark {int(missing[0])} is never observed; cannot initialise it")
-    return out
-
-
-def _first_of_each(group: NDArray[np.int64], rank: NDArray[np.int64]) -> NDArray[np.int64]:
-    """Index of the lowest-``rank`` element of each distinct ``group`` (ties: first index)."""
-    order = np.lexsort((np.arange(group.size), rank, group))
-    return order[np.concatenate(([True], np.diff(group[order]) != 0))] if group.size else order
 
 
 def _upper_sqrt(info: Array) -> Array:
@@ -353,8 +244,8 @@ class _NormalEquations:
     fallback):
 
     * QDLDL (AMD) and CHOLMOD (AMD) order the scalar matrix themselves: the variables
-      keep their natural order (measured with QDLDL on a 10⁴-pose Manhattan graph: 3.03·10⁶
-      entries in L from the natural order, 3.16·10⁶ from the block order below). The
+      keep their natural order (which gave a sparser factor than the block order below on a
+      10⁴-pose Manhattan graph; benchmarks/README.md). The
       expected work ``27 Σ c²`` (``c``: column counts of the Cholesky factor of the *block*
       graph, one node per pose and landmark, 3 × 3 blocks) picks between the two
       (:func:`~slamrel.backends.sparse_cholesky.choose_backend`; CHOLMOD only when
@@ -590,8 +481,8 @@ def _levenberg_marquardt(
     A stall is an accepted step that removes less than half the cost while the normalised
     cost ``2·cost/dof`` is still above ``stall_chi2``: far from a consistent solution and
     no longer converging fast, the signature of the wrong basin (Victoria Park from
-    odometry: 35% off 4.3e7 at the 2nd step; where one batch works, each step removes
-    most of the cost until χ²/dof is near 1).
+    odometry stalls at its 2nd step; where one batch works, each step removes most of the
+    cost until χ²/dof is near 1; benchmarks/README.md).
     """
     dof = _dof(graph)
 
@@ -639,8 +530,8 @@ def solve_graph_incremental(
 
     Batch least squares started from chained odometry can stop in a poor local minimum on
     long runs: on Victoria Park the accumulated heading error makes revisited landmarks pull
-    the wrong way (measured: cost 2.5e5 from odometry against 3.1e3 from a good start, after
-    68 iterations; GTSAM's LM stops in the same minimum). An incremental smoother (iSAM)
+    the wrong way (a cost about 80 times the one from a good start; GTSAM's LM stops in the
+    same minimum; benchmarks/README.md). An incremental smoother (iSAM)
     never sees that guess, because each new pose is linearised next to already-optimised
     ones. This driver first tries the whole graph, and grows sub-problems when that stalls:
 
@@ -658,21 +549,18 @@ def solve_graph_incremental(
        next is multiplied by ``growth`` (the first sub-problem has ``batch`` poses);
     4. *stall check*: a sub-problem whose solution has a normalised cost
        ``χ²/dof = 2·cost / (residuals − unknowns)`` above ``gate · max(1, previous χ²/dof)``
-       fell into a wrong minimum (on Victoria Park: 21.8 against 1.0 before, when 3,969
-       odometry poses are added at once); it is undone and retried with the step divided
+       fell into a wrong minimum (as on Victoria Park when thousands of odometry poses are
+       added at once); it is undone and retried with the step divided
        by ``growth²`` (not below ``batch``, where it is accepted as it is).
 
     Why this scheme: a fixed step (``growth=1``) is robust but solves ``N/batch``
-    ever larger problems, O(N²/batch) work (14 solves on Victoria Park); one batch is
-    fastest where it works (7 iterations on a 10⁴-pose Manhattan graph against 34 grown,
-    LM starting at λ = 1e-4; 6 from :data:`LAMBDA_INITIAL`) but falls into the wrong minimum
-    on Victoria Park (68 iterations to cost 2.5e5). So the
-    whole graph is tried first and abandoned as soon as it stalls (on Victoria Park at its
-    2nd step, a few per cent of the run); then geometric growth solves O(log N)
-    sub-problems whose sizes sum to about twice the last, each warm (the solved part starts
-    at its optimum), and the χ² check catches a step that grew too far, at the price of one
-    wasted sub-solve. Measured on Victoria Park: ``batch=500``: ``growth=1`` 135 iterations
-    over 14 sub-problems, ``growth=2`` 85 over 4; the same minimum (cost 3091.97).
+    ever larger problems, O(N²/batch) work; one batch is fastest where it works (a
+    Manhattan grid) but falls into the wrong minimum on Victoria Park. So the whole graph
+    is tried first and abandoned as soon as it stalls (a few per cent of the run); then
+    geometric growth solves O(log N) sub-problems whose sizes sum to about twice the last,
+    each warm (the solved part starts at its optimum), and the χ² check catches a step that
+    grew too far, at the price of one wasted sub-solve. ``growth=2`` reaches the same
+    minimum as ``growth=1`` in fewer iterations (the figures: benchmarks/README.md).
 
     Poses must be indexed in time order (as :func:`~slamrel.formats.isam.read_isam` and
     the g2o reader give them). Landmarks that no pose observes keep their initial guess out
@@ -780,7 +668,7 @@ def _sub_problem(
     fresh = np.flatnonzero(pl & ~placed[graph.pl_l])  # sightings of unplaced landmarks
     if fresh.size:
         # keep the initial guess's landmark relative to its earliest observing pose
-        first = fresh[_first_of_each(graph.pl_l[fresh], graph.pl_k[fresh])]
+        first = fresh[first_of_each(graph.pl_l[fresh], graph.pl_k[fresh])]
         k, l_ = graph.pl_k[first], graph.pl_l[first]
         lm[l_] = se2.transform_points(
             x[k], se2.inverse_transform_points(x0[k], graph.landmarks[l_])

@@ -2,12 +2,13 @@
 
 slamrel's earlier "TORO-style" optimiser, kept as a separate, named method because it gets
 closer to the optimum than TORO on small, dense graphs (the pose-only study's Method 2
-graphs), while on large graphs started from odometry it is far worse (issue 28: 140 × the
-optimum after 300 iterations on an Olson-style graph, farther from the truth than the
-odometry on ``city10000``). It differs from TORO (:mod:`slamrel.backends.toro_optimiser`) in
-its heading Jacobian: translational residuals also move headings (the lever term below),
-while the positions down the tree do not move with them; a breadth-first tree, input-order
-visits, a constant preconditioner and a step capped per constraint.
+graphs), while on large graphs started from odometry it is far worse: far from the optimum
+after hundreds of iterations on an Olson-style graph, and farther from the truth than the
+odometry on ``city10000`` (the figures: benchmarks/README.md). It differs from TORO
+(:mod:`slamrel.backends.toro_optimiser`) in its heading Jacobian: translational residuals
+also move headings (the lever term below), while the positions down the tree do not move
+with them; a breadth-first tree, input-order visits, a constant preconditioner and a step
+capped per constraint.
 
 Reimplemented from the papers (Olson, Leonard & Teller, ICRA 2006; Grisetti, Stachniss,
 Grzonka & Burgard, RSS 2007), not from TORO's code:
@@ -36,9 +37,9 @@ Grzonka & Burgard, RSS 2007), not from TORO's code:
 * **Learning rate** ``λ_t = 1 / (γ ρ̃ t)`` in iteration ``t`` (the harmonic schedule of both
   papers), with ``ρ̃`` the median over constraints of ``ρ_c``, the spectral radius of
   ``A_c Ω_c`` (the fraction of its residual a unit-rate visit removes), so that ``γ`` does not
-  depend on how densely the graph is connected. ``γ = 0.1`` by default: best of 0.1 / 0.3 / 1
-  on a seeded 30-pose ring (best cost 1.33 / 1.31 / 1.37 × the optimum after 100 iterations)
-  and on the pose-only Method 2 graph of hu-simple1, noise a, seed 0 (1.04 / 1.15 / 1.80 ×).
+  depend on how densely the graph is connected. ``γ = 0.1`` by default: the best of 0.1, 0.3
+  and 1 over a seeded 30-pose ring and the pose-only Method 2 graph of hu-simple1, noise a,
+  seed 0 (the costs reached: benchmarks/README.md).
 * **Result**: the iterate of lowest cost (stochastic steps make the cost fluctuate).
 
 Positions and headings are separate parameters (the 2-D parameterisation of the RSS paper),
@@ -63,7 +64,7 @@ from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.errors import InputError
 from relation_metric.trajectory import readonly
-from slamrel.backends.least_squares import PoseGraph
+from slamrel.backends.graph import PoseGraph
 from slamrel.backends.toro_optimiser import TreeSolution, spanning_tree, spherical_information
 
 __all__ = ["lever_sgd_optimize"]

@@ -28,17 +28,17 @@ one-sided χ² gate in most runs, :func:`relation_metric.consistency.nees1`); Me
 more accurate than Method 1, which throws away the information between non-adjacent poses;
 pose-only LS is somewhat less accurate than full LS; and the map fitted to the pose-only
 trajectory (NEES3) is about as consistent as full LS's map (NEES2). Without the inflation
-(``inflate=False``) Method 2 reuses information and is over-confident (measured on simple1:
-whole-trajectory NEES ≈ 1000 against a gate ≈ 280; see ``docs/design.md``).
+(``inflate=False``) Method 2 reuses information and is over-confident: its whole-trajectory
+NEES lies far beyond the χ² gate (``docs/design.md``, measured pitfalls; the figures in
+benchmarks/README.md).
 
 Where the per-pair least squares starts (``start``): the paper starts it at the ground
 truth (``"truth"``, pass ``truth=``), which a reader with real data does not have. The default
-is ``"odometry"`` (the odometry's relative pose): measured on simple1 and complex2, noise a–c,
-seeds 0–1 (12 problems, 700–9925 pairs each), every pair reached the same minimum as from the
-truth (largest difference 3e-10). ``"align"`` (the closed-form 2-D rigid alignment of the
-shared landmarks' observations, needing neither) agreed on 11 problems but reached another
-minimum on 1 of 9741 pairs of complex2 / noise c / seed 0, where 5 landmarks 0.3 m noisy
-make the alignment ambiguous.
+is ``"odometry"`` (the odometry's relative pose): on the simulated worlds every pair reached
+the same minimum from it as from the truth. ``"align"`` (the closed-form 2-D rigid alignment
+of the shared landmarks' observations, needing neither) reached another minimum on a rare
+pair whose few, noisy shared landmarks make the alignment ambiguous (the problems measured:
+benchmarks/README.md).
 
 Observations are relative positions ``z = r [cos b, sin b]``: with a Cartesian covariance
 (``LandmarkLog.observation_covariance``, the paper's sensor model) as given, otherwise the
@@ -48,7 +48,7 @@ range-bearing covariance linearised, ``J diag(σ_r², σ_b²) Jᵀ``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import Literal, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -59,16 +59,12 @@ from relation_metric.arrays import Array
 from relation_metric.consistency import JointNees, nees2
 from relation_metric.errors import DivergenceError, InputError
 from relation_metric.trajectory import Trajectory, readonly
-from slamrel.backends.least_squares import (
-    GraphSolution,
-    PoseGraph,
-    initial_landmarks,
-    joint_covariance,
-    solve_graph,
-)
+from slamrel.backends.graph import PoseGraph, initial_landmarks
+from slamrel.backends.least_squares import GraphSolution, joint_covariance, solve_graph
 
 __all__ = [
     "LandmarkLog",
+    "SimulatedLog",
     "cartesian_observations",
     "full_least_squares",
     "pose_only_least_squares",
@@ -92,10 +88,51 @@ __all__ = [
     "METHOD2_MIN_COMMON",
 ]
 
-if TYPE_CHECKING:
-    from slamrel.simulation.worlds import World
-
 Start = Literal["align", "odometry", "truth"]
+
+
+class _NoiseSigmas(Protocol):
+    """The standard deviations of a simulated noise type (``simulation.worlds.NoiseType``)."""
+
+    @property
+    def sigma_dx(self) -> float: ...
+    @property
+    def sigma_dy(self) -> float: ...
+    @property
+    def sigma_dtheta(self) -> float: ...
+    @property
+    def sigma_range(self) -> float: ...
+    @property
+    def sigma_bearing(self) -> float: ...
+
+
+class _Sightings(Protocol):
+    """Range-bearing observations, one row each (``simulation.worlds.Observations``)."""
+
+    @property
+    def pose(self) -> NDArray[np.int64]: ...
+    @property
+    def range(self) -> NDArray[np.float64]: ...
+    @property
+    def bearing(self) -> NDArray[np.float64]: ...
+    @property
+    def landmark(self) -> NDArray[np.int64]: ...
+
+
+class SimulatedLog(Protocol):
+    """What :meth:`LandmarkLog.from_world` reads of a simulated world
+    (``slamrel.simulation.worlds.World`` has it): stated here, so that the back-ends need not
+    import the simulator, which sits beside them."""
+
+    @property
+    def odometry(self) -> Trajectory: ...
+    @property
+    def observations(self) -> _Sightings: ...
+    @property
+    def noise_params(self) -> _NoiseSigmas: ...
+    @property
+    def observation_covariance(self) -> NDArray[np.float64] | None: ...
+
 
 METHOD1_INFLATION = 2.0  # Hu et al.: each observation is used by two adjacent-pair constraints
 METHOD2_MIN_COMMON = 5  # Hu et al.: pairs sharing at least 5 landmarks (DLR data)
@@ -188,7 +225,7 @@ class LandmarkLog:
         return log, readonly(other, np.int64)
 
     @classmethod
-    def from_world(cls, world: World) -> LandmarkLog:
+    def from_world(cls, world: SimulatedLog) -> LandmarkLog:
         """The odometry and observations of a simulated world, with its noise model."""
         nt = world.noise_params
         o = world.observations
@@ -617,9 +654,8 @@ def pose_only_least_squares(
     initial : {"chained", "odometry"}
         Start of the pose graph: :func:`chained_start` (default) or the raw odometry. Under
         noise b (0.2 rad a step) the odometry is far enough off that Levenberg–Marquardt
-        stops in a poor minimum: measured in the 10-run study, Method 2 on hu-complex1/b
-        reached RMS errors of 5.8–8.7 m in 3 of 10 runs, Method 1 on hu-simple1/b and
-        hu-simple2/b 5.2 m and 17.5 m in 1 of 10 (full LS: none).
+        stops in a poor minimum in some runs of the study, for Method 1 and Method 2 but not
+        for full LS (the runs and errors: benchmarks/README.md).
 
     Returns
     -------
@@ -689,8 +725,6 @@ def pose_only_graph(
     return graph, cons
 
 
-
-
 @dataclass(frozen=True)
 class LandmarkGraphPoseOnly:
     """A landmark graph's pose-only problem (:func:`pose_only_from_landmark_graph`).
@@ -724,9 +758,9 @@ def pose_only_from_landmark_graph(
     the graph as a log, the Method 1/2 pair constraints from its observations (each pair's
     least squares started at ``start``: by default the rigid alignment of the shared
     landmarks' observations, since on a long run the odometry's relative pose of two
-    revisits can be too far off: on Victoria Park with ``k = 2`` the pair 718–3264 does not
-    converge from it), plus its odometry and any other
-    pose–pose factors. Optimise the result with least squares or TORO; fit the landmarks to
+    revisits can be too far off to converge from, as on Victoria Park: benchmarks/README.md),
+    plus its odometry and any other pose–pose factors. Optimise the result with least
+    squares or TORO; fit the landmarks to
     the poses afterwards with :func:`landmarks_given_poses`."""
     log, other = LandmarkLog.from_graph(graph)
     pg, cons = pose_only_graph(log, method=method, min_common=min_common, start=start)

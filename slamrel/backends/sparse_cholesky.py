@@ -10,23 +10,21 @@ Back-ends, chosen when the object is built:
     computed on the first :meth:`SparseCholesky.factor` and *reused* by every later one
     (``Solver.update``: numeric factorisation only). No supernodes, so its time grows with
     the flops: the right choice for graphs with little fill (a pose chain with landmarks,
-    such as Victoria Park: an order of magnitude faster than SuperLU).
+    such as Victoria Park, where it is much faster than SuperLU).
 ``"supernodal"`` (core: numpy + scipy, and QDLDL's AMD for the ordering)
     slamrel's own supernodal multifrontal Cholesky (:mod:`slamrel.backends.supernodal`):
     supervariables, elimination tree, fundamental and relaxed supernodes and every index
     map computed once per pattern; per factorisation, dense ``dpotrf``/``dtrsm``/``dsyrk``
     on each supernode's front (scipy's LAPACK/BLAS) and a vectorised extend-add. For
-    graphs with much fill, where QDLDL's scalar up-looking factorisation is an order of
-    magnitude slower (Manhattan 10⁴: 83–102 against 480–600 ms CPU per factorisation);
-    CHOLMOD, when installed, is still 1.5–1.8× faster (53–57 ms: its work around the dense
-    calls is C, and it stores fewer explicit zeros).
+    graphs with much fill, where QDLDL's scalar up-looking factorisation is much slower;
+    CHOLMOD, when installed, is faster still (its work around the dense calls is C, and it
+    stores fewer explicit zeros).
 ``"cholmod"`` (optional extra ``fast``: the ``cvxopt`` wheel)
     CHOLMOD's supernodal Cholesky (BLAS-3 on dense supernodes) through ``cvxopt.cholmod``:
     the ordering (CHOLMOD's AMD) and the symbolic analysis once per pattern
     (``cholmod.symbolic``), then a numeric factorisation only per call (``cholmod.numeric``).
-    On graphs with much fill (2-D loop structure: a 10⁴-pose Manhattan grid, 3.6·10⁶
-    entries in L) it is an order of magnitude faster than QDLDL;
-    on low-fill graphs QDLDL is as fast or faster (Victoria Park).
+    On graphs with much fill (2-D loop structure, such as a 10⁴-pose Manhattan grid) it is
+    much faster than QDLDL; on low-fill graphs QDLDL is as fast or faster (Victoria Park).
     cvxopt is GPL-3.0 and bundles CHOLMOD's GPL-2.0+ Supernodal module, so it is an extra,
     not a core dependency of this BSD-3 package. (Before: the ``cholespy`` wheel, which
     re-ran the analysis at every factorisation and took no ordering: slower there.)
@@ -40,8 +38,8 @@ Back-ends, chosen when the object is built:
 factorisation work (``flops``, e.g. from a symbolic factorisation of the block graph) is
 above :data:`CHOLMOD_MIN_FLOPS`, else ``"supernodal"`` above :data:`SUPERNODAL_MIN_FLOPS`,
 else ``"qdldl"``, else ``"superlu"``. Every back-end solves
-to working precision (measured: relative difference ≤ 1.3e-13 between them on both
-problems above), so the choice moves results by rounding only.
+to working precision (their solutions agree to rounding on both problems above:
+benchmarks/README.md), so the choice moves results by rounding only.
 """
 
 from __future__ import annotations

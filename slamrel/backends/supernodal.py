@@ -32,9 +32,8 @@ A pivot that is not positive (``dpotrf``'s ``info > 0``) raises
 :class:`~relation_metric.errors.DivergenceError`, as CHOLMOD does. The BLAS calls run on one
 thread (OpenBLAS's thread-local setting, when scipy's OpenBLAS offers it): with many small
 dense blocks the second thread's wake-ups cost more than it computes, and on a machine
-whose cores are busy a two-thread call waits for a core (Manhattan 10⁴: 1.0–1.7 s per
-factorisation with two threads against 0.12 s with one, on 2 shared cores).
-Timings: benchmarks/README.md (``bench_sparse_cholesky.py``).
+whose cores are busy a two-thread call waits for a core (an order of magnitude slower on
+2 shared cores). Timings: benchmarks/README.md (``bench_sparse_cholesky.py``).
 """
 
 from __future__ import annotations
@@ -45,7 +44,7 @@ import os
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -189,7 +188,7 @@ def symbolic_factor(pattern: sp.spmatrix) -> tuple[sp.csc_matrix, NDArray[np.int
     QDLDL factorises a diagonally dominant matrix with the pattern (no pivot test needed).
     The last result is kept: :func:`~slamrel.backends.sparse_cholesky.factor_flops` on a
     block graph and the supernodal analysis of the same graph's scalar matrix ask for the
-    same one (one LM problem: 40–50 ms saved on Manhattan 10⁴).
+    same one (a second symbolic analysis per LM problem saved; benchmarks/README.md).
     """
     import qdldl
 
@@ -243,103 +242,23 @@ class SupernodalCholesky:
         if widths is not None and (widths.sum() != n or (widths < 1).any()):
             raise ValueError(f"blocks of widths summing to {widths.sum()} for {n} columns")
         lb, p, gstart, width = _block_factor(ip, ix, n, widths)
-        ng = gstart.size
-        # --- elimination tree, postordered -----------------------------------------------
-        cnt = np.diff(lb.indptr)
-        parent = np.full(ng, ng)
-        has = cnt > 0
-        parent[has] = lb.indices[lb.indptr[:-1][has]]  # first row below the diagonal
-        tree = sp.csr_matrix((np.ones(ng), (parent, np.arange(ng))), shape=(ng + 1, ng + 1))
-        pre = csgraph.depth_first_order(tree, ng, directed=True, return_predecessors=False)
-        post = np.asarray(pre[::-1][:-1], dtype=np.int64)  # children first, subtrees contiguous
-        rank = np.empty(ng + 1, dtype=np.int64)
-        rank[post] = np.arange(ng)
-        rank[ng] = ng
-        lb = sp.csc_matrix(lb[post][:, post])
-        lb.sort_indices()
-        order = p[post]  # compressed node of every block, in the new order
-        w = width[order]
-        parent = rank[parent[post]]
-        cnt = np.diff(lb.indptr)
-        below_w = np.bincount(np.repeat(np.arange(ng), cnt), weights=w[lb.indices], minlength=ng)
-        # --- fundamental supernodes ---------------------------------------------------------
-        j = np.arange(ng - 1)
-        joins = (parent[:-1] == j + 1) & (cnt[:-1] == cnt[1:] + 1)
-        new = np.concatenate(([True], ~joins))
-        fstart = np.flatnonzero(new)
-        fend = np.append(fstart[1:], ng) - 1
-        nf = fstart.size
-        fsn = np.cumsum(new) - 1
-        fpar = np.where(parent[fend] < ng, fsn[np.minimum(parent[fend], ng - 1)], -1)
+        lb, order, w, parent = _postordered_tree(lb, p, width)
+        sn = _supernodes(lb, parent, w, relax)
+        ns = sn.parent.size
+        w = w[sn.block_order]
         cw = np.concatenate(([0], np.cumsum(w)))
-        merged, kids = _amalgamate(
-            (cw[fend + 1] - cw[fstart]).tolist(),
-            below_w[fend].astype(np.int64).tolist(),
-            fpar.tolist(),
-            relax,
-        )
-        # --- postorder of the merged tree; every supernode's blocks made consecutive ---------
-        tops = _postorder([f for f in range(nf) if fpar[f] < 0 and merged[f]], kids)
-        ns = len(tops)
-        sid = np.empty(nf, dtype=np.int64)
-        sid[tops] = np.arange(ns)
-        spar = np.full(ns, -1, dtype=np.int64)
-        for f in tops:
-            if kids[f]:
-                spar[sid[kids[f]]] = sid[f]
-        mem = np.array([m for f in tops for m in merged[f]], dtype=np.int64)
-        nmem = np.array([len(merged[f]) for f in tops])
-        block_order = _ranges(fstart[mem], fend[mem] - fstart[mem] + 1)
-        relabel = np.empty(ng, dtype=np.int64)
-        relabel[block_order] = np.arange(ng)
-        nblk = np.bincount(
-            np.repeat(np.arange(ns), nmem), weights=fend[mem] - fstart[mem] + 1, minlength=ns
-        ).astype(np.int64)
-        w = w[block_order]
-        cw = np.concatenate(([0], np.cumsum(w)))
-        bend = np.cumsum(nblk)
-        c0, c1 = cw[bend - nblk], cw[bend]
+        bend = np.cumsum(sn.blocks)
+        c0, c1 = cw[bend - sn.blocks], cw[bend]
         k = c1 - c0
         # --- scalar numbering and rows of every supernode -----------------------------------
-        self.perm = _ranges(gstart[order[block_order]], w)  # original column at each new position
+        # the original column at each new position
+        self.perm = _ranges(gstart[order[sn.block_order]], w)
         self.iperm = np.empty(n, dtype=np.int64)
         self.iperm[self.perm] = np.arange(n)
-        last = fend[np.array(tops)]  # the top member's last block: its rows below are the front's
-        start_b, len_b = lb.indptr[last], np.diff(lb.indptr)[last]
-        brows = relabel[lb.indices[_ranges(start_b, len_b)]]
-        owner = np.repeat(np.arange(ns), len_b)
-        o = np.lexsort((brows, owner))
-        brows = brows[o]
-        below = _ranges(cw[brows], w[brows])
-        bsz = np.bincount(np.repeat(owner, w[brows]), minlength=ns).astype(np.int64)
-        boff = np.concatenate(([0], np.cumsum(bsz)))
+        self.below, rows, bsz = _front_rows(lb, sn, w, cw, c0, c1)
         m = k + bsz
-        self.below = [below[boff[s] : boff[s + 1]] for s in range(ns)]
-        rows = [np.concatenate((np.arange(c0[s], c1[s]), self.below[s])) for s in range(ns)]
-        # --- extend-add maps: flat (column-major) positions of a child's update in its parent
-        # (kept as row positions; factor() expands them to flat positions in one reused
-        # array: maps for every child, 14·10⁶ integers on Manhattan 10⁴, cost more in page
-        # faults when first written than their expansion at every factorisation)
-        self.rel: list[NDArray[np.int64] | None] = [None] * ns
-        for s in range(ns):
-            if spar[s] >= 0 and bsz[s]:
-                self.rel[s] = np.searchsorted(rows[spar[s]], self.below[s])
-        self.children: list[list[int]] = [[] for _ in range(ns)]
-        for s, q in enumerate(spar.tolist()):
-            if q >= 0:
-                self.children[q].append(s)
-        # --- where each entry of A's lower triangle (new numbering) goes in its front --------
-        col = np.repeat(np.arange(n), np.diff(ip))
-        pi, pj = self.iperm[ix], self.iperm[col]
-        low = np.flatnonzero(pi >= pj)
-        owner_e = np.repeat(np.arange(ns), k)[pj[low]]
-        roff = np.concatenate(([0], np.cumsum(m)))
-        keys = np.concatenate(rows) + np.repeat(np.arange(ns), m) * n
-        local_row = np.searchsorted(keys, owner_e * n + pi[low]) - roff[owner_e]
-        fpos = local_row + m[owner_e] * (pj[low] - c0[owner_e])
-        o = np.argsort(owner_e, kind="stable")
-        self._src, self._fpos = low[o], fpos[o]
-        self._aoff = np.searchsorted(owner_e[o], np.arange(ns + 1)).tolist()
+        self.rel, self.children = _extend_add_rows(rows, self.below, sn.parent, bsz)
+        self._src, self._fpos, self._aoff = _entry_positions(ip, ix, self.iperm, rows, k, m, c0)
         self.c0, self.c1, self.k, self.m = c0.tolist(), c1.tolist(), k.tolist(), m.tolist()
         self.n_supernodes = ns
         #: entries of ``L`` stored (explicit zeros of the amalgamation included)
@@ -349,15 +268,7 @@ class SupernodalCholesky:
         # --- storage, laid out once: L₁₁ and L₂₁ of every supernode in one array; the update
         # matrices on a stack (postorder: a supernode's children are the top of the stack)
         self._l_off = np.concatenate(([0], np.cumsum(k * m))).tolist()  # L₁₁ (k²), then L₂₁
-        self._u_off = [0] * ns
-        top, depth = 0, 0
-        for s in range(ns):
-            if self.children[s]:
-                top = self._u_off[self.children[s][0]]  # pops every child
-            self._u_off[s] = top
-            top += int(bsz[s]) ** 2
-            depth = max(depth, top)
-        self._stack_size = depth
+        self._u_off, self._stack_size = _update_stack(self.children, bsz)
         self._front_size = int((m**2).max()) if ns else 0
         self._map_size = int((bsz**2).max()) if ns else 0
         self._l: Array | None = None  # L panels (column-major, m × k each), after factor()
@@ -442,6 +353,189 @@ class SupernodalCholesky:
                     xs = xs - l21.T @ x[below[s]]
                 x[c0[s] : c1[s]] = lapack.dtrtrs(l11s[s], xs, lower=1, trans=1)[0]
         return x[self.iperm]
+
+
+def _postordered_tree(
+    lb: sp.csc_matrix, p: NDArray[np.int64], width: NDArray[np.int64]
+) -> tuple[sp.csc_matrix, NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """The elimination tree of the block factor ``lb`` (``p``: its compressed node at each
+    position, ``width``: each node's columns), postordered: children first, every subtree
+    contiguous (``scipy.sparse.csgraph.depth_first_order``, reversed).
+
+    Returns ``lb`` in the new order, the compressed node and the width of every block in it,
+    and every block's parent (first row below the diagonal; the block count at a root).
+    """
+    ng = width.size
+    cnt = np.diff(lb.indptr)
+    parent = np.full(ng, ng)
+    has = cnt > 0
+    parent[has] = lb.indices[lb.indptr[:-1][has]]  # first row below the diagonal
+    tree = sp.csr_matrix((np.ones(ng), (parent, np.arange(ng))), shape=(ng + 1, ng + 1))
+    pre = csgraph.depth_first_order(tree, ng, directed=True, return_predecessors=False)
+    post = np.asarray(pre[::-1][:-1], dtype=np.int64)  # children first, subtrees contiguous
+    rank = np.empty(ng + 1, dtype=np.int64)
+    rank[post] = np.arange(ng)
+    rank[ng] = ng
+    lb = sp.csc_matrix(lb[post][:, post])
+    lb.sort_indices()
+    order = p[post]  # compressed node of every block, in the new order
+    return lb, order, width[order], rank[parent[post]]
+
+
+class _Supernodes(NamedTuple):
+    """The supernodes of a postordered block tree (:func:`_supernodes`), in postorder."""
+
+    #: each supernode's parent supernode (−1 at a root)
+    parent: NDArray[np.int64]
+    #: the block (tree order) at each new position: every supernode's blocks consecutive
+    block_order: NDArray[np.int64]
+    #: each supernode's number of blocks
+    blocks: NDArray[np.int64]
+    #: each supernode's top member's last block (tree order): its rows below are the front's
+    last: NDArray[np.int64]
+
+
+def _supernodes(
+    lb: sp.csc_matrix, parent: NDArray[np.int64], w: NDArray[np.int64], relax: tuple[float, ...]
+) -> _Supernodes:
+    """Fundamental supernodes of the postordered block factor ``lb`` (a column joins the
+    previous one when it is its parent and its column count is one less), merged by relaxed
+    amalgamation (:func:`_amalgamate`), then the merged tree postordered again so that every
+    supernode's blocks are consecutive."""
+    ng = parent.size
+    cnt = np.diff(lb.indptr)
+    below_w = np.bincount(np.repeat(np.arange(ng), cnt), weights=w[lb.indices], minlength=ng)
+    # --- fundamental supernodes -------------------------------------------------------------
+    j = np.arange(ng - 1)
+    joins = (parent[:-1] == j + 1) & (cnt[:-1] == cnt[1:] + 1)
+    new = np.concatenate(([True], ~joins))
+    fstart = np.flatnonzero(new)
+    fend = np.append(fstart[1:], ng) - 1
+    nf = fstart.size
+    fsn = np.cumsum(new) - 1
+    fpar = np.where(parent[fend] < ng, fsn[np.minimum(parent[fend], ng - 1)], -1)
+    cw = np.concatenate(([0], np.cumsum(w)))
+    merged, kids = _amalgamate(
+        (cw[fend + 1] - cw[fstart]).tolist(),
+        below_w[fend].astype(np.int64).tolist(),
+        fpar.tolist(),
+        relax,
+    )
+    # --- postorder of the merged tree; every supernode's blocks made consecutive -------------
+    tops = _postorder([f for f in range(nf) if fpar[f] < 0 and merged[f]], kids)
+    ns = len(tops)
+    sid = np.empty(nf, dtype=np.int64)
+    sid[tops] = np.arange(ns)
+    spar = np.full(ns, -1, dtype=np.int64)
+    for f in tops:
+        if kids[f]:
+            spar[sid[kids[f]]] = sid[f]
+    mem = np.array([m for f in tops for m in merged[f]], dtype=np.int64)
+    nmem = np.array([len(merged[f]) for f in tops])
+    block_order = _ranges(fstart[mem], fend[mem] - fstart[mem] + 1)
+    nblk = np.bincount(
+        np.repeat(np.arange(ns), nmem), weights=fend[mem] - fstart[mem] + 1, minlength=ns
+    ).astype(np.int64)
+    return _Supernodes(spar, block_order, nblk, fend[np.array(tops)])
+
+
+def _front_rows(
+    lb: sp.csc_matrix,
+    sn: _Supernodes,
+    w: NDArray[np.int64],
+    cw: NDArray[np.int64],
+    c0: NDArray[np.int64],
+    c1: NDArray[np.int64],
+) -> tuple[list[NDArray[np.int64]], list[NDArray[np.int64]], NDArray[np.int64]]:
+    """Each supernode's scalar rows below its columns (new numbering, sorted), its front's
+    rows (its columns ``c0 … c1 − 1``, then those), and how many rows are below.
+
+    ``w`` and ``cw``: the blocks' widths in the new order and their cumulative sum.
+    """
+    ng, ns = w.size, sn.parent.size
+    relabel = np.empty(ng, dtype=np.int64)
+    relabel[sn.block_order] = np.arange(ng)
+    start_b, len_b = lb.indptr[sn.last], np.diff(lb.indptr)[sn.last]
+    brows = relabel[lb.indices[_ranges(start_b, len_b)]]
+    owner = np.repeat(np.arange(ns), len_b)
+    o = np.lexsort((brows, owner))
+    brows = brows[o]
+    below = _ranges(cw[brows], w[brows])
+    bsz = np.bincount(np.repeat(owner, w[brows]), minlength=ns).astype(np.int64)
+    boff = np.concatenate(([0], np.cumsum(bsz)))
+    below_s = [below[boff[s] : boff[s + 1]] for s in range(ns)]
+    rows = [np.concatenate((np.arange(c0[s], c1[s]), below_s[s])) for s in range(ns)]
+    return below_s, rows, bsz
+
+
+def _extend_add_rows(
+    rows: list[NDArray[np.int64]],
+    below: list[NDArray[np.int64]],
+    parent: NDArray[np.int64],
+    bsz: NDArray[np.int64],
+) -> tuple[list[NDArray[np.int64] | None], list[list[int]]]:
+    """Where a child's update matrix goes in its parent's front (its rows below, as row
+    positions in the parent's front; ``None`` at a root or without rows below), and each
+    supernode's children.
+
+    The maps are kept as row positions: :meth:`SupernodalCholesky.factor` expands them to
+    flat (column-major) positions in one reused array, because maps for every child (14·10⁶
+    integers on Manhattan 10⁴) cost more in page faults when first written than their
+    expansion at every factorisation.
+    """
+    ns = len(rows)
+    rel: list[NDArray[np.int64] | None] = [None] * ns
+    for s in range(ns):
+        if parent[s] >= 0 and bsz[s]:
+            rel[s] = np.searchsorted(rows[parent[s]], below[s])
+    children: list[list[int]] = [[] for _ in range(ns)]
+    for s, q in enumerate(parent.tolist()):
+        if q >= 0:
+            children[q].append(s)
+    return rel, children
+
+
+def _entry_positions(
+    ip: NDArray[np.int64],
+    ix: NDArray[np.int64],
+    iperm: NDArray[np.int64],
+    rows: list[NDArray[np.int64]],
+    k: NDArray[np.int64],
+    m: NDArray[np.int64],
+    c0: NDArray[np.int64],
+) -> tuple[NDArray[np.int64], NDArray[np.int64], list[int]]:
+    """Where each entry of A's lower triangle (new numbering) goes in its front.
+
+    Returns the entries' indices in A's pattern (``ip``, ``ix``) grouped by supernode, their
+    flat (column-major) positions in their fronts (``k`` columns, ``m`` rows, first column
+    ``c0``), and each supernode's first entry in that grouping (one more: the end).
+    """
+    n, ns = iperm.size, len(rows)
+    col = np.repeat(np.arange(n), np.diff(ip))
+    pi, pj = iperm[ix], iperm[col]
+    low = np.flatnonzero(pi >= pj)
+    owner_e = np.repeat(np.arange(ns), k)[pj[low]]
+    roff = np.concatenate(([0], np.cumsum(m)))
+    keys = np.concatenate(rows) + np.repeat(np.arange(ns), m) * n
+    local_row = np.searchsorted(keys, owner_e * n + pi[low]) - roff[owner_e]
+    fpos = local_row + m[owner_e] * (pj[low] - c0[owner_e])
+    o = np.argsort(owner_e, kind="stable")
+    return low[o], fpos[o], np.searchsorted(owner_e[o], np.arange(ns + 1)).tolist()
+
+
+def _update_stack(children: list[list[int]], bsz: NDArray[np.int64]) -> tuple[list[int], int]:
+    """Each supernode's update matrix's offset on one stack, and the stack's size: in
+    postorder a supernode's children are the top of the stack, popped when it is formed."""
+    ns = len(children)
+    u_off = [0] * ns
+    top, depth = 0, 0
+    for s in range(ns):
+        if children[s]:
+            top = u_off[children[s][0]]  # pops every child
+        u_off[s] = top
+        top += int(bsz[s]) ** 2
+        depth = max(depth, top)
+    return u_off, depth
 
 
 def _amalgamate(

@@ -10,7 +10,7 @@ folder only to measure against (``benchmarks/bench_toro.py``).
   order, and TORO's default): poses are inserted in index order and pose ``k``'s parent is
   the lowest-index pose it shares a constraint with (among those before it), so a loop
   closure hangs a new pose below the old pose it revisits and tree paths stay short (on
-  ``city10000`` the mean path length is 11.25 poses, what the real ``toro`` prints).
+  ``city10000`` the mean path length is what the real ``toro`` prints: benchmarks/README.md).
   ``"breadth-first"``: a breadth-first spanning tree from pose 0.
 * **Parameters**. Pose ``k``'s parameter is its difference from its parent in the global
   frame, ``x_k = p_k − p_parent(k)`` (``x``, ``y`` and the unwrapped heading ``θ``), so
@@ -48,15 +48,13 @@ folder only to measure against (``benchmarks/bench_toro.py``).
   the papers' fraction with ``γ = min W`` and ``t + 1``. Reproduced: the three triangles of
   ``tests/test_estimation_toro.py``, two 4-pose graphs and 80 random triangles (random
   information, headings up to ±3 rad) to ``toro``'s printed digits for 1–20 iterations;
-  ``city10000`` after 100 and 300 iterations within 0.11 % of ``toro``'s cost; the study's
-  Method 2 graphs (seed 0) iterate for iterate on hu-simple1 and, for one iteration, on
-  hu-complex1. On the complex worlds the iterates of either program depend on the last bits
-  of the data (the cap is discontinuous where ``u ≈ −r``): measurements changed by 1e-12
-  move slamrel's cost after one iteration on hu-complex2 by 1.1 % and after five
-  (hu-complex1 and 2) by 10–20 %, as much as it differs from ``toro``'s. Compared by the
-  median over the graph and five such copies, slamrel's cost after 100 iterations over
-  ``toro``'s is 0.89–1.01 on the eight graphs of the four worlds with noise a and c
-  (``benchmarks/bench_toro.py``; on the graphs alone 0.58–1.24).
+  ``city10000`` after 100 and 300 iterations close to ``toro``'s cost; the study's Method 2
+  graphs (seed 0) iterate for iterate on hu-simple1 and, for one iteration, on hu-complex1.
+  On the complex worlds the iterates of either program depend on the last bits of the data
+  (the cap is discontinuous where ``u ≈ −r``): measurements changed by 1e-12 move slamrel's
+  cost after a few iterations as much as it differs from ``toro``'s, so the two are compared
+  by the median over the graph and five such copies (``benchmarks/bench_toro.py``; the
+  ratios are in benchmarks/README.md).
 * **Order** (``order=``). ``"depth"`` (the RSS paper's): the constraints sorted by their
   level, the depth of the lowest common ancestor of their two poses, root side first (ties
   in input order). ``"input"``: the input order.
@@ -67,19 +65,21 @@ visits are therefore grouped into runs (:func:`_runs`) that keep the order of ev
 visits sharing a pose, and each run is applied at once (sparse products over the run): the
 same result as one visit at a time in the paper's order. The one quantity outside the paths,
 the heading of the lowest common ancestor in ``R_i``, is taken from the start of the
-iteration with the papers' rules (on the 4-pose graphs of the tests this moves a pose by up
-to 0.13 after 5 iterations against the visits one at a time). When every constraint's
-translational information is isotropic (``city10000``, TORO's spherical covariances) the
-weights, hence ``M`` and the splits, are the same in every iteration, and an iteration's
-visits are instead two sparse triangular solves, headings first and translations after
-(:class:`_TriangularSweep`): the same result again, up to the order of floating-point sums,
-without a Python step per run (about 4,200 runs per iteration on ``city10000``).
+iteration with the papers' rules (on the 4-pose graphs of the tests this moves a pose by a
+visible amount after a few iterations against the visits one at a time:
+benchmarks/README.md). When every constraint's translational information is isotropic
+(``city10000``, TORO's spherical covariances) the weights, hence ``M`` and the splits, are
+the same in every iteration, and an iteration's visits are instead two sparse triangular
+solves, headings first and translations after (:class:`_TriangularSweep`): the same result
+again, up to the order of floating-point sums, without a Python step per run (thousands of
+runs per iteration on ``city10000``).
 
 With ``rules="toro"`` the runs are exact: a visit reads the heading of its top pose as
 the earlier visits of the iteration left it (the sum of the heading parameters on its root
 path), and a run ends where a visit would change a pose another visit of the run reads
-(about 3,500 runs per iteration on hu-complex1, against 488 on hu-simple1). The triangular
-sweep still takes that heading from the iteration's start.
+(thousands of runs per iteration on hu-complex1, hundreds on hu-simple1:
+benchmarks/README.md). The triangular sweep still takes that heading from the iteration's
+start.
 
 The result is the last iterate (the papers run a fixed number of iterations; the cost need
 not decrease monotonically). The cost reported is ``½ Σ eᵀ Ω e`` with the graph's own
@@ -104,7 +104,7 @@ from relation_metric import se2
 from relation_metric.arrays import Array
 from relation_metric.errors import InputError
 from relation_metric.trajectory import readonly
-from slamrel.backends.least_squares import PoseGraph
+from slamrel.backends.graph import PoseGraph
 
 __all__ = [
     "TORO_TREES",
@@ -387,11 +387,11 @@ def first_per_pair(pp_i: NDArray[np.int64], pp_j: NDArray[np.int64]) -> NDArray[
     """Which constraints TORO keeps, shape (E,): a constraint ``(i, j)`` is left out when an
     earlier one joins ``i`` and ``j`` (in either direction).
 
-    Measured on OpenSLAM's ``toro`` (it loads the study's Method 2 graphs, whose odometry
-    and landmark constraints share 81 consecutive pose pairs, as 727 edges of 808, and its
-    iterates equal those of the first constraint of each pair alone). One difference is
-    known: ``toro`` keeps a later ``(j, i)`` with ``i < j`` beside an earlier ``(i, j)``;
-    this keeps the first only.
+    Measured on OpenSLAM's ``toro``: it loads the study's Method 2 graphs, whose odometry
+    and landmark constraints share consecutive pose pairs, with one edge per pair, and its
+    iterates equal those of the first constraint of each pair alone (the counts:
+    benchmarks/README.md). One difference is known: ``toro`` keeps a later ``(j, i)`` with
+    ``i < j`` beside an earlier ``(i, j)``; this keeps the first only.
     """
     lo = np.minimum(pp_i, pp_j).astype(np.int64)
     hi = np.maximum(pp_i, pp_j).astype(np.int64)
@@ -406,9 +406,9 @@ def measurement_weights(z: Array, info: Array) -> Array:
     """TORO's weights, shape (E, 3): the diagonal of ``R(δ_θ) Ω R(δ_θ)ᵀ``, the information
     turned by the constraint's own measured rotation (not by a pose's heading), so they are
     the same in every iteration. Measured on OpenSLAM's ``toro``: its first steps on
-    anisotropic constraints fit this rotation to 7·10⁻⁶ (its output precision) and no other
-    of 14 candidates (the headings of ``i`` or ``j``, ``±δ_θ``, sums of these, none) to
-    better than 0.06."""
+    anisotropic constraints fit this rotation to its output precision and none of the other
+    candidates (the headings of ``i`` or ``j``, ``±δ_θ``, sums of these, none) comes close
+    (the residuals: benchmarks/README.md)."""
     return _turned_diagonal(z[:, 2], info)
 
 

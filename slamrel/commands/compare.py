@@ -125,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
 def _figure(comp, path: Path) -> None:  # type: ignore[no-untyped-def]
     import numpy as np
 
-    from slamrel.plots.relation_errors import pyplot, save_figure
+    from slamrel.plots.relation_errors import literal_text, pyplot, save_figure
 
     plt = pyplot()
     datasets = list(dict.fromkeys(ds for ds, _ in comp.stats))
@@ -139,15 +139,16 @@ def _figure(comp, path: Path) -> None:  # type: ignore[no-untyped-def]
     ):
         for k, alg in enumerate(algorithms):
             means = [
-                comp.stats[(ds, alg)][part]["abs"].mean if (ds, alg) in comp.stats else np.nan
+                comp.stats[(ds, alg)].part(part, "abs").mean if (ds, alg) in comp.stats else np.nan
                 for ds in datasets
             ]
             stds = [
-                comp.stats[(ds, alg)][part]["abs"].std if (ds, alg) in comp.stats else np.nan
+                comp.stats[(ds, alg)].part(part, "abs").std if (ds, alg) in comp.stats else np.nan
                 for ds in datasets
             ]
-            ax.bar(x + k * width - 0.4 + width / 2, means, width, yerr=stds, capsize=3, label=alg)
-        ax.set_xticks(x, datasets)
+            bar_x = x + k * width - 0.4 + width / 2
+            ax.bar(bar_x, means, width, yerr=stds, capsize=3, label=literal_text(alg))
+        ax.set_xticks(x, [literal_text(ds) for ds in datasets])
         ax.set_ylabel(f"{part} error, abs [{unit}] (mean ± std)")
     axes[0].legend()
     save_figure(fig, path)

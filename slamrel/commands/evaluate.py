@@ -420,13 +420,13 @@ def summary_text(scored: FileEvaluation, *, degrees: bool) -> str:
     rot_values = ev.errors.rotation[ev.valid]
     rot = error_summaries(np.degrees(rot_values) if degrees else rot_values)
     rows = [
-        ("translation abs [m]", ev.translation["abs"]),
-        ("translation sqr [m²]", ev.translation["sqr"]),
-        (f"rotation abs [{unit}]", rot["abs"]),
-        (f"rotation sqr [{unit}²]", rot["sqr"]),
+        ("translation abs [m]", ev.translation.abs),
+        ("translation sqr [m²]", ev.translation.sqr),
+        (f"rotation abs [{unit}]", rot.abs),
+        (f"rotation sqr [{unit}²]", rot.sqr),
     ]
     if ev.errors.mode == "metricevaluator":
-        rows.append(("weighted (metricEvaluator)", ev.combined["abs"]))
+        rows.append(("weighted (metricEvaluator)", ev.combined.abs))
     head = (
         f"relations: {result['relations']} ({result['associated_by_odometry']} via odometry, "
         f"{result['interpolated']} interpolated, {result['unassociated']} unassociated); "

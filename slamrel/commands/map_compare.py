@@ -180,11 +180,11 @@ def _print_summary(args: argparse.Namespace, res: MapComparison, out: dict[str, 
     from relation_metric.evaluate import error_summaries
 
     table = [
-        ("edge length abs [m]", error_summaries(res.errors.edge_length)["abs"]),
-        ("corner angle abs [rad]", error_summaries(res.errors.corner_angle.ravel())["abs"]),
+        ("edge length abs [m]", error_summaries(res.errors.edge_length).abs),
+        ("corner angle abs [rad]", error_summaries(res.errors.corner_angle.ravel()).abs),
         (
             "  excluding thin triangles",
-            error_summaries(res.errors.corner_angle[~res.mesh.thin].ravel())["abs"],
+            error_summaries(res.errors.corner_angle[~res.mesh.thin].ravel()).abs,
         ),
     ]
     print(stats_table(table))

@@ -5,14 +5,19 @@ from __future__ import annotations
 import argparse
 import io
 import sys
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, NamedTuple
 
 from recovery.constants import MAP_MODES, METHODS
 from slamrel.commands import options as opt
 from slamrel.commands.common import add_recovery_arguments, check_outputs, errors_about
 
 if TYPE_CHECKING:
-    from recovery.recover import Recovery
+    from recovery.anchoring import NeesFrame
+    from recovery.bundle import Bundle
+    from recovery.results import Recovery
+    from relation_metric.consistency import NeesBlowup, NeesSummary
+    from slamrel.runs.nees import NeesCurve
 
 # what recover writes: every one read back by evaluate's reader with the same poses and times
 WRITABLE_FORMATS = ("plain", "tum", "csv", "carmen")
@@ -113,6 +118,13 @@ def run(args: argparse.Namespace) -> int:
         np.save(buf, np.asarray(result.covariances), allow_pickle=False)
         write_bytes_atomic(args.covariances, buf.getvalue())
     report = result.report()
+    truth = _against_truth(bundle, result)
+    if truth is not None:  # the NEES of slamrel run, in the frame placed by the start pose
+        divergence = report["divergence"]
+        assert isinstance(divergence, dict)
+        divergence["nees_stretches"] = [b.as_dict() for b in truth.blowups]
+        after = {k: report.pop(k) for k in ("iterations", "robust", "batch") if k in report}
+        report |= truth.as_dict() | after  # the keys in the order they always had
     report["gate"] = args.gate
     # rows put in time order under the filter-log rule (relation_metric.timeorder)
     report["reordered"] = dict(bundle.reordered)
@@ -153,24 +165,57 @@ def run(args: argparse.Namespace) -> int:
                 f"({100 * c.downweighted_fraction:.1f}% of associated; weight lost "
                 f"{100 * c.downweight_loss:.1f}%)"
             )
-        print(divergence_summary_text(result))
+        print(divergence_summary_text(result, () if truth is None else truth.blowups))
         if c.gated_fraction > 0.05:
             print(
                 "note: a large gated fraction is a finding about the map (wrong associations "
                 "or an inconsistent map), not noise"
             )
-        ns, frame = result.nees_stats, result.nees_frame
-        if ns is not None and ns.mean is None:
+        if truth is not None and truth.curve is None:
             print(
-                "note: no NEES: no recovered pose lies at a ground-truth time (within 1 µs; "
-                "is groundtruth.csv in the time base of the log?)"
+                "note: no NEES: no recovered pose after the first lies at a ground-truth time "
+                "(within 1 µs; is groundtruth.csv in the time base of the log?)"
             )
-        if ns is not None and ns.mean is not None and frame is not None:
-            print(f"mean pose NEES vs ground truth: {ns.mean:.3f} (3 dof), {frame.description}")
-            unaligned = result.nees_stats_truth_frame
-            if frame.aligned and unaligned is not None and unaligned.mean is not None:
-                print(f"  unaligned, in the truth frame: {unaligned.mean:.3f}")
+        if truth is not None and truth.curve is not None:
+            frame, mean = truth.frame, truth.curve.summary.mean
+            print(f"mean pose NEES vs ground truth: {mean:.3f} (3 dof), {frame.description}")
+            if frame.aligned and truth.unaligned is not None:
+                print(f"  unaligned, in the truth frame: {truth.unaligned.mean:.3f}")
     return 0
+
+
+class _TruthScores(NamedTuple):
+    """The recovered trajectory against the bundle's ground truth (``recover --report``)."""
+
+    frame: NeesFrame
+    curve: NeesCurve | None  # None: no recovered pose after the prior at a ground-truth time
+    unaligned: NeesSummary | None
+    blowups: list[NeesBlowup]
+
+    def as_dict(self) -> dict[str, object]:
+        """``nees`` (as ``metrics.json`` ``nees.recovered``), ``nees_frame`` and
+        ``nees_truth_frame`` (``None`` where there is no NEES)."""
+        return {
+            "nees": None if self.curve is None else self.curve.summary.as_dict(),
+            "nees_frame": self.frame.as_dict(),
+            "nees_truth_frame": None if self.unaligned is None else self.unaligned.as_dict(),
+        }
+
+
+def _against_truth(bundle: Bundle, result: Recovery) -> _TruthScores | None:
+    """The NEES of the recovery as ``slamrel run`` computes it (:mod:`slamrel.runs.nees`), in
+    the frame placed by the start pose with the landmark fit by id reported beside it; ``None``
+    without ground truth."""
+    from slamrel.runs.nees import blowups, frame_by_id, recovery_nees
+
+    if bundle.groundtruth is None:
+        return None
+    frame = frame_by_id(bundle)
+    got = recovery_nees(bundle, result, frame)
+    if got is None:
+        return _TruthScores(frame, None, None, [])
+    curve, unaligned = got
+    return _TruthScores(frame, curve, unaligned, blowups(curve, result.divergence.max_outlier_run))
 
 
 def output_format(path: str, fmt: str | None) -> str:
@@ -210,8 +255,11 @@ def output_format(path: str, fmt: str | None) -> str:
     return fmt or named or "plain"
 
 
-def divergence_summary_text(result: Recovery, *, limit: int = 5) -> str:
-    """Console lines about the stretches where the map and the log disagree (no numpy reprs)."""
+def divergence_summary_text(
+    result: Recovery, nees_blowups: Sequence[NeesBlowup] = (), *, limit: int = 5
+) -> str:
+    """Console lines about the stretches where the map and the log disagree, and the NEES
+    blow-ups against ground truth (no numpy reprs)."""
     from relation_metric.consistency import OUTLIER_PROBABILITY
 
     d = result.divergence
@@ -223,7 +271,7 @@ def divergence_summary_text(result: Recovery, *, limit: int = 5) -> str:
         else "no measurement reached the filter"
     )
     st = d.stretches
-    ns = d.nees_blowups or ()
+    ns = nees_blowups
     nees_txt = (
         f"\nNEES vs ground truth blows up (beyond its {100 * OUTLIER_PROBABILITY:g}% bound) "
         f"{len(ns)} time(s), the first over [{ns[0].t0:.3f}, {ns[0].t1:.3f}] s"

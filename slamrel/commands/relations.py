@@ -20,6 +20,8 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from slamrel.formats.laser import LaserScans
+    from slamrel.scans.proposals import Proposals
+    from slamrel.scans.relations import AlignOptions, ScanRelations
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -48,6 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """``relations align``'s parser; its options in groups, one function each."""
     a = rsub.add_parser(
         "align",
         help="make reference relations from a laser log by scan alignment",
@@ -57,6 +60,22 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
         "poses as a Freiburg .relations file, with a per-relation quality report (matched "
         "fraction, residual, degeneracy, flags) for review.",
     )
+    _add_align_io_arguments(a)
+    _add_align_guess_arguments(a)
+    _add_align_pair_arguments(a)
+    _add_align_search_arguments(a)
+    a.add_argument(
+        "--time-tolerance",
+        type=float,
+        default=0.05,
+        help="--at: largest gap between a relation time and its scan [s] (default 0.05)",
+    )
+    a.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    a.set_defaults(func=run_align)
+
+
+def _add_align_io_arguments(a: argparse.ArgumentParser) -> None:
+    """The laser log read, and the files written (relations, quality report, review page)."""
     a.add_argument(
         "log",
         metavar="LOG",
@@ -75,6 +94,11 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="also write the review page (one self-contained file: overlay, accept/reject, "
         "nudge, re-align, save .relations and the review state)",
     )
+
+
+def _add_align_guess_arguments(a: argparse.ArgumentParser) -> None:
+    """The scans' poses, which give the alignments their initial guesses: the log's own,
+    or an estimate's (a bag's scans have none)."""
     a.add_argument(
         "--record",
         help="laser record to read (FLASER, RLASER, ROBOTLASER1, ...; default: the only "
@@ -103,6 +127,11 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
         help="skip (and count) estimate pose records with non-finite values instead of "
         "refusing the file",
     )
+
+
+def _add_align_pair_arguments(a: argparse.ArgumentParser) -> None:
+    """Which pairs of scans are aligned: a .relations file's, or keyframes (consecutive,
+    and loops)."""
     which = a.add_mutually_exclusive_group()
     which.add_argument(
         "--at",
@@ -136,6 +165,11 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
         default=10.0,
         help="least travel between the two scans of a loop pair [m] (default 10)",
     )
+
+
+def _add_align_search_arguments(a: argparse.ArgumentParser) -> None:
+    """How each pair is aligned (the correlative search, the readings used) and when a
+    relation is flagged for review."""
     a.add_argument(
         "--global-search",
         choices=("never", "flagged", "always"),
@@ -174,14 +208,6 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
         type=float,
         help="ignore readings at or beyond this [m] (default: the scan's maximum range)",
     )
-    a.add_argument(
-        "--time-tolerance",
-        type=float,
-        default=0.05,
-        help="--at: largest gap between a relation time and its scan [s] (default 0.05)",
-    )
-    a.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
-    a.set_defaults(func=run_align)
 
 
 def run_generate(args: argparse.Namespace) -> int:
@@ -204,21 +230,39 @@ def run_generate(args: argparse.Namespace) -> int:
 
 
 def run_align(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from relation_metric.errors import OptionError
-    from slamrel.formats.bags import names_bag, split_bag_spec
     from slamrel.formats.laser import read_laser_scans
-    from slamrel.formats.relations import read_relations, write_relations
-    from slamrel.scans.correlative import CorrelativeOptions
-    from slamrel.scans.proposals import consecutive_pairs, loop_pairs, pairs_at_times
-    from slamrel.scans.relations import (
-        AlignOptions,
-        QualityLimits,
-        align_scans,
-        guesses_from_poses,
+    from slamrel.formats.relations import write_relations
+    from slamrel.scans.relations import align_scans, guesses_from_poses
+
+    bag = _checked_align_options(args)
+    check_outputs(
+        [args.output, args.report, args.review], input_files([args.log, args.estimate, args.at])
     )
-    from slamrel.scans.report import estimate_at_scans, format_report
+    scans = read_laser_scans(args.log, record=args.record)
+    scans, poses, summary = _align_guesses(args, scans, bag)
+    prop = _align_pairs(args, scans, poses)
+    options = _align_options(args)
+    result = align_scans(scans, prop, guesses_from_poses(poses, prop), options)
+    write_relations(args.output, result.relation_set())
+    _write_align_extras(args, scans, result, poses, options, bag)
+    if not args.quiet:
+        flagged = int(result.flagged.sum())
+        print(
+            f"{len(result)} relations from {len(scans)} {scans.record} scans "
+            f"({summary}) -> {args.output}"
+        )
+        print(
+            f"{flagged} flagged for review, {int((result.initialiser == 'correlative').sum())} "
+            f"re-initialised by the correlative search"
+        )
+    return 0
+
+
+def _checked_align_options(args: argparse.Namespace) -> bool:
+    """Refuse option values ``relations align`` cannot use, before any file is read; whether
+    LOG names a ROS bag (whose options differ from a CARMEN log's)."""
+    from relation_metric.errors import OptionError
+    from slamrel.formats.bags import names_bag
 
     names = ("distance", "angle", "loop_radius", "search_xy", "search_theta", "max_correction")
     for name in (*names, "max_correction_angle"):
@@ -237,10 +281,20 @@ def run_align(args: argparse.Namespace) -> int:
             )
     elif args.base_frame:
         raise OptionError("--base-frame applies to a ROS bag LOG (BAG:TOPIC) only")
-    check_outputs(
-        [args.output, args.report, args.review], input_files([args.log, args.estimate, args.at])
-    )
-    scans = read_laser_scans(args.log, record=args.record)
+    return bag
+
+
+def _align_guesses(
+    args: argparse.Namespace, scans: LaserScans, bag: bool
+) -> tuple[LaserScans, NDArray[np.float64], str]:
+    """The scans (a bag's: those with a pose), the laser pose of each, which gives the
+    alignments their initial guesses, and where the poses came from (for the summary): the
+    bag's estimate, ``--estimate``, or the log's own laser poses."""
+    import numpy as np
+
+    from relation_metric.errors import OptionError
+    from slamrel.scans.report import estimate_at_scans, within_span
+
     if bag:
         scans, poses, source = _bag_guesses(args, scans)
         summary = f"{scans.frame_id or 'laser'} poses from {source}"
@@ -253,6 +307,9 @@ def run_align(args: argparse.Namespace) -> int:
             role="estimate",
             skip_invalid=args.skip_invalid_poses,
         ).trajectory
+        _refuse_disjoint(
+            args.estimate, scans, est.timestamps, within_span(scans.timestamps, est.timestamps)
+        )
         poses, corrected = estimate_at_scans(scans, est.timestamps, est.poses)
         summary = f"guesses from {args.estimate}; {corrected} scan pose(s) odometry-corrected"
     else:
@@ -262,27 +319,64 @@ def run_align(args: argparse.Namespace) -> int:
         raise OptionError(
             f"{args.log} has scans without poses ({scans.record}); give --estimate TRAJ"
         )
+    return scans, poses, summary
+
+
+def _refuse_disjoint(
+    estimate: str, scans: LaserScans, times: NDArray[np.float64], inside: NDArray[np.bool_]
+) -> None:
+    """Refuse an estimate (its pose ``times``) whose time span holds none of the scans
+    (``inside``: which it holds): its poses would guess nothing, and any guess would be the
+    log's own motion presented as the estimate's."""
+    if inside.any():
+        return
+    from relation_metric.errors import InputError
+
+    first, last = (float(times[0]), float(times[-1])) if times.size else (float("nan"),) * 2
+    raise InputError(
+        f"no scan lies within the estimate's time span ({first:.3f} … {last:.3f} s; the "
+        f"scans: {scans.timestamps.min():.3f} … {scans.timestamps.max():.3f} s)",
+        path=estimate,
+    )
+
+
+def _align_pairs(
+    args: argparse.Namespace, scans: LaserScans, poses: NDArray[np.float64]
+) -> Proposals:
+    """The pairs of scans to align: those of ``--at``'s relations, or consecutive keyframes
+    (and, with ``--loops``, loop pairs)."""
+    from slamrel.formats.relations import read_relations
+    from slamrel.scans.proposals import consecutive_pairs, loop_pairs, pairs_at_times
+
     if args.at:
         given = read_relations(args.at)
-        prop = pairs_at_times(
+        return pairs_at_times(
             scans.timestamps,
             given.first,
             given.second,
             tolerance=args.time_tolerance,
             path=args.at,
         )
-    else:
-        prop = consecutive_pairs(poses, scans.timestamps, distance=args.distance, angle=args.angle)
-        if args.loops:
-            prop = prop + loop_pairs(
-                poses,
-                scans.timestamps,
-                radius=args.loop_radius,
-                min_travel=args.loop_min_travel,
-                distance=args.distance,
-                angle=args.angle,
-            )
-    options = AlignOptions(
+    prop = consecutive_pairs(poses, scans.timestamps, distance=args.distance, angle=args.angle)
+    if args.loops:
+        prop = prop + loop_pairs(
+            poses,
+            scans.timestamps,
+            radius=args.loop_radius,
+            min_travel=args.loop_min_travel,
+            distance=args.distance,
+            angle=args.angle,
+        )
+    return prop
+
+
+def _align_options(args: argparse.Namespace) -> AlignOptions:
+    """The alignment's options (correlative search, readings, quality limits) from the
+    command line."""
+    from slamrel.scans.correlative import CorrelativeOptions
+    from slamrel.scans.relations import AlignOptions, QualityLimits
+
+    return AlignOptions(
         correlative=CorrelativeOptions(search_xy=args.search_xy, search_theta=args.search_theta),
         global_search=args.global_search,
         max_range=args.max_range,
@@ -290,8 +384,20 @@ def run_align(args: argparse.Namespace) -> int:
             max_correction=args.max_correction, max_correction_angle=args.max_correction_angle
         ),
     )
-    result = align_scans(scans, prop, guesses_from_poses(poses, prop), options)
-    write_relations(args.output, result.relation_set())
+
+
+def _write_align_extras(
+    args: argparse.Namespace,
+    scans: LaserScans,
+    result: ScanRelations,
+    poses: NDArray[np.float64],
+    options: AlignOptions,
+    bag: bool,
+) -> None:
+    """The outputs asked for besides the relations: ``--report`` and ``--review``."""
+    from slamrel.formats.bags import split_bag_spec
+    from slamrel.scans.report import format_report
+
     if args.report:
         from slamrel.outputs import write_text_atomic
 
@@ -304,17 +410,6 @@ def run_align(args: argparse.Namespace) -> int:
         spec = split_bag_spec(args.log) if bag else None
         name = Path(args.log).name if spec is None else f"{Path(spec.path).name}:{spec.topic}"
         write_scan_review(args.review, scans, result, poses, options, name=name)
-    if not args.quiet:
-        flagged = int(result.flagged.sum())
-        print(
-            f"{len(result)} relations from {len(scans)} {scans.record} scans "
-            f"({summary}) -> {args.output}"
-        )
-        print(
-            f"{flagged} flagged for review, {int((result.initialiser == 'correlative').sum())} "
-            f"re-initialised by the correlative search"
-        )
-    return 0
 
 
 def _bag_guesses(
@@ -326,7 +421,6 @@ def _bag_guesses(
 
     import numpy as np
 
-    from relation_metric.errors import InputError
     from slamrel.evaluation import load_trajectory
     from slamrel.formats.bags import bag_topic_frames, split_bag_spec
     from slamrel.formats.laser import BagScanWarning, bag_laser_offset
@@ -363,13 +457,8 @@ def _bag_guesses(
         )
         offset, text = np.zeros(3), "laser offset zero"
     poses, inside = laser_poses_at_stamps(scans.timestamps, est, offset)
+    _refuse_disjoint(args.estimate, scans, est.timestamps, inside)
     first, last = est.span()
-    if not inside.any():
-        raise InputError(
-            f"no scan lies within the estimate's time span ({first:.3f} … {last:.3f} s; the "
-            f"scans: {scans.timestamps.min():.3f} … {scans.timestamps.max():.3f} s)",
-            path=args.estimate,
-        )
     if not inside.all():
         out = int(np.count_nonzero(~inside))
         warnings.warn(

@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from relation_metric.errors import InputError
+from relation_metric.errors import InputError, OptionError
 from slamrel.commands import options as opt
 from slamrel.commands.common import (
     add_association_arguments,
@@ -24,7 +24,7 @@ from slamrel.constants import NOISE_HELP, NOISE_NAMES, WORLDS
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     from landmark_graph.landmark_association import Association
-    from recovery.bundle import Bundle
+    from slamrel.pipeline import RunInput
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -32,7 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "run",
         help="simulate, run EKF-SLAM, recover and score the trajectory, write a report",
         description="SOURCE is a SLAM result bundle directory (scored against its "
-        "groundtruth.csv) or a built-in world (" + ", ".join(WORLDS) + "); default simple1.",
+        "groundtruth.csv when it has one; without, the report holds what needs no truth and "
+        "the scores on --relations) or a built-in world (" + ", ".join(WORLDS) + "); default "
+        "simple1.",
     )
     p.add_argument(
         "source",
@@ -70,6 +72,19 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default=1.0,
         help="factor on the noise the filter assumes (default: %(default)s)",
     )
+    p.add_argument(
+        "--relations",
+        metavar="FILE",
+        help="reference relations (Freiburg .relations, e.g. from slamrel relations align) "
+        "every estimate is scored on too, as slamrel evaluate scores them; with ground truth "
+        "or without",
+    )
+    p.add_argument(
+        "--reference-map",
+        metavar="FILE",
+        help="a reference landmark map (any format map-compare reads) the SLAM map is "
+        "compared with, for a bundle without landmarks_groundtruth.csv",
+    )
     add_association_arguments(p)
     add_force_argument(p)
     add_recovery_arguments(
@@ -94,7 +109,10 @@ def run(args: argparse.Namespace) -> int:
         check_rate(args.source, args.rate)
     assoc_file = association_file(args.associate)
     check_outputs(
-        [], [args.source if is_dir else None, assoc_file], dirs=[args.output], force=args.force
+        [],
+        [args.source if is_dir else None, assoc_file, args.relations, args.reference_map],
+        dirs=[args.output],
+        force=args.force,
     )
     start = time.perf_counter()
     if is_dir:
@@ -104,7 +122,8 @@ def run(args: argparse.Namespace) -> int:
             args.source, noise=args.noise, seed=args.seed, rate=args.rate,
             corrupt_fraction=args.corrupt, noise_scale=args.noise_scale,
         )  # fmt: skip
-    associate = _association(args.associate, inp.bundle, assoc_file)
+    inp = _with_references(inp, args.relations, args.reference_map)
+    associate = _association(args.associate, inp, assoc_file)
     words = {'associate="auto"': "--associate auto", "align=False": "--no-align"}
     with in_option_words(words):
         result = run_pipeline(
@@ -115,14 +134,23 @@ def run(args: argparse.Namespace) -> int:
     html = write_report(result, args.output, force=args.force)
     if not args.quiet:
         print(f"slamrel run {result.name} ({time.perf_counter() - start:.1f} s)")
-        print(f"{'estimate':16s}{'relations':>13s}{'trans mean [m]':>16s}{'rot mean [rad]':>16s}")
+        if result.evaluations or result.reference is not None:
+            head = f"{'relations':>13s}{'trans mean [m]':>16s}{'rot mean [rad]':>16s}"
+            print(f"{'estimate':16s}{head}")
         for name, evs in result.evaluations.items():
             for set_name in ("consecutive", "loops", "global"):
                 if set_name in evs:
                     ev = evs[set_name]
                     print(
-                        f"{name:16s}{set_name:>13s}{ev.translation['abs'].mean:16.4f}{ev.rotation['abs'].mean:16.4f}"
+                        f"{name:16s}{set_name:>13s}{ev.translation.abs.mean:16.4f}{ev.rotation.abs.mean:16.4f}"
                     )
+        if result.reference is not None:
+            for name, ev in result.reference.scores.items():
+                t, r = ev.translation.abs.mean, ev.rotation.abs.mean
+                print(f"{name:16s}{'reference':>13s}{t:16.4f}{r:16.4f}")
+        if not result.has_truth:
+            scored = "nothing scored" if result.reference is None else "scored only on --relations"
+            print(f"no ground truth: {scored}; NEES not judged (see the report)")
         ms = result.map_summary
         if ms is not None:
             extra = f", {ms.unobserved} never within reach" if ms.unobserved else ""
@@ -146,19 +174,54 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _association(value: str, bundle: Bundle, path: str | None) -> str | Association:
-    """``--associate`` for the run: the mode, or the file read against the bundle's maps."""
+def _with_references(inp: RunInput, relations: str | None, reference_map: str | None) -> RunInput:
+    """The run's input with ``--relations`` (read as ``slamrel evaluate`` reads a
+    ``.relations`` file) and ``--reference-map`` (read as ``map-compare`` reads a map)."""
+    import dataclasses
+
+    if reference_map is not None and inp.bundle.landmarks_groundtruth is not None:
+        raise OptionError(
+            "the bundle has its own landmarks_groundtruth.csv, which the map is compared "
+            "with; drop --reference-map (or the file)",
+            option="--reference-map",
+        )
+    changes: dict[str, Any] = {}
+    if relations is not None:
+        from slamrel.evaluation import EvaluateOptions, load_reference
+
+        rel, trajectory = load_reference(relations, EvaluateOptions())
+        if trajectory is not None:
+            raise InputError(
+                "read as a trajectory: expected a Freiburg .relations file (a ground-truth "
+                "trajectory belongs in the bundle as groundtruth.csv)",
+                path=relations,
+            )
+        changes |= {"reference_relations": rel, "reference_relations_name": relations}
+    if reference_map is not None:
+        from slamrel.formats.landmark_maps import read_map
+
+        changes["reference_map"] = read_map(reference_map)
+    return dataclasses.replace(inp, **changes) if changes else inp
+
+
+def _association(value: str, inp: RunInput, path: str | None) -> str | Association:
+    """``--associate`` for the run: the mode, or the file read against the bundle's maps (the
+    SLAM map and the true landmarks, or the ``--reference-map``)."""
     if path is None:
         return value
     from landmark_graph.maps import LandmarkMap
 
-    if bundle.landmarks_groundtruth is None:
+    bundle = inp.bundle
+    ref = inp.reference_map
+    if ref is None and bundle.landmarks_groundtruth is not None:
+        ref = LandmarkMap(*bundle.landmarks_groundtruth)
+    if ref is None:
         raise InputError(
-            "the bundle has no landmarks_groundtruth.csv: an association file has nothing to "
-            "pair the map with",
+            "the bundle has no landmarks_groundtruth.csv (and no --reference-map is given): an "
+            "association file has nothing to pair the map with",
             path=path,
         )
     est = LandmarkMap(bundle.map_ids, bundle.map_xy)
     with errors_about(path):
-        choice = association_choice(value, est, LandmarkMap(*bundle.landmarks_groundtruth))
+        choice = association_choice(value, est, ref)
     return choice

@@ -27,7 +27,9 @@ from slamrel.commands.common import (
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
     import numpy as np
 
-    from slamrel.backends.least_squares import PoseGraph
+    from slamrel.backends.graph import PoseGraph
+    from slamrel.backends.least_squares import GraphSolution
+    from slamrel.backends.pose_only import LandmarkLog
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -51,6 +53,17 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     s.add_argument("graph", metavar="GRAPH", help="g2o graph or iSAM text file")
     s.add_argument("-o", "--output", required=True, metavar="DIR", help="directory to write")
+    _add_lm_arguments(s)
+    _add_method_arguments(s)
+    _add_toro_arguments(s)
+    add_noise_argument(s)
+    add_force_argument(s)
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    s.set_defaults(func=run_solve)
+
+
+def _add_lm_arguments(s: argparse.ArgumentParser) -> None:
+    """``--method lm``'s stopping rule and its incremental schedule of sub-problems."""
     s.add_argument(
         "--max-iterations",
         type=opt.positive_int,
@@ -80,6 +93,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="F",
         help="factor on the poses added per sub-problem (default 2; 1: a fixed step of --batch)",
     )
+
+
+def _add_method_arguments(s: argparse.ArgumentParser) -> None:
+    """Which optimiser, on the graph as it is or on Hu et al.'s pose-only graph of it."""
     s.add_argument(
         "--method",
         choices=("lm", "toro"),
@@ -101,6 +118,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="K",
         help="Method 2: pose pairs sharing at least K landmarks (default 5, the paper's)",
     )
+
+
+def _add_toro_arguments(s: argparse.ArgumentParser) -> None:
+    """``--method toro``'s passes, spanning tree, visiting order and update rules."""
     s.add_argument(
         "--toro-iterations",
         type=opt.nonnegative_int,
@@ -130,10 +151,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "OpenSLAM's toro as measured on it (toro), or the update as the papers state it "
         "(papers) (default: %(default)s)",
     )
-    add_noise_argument(s)
-    add_force_argument(s)
-    s.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
-    s.set_defaults(func=run_solve)
 
 
 def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
@@ -161,81 +178,19 @@ def _load(path: str, noise: str) -> tuple[PoseGraph, np.ndarray, np.ndarray]:
 def run_solve(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from relation_metric.errors import InputError
-    from relation_metric.trajectory import Trajectory
-    from slamrel.backends.least_squares import PoseGraph, solve_graph, solve_graph_incremental
-    from slamrel.backends.pose_only import landmarks_given_poses, pose_only_from_landmark_graph
-    from slamrel.backends.toro_optimiser import toro_optimize
-    from slamrel.formats.g2o import write_g2o_graph
-    from slamrel.formats.landmark_csv import write_landmark_csv
-    from slamrel.formats.trajectories import write_trajectory
-    from slamrel.outputs import staged_directory
+    from slamrel.backends.pose_only import landmarks_given_poses
 
     check_outputs([], [args.graph], dirs=[args.output], force=args.force)
     graph, pose_ids, lm_ids = _load(args.graph, args.noise)
     notes: list[str] = []
+    sol = None
     with errors_about(args.graph):
-        log = None
-        if args.pose_only != "none":
-            if graph.pl_k.size == 0:
-                raise InputError(
-                    f"--pose-only {args.pose_only} extracts constraints from landmark "
-                    "observations, and this graph has none (a pose graph: drop --pose-only)"
-                )
-            po = pose_only_from_landmark_graph(
-                graph, method=1 if args.pose_only == "m1" else 2, min_common=args.min_common
-            )
-            log = po.log
-            notes.append(
-                f"pose-only {args.pose_only.upper()}: {po.constraints.pairs.shape[0]} pair "
-                f"constraints from {graph.pl_k.size} observations, {graph.n_poses - 1} "
-                f"odometry steps, {po.kept} other pose-pose factors kept"
-            )
-            problem = po.graph
-        else:
-            problem = graph
+        problem, log = _problem(args, graph, notes)
         if args.method == "toro":
-            if problem.pl_k.size:
-                raise InputError(
-                    f"TORO optimises pose graphs; this graph has {problem.pl_k.size} "
-                    "pose-landmark factors (--pose-only m1|m2 extracts a pose graph from them)"
-                )
-            tree = toro_optimize(
-                problem,
-                iterations=args.toro_iterations,
-                tree=args.toro_tree,
-                order=args.toro_order,
-                rules=args.toro_rules,
-            )
-            if tree.dropped:
-                notes.append(
-                    f"TORO used one constraint per pose pair, the first: {tree.dropped} later "
-                    "parallel constraints were left out of the steps (the cost counts them)"
-                )
-            poses = np.asarray(tree.poses)
-            landmarks = np.asarray(problem.landmarks)
-            converged = True  # a fixed number of passes, as TORO runs
-            summary = (
-                f"TORO: {tree.iterations} iterations ({args.toro_tree} tree, mean path "
-                f"{tree.mean_path_length:.3g} poses, {args.toro_order} order, "
-                f"{args.toro_rules} rules): cost "
-                f"{tree.cost[0]:.6g} -> {tree.cost[-1]:.6g}"
-            )
+            poses, landmarks, summary = _solve_toro(args, problem, notes)
         else:
-            if args.batch == 0:
-                sol = solve_graph(
-                    problem, max_iterations=args.max_iterations, tolerance=args.tolerance
-                )
-            else:
-                sol = solve_graph_incremental(
-                    problem,
-                    batch=args.batch,
-                    growth=args.growth,
-                    max_iterations=args.max_iterations,
-                    tolerance=args.tolerance,
-                )
+            sol = _solve_lm(args, problem)
             poses, landmarks = np.asarray(sol.poses), np.asarray(sol.landmarks)
-            converged = sol.converged
             summary = (
                 f"{'converged' if sol.converged else 'NOT converged'} after {sol.iterations} "
                 f"iterations: cost {sol.cost[0]:.6g} -> {sol.cost[-1]:.6g} "
@@ -246,21 +201,8 @@ def run_solve(args: argparse.Namespace) -> int:
             landmarks = np.zeros((graph.n_landmarks, 2))
             landmarks[fitted_ids] = fitted
     out = Path(args.output)
-    written = PoseGraph(
-        poses, np.asarray(landmarks).reshape(-1, 2) if log is None else np.empty((0, 2)),
-        problem.pp_i, problem.pp_j, problem.pp_z, problem.pp_info,
-        problem.pl_k, problem.pl_l, problem.pl_z, problem.pl_info,
-    )  # fmt: skip
-    with staged_directory(out, kind="solve", force=args.force) as tmp:
-        write_trajectory(tmp / "trajectory.txt", Trajectory.from_poses(poses), format="plain")
-        write_landmark_csv(tmp / "landmarks.csv", lm_ids, landmarks)
-        write_g2o_graph(
-            tmp / "solved.g2o",
-            written,
-            pose_ids=pose_ids,
-            landmark_ids=lm_ids if log is None else np.empty(0, np.int64),
-        )
-    if not converged:
+    _write_solution(args, problem, poses, landmarks, log, pose_ids, lm_ids)
+    if sol is not None and not sol.converged:  # TORO runs a fixed number of passes
         # a result all the same (the last iterate is written), said even with -q
         warnings.warn(
             f"{args.graph}: NOT converged after {sol.iterations} iterations (cost "
@@ -273,10 +215,124 @@ def run_solve(args: argparse.Namespace) -> int:
         for note in notes:
             print(note)
         print(f"{summary}; wrote {out}/")
-        if args.method == "lm" and sol.faster_solver == "cholmod":
+        if sol is not None and sol.faster_solver == "cholmod":
             print(
                 "note: this graph has much fill-in; CHOLMOD's supernodal Cholesky would "
                 "factorise it faster than the core back-ends: install the optional `fast` "
                 "extra (cvxopt, GPL-3.0)"
             )
     return 0
+
+
+def _problem(
+    args: argparse.Namespace, graph: PoseGraph, notes: list[str]
+) -> tuple[PoseGraph, LandmarkLog | None]:
+    """The graph to optimise: ``graph`` itself, or with ``--pose-only`` its pose-only graph
+    and the landmark observations the landmarks are fitted from afterwards (its
+    constraints counted in ``notes``)."""
+    from relation_metric.errors import InputError
+    from slamrel.backends.pose_only import pose_only_from_landmark_graph
+
+    if args.pose_only == "none":
+        return graph, None
+    if graph.pl_k.size == 0:
+        raise InputError(
+            f"--pose-only {args.pose_only} extracts constraints from landmark "
+            "observations, and this graph has none (a pose graph: drop --pose-only)"
+        )
+    po = pose_only_from_landmark_graph(
+        graph, method=1 if args.pose_only == "m1" else 2, min_common=args.min_common
+    )
+    notes.append(
+        f"pose-only {args.pose_only.upper()}: {po.constraints.pairs.shape[0]} pair "
+        f"constraints from {graph.pl_k.size} observations, {graph.n_poses - 1} "
+        f"odometry steps, {po.kept} other pose-pose factors kept"
+    )
+    return po.graph, po.log
+
+
+def _solve_toro(
+    args: argparse.Namespace, problem: PoseGraph, notes: list[str]
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """TORO on a pose graph: its poses, the graph's landmarks (none) and the summary line
+    (the constraints it left out noted in ``notes``)."""
+    import numpy as np
+
+    from relation_metric.errors import InputError
+    from slamrel.backends.toro_optimiser import toro_optimize
+
+    if problem.pl_k.size:
+        raise InputError(
+            f"TORO optimises pose graphs; this graph has {problem.pl_k.size} "
+            "pose-landmark factors (--pose-only m1|m2 extracts a pose graph from them)"
+        )
+    tree = toro_optimize(
+        problem,
+        iterations=args.toro_iterations,
+        tree=args.toro_tree,
+        order=args.toro_order,
+        rules=args.toro_rules,
+    )
+    if tree.dropped:
+        notes.append(
+            f"TORO used one constraint per pose pair, the first: {tree.dropped} later "
+            "parallel constraints were left out of the steps (the cost counts them)"
+        )
+    summary = (
+        f"TORO: {tree.iterations} iterations ({args.toro_tree} tree, mean path "
+        f"{tree.mean_path_length:.3g} poses, {args.toro_order} order, "
+        f"{args.toro_rules} rules): cost "
+        f"{tree.cost[0]:.6g} -> {tree.cost[-1]:.6g}"
+    )
+    return np.asarray(tree.poses), np.asarray(problem.landmarks), summary
+
+
+def _solve_lm(args: argparse.Namespace, problem: PoseGraph) -> GraphSolution:
+    """Levenberg-Marquardt on ``problem``: one batch solve (``--batch 0``) or incremental."""
+    from slamrel.backends.least_squares import solve_graph, solve_graph_incremental
+
+    if args.batch == 0:
+        return solve_graph(problem, max_iterations=args.max_iterations, tolerance=args.tolerance)
+    return solve_graph_incremental(
+        problem,
+        batch=args.batch,
+        growth=args.growth,
+        max_iterations=args.max_iterations,
+        tolerance=args.tolerance,
+    )
+
+
+def _write_solution(
+    args: argparse.Namespace,
+    problem: PoseGraph,
+    poses: np.ndarray,
+    landmarks: np.ndarray,
+    log: LandmarkLog | None,
+    pose_ids: np.ndarray,
+    lm_ids: np.ndarray,
+) -> None:
+    """trajectory.txt, landmarks.csv and solved.g2o (``problem``'s factors at the solution;
+    a pose-only problem's without landmarks) into ``-o DIR``, all or none."""
+    import numpy as np
+
+    from relation_metric.trajectory import Trajectory
+    from slamrel.backends.graph import PoseGraph
+    from slamrel.formats.g2o import write_g2o_graph
+    from slamrel.formats.landmark_csv import write_landmark_csv
+    from slamrel.formats.trajectories import write_trajectory
+    from slamrel.outputs import staged_directory
+
+    written = PoseGraph(
+        poses, np.asarray(landmarks).reshape(-1, 2) if log is None else np.empty((0, 2)),
+        problem.pp_i, problem.pp_j, problem.pp_z, problem.pp_info,
+        problem.pl_k, problem.pl_l, problem.pl_z, problem.pl_info,
+    )  # fmt: skip
+    with staged_directory(Path(args.output), kind="solve", force=args.force) as tmp:
+        write_trajectory(tmp / "trajectory.txt", Trajectory.from_poses(poses), format="plain")
+        write_landmark_csv(tmp / "landmarks.csv", lm_ids, landmarks)
+        write_g2o_graph(
+            tmp / "solved.g2o",
+            written,
+            pose_ids=pose_ids,
+            landmark_ids=lm_ids if log is None else np.empty(0, np.int64),
+        )

@@ -280,6 +280,40 @@ def _topics(reader: Any) -> list[BagTopic]:
     return [BagTopic(t, kind[t], count[t]) for t in sorted(kind)]
 
 
+def _messages(reader: Any, connections: list[Any]) -> Iterator[tuple[int, Any, Any]]:
+    """``(k, connection, message)`` of ``connections`` in bag order, ``k`` the 1-based index
+    of the message on its topic; a message that cannot be read or deserialized (cut off,
+    another type than its connection declares) raises :class:`InputError` naming the bag,
+    the topic and ``k`` instead of a bug report."""
+    count: Counter[str] = Counter()
+    stream = iter(reader.messages(connections=connections))
+    while True:
+        try:
+            connection, _, raw = next(stream)
+        except StopIteration:
+            return
+        except Exception as exc:  # noqa: BLE001 - rosbags' own errors, struct, OSError
+            after = ", ".join(f"{t} after {n}" for t, n in sorted(count.items()))
+            raise InputError(
+                f"cannot read the next message ({type(exc).__name__}: {exc})"
+                + (f" (messages read: {after})" if after else "")
+                + "; expected a complete bag",
+                path=reader.paths[0],
+            ) from None
+        count[connection.topic] += 1
+        k = count[connection.topic]
+        try:
+            msg = reader.deserialize(raw, connection.msgtype)
+        except Exception as exc:  # noqa: BLE001 - any bytes that do not decode
+            raise InputError(
+                f"topic {connection.topic!r}, message {k}: does not deserialize as "
+                f"{connection.msgtype.replace('/msg/', '/')} ({type(exc).__name__}: {exc}); "
+                "expected a message of the type its connection declares",
+                path=reader.paths[0],
+            ) from None
+        yield k, connection, msg
+
+
 def describe_bag_topics(topics: list[BagTopic]) -> str:
     """``its topics: /a (geometry_msgs/PoseStamped, 12), ...`` for messages."""
     if not topics:
@@ -341,8 +375,7 @@ def _read_topic(reader: Any, topic: str, msgtype: str) -> BagPoses:
     rows: list[tuple[float, ...]] = []
     covs: list[Any] = []
     frame = child = None
-    for connection, _, raw in reader.messages(connections=connections):
-        msg = reader.deserialize(raw, connection.msgtype)
+    for _, _, msg in _messages(reader, connections):
         s = msg.header.stamp
         stamps.append(s.sec + s.nanosec * 1e-9)
         if msgtype == _TRANSFORM:
@@ -387,9 +420,8 @@ def _tf_edges(reader: Any, topics: Mapping[str, Any]) -> dict[str, _Edge]:
     edges: dict[str, _Edge] = {}
     if not connections:  # rosbags reads every topic for an empty list
         return edges
-    for connection, _, raw in reader.messages(connections=connections):
+    for _, connection, msg in _messages(reader, connections):
         static = connection.topic.lstrip("/") == "tf_static"
-        msg = reader.deserialize(raw, connection.msgtype)
         for tf in msg.transforms:
             parent, child = tf.header.frame_id.lstrip("/"), tf.child_frame_id.lstrip("/")
             edge = edges.setdefault(child, _Edge(parent, child, static))
@@ -585,8 +617,7 @@ def read_bag_laser_scans(spec: BagSpec) -> BagScans:
         config: list[tuple[float, float, float, float]] = []
         rows: list[NDArray[np.float64]] = []
         frame: str | None = None
-        for k, (connection, _, raw) in enumerate(reader.messages(connections=connections), 1):
-            msg = reader.deserialize(raw, connection.msgtype)
+        for k, _, msg in _messages(reader, connections):
             r = np.asarray(msg.ranges, dtype=np.float64)
             if rows and r.size != rows[0].size:
                 raise InputError(
@@ -671,8 +702,7 @@ def bag_topic_frames(spec: BagSpec) -> tuple[str, str]:
             known = set(edges) | {e.parent for e in edges.values()}
             return _split_frames(spec.frames, known, spec.path)
         connections = [c for c in reader.connections if c.topic == spec.topic]
-        for connection, _, raw in reader.messages(connections=connections) if connections else ():
-            msg = reader.deserialize(raw, connection.msgtype)
+        for _, _, msg in _messages(reader, connections) if connections else ():
             child = getattr(msg, "child_frame_id", "")
             return msg.header.frame_id.lstrip("/"), str(child).lstrip("/")
     return "", ""

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recovery.bundle import Bundle
-from recovery.constants import MAX_SIGMA, MAX_VARIANCE
+from recovery.constants import MAX_SIGMA, MAX_VARIANCE, MIN_SENSOR_SIGMA
 from recovery.models import (
     CONTROL_STAMPS,
     INTEGRATIONS,
@@ -54,6 +54,7 @@ from slamrel.constants import BUNDLE_FORMAT as FORMAT
 from slamrel.formats.landmark_csv import read_landmark_csv, write_landmark_csv
 from slamrel.formats.text import (
     format_csv_table,
+    loads_json,
     read_csv_id_column,
     read_csv_table,
     read_source,
@@ -354,6 +355,15 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
                 path=path,
                 line=_line_of_key(text, n),
             )
+        if v < MIN_SENSOR_SIGMA:
+            raise InputError(
+                f"sensor_model.{n}: {v:g} is below {MIN_SENSOR_SIGMA:g}: its variance "
+                f"{v:g}² is not a float64 number (it rounds to {v * v:g}, the noise-free "
+                "sensor that 0 states, whose measurements would weigh infinitely); expected a "
+                f"standard deviation of at least {MIN_SENSOR_SIGMA:g}",
+                path=path,
+                line=_line_of_key(text, n),
+            )
         vals.append(v)
     reach: dict[str, float] = {}
     for n in ("max_range", "fov"):  # optional: the sensor's reach, when the writer knows it
@@ -372,7 +382,7 @@ def _read_manifest(path: Path) -> dict[str, Any]:
     name = str(path)
     text = read_text(path)
     try:
-        doc = json.loads(text)
+        doc: Any = loads_json(text, path=name)
     except json.JSONDecodeError as exc:
         raise InputError(f"not valid JSON: {exc.msg}", path=name, line=exc.lineno) from None
     except RecursionError:

@@ -172,5 +172,3 @@ def _read_text(
     cov[:, 3:, 3:] = _triangle(values[:, 8:14], 3)  # orientation (ov_eval's Pr)
     cov[:, :3, :3] = _triangle(values[:, 14:20], 3)  # position (ov_eval's Pt)
     return t, poses, cov, lines, layout
-
-

@@ -31,8 +31,7 @@ from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
 from relation_metric.ids import (
     first_missing,
-    first_repeat,
-    integer_ids,
+    refuse_repeated_ids,
     refuse_self_loops,
     rows_of,
 )
@@ -42,14 +41,14 @@ from slamrel.formats.text import (
     PathLike,
     Records,
     SourceText,
+    exact_record_ids,
     read_keyword_records,
     read_source,
-    record_id_tokens,
     write_text_atomic,
 )
 
 if TYPE_CHECKING:
-    from slamrel.backends.least_squares import PoseGraph
+    from slamrel.backends.graph import PoseGraph
 
 __all__ = [
     "G2O_RECORDS",
@@ -67,8 +66,6 @@ G2O_RECORDS: dict[str, tuple[str, ...]] = {
 }
 """The planar g2o records: their field names after the keyword."""
 
-# From 2**53 on a double no longer holds every integer: such ids are re-read from the text.
-_EXACT_FLOAT_IDS = 2.0**53
 # Leading id columns of each record (vertex id; edge ends), written as integers.
 _ID_COLUMNS = {"VERTEX_SE2": 1, "VERTEX_XY": 1, "EDGE_SE2": 2, "EDGE_SE2_XY": 2}
 
@@ -121,7 +118,8 @@ def read_g2o_records(
         one = _ID_COLUMNS[kind] == 1
         what = [f"{kind} id"] if one else [f"{kind} vertex 1", f"{kind} vertex 2"]
         cols = np.stack(
-            [_exact_ids(vals[:, c], lines, src, c + 1, w) for c, w in enumerate(what)], axis=1
+            [exact_record_ids(vals[:, c], lines, src, c + 1, w) for c, w in enumerate(what)],
+            axis=1,
         ).reshape(-1, len(what))
         if ids is not None:
             ids[kind] = cols
@@ -129,35 +127,10 @@ def read_g2o_records(
             vertex_ids.append(cols[:, 0])
             id_lines.append(lines)
     if vertex_ids:
-        every, every_line = np.concatenate(vertex_ids), np.concatenate(id_lines)
-        repeat = first_repeat(every, tiebreak=every_line)
-        if repeat is not None:
-            first, k = repeat
-            raise InputError(
-                f"vertex id {int(every[k])} is defined twice (first on line "
-                f"{int(every_line[first])})",
-                path=src.path,
-                line=int(every_line[k]),
-            )
+        refuse_repeated_ids(
+            np.concatenate(vertex_ids), np.concatenate(id_lines), src.path, "vertex id"
+        )
     return recs
-
-
-def _exact_ids(
-    values: NDArray[np.float64],
-    lines: NDArray[np.int64],
-    src: SourceText,
-    field: int,
-    column: str,
-) -> NDArray[np.int64]:
-    """An id column as int64: through the parsed floats where they hold every integer
-    (``|id| < 2**53``), re-read from the text where they do not."""
-    big = np.abs(values) >= _EXACT_FLOAT_IDS
-    if not big.any():
-        return integer_ids(values, lines, src.path, column)
-    out = np.empty(values.shape[0], dtype=np.int64)
-    out[~big] = integer_ids(values[~big], lines[~big], src.path, column)
-    out[big] = record_id_tokens(src, lines[big], field, column)
-    return out
 
 
 def format_g2o_records(kind: str, ids: ArrayLike, values: ArrayLike) -> str:
@@ -203,7 +176,7 @@ def read_g2o_graph(
     pose_ids, landmark_ids : ndarray of int
         The file's vertex ids of the graph's poses and landmarks.
     """
-    from slamrel.backends.least_squares import PoseGraph
+    from slamrel.backends.graph import PoseGraph
 
     exact: dict[str, NDArray[np.int64]] = {}
     recs = read_g2o_records(path, source=source, ids=exact)

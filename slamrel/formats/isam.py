@@ -42,7 +42,7 @@ from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
 from relation_metric.ids import first_missing, integer_ids, refuse_self_loops, rows_of
 from relation_metric.trajectory import Trajectory
-from slamrel.backends.least_squares import PoseGraph, initial_landmarks
+from slamrel.backends.graph import PoseGraph, initial_landmarks
 from slamrel.formats.text import PathLike, SourceText, read_keyword_records, read_source
 
 __all__ = [

@@ -29,6 +29,9 @@ with an estimate by time). The time of a scan is its ipc timestamp, as for poses
 Input rule: a record whose counts or numbers are wrong raises :class:`InputError` with file
 and line; a log with more than one kind of laser record needs ``record=`` (no guess which
 sensor is meant); other records are skipped and counted in :attr:`LaserScans.skipped`.
+Scans stay in file order (keyframes and pairs follow the log as written); scans out of time
+order are counted in a :class:`~relation_metric.timeorder.TimeOrderWarning` naming the first
+one's line, since a pair of them measures motion backwards in time.
 
 ROS bags
 --------
@@ -47,6 +50,7 @@ index on the topic.
 from __future__ import annotations
 
 import math
+import warnings
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -56,6 +60,7 @@ from numpy.typing import NDArray
 
 from relation_metric.errors import InputError
 from relation_metric.se2 import between
+from relation_metric.timeorder import TimeOrderWarning, sort_by_time
 from slamrel.formats.bags import (
     BagSpec,
     bag_topics,
@@ -342,6 +347,15 @@ def _scans_from_rows(
                 path=path,
                 line=number,
             )
+    lines = np.array([number for number, _ in rows], dtype=np.int64)
+    report = sort_by_time(times, lines=lines, what=f"{kind} scan")[1]
+    if report.out_of_order:
+        warnings.warn(
+            f"{path}: {report.describe(f'{kind} scan')}; kept in file order (keyframes and "
+            "pairs follow the log as written)",
+            TimeOrderWarning,
+            stacklevel=3,
+        )
     return LaserScans(
         path=path,
         record=kind,
@@ -353,7 +367,7 @@ def _scans_from_rows(
         max_range=config[:, 3].copy(),
         laser_pose=laser,
         odometry_pose=odom,
-        lines=np.array([number for number, _ in rows], dtype=np.int64),
+        lines=lines,
         guessed_config=guessed,
         skipped=skipped,
     )

@@ -1,6 +1,8 @@
-"""Writers for evaluation results: JSON, per-relation CSV, evo result zip.
+"""Evaluation results as files: JSON, the per-relation CSV (writer and reader), evo zips.
 
 All outputs are written atomically (temporary file + rename); none is written over an input.
+The per-relation CSV is the one result slamrel reads again (``slamrel compare``): its writer
+and its reader live here side by side, so that the two agree on every column.
 """
 
 from __future__ import annotations
@@ -9,20 +11,32 @@ import io
 import json
 import zipfile
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.errors import InputError
 from relation_metric.evaluate import Evaluation
-from slamrel.formats.text import NUMBER_FORMAT, PathLike, write_bytes_atomic, write_text_atomic
+from relation_metric.stats import evo_statistics
+from slamrel.formats.text import (
+    NUMBER_FORMAT,
+    PathLike,
+    read_csv_table,
+    read_csv_text_column,
+    read_source,
+    write_bytes_atomic,
+    write_text_atomic,
+)
 
 __all__ = [
     "write_json",
     "write_per_relation_csv",
+    "PerRelationTable",
+    "read_per_relation_csv",
     "write_evo_zip",
     "write_evo_ape_zip",
+    "write_evo_result",
     "evo_stats",
     "EvoDelta",
     "evo_delta",
@@ -111,18 +125,100 @@ def _check_set_names(sets: np.ndarray, n: int) -> None:
             )
 
 
+class PerRelationTable(NamedTuple):
+    """A per-relation CSV (:func:`write_per_relation_csv`) as arrays, one row per relation.
+
+    Attributes
+    ----------
+    t1, t2 : ndarray, shape (M,)
+        The times of the relation's two ends (seconds).
+    translation, rotation : ndarray, shape (M,)
+        The errors (metres; radians or degrees, see ``rotation_unit``); NaN where a cell is
+        empty (only an invalid relation may leave them empty).
+    rotation_unit : str
+        ``"rad"`` (column ``rot_error_rad``) or ``"deg"`` (``rot_error_deg``).
+    valid : ndarray of bool, shape (M,)
+        Whether the relation was associated and scored.
+    relation_set : ndarray of str, shape (M,), or None
+        The ``set`` column (``consecutive``, ``loops``, ...); None when the file has none.
+    lines : ndarray of int, shape (M,)
+        The 1-based line of each relation (for messages about a row).
+    """
+
+    t1: NDArray[np.float64]
+    t2: NDArray[np.float64]
+    translation: NDArray[np.float64]
+    rotation: NDArray[np.float64]
+    rotation_unit: str
+    valid: NDArray[np.bool_]
+    relation_set: NDArray[np.str_] | None
+    lines: NDArray[np.int64]
+
+
+_ROTATION_COLUMNS = ("rot_error_rad", "rot_error_deg")
+
+
+def read_per_relation_csv(path: PathLike) -> PerRelationTable:
+    """Read and check a per-relation CSV of ``slamrel evaluate --per-relation``.
+
+    The columns read are ``t1``, ``t2``, ``trans_error``, ``rot_error_rad`` or
+    ``rot_error_deg``, ``valid`` and, when present, ``set`` (the estimate indices ``i``,
+    ``j`` and ``via_odometry`` are for people and are not read). Number cells as
+    :func:`~slamrel.formats.text.read_csv_table` reads them; the errors of an invalid
+    relation may be empty.
+
+    Raises
+    ------
+    InputError
+        What :func:`~slamrel.formats.text.read_csv_table` refuses (a missing column, a cell
+        that is not a number), a ``valid`` other than 0 or 1, an empty ``set`` cell, or a
+        valid relation without an error value; at the file and line.
+    """
+    src = read_source(path)
+    c, lines = read_csv_table(
+        path,
+        required=("t1", "t2", "trans_error", _ROTATION_COLUMNS, "valid"),
+        empty_ok=("trans_error", *_ROTATION_COLUMNS),
+        describe="the per-relation CSV of slamrel evaluate",
+        source=src,
+    )
+    set_column = read_csv_text_column(src, "set")
+    rot_col = next(n for n in _ROTATION_COLUMNS if n in c)
+    valid = c["valid"]
+    bad = np.flatnonzero((valid != 0) & (valid != 1))
+    if bad.size:
+        raise InputError(
+            f"column 'valid': expected 0 or 1, got {float(valid[bad[0]]):g}",
+            path=path,
+            line=int(lines[bad[0]]),
+        )
+    if set_column is not None:
+        unnamed = np.flatnonzero(set_column == "")
+        if unnamed.size:
+            raise InputError(
+                "column 'set': an empty cell; expected the name of the relation set",
+                path=path,
+                line=int(lines[unnamed[0]]),
+            )
+    keep = valid == 1
+    trans, rot = c["trans_error"], c[rot_col]
+    empty = np.flatnonzero(np.isnan(trans[keep]) | np.isnan(rot[keep]))
+    if empty.size:
+        raise InputError(
+            "a valid relation without an error value; expected numbers in trans_error and "
+            f"{rot_col}",
+            path=path,
+            line=int(lines[keep][empty[0]]),
+        )
+    return PerRelationTable(
+        c["t1"], c["t2"], trans, rot, rot_col.removeprefix("rot_error_"), keep, set_column, lines
+    )
+
+
 def evo_stats(errors: np.ndarray) -> dict[str, float]:
-    """Statistics as evo computes them (population std, ``sse``)."""
-    e = np.asarray(errors, dtype=np.float64)
-    return {
-        "rmse": float(np.sqrt(np.mean(e**2))),
-        "mean": float(np.mean(e)),
-        "median": float(np.median(e)),
-        "std": float(np.std(e)),
-        "min": float(np.min(e)),
-        "max": float(np.max(e)),
-        "sse": float(np.sum(e**2)),
-    }
+    """Statistics as evo computes them (population std, ``sse``):
+    :func:`relation_metric.stats.evo_statistics`."""
+    return evo_statistics(errors)
 
 
 @dataclass(frozen=True)
@@ -275,11 +371,37 @@ def write_evo_ape_zip(
     _write_evo_archive(path, info, e, t, t - t.min())
 
 
+def write_evo_result(
+    path: PathLike,
+    info: dict[str, Any],
+    errors: ArrayLike,
+    timestamps: ArrayLike | None = None,
+    seconds_from_start: ArrayLike | None = None,
+) -> None:
+    """Write an evo result zip with the given ``info`` (evo's ``title``, ``ref_name``,
+    ``est_name``, ``label``), as ``evo_ape``/``evo_rpe --save_results`` do: what ``slamrel
+    ape``/``rpe`` write. ``timestamps`` and ``seconds_from_start`` (K,) are the estimate's
+    times of the errors (None: trajectories without times, as KITTI's; evo's zips then hold
+    no time arrays either)."""
+    e = np.asarray(errors, dtype=np.float64)
+    if e.size == 0:
+        raise InputError("no error value: an evo result needs at least one error", path=path)
+    t = None if timestamps is None else np.asarray(timestamps, dtype=np.float64)
+    s = None if seconds_from_start is None else np.asarray(seconds_from_start, dtype=np.float64)
+    _write_evo_archive(path, info, e, t, s)
+
+
 def _write_evo_archive(
-    path: PathLike, info: dict[str, Any], errors: NDArray, timestamps: NDArray, seconds: NDArray
+    path: PathLike,
+    info: dict[str, Any],
+    errors: NDArray,
+    timestamps: NDArray | None,
+    seconds: NDArray | None,
 ) -> None:
     """The zip evo's ``file_interface.save_res_file`` writes: info, stats and the arrays."""
-    arrays = {"error_array": errors, "timestamps": timestamps, "seconds_from_start": seconds}
+    arrays = {"error_array": errors}
+    if timestamps is not None and seconds is not None:
+        arrays.update(timestamps=timestamps, seconds_from_start=seconds)
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as archive:
         archive.writestr("info.json", json.dumps(info))

@@ -21,6 +21,7 @@ tables are read by :func:`read_csv_table` and written by :func:`write_csv_table`
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -36,6 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.arrays import PathLike
 from relation_metric.errors import InputError
+from relation_metric.ids import integer_ids
 from slamrel.formats.fastparse import UTF8_BOM, read_decimal_table
 from slamrel.outputs import (
     atomic_write,
@@ -54,13 +56,16 @@ __all__ = [
     "RowLines",
     "CsvTable",
     "read_csv_table",
+    "csv_header",
     "read_csv_text_column",
     "read_csv_id_column",
     "exact_integer_tokens",
     "record_id_tokens",
+    "exact_record_ids",
     "format_csv_table",
     "write_csv_table",
     "parse_float",
+    "loads_json",
     "quote_token",
     "write_text_atomic",
     "write_bytes_atomic",
@@ -459,8 +464,9 @@ def read_csv_table(
     Raises
     ------
     InputError
-        An empty file, a missing required column (at the header line), a row with another
-        number of fields or a cell that is not a finite number (at its line).
+        An empty file, a column name given twice or a missing required column (at the
+        header line), a row with another number of fields or a cell that is not a finite
+        number (at its line).
     """
     src = read_source(path) if source is None else source
     name = src.path
@@ -470,7 +476,7 @@ def read_csv_table(
     if not data:
         raise InputError(f"empty file{kind}: expected a header {expected}", path=name)
     head_line, head_text = data[0]
-    header = [h.strip().lower() for h in head_text.split(",")]
+    header = csv_header(head_text, path=name, line=head_line, kind=kind)
     missing = [c for c in required if _find(header, c) is None]
     if missing:
         raise InputError(
@@ -520,6 +526,28 @@ def read_csv_table(
     return CsvTable({c: values[:, i] for i, c in enumerate(wanted)}, numbers)
 
 
+def csv_header(text: str, *, path: str, line: int, kind: str = "") -> list[str]:
+    """The column names of a CSV header line: lower case, stripped of surrounding blanks.
+
+    A name given twice is refused (:class:`InputError` at ``line`` naming it): a reader
+    looks a column up by its name, so the second column of that name would be ignored
+    without a word. Empty names (cells of no column a reader asks for) may repeat.
+    """
+    header = [h.strip().lower() for h in text.split(",")]
+    seen: dict[str, int] = {}
+    for k, h in enumerate(header):
+        if h and h in seen:
+            raise InputError(
+                f"the header{kind} names column {h!r} twice (columns {seen[h] + 1} and "
+                f"{k + 1}); expected each column name once (names are matched case-"
+                "insensitively)",
+                path=path,
+                line=line,
+            )
+        seen.setdefault(h, k)
+    return header
+
+
 def read_csv_text_column(source: SourceText, name: str) -> NDArray[np.str_] | None:
     """The cells of a text column ``name`` of a header CSV, row by row (``None`` if absent).
 
@@ -531,7 +559,7 @@ def read_csv_text_column(source: SourceText, name: str) -> NDArray[np.str_] | No
     first = next(data, None)
     if first is None:
         return None
-    header = [h.strip().lower() for h in first[1].split(",")]
+    header = csv_header(first[1], path=source.path, line=first[0])
     if name not in header:
         return None
     k = header.index(name)
@@ -636,6 +664,34 @@ def record_id_tokens(
     text = source.lines
     cells = np.array([text[n - 1].split()[field] for n in lines.tolist()], dtype=np.str_)
     return exact_integer_tokens(cells, lines, source.path, column, hint="an integer")
+
+
+# From 2**53 on a double no longer holds every integer: such ids are re-read from the text.
+_EXACT_FLOAT_IDS = 2.0**53
+
+
+def exact_record_ids(
+    values: NDArray[np.float64],
+    lines: NDArray[np.int64],
+    source: SourceText,
+    field: int,
+    column: str,
+) -> NDArray[np.int64]:
+    """An id column of keyword records (field ``field``, the keyword being field 0) as exact
+    int64: through the parsed floats where they hold every integer (``|id| < 2**53``),
+    re-read from the text where they do not.
+
+    The one id rule of the keyword-record graph readers (g2o, TORO): a value that is not an
+    integer (``3.5``) or does not fit in int64 raises :class:`InputError` at its line, so no
+    id is ever rounded or truncated onto another.
+    """
+    big = np.abs(values) >= _EXACT_FLOAT_IDS
+    if not big.any():
+        return integer_ids(values, lines, source.path, column)
+    out = np.empty(values.shape[0], dtype=np.int64)
+    out[~big] = integer_ids(values[~big], lines[~big], source.path, column)
+    out[big] = record_id_tokens(source, lines[big], field, column)
+    return out
 
 
 def _column_name(c: Column) -> str:
@@ -861,3 +917,67 @@ def read_keyword_records(
         )
         for k, n in fields.items()
     }
+
+
+# ------------------------------------------------------------------ JSON documents
+
+
+class _RepeatedKey(Exception):
+    """Raised inside :func:`json.loads` by :func:`_unique_pairs` (caught by :func:`loads_json`)."""
+
+
+def _unique_pairs(pairs: list[tuple[str, object]]) -> dict[str, object]:
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        raise _RepeatedKey
+    return out
+
+
+# a JSON string, or one of the structural characters that matter for finding keys
+_JSON_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"|[{}\[\]]')
+
+
+def _repeated_key(text: str) -> tuple[str, int, int]:
+    """The first key (in document order) given twice in one object of valid JSON ``text``:
+    ``(key, its first line, its second line)``."""
+    stack: list[dict[str, int] | None] = []
+    for m in _JSON_TOKEN.finditer(text):
+        token = m.group()
+        if token == "{":
+            stack.append({})
+        elif token == "[":
+            stack.append(None)
+        elif token in "}]":
+            stack.pop()
+        else:
+            keys = stack[-1] if stack else None
+            rest = text[m.end() :].lstrip()
+            if keys is None or not rest.startswith(":"):
+                continue  # a value, not a key
+            key = json.loads(token)
+            line = text.count("\n", 0, m.start()) + 1
+            if key in keys:
+                return key, keys[key], line
+            keys[key] = line
+    raise AssertionError("no repeated key found in a document json refused for one")
+
+
+def loads_json(text: str, *, path: str) -> object:
+    """``json.loads(text)``, refusing a key given twice in one object.
+
+    :func:`json.loads` keeps the last value of a repeated key without a word, so an edited
+    file could silently lose the value its reader meant; every JSON document slamrel reads
+    as input goes through here. Raises :class:`InputError` naming ``path``, the key and the
+    line of its second occurrence; :class:`json.JSONDecodeError` and :class:`RecursionError`
+    pass through for the caller to word.
+    """
+    try:
+        return json.loads(text, object_pairs_hook=_unique_pairs)
+    except _RepeatedKey:
+        key, first, line = _repeated_key(text)
+        raise InputError(
+            f"key {key!r} is given twice in one object (first on line {first}); expected "
+            "each key once (JSON keeps only the last value, silently)",
+            path=path,
+            line=line,
+        ) from None

@@ -6,6 +6,13 @@ TORO's own order (``xx xy yy θθ xθ yθ``; g2o's is the row-first upper triang
 ``xx xy xθ yy yθ θθ``). The older spellings ``VERTEX`` and ``EDGE`` of the same records are
 read too. TORO files hold pose graphs only: writing a graph with landmark factors is an
 error, and so is any other record (named with its line).
+
+The record rules are the g2o reader's (:mod:`slamrel.formats.g2o`), from the same shared
+functions: ids exact integers within int64 (``VERTEX2 3.5`` is refused, not read as vertex
+3; an id beyond 2**53 is re-read from its text, never rounded onto another vertex),
+vertex ids unique, every edge end a known vertex and no self-loop, coordinates within
+:data:`~relation_metric.trajectory.MAX_COORDINATE`, information matrices symmetric positive
+semi-definite — each refused with its file and line.
 """
 
 from __future__ import annotations
@@ -13,14 +20,19 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from relation_metric.checks import check_covariances
 from relation_metric.errors import InputError
-from relation_metric.ids import refuse_self_loops, rows_of
-from slamrel.backends.least_squares import PoseGraph
+from relation_metric.ids import first_missing, refuse_repeated_ids, refuse_self_loops, rows_of
+from relation_metric.trajectory import check_coordinates
+from slamrel.backends.graph import PoseGraph
 from slamrel.formats.text import (
     NUMBER_FORMAT,
     PathLike,
+    Records,
     SourceText,
+    exact_record_ids,
     read_keyword_records,
+    read_source,
     write_text_atomic,
 )
 
@@ -57,31 +69,29 @@ def read_toro_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64]]:
     pose_ids : ndarray of int, shape (N,)
         The file's vertex ids of the graph's poses.
     """
-    recs = read_keyword_records(path, _FIELDS)
-    vert = np.concatenate((recs["VERTEX2"][0], recs["VERTEX"][0])).reshape(-1, 4)
-    edge = np.concatenate((recs["EDGE2"][0], recs["EDGE"][0])).reshape(-1, 11)
-    edge_lines = np.concatenate((recs["EDGE2"][1], recs["EDGE"][1]))
+    src = read_source(path)
+    recs = read_keyword_records(path, _FIELDS, source=src)
+    vert, vert_lines, ids = _records(recs, src, ("VERTEX2", "VERTEX"), ("id",))
+    edge, edge_lines, ends = _records(recs, src, ("EDGE2", "EDGE"), ("vertex 1", "vertex 2"))
     if vert.shape[0] == 0:
         raise InputError("no VERTEX2 records", path=path)
-    ids = vert[:, 0].astype(np.int64)
-    uniq, counts = np.unique(ids, return_counts=True)
-    if (counts > 1).any():
-        raise InputError(f"vertex id {int(uniq[counts > 1][0])} is defined twice", path=path)
-    order = np.argsort(ids)
-    ids = ids[order]
-    ends = edge[:, :2].astype(np.int64)
+    refuse_repeated_ids(ids[:, 0], vert_lines, src.path, "vertex id")
+    check_coordinates(vert[:, 1:3], what="pose", path=src.path, line_of=vert_lines.__getitem__)
+    order = np.argsort(ids[:, 0])
+    ids = ids[order, 0]
     pos = rows_of(ids, ends)
-    ok = pos >= 0
-    if not ok.all():
-        k = int(np.flatnonzero(~ok.all(axis=1))[0])
-        bad = int(ends[k][~ok[k]][0])
+    k = first_missing(pos)
+    if k is not None:
         raise InputError(
-            f"EDGE2 refers to unknown vertex {bad}", path=path, line=int(edge_lines[k])
+            f"EDGE2 refers to unknown vertex {int(ends.ravel()[k])}",
+            path=path,
+            line=int(edge_lines[k // 2]),
         )
     refuse_self_loops(ends, edge_lines, path, "EDGE2")
     info = np.zeros((edge.shape[0], 3, 3))
     info[:, _ROWS, _COLS] = edge[:, 5:11]
     info[:, _COLS, _ROWS] = edge[:, 5:11]
+    check_covariances(info, path=path, lines=edge_lines, what="EDGE2 information matrix")
     graph = PoseGraph(
         poses=vert[order, 1:4],
         landmarks=np.empty((0, 2)),
@@ -91,6 +101,33 @@ def read_toro_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64]]:
         pp_info=info,
     )
     return graph, ids
+
+
+def _records(
+    recs: Records, src: SourceText, kinds: tuple[str, str], id_fields: tuple[str, ...]
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
+    """The records of both spellings ``kinds`` of one record: values, file lines and the
+    leading ``id_fields`` as exact int64 ids (shape (K, len(id_fields)))."""
+    values, lines, ids = [], [], []
+    for kind in kinds:
+        vals, ln = recs[kind]
+        values.append(vals)
+        lines.append(ln)
+        ids.append(
+            np.stack(
+                [
+                    exact_record_ids(vals[:, c], ln, src, c + 1, f"{kind} {name}")
+                    for c, name in enumerate(id_fields)
+                ],
+                axis=1,
+            ).reshape(-1, len(id_fields))
+        )
+    width = _FIELDS[kinds[0]] - 1
+    return (
+        np.concatenate(values).reshape(-1, width),
+        np.concatenate(lines),
+        np.concatenate(ids).reshape(-1, len(id_fields)),
+    )
 
 
 def write_toro_graph(

@@ -25,7 +25,8 @@ Formats
            Other record types are skipped and counted.
 ``g2o``    ``VERTEX_SE2 id x y θ`` (:func:`slamrel.formats.g2o.read_g2o_records`: integer,
            unique ids); the vertex id becomes the timestamp. Other records are skipped and
-           counted.
+           counted; skipped 3-D pose vertices (``VERTEX_SE3…``) also in a
+           :class:`SkippedPoseWarning`.
 ``csv``    comma separated with the header ``t,x,y,theta`` (the SLAM result bundle's
            ``groundtruth.csv``); ``#`` comment lines allowed.
 ``kitti``  KITTI odometry poses: 12 numbers a line, the row-major 3×4 matrix ``[R | t]``.
@@ -91,6 +92,7 @@ __all__ = [
     "LoadedTrajectory",
     "InvalidPoseWarning",
     "PlanarProjectionWarning",
+    "SkippedPoseWarning",
     "DIMENSIONS",
     "CSV_HEADER",
     "detect_trajectory_format",
@@ -157,6 +159,11 @@ class InvalidPoseWarning(UserWarning):
 
 class PlanarProjectionWarning(UserWarning):
     """A 3-D trajectory was projected onto the plane (``dimension="2d"``, ``--planar``)."""
+
+
+class SkippedPoseWarning(UserWarning):
+    """Pose records of a kind the reader does not read (a g2o file's ``VERTEX_SE3``) were
+    skipped: the trajectory lacks those poses."""
 
 
 class LoadedTrajectory(NamedTuple):
@@ -841,6 +848,7 @@ def _read_g2o(src: SourceText, *, skipped: Counter[str]) -> tuple[NDArray, NDArr
     ids: dict[str, NDArray[np.int64]] = {}
     recs = read_g2o_records(src.path, ("VERTEX_SE2",), skipped=skipped, source=src, ids=ids)
     values, lines = recs["VERTEX_SE2"]
+    _warn_skipped_3d_poses(src, skipped)
     big = np.flatnonzero(np.abs(ids["VERTEX_SE2"][:, 0]) >= 2**53)
     if big.size:  # a double cannot hold it: two poses could share one timestamp
         k = int(big[0])
@@ -853,6 +861,23 @@ def _read_g2o(src: SourceText, *, skipped: Counter[str]) -> tuple[NDArray, NDArr
         )
     order = np.argsort(values[:, 0], kind="stable")
     return values[order, 0], values[order, 1:4], lines[order]
+
+
+def _warn_skipped_3d_poses(src: SourceText, skipped: Counter[str]) -> None:
+    """Say that a g2o file's 3-D pose vertices were skipped (the count alone went to
+    ``--json``): a file of ``VERTEX_SE3`` poses with a few ``VERTEX_SE2`` ones would give a
+    trajectory of the latter only, without a word."""
+    kinds = sorted(k for k in skipped if k.startswith("VERTEX_SE3"))
+    if not kinds:
+        return
+    first = next(n for n, text in src.data_lines() if text.split(None, 1)[0] in kinds)
+    counts = ", ".join(f"{skipped[k]} {k}" for k in kinds)
+    warnings.warn(
+        f"{src.path}: skipped {counts} record(s) (3-D poses, first at line {first}); the g2o "
+        "trajectory format reads VERTEX_SE2 poses only",
+        SkippedPoseWarning,
+        stacklevel=4,
+    )
 
 
 def write_trajectory(

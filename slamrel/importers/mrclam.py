@@ -189,14 +189,15 @@ class NoiseFit:
         Standard deviations of the measurement residuals against the ground truth within
         5 robust σ (1.4826 · MAD) of their median; ``outlier_fraction`` of the residuals lie
         beyond that. MRCLAM's residuals are heavy-tailed: the MAD alone would understate the
-        spread of the accepted residuals by ~1.3× and make the filter overconfident.
+        spread of the accepted residuals and make the filter overconfident
+        (benchmarks/README.md).
     alpha : tuple of float
         ``(α1, α2, α3, α4)`` of the speed-proportional velocity model (Probabilistic Robotics
         Table 5.3: ``σ_v² = α1 v² + α2 ω²``, ``σ_ω² = α3 v² + α4 ω²`` per row), fitted by
         iteratively reweighted non-negative least squares of the squared window errors on
         ``[Σ v_k² dt_k², Σ ω_k² dt_k²]`` (see :func:`_fit_variance`). Zero commands
-        then move nothing, as the robots do: they stand still for up to a third of a run
-        (Vicon: median 1 s displacement 0.1 mm there).
+        then move nothing, as the robots do: they stand still for long stretches of a run,
+        where Vicon shows no motion (benchmarks/README.md).
     window : float
     """
 
@@ -215,10 +216,10 @@ class NoiseFit:
 class OdometryCalibration:
     """A delay and scale of the odometry, fitted against the ground truth.
 
-    MRCLAM's odometry rows are velocity *commands*: the robot moves about a quarter of a
-    second after the command and a little slower than commanded (dataset 7: delays
-    0.175–0.275 s, speed scales 0.87–0.91, turn-rate scales 0.91–0.94). Both are systematic,
-    not noise, so a Gaussian filter cannot absorb them; the bundle uses corrected controls
+    MRCLAM's odometry rows are velocity *commands*: the robot moves a fraction of a second
+    after the command and a little slower than commanded (the values fitted on dataset 7:
+    benchmarks/README.md). Both are systematic, not noise, so a Gaussian filter cannot
+    absorb them; the bundle uses corrected controls
     ``[t + delay, scale_v · v, scale_omega · ω]`` and dead reckoning uses the same ones.
 
     Attributes
@@ -472,12 +473,11 @@ def mrclam_bundle(
     :func:`fit_noise` unless given. The log starts at the first control inside the ground
     truth's span; the initial pose is the ground truth there (a tight prior fixes the frame).
     ``motion_noise="speed"`` (default) gives the velocity model the fitted ``alpha`` (noise
-    grows with the commanded speeds, zero at rest), ``"constant"`` the fitted ``σ_v, σ_ω``.
-    Measured on dataset 7 (gated EKF-SLAM + recovery, 1 s relations, mean [m]): with
-    ``"constant"`` robot 4, at rest 37% of the time, wanders under its biased measurements
-    while standing (recovered 0.0070 = dead reckoning 0.0070; loop median 0.17 against 0.026);
-    with ``"speed"`` it is 0.0063 (loop median 0.0075), and the other four robots stay below
-    dead reckoning too. The bundle's description records all fitted values.
+    grows with the commanded speeds, zero at rest), ``"constant"`` the fitted ``σ_v, σ_ω``:
+    with ``"constant"`` a robot that stands still much of the time wanders under its biased
+    measurements while standing, and its recovery is no better than dead reckoning; with
+    ``"speed"`` every robot of dataset 7 stays below dead reckoning (the figures:
+    benchmarks/README.md). The bundle's description records all fitted values.
     """
     if motion_noise not in ("speed", "constant"):
         raise InputError(f"motion_noise must be 'speed' or 'constant', got {motion_noise!r}")

@@ -9,7 +9,13 @@ import numpy as np
 from landmark_graph.map_compare import MapComparison
 from slamrel.plots.relation_errors import pyplot
 
-__all__ = ["map_figure"]
+__all__ = ["MAP_LEGEND", "map_figure"]
+
+#: The legend of :func:`map_figure`: below the plot, where it covers no landmark.
+MAP_LEGEND: dict[str, Any] = {
+    "loc": "upper center", "bbox_to_anchor": (0.5, -0.08), "ncol": 3, "fontsize": 8,
+    "frameon": False,
+}  # fmt: skip
 
 
 def map_figure(res: MapComparison) -> Any:
@@ -17,7 +23,8 @@ def map_figure(res: MapComparison) -> Any:
     reference by the fit on the associated pairs, :mod:`landmark_graph.map_compare`, unless
     the comparison was asked to be unaligned), the reference mesh with each edge coloured by
     its length error, thin triangles dotted, missed, unobserved and spurious landmarks
-    marked."""
+    marked. The legend sits below the plot and the title is two short lines, so that the
+    figure hides no landmark and cuts no word (:data:`MAP_LEGEND`)."""
     plt = pyplot()
     from matplotlib.collections import LineCollection
 
@@ -53,13 +60,14 @@ def map_figure(res: MapComparison) -> Any:
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.legend(loc="best")
+    ax.legend(**MAP_LEGEND)
     al = res.alignment
     frame = f"aligned on {al.pairs} pairs" if al.applied else "as given"
     unobserved = f", {res.unobserved.size} unobserved" if res.unobserved.size else ""
     ax.set_title(
         f"{a.estimate_rows.size} matched, {res.missed.size} missed{unobserved}, "
-        f"{a.spurious.size} spurious; "
-        f"OSPA {res.ospa:.3g} m (c = {res.cutoff:g}, p = {res.order:g}, {frame})"
+        f"{a.spurious.size} spurious\n"
+        f"OSPA {res.ospa:.3g} m (c = {res.cutoff:g}, p = {res.order:g}, {frame})",
+        fontsize=10,
     )
     return fig

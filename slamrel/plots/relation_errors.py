@@ -21,7 +21,14 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-__all__ = ["evaluation_figure", "save_figure", "pyplot", "plot_plane", "PLOT_MODES"]
+__all__ = [
+    "evaluation_figure",
+    "save_figure",
+    "pyplot",
+    "plot_plane",
+    "literal_text",
+    "PLOT_MODES",
+]
 
 #: The planes of :func:`evaluation_figure` (``plot_mode``): two position axes, horizontal then
 #: vertical, or ``"auto"`` (:func:`plot_plane`); defined in :mod:`slamrel.constants`.
@@ -74,6 +81,17 @@ def pyplot():  # type: ignore[no-untyped-def]
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def literal_text(text: str) -> str:
+    """``text`` as matplotlib draws it literally: every ``$`` escaped.
+
+    A pair of unescaped ``$`` makes matplotlib parse the text between as mathtext, so a
+    user's name (a dataset or algorithm, ``a$\\frac$``) would be drawn as formula or fail
+    to draw at all; outside ``$`` nothing else is special (a backslash is drawn as itself).
+    Every user-given text put into a figure goes through here.
+    """
+    return text.replace("$", r"\$")
 
 
 def evaluation_figure(
@@ -188,7 +206,7 @@ def _errors_over_time(ax_t: Axes, ev: Evaluation, estimate: Trajectory, degrees:
     ax_r = ax_t.twinx()
     ax_r.plot(x_axis, rot, ".", ms=3, color="tab:red", alpha=0.6)
     ax_r.set_ylabel(f"rotational error [{'deg' if degrees else 'rad'}]", color="tab:red")
-    s = ev.translation["abs"]
+    s = ev.translation.abs
     ax_t.set_title(
         f"{s.count} relations scored, {int((~valid).sum())} unassociated; "
         f"translation {s.mean:.4g} ± {s.std:.4g} m"

@@ -1,7 +1,7 @@
 """Figures of the end-to-end report (matplotlib, Agg; no statistics computed here).
 
 Every time axis is in seconds since the run's start (the caller passes times on that axis,
-or the run's start ``t0`` to subtract: :class:`slamrel.pipeline.TimeBase`).
+or the run's start ``t0`` to subtract: :class:`slamrel.runs.time_base.TimeBase`).
 """
 
 from __future__ import annotations
@@ -51,8 +51,16 @@ class TimeSpan(Protocol):
     def t1(self) -> float: ...
 
 
+#: Drawing order of :func:`trajectories_figure`: the reference beneath everything, the
+#: landmarks above it, the estimates on top (an estimate lying on the reference must show).
+TRAJECTORY_ZORDER = {"reference": 1.0, "landmarks": 2.0, "estimates": 3.0}
+#: The SLAM map's markers in :func:`trajectories_figure`: hollow purple circles (red is the
+#: colour of the stretches where the map and the log disagree, :func:`mark_stretches_xy`).
+MAP_COLOUR = "tab:purple"
+
+
 def trajectories_figure(
-    reference: Trajectory,
+    reference: Trajectory | None,
     estimates: Mapping[str, Trajectory],
     *,
     landmarks: NDArray[np.float64] | None = None,
@@ -64,17 +72,29 @@ def trajectories_figure(
 
     The estimates and the map are drawn as given: the caller moves them into the reference's
     frame first and says how in ``labels`` (legend text per estimate name) or ``title``.
+    The reference (``None``: there is none) is a thin grey line beneath the estimates
+    (:data:`TRAJECTORY_ZORDER`), so that an estimate lying on it stays visible, and the first
+    estimate (the main one) lies on top of the others; the map is
+    hollow purple circles (:data:`MAP_COLOUR`), true landmarks black crosses.
     """
     plt = pyplot()
+    z = TRAJECTORY_ZORDER
     fig, ax = plt.subplots(figsize=(7, 7), constrained_layout=True)
-    ax.plot(reference.poses[:, 0], reference.poses[:, 1], "k-", lw=2, label="reference", zorder=3)
-    for name, est in estimates.items():
+    if reference is not None:
+        ax.plot(reference.poses[:, 0], reference.poses[:, 1], "-", color="0.5", lw=1.5,
+                label="ground truth", zorder=z["reference"])  # fmt: skip
+    n = len(estimates)
+    for k, (name, est) in enumerate(estimates.items()):
         label = name if labels is None else labels.get(name, name)
-        ax.plot(est.poses[:, 0], est.poses[:, 1], "-", lw=1, label=label)
+        # the first estimate (the main one) on top of the others, the legend in their order
+        ax.plot(est.poses[:, 0], est.poses[:, 1], "-", lw=1, label=label,
+                zorder=z["estimates"] + 0.01 * (n - k))  # fmt: skip
     if landmarks is not None and landmarks.size:
-        ax.plot(landmarks[:, 0], landmarks[:, 1], "k+", ms=7, label="true landmarks")
+        ax.plot(landmarks[:, 0], landmarks[:, 1], "k+", ms=7, label="true landmarks",
+                zorder=z["landmarks"])  # fmt: skip
     if mapped is not None and mapped.size:
-        ax.plot(mapped[:, 0], mapped[:, 1], "o", mfc="none", ms=6, color="tab:red", label="map")
+        ax.plot(mapped[:, 0], mapped[:, 1], "o", mfc="none", ms=6, color=MAP_COLOUR,
+                label="SLAM map", zorder=z["landmarks"])  # fmt: skip
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")

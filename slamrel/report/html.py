@@ -101,7 +101,7 @@ def format_intervals(intervals: Sequence[tuple[float, float]], *, unit: str = "s
     it takes for distinct intervals to print distinctly (and for ``a < b`` to show).
 
     The intervals are expected on a readable axis (seconds since the run's start, not Unix
-    time: :class:`slamrel.pipeline.TimeBase`).
+    time: :class:`slamrel.runs.time_base.TimeBase`).
     """
     iv = [(float(a), float(b)) for a, b in intervals]
     for decimals in (1, 2, 3):
@@ -117,8 +117,9 @@ def format_intervals(intervals: Sequence[tuple[float, float]], *, unit: str = "s
 def verdict_html(verdict: Verdict) -> str:
     """The verdict block: overall level, evidence, one row per judgement with its rule."""
     rows = "".join(
-        f'<tr class="{j.level}"><td>{html.escape(j.what)}</td><td>{html.escape(j.value)}</td>'
-        f'<td><span class="lamp {j.level}">{j.level}</span></td>'
+        f'<tr class="{_css(j.level)}"><td>{html.escape(j.what)}</td>'
+        f"<td>{html.escape(j.value)}</td>"
+        f'<td><span class="lamp {_css(j.level)}">{j.level}</span></td>'
         f'<td class="rule">{html.escape(j.rule)}</td>'
         "</tr>"
         for j in verdict.lines
@@ -130,6 +131,11 @@ def verdict_html(verdict: Verdict) -> str:
         "<table><thead><tr><th>what</th><th>value</th><th>judgement</th><th>rule</th></tr>"
         f"</thead><tbody>{rows}</tbody></table></section>"
     )
+
+
+def _css(level: str) -> str:
+    """A level as one CSS class name (``"not judged"`` → ``not-judged``)."""
+    return level.replace(" ", "-")
 
 
 _STYLE = """
@@ -146,9 +152,10 @@ figcaption { font-size: 0.9rem; color: #555; }
 .verdict.green { border-color: #1a7f37; } .verdict.amber { border-color: #b7791f; }
 .verdict.red { border-color: #b42318; }
 .lamp { display: inline-block; padding: 0 0.5rem; border-radius: 4px; color: #fff;
-  background: #777; font-weight: 600; }
+  background: #777; font-weight: 600; white-space: nowrap; }
 .lamp.green { background: #1a7f37; } .lamp.amber { background: #b7791f; }
 .lamp.red { background: #b42318; } .lamp.info { background: #6b7280; }
+.lamp.not-judged { background: #fff; color: #555; border: 1px dashed #888; }
 .verdict th, .verdict td { text-align: left; } td.rule { font-size: 0.85rem; color: #555; }
 nav ol { columns: 2; }
 """

@@ -3,19 +3,20 @@
 :func:`report_figures` draws the four figures (:class:`RunFigures`, one attribute each, the
 map figure only with a map comparison); :func:`report_sections` writes the four sections
 (:class:`RunSections`). Every number in a table is read from the same structures
-``metrics.json`` is written from (:meth:`slamrel.pipeline.RunResult.metrics`), so the page
+``metrics.json`` is written from (:meth:`slamrel.runs.result.RunResult.metrics`), so the page
 and the file cannot disagree. :func:`slamrel.pipeline.write_report` writes the folder.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
-from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, NisStats
-from relation_metric.consistency import OUTLIER_PROBABILITY
+from recovery.ekf import DEFAULT_MAX_OUTLIER_RUN
+from recovery.results import Divergence, NisStats
+from relation_metric.consistency import OUTLIER_PROBABILITY, NeesBlowup
 from relation_metric.evaluate import pose_errors
 from relation_metric.trajectory import Trajectory
 from slamrel.plots.maps import map_figure
@@ -30,20 +31,18 @@ from slamrel.plots.run import (
     trajectories_figure,
 )
 from slamrel.report.html import Figure, Section, Table, figure_png, format_intervals
-
-if TYPE_CHECKING:
-    from recovery.recover import Divergence
-    from slamrel.pipeline import MapSummary, RunResult
+from slamrel.runs.result import MapSummary, RunResult
 
 __all__ = ["RunFigures", "RunSections", "report_figures", "report_sections"]
 
 
 class RunFigures(NamedTuple):
-    """The figures of the run report, in page (and ``figure_<k>.png``) order."""
+    """The figures of the run report, in page (and ``figure_<k>.png``) order (without ground
+    truth no ``errors`` nor ``nees``)."""
 
     trajectories: Figure
-    errors: Figure
-    nees: Figure
+    errors: Figure | None
+    nees: Figure | None
     map: Figure | None = None
 
     def in_order(self) -> list[Figure]:
@@ -68,22 +67,39 @@ def report_figures(result: RunResult) -> RunFigures:
 
     One time axis throughout: seconds since the run's start (:attr:`RunResult.time_base`);
     trajectories and the map in the ground truth's frame (:attr:`RunResult.display_frames`,
-    said in the captions).
+    said in the captions). Without ground truth the estimates and the map are drawn as
+    estimated, in the SLAM map's frame, and there is no figure of the errors against it nor
+    of the NEES.
     """
     truth = result.bundle.groundtruth
-    assert truth is not None
     stretches = result.agreement.stretches if result.agreement is not None else ()
     frames = result.display_frames
     drawn = {
         k: Trajectory(est.timestamps, frames[k].apply(est.poses))
         for k, est in result.estimates.items()
     }
-    lgt = result.bundle.landmarks_groundtruth
+    lgt = result.bundle.landmarks_groundtruth if truth is not None else None
     map_xy = result.bundle.map_xy
+    red = (
+        " Red dots: recovered poses where the map and the log disagree."
+        if stretches and "recovered" in drawn
+        else ""
+    )
+    if truth is not None:
+        what = (
+            "Estimates (coloured lines) against the ground truth (the grey line beneath them), "
+            + ("with the true landmarks (black crosses) and " if lgt else "with ")
+            + "the SLAM map (hollow purple circles), in the ground truth's frame: "
+            f"{_frames_text(result)}."
+        )
+    else:
+        what = (
+            "Estimates (coloured lines) and the SLAM map (hollow purple circles) as estimated, "
+            "in the SLAM map's frame: the bundle has no ground truth, so nothing is aligned "
+            "and no line is the truth."
+        )
     trajectories = Figure(
-        "Estimates against the ground truth, with the true landmarks and the SLAM map, in the "
-        f"ground truth's frame: {_frames_text(result)}. Red dots: recovered poses where the "
-        "map and the log disagree (if any).",
+        what + red,
         figure_png(
             mark_stretches_xy(
                 trajectories_figure(
@@ -100,8 +116,8 @@ def report_figures(result: RunResult) -> RunFigures:
     )
     return RunFigures(
         trajectories,
-        _errors_figure(result, drawn, stretches),
-        _nees_figure(result, stretches),
+        _errors_figure(result, drawn, stretches) if result.evaluations else None,
+        _nees_figure(result, stretches) if truth is not None else None,
         _map_figure(result),
     )
 
@@ -122,9 +138,7 @@ def _errors_figure(
     main = result.main_estimate
     evs = result.evaluations[main]
     tb = result.time_base
-    names = [(r.name, r.absent) for r in result.relation_sets] or [
-        (k, "") for k in evs if k != "all"
-    ]
+    names = [(r.name, r.absent) for r in result.relation_sets] or [(k, "") for k in evs.sets]
     est = drawn[main]
     panels = []
     for name, absent in names:
@@ -249,11 +263,24 @@ def report_sections(
 ) -> RunSections:
     """The report's sections; ``review``: the ``(href, text)`` link to ``review.html``."""
     tb = result.time_base
+    truth = result.has_truth
     summary = Section(
         f"slamrel run: {result.name}",
         paragraphs=[
-            "Relation metric (Kümmerle et al. 2009): relative motions of each estimate "
-            "against ground-truth relations, ε = 1/N Σ ‖δ_ij ⊖ δ*_ij‖².",
+            *(
+                [
+                    "Relation metric (Kümmerle et al. 2009): relative motions of each estimate "
+                    + (
+                        "against ground-truth relations"
+                        if truth
+                        else "against the reference "
+                        "relations given (the bundle has no ground truth)"
+                    )
+                    + ", ε = 1/N Σ ‖δ_ij ⊖ δ*_ij‖²."
+                ]
+                if truth or result.reference is not None
+                else []
+            ),  # fmt: skip
             f"Times on this page are seconds since the run's start (the first time of its "
             f"log, {tb.t0:.3f} s on the log's own clock); the run lasts {tb.duration:.1f} s.",
             *_relation_set_paragraphs(result),
@@ -261,14 +288,41 @@ def report_sections(
         ],
         tables=[
             *_relation_sets_table(result),
-            _stats_table(result, "translation"),
-            _stats_table(result, "rotation"),
+            *(
+                [_stats_table(result, "translation"), _stats_table(result, "rotation")]
+                if truth
+                else []
+            ),
+            *_reference_tables(result),
         ],
-        figures=[figures.trajectories, figures.errors],
+        figures=[f for f in (figures.trajectories, figures.errors) if f is not None],
     )
+    consistency = _consistency_section(result, figures)
+    ms = result.map_summary
+    map_section = None
+    if ms is not None:
+        map_section = _map_section(
+            ms,
+            [] if figures.map is None else [figures.map],
+            [] if review is None else [review],
+        )
+    return RunSections(summary, consistency, _agreement_section(result), map_section)
+
+
+def _consistency_section(result: RunResult, figures: RunFigures) -> Section:
+    """The NEES of each estimate with covariances (needs ground truth) and its frame."""
+    if not result.has_truth:
+        return Section(
+            "Consistency",
+            paragraphs=[
+                "No NEES: it compares each estimate with the ground truth, which the bundle "
+                "does not have. The map–log agreement below (the innovations' NIS) is the "
+                "consistency check that needs no truth."
+            ],
+        )
     frame = result.nees_frame
     unaligned = result.nees_truth_frame
-    consistency = Section(
+    return Section(
         "Consistency",
         paragraphs=[] if frame is None else [f"NEES frame: {frame.description}."],
         tables=[
@@ -296,17 +350,65 @@ def report_sections(
             ),
             *_anchoring_table(result),
         ],
-        figures=[figures.nees],
+        figures=[] if figures.nees is None else [figures.nees],
     )
-    ms = result.map_summary
-    map_section = None
-    if ms is not None:
-        map_section = _map_section(
-            ms,
-            [] if figures.map is None else [figures.map],
-            [] if review is None else [review],
+
+
+def _reference_tables(result: RunResult) -> list[Table]:
+    """Each estimate on the reference relations given, and, without ground truth, the
+    online estimate against the recovered one."""
+    tables = []
+    ref = result.reference
+    if ref is not None:
+        rows = [
+            [name, int(ev.valid.sum()), int((~ev.valid).sum()), ev.translation.abs.mean,
+             ev.translation.abs.std, ev.rotation.abs.mean, ev.rotation.abs.std]
+            for name, ev in ref.scores.items()
+        ]  # fmt: skip
+        tables.append(
+            Table(
+                f"relation error on the reference relations ({ref.source}, {ref.relations} "
+                "relations; scored as slamrel evaluate scores them)",
+                [
+                    "estimate",
+                    "scored",
+                    "unassociated",
+                    "trans abs mean [m]",
+                    "trans abs std [m]",
+                    "rot abs mean [rad]",
+                    "rot abs std [rad]",
+                ],
+                rows,
+            )  # fmt: skip
         )
-    return RunSections(summary, consistency, _agreement_section(result), map_section)
+    diff = result.online_vs_recovered
+    if diff is not None:
+        tables.append(
+            Table(
+                "online against recovered: the online estimate on relations drawn from the "
+                "recovered trajectory (their difference, not an error)",
+                [
+                    "relations",
+                    "count",
+                    "trans abs mean [m]",
+                    "trans abs max [m]",
+                    "rot abs mean [rad]",
+                    "rot abs max [rad]",
+                ],
+                [
+                    [
+                        k,
+                        ev.translation.abs.count,
+                        ev.translation.abs.mean,
+                        ev.translation.abs.max,
+                        ev.rotation.abs.mean,
+                        ev.rotation.abs.max,
+                    ]
+                    for k, ev in diff.items()
+                ],
+            )  # fmt: skip
+        )
+    return tables
 
 
 def _relation_set_paragraphs(result: RunResult) -> list[str]:
@@ -350,8 +452,8 @@ def _stats_table(result: RunResult, part: str) -> Table:
     rows = []
     for name, evs in result.evaluations.items():
         for set_name, ev in evs.items():
-            s = getattr(ev, part)["abs"]
-            q = getattr(ev, part)["sqr"]
+            s = getattr(ev, part).abs
+            q = getattr(ev, part).sqr
             rows.append([name, set_name, s.mean, s.std, q.mean, s.max, s.count])
     u = "m" if part == "translation" else "rad"
     return Table(
@@ -403,11 +505,13 @@ def _agreement_section(result: RunResult) -> Section:
             for w, s in zip(when, shown)
         ]
         tables.append(Table("stretches where the map and the log disagree", _STRETCH_COLUMNS, rows))
-    return Section("Map–log agreement", paragraphs=_agreement_paragraphs(a, tb.t0), tables=tables)
+    paragraphs = _agreement_paragraphs(a, result.nees_blowups or (), tb.t0)
+    return Section("Map–log agreement", paragraphs=paragraphs, tables=tables)
 
 
-def _agreement_paragraphs(a: Divergence, t0: float) -> list[str]:
-    """The rule and the counts; ``t0``: the run's start (intervals are printed since it)."""
+def _agreement_paragraphs(a: Divergence, ns: Sequence[NeesBlowup], t0: float) -> list[str]:
+    """The rule and the counts, and the NEES blow-ups ``ns``; ``t0``: the run's start
+    (intervals are printed since it)."""
     st = a.stretches
     paragraphs = [
         "EKF localisation in the final map checks every innovation against its covariance: "
@@ -424,7 +528,6 @@ def _agreement_paragraphs(a: Divergence, t0: float) -> list[str]:
             else "The map and the log agree: no stretch of outlying innovations."
         ),
     ]
-    ns = a.nees_blowups or ()
     if ns:
         paragraphs.append(
             f"Against the ground truth, the recovered pose's NEES blows up {len(ns)} time(s): "

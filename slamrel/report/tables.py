@@ -9,7 +9,8 @@ and part (translation, rotation): the mean paired difference of the abs errors A
 confidence interval and a two-sided p-value from a circular block bootstrap over the
 relations in time order (:func:`relation_metric.significance.paired_difference`: relations
 that share a stretch of the run are dependent, and the blocks keep that dependence), the
-p-values Holm-adjusted over all tests of the table.
+p-values Holm-adjusted over all tests of the table
+(:func:`relation_metric.significance.holm_adjust`).
 
 Inputs are the per-relation CSV files of ``slamrel evaluate --per-relation`` (or of
 ``slamrel run``); relations are paired by their relation set and ``(t1, t2)`` as written
@@ -31,15 +32,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relation_metric.errors import InputError
+from relation_metric.evaluate import error_summaries
 from relation_metric.significance import (
     DEFAULT_RESAMPLES,
     MIN_BLOCKS,
     OVERLAP_FACTOR,
     PairedDifference,
+    holm_adjust,
     paired_difference,
 )
-from relation_metric.stats import Summary, summarize
-from slamrel.formats.text import PathLike, read_csv_table, read_csv_text_column, read_source
+from relation_metric.stats import ErrorStats, Summary
+from slamrel.formats.results import read_per_relation_csv
+from slamrel.formats.text import PathLike
 
 __all__ = [
     "ALL_RELATIONS",
@@ -48,7 +52,6 @@ __all__ = [
     "PairTest",
     "Comparison",
     "compare_results",
-    "holm",
 ]
 
 ALL_RELATIONS = "all"
@@ -179,54 +182,20 @@ class ResultErrors:
 
 
 def read_per_relation(path: PathLike, *, dataset: str, algorithm: str) -> ResultErrors:
-    """Read a per-relation CSV of ``slamrel evaluate`` (only valid relations are kept).
+    """A per-relation CSV of ``slamrel evaluate`` as compared (only valid relations are kept).
 
-    Relations are keyed by their times ``t1 t2`` (as numbers, so that ``1.50`` and ``1.5``
-    pair) and, when the file has a ``set`` column, their relation set (without it every
-    relation is in the set :data:`ALL_RELATIONS`); the errors of invalid relations may be
-    empty.
+    The file is read by the format's one reader,
+    :func:`slamrel.formats.results.read_per_relation_csv`. Relations are keyed by their
+    times ``t1 t2`` (as numbers, so that ``1.50`` and ``1.5`` pair) and, when the file has a
+    ``set`` column, their relation set (without it every relation is in the set
+    :data:`ALL_RELATIONS`); a relation twice in one set cannot be paired and is refused.
     """
-    rot_names = ("rot_error_rad", "rot_error_deg")
-    src = read_source(path)
-    table = read_csv_table(
-        path,
-        required=("t1", "t2", "trans_error", rot_names, "valid"),
-        empty_ok=("trans_error", *rot_names),
-        describe="the per-relation CSV of slamrel evaluate",
-        source=src,
-    )
-    c, lines = table
-    set_column = read_csv_text_column(src, "set")
-    rot_col = next(n for n in rot_names if n in c)
-    valid = c["valid"]
-    bad = np.flatnonzero((valid != 0) & (valid != 1))
-    if bad.size:
-        raise InputError(
-            f"column 'valid': expected 0 or 1, got {float(valid[bad[0]]):g}",
-            path=path,
-            line=int(lines[bad[0]]),
-        )
-    if set_column is not None:
-        unnamed = np.flatnonzero(set_column == "")
-        if unnamed.size:
-            raise InputError(
-                "column 'set': an empty cell; expected the name of the relation set",
-                path=path,
-                line=int(lines[unnamed[0]]),
-            )
-    keep = valid == 1
-    trans, rot = c["trans_error"][keep], c[rot_col][keep]
-    empty = np.flatnonzero(np.isnan(trans) | np.isnan(rot))
-    if empty.size:
-        raise InputError(
-            "a valid relation without an error value; expected numbers in trans_error and "
-            f"{rot_col}",
-            path=path,
-            line=int(lines[keep][empty[0]]),
-        )
-    t1, t2 = c["t1"][keep], c["t2"][keep]
+    table = read_per_relation_csv(path)
+    keep, lines = table.valid, table.lines
+    trans, rot = table.translation[keep], table.rotation[keep]
+    t1, t2 = table.t1[keep], table.t2[keep]
     k = np.char.add(np.char.add(t1.astype(str), " "), t2.astype(str))
-    sets = None if set_column is None else set_column[keep]
+    sets = None if table.relation_set is None else table.relation_set[keep]
     paired = k if sets is None else np.char.add(np.char.add(sets, _SEP), k)
     uniq, counts = np.unique(paired, return_counts=True)
     if (counts > 1).any():
@@ -238,7 +207,7 @@ def read_per_relation(path: PathLike, *, dataset: str, algorithm: str) -> Result
             line=int(lines[keep][dup]),
         )
     return ResultErrors(
-        dataset, algorithm, k, trans, rot, rot_col.removeprefix("rot_error_"),
+        dataset, algorithm, k, trans, rot, table.rotation_unit,
         t1=t1, t2=t2, relation_set=sets,
     )  # fmt: skip
 
@@ -295,10 +264,25 @@ class PairTest:
 
 
 @dataclass(frozen=True)
+class ResultStats:
+    """The statistics of one result's common relations: translation [m] and rotation (in
+    the comparison's unit), each of ``|e|`` and ``e²``."""
+
+    translation: ErrorStats
+    rotation: ErrorStats
+
+    def part(self, part: str, kind: str) -> Summary:
+        """``part`` ("translation" or "rotation"), ``kind`` ("abs" or "sqr"): for tables
+        that walk the columns."""
+        stats: ErrorStats = getattr(self, part)
+        return stats.abs if kind == "abs" else stats.sqr
+
+
+@dataclass(frozen=True)
 class Comparison:
     """Statistics per (dataset, algorithm) and pairwise tests per dataset and relation set."""
 
-    stats: dict[tuple[str, str], dict[str, dict[str, Summary]]]
+    stats: dict[tuple[str, str], ResultStats]
     tests: list[PairTest]
     alpha: float
     rotation_unit: str
@@ -312,8 +296,8 @@ class Comparison:
             row: list[Any] = [ds, alg]
             for part in ("translation", "rotation"):
                 for kind in ("abs", "sqr"):
-                    row += [st[part][kind].mean, st[part][kind].std]
-            row.append(st["translation"]["abs"].count)
+                    row += [st.part(part, kind).mean, st.part(part, kind).std]
+            row.append(st.translation.abs.count)
             out.append(row)
         return out
 
@@ -439,7 +423,7 @@ class Comparison:
         body = []
         for (ds, alg), st in self.stats.items():
             cells = [
-                f"${st[p][k].mean:.4g} \\pm {st[p][k].std:.4g}$"
+                f"${st.part(p, k).mean:.4g} \\pm {st.part(p, k).std:.4g}$"
                 for p in ("translation", "rotation")
                 for k in ("abs", "sqr")
             ]
@@ -512,19 +496,6 @@ def _tex(s: str) -> str:
     return "".join(_TEX_SPECIAL.get(c, c) for c in s)
 
 
-def holm(p: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Holm–Bonferroni adjusted p-values (step-down, monotone, capped at 1)."""
-    p = np.asarray(p, dtype=np.float64)
-    m = p.size
-    if m == 0:
-        return p
-    order = np.argsort(p)
-    adj = np.maximum.accumulate((m - np.arange(m)) * p[order])
-    out = np.empty(m)
-    out[order] = np.minimum(adj, 1.0)
-    return out
-
-
 def _test_seed(seed: int, *names: str) -> np.random.SeedSequence:
     """The bootstrap seed of one test: from ``seed`` and the test's names (not its position,
     so adding a result to a table leaves the other tests' resamples as they were)."""
@@ -592,12 +563,11 @@ def compare_results(
         seen.add(key)
         _check_errors(r)
     results, left_out = _common_relations(results)
-    stats: dict[tuple[str, str], dict[str, dict[str, Summary]]] = {}
+    stats: dict[tuple[str, str], ResultStats] = {}
     for r in results:
-        stats[(r.dataset, r.algorithm)] = {
-            "translation": {"abs": summarize(r.translation), "sqr": summarize(r.translation**2)},
-            "rotation": {"abs": summarize(r.rotation), "sqr": summarize(r.rotation**2)},
-        }
+        stats[(r.dataset, r.algorithm)] = ResultStats(
+            error_summaries(r.translation), error_summaries(r.rotation)
+        )
     raw: list[tuple[str, str, str, str, str, PairedDifference]] = []
     for ds in dict.fromkeys(r.dataset for r in results):
         group = [r for r in results if r.dataset == ds]
@@ -618,7 +588,7 @@ def compare_results(
                     raw.append((ds, name, a.algorithm, b.algorithm, part, diff))
     tested = np.array([x[5].tested for x in raw], dtype=bool)
     p_holm = np.full(len(raw), np.nan)
-    p_holm[tested] = holm(np.array([x[5].p_value for x in raw])[tested])
+    p_holm[tested] = holm_adjust(np.array([x[5].p_value for x in raw])[tested])
     tests = [
         PairTest(
             ds,

@@ -24,8 +24,8 @@ Lamps (``green`` / ``amber`` / ``red``):
   ``OVERCONFIDENT[1]`` (3). Conservative: amber below the 99 % interval and below
   :data:`CONSERVATIVE` ``[0]`` (0.5), red below ``CONSERVATIVE[1]`` (0.1: covariances ten
   times the error's say nothing). The allowances are the recovery's approximations
-  (linearisation; with a joint map covariance the recovered covariance is conservative by
-  up to 2×, measured);
+  (linearisation; with a joint map covariance the recovered covariance is conservative,
+  docs/verdict.md gives the calibration);
 * **NEES excursions** — runs of at least :data:`MIN_EXCURSION` consecutive steps with NEES
   above the 95 % single-pose band (:func:`nees_excursions`, no merging of runs), as a share
   of the steps: green ≤ 5 %, amber ≤ 20 %, red above. A consistent estimator is above the
@@ -34,7 +34,7 @@ Lamps (``green`` / ``amber`` / ``red``):
   ``max_outlier_run`` poses): an excursion says the covariance is locally optimistic, a
   blow-up that the estimate is lost;
 * **map–log agreement** — the innovations of the recovery's filter (its NIS, χ²(2) for
-  consistent models, :class:`recovery.recover.NisStats`): the mean over 2, ``q``, and the
+  consistent models, :class:`recovery.results.NisStats`): the mean over 2, ``q``, and the
   tail, the innovations beyond the 99.9 % bound (plus the gated ones) against the 0.1 % a
   consistent filter has (a Poisson count). Red when ``q`` is outside ``[0.5, 1.5]`` or the
   tail exceeds its Poisson 99.99 % quantile and 0.5 % of the innovations; amber when ``q`` is
@@ -51,6 +51,12 @@ Lamps (``green`` / ``amber`` / ``red``):
   down-weights some perfectly Gaussian innovations — 22 % of them at ``c = 1.75`` — so the
   fraction itself is no finding.)
 
+Without ground truth the lamps that need it (the NEES's consistency and excursions, the map's
+consistency) are lines at the level ``not judged`` that say what they need; the accuracy lamps
+are judged on the reference relations when the user gave some (``--relations``), and are not
+judged otherwise, when the online estimate's difference from the recovered one is an
+information line instead. Lines that are not judged do not set the overall level.
+
 Information lines (``info``, not lamps; they do not set the overall level): the map's edge
 error and OSPA — accuracies in metres, which a healthy map has as large as its stated
 covariance allows (the map consistency lamp judges that) — and the down-weighted
@@ -58,7 +64,7 @@ information of the ``huber``/``cauchy`` updates (iterated weights: no closed exp
 
 The overall level is the worst lamp; "how sure" states the evidence (relations, poses,
 matched landmarks). The verdict judges typed results (:class:`RunFacts`, read from a
-:class:`slamrel.pipeline.RunResult`), the same the tables and ``metrics.json`` are written
+:class:`slamrel.runs.result.RunResult`), the same the tables and ``metrics.json`` are written
 from.
 """
 
@@ -81,8 +87,9 @@ from relation_metric.consistency import (
 )
 
 if TYPE_CHECKING:
-    from recovery.recover import RecoveryCounts, RobustSettings
-    from slamrel.pipeline import MapSummary, RunResult
+    from recovery.results import RecoveryCounts, RobustSettings
+    from relation_metric.evaluate import Evaluation
+    from slamrel.runs.result import MapSummary, RunResult
 
 __all__ = [
     "Judgement",
@@ -96,6 +103,7 @@ __all__ = [
     "MIN_EXCURSION",
     "LEVELS",
     "INFO",
+    "NOT_JUDGED",
     "OVERCONFIDENT",
     "CONSERVATIVE",
 ]
@@ -103,6 +111,8 @@ __all__ = [
 LEVELS = ("green", "amber", "red")
 #: The level of an information line: shown, not a lamp (it does not set the overall level).
 INFO = "info"
+#: The level of a lamp that could not be judged (it needs ground truth the run does not have).
+NOT_JUDGED = "not judged"
 #: Shortest run of consecutive steps above the 95 % NEES band that counts as an excursion.
 MIN_EXCURSION = 3
 #: Allowances on ``q = mean NEES / dof`` above 1: amber beyond the first, red beyond the
@@ -258,6 +268,19 @@ class RunFacts:
     unassociated : int or None
         Relations generated for the main estimate that could not be scored (no pose near an
         end); ``None``: not known.
+    has_truth : bool
+        Whether the run has a ground-truth trajectory (without, lamps that need it are said
+        to be not judged).
+    scored_on : str
+        What ``translation_errors`` were scored on, when not on relations drawn from the
+        ground truth (``"the reference relations"``); empty otherwise.
+    has_online : bool
+        Whether the run has an online estimate.
+    online_difference : float or None
+        Without ground truth: the online estimate's mean abs translation relation error on
+        relations drawn from the recovered trajectory [m] (their difference).
+    online_difference_relations : int
+        The relations it was computed on.
     """
 
     main: str
@@ -274,6 +297,11 @@ class RunFacts:
     online_nees: NeesSummary | None = None
     online_nees_values: NDArray[np.float64] | None = None
     unassociated: int | None = None
+    has_truth: bool = True
+    scored_on: str = ""
+    has_online: bool = False
+    online_difference: float | None = None
+    online_difference_relations: int = 0
 
     @classmethod
     def of(cls, result: RunResult) -> RunFacts:
@@ -281,13 +309,12 @@ class RunFacts:
         rec = result.recovery_result
         curve = result.nees.get(main)
         online = result.nees.get("online") if main != "online" else None
-        scored = result.evaluations[main]["all"]
+        errors, scored, scored_on = _scores_of(result, main)
+        diff = result.online_vs_recovered
         return cls(
             main=main,
-            translation_errors={
-                k: evs["all"].translation["abs"].mean for k, evs in result.evaluations.items()
-            },
-            relations=int(scored.valid.sum()),
+            translation_errors=errors,
+            relations=0 if scored is None else int(scored.valid.sum()),
             nees=None if curve is None else curve.summary,
             nees_values=None if curve is None else curve.values,
             map=result.map_summary,
@@ -298,8 +325,28 @@ class RunFacts:
             map_nees=_map_nees_of(result),
             online_nees=None if online is None else online.summary,
             online_nees_values=None if online is None else online.values,
-            unassociated=int((~scored.valid).sum()),
+            unassociated=None if scored is None else int((~scored.valid).sum()),
+            has_truth=result.has_truth,
+            scored_on=scored_on,
+            has_online="online" in result.estimates,
+            online_difference=None if diff is None else diff.all.translation.abs.mean,
+            online_difference_relations=0 if diff is None else int(diff.all.valid.sum()),
         )
+
+
+def _scores_of(result: RunResult, main: str) -> tuple[dict[str, float], Evaluation | None, str]:
+    """The accuracy the verdict judges: per estimate the mean abs translation relation error
+    on the relations drawn from the ground truth, else on the reference relations the user
+    gave (estimates with no scored relation left out); the main estimate's evaluation; what
+    they were scored on (empty: the ground truth)."""
+    if result.evaluations:
+        errors = {k: evs.all.translation.abs.mean for k, evs in result.evaluations.items()}
+        return errors, result.evaluations[main].all, ""
+    if result.reference is None:
+        return {}, None, ""
+    scores = result.reference.scores
+    errors = {k: ev.translation.abs.mean for k, ev in scores.items() if ev.valid.any()}
+    return errors, scores.get(main), "the reference relations"
 
 
 def _map_nees_of(result: RunResult) -> MapNees | None:
@@ -345,6 +392,8 @@ def run_verdict(facts: RunFacts) -> Verdict:
         *_measurement_lines(facts),
         *(_map_lines(facts.map) if facts.map is not None else []),
     ]
+    if not facts.has_truth:
+        lines += _not_judged_lines(facts, lines)
     lamps = [ln.level for ln in lines if ln.level in LEVELS]
     level = max(lamps, key=LEVELS.index) if lamps else "amber"
     return Verdict(level, _evidence(facts), lines)
@@ -354,13 +403,14 @@ def _accuracy_lines(facts: RunFacts, health: Sequence[Judgement]) -> list[Judgem
     """The main estimate against dead reckoning, and the online estimate against it."""
     lines = []
     main, err = facts.main, facts.translation_errors
+    on = f" (on {facts.scored_on})" if facts.scored_on else ""
     ours = err.get(main)
     dr = err.get("dead_reckoning") if main != "dead_reckoning" else None
     if ours is not None and dr is not None and dr > 0:
         r = ours / dr
         lines.append(
             Judgement(
-                f"{main} vs dead reckoning",
+                f"{main} vs dead reckoning{on}",
                 f"{_g(ours)} m / {_g(dr)} m = {_g(r)}",
                 _level(r, 1.0, 1.5),
                 "ratio of the mean abs relation errors in translation; with correct models the "
@@ -384,7 +434,7 @@ def _accuracy_lines(facts: RunFacts, health: Sequence[Judgement]) -> list[Judgem
         )
         lines.append(
             Judgement(
-                f"online vs {main}",
+                f"online vs {main}{on}",
                 f"{_g(online)} m / {_g(ours)} m = {_g(r)}{why}",
                 level,
                 "ratio of the same errors; green within a factor 2, amber within 4, red beyond; "
@@ -395,6 +445,67 @@ def _accuracy_lines(facts: RunFacts, health: Sequence[Judgement]) -> list[Judgem
             )
         )
     return lines
+
+
+def _not_judged_lines(facts: RunFacts, judged: Sequence[Judgement]) -> list[Judgement]:
+    """Without ground truth: each lamp that needs it, said not to be judged and why, and the
+    online estimate's difference from the recovered one (information) when it is not
+    judged on reference relations."""
+    have = {ln.key for ln in judged}
+    main = facts.main
+    needs = "needs ground truth (groundtruth.csv)"
+    out = []
+    if "accuracy" not in have and main != "dead_reckoning":
+        out.append(
+            (f"{main} vs dead reckoning", "accuracy",
+             f"{needs} or reference relations (--relations)")
+        )  # fmt: skip
+    difference = []
+    if facts.has_online and "online" not in have and main != "online":
+        out.append(
+            (f"online vs {main}", "online", f"{needs} or reference relations (--relations)")
+        )  # fmt: skip
+        if facts.online_difference is not None and facts.online_difference_relations:
+            d = facts.online_difference
+            difference.append(
+                Judgement(
+                    f"online vs {main} (difference)",
+                    f"{_g(d)} m mean abs translation difference over "
+                    f"{facts.online_difference_relations} relations drawn from the {main} "
+                    "trajectory",
+                    INFO,
+                    "the online estimate scored on relations drawn from the recovered "
+                    "trajectory: how far the two differ, not an error of either; no rule says "
+                    "how far two estimates may differ, so not a lamp",
+                    "online_difference",
+                    d,
+                )
+            )
+    return [*_not_judged(out), *difference, *_not_judged(_truth_lamps(facts, needs))]
+
+
+def _truth_lamps(facts: RunFacts, needs: str) -> list[tuple[str, str, str]]:
+    """The lamps that need the ground truth whatever else is given: the NEES's."""
+    out = [
+        (f"consistency ({facts.main})", "consistency", f"the NEES {needs}"),
+        ("NEES excursions", "excursions", f"the NEES {needs}"),
+    ]
+    if facts.has_online:
+        out.append(("consistency (online)", "online_consistency", f"the NEES {needs}"))
+    if facts.map_nees is None:
+        out.append(
+            ("map consistency", "map_consistency",
+             "the map's NEES needs the true landmarks in the ground truth's frame")
+        )  # fmt: skip
+    return out
+
+
+def _not_judged(lines: Sequence[tuple[str, str, str]]) -> list[Judgement]:
+    """``(what, key, why)`` as lines at the level :data:`NOT_JUDGED`."""
+    return [
+        Judgement(what, f"not judged: {why}", NOT_JUDGED, "not judged without ground truth", key)
+        for what, key, why in lines
+    ]
 
 
 def _chi2_level(q: float, dof: int, n: float) -> tuple[str, str]:
@@ -603,11 +714,18 @@ def _evidence(facts: RunFacts) -> str:
     """The evidence sentence: relations (scored, and unassociated when known), poses and
     matched landmarks counted."""
     evidence = [f"{facts.relations} relations"]
-    if facts.unassociated is not None:
-        evidence[0] = f"{facts.relations} scored relations" + (
-            f" ({facts.unassociated} more generated but unassociated, not scored)"
-            if facts.unassociated
-            else " (all generated relations associated)"
+    made = "given" if facts.scored_on else "generated"
+    if not facts.has_truth and not facts.scored_on:
+        evidence = ["no relations (no ground truth, no reference relations)"]
+    elif facts.unassociated is not None:
+        evidence[0] = (
+            f"{facts.relations} scored relations"
+            + (f" of {facts.scored_on}" if facts.scored_on else "")
+            + (
+                f" ({facts.unassociated} more {made} but unassociated, not scored)"
+                if facts.unassociated
+                else f" (all {made} relations associated)"
+            )
         )
     if facts.poses:
         evidence.append(f"{facts.poses} poses")

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-__all__ = ["CorrelativeOptions", "CorrelativeMatch", "correlative_match"]
+__all__ = ["CorrelativeOptions", "CorrelativeMatch", "correlative_match", "table_cells"]
 
 
 @dataclass(frozen=True)
@@ -85,6 +85,36 @@ def _rotated(points: NDArray[np.float64], theta: NDArray[np.float64]) -> NDArray
     return np.stack((c * x - s * y, s * x + c * y), axis=-1)
 
 
+def _table_extent(
+    reference: NDArray[np.float64],
+    current: NDArray[np.float64],
+    guess: NDArray[np.float64],
+    opt: CorrelativeOptions,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Lower corner and size [m] of the lookup table: the reference's returns and every
+    place the current scan's returns reach from the window around ``guess``, blurred."""
+    f = max(int(opt.coarse), 1)
+    reach = float(np.max(np.hypot(current[:, 0], current[:, 1]))) if current.size else 1.0
+    margin = reach + opt.search_xy + 4 * opt.sigma + f * opt.resolution
+    cx, cy = guess[0], guess[1]
+    lo = np.minimum(reference.min(axis=0), [cx - margin, cy - margin]) - 4 * opt.sigma
+    hi = np.maximum(reference.max(axis=0), [cx + margin, cy + margin]) + 4 * opt.sigma
+    return lo, hi - lo
+
+
+def table_cells(
+    reference: NDArray[np.float64],
+    current: NDArray[np.float64],
+    guess: NDArray[np.float64],
+    options: CorrelativeOptions | None = None,
+) -> float:
+    """Cells of the lookup table :func:`correlative_match` would build (as a float: a guess
+    far off asks for more than any integer type holds)."""
+    opt = options or CorrelativeOptions()
+    extent = _table_extent(reference, current, np.asarray(guess, dtype=np.float64), opt)[1]
+    return float(np.prod(np.ceil(extent / opt.resolution) + 1))
+
+
 def correlative_match(
     reference: NDArray[np.float64],
     current: NDArray[np.float64],
@@ -111,12 +141,8 @@ def correlative_match(
     r, f = opt.resolution, max(int(opt.coarse), 1)
     half = int(np.ceil(opt.search_xy / r))
     half = int(np.ceil(half / f)) * f
-    reach = float(np.max(np.hypot(current[:, 0], current[:, 1]))) if current.size else 1.0
-    margin = reach + opt.search_xy + 4 * opt.sigma + f * r
-    cx, cy = guess[0], guess[1]
-    lo = np.minimum(reference.min(axis=0), [cx - margin, cy - margin]) - 4 * opt.sigma
-    hi = np.maximum(reference.max(axis=0), [cx + margin, cy + margin]) + 4 * opt.sigma
-    shape = tuple(np.ceil((hi - lo) / r).astype(int) + 1)
+    lo, extent = _table_extent(reference, current, guess, opt)
+    shape = tuple(np.ceil(extent / r).astype(int) + 1)
     occ = np.ones(shape, dtype=bool)
     cells = np.floor((reference - lo) / r + 0.5).astype(int)
     occ[cells[:, 0], cells[:, 1]] = False

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from relation_metric.relations import RelationSet
 from relation_metric.se2 import between
 from slamrel.formats.laser import LaserScans
-from slamrel.scans.correlative import CorrelativeOptions, correlative_match
+from slamrel.scans.correlative import CorrelativeOptions, correlative_match, table_cells
 from slamrel.scans.matching import Alignment, IcpOptions, PreparedScan, align, prepare_scan
 from slamrel.scans.proposals import Proposals
 
@@ -184,6 +184,45 @@ def _better(a: Alignment, b: Alignment, limits: QualityLimits) -> bool:
     return bool(a.failed) or b.matched_fraction >= a.matched_fraction + 0.1
 
 
+#: Lookup-table cells (1 GB of float64) beyond which a correlative search whose window lets
+#: the two scans overlap nowhere is refused rather than run: it cannot succeed, and its table
+#: grows with the square of the guess's distance (a pose at 1e20 m asked for a table of
+#: negative size). Searches of scans that can overlap are never refused.
+MAX_HOPELESS_CELLS = 2**27
+
+
+def _refuse_far_guess(
+    scans: LaserScans,
+    pair: tuple[int, int],
+    ref: PreparedScan,
+    cur: PreparedScan,
+    guess: NDArray[np.float64],
+    options: CorrelativeOptions,
+) -> None:
+    """Refuse the correlative search of a pair whose guess puts the scans so far apart that
+    no placement in the window lets their returns overlap, when its lookup table would
+    exceed :data:`MAX_HOPELESS_CELLS`; the poses of the two scans' lines made the guess."""
+    reach = float(np.max(np.hypot(*ref.points.T)) + np.max(np.hypot(*cur.points.T)))
+    apart = float(np.hypot(guess[0], guess[1]))
+    if apart <= reach + options.search_xy + 4 * options.sigma:
+        return
+    cells = table_cells(ref.points, cur.points, guess, options)
+    if cells <= MAX_HOPELESS_CELLS:
+        return
+    from relation_metric.errors import InputError
+
+    i, j = pair
+    raise InputError(
+        f"the guess puts the scan of line {int(scans.lines[j])} {apart:.6g} m from the scan of "
+        f"line {int(scans.lines[i])}, but their returns reach {reach:.6g} m together and the "
+        f"correlative search moves ±{options.search_xy:g} m: no placement it tries lets them "
+        f"overlap, and its table would need {cells:.3g} cells (limit {MAX_HOPELESS_CELLS}); "
+        "expected poses (the log's, or --estimate's) that put the two scans near each other",
+        path=scans.path,
+        line=int(scans.lines[j]),
+    )
+
+
 def align_scans(
     scans: LaserScans,
     proposals: Proposals,
@@ -222,6 +261,7 @@ def align_scans(
         lost = bool({"failed", "low overlap", "high residual"} & set(flags))
         if opt.global_search == "always" or (opt.global_search == "flagged" and lost):
             if ref.points.shape[0] and cur.points.shape[0]:
+                _refuse_far_guess(scans, (i, j), ref, cur, g, opt.correlative)
                 c = correlative_match(ref.points, cur.points, g, opt.correlative)
                 b = align(ref, cur, c.delta, opt.icp)
                 if _better(a, b, opt.limits):

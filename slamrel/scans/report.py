@@ -56,6 +56,17 @@ def estimate_at_scans(
     return out, int(far.sum())
 
 
+def within_span(
+    stamps: NDArray[np.float64], times: NDArray[np.float64], *, tolerance: float = 0.1
+) -> NDArray[np.bool_]:
+    """Which ``stamps`` lie within the span of the sorted ``times``, widened by ``tolerance``
+    [s] at both ends: the scans an estimate at ``times`` can give a pose without
+    extrapolating."""
+    if times.size == 0:
+        return np.zeros(np.shape(stamps), dtype=bool)
+    return (stamps >= times[0] - tolerance) & (stamps <= times[-1] + tolerance)
+
+
 def laser_poses_at_stamps(
     stamps: NDArray[np.float64],
     base: Trajectory,
@@ -71,8 +82,7 @@ def laser_poses_at_stamps(
     end the end pose is used.
     """
     stamps = np.asarray(stamps, dtype=np.float64)
-    first, last = base.span()
-    inside = (stamps >= first - tolerance) & (stamps <= last + tolerance)
+    inside = within_span(stamps, base.timestamps, tolerance=tolerance)
     out = np.full((stamps.size, 3), np.nan)
     if inside.any():
         out[inside] = compose(base.poses_at(stamps[inside]), np.asarray(offset, dtype=np.float64))

@@ -1,5 +1,5 @@
-"""Result bundles that are healthy *by construction* (issue 23, acceptance 1; the calibration
-study of the verdict, :mod:`slamrel.studies.calibration`, issue 24).
+"""Result bundles that are healthy *by construction*: the runs on which the recovery must be
+consistent, and the healthy half of the verdict's calibration (:mod:`slamrel.studies.calibration`).
 
 A healthy bundle is what a correct SLAM run with exact models could have left behind, built
 so that every number in it is true to its stated statistics:

@@ -28,16 +28,13 @@ exact polar form of the noisy relative position). The older worlds keep their nu
 (other results depend on them); either sensor model can be chosen for any world.
 
 They do **not** reproduce the paper's observation counts, which its stated set-up does not
-determine. Measured over seeds 0–9 (noise a): hu-simple1 has 2,268–2,458 observations
-(28–30 per pose, each of its 220–225 landmarks seen 10–11 times), hence a data dof
-``2 (K − L)`` of 4,096–4,468; hu-simple2 3,794–4,030; hu-complex1 9,554–10,262; hu-complex2
-12,924–14,540; the Method 2 graphs have 808–894 (hu-simple1) and 6,061–6,641 (hu-complex1)
-edges, odometry included. The paper's Table II implies a data dof near 330 for the simple
-worlds (full LS's NEES3 sits at its data dof) and Method 2 graphs far smaller (NEES2 of
-18–34): 225 features within 5 m of an 82-pose drive, seen over 180°, cannot give so few
-observations, so the paper's features must be farther from the path (or its sensor
-narrower) than it says. Absolute NEES2/NEES3 values are therefore not comparable with the
-paper's; the orderings between methods and NEES against its own dof are.
+determine: these worlds give many times the paper's data dof ``2 (K − L)`` and far larger
+Method 2 graphs (the counts over seeds: benchmarks/README.md). The paper's Table II implies
+a data dof near 330 for the simple worlds (full LS's NEES3 sits at its data dof) and Method 2
+graphs far smaller (NEES2 of 18–34): 225 features within 5 m of an 82-pose drive, seen over
+180°, cannot give so few observations, so the paper's features must be farther from the path
+(or its sensor narrower) than it says. Absolute NEES2/NEES3 values are therefore not
+comparable with the paper's; the orderings between methods and NEES against its own dof are.
 
 A world and its noise realisation are fully determined by ``(trajectory, noise type, seed)``:
 the landmark layout draws from ``seed`` and the noise from an independent child stream, so

@@ -146,8 +146,8 @@ def evaluate_run(
     out: dict[str, Any] = {
         "relations": res["relations"],
         "unassociated": res["unassociated"],
-        "trans_mean": ev.translation["abs"].mean,
-        "trans_rmse": ev.translation["abs"].rmse,
+        "trans_mean": ev.translation.abs.mean,
+        "trans_rmse": ev.translation.abs.rmse,
         "rot_mean": res["rotation"]["abs"]["mean"],
         "rot_rmse": res["rotation"]["abs"]["rmse"],
         "warnings": [str(w.message) for w in caught],

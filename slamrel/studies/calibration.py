@@ -1,4 +1,4 @@
-"""Is the verdict right? Its calibration on runs whose truth is known (issue 24).
+"""Is the verdict right? Its calibration on runs whose truth is known.
 
 Every lamp of the verdict (:mod:`slamrel.report.verdict`) judges a quantity against what
 correct models produce. This study checks that on two kinds of run:
@@ -70,7 +70,7 @@ def broken_bundle(bundle: Bundle, fault: str, *, seed: int = 0) -> Bundle:
     ``associations-f``: a seeded fraction ``f`` of the associated measurements is given
     another landmark in view (:func:`_wrong_associations`). (Confusing a landmark with its
     nearest neighbour, often closer than the sensor noise in these dense worlds, is invisible
-    to every statistic and harmless: measured in the study's notes, not counted as broken.)
+    to every statistic and harmless: measured, docs/verdict.md; not counted as broken.)
     ``noise-xs``: the stated standard deviations of the sensor and of the motion model are
     multiplied by ``s``; the log is not changed.
     """

@@ -146,14 +146,13 @@ def faithfulness_study(
                 "seed": seed,
             }
         )
-        div = r.recovery.get("divergence") or {}
         rows.append(
             [
-                r.evaluations[k][s].translation["abs"].mean
+                r.evaluations[k][s].translation.abs.mean
                 for k in ("online", "recovered")
                 for s in ("global", "consecutive")
             ]
-            + [float(div.get("fraction_of_log", 0.0))]
+            + [0.0 if r.agreement is None else r.agreement.fraction_of_log]
         )
     a = np.asarray(rows)
     return FaithfulnessStudy(
@@ -280,7 +279,7 @@ def _mean_translation_error(
 
     with warnings.catch_warnings():  # relations beyond the estimate's span are reported, not used
         warnings.simplefilter("ignore")
-        return float(evaluate(rel, Trajectory(times, poses)).translation["abs"].mean)
+        return float(evaluate(rel, Trajectory(times, poses)).translation.abs.mean)
 
 
 def recovery_variants_table(

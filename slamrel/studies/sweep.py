@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from relation_metric.errors import InputError
-from slamrel.formats.text import write_text_atomic
+from slamrel.formats.text import loads_json, write_text_atomic
 
 __all__ = [
     "Task",
@@ -94,9 +94,11 @@ def _stored_record(path: Path, task: Task) -> tuple[dict[str, Any] | None, str |
     except (OSError, UnicodeDecodeError) as exc:
         return None, f"unreadable ({exc})"
     try:
-        record = json.loads(text)
+        record: Any = loads_json(text, path=str(path))
     except json.JSONDecodeError as exc:
         return None, f"not valid JSON ({exc.msg}, line {exc.lineno})"
+    except InputError as exc:  # a key given twice: which value was meant is unknown
+        return None, exc.message
     except RecursionError:
         return None, "JSON nested too deeply"
     if not isinstance(record, dict) or "result" not in record:

@@ -2,7 +2,7 @@
 
 The error of an estimate is the mean translational error on 2,000 global relations of the
 ground truth (``generate_relations(groundtruth, "global", count=2000, seed=0)``,
-``evaluate(...).translation["abs"].mean``), in metres.
+``evaluate(...).translation.abs.mean``), in metres.
 
 The floor is localisation in the true map: the bundle with ``map.csv`` replaced by the true
 landmarks (exact, no covariance), each association mapped to the true landmark of the
@@ -77,7 +77,7 @@ def scorer(run: Run) -> Callable[[Trajectory], float]:
     relations = generate_relations(groundtruth(run), "global", count=2000, seed=0)
 
     def score(estimate: Trajectory) -> float:
-        return float(evaluate(relations, estimate).translation["abs"].mean)
+        return float(evaluate(relations, estimate).translation.abs.mean)
 
     return score
 

@@ -33,10 +33,12 @@ extended RTS smoother of the filter run (which linearises along the run:
 χ² by less than :data:`~recovery.constants.SMOOTHER_CHI2_RESOLUTION` (one unit). For a
 linear-Gaussian model one step from any start is the exact minimum, i.e. the fixed-interval
 (RTS) smoother of the map-augmented state (poses plus a static map): this is that smoother in
-information form, relinearised where the model is not linear. One step alone was not enough:
-on hu-complex1 the second still removed tens of χ² units, and stopping after the first left
-an error its covariance did not hold (mean NEES 3.52 against 3.006 after the second).
-``method="batch"`` iterates to numerical convergence (``tolerance``).
+information form, relinearised where the model is not linear. One step alone is not enough
+on this nonlinear model: the second still lowers χ² markedly, and stopping after the first
+leaves an error its covariance does not hold (measured on hu-complex1: benchmarks/README.md).
+``method="batch"`` iterates to numerical convergence (``tolerance``). (The module is named
+for that method; ``slamrel batch``, the scoring of many runs, is another thing:
+``slamrel.studies.batch``.)
 
 The minimiser is the estimation layer's :func:`~recovery.lm.levenberg_marquardt`
 (Marquardt's damping ``λ diag(H)``, ×10 on a rejected step, ÷10 on an accepted one, up to
@@ -45,21 +47,21 @@ The minimiser is the estimation layer's :func:`~recovery.lm.levenberg_marquardt`
 
 * *nearly undamped*: ``λ`` starts at :data:`LAMBDA_INITIAL` ``= 1e-14`` and is not lowered
   below :data:`LAMBDA_MIN` ``= 1e-16``. ``diag(H)`` of a position is dominated by the stiff
-  lateral-slip term (up to 3.5·10¹¹ at 10⁵ steps, against measurement curvatures of
-  10²–10⁵), so Marquardt's scaled damping is huge for the soft directions unless ``λ`` is
-  tiny: from ``λ = 1e-6`` with the loop's usual floor ``1e-12`` the run took 16 iterations at
-  10⁵ steps, most of them damped steps creeping towards the minimum and a linear tail (each
-  step half the undamped one); the smoother's trajectory is a good start, so the nearly
-  undamped Gauss–Newton steps converge in 4 (quadratically at the end). Should the banded
+  lateral-slip term, orders of magnitude above the measurement curvatures, so Marquardt's
+  scaled damping is huge for the soft directions unless ``λ`` is tiny: from ``λ = 1e-6``
+  with the loop's usual floor ``1e-12`` most iterations were damped steps creeping towards
+  the minimum, ending in a linear tail (each step half the undamped one); the smoother's
+  trajectory is a good start, so the nearly undamped Gauss–Newton steps converge in a few
+  iterations, quadratically at the end (the counts: benchmarks/README.md). Should the banded
   Cholesky of the nearly undamped ``H`` fail in rounding, the step is solved again with
   ``1e-12 diag(H)`` added.
 * *steps along the chain* (:meth:`Problem.retract <recovery.lm.Problem.retract>`
   is :func:`retract_chain`): the step, computed in absolute poses, moves each motion
   increment by its linear model and the trajectory is recomposed from them, so the stiff
   motion residuals land exactly on their linearisation and only the soft measurement
-  residuals carry the nonlinearity. Measured at 10⁵ steps: with the old damping it cuts 16
-  iterations to 10; with the damping above both retractions need 3–4 iterations, the chain's
-  first step leaving a lower cost (10,065 against 10,178 from 184,509); no step is rejected.
+  residuals carry the nonlinearity. With the old damping it needed fewer iterations than
+  the additive step; with the damping above both need about as many, the chain's first step
+  leaving the lower cost, and no step is rejected (benchmarks/README.md).
 
 The poses' block ``A`` of the normal equations is block tridiagonal in time order (each
 measurement touches one pose), so it is assembled straight into LAPACK's band storage
@@ -68,9 +70,9 @@ measurement touches one pose), so it is assembled straight into LAPACK's band st
 no fill, no ordering. The band is stored *lower* and Fortran-ordered, so ``pbsv`` factorises in
 place, faster than the upper form and than ``scipy.linalg.solveh_banded`` (which copied the
 C-ordered band): LAPACK's unblocked band Cholesky walks columns, contiguous in the lower form,
-strided in the upper. The two forms round differently (steps ~10⁻¹⁰ relative apart; the same
-minimum, poses 7·10⁻¹² m apart at 10⁵ steps). SuperLU in the natural order and ``spsolve``'s
-default (COLAMD with pivoting) are far slower (timings in benchmarks/README.md). A block
+strided in the upper. The two forms round differently and reach the same minimum (how far
+apart: benchmarks/README.md). SuperLU in the natural order and ``spsolve``'s default (COLAMD
+with pivoting) are far slower (timings in benchmarks/README.md). A block
 Thomas recursion would be linear too but sequential (a Python loop per pose).
 
 Per-pose covariances are the diagonal blocks of ``H⁻¹`` at the solution: with ``H = [[A, B],
@@ -80,10 +82,10 @@ filter/RTS covariance recursion linearised at the solution (exact for a block-tr
 information matrix, and vectorised like the smoother; about as long as one filter + smoother
 pass, the smoother's mean half skipped: :func:`~recovery.smoother.smoothed_covariances`); the
 map's term ``Y S⁻¹ Yᵀ`` from one banded solve with ``r`` right-hand sides (``3N r`` floats of
-memory). A vectorised block cyclic reduction of ``A`` itself was measured faster
-(benchmarks/README.md) but inaccurate: the Schur complements of the information form cancel the
-stiff terms, leaving relative errors up to 4·10⁻² in the covariances at 3·10³ steps (the
-covariance-form recursion: 3·10⁻⁷, against a sparse LU solve).
+memory). A vectorised block cyclic reduction of ``A`` itself was faster but inaccurate: the
+Schur complements of the information form cancel the stiff terms, leaving covariance errors
+orders of magnitude above the covariance-form recursion's (both against a sparse LU solve;
+the figures in benchmarks/README.md).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""recovery.batch: the chain retraction and the minimum it converges to.
+"""recovery.batch_refinement: the chain retraction and the minimum it converges to.
 
 Oracles: a per-pose loop of :func:`relation_metric.se2.compose` over the increments moved by
 their linear model (built from :func:`relation_metric.se2.between`'s own Jacobians), the
@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.linalg import solveh_banded
 
-from recovery.batch import (
+from recovery.batch_refinement import (
     _band,
     _BatchProblem,
     _cholesky_solve,
@@ -147,7 +147,7 @@ def test_chain_retraction_reaches_the_minimum_of_the_additive_one(motion: str) -
 
 
 def test_failed_factorisation_is_retried_with_the_damping_floor(monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    import recovery.batch as batch
+    import recovery.batch_refinement as batch
 
     b = simulate_bundle(12, steps=60, measure_every=4)
     inp = filter_input(b, map_mode="marginal")
