@@ -23,9 +23,11 @@ Schmidt update (:mod:`recovery.ekf`), without its restriction to the past. A map
 direction the log does not see (the map's anchoring) stays at its prior and shows only in
 the covariance. ``η̂`` (as ``L η̂``, :attr:`BatchResult.map_correction`) is a by-product;
 the score of the recovery is that of its poses. When ``Σ_m`` is the posterior of a SLAM run on
-the same log (a real bundle), the log's information about the map is counted twice in the
-covariance (a lower bound then); to first order the poses are unaffected: the SLAM map is
-already the minimiser the prior is centred on.
+the same log (an EKF-SLAM's map), the log's information about the map is counted twice in
+this covariance (too small then); ``map_prior="deconditioned"`` gives the poses' covariance by
+the law of total covariance instead, ``A⁻¹ + A⁻¹ B Σ_m Bᵀ A⁻¹``, exact for a linear model
+(docs/recovery.md). The poses are the same under both: the SLAM map is already the minimiser
+the prior is centred on.
 
 **The smoother** of :func:`recovery.recover.recover` is this problem solved from the
 extended RTS smoother of the filter run (which linearises along the run:
@@ -100,6 +102,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.linalg.lapack import dpbsv
 
+from recovery.constants import DEFAULT_MAP_PRIOR, MAP_PRIORS
 from recovery.ekf import FilterInput, run_filter
 from recovery.lm import Linearisation, LMOptions, levenberg_marquardt, retract_poses
 from recovery.map_uncertainty import block_factor, covariance_factor
@@ -117,6 +120,7 @@ __all__ = [
     "normal_equations",
     "retract_chain",
     "batch_covariances",
+    "check_map_prior",
 ]
 
 
@@ -553,16 +557,27 @@ class _JointProblem:
         nx = s.poses.size
         return JointState(retract_chain(s.poses, delta[:nx]), s.eta + delta[nx:])
 
-    def map_covariance_term(self, s: JointState) -> Array:
-        """``(Y S⁻¹ Yᵀ)_kk`` (N, 3, 3), ``Y = A⁻¹ B``, ``S = C − Bᵀ Y`` at ``s`` (undamped):
-        what the map's uncertainty adds to each pose's covariance ``(A⁻¹)_kk``."""
+    def map_covariance_term(self, s: JointState, *, deconditioned: bool = False) -> Array:
+        """What the map's uncertainty adds to each pose's covariance ``(A⁻¹)_kk``, (N, 3, 3),
+        at ``s`` (undamped), with ``Y = A⁻¹ B`` (``−Y`` the poses' sensitivity to ``η``).
+
+        Independent map (default): ``(Y S⁻¹ Yᵀ)_kk``, ``S = C − Bᵀ Y`` — the poses' block of
+        ``H⁻¹``, the map's prior ``Σ_m`` and the log's information about the map added.
+        ``deconditioned``: ``(Y Yᵀ)_kk`` — the law of total covariance
+        ``Cov(X | Z) = A⁻¹ + A⁻¹ B Σ_m Bᵀ A⁻¹`` for a map whose ``Σ_m = L Lᵀ`` is already the
+        posterior given this log (``η``'s prior stands for ``Cov(m | Z)``, so ``S`` is
+        ``I``: the log's information about the map is not added a second time).
+        """
         n = s.poses.shape[0]
         if not self.rank:
             return np.zeros((n, 3, 3))
         ab0, b, c = self.linearise(s).system
         y = _cholesky_solve(ab0.copy(order="F"), np.asfortranarray(b))
-        chol = scipy.linalg.cholesky(c - b.T @ y, lower=True)
-        v = scipy.linalg.solve_triangular(chol, y.T, lower=True).T.reshape(n, 3, self.rank)
+        if deconditioned:
+            v = y.reshape(n, 3, self.rank)
+        else:
+            chol = scipy.linalg.cholesky(c - b.T @ y, lower=True)
+            v = scipy.linalg.solve_triangular(chol, y.T, lower=True).T.reshape(n, 3, self.rank)
         return v @ v.transpose(0, 2, 1)
 
 
@@ -572,6 +587,15 @@ def map_factor_of(inp: FilterInput) -> Array:
     if inp.map_covariance is not None:
         return covariance_factor(inp.map_covariance)
     return block_factor(inp.map_marginals)
+
+
+def check_map_prior(map_prior: str) -> None:
+    """:class:`~relation_metric.errors.InputError` for a ``map_prior`` not in
+    :data:`~recovery.constants.MAP_PRIORS`."""
+    if map_prior not in MAP_PRIORS:
+        raise InputError(
+            f"unknown map prior {map_prior!r}; expected one of {', '.join(MAP_PRIORS)}"
+        )
 
 
 def memory_budget() -> float:
@@ -619,6 +643,7 @@ def refine(
     tolerance: float = 1e-10,
     map_factor: Array | None = None,
     cost_tolerance: float = 0.0,
+    map_prior: str = DEFAULT_MAP_PRIOR,
 ) -> BatchResult:
     """Levenberg–Marquardt from ``start`` (N, 3) over all poses and the map correction.
 
@@ -642,11 +667,22 @@ def refine(
     map_factor : ndarray, shape (2M, r), optional
         ``L`` with ``L Lᵀ = Σ_m`` (:class:`recovery.map_uncertainty.MapUncertainty`); by
         default from ``inp`` (:func:`map_factor_of`).
+    map_prior : {"independent", "deconditioned"}
+        Where the map's error comes from (:data:`~recovery.constants.MAP_PRIORS`). It
+        changes the covariances only, never the poses: ``"deconditioned"`` (a map made from
+        this log) takes the poses' covariance by the law of total covariance
+        (:meth:`_JointProblem.map_covariance_term`).
 
     Returns
     -------
     BatchResult
+
+    Raises
+    ------
+    InputError
+        For an unknown ``map_prior``.
     """
+    check_map_prior(map_prior)
     factor = map_factor_of(inp) if map_factor is None else map_factor
     check_joint_size(int(np.asarray(start).shape[0]), int(np.asarray(factor).shape[1]))
     reg = regularised_sigma(inp.sigma)  # shared by the weights and the covariance pass
@@ -667,7 +703,7 @@ def refine(
     x[:, 2] = se2.wrap_angle(x[:, 2])
     state = JointState(x, res.x.eta)
     covs = batch_covariances(problem.map_inp(state.eta), x, used, weights, regularised=reg)
-    covs = covs + problem.map_covariance_term(state)
+    covs = covs + problem.map_covariance_term(state, deconditioned=map_prior == "deconditioned")
     shift = (factor @ state.eta).reshape(-1, 2) if problem.rank else np.zeros_like(inp.map_xy)
     return BatchResult(
         x, covs, res.iterations, float(res.costs[0]), float(res.costs[-1]), map_correction=shift

@@ -10,6 +10,8 @@ from __future__ import annotations
 __all__ = [
     "METHODS",
     "MAP_MODES",
+    "MAP_PRIORS",
+    "DEFAULT_MAP_PRIOR",
     "BATCH_MAX_ITERATIONS",
     "SMOOTHER_CHI2_RESOLUTION",
     "SMOOTHER_MAX_ITERATIONS",
@@ -27,6 +29,14 @@ METHODS = ("filter", "smoother", "batch")
 #: ``map_mode`` of :func:`recovery.recover.recover`: the form of the map's uncertainty
 #: (:mod:`recovery.map_uncertainty`).
 MAP_MODES = ("joint", "marginal", "ignore")
+#: ``map_prior`` of :func:`recovery.recover.recover`: where the map's error comes from. An
+#: ``independent`` map (surveyed, or drawn apart from the log) is a prior the log's
+#: measurements add to; a ``deconditioned`` map was made from this very log (an EKF-SLAM's
+#: final map), so its covariance already holds the log's information and the poses'
+#: covariance is the law of total covariance over it (docs/recovery.md).
+MAP_PRIORS = ("independent", "deconditioned")
+#: The map prior of :func:`recovery.recover.recover` when none is asked for.
+DEFAULT_MAP_PRIOR = "independent"
 #: Iterations of ``method="batch"`` (to numerical convergence; the smoother stops earlier).
 BATCH_MAX_ITERATIONS = 50
 #: The smoother's Gauss–Newton steps stop after one that lowers χ² (twice the cost) by less

@@ -37,7 +37,9 @@ import numpy as np
 from recovery.bundle import Bundle
 from recovery.constants import (
     BATCH_MAX_ITERATIONS,
+    DEFAULT_MAP_PRIOR,
     DEFAULT_ROBUST,
+    MAP_PRIORS,
     METHODS,
     SMOOTHER_CHI2_RESOLUTION,
     SMOOTHER_MAX_ITERATIONS,
@@ -198,6 +200,7 @@ def recover(
     robust_threshold: float | None = None,
     robust_scale: float | str = "auto",
     progress: bool = False,
+    map_prior: str = DEFAULT_MAP_PRIOR,
 ) -> Recovery:
     """Recover the trajectory of a SLAM run by localisation in its final map.
 
@@ -245,12 +248,28 @@ def recover(
         weighted away. The filter then runs with ``c_eff = c ŝ``.
     progress : bool
         tqdm bar on the filter's epochs.
+    map_prior : {"independent", "deconditioned"}
+        Where the map's error comes from (:data:`~recovery.constants.MAP_PRIORS`).
+        ``"independent"`` (default): a map made apart from the log (surveyed, or drawn
+        independently of its noise), whose ``Σ_m`` is a prior the log's measurements add
+        to. ``"deconditioned"``: a map made from this very log (an EKF-SLAM's final map and
+        its joint covariance), whose ``Σ_m`` already holds the log's information: the poses'
+        covariance is then ``A⁻¹ + A⁻¹ B Σ_m Bᵀ A⁻¹`` (the law of total covariance), not the
+        poses' block of the joint information with the log's information about the map
+        counted a second time (docs/recovery.md). The trajectory is the same under both;
+        smoother and batch only.
 
     Returns
     -------
     Recovery
+
+    Raises
+    ------
+    InputError
+        For an unknown method, map mode or map prior, a gate outside ``(0, 1)``, or
+        ``map_prior="deconditioned"`` with the filter.
     """
-    _check_options(method, gate)
+    _check_options(method, gate, map_prior)
     mu = map_uncertainty(bundle, map_mode)
     inp = filter_input(bundle, uncertainty=mu)
     if method != "filter":  # before any work: the joint problem's dense map terms
@@ -268,7 +287,7 @@ def recover(
         **kw,  # type: ignore[arg-type]
     )
     weights = None if robust is None else fr.weights
-    est = _estimate(method, inp, fr, mu, weights)
+    est = _estimate(method, inp, fr, mu, weights, map_prior)
     covs, n_repaired = _check_finite(
         est.poses, est.covariances, inp.times, repair=on_divergence != "raise"
     )
@@ -293,14 +312,26 @@ def recover(
         batch=est.costs,
         weights=None if weights is None else readonly(weights),
         map_correction=est.map_correction,
+        map_prior=map_prior,
     )
 
 
-def _check_options(method: str, gate: float | None) -> None:
-    """:class:`~relation_metric.errors.InputError` for an unknown method or a gate outside
-    ``(0, 1)``, before any work."""
+def _check_options(method: str, gate: float | None, map_prior: str = DEFAULT_MAP_PRIOR) -> None:
+    """:class:`~relation_metric.errors.InputError` for an unknown method or map prior, the
+    deconditioned map prior with the filter, or a gate outside ``(0, 1)``, before any work."""
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
+    if map_prior not in MAP_PRIORS:
+        raise InputError(
+            f"unknown map prior {map_prior!r}; expected one of {', '.join(MAP_PRIORS)}"
+        )
+    if map_prior == "deconditioned" and method == "filter":
+        raise InputError(
+            "map prior 'deconditioned' needs the smoother or the batch: the filter's pose at "
+            "time t reads only the log before t, and its error's correlation with a map made "
+            "from the whole log has no closed form; expected method smoother or batch, or map "
+            "prior independent"
+        )
     if gate is not None and not 0.0 < gate < 1.0:
         raise InputError(f"gate probability must be in (0, 1), got {gate}")
 
@@ -345,6 +376,7 @@ def _estimate(
     fr: FilterResult,
     mu: MapUncertainty,
     weights: Array | None,
+    map_prior: str = DEFAULT_MAP_PRIOR,
 ) -> _Estimate:
     """The filter's poses, or the smoother's or batch's refinement of them.
 
@@ -364,6 +396,7 @@ def _estimate(
         used=fr.status == USED,
         weights=weights,
         map_factor=mu.factor,
+        map_prior=map_prior,
         **(_SMOOTHER_STOP if method == "smoother" else _BATCH_STOP),
     )
     return _Estimate(

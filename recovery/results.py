@@ -26,6 +26,7 @@ from relation_metric.consistency import chi2_quantile
 from relation_metric.trajectory import Trajectory
 
 __all__ = [
+    "MAP_PRIOR_RULES",
     "BatchCosts",
     "Divergence",
     "NisStats",
@@ -34,6 +35,16 @@ __all__ = [
     "RobustSettings",
     "Stretch",
 ]
+
+#: Each map prior's assumption, in words (written into the recovery report).
+MAP_PRIOR_RULES = {
+    "independent": "the map's error independent of the log's noise: a prior the log's "
+    "measurements add to",
+    "deconditioned": "the map made from this log (its covariance already holds the log's "
+    "information): the poses' covariance is their covariance in the exact map plus the map's "
+    "covariance through the poses' sensitivity to it (law of total covariance), the log's "
+    "information about the map not counted twice",
+}
 
 
 @dataclass(frozen=True)
@@ -407,6 +418,9 @@ class Recovery:
         The map uncertainty every estimator used, with its rule in words.
     map_correction : ndarray, shape (M, 2) or None
         The smoother's or batch's estimate of the map's error ``L η`` (``map.csv`` order).
+    map_prior : str
+        Where the map's error comes from (:data:`~recovery.constants.MAP_PRIORS`):
+        ``independent`` of the log, or ``deconditioned`` (the map made from this log).
     """
 
     method: str
@@ -424,6 +438,7 @@ class Recovery:
     weights: Array | None = None
     map_uncertainty: MapUncertainty | None = None
     map_correction: Array | None = None
+    map_prior: str = "independent"
 
     @property
     def stretches(self) -> tuple[Stretch, ...]:
@@ -448,6 +463,9 @@ class Recovery:
             "divergence": self.divergence.as_dict(),
             "nis": self.nis_stats.as_dict(),
         }
+        if self.map_prior != "independent":  # only then: earlier reports keep their bytes
+            out["map_prior"] = self.map_prior
+            out["map_prior_rule"] = MAP_PRIOR_RULES[self.map_prior]
         dead = self.counts.dead_reckoning()
         if dead is not None:  # only then: the reports of observed runs keep their bytes
             out["dead_reckoning"] = dead

@@ -37,6 +37,7 @@ from landmark_graph.maps import LandmarkMap
 from landmark_graph.observability import SensorReach, within_reach
 from recovery.anchoring import NeesFrame, anchor_on_landmarks
 from recovery.bundle import Bundle
+from recovery.constants import DEFAULT_MAP_PRIOR
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, recover
 from recovery.results import Recovery
 from recovery.steps import build_steps
@@ -289,14 +290,18 @@ def run_pipeline(
     process_noise_scale: float = 1.0,
     associate: str | Association = DEFAULT_ASSOCIATE,
     align: bool = True,
+    map_prior: str | None = None,
 ) -> RunResult:
     """Run the whole chain on a built-in world, or score a bundle read earlier (no I/O).
 
     ``source``: a world name (simulated by :func:`simulate_run_input` with ``noise``, ``seed``,
     ``rate``, ``corrupt_fraction``, ``noise_scale``, ``process_noise_scale``), or a
     :class:`RunInput` (e.g. from :func:`read_run_input` for a bundle directory).
-    ``max_outlier_run``, ``on_divergence`` and ``robust`` are passed to
-    :func:`recovery.recover.recover`, ``associate`` and ``align`` to :func:`map_comparison`.
+    ``max_outlier_run``, ``on_divergence``, ``robust`` and ``map_prior`` (``None``: the
+    default of :func:`recovery.recover.recover`, ``independent``: a bundle does not say
+    whether its map was made from its log, and ``slamrel recover`` must give the same bundle
+    the same covariances) are passed to :func:`recovery.recover.recover`, ``associate`` and
+    ``align`` to :func:`map_comparison`.
     """
     inp = source
     if not isinstance(inp, RunInput):
@@ -307,6 +312,7 @@ def run_pipeline(
     return score_bundle(
         inp, seed=seed, method=method, max_outlier_run=max_outlier_run,
         on_divergence=on_divergence, robust=robust, associate=associate, align=align,
+        map_prior=map_prior,
     )  # fmt: skip
 
 
@@ -320,6 +326,7 @@ def score_bundle(
     robust: str | None = DEFAULT_ROBUST,
     associate: str | Association = DEFAULT_ASSOCIATE,
     align: bool = True,
+    map_prior: str | None = None,
 ) -> RunResult:
     """Recover the trajectory from a SLAM result bundle and score it (and its baselines).
 
@@ -358,6 +365,7 @@ def score_bundle(
         rec = recover(
             bundle, method=method, max_outlier_run=max_outlier_run,
             on_divergence=on_divergence, robust=robust,
+            map_prior=DEFAULT_MAP_PRIOR if map_prior is None else map_prior,
         )  # fmt: skip
     except SlamrelError as exc:  # DivergenceError with on_divergence="raise"
         if isinstance(exc, InputError):
