@@ -29,7 +29,7 @@ from relation_metric.relations import RelationSet, generate_relations
 from relation_metric.time_association import synchronize
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, RepeatedTimeWarning, zero_length
 from relation_metric.trajectory import Trajectory
-from slamrel.constants import EVO_MAX_TIME_DIFF, TRAJECTORY_FORMATS
+from slamrel.constants import EVO_MAX_TIME_DIFF, STRATEGY_OPTION_WORDS, TRAJECTORY_FORMATS
 from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
 from slamrel.formats.bags import is_bag, names_bag
 from slamrel.formats.relations import read_relations
@@ -480,21 +480,22 @@ def _generate(
     reference: Trajectory, options: EvaluateOptions, *, key: Literal["time", "index"] = "time"
 ) -> RelationSet:
     """Relations generated from ``reference`` with the strategy options (default consecutive)."""
-    return generate_relations(
-        reference,
-        "consecutive" if options.strategy is None else options.strategy,  # type: ignore[arg-type]
-        step=options.step,
-        distance=options.distance,
-        radius=options.radius,
-        min_separation_time=options.min_separation_time,
-        min_separation_distance=options.min_separation_distance,
-        count=options.count,
-        min_distance=options.min_distance,
-        seed=options.seed,
-        chained=options.chained,
-        seconds=options.seconds,
-        key=key,
-    )
+    with in_option_words(STRATEGY_OPTION_WORDS):
+        return generate_relations(
+            reference,
+            "consecutive" if options.strategy is None else options.strategy,  # type: ignore[arg-type]
+            step=options.step,
+            distance=options.distance,
+            radius=options.radius,
+            min_separation_time=options.min_separation_time,
+            min_separation_distance=options.min_separation_distance,
+            count=options.count,
+            min_distance=options.min_distance,
+            seed=options.seed,
+            chained=options.chained,
+            seconds=options.seconds,
+            key=key,
+        )
 
 
 def _note_projection(notes: dict[str, Any], role: str, loaded: LoadedTrajectory) -> None:

@@ -222,22 +222,24 @@ def relations_from_args(
 ) -> RelationSet:
     """Generate relations from ``reference`` with the strategy options in ``args``."""
     from relation_metric.relations import generate_relations
+    from slamrel.constants import STRATEGY_OPTION_WORDS
 
-    return generate_relations(
-        reference,
-        args.strategy,
-        step=args.step,
-        distance=args.distance,
-        radius=args.radius,
-        min_separation_time=args.min_separation_time,
-        min_separation_distance=args.min_separation_distance,
-        count=args.count,
-        min_distance=args.min_distance,
-        seed=args.seed,
-        chained=getattr(args, "chained", False),
-        seconds=getattr(args, "seconds", EVALUATE_DEFAULTS["seconds"]),
-        key=key,
-    )
+    with in_option_words(STRATEGY_OPTION_WORDS):
+        return generate_relations(
+            reference,
+            args.strategy,
+            step=args.step,
+            distance=args.distance,
+            radius=args.radius,
+            min_separation_time=args.min_separation_time,
+            min_separation_distance=args.min_separation_distance,
+            count=args.count,
+            min_distance=args.min_distance,
+            seed=args.seed,
+            chained=getattr(args, "chained", False),
+            seconds=getattr(args, "seconds", EVALUATE_DEFAULTS["seconds"]),
+            key=key,
+        )
 
 
 def input_files(paths: Sequence[str | None]) -> list[str | None]:
