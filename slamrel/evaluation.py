@@ -163,6 +163,12 @@ def score_files(
         _warn_evo_tolerance(options.max_time_diff)
         ref_sync, est_sync = synchronize(ref_traj, scored, max_diff=options.max_time_diff)
         notes["synchronized_pairs"] = len(ref_sync)
+        if len(ref_sync) < 2:
+            raise InputError(
+                f"--sync pairs only {len(ref_sync)} pose(s) with {estimate} within "
+                f"--max-time-diff {options.max_time_diff:g} s; relations need at least 2",
+                path=reference,
+            )
         relations = _generate_pairs(ref_sync, est_sync, options)
         scored = est_sync
         ate_pair = _same_times(est_sync, ref_sync)
@@ -431,7 +437,14 @@ def load_reference(
     traj = _windowed(loaded.trajectory, options, notes, reference, "reference")
     if options.sync:  # relations are generated after the pose-by-pose association
         return RelationSet(np.empty(0), np.empty(0), np.empty((0, 3))), traj
-    return _generate(traj, options), traj
+    try:
+        return _generate(traj, options), traj
+    except InputError as exc:
+        if exc.path is not None:
+            raise
+        window = options.t_start is not None or options.t_end is not None
+        said = exc.message + (" inside --t-start/--t-end" if window else "")
+        raise type(exc)(said, path=reference) from None
 
 
 class DuplicateRelationWarning(RepeatedTimeWarning):

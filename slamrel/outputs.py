@@ -970,8 +970,9 @@ def resumable_directory(
             data = None
         if not isinstance(data, dict) or data.get("kind") != kind:
             found = data.get("kind") if isinstance(data, dict) else None
+            article = "an" if kind[:1] in "aeiou" else "a"
             raise InputError(
-                f"exists and is not a {kind} folder slamrel wrote "
+                f"exists and is not {article} {kind} folder slamrel wrote "
                 f"({MANIFEST} says {found!s}); choose a new or empty folder",
                 path=path,
             )

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 from slamrel.commands.common import (
     add_strategy_arguments,
     check_outputs,
+    errors_about,
     input_files,
     relations_from_args,
 )
@@ -218,7 +219,8 @@ def run_generate(args: argparse.Namespace) -> int:
     reference = load_trajectory(
         args.reference, args.format, planar=args.planar, times=args.times
     ).trajectory
-    rel = relations_from_args(reference, args)
+    with errors_about(args.reference):
+        rel = relations_from_args(reference, args)
     write_relations(args.output, rel)
     if not args.quiet:
         dim = "3-D" if reference.group.name == "SE3" else "2-D"
