@@ -102,3 +102,45 @@ def test_align_at_times_without_scans_are_plain_numbers():
         pairs_at_times(t, np.array([0.0, 101.0]), np.array([0.2, 0.25]), tolerance=0.02)
     assert "relation 2 (101.0 0.25), is 101 s from the nearest scan" in str(err.value)
     assert "np." not in str(err.value)
+
+
+# ------------------------------------- map-compare and review when no pair is found
+
+
+def _far_maps(tmp_path: Path) -> tuple[str, str]:
+    """Two valid maps the automatic association cannot pair (no shared id, no shape in
+    common within the cut-off): a person can still pair them by hand."""
+    est = _plain(tmp_path / "est.csv", "id,x,y\n1,0,0\n2,10,0\n3,0,10\n4,10,10\n")
+    ref = _plain(tmp_path / "ref.csv", "id,x,y\n11,100,100\n12,150,100\n13,100,150\n14,160,160\n")
+    return est, ref
+
+
+def test_map_compare_without_any_pair_still_writes_its_outputs(tmp_path, capsys):
+    """It used to exit 3 ("found no consistent pair") and write no page to pair by hand."""
+    import json
+
+    est, ref = _far_maps(tmp_path)
+    page, out = tmp_path / "r.html", tmp_path / "mc.json"
+    argv = ["map-compare", est, ref, "--review", str(page), "--json", str(out)]
+    err = _err([*argv, "--per-edge", str(tmp_path / "e.csv")], capsys, code=0)
+    assert "found no consistent pair of landmarks: 0 pairs" in err
+    assert "on the page of --review (or slamrel review)" in err
+    a = json.loads(out.read_text())["association"]
+    assert (a["matched"], a["missed"], a["spurious"]) == (0, 4, 4)
+    assert a["missed_ids"] == [11, 12, 13, 14] and a["spurious_ids"] == [1, 2, 3, 4]
+    assert "0 pairs" in a["cautions"][0]
+    assert page.stat().st_size > 1000
+    assert (tmp_path / "e.csv").read_text().count("\n") == 1  # the header, no edge
+    # the pairs the user asked for by id stay the user's: none is still an error
+    _err(["map-compare", est, ref, "--associate", "id"], capsys)
+
+
+@pytest.mark.parametrize("mode", ["auto", "id-or-auto"])
+def test_review_without_any_pair_writes_the_page(tmp_path, capsys, mode):
+    est, ref = _far_maps(tmp_path)
+    page = tmp_path / "r.html"
+    assert main(["review", est, ref, "-o", str(page), "--associate", mode]) == 0
+    out, err = capsys.readouterr()
+    assert "0 proposed pairs" in out and "4 missed, 4 spurious" in out
+    assert "0 pairs" in err and "pair the landmarks by hand on this page" in err
+    assert page.stat().st_size > 1000

@@ -104,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
     words = {
         'associate="auto"': "--associate auto",
         "an association of your own": "an association file",
+        "on a review page": "on the page of --review (or slamrel review)",
+        "as the association": "with --associate FILE",
     }
     with errors_about(args.estimate), in_option_words(words):
         res = compare_maps(
@@ -115,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             thin_angle=np.deg2rad(args.thin_angle),
             align=args.align,
+            allow_empty=True,  # no pair found: the page and the outputs, with 0 pairs said
         )
     out = res.as_dict()
     if args.json:
