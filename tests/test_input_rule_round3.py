@@ -144,3 +144,47 @@ def test_review_without_any_pair_writes_the_page(tmp_path, capsys, mode):
     assert "0 proposed pairs" in out and "4 missed, 4 spurious" in out
     assert "0 pairs" in err and "pair the landmarks by hand on this page" in err
     assert page.stat().st_size > 1000
+
+
+# ------------------------------ information beyond what a solve can sum (no bug warning)
+
+_G2O = (
+    "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_SE2 2 2 0 0\n"
+    "EDGE_SE2 0 1 1 0 0 {i} 0 0 {i} 0 {i}\n"
+    "EDGE_SE2 1 2 1 0.1 0 1 0 0 1 0 1\n"
+    "EDGE_SE2 0 2 2.5 0 0 {i} 0 0 {i} 0 {i}\n"  # a loop that disagrees by 0.5 m
+)
+
+
+def test_g2o_information_beyond_1e200_is_refused_at_its_line(tmp_path, capsys):
+    """Information 1e300 on a loop that disagrees: the solve overflowed (slamrel's own
+    "floating-point problem … bug" warning, then "singular"). Refused at the edge's line;
+    1e200 (a standard deviation of 1e-100) still solves, without a warning."""
+    f = _plain(tmp_path / "g.g2o", _G2O.format(i="1e300"))
+    err = _err(["solve", f, "-o", str(tmp_path / "out"), "-q"], capsys)
+    assert f"{f}:4: EDGE_SE2 information matrix: an entry of 1e+300 is beyond 1e+200" in err
+    assert "floating-point problem" not in err
+    ok = _plain(tmp_path / "ok.g2o", _G2O.format(i="1e200"))
+    assert main(["solve", ok, "-o", str(tmp_path / "ok"), "-q"]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_toro_and_isam_information_beyond_1e200_are_refused(tmp_path, capsys):
+    toro = _plain(
+        tmp_path / "t.graph",
+        "VERTEX2 0 0 0 0\nVERTEX2 1 1 0 0\nEDGE2 0 1 1 0 0 1e300 0 1e300 1e300 0 0\n",
+    )
+    err = _err(["solve", toro, "-o", str(tmp_path / "o1"), "-q"], capsys)
+    assert f"{toro}:3: EDGE2 information matrix: an entry of 1e+300 is beyond 1e+200" in err
+    isam = _plain(
+        tmp_path / "i.txt",
+        f"ODOMETRY 0 1 1 0 0 1e150 0 0 1 0 1\nODOMETRY 1 2 1 0 0 {_SQRT_INFO}\n",
+    )
+    err = _err(["solve", isam, "-o", str(tmp_path / "o2"), "-q"], capsys)
+    assert f"{isam}:1: ODOMETRY: square-root information entry 1e+150 is beyond 1e+100" in err
+    tiny = _plain(
+        tmp_path / "c.txt",
+        "ODOMETRY 0 1 1 0 0 1e-250 0 0 1e-250 0 1e-250\nODOMETRY 1 2 1 0 0 1 0 0 1 0 1\n",
+    )
+    err = _err(["solve", tiny, "--noise", "covariance", "-o", str(tmp_path / "o3")], capsys)
+    assert f"{tiny}:1: ODOMETRY information (inverse covariance): an entry of 1e+250" in err

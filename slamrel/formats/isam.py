@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from recovery.bundle import Bundle
 from recovery.models import MotionModel, SensorModel
 from relation_metric import se2
-from relation_metric.checks import check_covariances
+from relation_metric.checks import MAX_INFORMATION, check_covariances
 from relation_metric.errors import InputError
 from relation_metric.ids import first_missing, refuse_self_loops, rows_of
 from relation_metric.trajectory import Trajectory
@@ -141,7 +141,20 @@ def _information(
                 path=path,
                 line=int(lines[bad[0]]),
             )
-        return np.swapaxes(m, 1, 2) @ m  # Rᵀ R
+        root = np.sqrt(MAX_INFORMATION)
+        big = np.flatnonzero((np.abs(upper) > root).any(axis=1))
+        if big.size:
+            raise InputError(
+                f"{kind}: square-root information entry "
+                f"{float(np.abs(upper[big[0]]).max()):.6g} is beyond {root:.6g} (information "
+                f"beyond {MAX_INFORMATION:.6g}, where the sums of squares of a solve overflow)",
+                path=path,
+                line=int(lines[big[0]]),
+            )
+        info = np.swapaxes(m, 1, 2) @ m  # Rᵀ R
+        check_covariances(info, path=path, lines=lines, what=f"{kind} information (Rᵀ R)",
+                          max_abs=MAX_INFORMATION)  # fmt: skip
+        return info
     sym = m + np.swapaxes(np.triu(m, 1), 1, 2)
     check_covariances(sym, path=path, lines=lines, what=f"{kind} covariance", definite=True)
     with np.errstate(all="ignore"):
@@ -154,6 +167,8 @@ def _information(
             path=path,
             line=int(lines[bad[0]]),
         )
+    check_covariances(info, path=path, lines=lines, what=f"{kind} information (inverse covariance)",
+                      max_abs=MAX_INFORMATION)  # fmt: skip
     return info.astype(np.float64, copy=False)
 
 
