@@ -188,3 +188,34 @@ def test_toro_and_isam_information_beyond_1e200_are_refused(tmp_path, capsys):
     )
     err = _err(["solve", tiny, "--noise", "covariance", "-o", str(tmp_path / "o3")], capsys)
     assert f"{tiny}:1: ODOMETRY information (inverse covariance): an entry of 1e+250" in err
+
+
+# ------------------------------------------------ MRCLAM: odd-but-valid and repeated rows
+
+
+def test_mrclam_nonpositive_ranges_are_left_out_counted_and_named(tmp_path):
+    """A range of 0 or below (the dataset holds −0.035 m) used to refuse the whole run with
+    an error naming only the folder. Left out, counted, the first named by file and line."""
+    from slamrel.importers.mrclam import read_mrclam_robot
+    from tests.test_importers_mrclam import make_dataset
+
+    rows = ["10.1 63 1.5 0.1\n", "10.2 63 -0.035 0.1\n", "10.3 81 0 0.2\n", "10.7 81 3 0.5\n"]
+    d = make_dataset(tmp_path, measurement_rows=rows)
+    with pytest.warns(UserWarning) as caught:
+        r = read_mrclam_robot(d, 1)
+    said = " ".join(str(w.message) for w in caught)
+    assert "Robot1_Measurement.dat: 2 measurement(s) with a range of 0 or below left out" in said
+    assert "(the first at line 4: range -0.035)" in said
+    assert r.nonpositive_ranges == 2
+    np.testing.assert_allclose(r.measurements[:, :2], [[10.1, 1.5], [10.7, 3.0]])
+
+
+def test_mrclam_landmark_surveyed_twice_is_refused_at_its_line(tmp_path, capsys):
+    from tests.test_importers_mrclam import HEAD, make_dataset
+
+    d = make_dataset(tmp_path)
+    lm = d / "Landmark_Groundtruth.dat"
+    lm.write_text(HEAD + "6 1.0 2.0 0.01 0.01\n7 3.0 4.0 0.01 0.01\n6 5.0 6.0 0.01 0.01\n")
+    err = _err(["import", "mrclam", str(d), "--robot", "1", "-o", str(tmp_path / "b")], capsys)
+    assert f"{lm}:5: landmark subject 6 is given twice (first at line 3)" in err
+    assert not (tmp_path / "b").exists()
