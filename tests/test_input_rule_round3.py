@@ -219,3 +219,17 @@ def test_mrclam_landmark_surveyed_twice_is_refused_at_its_line(tmp_path, capsys)
     err = _err(["import", "mrclam", str(d), "--robot", "1", "-o", str(tmp_path / "b")], capsys)
     assert f"{lm}:5: landmark subject 6 is given twice (first at line 3)" in err
     assert not (tmp_path / "b").exists()
+
+
+def test_slam_known_association_names_the_measurement_without_an_id(tmp_path, capsys):
+    """It used to say only the bundle folder ("needs a landmark id for every measurement")."""
+    from tests.test_readers_fuzz import BUNDLE
+
+    b = tmp_path / "log"
+    b.mkdir()
+    for name, text in BUNDLE.items():
+        (b / name).write_text(text)  # measurements.csv line 3 has an empty landmark field
+    err = _err(["slam", str(b), "-o", str(tmp_path / "out")], capsys)
+    assert f"{b / 'measurements.csv'}:3: measurement without a landmark id" in err
+    assert "--association nn associates them by nearest neighbour" in err
+    assert not (tmp_path / "out").exists()

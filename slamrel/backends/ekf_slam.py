@@ -36,6 +36,7 @@ step's updates) are stored for validation only.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -484,6 +485,24 @@ def _nn_mistakes(assoc: NDArray[np.int64], true_ids: NDArray[np.int64]) -> NDArr
     return wrong
 
 
+def _refuse_missing_ids(bundle: Bundle, used: NDArray[np.bool_]) -> None:
+    """Known association: the first used measurement without a landmark id, refused at its
+    line of the bundle's measurements.csv (the array-level check names no line)."""
+    missing = np.flatnonzero(used & ~np.asarray(bundle.measurement_associated, dtype=bool))
+    if not missing.size:
+        return
+    k = int(missing[0])
+    lines = bundle.measurement_lines
+    line = None if lines is None else int(lines[k]) or None
+    raise InputError(
+        f"measurement without a landmark id (unassociated; {missing.size} such in the log's "
+        "time span): known association needs one for every measurement; "
+        "association='nn' associates them by nearest neighbour",
+        path=None if bundle.path is None else Path(bundle.path) / "measurements.csv",
+        line=line,
+    )
+
+
 def ekf_slam_bundle(
     bundle: Bundle,
     *,
@@ -518,6 +537,7 @@ def ekf_slam_bundle(
     _check_fraction(corrupt_fraction)
     if association == "known":
         used = np.asarray(steps.measurement_grid) >= 0
+        _refuse_missing_ids(bundle, used)
         ids = corrupt_associations(ids, used, corrupt_fraction, seed=seed)
     res = ekf_slam(
         steps,

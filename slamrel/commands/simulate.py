@@ -6,7 +6,13 @@ import argparse
 from pathlib import Path
 
 from slamrel.commands import options as opt
-from slamrel.commands.common import add_force_argument, check_outputs, check_rate, errors_about
+from slamrel.commands.common import (
+    add_force_argument,
+    check_outputs,
+    check_rate,
+    errors_about,
+    in_option_words,
+)
 from slamrel.constants import NOISE_HELP, NOISE_NAMES, WORLDS
 
 
@@ -103,7 +109,8 @@ def run_slam(args: argparse.Namespace) -> int:
 
     check_outputs([], [args.bundle], dirs=[args.output], force=args.force)
     bundle = read_bundle(args.bundle)
-    with errors_about(args.bundle):
+    words = {"association='nn'": "--association nn"}
+    with errors_about(args.bundle), in_option_words(words):
         out, res = ekf_slam_bundle(
             bundle,
             association=args.association,
