@@ -233,3 +233,18 @@ def test_slam_known_association_names_the_measurement_without_an_id(tmp_path, ca
     assert f"{b / 'measurements.csv'}:3: measurement without a landmark id" in err
     assert "--association nn associates them by nearest neighbour" in err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("topic", ["/pose", "/odom"])
+def test_a_nan_pose_in_a_bag_names_the_bag_topic_and_message(tmp_path, capsys, topic):
+    """It used to say "pose 5 is not finite" with no file (the bag reader built the
+    trajectory without saying where its rows came from)."""
+    pytest.importorskip("rosbags")
+    from tests.test_bags import _truth, _write
+
+    truth = _truth(np.random.default_rng(0))
+    truth["xyz"][5, 0] = np.nan
+    bag = _write(tmp_path / "nan.bag", "ros1", truth)
+    err = _err(["evaluate", f"{bag}:{topic}", f"{bag}:/posecov", "-q"], capsys)
+    assert f"{bag}: topic '{topic}', message 6 of " in err
+    assert "x = nan; expected finite numbers (1 such message(s))" in err

@@ -342,10 +342,31 @@ def read_bag_poses(spec: BagSpec) -> BagPoses:
                     f"{spec.path}:{spec.topic}:PARENT.CHILD ({_frames_text(reader, topics)})",
                     path=spec.path,
                 )
-            return _tf_chain(reader, topics, spec)
+            return _finite(_tf_chain(reader, topics, spec), spec)
         if info.count == 0:
             raise InputError(f"topic {spec.topic!r} has no messages", path=where)
-        return _read_topic(reader, spec.topic, info.msgtype)
+        return _finite(_read_topic(reader, spec.topic, info.msgtype), spec)
+
+
+_POSE_FIELDS = ("x", "y", "z", "qx", "qy", "qz", "qw")
+
+
+def _finite(got: BagPoses, spec: BagSpec) -> BagPoses:
+    """``got``, or :class:`InputError` at the first message (1-based, in bag order: a bag's
+    line) whose stamp or pose holds a non-finite number."""
+    bad = ~np.isfinite(got.poses).all(axis=1) | ~np.isfinite(got.timestamps)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        row = got.poses[k]
+        fields = [n for n, v in zip(_POSE_FIELDS, row, strict=True) if not np.isfinite(v)]
+        what = f"{', '.join(fields)} = {row[~np.isfinite(row)][0]}" if fields else "its stamp"
+        raise InputError(
+            f"topic {spec.topic!r}, message {k + 1} of {bad.size} (stamp "
+            f"{float(got.timestamps[k])!r}): {what}; expected finite numbers "
+            f"({int(bad.sum())} such message(s))",
+            path=spec.path,
+        )
+    return got
 
 
 def _typed_topic(topics: Mapping[str, BagTopic], spec: BagSpec, types: tuple[str, ...]) -> BagTopic:
