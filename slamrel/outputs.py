@@ -659,8 +659,12 @@ def _acquire(final: Path, path: PathLike, *, wait: bool) -> int:
             os.close(fd)
             raise
         if same:
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+            except OSError as exc:  # a full disk: no lock file is left behind, one error
+                _release(fd, final)
+                raise _os_error(exc, path, "cannot write its lock file") from None
             return fd
         os.close(fd)
 

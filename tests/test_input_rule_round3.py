@@ -248,3 +248,21 @@ def test_a_nan_pose_in_a_bag_names_the_bag_topic_and_message(tmp_path, capsys, t
     err = _err(["evaluate", f"{bag}:{topic}", f"{bag}:/posecov", "-q"], capsys)
     assert f"{bag}: topic '{topic}', message 6 of " in err
     assert "x = nan; expected finite numbers (1 such message(s))" in err
+
+
+def test_a_full_disk_at_the_lock_file_is_one_error_and_leaves_no_lock(
+    tmp_path, capsys, monkeypatch
+):
+    """ENOSPC while writing the pid into the output's lock file: it used to escape as a raw
+    OSError and leave an empty ``.NAME.slamrel-lock`` behind."""
+    import errno
+    import os
+
+    def full(fd, data, offset):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "pwrite", full)
+    out = tmp_path / "sim"
+    err = _err(["simulate", "simple1", "-o", str(out), "-q"], capsys)
+    assert f"{out}: cannot write its lock file: no space left on the device" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
