@@ -46,7 +46,8 @@ MAX_INFORMATION = 1e200
 A least-squares cost sums ``rᵀ Ω r`` over the edges; with residuals up to twice
 :data:`~relation_metric.trajectory.MAX_COORDINATE` (1e30 m, so ``r² ≤ 4e60``) and up to 1e8
 edges, ``Ω ≤ 1e200`` keeps every cost and normal-equation entry below float64's 1.8e308.
-Beyond it the solver would overflow (a floating-point warning, then a singular system)."""
+Beyond it the solver would overflow (a floating-point warning, then a singular system); the
+same bound holds for the inverse of a filter's covariance in a NEES (``eᵀ Σ⁻¹ e``)."""
 
 
 def bad_covariances(
@@ -94,8 +95,8 @@ def bad_covariances(
         top = np.where(ok, np.abs(np.where(nan, 0.0, flat)).max(axis=1), 0.0)
         for k in np.flatnonzero(top > max_abs).tolist():
             reasons[k] = (
-                f"an entry of {float(top[k]):.6g} is beyond {max_abs:.6g}, where the sums of "
-                "squares of a solve overflow"
+                f"an entry of {float(top[k]):.6g} is beyond {max_abs:.6g}, where sums of "
+                "squares (a solve's cost, a NEES) overflow"
             )
         ok &= top <= max_abs
     if ok.any():

@@ -266,3 +266,17 @@ def test_a_full_disk_at_the_lock_file_is_one_error_and_leaves_no_lock(
     err = _err(["simulate", "simple1", "-o", str(out), "-q"], capsys)
     assert f"{out}: cannot write its lock file: no space left on the device" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_nees_with_a_covariance_too_small_to_invert_usefully_is_refused(tmp_path, capsys):
+    """Variance 1e-300: the NEES overflowed (slamrel's own "floating-point problem … bug"
+    warnings, then a mean of 3e295, exit 0). Refused at its line; 1e-150 is still scored."""
+    truth = _plain(tmp_path / "truth.txt", "0 0 0 0\n1 1 0 0\n2 2 0 0\n")
+    rows = "1 1 0.01 0 0.01 0 0 0.01 0 0.01\n2 2 0 0.01 0.01 0 0 0.01 0 0.01\n"
+    tiny = _plain(tmp_path / "c.txt", "0 0.01 0 0 1e-300 0 0 1e-300 0 1e-300\n" + rows)
+    err = _err(["nees", truth, tiny], capsys)
+    assert f"{tiny}:1: information (inverse covariance; a variance below about 1e-200)" in err
+    assert "floating-point problem" not in err
+    ok = _plain(tmp_path / "ok.txt", "0 0.01 0 0 1e-150 0 0 1e-150 0 1e-150\n" + rows)
+    assert main(["nees", truth, ok, "-q"]) == 0
+    assert "floating-point problem" not in capsys.readouterr().err

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from relation_metric.checks import check_covariances
+from relation_metric.checks import MAX_INFORMATION, check_covariances
 from relation_metric.errors import InputError
 from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
 from slamrel.constants import COVARIANCE_LAYOUTS
@@ -119,6 +119,16 @@ def read_pose_covariances(
     if poses.shape[1] == 7:
         poses = np.column_stack((poses[:, :3], unit_quaternions(poses[:, 3:], name, lines)))
     check_covariances(cov, path=name, lines=lines, definite=True)  # NEES inverts it
+    with np.errstate(all="ignore"):  # too small to invert: infinite, refused just below
+        info = np.linalg.inv(cov)
+    check_covariances(
+        info,
+        path=name,
+        lines=lines,
+        what="information (inverse covariance; a variance below about 1e-200)",
+        max_abs=MAX_INFORMATION,
+        allow_unknown=False,
+    )
     order, report = sort_by_time(t, lines=lines, path=name, what="pose")
     if report.out_of_order:
         warnings.warn(
