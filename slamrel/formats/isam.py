@@ -151,10 +151,10 @@ def _information(
                 path=path,
                 line=int(lines[big[0]]),
             )
-        info = np.swapaxes(m, 1, 2) @ m  # Rᵀ R
-        check_covariances(info, path=path, lines=lines, what=f"{kind} information (Rᵀ R)",
+        rtr = np.swapaxes(m, 1, 2) @ m  # Rᵀ R
+        check_covariances(rtr, path=path, lines=lines, what=f"{kind} information (Rᵀ R)",
                           max_abs=MAX_INFORMATION)  # fmt: skip
-        return info
+        return rtr
     sym = m + np.swapaxes(np.triu(m, 1), 1, 2)
     check_covariances(sym, path=path, lines=lines, what=f"{kind} covariance", definite=True)
     with np.errstate(all="ignore"):

@@ -15,7 +15,7 @@ dropped without being counted in :class:`MrclamRobot`.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -84,7 +84,7 @@ class MrclamRobot:
 
 
 def _time_ordered(
-    path: Path, rows: NDArray[np.float64], lines: RowLines, what: str
+    path: Path, rows: NDArray[np.float64], lines: Callable[[int], int], what: str
 ) -> tuple[NDArray[np.float64], int]:
     """``rows`` (time in column 0) under the filter-log rule of ``relation_metric.timeorder``.
 
@@ -166,8 +166,8 @@ def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
         meas_path, columns=("time", "barcode", "range", "bearing"), describe="MRCLAM measurements"
     )
     integer_ids(meas[:, 1], meas_lines, meas_path, "barcode")  # at its line, before sorting
-    meas, meas_lines, nonpositive = _without_nonpositive_ranges(meas_path, meas, meas_lines)
-    meas, reordered[meas_path.name] = _time_ordered(meas_path, meas, meas_lines, "measurement")
+    meas, kept_lines, nonpositive = _without_nonpositive_ranges(meas_path, meas, meas_lines)
+    meas, reordered[meas_path.name] = _time_ordered(meas_path, meas, kept_lines, "measurement")
     gt_path = d / f"Robot{robot}_Groundtruth.dat"
     gt, gt_lines = read_numeric_table(
         gt_path, columns=("time", "x", "y", "theta"), describe="MRCLAM ground truth"
@@ -199,7 +199,7 @@ def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
 
 def _without_nonpositive_ranges(
     path: Path, meas: NDArray[np.float64], lines: RowLines
-) -> tuple[NDArray[np.float64], RowLines, int]:
+) -> tuple[NDArray[np.float64], Callable[[int], int], int]:
     """The measurements (``time barcode range bearing``) with a positive range, their line
     numbers, and how many were left out (warned about, naming the first one's line)."""
     bad = np.flatnonzero(~(meas[:, 2] > 0))
