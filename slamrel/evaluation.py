@@ -287,10 +287,16 @@ def _why_no_relations(
         why = f"{dropped} zero-length (t1 == t2) and {dup} repeated line(s) were dropped"
         return f"no relation left to score: {why}; expected at least one relation"
     strategy = options.strategy or "consecutive"
+    knobs = {
+        "consecutive": "a smaller --step",
+        "distance": "a smaller --distance",
+        "time": "fewer --seconds",
+        "loops": "a larger --radius or a smaller --min-separation-time",
+        "global": "a smaller --min-distance",
+    }.get(strategy, "other strategy options")
     return (
         f"no relation was selected: --strategy {strategy} generated none from the "
-        f"{len(ref_traj)} reference poses; expected at least one (loosen the strategy's "
-        "options: --delta, --radius, --step, --count, ...)"
+        f"{len(ref_traj)} reference poses; expected at least one ({knobs})"
     )
 
 

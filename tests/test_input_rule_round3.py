@@ -280,3 +280,21 @@ def test_nees_with_a_covariance_too_small_to_invert_usefully_is_refused(tmp_path
     ok = _plain(tmp_path / "ok.txt", "0 0.01 0 0 1e-150 0 0 1e-150 0 1e-150\n" + rows)
     assert main(["nees", truth, ok, "-q"]) == 0
     assert "floating-point problem" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("options", "knob"),
+    [
+        (["--strategy", "distance", "--distance", "5"], "(a smaller --distance)"),
+        (["--strategy", "time", "--seconds", "5"], "(fewer --seconds)"),
+        (["--step", "3"], "(a smaller --step)"),
+    ],
+)
+def test_no_relation_selected_names_the_option_that_would_select_some(
+    tmp_path, capsys, options, knob
+):
+    """The hint used to list options the command does not have (--delta)."""
+    two = _plain(tmp_path / "two.txt", "0 0 0 0\n1 1 0 0\n")
+    err = _err(["evaluate", *options, two, two, "-q"], capsys)
+    assert f"{two}: no relation was selected" in err and knob in err
+    assert "--delta" not in err
