@@ -298,3 +298,16 @@ def test_no_relation_selected_names_the_option_that_would_select_some(
     err = _err(["evaluate", *options, two, two, "-q"], capsys)
     assert f"{two}: no relation was selected" in err and knob in err
     assert "--delta" not in err
+
+
+def test_a_disconnected_graph_names_the_file_ids(tmp_path, capsys):
+    """It said "pose #1 (0-based, in file order)": an index in id order, not the file's
+    order nor its id. The file ids now: vertex 30 is cut off from vertex 10 (the gauge)."""
+    f = _plain(
+        tmp_path / "g.g2o",
+        "VERTEX_SE2 30 2 0 0\nVERTEX_SE2 10 0 0 0\nVERTEX_SE2 20 1 0 0\n"
+        "EDGE_SE2 10 20 1 0 0 1 0 0 1 0 1\n",
+    )
+    err = _err(["solve", f, "-o", str(tmp_path / "out"), "-q"], capsys)
+    assert "2 disconnected parts (sizes 2, 1)" in err
+    assert "e.g. pose 30, share no factor with pose 10, which holds the gauge" in err
