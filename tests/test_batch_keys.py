@@ -14,6 +14,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from slamrel.cli import main
 
@@ -106,3 +107,22 @@ def test_a_resumed_batch_recomputes_a_result_edited_by_hand(tmp_path, capsys):
     assert "(1 run now, 1 already done" in cap.out
     assert f"damaged result {case}: its result does not match the checksum" in cap.err
     assert (out / "table.csv").read_text() == before
+
+
+@pytest.mark.slow  # 25 s: two pose-only studies
+def test_a_resumed_study_recomputes_a_case_edited_to_nan(tmp_path, capsys):
+    """The pose-only study resumes through the same sweep: a stored case whose NEES was
+    edited to NaN is computed again (it used to be trusted: the table showed nan)."""
+    small = ["--worlds", "hu-simple1", "--noise", "a", "--methods", "full,m1"]
+    out = tmp_path / "study"
+    assert main(["study", "pose-only", "--runs", "1", "-o", str(out), "-q", *small]) == 0
+    before = (out / "table.csv").read_bytes()
+    case = next(p for p in (out / "cases").glob("*.json") if "_full-" in p.name)
+    record = json.loads(case.read_text())
+    record["result"]["nees1"] = float("nan")
+    case.write_text(json.dumps(record))
+    assert main(["study", "pose-only", "--runs", "1", "-o", str(out), *small]) == 0
+    cap = capsys.readouterr()
+    assert "1 run now, 1 already done" in cap.out, cap.out
+    assert "does not match the checksum" in cap.err
+    assert (out / "table.csv").read_bytes() == before
