@@ -20,6 +20,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import require_data
 
@@ -148,3 +149,60 @@ def test_ate_table_prints_evos_population_std(capsys):
     row = next(ln for ln in capsys.readouterr().out.splitlines() if "ATE translation [m] se3" in ln)
     rmse, mean, median, std, *_ = row.split()[4:]
     assert std == f"{stored['std']:.6f}" and rmse == f"{stored['rmse']:.6f}"
+
+
+# ------------------------------------------------------- KITTI devkit: its segment rule
+
+
+def _kitti_errors(gt, est, strictly_beyond: bool) -> tuple[float, float]:
+    """The devkit's loop (``tests/test_drift.py``'s literal port) with its segment end
+    ``dist[i] > dist[first] + length``, or slamrel's own distance rule ``>=``."""
+    from tests.test_drift import _devkit
+
+    if strictly_beyond:
+        t_pct, r_deg, _ = _devkit(gt, est)
+        return t_pct, r_deg
+    dist = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1))))
+    errs = []
+    for first in range(0, len(gt), 10):
+        for length in range(100, 900, 100):
+            hit = np.flatnonzero(dist >= dist[first] + length)
+            if hit.size:
+                last = int(hit[0])
+                e = np.linalg.inv(np.linalg.inv(est[first]) @ est[last]) @ (
+                    np.linalg.inv(gt[first]) @ gt[last]
+                )
+                c = max(min(0.5 * (np.trace(e[:3, :3]) - 1.0), 1.0), -1.0)
+                errs.append((math.acos(c) / length, float(np.linalg.norm(e[:3, 3])) / length))
+    a = np.asarray(errs)
+    return 100.0 * a[:, 1].mean(), math.degrees(a[:, 0].mean())
+
+
+def test_kitti_drift_ends_segments_strictly_beyond_the_length(tmp_path):
+    """A drive of 1 m steps: every segment length is reached exactly at a pose, where the
+    devkit (``>``) takes the next pose and a "first pose at least L further" rule (``>=``,
+    slamrel's ``distance`` strategy) the pose itself. The estimate bends at every pose, so
+    the two rules give other numbers; ``--kitti-drift`` gives the devkit's."""
+    from tests import kitti_sim
+
+    n = 901
+    rng = np.random.default_rng(5)
+    gt = np.tile(np.eye(4), (n, 1, 1))
+    gt[:, 0, 3] = np.arange(n, dtype=np.float64)
+    est = gt.copy()
+    yaw = np.cumsum(rng.normal(0.0, 2e-3, n))
+    est[:, 0, 0], est[:, 0, 1] = np.cos(yaw), -np.sin(yaw)
+    est[:, 1, 0], est[:, 1, 1] = np.sin(yaw), np.cos(yaw)
+    step = np.stack((np.cos(yaw), np.sin(yaw)), axis=1)
+    est[:, :2, 3] = np.concatenate(([[0.0, 0.0]], np.cumsum(step[:-1], axis=0)))
+    kitti_sim.write_kitti(tmp_path / "gt.txt", gt)
+    kitti_sim.write_kitti(tmp_path / "est.txt", est)
+    out = tmp_path / "k.json"
+    args = ["evaluate", str(tmp_path / "gt.txt"), str(tmp_path / "est.txt"), "--kitti-drift"]
+    assert main([*args, "--json", str(out), "-q"]) == 0
+    got = json.loads(out.read_text())["kitti_drift"]
+    devkit = _kitti_errors(gt, est, strictly_beyond=True)
+    own = _kitti_errors(gt, est, strictly_beyond=False)
+    assert abs(own[0] - devkit[0]) > 1e-6 * devkit[0]  # the case discriminates
+    assert got["translation_percent"] == pytest.approx(devkit[0], rel=1e-9)
+    assert got["rotation_deg_per_m"] == pytest.approx(devkit[1], rel=1e-7)
