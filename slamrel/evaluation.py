@@ -39,8 +39,10 @@ from slamrel.formats.trajectories import (
     TRAJECTORY_EXTENSIONS,
     LoadedTrajectory,
     PlanarProjectionWarning,
+    first_of_each_timestamp,
     read_trajectory,
     sniff_trajectory_format,
+    with_repeats_kept,
     without_exact_repeats,
     without_repeated_times,
 )
@@ -771,6 +773,8 @@ def load_trajectory(
     planar: bool = False,
     times: str | None = None,
     format_option: str = "--format",
+    repeats: str | None = None,
+    repeats_option: str = "",
 ) -> LoadedTrajectory:
     """Read a trajectory given to ``slamrel evaluate`` (or another command).
 
@@ -789,6 +793,12 @@ def load_trajectory(
     ``planar`` (``--planar``) projects them onto the plane with a warning that states the
     out-of-plane motion discarded. ``times`` is a KITTI times file. The reader's messages
     name the command's options (``format_option`` for its ``format``).
+
+    ``repeats`` overrides the role's rule for poses sharing a timestamp: ``"keep"`` keeps
+    them all as evo does (:func:`with_repeats_kept`), ``"first"`` keeps the first of each
+    (:func:`first_of_each_timestamp`), ``"refuse"`` or None applies the role's rule above;
+    either way they are counted and said. ``repeats_option`` names the command's option in
+    the refusal.
     """
     p = Path(path)
     if p.is_dir() and not is_bag(p):
@@ -826,8 +836,11 @@ def load_trajectory(
             dimension="2d" if planar else "auto",
             times=times,
         )
+    if repeats == "keep":
+        return with_repeats_kept(loaded, path, what=role)
+    if repeats == "first":
+        return first_of_each_timestamp(loaded, path, what=role)
     if role == "reference":
-        loaded = without_repeated_times(loaded, path)
-    else:
-        loaded = without_exact_repeats(loaded, path, what=role)
-    return loaded
+        return without_repeated_times(loaded, path)
+    hint = f"; {repeats_option} keep reads it as evo does" if repeats_option else ""
+    return without_exact_repeats(loaded, path, what=role, hint=hint)

@@ -14,9 +14,11 @@ follows evo's steps in evo's order:
    (:mod:`relation_metric.pose_error`); the statistics are evo's
    (:func:`~relation_metric.stats.evo_statistics`, population ``std``).
 
-Where slamrel reads a file differently from evo, it says so: a reference pose repeating an
-earlier pose's timestamp is dropped (warned), an estimate with two different poses at one
-timestamp is refused (evo takes one of them silently).
+Where slamrel reads a file differently from evo, it says so: by default a reference pose
+repeating an earlier pose's timestamp is dropped (warned), an estimate with two different
+poses at one timestamp is refused (evo keeps both silently); ``duplicate_stamps="keep"``
+(``--duplicate_stamps keep``) keeps them all as evo does, counted and warned, and gives
+evo's numbers; ``"first"`` keeps the first of each timestamp in both.
 """
 
 from __future__ import annotations
@@ -67,6 +69,7 @@ class EvoOptions:
     ``metric`` ``"ape"`` or ``"rpe"``; ``kind`` a key of :data:`INPUT_KINDS`; ``reference`` and
     ``estimate`` file paths, or for bags the bag in ``reference`` and the topics in
     ``ref_topic``/``est_topic``. ``n_to_align`` −1 means all poses (evo's default).
+    ``duplicate_stamps`` ``"keep"`` (evo's reading), ``"first"`` or ``"refuse"`` (module doc).
     """
 
     metric: str
@@ -90,6 +93,7 @@ class EvoOptions:
     t_start: float | None = None
     t_end: float | None = None
     project_to_plane: str | None = None
+    duplicate_stamps: str = "refuse"
 
 
 @dataclass(frozen=True)
@@ -198,8 +202,10 @@ def _load(o: EvoOptions) -> tuple[Trajectory, Trajectory, str, str]:
     else:
         ref_path, est_path = o.reference, o.estimate
         names = (o.reference, o.estimate)
-    ref = load_trajectory(ref_path, ref_fmt, role="reference", format_option=o.kind)
-    est = load_trajectory(est_path, est_fmt, role="estimate", format_option=o.kind)
+    rule = {"format_option": o.kind, "repeats": o.duplicate_stamps}
+    rule["repeats_option"] = "--duplicate_stamps"
+    ref = load_trajectory(ref_path, ref_fmt, role="reference", **rule)
+    est = load_trajectory(est_path, est_fmt, role="estimate", **rule)
     return ref.trajectory.lifted(), est.trajectory.lifted(), names[0], names[1]
 
 

@@ -72,6 +72,10 @@ CASES = [
     ("kitti/rpe_all", "rpe", "kitti", "kitti", ["-d", "50", "-u", "m", "--all_pairs"]),
     ("euroc/ape_as", "ape", "euroc", "euroc", ["-as"]),
     ("euroc/rpe", "rpe", "euroc", "euroc", ["-d", "10"]),
+    ("repeats/euroc_ape", "ape", "euroc", "euroc_rep", ["-as", "--duplicate_stamps", "keep"]),
+    ("repeats/euroc_rpe", "rpe", "euroc", "euroc_rep", ["-d", "5", "--duplicate_stamps", "keep"]),
+    ("repeats/tum_ape", "ape", "tum", "tum_rep", ["-a", "--duplicate_stamps", "keep"]),
+    ("repeats/tum_rpe", "rpe", "tum", "tum_rep", ["--all_pairs", "--duplicate_stamps", "keep"]),
 ]
 
 
@@ -152,6 +156,37 @@ def _euroc_pair(folder: Path) -> tuple[Path, Path]:
     return gt, est
 
 
+def _repeated_pair(folder: Path) -> tuple[Path, Path, Path, Path]:
+    """Files with repeated timestamps carrying different poses, as evo's EuRoC ``V102.txt``.
+
+    ``est_rep.tum``: the EuRoC estimate with 4 rows written twice at one time, the second
+    pose moved by 5 cm (the shorter trajectory of the association: evo pairs both).
+    ``gt_rep.tum`` / ``est_exact.tum``: a 200 Hz TUM reference whose rows at 3 of the
+    estimate's exact times are written twice with different poses (the longer trajectory:
+    evo's exact match takes the last of them).
+    """
+    gt_csv, est = _euroc_pair(folder)
+    rows = np.loadtxt(est)
+    dup = rows[[50, 100, 101, 150]].copy()
+    dup[:, 1:4] += 0.05
+    rep = np.insert(rows, [51, 101, 102, 151], dup, axis=0)
+    est_rep = folder / "est_rep.tum"
+    np.savetxt(est_rep, rep, fmt="%.17g")
+    g = np.loadtxt(gt_csv, delimiter=",")
+    t = g[:, 0] * 1e-9
+    gt = np.column_stack((t, g[:, 1:4], g[:, 5:8], g[:, 4]))
+    twice = gt[[300, 600, 900]].copy()
+    twice[:, 1:4] -= 0.04
+    gt_rows = np.insert(gt, [301, 601, 901], twice, axis=0)
+    gt_rep = folder / "gt_rep.tum"
+    np.savetxt(gt_rep, gt_rows, fmt="%.17g")
+    exact = folder / "est_exact.tum"
+    sel = gt[::10].copy()
+    sel[:, 1:4] += np.random.default_rng(42).normal(0.0, 0.01, (sel.shape[0], 3))
+    np.savetxt(exact, sel, fmt="%.17g")
+    return gt_csv, est_rep, gt_rep, exact
+
+
 @pytest.fixture(scope="session")
 def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
     """The positional arguments of each input (after the kind), real and generated."""
@@ -159,6 +194,7 @@ def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
     tum = require_data("tum_rgbd")
     kitti = _kitti_pair(folder)
     euroc = _euroc_pair(folder)
+    rep = _repeated_pair(folder)
     return {
         "fr1": [
             str(tum / "freiburg1_xyz-groundtruth.txt"),
@@ -168,6 +204,8 @@ def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
         "bag": [str(require_data("rosbag", "ROS_example.bag")), "groundtruth", "ORB-SLAM"],
         "kitti": [str(p) for p in kitti],
         "euroc": [str(p) for p in euroc],
+        "euroc_rep": [str(rep[0]), str(rep[1])],
+        "tum_rep": [str(rep[2]), str(rep[3])],
     }
 
 
@@ -188,6 +226,18 @@ def _assert_close(ours: dict, theirs: dict, where: str) -> None:
         assert ours[key] == pytest.approx(value, rel=TOL, abs=1e-15), f"{where}: {key}"
 
 
+def _evo_words(args: list[str]) -> list[str]:
+    """The command line without slamrel's own options (``--duplicate_stamps X``): evo's."""
+    out: list[str] = []
+    skip = False
+    for a in args:
+        if skip or a == "--duplicate_stamps":
+            skip = not skip
+            continue
+        out.append(a)
+    return out
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_same_numbers_as_evo(case, evo_bin: Path, inputs: dict, tmp_path: Path) -> None:
@@ -196,7 +246,7 @@ def test_same_numbers_as_evo(case, evo_bin: Path, inputs: dict, tmp_path: Path) 
     ours, theirs = tmp_path / "slamrel.zip", tmp_path / "evo.zip"
     _slamrel(metric, kind, args, ours)
     run = subprocess.run(
-        [str(evo_bin / f"evo_{metric}"), kind, *args, "--save_results", str(theirs)]
+        [str(evo_bin / f"evo_{metric}"), kind, *_evo_words(args), "--save_results", str(theirs)]
         + ["--no_warnings", "--silent"],
         capture_output=True,
         text=True,
@@ -315,3 +365,34 @@ def test_align_and_align_origin_exclude_each_other(tmp_path: Path) -> None:
     with pytest.raises(SystemExit) as stop:
         main(["ape", "kitti", str(gt), str(est), "-a", "--align_origin"])
     assert stop.value.code == 2
+
+
+def test_repeated_stamps_refused_by_default_and_kept_on_request(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """evo's V102.txt case: two poses at one time are refused, naming the option that keeps
+    them; with it every estimate pose is associated (the estimate is the shorter: evo pairs
+    each of its poses, repeats included), and the repeats are counted in a warning."""
+    gt, est, _, _ = _repeated_pair(tmp_path)
+    assert main(["ape", "euroc", str(gt), str(est)]) == 3
+    err = capsys.readouterr().err
+    assert f"{est}:52:" in err and "--duplicate_stamps keep" in err
+    out = tmp_path / "keep.zip"
+    _slamrel("ape", "euroc", [str(gt), str(est), "--duplicate_stamps", "keep"], out)
+    assert "kept all 4 estimate pose(s)" in capsys.readouterr().err
+    _, errors, _ = _read_zip(out)
+    assert errors.size == len(np.loadtxt(est))  # 204 rows, all within 2 ms of a 200 Hz pose
+    first = tmp_path / "first.zip"
+    _slamrel("ape", "euroc", [str(gt), str(est), "--duplicate_stamps", "first"], first)
+    assert _read_zip(first)[1].size == errors.size - 4
+
+
+def test_exact_match_on_a_repeated_time_takes_the_last_as_evo() -> None:
+    """Hand oracle of evo's ``searchsorted(side="right")``: a query equal to a repeated time
+    gets the last of the repeats; queries between times are unchanged."""
+    from relation_metric.time_association import match_nearest_times
+
+    times = np.array([0.0, 1.0, 1.0, 1.0, 2.0, 3.0, 3.0])
+    i, k = match_nearest_times(np.array([1.0, 0.9, 1.2, 2.9, 3.0, 1.7]), times, 0.5)
+    assert i.tolist() == [0, 1, 2, 3, 4, 5]
+    assert k.tolist() == [3, 1, 3, 5, 6, 4]

@@ -20,10 +20,11 @@ HELP = {
 }
 
 EPILOG = """\
-Differences from evo (said where they happen): a reference pose that repeats an earlier
-pose's timestamp is dropped with a warning, and an estimate with two different poses at
-one timestamp is refused (evo keeps both and pairs one of them). Compare the numbers with
-'slamrel evaluate', slamrel's own richer command (relation sets, significance, drift)."""
+Differences from evo (said where they happen): by default a reference pose that repeats an
+earlier pose's timestamp is dropped with a warning, and an estimate with two different
+poses at one timestamp is refused (evo keeps both); --duplicate_stamps keep reads such
+files as evo does. Compare the numbers with 'slamrel evaluate', slamrel's own richer
+command (relation sets, significance, drift)."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -68,6 +69,14 @@ def _kind_parsers(kinds: argparse._SubParsersAction, metric: str) -> None:  # ty
             _delta_arguments(p)
         if kind != "kitti":
             _time_arguments(p)
+            p.add_argument(
+                "--duplicate_stamps",
+                choices=("keep", "first", "refuse"),
+                default="refuse",
+                help="poses that share a timestamp: keep all (as evo), keep the first of each, "
+                "or refuse two different estimate poses at one time (the reference keeps its "
+                "first); counted and said (default: %(default)s)",
+            )
         _output_arguments(p)
         p.set_defaults(func=run, evo_metric=metric)
 

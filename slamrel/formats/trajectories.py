@@ -99,6 +99,8 @@ __all__ = [
     "sniff_trajectory_format",
     "without_repeated_times",
     "without_exact_repeats",
+    "with_repeats_kept",
+    "first_of_each_timestamp",
     "read_trajectory",
     "write_trajectory",
     "unit_quaternions",
@@ -637,8 +639,56 @@ def without_repeated_times(loaded: LoadedTrajectory, path: PathLike) -> LoadedTr
     )
 
 
-def without_exact_repeats(
+def with_repeats_kept(
     loaded: LoadedTrajectory, path: PathLike, *, what: str = "estimate"
+) -> LoadedTrajectory:
+    """The trajectory with every pose kept, repeated timestamps too, as evo reads a file.
+
+    evo keeps both poses of a repeated timestamp: the shorter trajectory of an association
+    pairs each of them, the longer one offers the last of them to an exact time match
+    (:func:`relation_metric.time_association.match_nearest_times`). Nothing is dropped; the
+    repeats are counted (``LoadedTrajectory.repeated``) and said (``RepeatedTimeWarning``).
+    """
+    from relation_metric.timeorder import RepeatedTimeWarning
+
+    rep = loaded.repeated
+    if rep.count:
+        warnings.warn(
+            f"{os.fspath(path)}: kept all {rep.count} {what} pose(s) that repeat the previous "
+            f"pose's timestamp ({rep.differing} with a different pose; first at line "
+            f"{rep.first_line}), as evo does",
+            RepeatedTimeWarning,
+            stacklevel=2,
+        )
+    return loaded
+
+
+def first_of_each_timestamp(
+    loaded: LoadedTrajectory, path: PathLike, *, what: str = "estimate"
+) -> LoadedTrajectory:
+    """The first pose (in file order) of each timestamp; the others dropped, counted, said."""
+    from relation_metric.timeorder import RepeatedTimeWarning, first_of_each_time
+
+    rep = loaded.repeated
+    if not rep.count:
+        return loaded
+    traj = loaded.trajectory
+    keep = first_of_each_time(traj.timestamps)
+    warnings.warn(
+        f"{os.fspath(path)}: dropped {rep.count} {what} pose(s) that repeat the previous "
+        f"pose's timestamp ({rep.differing} with a different pose; first at line "
+        f"{rep.first_line}); the first of each timestamp is kept",
+        RepeatedTimeWarning,
+        stacklevel=2,
+    )
+    return loaded._replace(
+        trajectory=Trajectory(traj.timestamps[keep], traj.poses[keep]),
+        repeated_dropped=loaded.repeated_dropped + rep.count,
+    )
+
+
+def without_exact_repeats(
+    loaded: LoadedTrajectory, path: PathLike, *, what: str = "estimate", hint: str = ""
 ) -> LoadedTrajectory:
     """An estimate (or odometry) with one pose per timestamp, or an :class:`InputError`.
 
@@ -657,7 +707,7 @@ def without_exact_repeats(
         raise InputError(
             f"two different {what} poses at t = {rep.time:.9g} s: this line and the one before "
             f"it in time{earlier}; {rep.differing} timestamp repeat(s) carry a different pose. "
-            f"Expected one pose per timestamp (which one is meant is a guess; remove one)",
+            f"Expected one pose per timestamp (which one is meant is a guess; remove one){hint}",
             path=path,
             line=rep.first_line,
         )
