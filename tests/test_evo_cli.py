@@ -70,6 +70,24 @@ CASES = [
     ("kitti/ape_xz", "ape", "kitti", "kitti", ["-a", "--project_to_plane", "xz"]),
     ("kitti/rpe_100m", "rpe", "kitti", "kitti", ["-d", "100", "-u", "m", "-r", "angle_deg"]),
     ("kitti/rpe_all", "rpe", "kitti", "kitti", ["-d", "50", "-u", "m", "--all_pairs"]),
+    ("kitti_e/rpe_100m", "rpe", "kitti", "kitti_e", ["-d", "100", "-u", "m"]),
+    ("kitti_e/rpe_origin_full", "rpe", "kitti", "kitti_e", ["--align_origin", "-r", "full"]),
+    ("kitti_e/rpe_as_rot", "rpe", "kitti", "kitti_e", ["-as", "-d", "20", "-r", "rot_part"]),
+    (
+        "kitti_e/rpe_xz",
+        "rpe",
+        "kitti",
+        "kitti_e",
+        ["-a", "-d", "50", "-u", "m", "--project_to_plane", "xz"],
+    ),
+    ("kitti_e/ape_full", "ape", "kitti", "kitti_e", ["-r", "full"]),
+    (
+        "kitti_e/ape_xz_deg",
+        "ape",
+        "kitti",
+        "kitti_e",
+        ["-a", "--project_to_plane", "xz", "-r", "angle_deg"],
+    ),
     ("euroc/ape_as", "ape", "euroc", "euroc", ["-as"]),
     ("euroc/rpe", "rpe", "euroc", "euroc", ["-d", "10"]),
     ("repeats/euroc_ape", "ape", "euroc", "euroc_rep", ["-as", "--duplicate_stamps", "keep"]),
@@ -110,8 +128,10 @@ def evo_bin() -> Path:
     return found
 
 
-def _kitti_pair(folder: Path) -> tuple[Path, Path]:
-    """A seeded KITTI-like drive (camera frame: y down, z forward) and a noisy estimate."""
+def _kitti_pair(folder: Path, fmt: str = "%.17g") -> tuple[Path, Path]:
+    """A seeded KITTI-like drive (camera frame: y down, z forward) and a noisy estimate,
+    written with ``fmt`` (KITTI's own files: ``%e``, 7 digits, rotations orthonormal to
+    ~1e-7 only)."""
     rng = np.random.default_rng(40)
     n = 600
     yaw = np.cumsum(rng.normal(0.0, 0.01, n))
@@ -125,8 +145,8 @@ def _kitti_pair(folder: Path) -> tuple[Path, Path]:
         r[:, 0, 0], r[:, 0, 2], r[:, 1, 1], r[:, 2, 0], r[:, 2, 2] = c, s, 1.0, -s, c
         p = pos + noise * np.cumsum(rng.normal(0.0, 0.02, (n, 3)), axis=0)
         rows = np.concatenate((r, p[:, :, None]), axis=2).reshape(n, 12)
-        path = folder / name
-        np.savetxt(path, rows, fmt="%.17g")
+        path = folder / (name if fmt == "%.17g" else f"short_{name}")
+        np.savetxt(path, rows, fmt=fmt)
         files.append(path)
     return files[0], files[1]
 
@@ -193,6 +213,7 @@ def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
     folder = tmp_path_factory.mktemp("evo_cli")
     tum = require_data("tum_rgbd")
     kitti = _kitti_pair(folder)
+    kitti_e = _kitti_pair(folder, "%e")
     euroc = _euroc_pair(folder)
     rep = _repeated_pair(folder)
     return {
@@ -203,6 +224,7 @@ def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
         "fr2": [str(tum / "fr2_desk_groundtruth.txt"), str(tum / "fr2_desk_ORB.txt")],
         "bag": [str(require_data("rosbag", "ROS_example.bag")), "groundtruth", "ORB-SLAM"],
         "kitti": [str(p) for p in kitti],
+        "kitti_e": [str(p) for p in kitti_e],
         "euroc": [str(p) for p in euroc],
         "euroc_rep": [str(rep[0]), str(rep[1])],
         "tum_rep": [str(rep[2]), str(rep[3])],
@@ -396,3 +418,38 @@ def test_exact_match_on_a_repeated_time_takes_the_last_as_evo() -> None:
     i, k = match_nearest_times(np.array([1.0, 0.9, 1.2, 2.9, 3.0, 1.7]), times, 0.5)
     assert i.tolist() == [0, 1, 2, 3, 4, 5]
     assert k.tolist() == [3, 1, 3, 5, 6, 4]
+
+
+def test_kitti_rotations_used_as_written(tmp_path: Path) -> None:
+    """KITTI's rotation blocks written with 7 digits are orthonormal to ~1e-7 only; the RPE
+    uses them as written, as evo does. Oracle: evo's arithmetic written out pair by pair on
+    4x4 matrices (inverse by transposition), independent of slamrel's vectorised path."""
+    gt, est = _kitti_pair(tmp_path, "%e")
+    out = tmp_path / "r.zip"
+    _slamrel("rpe", "kitti", [str(gt), str(est), "-d", "10", "-r", "full"], out)
+    ours = _read_zip(out)[1]
+
+    def inv(m: np.ndarray) -> np.ndarray:
+        r = np.eye(4)
+        r[:3, :3] = m[:3, :3].T
+        r[:3, 3] = -m[:3, :3].T @ m[:3, 3]
+        return r
+
+    q, p = (np.loadtxt(f).reshape(-1, 3, 4) for f in (gt, est))
+    h = np.tile(np.eye(4), (q.shape[0], 1, 1))
+    qq, pp = h.copy(), h.copy()
+    qq[:, :3], pp[:, :3] = q, p
+    oracle = [
+        np.linalg.norm(inv(inv(qq[i]) @ qq[i + 10]) @ (inv(pp[i]) @ pp[i + 10]) - np.eye(4))
+        for i in range(0, q.shape[0] - 10, 10)
+    ]
+    np.testing.assert_allclose(ours, oracle, rtol=1e-12)
+    # the quaternion reading (re-orthonormalised) differs at this precision: the test can fail
+    from slamrel.evo_metrics import EvoOptions, evo_files
+
+    o = EvoOptions("rpe", "kitti", str(gt), str(est), delta=10, pose_relation="full")
+    r = evo_files(o)
+    from relation_metric.pose_error import relative_pose_errors
+
+    quat = relative_pose_errors(r.reference, r.estimate, "full", delta=10)
+    assert np.abs(quat.errors - ours).max() > 1e-9 * np.abs(ours).max()

@@ -102,6 +102,7 @@ __all__ = [
     "with_repeats_kept",
     "first_of_each_timestamp",
     "read_trajectory",
+    "read_kitti_matrices",
     "write_trajectory",
     "unit_quaternions",
     "yaw_from_quaternion",
@@ -518,31 +519,43 @@ def _read_3d(
         cut = src.cut_off_line()
         q = unit_quaternions(q, name, lines)
     else:  # kitti
-        values, table_lines = read_numeric_table(
-            path,
-            columns=tuple(f"r{i}{j}" for i in range(3) for j in range(4)),
-            describe="a KITTI pose file (12 numbers: the 3x4 matrix [R | t], row by row)",
-        )
-        lines, cut = table_lines, table_lines.cut_off_line
-        m = values.reshape(-1, 3, 4)
-        r = m[:, :, :3]
-        with np.errstate(over="ignore", invalid="ignore"):
-            dev = np.abs(np.einsum("nij,nik->njk", r, r) - np.eye(3)).max(axis=(1, 2))
-        bad = np.flatnonzero(~(dev <= 1e-3)) if m.shape[0] else np.empty(0, np.int64)
-        if bad.size:
-            k = int(bad[0])
-            raise InputError(
-                f"the rotation block is not orthonormal (|RᵀR − I| up to {float(dev[k]):.3g}); "
-                "expected a KITTI pose [R | t] with a rotation matrix R",
-                path=name,
-                line=lines(k),
-            )
+        m, lines = read_kitti_matrices(path)
+        cut = lines.cut_off_line
         from relation_metric import se3
 
         poses7 = se3.from_matrix(m) if m.shape[0] else np.zeros((0, 7))
         xyz, q = poses7[:, :3], poses7[:, 3:]
         t = _kitti_times(times, m.shape[0], name)
     return t, _poses_of_dimension(t, xyz, q, name, dimension, discarded), lines, cut
+
+
+def read_kitti_matrices(path: PathLike) -> tuple[NDArray[np.float64], Any]:
+    """The 3×4 matrices ``[R | t]`` of a KITTI pose file as written, shape ``(N, 3, 4)``, and
+    the table's lines; a rotation block off orthonormal by more than 1e-3 is refused.
+
+    The trajectory reader turns them into quaternions (re-orthonormalising a block written
+    with few digits); evo's RPE uses the blocks as given (``slamrel ape|rpe kitti``).
+    """
+    name = os.fspath(path)
+    values, lines = read_numeric_table(
+        path,
+        columns=tuple(f"r{i}{j}" for i in range(3) for j in range(4)),
+        describe="a KITTI pose file (12 numbers: the 3x4 matrix [R | t], row by row)",
+    )
+    m = values.reshape(-1, 3, 4)
+    r = m[:, :, :3]
+    with np.errstate(over="ignore", invalid="ignore"):
+        dev = np.abs(np.einsum("nij,nik->njk", r, r) - np.eye(3)).max(axis=(1, 2))
+    bad = np.flatnonzero(~(dev <= 1e-3)) if m.shape[0] else np.empty(0, np.int64)
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(
+            f"the rotation block is not orthonormal (|RᵀR − I| up to {float(dev[k]):.3g}); "
+            "expected a KITTI pose [R | t] with a rotation matrix R",
+            path=name,
+            line=lines(k),
+        )
+    return m, lines
 
 
 def unit_quaternions(q: NDArray, name: str, lines: Any) -> NDArray:
