@@ -329,14 +329,20 @@ def _is_relations_file(path: str, options: EvaluateOptions) -> bool:
     return False
 
 
+#: Rows of unit quaternions from which an 8-column file is a TUM trajectory without a warning.
+_SURE_ROWS = 10
+
+
 def _eight_columns_are_relations(path: str) -> bool:
     """Tell a TUM trajectory from Freiburg relations, both 8 numbers a line, by content.
 
     A TUM file's last four columns are unit quaternions (its reader refuses any other); a
     relations file's are ``z roll pitch yaw``, whose norm is 1 only by accident. Every row a
-    unit quaternion (≥ 2 rows) → TUM; otherwise relations. Either way the guess is said in a
-    warning with how to state it; a file that cannot be told apart (fewer than 2 rows, all
-    unit) is refused naming both readings.
+    unit quaternion (≥ 2 rows) → TUM; otherwise relations. Relations are said in a warning
+    with how to state it, and so is TUM on fewer than :data:`_SURE_ROWS` rows; a TUM file of
+    more rows (evo's ``.txt`` files) is read without a word: that many unit norms by accident
+    do not happen. A file that cannot be told apart (fewer than 2 rows, all unit) is refused
+    naming both readings.
     """
 
     with warnings.catch_warnings():
@@ -354,6 +360,8 @@ def _eight_columns_are_relations(path: str) -> bool:
             "reference trajectory",
             path=path,
         )
+    if unit.all() and values.shape[0] >= _SURE_ROWS:
+        return False
     if unit.all():
         warnings.warn(
             f"{path}: read as a TUM trajectory (every row ends in a unit quaternion); rename it "
