@@ -28,7 +28,7 @@ from slamrel.formats.bags import bag_topics, read_bag_poses, split_bag_spec
 from slamrel.formats.trajectories import read_trajectory
 
 if os.environ.get("CI", "").lower() != "true":  # in the test extra: CI must run these
-    pytest.importorskip("rosbags", reason="rosbags not installed: pip install 'slamrel[bags]'")
+    pytest.importorskip("rosbags", reason="rosbags not installed: pip install .")
 
 from rosbags.rosbag1 import Writer as Writer1  # noqa: E402
 from rosbags.rosbag2 import StoragePlugin  # noqa: E402

@@ -1,9 +1,9 @@
 """Poses and laser scans from ROS bags: ROS 1 ``.bag``, ROS 2 sqlite3 (``.db3`` or a bag
 directory) and MCAP.
 
-Read through `rosbags <https://gitlab.com/ternaris/rosbags>`_ (pure Python, Apache-2.0), the
-optional extra ``bags`` (``pip install 'slamrel[bags]'``); it is imported only when a bag is
-read, so start-up and ``--help`` do not pay for it.
+Read through `rosbags <https://gitlab.com/ternaris/rosbags>`_ (pure Python, Apache-2.0), a
+dependency of slamrel as of evo (bags work after ``pip install .``); it is imported only when a
+bag is read, so start-up and ``--help`` do not pay for it.
 
 Naming a trajectory in a bag
 ----------------------------
@@ -117,7 +117,7 @@ class TfChainWarning(UserWarning):
     """Stamps of a tf chain that cannot be interpolated were left out (counted)."""
 
 
-_INSTALL = "install the optional extra: pip install 'slamrel[bags]' (or pip install rosbags)"
+_INSTALL = "rosbags is a dependency of slamrel: reinstall it (pip install .) or pip install rosbags"
 
 
 @dataclass(frozen=True)
