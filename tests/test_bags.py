@@ -666,6 +666,6 @@ def test_rosbags_is_imported_only_to_read_a_bag(tmp_path):
 def test_without_rosbags_the_error_says_how_to_install(tmp_path, rng, monkeypatch):
     bag = _write(tmp_path / "m.bag", "ros1", _truth(rng))
     monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)  # as if not installed
-    with pytest.raises(InputError, match=r"needs rosbags; install the optional extra"):
+    with pytest.raises(InputError, match=r"needs rosbags; rosbags is a dependency of slamrel"):
         read_trajectory(f"{bag}:/pose")
     assert main(["traj", "topics", str(bag)]) == 3
