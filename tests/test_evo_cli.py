@@ -453,3 +453,66 @@ def test_kitti_rotations_used_as_written(tmp_path: Path) -> None:
 
     quat = relative_pose_errors(r.reference, r.estimate, "full", delta=10)
     assert np.abs(quat.errors - ours).max() > 1e-9 * np.abs(ours).max()
+
+
+def _kind_parsers(metric: str) -> dict:
+    import argparse
+
+    from slamrel.cli import build_parser
+
+    def subparsers(p: argparse.ArgumentParser) -> dict:
+        (act,) = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
+        return act.choices
+
+    return subparsers(subparsers(build_parser(metric))[metric])
+
+
+@pytest.mark.parametrize("metric", ["ape", "rpe"])
+def test_help_states_every_default(metric: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """As evo's --help: every option of every input kind says its default, and the rendered
+    text shows the parser's actual default value (a flag: off; no value: none)."""
+    for kind, parser in _kind_parsers(metric).items():
+        with pytest.raises(SystemExit):
+            main([metric, kind, "--help"])
+        text = " ".join(capsys.readouterr().out.split())
+        for action in parser._actions:
+            if not action.option_strings or action.dest == "help":
+                continue
+            if action.default is None:
+                shown = "none"
+            elif action.default is False:
+                shown = "off"
+            else:
+                shown = str(action.default)
+            assert f"(default: {shown}" in " ".join((action.help or "").split()).replace(
+                "%(default)s", shown
+            ), (kind, action.dest)
+            assert action.option_strings[-1] in text, (kind, action.dest)
+
+
+def test_save_plot_writes_the_errors_it_scored(tmp_path: Path) -> None:
+    """--save_plot: a valid PNG and PDF (signature, PNG size in its header); the figure's
+    error line is the error array of the result zip (the oracle: the same run's numbers)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    gt, est = _euroc_pair(tmp_path)
+    png, pdf, out = tmp_path / "e.png", tmp_path / "e.pdf", tmp_path / "r.zip"
+    args = [str(gt), str(est), "-d", "5", "--save_plot", str(png), "--save_results", str(out)]
+    assert main(["rpe", "euroc", *args, "--silent"]) == 0
+    head = png.read_bytes()[:24]
+    assert head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR"
+    width, height = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    assert width > 500 and height > 500
+    assert main(["ape", "euroc", str(gt), str(est), "-a", "--save_plot", str(pdf)]) == 0
+    data = pdf.read_bytes()
+    assert data[:5] == b"%PDF-" and data.rstrip().endswith(b"%%EOF")
+    from slamrel.evo_metrics import EvoOptions, evo_files
+    from slamrel.plots.pose_errors import pose_error_figure
+
+    result = evo_files(EvoOptions("rpe", "euroc", str(gt), str(est), delta=5))
+    fig = pose_error_figure(result)
+    np.testing.assert_array_equal(fig.axes[0].lines[0].get_ydata(), _read_zip(out)[1])
+    before = gt.read_bytes()
+    assert main(["ape", "euroc", str(gt), str(est), "--save_plot", str(gt)]) == 3  # an input
+    assert gt.read_bytes() == before

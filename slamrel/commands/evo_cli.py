@@ -92,18 +92,21 @@ def _algorithm_arguments(p: argparse.ArgumentParser, metric: str) -> None:
     )
     align = p.add_mutually_exclusive_group()
     align.add_argument(
-        "-a", "--align", action="store_true", help="alignment with Umeyama's method (no scale)"
+        "-a",
+        "--align",
+        action="store_true",
+        help="alignment with Umeyama's method (no scale) (default: off)",
     )
     align.add_argument(
         "--align_origin",
         action="store_true",
-        help="align the trajectory origin to the origin of the reference trajectory",
+        help="align the trajectory origin to the origin of the reference trajectory (default: off)",
     )
     p.add_argument(
         "-s",
         "--correct_scale",
         action="store_true",
-        help="correct scale with Umeyama's method (-as: with the alignment)",
+        help="correct scale with Umeyama's method (-as: with the alignment) (default: off)",
     )
     p.add_argument(
         "--n_to_align",
@@ -147,12 +150,13 @@ def _delta_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--all_pairs",
         action="store_true",
-        help="use all pairs instead of consecutive pairs (default: consecutive)",
+        help="use all pairs instead of consecutive pairs (default: off: consecutive pairs)",
     )
     p.add_argument(
         "--pairs_from_reference",
         action="store_true",
-        help="determine the pose pairs from the reference trajectory (default: the estimate)",
+        help="determine the pose pairs from the reference trajectory (default: off: from the "
+        "estimate)",
     )
 
 
@@ -195,11 +199,30 @@ def _output_arguments(p: argparse.ArgumentParser) -> None:
         metavar="FILE.zip",
         help="write the result as evo's result zip (evo_res reads it) (default: none)",
     )
-    p.add_argument("--silent", action="store_true", help="don't print any output")
+    p.add_argument(
+        "-p",
+        "--plot",
+        action="store_true",
+        help="show the plot: the errors over time and the trajectories coloured by error "
+        "(default: off)",
+    )
+    p.add_argument(
+        "--save_plot",
+        metavar="FILE",
+        help="write the plot to FILE (.png, .pdf or .svg; no window) (default: none)",
+    )
+    p.add_argument(
+        "--plot_mode",
+        choices=("xy", "xz", "yx", "yz", "zx", "zy"),
+        default="xy",
+        help="the plane the trajectories are drawn in (default: %(default)s)",
+    )
+    p.add_argument("--silent", action="store_true", help="don't print any output (default: off)")
     p.add_argument(
         "--no_warnings",
         action="store_true",
-        help="accepted for evo's command lines; slamrel never asks for a confirmation",
+        help="accepted for evo's command lines; slamrel never asks for a confirmation "
+        "(default: off)",
     )
 
 
@@ -209,7 +232,9 @@ def run(args: argparse.Namespace) -> int:
     from slamrel.evo_metrics import EvoOptions, evo_files
     from slamrel.formats.results import write_evo_result
 
-    check_outputs([args.save_results], [args.reference, getattr(args, "estimate", None)])
+    check_outputs(
+        [args.save_results, args.save_plot], [args.reference, getattr(args, "estimate", None)]
+    )
     fields = {
         k: getattr(args, k)
         for k in EvoOptions.__dataclass_fields__
@@ -227,4 +252,21 @@ def run(args: argparse.Namespace) -> int:
         )
     if not args.silent:
         print(result.pretty())
+    if args.save_plot or args.plot:
+        _plots(args, result)
     return 0
+
+
+def _plots(args: argparse.Namespace, result: object) -> None:
+    """``--save_plot`` (written atomically, Agg) and ``--plot`` (a window, the user's backend)."""
+    from slamrel.plots.pose_errors import pose_error_figure
+
+    if args.save_plot:
+        from slamrel.plots.relation_errors import save_figure
+
+        save_figure(pose_error_figure(result, args.plot_mode), args.save_plot)
+    if args.plot:
+        import matplotlib.pyplot as plt
+
+        pose_error_figure(result, args.plot_mode, plt)
+        plt.show()
