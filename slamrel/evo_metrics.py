@@ -26,6 +26,7 @@ evo's numbers; ``"first"`` keeps the first of each timestamp in both.
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,6 +44,7 @@ from relation_metric.stats import evo_statistics
 from relation_metric.time_association import synchronize
 from relation_metric.trajectory import Trajectory
 from slamrel.evaluation import load_trajectory
+from slamrel.formats.bags import one_opening
 from slamrel.formats.trajectories import read_kitti_matrices
 
 __all__ = ["EvoOptions", "EvoResult", "evo_files", "INPUT_KINDS", "RELATION_TITLES"]
@@ -226,8 +228,9 @@ def _load(o: EvoOptions) -> tuple[Trajectory, Trajectory, str, str, Any]:
         names = (o.reference, o.estimate)
     rule = {"format_option": o.kind, "repeats": o.duplicate_stamps}
     rule["repeats_option"] = "--duplicate_stamps"
-    ref = load_trajectory(ref_path, ref_fmt, role="reference", **rule)
-    est = load_trajectory(est_path, est_fmt, role="estimate", **rule)
+    with one_opening(o.reference) if ref_fmt == "bag" else nullcontext():
+        ref = load_trajectory(ref_path, ref_fmt, role="reference", **rule)
+        est = load_trajectory(est_path, est_fmt, role="estimate", **rule)
     return ref.trajectory.lifted(), est.trajectory.lifted(), names[0], names[1], None
 
 
