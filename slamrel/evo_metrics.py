@@ -214,11 +214,11 @@ def _load(o: EvoOptions) -> tuple[Trajectory, Trajectory, str, str, Any]:
     if o.kind == "kitti":
         m_ref, _ = read_kitti_matrices(o.reference)
         m_est, _ = read_kitti_matrices(o.estimate)
-        ref, est = (
+        ref_k, est_k = (
             Trajectory(np.arange(m.shape[0], dtype=np.float64), se3.from_matrix(m))
             for m in (m_ref, m_est)
         )
-        return ref, est, o.reference, o.estimate, (m_ref[:, :, :3], m_est[:, :, :3])
+        return ref_k, est_k, o.reference, o.estimate, (m_ref[:, :, :3], m_est[:, :, :3])
     if ref_fmt == "bag":
         assert o.ref_topic is not None and o.est_topic is not None
         ref_path, est_path = f"{o.reference}:{o.ref_topic}", f"{o.reference}:{o.est_topic}"
@@ -226,11 +226,21 @@ def _load(o: EvoOptions) -> tuple[Trajectory, Trajectory, str, str, Any]:
     else:
         ref_path, est_path = o.reference, o.estimate
         names = (o.reference, o.estimate)
-    rule = {"format_option": o.kind, "repeats": o.duplicate_stamps}
-    rule["repeats_option"] = "--duplicate_stamps"
     with one_opening(o.reference) if ref_fmt == "bag" else nullcontext():
-        ref = load_trajectory(ref_path, ref_fmt, role="reference", **rule)
-        est = load_trajectory(est_path, est_fmt, role="estimate", **rule)
+        ref, est = (
+            load_trajectory(
+                path,
+                fmt,
+                role=role,
+                format_option=o.kind,
+                repeats=o.duplicate_stamps,
+                repeats_option="--duplicate_stamps",
+            )
+            for path, fmt, role in (
+                (ref_path, ref_fmt, "reference"),
+                (est_path, est_fmt, "estimate"),
+            )
+        )
     return ref.trajectory.lifted(), est.trajectory.lifted(), names[0], names[1], None
 
 

@@ -519,8 +519,8 @@ def _read_3d(
         cut = src.cut_off_line()
         q = unit_quaternions(q, name, lines)
     else:  # kitti
-        m, lines = read_kitti_matrices(path)
-        cut = lines.cut_off_line
+        m, table_lines = read_kitti_matrices(path)
+        lines, cut = table_lines, table_lines.cut_off_line
         from relation_metric import se3
 
         poses7 = se3.from_matrix(m) if m.shape[0] else np.zeros((0, 7))
