@@ -39,8 +39,10 @@ from slamrel.formats.trajectories import (
     TRAJECTORY_EXTENSIONS,
     LoadedTrajectory,
     PlanarProjectionWarning,
+    first_of_each_timestamp,
     read_trajectory,
     sniff_trajectory_format,
+    with_repeats_kept,
     without_exact_repeats,
     without_repeated_times,
 )
@@ -339,14 +341,20 @@ def _is_relations_file(path: str, options: EvaluateOptions) -> bool:
     return False
 
 
+#: Rows of unit quaternions from which an 8-column file is a TUM trajectory without a warning.
+_SURE_ROWS = 10
+
+
 def _eight_columns_are_relations(path: str) -> bool:
     """Tell a TUM trajectory from Freiburg relations, both 8 numbers a line, by content.
 
     A TUM file's last four columns are unit quaternions (its reader refuses any other); a
     relations file's are ``z roll pitch yaw``, whose norm is 1 only by accident. Every row a
-    unit quaternion (≥ 2 rows) → TUM; otherwise relations. Either way the guess is said in a
-    warning with how to state it; a file that cannot be told apart (fewer than 2 rows, all
-    unit) is refused naming both readings.
+    unit quaternion (≥ 2 rows) → TUM; otherwise relations. Relations are said in a warning
+    with how to state it, and so is TUM on fewer than :data:`_SURE_ROWS` rows; a TUM file of
+    more rows (evo's ``.txt`` files) is read without a word: that many unit norms by accident
+    do not happen. A file that cannot be told apart (fewer than 2 rows, all unit) is refused
+    naming both readings.
     """
 
     with warnings.catch_warnings():
@@ -364,6 +372,8 @@ def _eight_columns_are_relations(path: str) -> bool:
             "reference trajectory",
             path=path,
         )
+    if unit.all() and values.shape[0] >= _SURE_ROWS:
+        return False
     if unit.all():
         warnings.warn(
             f"{path}: read as a TUM trajectory (every row ends in a unit quaternion); rename it "
@@ -791,6 +801,8 @@ def load_trajectory(
     planar: bool = False,
     times: str | None = None,
     format_option: str = "--format",
+    repeats: str | None = None,
+    repeats_option: str = "",
 ) -> LoadedTrajectory:
     """Read a trajectory given to ``slamrel evaluate`` (or another command).
 
@@ -809,6 +821,12 @@ def load_trajectory(
     ``planar`` (``--planar``) projects them onto the plane with a warning that states the
     out-of-plane motion discarded. ``times`` is a KITTI times file. The reader's messages
     name the command's options (``format_option`` for its ``format``).
+
+    ``repeats`` overrides the role's rule for poses sharing a timestamp: ``"keep"`` keeps
+    them all as evo does (:func:`with_repeats_kept`), ``"first"`` keeps the first of each
+    (:func:`first_of_each_timestamp`), ``"refuse"`` or None applies the role's rule above;
+    either way they are counted and said. ``repeats_option`` names the command's option in
+    the refusal.
     """
     p = Path(path)
     if p.is_dir() and not is_bag(p):
@@ -846,8 +864,11 @@ def load_trajectory(
             dimension="2d" if planar else "auto",
             times=times,
         )
+    if repeats == "keep":
+        return with_repeats_kept(loaded, path, what=role)
+    if repeats == "first":
+        return first_of_each_timestamp(loaded, path, what=role)
     if role == "reference":
-        loaded = without_repeated_times(loaded, path)
-    else:
-        loaded = without_exact_repeats(loaded, path, what=role)
-    return loaded
+        return without_repeated_times(loaded, path)
+    hint = f"; {repeats_option} keep reads it as evo does" if repeats_option else ""
+    return without_exact_repeats(loaded, path, what=role, hint=hint)
