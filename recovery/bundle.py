@@ -74,6 +74,14 @@ class Bundle:
     wrapped_bearings : int
         Measurements whose bearing lay outside ``[−π, π)`` (within ``2π`` in magnitude) and
         was wrapped into it by the reader (counted, warned about).
+    step_covariances : ndarray, shape (K, 3, 3), or None
+        With a ``step_covariance`` motion model (only then): one covariance per row of the
+        motion log (``controls`` or ``odometry``), ``[x, y, θ]``, symmetric PSD; velocity: of
+        the increment the row is held over, odometry: of the step that ends at the row (row 0
+        unused).
+    skipped_invalid : int
+        Measurements dropped by the reader for a range ≤ 0 or a non-finite range or bearing
+        (only with ``skip_invalid_measurements``; counted, warned about).
 
     Raises
     ------
@@ -112,6 +120,8 @@ class Bundle:
     reordered: Mapping[str, int] = field(default_factory=dict)
     snapped: int = 0
     wrapped_bearings: int = 0
+    skipped_invalid: int = 0
+    step_covariances: Array | None = None
 
     def __post_init__(self) -> None:
         ro = object.__setattr__
@@ -127,7 +137,7 @@ class Bundle:
         ro(self, "measurement_landmarks", readonly(self.measurement_landmarks, np.int64))
         ro(self, "measurement_associated", readonly(self.measurement_associated, np.bool_))
         ro(self, "map_ids", readonly(self.map_ids, np.int64))
-        for name in ("controls", "map_covariance"):
+        for name in ("controls", "map_covariance", "step_covariances"):
             if getattr(self, name) is not None:
                 ro(self, name, readonly(getattr(self, name)))
         lines = self.measurement_lines
@@ -142,6 +152,7 @@ class Bundle:
             ids, xy = self.landmarks_groundtruth
             ro(self, "landmarks_groundtruth", (readonly(ids, np.int64), readonly(xy)))
         _check_models(self)
+        _check_step_covariances(self)
         _check_shapes(self)
         _check_values(self)
         _check_covariance_fields(self)
@@ -186,6 +197,29 @@ def _check_models(b: Bundle) -> None:
             raise InputError("the odometry model needs odometry poses", path=b.path)
         if len(b.odometry) < 2:
             raise InputError("expected at least two odometry rows", path=_where(b, "odometry.csv"))
+
+
+def _check_step_covariances(b: Bundle) -> None:
+    """``step_covariances`` given exactly with a ``step_covariance`` model, one per log row."""
+    wanted = b.motion.step_covariance_frame is not None
+    have = b.step_covariances is not None
+    where = _where(b, "step_covariance.csv")
+    if wanted != have:
+        raise InputError(
+            "step_covariances: expected one covariance per row of the motion log with a "
+            "step_covariance motion model, and none otherwise",
+            path=where if wanted else b.path,
+        )
+    if b.step_covariances is None:
+        return
+    k = b.controls.shape[0] if b.controls is not None else len(b.odometry)  # type: ignore[arg-type]
+    if b.step_covariances.shape != (k, 3, 3):
+        raise InputError(
+            f"step_covariances: expected shape ({k}, 3, 3), one per row of the motion log, "
+            f"got {b.step_covariances.shape}",
+            path=where,
+        )
+    check_covariances(b.step_covariances, path=where, what="step covariance")
 
 
 def _check_shapes(b: Bundle) -> None:

@@ -156,9 +156,15 @@ class MotionModel:
         Process noise ``C`` on the pose, once per control row (velocity) or odometry step,
         instead of noise on the controls: ``x ∘ (u + n)`` (``"body"``) or ``x ∘ u + w``
         (``"world"``), ``n, w ~ N(0, C)``.
+    step_covariance_frame : {"body", "world"} or None
+        A covariance ``C_k`` per control row or odometry step, given with the log
+        (``step_covariance.csv``, ``Bundle.step_covariances``), in the frame named, as
+        ``pose_noise`` but one per row: e.g. an increment-dependent odometry noise
+        ``J C Jᵀ`` as a filter computed it.
 
-    Exactly one of ``sigma``, ``alpha`` and ``pose_noise`` is set; ``sigma`` and ``alpha`` are
-    stored as tuples of float, ``pose_noise`` as a tuple of three rows of float.
+    Exactly one of ``sigma``, ``alpha``, ``pose_noise`` and ``step_covariance_frame`` is
+    set; ``sigma`` and ``alpha`` are stored as tuples of float, ``pose_noise`` as a tuple of
+    three rows of float.
 
     Raises
     ------
@@ -181,6 +187,7 @@ class MotionModel:
     control_stamp: str = "start"
     pose_noise_frame: str | None = None
     pose_noise: tuple[tuple[float, ...], ...] | None = None
+    step_covariance_frame: str | None = None
 
     def __post_init__(self) -> None:
         if self.type not in MOTION_TYPES:
@@ -189,11 +196,12 @@ class MotionModel:
                 f"{', '.join(MOTION_TYPES)}"
             )
         names = SIGMA_NAMES[self.type]
-        given = [f for f in ("sigma", "alpha", "pose_noise") if getattr(self, f) is not None]
+        forms = ("sigma", "alpha", "pose_noise", "step_covariance_frame")
+        given = [f for f in forms if getattr(self, f) is not None]
         if len(given) != 1:
             raise InputError(
                 f"motion_model ({self.type}): expected either sigma ({', '.join(names)}), "
-                "alpha (alpha1..alpha4) or pose_noise, exactly one of them"
+                "alpha (alpha1..alpha4), pose_noise or step_covariance, exactly one of them"
                 + (f"; got {' and '.join(given)}" if given else "")
             )
         _choice(self.integration, INTEGRATIONS, what="motion_model.integration")
@@ -205,6 +213,15 @@ class MotionModel:
                         f"motion_model.{name}: applies to the velocity model only; expected "
                         f"no {name} for the odometry model"
                     )
+        if given == ["step_covariance_frame"]:
+            _choice(
+                self.step_covariance_frame,
+                POSE_NOISE_FRAMES,
+                what="motion_model.step_covariance.frame",
+            )
+            if self.pose_noise_frame is not None:
+                raise InputError("motion_model.pose_noise.frame: given without pose_noise")
+            return
         if given == ["pose_noise"]:
             if self.pose_noise_frame is None:
                 raise InputError(
@@ -236,6 +253,8 @@ class MotionModel:
             out["control_stamp"] = self.control_stamp
         if self.alpha is not None:
             out["alpha"] = list(self.alpha)
+        elif self.step_covariance_frame is not None:
+            out["step_covariance"] = {"frame": self.step_covariance_frame}
         elif self.pose_noise is not None:
             out["pose_noise"] = {
                 "frame": self.pose_noise_frame,
@@ -475,7 +494,12 @@ def odometry_delta_covariance(delta: ArrayLike, alpha: tuple[float, ...]) -> Arr
 
 
 def increment_covariance(
-    model: MotionModel, u: ArrayLike, aux: ArrayLike, *, heading: ArrayLike | None = None
+    model: MotionModel,
+    u: ArrayLike,
+    aux: ArrayLike,
+    *,
+    heading: ArrayLike | None = None,
+    step_covariance: ArrayLike | None = None,
 ) -> Array:
     """Body-frame covariance ``Σ`` (..., 3, 3) of increments ``u``.
 
@@ -494,13 +518,23 @@ def increment_covariance(
     heading : array_like, shape (...), optional
         The heading each increment starts from; needed (only) by world-frame ``pose_noise``,
         which is turned into the body frame with it: ``Σ = Rot(θ)ᵀ f C Rot(θ)``.
+    step_covariance : array_like, shape (..., 3, 3), optional
+        With ``model.step_covariance_frame``: the covariance ``C`` of the row (or step) each
+        increment belongs to; it is used as ``pose_noise`` is (``f C``, rotated when world).
     """
     aux = np.asarray(aux, dtype=np.float64)
-    if model.pose_noise is not None:
-        cov = np.asarray(model.pose_noise, dtype=np.float64)
+    frame = model.pose_noise_frame
+    if model.step_covariance_frame is not None:
+        if step_covariance is None:
+            raise ValueError("a step_covariance motion model needs the rows' covariances")
+        frame = model.step_covariance_frame
+    if model.pose_noise is not None or model.step_covariance_frame is not None:
+        cov = np.asarray(
+            model.pose_noise if step_covariance is None else step_covariance, dtype=np.float64
+        )
         frac = 1.0 / aux[..., 3] if model.type == "velocity" else aux
         sig = frac[..., None, None] * cov
-        if model.pose_noise_frame == "world":
+        if frame == "world":
             if heading is None:
                 raise ValueError("world-frame pose noise needs the heading of each increment")
             rot = _rotation(np.broadcast_to(np.asarray(heading, float), frac.shape))

@@ -39,6 +39,7 @@ from recovery.constants import (
     BATCH_MAX_ITERATIONS,
     DEFAULT_MAP_PRIOR,
     DEFAULT_ROBUST,
+    INITIAL_COVARIANCE_FLOOR,
     MAP_PRIORS,
     METHODS,
     SMOOTHER_CHI2_RESOLUTION,
@@ -166,7 +167,7 @@ def filter_input(
         u=st.u,
         sigma=st.sigma,
         x0=bundle.initial_pose,
-        p0=bundle.initial_covariance,
+        p0=start_covariance(bundle.initial_covariance),
         meas_grid=st.measurement_grid,
         meas_z=bundle.measurements,
         meas_landmark=bundle.map_index(),
@@ -176,6 +177,19 @@ def filter_input(
         r=bundle.sensor.covariance,
         meas_labels=labels,
     )
+
+
+def start_covariance(p0: Array) -> Array:
+    """The filter's initial covariance: ``p0`` when positive definite, else ``p0 + εI``.
+
+    A positive semi-definite ``initial_covariance`` that is not definite (exactly zero: the
+    start pose known exactly) gets :data:`~recovery.constants.INITIAL_COVARIANCE_FLOOR` on its
+    diagonal (docs/bundle.md), since every method needs the inverse; (3, 3) -> (3, 3).
+    """
+    p0 = np.asarray(p0, dtype=np.float64)
+    if np.linalg.eigvalsh(0.5 * (p0 + p0.T)).min() > 0.0:
+        return p0
+    return p0 + INITIAL_COVARIANCE_FLOOR * np.eye(3)
 
 
 #: How :func:`recovery.batch_refinement.refine` stops for each method: the smoother at the data's

@@ -70,6 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         action="store_true",
         help="drop (and count) measurements whose landmark is not in map.csv",
     )
+    p.add_argument(
+        "--skip-invalid-measurements",
+        action="store_true",
+        help="drop (and count) measurements with a range <= 0 or a non-finite range or "
+        "bearing instead of refusing the bundle",
+    )
     add_recovery_arguments(
         p, fail_help="exit 3 at the first such stretch instead of recovering and reporting it"
     )
@@ -99,7 +105,11 @@ def run(args: argparse.Namespace) -> int:
 
     fmt = output_format(args.output, args.format)
     check_outputs([args.output, args.covariances, args.report], [args.bundle])
-    bundle = read_bundle(args.bundle, skip_unknown_landmarks=args.skip_unknown_landmarks)
+    bundle = read_bundle(
+        args.bundle,
+        skip_unknown_landmarks=args.skip_unknown_landmarks,
+        skip_invalid_measurements=args.skip_invalid_measurements,
+    )
     with errors_about(args.bundle):
         result = recover(
             bundle,
@@ -132,6 +142,8 @@ def run(args: argparse.Namespace) -> int:
         report["snapped"] = bundle.snapped
     if bundle.wrapped_bearings:  # bearings outside [-pi, pi) wrapped by the reader
         report["wrapped_bearings"] = bundle.wrapped_bearings
+    if bundle.skipped_invalid:  # range <= 0 or non-finite, dropped by the reader
+        report["skipped_invalid"] = bundle.skipped_invalid
     report.setdefault("robust", None)
     if args.report:
         write_json(args.report, report)

@@ -1,0 +1,206 @@
+"""What third-party filters write, stated in the bundle and read as stated (issue 38).
+
+Each test compares against an independent oracle: the same bundle written the way the
+statement says it is equivalent to (a zero initial covariance vs the documented floor, a
+skipped measurement vs the bundle without that row), or a hand computation.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from slamrel.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+SIM_BUNDLE = ROOT / "data" / "sim-bundle"
+
+
+def _copy(tmp_path: Path, name: str = "b") -> Path:
+    b = tmp_path / name
+    shutil.copytree(SIM_BUNDLE, b)
+    return b
+
+
+def _set_manifest(b: Path, **keys: object) -> None:
+    doc = json.loads((b / "bundle.json").read_text())
+    doc.update(keys)
+    (b / "bundle.json").write_text(json.dumps(doc, indent=2) + "\n")
+
+
+def _edit_measurements(b: Path, edits: dict[int, tuple[int, str]]) -> None:
+    """Set field ``col`` of data row ``row`` (0-based, after the header) to ``text``."""
+    lines = (b / "measurements.csv").read_text().splitlines()
+    for row, (col, text) in edits.items():
+        fields = lines[row + 1].split(",")
+        fields[col] = text
+        lines[row + 1] = ",".join(fields)
+    (b / "measurements.csv").write_text("\n".join(lines) + "\n")
+
+
+def _recovered(tmp_path: Path, b: Path, *extra: str) -> bytes:
+    out = tmp_path / f"{b.name}.txt"
+    assert main(["recover", str(b), "-o", str(out), "-q", *extra]) == 0
+    return out.read_bytes()
+
+
+def test_zero_initial_covariance_is_the_documented_floor(tmp_path: Path) -> None:
+    """An exactly zero (PSD, not PD) initial covariance is accepted and read as ``1e-9 I``:
+    the recovered trajectory is byte for byte that of the bundle stating ``1e-9 I``."""
+    from recovery.constants import INITIAL_COVARIANCE_FLOOR
+    from recovery.recover import start_covariance
+
+    zero = _copy(tmp_path, "zero")
+    _set_manifest(zero, initial_covariance=np.zeros((3, 3)).tolist())
+    floor = _copy(tmp_path, "floor")
+    _set_manifest(floor, initial_covariance=(INITIAL_COVARIANCE_FLOOR * np.eye(3)).tolist())
+    assert _recovered(tmp_path, zero) == _recovered(tmp_path, floor)
+    # a singular PSD one gets the floor on its diagonal; a PD one is kept as it is
+    sing = np.diag([1e-4, 1e-4, 0.0])
+    assert np.array_equal(start_covariance(sing), sing + 1e-9 * np.eye(3))
+    pd = np.diag([1e-4, 2e-4, 3e-4])
+    assert start_covariance(pd) is not None and np.array_equal(start_covariance(pd), pd)
+
+
+def test_invalid_measurements_refused_with_line_and_option(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    b = _copy(tmp_path)
+    _edit_measurements(b, {4: (1, "-0.035"), 8: (2, "nan"), 11: (1, "0")})
+    assert main(["recover", str(b), "-o", str(tmp_path / "x.txt"), "-q"]) == 3
+    err = capsys.readouterr().err
+    assert "measurements.csv:6:" in err and "range -0.035" in err
+    assert "3 such measurement(s)" in err and "--skip-invalid-measurements" in err
+
+
+def test_invalid_measurements_skipped_equal_the_rows_deleted(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--skip-invalid-measurements``: the recovery is that of the bundle without those rows
+    (deleted by hand), the count is reported, the warning names the first line."""
+    b = _copy(tmp_path, "skip")
+    _edit_measurements(b, {4: (1, "-0.035"), 8: (2, "nan"), 11: (1, "0"), 20: (1, "inf")})
+    hand = _copy(tmp_path, "hand")
+    lines = (hand / "measurements.csv").read_text().splitlines()
+    kept = [ln for k, ln in enumerate(lines) if k - 1 not in (4, 8, 11, 20)]
+    (hand / "measurements.csv").write_text("\n".join(kept) + "\n")
+    report = tmp_path / "r.json"
+    got = _recovered(tmp_path, b, "--skip-invalid-measurements", "--report", str(report))
+    err = capsys.readouterr().err
+    assert got == _recovered(tmp_path, hand)
+    assert json.loads(report.read_text())["skipped_invalid"] == 4
+    assert "measurements.csv:6: 4 measurement(s) with a range <= 0" in err
+
+
+def test_run_refuses_simulation_options_on_a_bundle(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for argv in (["--noise", "c"], ["--rate", "3"], ["--corrupt", "0.5"], ["--noise-scale", "4"],
+                 ["--noise", "a"]):  # fmt: skip
+        assert main(["run", str(SIM_BUNDLE), "-o", str(tmp_path / "r"), "-q", *argv]) == 2
+        assert f"only a simulated world takes {argv[0]}" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+    argv = ["run", "simple1", "-o", str(tmp_path / "w"), "--skip-invalid-measurements"]
+    assert main(argv) == 2
+
+
+def test_run_says_what_seed_changes_on_a_bundle(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["run", str(SIM_BUNDLE), "-o", str(tmp_path / "r")]) == 0
+    assert "--seed" not in capsys.readouterr().out
+    assert main(["run", str(SIM_BUNDLE), "-o", str(tmp_path / "s"), "--seed", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "note: --seed 3 draws other global relations" in out
+    a = json.loads((tmp_path / "r" / "metrics.json").read_text())
+    s = json.loads((tmp_path / "s" / "metrics.json").read_text())
+    assert a["recovery"]["nis"] == s["recovery"]["nis"]  # the recovery does not depend on it
+
+
+# ------------------------------------------------------------ per-step control covariance
+
+
+def _write_step_covariances(b: Path, covs: np.ndarray) -> None:
+    t = np.loadtxt(b / "controls.csv", delimiter=",", skiprows=1)[:, 0]
+    rows = [",".join(f"{v:.17g}" for v in (ti, c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2],
+                                            c[2, 2])) for ti, c in zip(t, covs)]  # fmt: skip
+    (b / "step_covariance.csv").write_text("t,cxx,cxy,cxt,cyy,cyt,ctt\n" + "\n".join(rows) + "\n")
+
+
+def test_step_covariance_constant_equals_pose_noise(tmp_path: Path) -> None:
+    """A ``step_covariance.csv`` whose every row is ``C`` recovers byte for byte what a body-
+    frame ``pose_noise`` ``C`` recovers (the documented equivalence)."""
+    c = np.array([[4e-4, 1e-5, 0.0], [1e-5, 1e-4, 2e-6], [0.0, 2e-6, 9e-5]])
+    pn = _copy(tmp_path, "pn")
+    motion = json.loads((pn / "bundle.json").read_text())["motion_model"]
+    for k in ("sigma_v", "sigma_omega"):
+        del motion[k]
+    _set_manifest(pn, motion_model=motion | {"pose_noise": {"frame": "body", "covariance":
+                                                            c.tolist()}})  # fmt: skip
+    sc = _copy(tmp_path, "sc")
+    _set_manifest(sc, motion_model=motion | {"step_covariance": {"frame": "body"}})
+    k = np.loadtxt(sc / "controls.csv", delimiter=",", skiprows=1).shape[0]
+    _write_step_covariances(sc, np.repeat(c[None], k, axis=0))
+    assert _recovered(tmp_path, sc) == _recovered(tmp_path, pn)
+
+
+def test_step_covariance_per_row_by_hand() -> None:
+    """Each step gets its own row's covariance, ``f C_k`` for a piece covering the fraction
+    ``f`` of row k; world frame: ``Rot(θ)ᵀ f C_k Rot(θ)`` at the dead-reckoning heading."""
+    from recovery.bundle import Bundle
+    from recovery.models import MotionModel, SensorModel
+    from recovery.steps import build_steps
+
+    c = np.stack([np.diag([1.0, 2.0, 3.0]), np.diag([4.0, 5.0, 6.0]) + 0.5 * np.eye(3)[[1, 0, 2]],
+                  np.diag([7.0, 8.0, 9.0])])  # fmt: skip
+    c[1, 2, 2] = 6.0
+    th0 = 0.3
+
+    def bundle(frame: str) -> Bundle:
+        return Bundle(
+            motion=MotionModel("velocity", step_covariance_frame=frame),
+            sensor=SensorModel(0.1, 0.01),
+            controls=np.array([[0.0, 1.0, 0.0], [1.0, 2.0, 0.0], [2.0, 0.0, 0.0]]),
+            step_covariances=c,
+            initial_pose=np.array([0.0, 0.0, th0]),
+            measurement_times=np.array([1.25]),
+            measurements=np.array([[1.0, 0.0]]),
+            measurement_landmarks=np.array([0]),
+            measurement_associated=np.array([False]),
+            map_ids=np.array([0]),
+            map_xy=np.array([[5.0, 5.0]]),
+            map_marginals=np.zeros((1, 2, 2)),
+        )
+
+    body = build_steps(bundle("body")).sigma
+    assert np.array_equal(body, np.stack([c[0], 0.25 * c[1], 0.75 * c[1]]))
+    rot = np.array([[np.cos(th0), -np.sin(th0), 0], [np.sin(th0), np.cos(th0), 0], [0, 0, 1]])
+    world = build_steps(bundle("world")).sigma
+    want = np.stack([rot.T @ (f * c[k]) @ rot for k, f in ((0, 1.0), (1, 0.25), (1, 0.75))])
+    assert np.allclose(world, want, rtol=1e-14, atol=1e-14)
+
+
+def test_step_covariance_file_checked(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    b = _copy(tmp_path)
+    motion = json.loads((b / "bundle.json").read_text())["motion_model"]
+    for k in ("sigma_v", "sigma_omega"):
+        del motion[k]
+    _set_manifest(b, motion_model=motion | {"step_covariance": {"frame": "body"}})
+    out = str(tmp_path / "x.txt")
+    assert main(["recover", str(b), "-o", out, "-q"]) == 3
+    assert "step_covariance.csv: missing required file" in capsys.readouterr().err
+    k = np.loadtxt(b / "controls.csv", delimiter=",", skiprows=1).shape[0]
+    _write_step_covariances(b, np.repeat(np.eye(3)[None], k - 1, axis=0))  # one row short
+    assert main(["recover", str(b), "-o", out, "-q"]) == 3
+    assert f"expected one row per row of controls.csv, at its times ({k} rows)" in (
+        capsys.readouterr().err
+    )
+    bad = np.repeat(np.eye(3)[None], k, axis=0)
+    bad[3, 0, 0] = -1.0
+    _write_step_covariances(b, bad)
+    assert main(["recover", str(b), "-o", out, "-q"]) == 3
+    assert "step_covariance.csv:5:" in capsys.readouterr().err
