@@ -271,7 +271,9 @@ class SensorModel:
 
     ``max_range`` [m] and ``fov`` [rad] (the full opening angle, centred on the heading) are
     the sensor's reach when the bundle declares it (``None``: not declared); only the map
-    comparison reads them (which true landmarks the run could have seen).
+    comparison reads them (which true landmarks the run could have seen). ``mount``
+    ``(x, y, θ)``: the sensor's pose in the robot frame (``None``: at the robot's origin,
+    facing forward); the measurement is ``h(x ∘ mount, l)``.
 
     Raises
     ------
@@ -286,6 +288,7 @@ class SensorModel:
     type: str = "range_bearing"
     max_range: float | None = None
     fov: float | None = None
+    mount: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.type != "range_bearing":
@@ -304,6 +307,19 @@ class SensorModel:
                 bound = "a positive number" if name == "max_range" else "an angle in (0, 2π]"
                 raise InputError(f"sensor_model.{name}: expected {bound}, got {value:g}")
             object.__setattr__(self, name, value)
+        if self.mount is not None:
+            m = np.asarray(self.mount, dtype=np.float64)
+            if m.shape != (3,) or not np.isfinite(m).all() or np.abs(m[:2]).max() > 1e30:
+                raise InputError(
+                    f"sensor_model.mount: expected [x, y, theta], three finite numbers (the "
+                    f"sensor's pose in the robot frame), got {self.mount!s:.60}"
+                )
+            object.__setattr__(self, "mount", (float(m[0]), float(m[1]), float(m[2])))
+
+    @property
+    def mounted(self) -> bool:
+        """Is the sensor mounted off the robot's origin (a ``mount`` other than zero)?"""
+        return self.mount is not None and any(v != 0.0 for v in self.mount)
 
     @property
     def covariance(self) -> Array:
@@ -319,6 +335,8 @@ class SensorModel:
         for name in ("max_range", "fov"):
             if getattr(self, name) is not None:
                 out[name] = getattr(self, name)
+        if self.mount is not None:
+            out["mount"] = list(self.mount)
         return out
 
 

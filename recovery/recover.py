@@ -56,6 +56,7 @@ from recovery.ekf import (
     run_filter,
 )
 from recovery.map_uncertainty import MapUncertainty, map_uncertainty
+from recovery.mount import to_robot_frame, to_sensor_frame
 from recovery.results import (
     BatchCosts,
     Divergence,
@@ -286,6 +287,9 @@ def recover(
     _check_options(method, gate, map_prior)
     mu = map_uncertainty(bundle, map_mode)
     inp = filter_input(bundle, uncertainty=mu)
+    mount = np.asarray(bundle.sensor.mount) if bundle.sensor.mounted else None
+    if mount is not None:  # the filter runs on the sensor's poses (recovery.mount)
+        inp = to_sensor_frame(inp, mount)
     if method != "filter":  # before any work: the joint problem's dense map terms
         from recovery.batch_refinement import check_joint_size
 
@@ -302,6 +306,9 @@ def recover(
     )
     weights = None if robust is None else fr.weights
     est = _estimate(method, inp, fr, mu, weights, map_prior)
+    if mount is not None:
+        est = replace(est, **dict(zip(("poses", "covariances"), to_robot_frame(
+            est.poses, est.covariances, mount))))  # fmt: skip
     covs, n_repaired = _check_finite(
         est.poses, est.covariances, inp.times, repair=on_divergence != "raise"
     )

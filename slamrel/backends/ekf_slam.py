@@ -36,6 +36,7 @@ step's updates) are stored for validation only.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -510,6 +511,12 @@ def ekf_slam_bundle(
     ``noise_scale`` scales motion and sensor alike, which leaves the filter's gains, and so
     its online estimate, unchanged).
     """
+    if bundle.sensor.mounted:
+        raise InputError(
+            "sensor_model.mount: slamrel's reference EKF-SLAM models a sensor at the robot's "
+            "origin only; expected no mount (or [0, 0, 0]) for slamrel slam",
+            path=None if bundle.path is None else Path(bundle.path) / "bundle.json",
+        )
     if process_noise_scale != 1.0:
         bundle = replace(bundle, motion=_scaled(bundle.motion, process_noise_scale))
     steps = build_steps(bundle)

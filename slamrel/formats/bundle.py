@@ -118,7 +118,7 @@ _MANIFEST_KEYS = {
     ),
     "motion_model.pose_noise": ("frame", "covariance"),
     "motion_model.step_covariance": ("frame",),
-    "sensor_model": ("type", "sigma_range", "sigma_bearing", "max_range", "fov"),
+    "sensor_model": ("type", "sigma_range", "sigma_bearing", "max_range", "fov", "mount"),
 }
 
 
@@ -447,7 +447,24 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
                 raise InputError(
                     f"sensor_model.{n}: expected {bound}, got {reach[n]}", path=path, line=where
                 )
-    return SensorModel(vals[0], vals[1], max_range=reach.get("max_range"), fov=reach.get("fov"))
+    mount = None
+    if "mount" in spec:  # the sensor's pose in the robot frame
+        mount = _numbers(
+            spec["mount"],
+            3,
+            what="sensor_model.mount",
+            path=path,
+            line=_line_of_key(text, "mount"),
+            minimum=None,
+            maximum=MAX_SIGMA,
+        )
+    return SensorModel(
+        vals[0],
+        vals[1],
+        max_range=reach.get("max_range"),
+        fov=reach.get("fov"),
+        mount=mount,  # type: ignore[arg-type]
+    )
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:
