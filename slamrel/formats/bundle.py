@@ -74,6 +74,7 @@ __all__ = [
     "read_bundle",
     "read_online",
     "write_bundle",
+    "write_measurements",
     "write_online",
 ]
 
@@ -972,13 +973,13 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
             list(STEP_COVARIANCE_COLUMNS),
             [lt, c[:, 0, 0], c[:, 0, 1], c[:, 0, 2], c[:, 1, 1], c[:, 1, 2], c[:, 2, 2]],
         )
-    t = bundle.measurement_times
-    rows = format_csv_table(
-        ["t", "range", "bearing"], [t, bundle.measurements[:, 0], bundle.measurements[:, 1]]
-    ).splitlines()
-    ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks.astype(str), "")
-    text = "t,range,bearing,landmark\n" + "".join(f"{r},{i}\n" for r, i in zip(rows[1:], ids))
-    write_text_atomic(root / "measurements.csv", text)
+    write_measurements(
+        root / "measurements.csv",
+        bundle.measurement_times,
+        bundle.measurements,
+        bundle.measurement_landmarks,
+        bundle.measurement_associated,
+    )
     write_landmark_csv(root / "map.csv", bundle.map_ids, bundle.map_xy, bundle.map_marginals)
     if bundle.map_covariance is not None:
         buf = io.BytesIO()
@@ -988,6 +989,17 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
         write_trajectory(root / "groundtruth.csv", bundle.groundtruth, format="csv")
     if bundle.landmarks_groundtruth is not None:
         write_landmark_csv(root / "landmarks_groundtruth.csv", *bundle.landmarks_groundtruth)
+
+
+def write_measurements(
+    path: PathLike, t: Array, z: Array, landmarks: Array, associated: Array
+) -> None:
+    """Write ``measurements.csv`` atomically: ``t,range,bearing`` (``%.17g``) for ``t`` (J,)
+    and ``z`` (J, 2), and the ``landmark`` id (``%d``; empty where not ``associated``)."""
+    rows = format_csv_table(["t", "range", "bearing"], [t, z[:, 0], z[:, 1]]).splitlines()
+    ids = np.where(associated, np.asarray(landmarks).astype(np.int64).astype(str), "")
+    text = "t,range,bearing,landmark\n" + "".join(f"{r},{i}\n" for r, i in zip(rows[1:], ids))
+    write_text_atomic(path, text)
 
 
 class OnlineEstimate(NamedTuple):
