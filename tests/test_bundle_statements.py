@@ -108,6 +108,7 @@ def test_run_refuses_simulation_options_on_a_bundle(
     assert main(argv) == 2
 
 
+@pytest.mark.slow
 def test_run_says_what_seed_changes_on_a_bundle(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -267,3 +268,117 @@ def test_mount_used_in_the_measurement_model() -> None:
 
     assert error(m) < 1e-3
     assert error(None) > 0.1
+
+
+# ------------------------------------------------------------------------------ the checks
+
+
+@pytest.fixture(scope="module")
+def client_bundle(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A short recorded run of the textbook client with its quirks (distinct marginals, zero
+    and singular online covariances, dropouts, a mount)."""
+    import math
+
+    from clients.export import recorder_for, write_recorded_bundle
+    from clients.textbook_ekfslam import Config, run
+
+    cfg = Config(steps=120, mount=(0.3, 0.1, math.radians(5.0)), motion_noise="control",
+                 initial_variance=0.0, dropout=0.01)  # fmt: skip
+    rec = recorder_for(cfg)
+    r = run(0, cfg, recorder=rec)
+    return write_recorded_bundle(r, rec, tmp_path_factory.mktemp("client") / "b")
+
+
+def test_map_covariance_in_another_order_is_refused(
+    tmp_path: Path, client_bundle: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    b = tmp_path / "perm"
+    shutil.copytree(client_bundle, b)
+    c = np.load(b / "map_covariance.npy")
+    m = c.shape[0] // 2
+    rows = np.stack([2 * np.arange(m)[::-1], 2 * np.arange(m)[::-1] + 1], 1).ravel()
+    np.save(b / "map_covariance.npy", c[np.ix_(rows, rows)])  # landmarks in reverse order
+    out = str(tmp_path / "x.txt")
+    argv = ["recover", str(b), "-o", out, "-q", "--skip-invalid-measurements"]
+    assert main(argv) == 3
+    err = capsys.readouterr().err
+    assert "map_covariance.npy: its diagonal block 0" in err and "map.csv's order" in err
+    assert main(["recover", str(client_bundle), "-o", out, "-q",
+                 "--skip-invalid-measurements"]) == 0  # fmt: skip
+
+
+def test_map_without_covariance_is_reported_exact(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``map.csv`` with no covariance columns and no joint covariance: "exact", and the
+    recovery is byte for byte that of ``--map-uncertainty ignore``."""
+    b = _copy(tmp_path)
+    (b / "map_covariance.npy").unlink()
+    rows = [",".join(r.split(",")[:3]) for r in (b / "map.csv").read_text().splitlines()]
+    (b / "map.csv").write_text("\n".join(rows) + "\n")
+    report = tmp_path / "r.json"
+    out = tmp_path / "a.txt"
+    assert main(["recover", str(b), "-o", str(out), "--report", str(report)]) == 0
+    assert "map uncertainty: exact" in capsys.readouterr().out
+    assert json.loads(report.read_text())["map_uncertainty"] == "exact"
+    ignore = tmp_path / "b.txt"
+    assert main(["recover", str(b), "-o", str(ignore), "-q", "--map-uncertainty", "ignore"]) == 0
+    assert out.read_bytes() == ignore.read_bytes()
+
+
+def test_nees_reads_the_bundles_own_files(
+    tmp_path: Path, client_bundle: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``slamrel nees BUNDLE/groundtruth.csv BUNDLE/online.csv``: the zero and singular
+    online covariances are left out and counted; the rest is the same NEES as the se2-cov
+    file of the remaining rows (written by hand)."""
+    from slamrel.formats.bundle import read_online
+
+    gt, on = client_bundle / "groundtruth.csv", client_bundle / "online.csv"
+    a = tmp_path / "a.json"
+    assert main(["nees", str(gt), str(on), "--json", str(a), "-q"]) == 0
+    err = capsys.readouterr().err
+    with pytest.warns(UserWarning):
+        est = read_online(on)
+    assert est.covariances is not None
+    ok = np.linalg.eigvalsh(est.covariances)[:, 0] > 0
+    assert f"online.csv:2: {int((~ok).sum())} of {ok.size} online pose" in err
+    c = est.covariances[ok]
+    iu = np.triu_indices(3)
+    rows = np.column_stack((est.trajectory.timestamps[ok], est.trajectory.poses[ok],
+                            c[:, iu[0], iu[1]]))  # fmt: skip
+    hand = tmp_path / "online.se2cov"
+    np.savetxt(hand, rows, fmt="%.17g")
+    b = tmp_path / "b.json"
+    assert main(["nees", str(gt), str(hand), "--json", str(b), "-q"]) == 0
+    ja, jb = json.loads(a.read_text()), json.loads(b.read_text())
+    assert ja["matched"] == jb["matched"] == int(ok.sum())
+    assert ja["nees"] == jb["nees"]
+
+
+def test_map_compare_leaves_out_landmarks_out_of_reach(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A reference landmark 40 m from every pose of sim-bundle's truth: missed without a
+    reach, unobserved with ``--trajectory`` (file + ``--max-range``, or the bundle)."""
+    ref = np.array([[100, 0.18, 1.39], [101, -0.68, 14.19], [102, 3.0, 0.5], [103, 40.0, 40.0]])
+    (tmp_path / "ref.csv").write_text(
+        "landmark,x,y\n" + "".join(f"{int(i)},{x:.17g},{y:.17g}\n" for i, x, y in ref)
+    )
+    (tmp_path / "est.csv").write_text(
+        "landmark,x,y\n" + "".join(f"{int(i)},{x + 0.05:.17g},{y:.17g}\n" for i, x, y in ref[:3])
+    )
+    base = ["map-compare", str(tmp_path / "est.csv"), str(tmp_path / "ref.csv"), "-q"]
+    got = {}
+    for name, extra in (("none", []), ("file", ["--trajectory", str(SIM_BUNDLE /
+                        "groundtruth.csv"), "--max-range", "5"]),
+                        ("bundle", ["--trajectory", str(SIM_BUNDLE)])):  # fmt: skip
+        out = tmp_path / f"{name}.json"
+        assert main([*base, *extra, "--json", str(out)]) == 0
+        got[name] = json.loads(out.read_text())["association"]
+    assert got["none"]["missed_ids"] == [103] and got["none"]["unobserved"] == 0
+    for name in ("file", "bundle"):
+        assert got[name]["missed"] == 0 and got[name]["unobserved_ids"] == [103]
+    assert main([*base, "--max-range", "5"]) == 2
+    assert main([*base, "--trajectory", str(SIM_BUNDLE / "groundtruth.csv")]) == 2
+    capsys.readouterr()

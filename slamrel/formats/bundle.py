@@ -46,7 +46,7 @@ from recovery.models import (
 )
 from recovery.steps import SNAP_TOLERANCE, snap_times
 from relation_metric.arrays import Array, PathLike
-from relation_metric.checks import check_covariances
+from relation_metric.checks import check_covariances, check_joint_covariance
 from relation_metric.errors import InputError
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, check_coordinates
@@ -797,7 +797,34 @@ def _read_map(root: Path) -> dict[str, Any]:
     marg = np.zeros((m, 2, 2)) if table.cov is None else np.nan_to_num(table.cov, nan=0.0)
     p_cov = root / "map_covariance.npy"
     cov = _load_matrix(p_cov, 2 * m, what=f"for {m} landmarks") if p_cov.exists() else None
+    if cov is not None and table.cov is not None:
+        _check_joint_order(cov, marg, table.ids, p_cov, p_map)
     return {"map_ids": table.ids, "map_xy": table.xy, "map_marginals": marg, "map_covariance": cov}
+
+
+def _check_joint_order(
+    cov: Array, marg: Array, ids: NDArray[np.int64], p_cov: Path, p_map: Path
+) -> None:
+    """The joint covariance's diagonal blocks must be ``map.csv``'s covariances, landmark by
+    landmark, within a relative 1e-6 of the landmark's largest entry: a joint covariance in
+    another landmark order than ``map.csv`` (which nothing else would notice) is refused."""
+    check_joint_covariance(cov, path=p_cov, what="map covariance")  # its own defects first
+    m = ids.shape[0]
+    ar = np.arange(m)
+    blocks = cov.reshape(m, 2, m, 2)[ar, :, ar, :]
+    scale = np.maximum(np.abs(blocks).max(axis=(1, 2)), np.abs(marg).max(axis=(1, 2)))
+    off = np.abs(blocks - marg).max(axis=(1, 2)) > 1e-6 * scale
+    if not off.any():
+        return
+    k = int(np.flatnonzero(off)[0])
+    raise InputError(
+        f"its diagonal block {k} (rows {2 * k}, {2 * k + 1}) is not the covariance map.csv "
+        f"gives landmark {int(ids[k])} (row {k + 1} of map.csv: cxx {marg[k, 0, 0]:.6g}, cyy "
+        f"{marg[k, 1, 1]:.6g}; the block: {blocks[k, 0, 0]:.6g}, {blocks[k, 1, 1]:.6g}; "
+        f"{int(off.sum())} of {m} landmarks differ); expected the joint covariance with its "
+        f"landmarks in map.csv's order ({p_map.name})",
+        path=p_cov,
+    )
 
 
 class BearingWrapWarning(UserWarning):
