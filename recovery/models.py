@@ -75,6 +75,8 @@ INTEGRATIONS = ("arc", "euler")
 #: ``control_stamp`` of the velocity model: a control row is stamped at the start of the
 #: interval it is held over (row k: ``[t_k, t_{k+1})``) or at its end (``(t_{k−1}, t_k]``).
 CONTROL_STAMPS = ("start", "end")
+#: ``sensor_model.noise``: the σ are the filter's assumed noise, or the data's true noise.
+SENSOR_NOISE_SOURCES = ("assumed", "true")
 #: ``pose_noise.frame``: noise on the body-frame increment, or added in the map frame.
 POSE_NOISE_FRAMES = ("body", "world")
 #: The ``sigma`` entries of each motion model, in order (``bundle.json`` keys).
@@ -273,7 +275,9 @@ class SensorModel:
     the sensor's reach when the bundle declares it (``None``: not declared); only the map
     comparison reads them (which true landmarks the run could have seen). ``mount``
     ``(x, y, θ)``: the sensor's pose in the robot frame (``None``: at the robot's origin,
-    facing forward); the measurement is ``h(x ∘ mount, l)``.
+    facing forward); the measurement is ``h(x ∘ mount, l)``. ``noise``: whether the σ are the
+    filter's assumed noise (``"assumed"``, the default) or the data's true noise (``"true"``,
+    known for a simulation); the recovery uses them either way and reports which.
 
     Raises
     ------
@@ -289,6 +293,7 @@ class SensorModel:
     max_range: float | None = None
     fov: float | None = None
     mount: tuple[float, float, float] | None = None
+    noise: str = "assumed"
 
     def __post_init__(self) -> None:
         if self.type != "range_bearing":
@@ -307,6 +312,7 @@ class SensorModel:
                 bound = "a positive number" if name == "max_range" else "an angle in (0, 2π]"
                 raise InputError(f"sensor_model.{name}: expected {bound}, got {value:g}")
             object.__setattr__(self, name, value)
+        _choice(self.noise, SENSOR_NOISE_SOURCES, what="sensor_model.noise")
         if self.mount is not None:
             m = np.asarray(self.mount, dtype=np.float64)
             if m.shape != (3,) or not np.isfinite(m).all() or np.abs(m[:2]).max() > 1e30:
@@ -337,6 +343,8 @@ class SensorModel:
                 out[name] = getattr(self, name)
         if self.mount is not None:
             out["mount"] = list(self.mount)
+        if self.noise != "assumed":  # written when stated (older bundles unchanged)
+            out["noise"] = self.noise
         return out
 
 

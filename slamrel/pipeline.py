@@ -373,6 +373,11 @@ def score_bundle(
         rec, rec_error = None, str(exc)
     own = _own_estimates(inp, rec)
     notes = run_notes(rec, rec_error, method, has_online=inp.online is not None)
+    if bundle.skipped_invalid:  # read with --skip-invalid-measurements
+        notes.append(
+            f"{bundle.skipped_invalid} measurement(s) with a range <= 0 or a non-finite range "
+            "or bearing were skipped by the reader (--skip-invalid-measurements) and not used"
+        )
     frame, estimates, evaluations = None, own, {}
     nees: dict[str, NeesCurve] = {}
     nees_truth: dict[str, NeesSummary] = {}

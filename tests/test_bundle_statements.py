@@ -382,3 +382,94 @@ def test_map_compare_leaves_out_landmarks_out_of_reach(
     assert main([*base, "--max-range", "5"]) == 2
     assert main([*base, "--trajectory", str(SIM_BUNDLE / "groundtruth.csv")]) == 2
     capsys.readouterr()
+
+
+# ------------------------------------------------ frames, initialisation, time, sensor noise
+
+
+def _empty_landmarks(b: Path, rows: set[int]) -> None:
+    lines = (b / "measurements.csv").read_text().splitlines()
+    for k in rows:
+        f = lines[k + 1].split(",")
+        f[3] = ""
+        lines[k + 1] = ",".join(f)
+    (b / "measurements.csv").write_text("\n".join(lines) + "\n")
+
+
+def test_unprocessed_frames_and_initialising_measurements_used_as_stated(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``processed`` 0 rows and (``"initialisation": "initialises_only"``) each landmark's
+    first measurement are not used: the recovery is byte for byte that of the bundle with
+    those landmark cells emptied by hand, and both are counted apart."""
+    b = _copy(tmp_path, "stated")
+    _set_manifest(b, initialisation="initialises_only")
+    lines = (b / "measurements.csv").read_text().splitlines()
+    unprocessed = {0, 1, 2}
+    lines = [lines[0] + ",processed"] + [
+        ln + (",0" if k in unprocessed else ",1") for k, ln in enumerate(lines[1:])
+    ]
+    (b / "measurements.csv").write_text("\n".join(lines) + "\n")
+    # by hand: the first processed measurement of each landmark, in time order (file order)
+    seen: set[str] = set()
+    first = set()
+    for k, ln in enumerate(lines[1:]):
+        lm = ln.split(",")[3]
+        if k not in unprocessed and lm and lm not in seen:
+            seen.add(lm)
+            first.add(k)
+    hand = _copy(tmp_path, "hand")
+    _empty_landmarks(hand, unprocessed | first)
+    report = tmp_path / "r.json"
+    assert _recovered(tmp_path, b, "--report", str(report)) == _recovered(tmp_path, hand)
+    r = json.loads(report.read_text())
+    assert r["unprocessed"] == 3 and r["initialising"] == len(first) > 0
+
+
+def test_time_as_step_index_and_sensor_noise_stated(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``"time": "steps"``: sim-bundle's 0.1 s rows as steps (t × 10, v and ω per step) give
+    the same poses; a t that is no step index is refused at its line. ``sensor_model.noise``
+    is reported as stated and changes nothing else."""
+    from slamrel.formats.bundle import read_bundle
+
+    b = _copy(tmp_path, "steps")
+    _set_manifest(b, time="steps")
+    ctl = np.loadtxt(b / "controls.csv", delimiter=",", skiprows=1)
+    ctl = ctl * [10.0, 0.1, 0.1]
+    (b / "controls.csv").write_text(
+        "t,v,omega\n" + "".join(f"{round(t)},{v:.17g},{w:.17g}\n" for t, v, w in ctl)
+    )
+    meas = (b / "measurements.csv").read_text().splitlines()
+    out = [meas[0]]
+    for ln in meas[1:]:
+        f = ln.split(",")
+        f[0] = str(round(float(f[0]) * 10))
+        out.append(",".join(f))
+    (b / "measurements.csv").write_text("\n".join(out) + "\n")
+    (b / "groundtruth.csv").unlink()
+    motion = json.loads((b / "bundle.json").read_text())["motion_model"]
+    per_step = {"sigma_v": motion["sigma_v"] * 0.1, "sigma_omega": motion["sigma_omega"] * 0.1}
+    _set_manifest(b, motion_model=motion | per_step)
+    steps = read_bundle(b)
+    assert steps.time == "steps"
+    seconds = read_bundle(SIM_BUNDLE)
+    from recovery.recover import recover
+
+    a, s = recover(steps, method="filter").trajectory, recover(seconds, method="filter").trajectory
+    assert np.array_equal(a.timestamps, np.round(s.timestamps * 10))
+    assert np.allclose(a.poses, s.poses, atol=1e-9)
+    f = (b / "measurements.csv").read_text().splitlines()
+    t_last = float(f[-1].split(",")[0]) + 0.5  # the last row: still in time order
+    f[-1] = f"{t_last}" + f[-1][f[-1].index(",") :]
+    (b / "measurements.csv").write_text("\n".join(f) + "\n")
+    assert main(["recover", str(b), "-o", str(tmp_path / "x.txt"), "-q"]) == 3
+    err = capsys.readouterr().err
+    assert f"measurements.csv:{len(f)}: t = {t_last}: expected a step index" in err
+    noise = _copy(tmp_path, "noise")
+    sensor = json.loads((noise / "bundle.json").read_text())["sensor_model"]
+    _set_manifest(noise, sensor_model=sensor | {"noise": "true"})
+    report = tmp_path / "r.json"
+    assert _recovered(tmp_path, noise, "--report", str(report)) == _recovered(tmp_path, SIM_BUNDLE)
+    assert json.loads(report.read_text())["sensor_noise"] == "true"

@@ -130,7 +130,12 @@ def run(args: argparse.Namespace) -> int:
     )
     start = time.perf_counter()
     if is_dir:
-        inp = read_run_input(args.source, skip_invalid_measurements=args.skip_invalid_measurements)
+        from slamrel.formats.bundle import SKIP_INVALID_OPTION
+
+        with in_option_words({SKIP_INVALID_OPTION: "--skip-invalid-measurements"}):
+            inp = read_run_input(
+                args.source, skip_invalid_measurements=args.skip_invalid_measurements
+            )
     else:
         inp = simulate_run_input(
             args.source, noise=args.noise, seed=args.seed, rate=args.rate,

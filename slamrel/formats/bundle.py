@@ -31,13 +31,14 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from recovery.bundle import Bundle
+from recovery.bundle import INITIALISATIONS, TIME_UNITS, Bundle
 from recovery.constants import MAX_SIGMA, MAX_VARIANCE, MIN_SENSOR_SIGMA
 from recovery.models import (
     CONTROL_STAMPS,
     INTEGRATIONS,
     MOTION_TYPES,
     POSE_NOISE_FRAMES,
+    SENSOR_NOISE_SOURCES,
     SIGMA_NAMES,
     MotionModel,
     MotionModelWarning,
@@ -107,6 +108,8 @@ _MANIFEST_KEYS = {
         "initial_pose",
         "initial_covariance",
         "description",
+        "time",
+        "initialisation",
     ),
     "motion_model": (
         "type",
@@ -119,7 +122,15 @@ _MANIFEST_KEYS = {
     ),
     "motion_model.pose_noise": ("frame", "covariance"),
     "motion_model.step_covariance": ("frame",),
-    "sensor_model": ("type", "sigma_range", "sigma_bearing", "max_range", "fov", "mount"),
+    "sensor_model": (
+        "type",
+        "sigma_range",
+        "sigma_bearing",
+        "max_range",
+        "fov",
+        "mount",
+        "noise",
+    ),
 }
 
 
@@ -459,12 +470,21 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
             minimum=None,
             maximum=MAX_SIGMA,
         )
+    noise = spec.get("noise", "assumed")
+    if noise not in SENSOR_NOISE_SOURCES or not isinstance(noise, str):
+        raise InputError(
+            f"sensor_model.noise: unknown value {_shown(noise)}; expected one of "
+            f"{', '.join(SENSOR_NOISE_SOURCES)}",
+            path=path,
+            line=_line_of_key(text, "noise"),
+        )
     return SensorModel(
         vals[0],
         vals[1],
         max_range=reach.get("max_range"),
         fov=reach.get("fov"),
         mount=mount,  # type: ignore[arg-type]
+        noise=noise,
     )
 
 
@@ -494,6 +514,16 @@ def _read_manifest(path: Path) -> dict[str, Any]:
         "sensor": _parse_sensor(doc["sensor_model"], text, name),
         "description": str(doc.get("description", "")),
     }
+    for key, allowed in (("time", TIME_UNITS), ("initialisation", INITIALISATIONS)):
+        if key in doc:
+            if not isinstance(doc[key], str) or doc[key] not in allowed:
+                raise InputError(
+                    f"{key}: unknown value {_shown(doc[key])}; expected one of "
+                    f"{', '.join(allowed)}",
+                    path=name,
+                    line=_line_of_key(text, key),
+                )
+            out[key] = doc[key]
     pose = doc.get("initial_pose", [0.0, 0.0, 0.0])
     out["initial_pose"] = np.array(
         _numbers(
@@ -546,7 +576,12 @@ def _read_csv(
 
 
 def _read_csv_with_ids(
-    path: Path, *, required: Sequence[str], id_column: str, empty_ok: Sequence[str] = ()
+    path: Path,
+    *,
+    required: Sequence[str],
+    id_column: str,
+    empty_ok: Sequence[str] = (),
+    optional: Sequence[str] = (),
 ) -> tuple[dict[str, Any], NDArray[np.int64]]:
     """:func:`_read_csv` with ``id_column`` (may be empty) read as exact int64 ids.
 
@@ -557,7 +592,12 @@ def _read_csv_with_ids(
         raise InputError(f"missing required file; expected columns {','.join(required)}", path=path)
     src = read_source(path)
     cols, lines = read_csv_table(
-        path, required=required, empty_ok=(id_column,), nonfinite_ok=empty_ok, source=src
+        path,
+        required=required,
+        optional=optional,
+        empty_ok=(id_column,),
+        nonfinite_ok=empty_ok,
+        source=src,
     )
     ids, present = read_csv_id_column(src, id_column, lines, empty_ok=True)
     out: dict[str, Any] = {**cols, id_column: ids, id_column + "#": present}
@@ -671,6 +711,8 @@ def read_bundle(
     log_t = log["controls"][:, 0] if "controls" in log else log["odometry"].timestamps
     if meta["motion"].step_covariance_frame is not None:
         log["step_covariances"] = _read_step_covariances(root, log_t, log_name)
+    if meta.get("time") == "steps":
+        _check_steps((log_t, root / log_name, None), meas)
     snapped = 0
     if log_t.shape[0] >= 2:  # else the Bundle refuses the log (at least two rows)
         meas, snapped = _snap_measurements(meas, log_t, root / "measurements.csv", log_name)
@@ -688,6 +730,37 @@ def read_bundle(
         wrapped_bearings=wrapped["measurements.csv"],
         skipped_invalid=skipped_invalid,
     )
+
+
+def _refuse_first(bad: Array, message: Callable[[int], str], path: Path, lines: Any) -> None:
+    """:class:`InputError` at the first row where ``bad`` (J,) holds, if any: the message of
+    its index, its line (``lines`` (J,), or None)."""
+    hit = np.flatnonzero(bad)
+    if hit.size:
+        k = int(hit[0])
+        raise InputError(message(k), path=path, line=None if lines is None else int(lines[k]))
+
+
+def _check_steps(log: tuple[Array, Path, None], meas: dict[str, Any]) -> None:
+    """``"time": "steps"``: every time of the log and the measurements is a step index."""
+    log_t, log_path, _ = log
+    for t, path, lines in (
+        (log_t, log_path, None),
+        (
+            meas["measurement_times"],
+            log_path.parent / "measurements.csv",
+            meas["measurement_lines"],
+        ),
+    ):
+        _refuse_first(
+            t != np.round(t),
+            lambda k, t=t: (
+                f"t = {float(t[k])!r}: expected a step index (an integer), as the "
+                'manifest\'s "time": "steps" says'
+            ),
+            path,
+            lines,
+        )
 
 
 def _snap_measurements(
@@ -865,8 +938,9 @@ class InvalidMeasurementWarning(UserWarning):
     """Measurements with a range ≤ 0 or a non-finite range or bearing were skipped (counted)."""
 
 
-#: The option that skips invalid measurements, named in the reader's error.
-SKIP_INVALID_OPTION = "--skip-invalid-measurements"
+#: The parameter that skips invalid measurements, named in the reader's error (the command
+#: line says its own option for it).
+SKIP_INVALID_OPTION = "skip_invalid_measurements=True"
 
 
 def _drop_invalid(
@@ -914,18 +988,40 @@ def _read_measurements(
         required=("t", "range", "bearing", "landmark"),
         id_column="landmark",
         empty_ok=("range", "bearing"),
+        optional=("processed",),
     )
     cols, lines, skipped = _drop_invalid(cols, lines, p, skip_invalid)
     cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "measurement")
     bearing, wrapped[p.name] = _wrapped_bearings(cols["bearing"], lines, p)
-    return {
+    out = {
         "measurement_times": cols["t"],
         "measurements": np.column_stack((cols["range"], bearing)),
         "measurement_landmarks": cols["landmark"].astype(np.int64),
         "measurement_associated": cols["landmark#"].astype(bool),
         "measurement_lines": lines,
-        "skipped_invalid": skipped,
     }
+    unprocessed = _unprocessed(cols, lines, p)
+    if unprocessed is not None:  # (every field here is a row array: filtered and sorted alike)
+        out["measurement_unprocessed"] = unprocessed
+    return out | {"skipped_invalid": skipped}
+
+
+def _unprocessed(cols: dict[str, Any], lines: NDArray[np.int64], path: Path) -> Any:
+    """The optional ``processed`` column (1: processed, the default; 0: a frame the filter
+    never processed) as the unprocessed mask, ``None`` without the column."""
+    if "processed" not in cols:
+        return None
+    v = cols["processed"]
+    _refuse_first(
+        (v != 0) & (v != 1),
+        lambda k: (
+            f"processed {float(v[k]):g}: expected 1 (the filter processed this frame) "
+            "or 0 (it never processed it)"
+        ),
+        path,
+        lines,
+    )
+    return v == 0
 
 
 def _read_truth(root: Path, reordered: dict[str, int]) -> dict[str, Any]:
@@ -982,6 +1078,9 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
         "initial_covariance": [[float(v) for v in row] for row in bundle.initial_covariance],
         "description": bundle.description,
     }
+    for key, default in (("time", "seconds"), ("initialisation", "updates")):
+        if getattr(bundle, key) != default:  # written when stated (older bundles unchanged)
+            meta[key] = getattr(bundle, key)
     write_text_atomic(root / "bundle.json", json.dumps(meta, indent=2) + "\n")
     if bundle.controls is not None:
         c = bundle.controls
@@ -1006,6 +1105,7 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
         bundle.measurements,
         bundle.measurement_landmarks,
         bundle.measurement_associated,
+        bundle.measurement_unprocessed,
     )
     write_landmark_csv(root / "map.csv", bundle.map_ids, bundle.map_xy, bundle.map_marginals)
     if bundle.map_covariance is not None:
@@ -1019,13 +1119,24 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
 
 
 def write_measurements(
-    path: PathLike, t: Array, z: Array, landmarks: Array, associated: Array
+    path: PathLike,
+    t: Array,
+    z: Array,
+    landmarks: Array,
+    associated: Array,
+    unprocessed: Array | None = None,
 ) -> None:
     """Write ``measurements.csv`` atomically: ``t,range,bearing`` (``%.17g``) for ``t`` (J,)
-    and ``z`` (J, 2), and the ``landmark`` id (``%d``; empty where not ``associated``)."""
+    and ``z`` (J, 2), and the ``landmark`` id (``%d``; empty where not ``associated``); with
+    ``unprocessed`` (J,) holding a True, a ``processed`` column (0 where True)."""
     rows = format_csv_table(["t", "range", "bearing"], [t, z[:, 0], z[:, 1]]).splitlines()
     ids = np.where(associated, np.asarray(landmarks).astype(np.int64).astype(str), "")
-    text = "t,range,bearing,landmark\n" + "".join(f"{r},{i}\n" for r, i in zip(rows[1:], ids))
+    if unprocessed is not None and np.any(unprocessed):
+        ids = np.char.add(ids, np.where(unprocessed, ",0", ",1"))
+        head = "t,range,bearing,landmark,processed\n"
+    else:
+        head = "t,range,bearing,landmark\n"
+    text = head + "".join(f"{r},{i}\n" for r, i in zip(rows[1:], ids))
     write_text_atomic(path, text)
 
 

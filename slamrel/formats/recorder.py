@@ -81,7 +81,7 @@ class BundleRecorder:
         )
         self._log: list[tuple[float, ...]] = []
         self._step_cov: list[Array] = []
-        self._meas: list[tuple[float, float, float, int, bool]] = []
+        self._meas: list[tuple[float, float, float, int, bool, bool]] = []
         self._online: list[tuple[float, Array, Array | None]] = []
 
     # -------------------------------------------------------------------- per step
@@ -101,12 +101,20 @@ class BundleRecorder:
         self._row("odometry", (float(t), float(x), float(y), float(theta)), covariance)
 
     def measurement(
-        self, t: float, range_: float, bearing: float, landmark: int | None = None
+        self,
+        t: float,
+        range_: float,
+        bearing: float,
+        landmark: int | None = None,
+        *,
+        processed: bool = True,
     ) -> None:
         """One range-bearing measurement at ``t``; ``landmark`` the id the filter associated
-        it with (also the landmark it initialised), ``None`` when it left it unassociated."""
+        it with (also the landmark it initialised), ``None`` when it left it unassociated;
+        ``processed=False`` for a frame the filter never processed (counted apart)."""
         lm = -1 if landmark is None else int(landmark)
-        self._meas.append((float(t), float(range_), float(bearing), lm, landmark is not None))
+        row = (float(t), float(range_), float(bearing), lm, landmark is not None, not processed)
+        self._meas.append(row)
 
     def online(self, t: float, pose: ArrayLike, covariance: ArrayLike | None = None) -> None:
         """The filter's own pose estimate at ``t`` (after its updates), with its 3 × 3
@@ -176,6 +184,7 @@ class BundleRecorder:
             measurements=meas[:, 1:3],
             measurement_landmarks=np.where(meas[:, 4] > 0, meas[:, 3], 0).astype(np.int64),
             measurement_associated=meas[:, 4] > 0,
+            measurement_unprocessed=meas[:, 5] > 0 if (meas[:, 5] > 0).any() else None,
             map_ids=ids,
             map_xy=np.asarray(map_xy, dtype=np.float64),
             map_marginals=np.nan_to_num(marg, nan=0.0),
@@ -189,8 +198,9 @@ class BundleRecorder:
         )
 
     def _measurement_rows(self) -> Array:
-        """The recorded measurements, (J, 5): ``t, range, bearing, landmark, associated``."""
-        return np.array(self._meas, dtype=np.float64).reshape(-1, 5)
+        """The recorded measurements, (J, 6): ``t, range, bearing, landmark, associated,
+        unprocessed``."""
+        return np.array(self._meas, dtype=np.float64).reshape(-1, 6)
 
     def online_estimate(self) -> tuple[Trajectory, Array | None] | None:
         """The recorded online poses and their covariances (None when none was recorded;
@@ -216,7 +226,12 @@ class BundleRecorder:
             if b.skipped_invalid:  # the log as the filter saw it, invalid readings included
                 meas = self._measurement_rows()
                 write_measurements(
-                    root / "measurements.csv", meas[:, 0], meas[:, 1:3], meas[:, 3], meas[:, 4] > 0
+                    root / "measurements.csv",
+                    meas[:, 0],
+                    meas[:, 1:3],
+                    meas[:, 3],
+                    meas[:, 4] > 0,
+                    meas[:, 5] > 0,
                 )
             if online is not None:
                 write_online(root / "online.csv", *online)
