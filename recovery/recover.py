@@ -307,8 +307,8 @@ def recover(
     weights = None if robust is None else fr.weights
     est = _estimate(method, inp, fr, mu, weights, map_prior)
     if mount is not None:
-        est = replace(est, **dict(zip(("poses", "covariances"), to_robot_frame(
-            est.poses, est.covariances, mount))))  # fmt: skip
+        poses, covariances = to_robot_frame(est.poses, est.covariances, mount)
+        est = replace(est, poses=poses, covariances=covariances)
     covs, n_repaired = _check_finite(
         est.poses, est.covariances, inp.times, repair=on_divergence != "raise"
     )

@@ -25,6 +25,7 @@ import json
 import math
 import warnings
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -741,6 +742,14 @@ def _refuse_first(bad: Array, message: Callable[[int], str], path: Path, lines: 
         raise InputError(message(k), path=path, line=None if lines is None else int(lines[k]))
 
 
+def _not_a_step(t: Array, k: int) -> str:
+    """The message of a ``t`` that is no step index (``"time": "steps"``)."""
+    return (
+        f"t = {float(t[k])!r}: expected a step index (an integer), as the manifest's "
+        '"time": "steps" says'
+    )
+
+
 def _check_steps(log: tuple[Array, Path, None], meas: dict[str, Any]) -> None:
     """``"time": "steps"``: every time of the log and the measurements is a step index."""
     log_t, log_path, _ = log
@@ -754,10 +763,7 @@ def _check_steps(log: tuple[Array, Path, None], meas: dict[str, Any]) -> None:
     ):
         _refuse_first(
             t != np.round(t),
-            lambda k, t=t: (
-                f"t = {float(t[k])!r}: expected a step index (an integer), as the "
-                'manifest\'s "time": "steps" says'
-            ),
+            partial(_not_a_step, t),
             path,
             lines,
         )
@@ -1122,9 +1128,9 @@ def write_measurements(
     path: PathLike,
     t: Array,
     z: Array,
-    landmarks: Array,
-    associated: Array,
-    unprocessed: Array | None = None,
+    landmarks: NDArray[Any],
+    associated: NDArray[Any],
+    unprocessed: NDArray[Any] | None = None,
 ) -> None:
     """Write ``measurements.csv`` atomically: ``t,range,bearing`` (``%.17g``) for ``t`` (J,)
     and ``z`` (J, 2), and the ``landmark`` id (``%d``; empty where not ``associated``); with
@@ -1227,8 +1233,10 @@ class OnlineCovarianceWarning(UserWarning):
 
 def _warn_singular_online(cov: Array, lines: NDArray[np.int64], name: str) -> None:
     """Warn once about covariances of ``online.csv`` that are PSD but not positive definite."""
-    bad = np.flatnonzero(~(np.linalg.eigvalsh(cov)[:, 0] > 0.0)) if cov.shape[0] else []
-    if len(bad):
+    if not cov.shape[0]:
+        return
+    bad = np.flatnonzero(~(np.linalg.eigvalsh(cov)[:, 0] > 0.0))
+    if bad.size:
         warnings.warn(
             f"{name}:{int(lines[bad[0]])}: {len(bad)} online pose covariance(s) zero or "
             "singular (positive semi-definite, not definite); those poses get no online NEES "

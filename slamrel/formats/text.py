@@ -500,7 +500,8 @@ def read_csv_table(
     if body:
         conv: dict[int | str, Callable[[str], float]] = {
             header.index(c): _float_or_nan for c in maybe_empty
-        } | {header.index(c): _float_any for c in loose}
+        }
+        conv.update({header.index(c): _float_any for c in loose})
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
