@@ -30,7 +30,7 @@ def test_recorded_bundle_reads_back_as_the_client_ran(tmp_path: Path) -> None:
     rec = recorder_for(cfg)
     r = run(0, cfg, recorder=rec)
     root = write_recorded_bundle(r, rec, tmp_path / "b")
-    with pytest.raises(InputError, match="--skip-invalid-measurements"):
+    with pytest.raises(InputError, match="skip_invalid_measurements=True"):
         read_bundle(root)
     with pytest.warns(UserWarning):
         b = read_bundle(root, skip_invalid_measurements=True)
