@@ -132,6 +132,7 @@ class Run:
     x: np.ndarray  # final state
     P: np.ndarray  # final covariance
     initial_covariance: np.ndarray = field(default_factory=lambda: 1e-9 * np.eye(3))
+    recorder: Any = None  # the BundleRecorder the run reported to, if any
 
     @property
     def n_client_landmarks(self) -> int:
@@ -433,4 +434,5 @@ def run(
         x=x,
         P=P,
         initial_covariance=cfg.initial_variance * np.eye(3),
+        recorder=rec,
     )
