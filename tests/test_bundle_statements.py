@@ -473,3 +473,27 @@ def test_time_as_step_index_and_sensor_noise_stated(
     report = tmp_path / "r.json"
     assert _recovered(tmp_path, noise, "--report", str(report)) == _recovered(tmp_path, SIM_BUNDLE)
     assert json.loads(report.read_text())["sensor_noise"] == "true"
+
+
+@pytest.mark.parametrize("kw", [{}, {"process_noise_scale": 2.0}, {"noise_scale": 3.0}])
+def test_slam_on_step_covariances_equals_pose_noise(kw: dict[str, float]) -> None:
+    """slamrel's EKF-SLAM on a log whose every row states ``C`` maps exactly what it maps
+    with ``pose_noise`` ``C``; its noise scales scale the stated ``C_k`` as they scale ``C``."""
+    from dataclasses import replace
+
+    from recovery.models import MotionModel
+    from slamrel.backends.ekf_slam import ekf_slam_bundle
+    from slamrel.formats.bundle import read_bundle
+
+    b = read_bundle(SIM_BUNDLE)
+    c = np.diag([4e-4, 1e-4, 9e-5])
+    assert b.controls is not None
+    pn = replace(b, motion=MotionModel("velocity", pose_noise_frame="body",
+                                       pose_noise=tuple(map(tuple, c))))  # fmt: skip
+    sc = replace(b, motion=MotionModel("velocity", step_covariance_frame="body"),
+                 step_covariances=np.repeat(c[None], b.controls.shape[0], 0))  # fmt: skip
+    (o1, _), (o2, _) = ekf_slam_bundle(pn, **kw), ekf_slam_bundle(sc, **kw)  # type: ignore[arg-type]
+    assert np.array_equal(o1.map_xy, o2.map_xy)
+    assert np.array_equal(o1.map_covariance, o2.map_covariance)
+    assert o2.step_covariances is not None and o1.motion.pose_noise is not None
+    assert np.allclose(o2.step_covariances, np.asarray(o1.motion.pose_noise), rtol=1e-15, atol=0)
