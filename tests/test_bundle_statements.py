@@ -497,3 +497,27 @@ def test_slam_on_step_covariances_equals_pose_noise(kw: dict[str, float]) -> Non
     assert np.array_equal(o1.map_covariance, o2.map_covariance)
     assert o2.step_covariances is not None and o1.motion.pose_noise is not None
     assert np.allclose(o2.step_covariances, np.asarray(o1.motion.pose_noise), rtol=1e-15, atol=0)
+
+
+def test_run_skips_and_counts_singular_online_covariances(
+    tmp_path: Path, client_bundle: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``run`` on the recorded client (zero and singular online covariances at its start,
+    dropouts): a report, the online NEES on the other poses, both counts in the notes."""
+    from slamrel.formats.bundle import read_online
+
+    with pytest.warns(UserWarning):
+        on = read_online(client_bundle / "online.csv")
+    assert on.covariances is not None
+    singular = int((np.linalg.eigvalsh(on.covariances)[:, 0] <= 0).sum())
+    assert singular > 0
+    rep = tmp_path / "rep"
+    assert main(["run", str(client_bundle), "-o", str(rep), "-q",
+                 "--skip-invalid-measurements"]) == 0  # fmt: skip
+    err = capsys.readouterr().err
+    assert f"online.csv:2: {singular} online pose covariance(s) zero or singular" in err
+    m = json.loads((rep / "metrics.json").read_text())
+    notes = " ".join(m["notes"])
+    assert f"online NEES: {singular} of {on.covariances.shape[0]} online poses" in notes
+    assert "measurement(s) with a range <= 0" in notes
+    assert m["nees"]["online"]["mean"] > 0
