@@ -21,6 +21,7 @@ __all__ = [
     "MAX_SIGMA",
     "MAX_VARIANCE",
     "MIN_SENSOR_SIGMA",
+    "INITIAL_COVARIANCE_FLOOR",
 ]
 
 #: ``method`` of :func:`recovery.recover.recover`: EKF only, EKF + RTS smoother, smoother
@@ -70,3 +71,8 @@ MAX_VARIANCE = MAX_SIGMA**2
 #: the noise-free sensor that σ = 0 states, whose information is infinite (the smoother's
 #: and batch's LinAlgError). Far below any physical noise in metres or radians.
 MIN_SENSOR_SIGMA = 1e-150
+#: Added to the diagonal of an ``initial_covariance`` that is positive semi-definite but not
+#: definite (an exactly zero one: the start pose known exactly, as two third-party EKF-SLAMs
+#: write it): the filter, the smoother and the batch need its inverse. The bundle's default
+#: ``1e-9 I`` says the same thing ("the start pose is known: it defines the map frame").
+INITIAL_COVARIANCE_FLOOR = 1e-9

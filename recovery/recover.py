@@ -39,6 +39,7 @@ from recovery.constants import (
     BATCH_MAX_ITERATIONS,
     DEFAULT_MAP_PRIOR,
     DEFAULT_ROBUST,
+    INITIAL_COVARIANCE_FLOOR,
     MAP_PRIORS,
     METHODS,
     SMOOTHER_CHI2_RESOLUTION,
@@ -55,6 +56,7 @@ from recovery.ekf import (
     run_filter,
 )
 from recovery.map_uncertainty import MapUncertainty, map_uncertainty
+from recovery.mount import to_robot_frame, to_sensor_frame
 from recovery.results import (
     BatchCosts,
     Divergence,
@@ -166,7 +168,7 @@ def filter_input(
         u=st.u,
         sigma=st.sigma,
         x0=bundle.initial_pose,
-        p0=bundle.initial_covariance,
+        p0=start_covariance(bundle.initial_covariance),
         meas_grid=st.measurement_grid,
         meas_z=bundle.measurements,
         meas_landmark=bundle.map_index(),
@@ -176,6 +178,19 @@ def filter_input(
         r=bundle.sensor.covariance,
         meas_labels=labels,
     )
+
+
+def start_covariance(p0: Array) -> Array:
+    """The filter's initial covariance: ``p0`` when positive definite, else ``p0 + εI``.
+
+    A positive semi-definite ``initial_covariance`` that is not definite (exactly zero: the
+    start pose known exactly) gets :data:`~recovery.constants.INITIAL_COVARIANCE_FLOOR` on its
+    diagonal (docs/bundle.md), since every method needs the inverse; (3, 3) -> (3, 3).
+    """
+    p0 = np.asarray(p0, dtype=np.float64)
+    if np.linalg.eigvalsh(0.5 * (p0 + p0.T)).min() > 0.0:
+        return p0
+    return p0 + INITIAL_COVARIANCE_FLOOR * np.eye(3)
 
 
 #: How :func:`recovery.batch_refinement.refine` stops for each method: the smoother at the data's
@@ -272,6 +287,9 @@ def recover(
     _check_options(method, gate, map_prior)
     mu = map_uncertainty(bundle, map_mode)
     inp = filter_input(bundle, uncertainty=mu)
+    mount = np.asarray(bundle.sensor.mount) if bundle.sensor.mounted else None
+    if mount is not None:  # the filter runs on the sensor's poses (recovery.mount)
+        inp = to_sensor_frame(inp, mount)
     if method != "filter":  # before any work: the joint problem's dense map terms
         from recovery.batch_refinement import check_joint_size
 
@@ -288,6 +306,9 @@ def recover(
     )
     weights = None if robust is None else fr.weights
     est = _estimate(method, inp, fr, mu, weights, map_prior)
+    if mount is not None:
+        poses, covariances = to_robot_frame(est.poses, est.covariances, mount)
+        est = replace(est, poses=poses, covariances=covariances)
     covs, n_repaired = _check_finite(
         est.poses, est.covariances, inp.times, repair=on_divergence != "raise"
     )

@@ -229,7 +229,7 @@ def _set_labels(evs: SetEvaluations) -> NDArray[np.str_]:
     return labels
 
 
-def read_run_input(directory: str | Path) -> RunInput:
+def read_run_input(directory: str | Path, *, skip_invalid_measurements: bool = False) -> RunInput:
     """Read a SLAM result bundle directory to score (the I/O end of ``slamrel run``).
 
     The bundle (``docs/bundle.md``) is scored against its ``groundtruth.csv`` (required by
@@ -237,7 +237,7 @@ def read_run_input(directory: str | Path) -> RunInput:
     beside it (written by ``slamrel slam --store-online``) is scored too, and with its
     covariance columns gets an online NEES (:func:`slamrel.formats.bundle.read_online`).
     """
-    bundle = read_bundle(directory)
+    bundle = read_bundle(directory, skip_invalid_measurements=skip_invalid_measurements)
     online_path = Path(directory) / "online.csv"
     if not online_path.is_file():
         return RunInput(bundle, name=str(directory))
@@ -373,6 +373,11 @@ def score_bundle(
         rec, rec_error = None, str(exc)
     own = _own_estimates(inp, rec)
     notes = run_notes(rec, rec_error, method, has_online=inp.online is not None)
+    if bundle.skipped_invalid:  # read with --skip-invalid-measurements
+        notes.append(
+            f"{bundle.skipped_invalid} measurement(s) with a range <= 0 or a non-finite range "
+            "or bearing were skipped by the reader (--skip-invalid-measurements) and not used"
+        )
     frame, estimates, evaluations = None, own, {}
     nees: dict[str, NeesCurve] = {}
     nees_truth: dict[str, NeesSummary] = {}
@@ -386,6 +391,7 @@ def score_bundle(
             frame, nees, nees_truth,
             online_without_covariances=inp.online is not None and inp.online_covariance is None,
         )  # fmt: skip
+        notes += _online_singular_note(inp)
     else:
         online_vs_recovered = _online_against_recovered(own, seed=seed)
         notes += no_truth_notes(
@@ -588,8 +594,33 @@ def _estimates_at_truth(
         online_t, online_rows = _at_truth_times(own["online"], truth)
         estimates["online"] = online_t
         if inp.online_covariance is not None:
-            score("online", online_t, inp.online_covariance[online_rows])
+            covs = inp.online_covariance[online_rows]
+            ok = positive_definite_rows(covs)  # zero or singular rows: no NEES (counted)
+            if ok.any():
+                kept = Trajectory(online_t.timestamps[ok], online_t.poses[ok])
+                score("online", kept, covs[ok])
     return estimates, nees, unaligned
+
+
+def positive_definite_rows(covs: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which of the (N, 3, 3) covariances are positive definite (a zero or singular one,
+    as filters write for their first steps, has no NEES), (N,)."""
+    if covs.shape[0] == 0:
+        return np.zeros(0, dtype=bool)
+    return np.asarray(np.linalg.eigvalsh(0.5 * (covs + covs.transpose(0, 2, 1)))[:, 0] > 0.0)
+
+
+def _online_singular_note(inp: RunInput) -> list[str]:
+    """The note counting the online poses whose covariance is zero or singular (no NEES)."""
+    if inp.online_covariance is None:
+        return []
+    n = int((~positive_definite_rows(inp.online_covariance)).sum())
+    if not n:
+        return []
+    return [
+        f"online NEES: {n} of {inp.online_covariance.shape[0]} online poses have a zero or "
+        "singular covariance (online.csv) and no NEES; they are skipped, the others scored"
+    ]
 
 
 def _at_truth_times(est: Trajectory, truth: Trajectory) -> tuple[Trajectory, NDArray[np.int64]]:

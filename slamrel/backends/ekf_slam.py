@@ -529,8 +529,19 @@ def ekf_slam_bundle(
     ``noise_scale`` scales motion and sensor alike, which leaves the filter's gains, and so
     its online estimate, unchanged).
     """
+    if bundle.sensor.mounted:
+        raise InputError(
+            "sensor_model.mount: slamrel's reference EKF-SLAM models a sensor at the robot's "
+            "origin only; expected no mount (or [0, 0, 0]) for slamrel slam",
+            path=None if bundle.path is None else Path(bundle.path) / "bundle.json",
+        )
     if process_noise_scale != 1.0:
-        bundle = replace(bundle, motion=_scaled(bundle.motion, process_noise_scale))
+        k2, own = process_noise_scale**2, bundle.step_covariances  # a stated C_k too
+        bundle = replace(
+            bundle,
+            motion=_scaled(bundle.motion, process_noise_scale),
+            step_covariances=None if own is None else k2 * own,
+        )
     steps = build_steps(bundle)
     true_ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks, -1)
     ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks, np.nan)
@@ -561,9 +572,11 @@ def ekf_slam_bundle(
             sigma_bearing=noise_scale * sensor.sigma_bearing,
         )
     rejected = int(((res.association < 0) & bundle.measurement_associated).sum())
+    own = bundle.step_covariances  # a stated per-step covariance is the filter's noise too
     out = replace(
         bundle,
         motion=_scaled(bundle.motion, noise_scale),
+        step_covariances=None if own is None else noise_scale**2 * own,
         sensor=sensor,
         measurement_landmarks=np.where(res.association >= 0, res.association, 0),
         measurement_associated=res.association >= 0,

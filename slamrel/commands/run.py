@@ -50,27 +50,40 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="DIR",
         help="report directory (default: %(default)s)",
     )
-    p.add_argument("--noise", choices=NOISE_NAMES, default="a", help=NOISE_HELP)
+    # simulated worlds only (refused with a bundle): None = not given, SIMULATION_DEFAULTS
     p.add_argument(
-        "--seed", type=opt.seed, default=0, help="seed of the simulation (default: %(default)s)"
+        "--noise", choices=NOISE_NAMES, default=None, help=NOISE_HELP + " (simulated worlds only)"
+    )
+    p.add_argument(
+        "--seed",
+        type=opt.seed,
+        default=None,
+        help="seed of the simulation and of the global relations' draw (with a bundle only "
+        "the draw, and the run says so; default: 0)",
     )
     p.add_argument(
         "--rate",
         type=opt.nonnegative_int,
-        default=0,
-        help="control steps per measurement step (0: odometry; default: %(default)s)",
+        default=None,
+        help="control steps per measurement step (0: odometry; simulated worlds only; default: 0)",
     )
     p.add_argument(
         "--corrupt",
         type=opt.fraction,
-        default=0.0,
-        help="fraction of associations corrupted (default: %(default)s)",
+        default=None,
+        help="fraction of associations corrupted (simulated worlds only; default: 0)",
     )
     p.add_argument(
         "--noise-scale",
         type=opt.noise_scale,
-        default=1.0,
-        help="factor on the noise the filter assumes (default: %(default)s)",
+        default=None,
+        help="factor on the noise the filter assumes (simulated worlds only; default: 1)",
+    )
+    p.add_argument(
+        "--skip-invalid-measurements",
+        action="store_true",
+        help="with a bundle: drop (and count) measurements with a range <= 0 or a non-finite "
+        "range or bearing instead of refusing the bundle",
     )
     p.add_argument(
         "--relations",
@@ -105,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
             f"{', '.join(WORLDS)}"
         )
     is_dir = Path(args.source).is_dir()
+    _simulation_options(args, is_dir)
     if not is_dir:
         check_rate(args.source, args.rate)
     assoc_file = association_file(args.associate)
@@ -116,7 +130,12 @@ def run(args: argparse.Namespace) -> int:
     )
     start = time.perf_counter()
     if is_dir:
-        inp = read_run_input(args.source)
+        from slamrel.formats.bundle import SKIP_INVALID_OPTION
+
+        with in_option_words({SKIP_INVALID_OPTION: "--skip-invalid-measurements"}):
+            inp = read_run_input(
+                args.source, skip_invalid_measurements=args.skip_invalid_measurements
+            )
     else:
         inp = simulate_run_input(
             args.source, noise=args.noise, seed=args.seed, rate=args.rate,
@@ -172,6 +191,38 @@ def run(args: argparse.Namespace) -> int:
             f"written to {html}"
         )
     return 0
+
+
+#: The options of a simulated world and their defaults; with a bundle they are refused.
+SIMULATION_DEFAULTS = {"noise": "a", "rate": 0, "corrupt": 0.0, "noise_scale": 1.0}
+
+
+def _simulation_options(args: argparse.Namespace, is_dir: bool) -> None:
+    """Fill the simulation options' defaults; with a bundle refuse the ones given (exit 2),
+    refuse ``--skip-invalid-measurements`` with a world, and say what ``--seed`` changes."""
+    given = [k for k in SIMULATION_DEFAULTS if getattr(args, k) is not None]
+    if is_dir and given:
+        names = ", ".join("--" + k.replace("_", "-") for k in given)
+        raise OptionError(
+            f"only a simulated world takes {names}; a bundle brings its own log and noise "
+            f"(drop {names})",
+            option="--" + given[0].replace("_", "-"),
+        )
+    if not is_dir and args.skip_invalid_measurements:
+        raise OptionError(
+            "applies to a bundle only (a simulated world has no invalid measurements)",
+            option="--skip-invalid-measurements",
+        )
+    for k, default in SIMULATION_DEFAULTS.items():
+        if getattr(args, k) is None:
+            setattr(args, k, default)
+    if is_dir and args.seed is not None and not args.quiet:
+        print(
+            f"note: --seed {args.seed} draws other global relations than the default seed 0 "
+            "(the bundle's log and the recovery do not depend on it)"
+        )
+    if args.seed is None:
+        args.seed = 0
 
 
 def _with_references(inp: RunInput, relations: str | None, reference_map: str | None) -> RunInput:
