@@ -298,9 +298,9 @@ def run_pipeline(
     ``rate``, ``corrupt_fraction``, ``noise_scale``, ``process_noise_scale``), or a
     :class:`RunInput` (e.g. from :func:`read_run_input` for a bundle directory).
     ``max_outlier_run``, ``on_divergence``, ``robust`` and ``map_prior`` (``None``: the
-    default of :func:`recovery.recover.recover`, ``independent``: a bundle does not say
-    whether its map was made from its log, and ``slamrel recover`` must give the same bundle
-    the same covariances) are passed to :func:`recovery.recover.recover`, ``associate`` and
+    default of :func:`recovery.recover.recover`, ``auto``: de-conditioned when the bundle
+    states that its map was made from its log, so that ``slamrel recover`` gives the same
+    bundle the same covariances) are passed to :func:`recovery.recover.recover`, ``associate`` and
     ``align`` to :func:`map_comparison`.
     """
     inp = source

@@ -499,10 +499,10 @@ def ekf_slam_bundle(
     The returned bundle keeps the log (and ground truth) and replaces the map by the filter's
     final map with its marginals and joint covariance, and the measurements' landmark ids by
     the associations the filter made (empty where it rejected a measurement): what a
-    filter-based SLAM system leaves behind. The filter's assumed noise is the bundle's models
-    scaled by ``noise_scale``; the bundle records the models it used. ``outlier_gate`` is the
-    χ² validation gate on known-association updates; rejected measurements are left
-    unassociated in the result bundle and counted in its description.
+    filter-based SLAM system leaves behind, stating ``map_source="log"``. The filter's assumed
+    noise is the bundle's models scaled by ``noise_scale``; the bundle records the models it
+    used. ``outlier_gate`` is the χ² validation gate on known-association updates; rejected
+    measurements are left unassociated in the result bundle and counted in its description.
 
     Experiment knobs: ``corrupt_fraction`` spoils that share of the known associations
     (seeded by ``seed``, :func:`corrupt_associations`); ``process_noise_scale`` scales the
@@ -551,6 +551,7 @@ def ekf_slam_bundle(
         map_xy=res.map_xy,
         map_marginals=marg,
         map_covariance=res.map_covariance,
+        map_source="log",  # the map is the filter's estimate from this very log
         description=(bundle.description + "; " if bundle.description else "")
         + f"EKF-SLAM ({association} association, corrupted {corrupt_fraction:g}, "
         f"noise scale {noise_scale:g}"

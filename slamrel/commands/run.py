@@ -129,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
         result = run_pipeline(
             inp, seed=args.seed, max_outlier_run=args.max_outlier_run or None,
             robust=args.robust, on_divergence="raise" if args.fail_on_divergence else "reenter",
-            associate=associate, align=args.align,
+            associate=associate, align=args.align, map_prior=args.map_prior,
         )  # fmt: skip
     html = write_report(result, args.output, force=args.force)
     if not args.quiet:

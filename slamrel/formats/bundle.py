@@ -14,8 +14,8 @@ that time (``Bundle.snapped``), and measurements outside the log's span are warn
 ``pose_noise`` gives a ``MotionModelWarning``.
 
 Landmark ids are integers. Manifest defaults: ``initial_pose`` ``[0, 0, 0]``,
-``initial_covariance`` ``1e-9 I``, ``description`` empty; velocity model ``integration``
-``"arc"``, ``control_stamp`` ``"start"``.
+``initial_covariance`` ``1e-9 I``, ``description`` empty, ``map_source`` not stated;
+velocity model ``integration`` ``"arc"``, ``control_stamp`` ``"start"``.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recovery.bundle import Bundle
-from recovery.constants import MAX_SIGMA, MAX_VARIANCE, MIN_SENSOR_SIGMA
+from recovery.constants import MAP_SOURCES, MAX_SIGMA, MAX_VARIANCE, MIN_SENSOR_SIGMA
 from recovery.models import (
     CONTROL_STAMPS,
     INTEGRATIONS,
@@ -104,6 +104,7 @@ _MANIFEST_KEYS = {
         "initial_pose",
         "initial_covariance",
         "description",
+        "map_source",
     ),
     "motion_model": (
         "type",
@@ -404,6 +405,16 @@ def _read_manifest(path: Path) -> dict[str, Any]:
         "sensor": _parse_sensor(doc["sensor_model"], text, name),
         "description": str(doc.get("description", "")),
     }
+    source = doc.get("map_source")
+    if source is not None:  # where the map came from (docs/bundle.md); absent: not stated
+        if source not in MAP_SOURCES:
+            raise InputError(
+                f"map_source: expected one of {', '.join(map(repr, MAP_SOURCES))}, got "
+                f"{_shown(source)}",
+                path=name,
+                line=_line_of_key(text, "map_source"),
+            )
+        out["map_source"] = source
     pose = doc.get("initial_pose", [0.0, 0.0, 0.0])
     out["initial_pose"] = np.array(
         _numbers(
@@ -802,6 +813,8 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
         "initial_covariance": [[float(v) for v in row] for row in bundle.initial_covariance],
         "description": bundle.description,
     }
+    if bundle.map_source is not None:  # only then: bundles that do not say keep their bytes
+        meta["map_source"] = bundle.map_source
     write_text_atomic(root / "bundle.json", json.dumps(meta, indent=2) + "\n")
     if bundle.controls is not None:
         c = bundle.controls
