@@ -17,7 +17,14 @@ from slamrel.cli import main
 from slamrel.pipeline import run_pipeline
 from slamrel.report.verdict import INFO, RunFacts, run_verdict
 from slamrel.simulation.healthy import healthy_bundle
-from slamrel.studies.calibration import IN_VIEW, broken_bundle
+from slamrel.studies.calibration import (
+    HEALTHY,
+    IN_VIEW,
+    REFERENCE,
+    TEXTBOOK,
+    broken_bundle,
+    class_rates,
+)
 
 
 def test_wrong_associations_pick_another_landmark_in_view():
@@ -70,6 +77,13 @@ def test_calibration_study_separates_healthy_from_broken(tmp_path, capsys):
     # the reference EKF-SLAM's own runs are reported as they are (no expectation)
     assert s["reference_runs"] == 2 * 3 * 5
     assert set(s["reference_q"]) >= {"consistency", "online_consistency", "map_log"}
+    # and every class on its own: runs and overall levels
+    classes = s["classes"]
+    assert classes[HEALTHY]["runs"] == 60 and classes[HEALTHY]["green"] >= 0.95 * 60
+    assert classes[REFERENCE]["runs"] == 30 and classes["broken"]["runs"] == 2 * 3 * 5 * 2
+    assert all(
+        sum(c[lv] for lv in ("green", "amber", "red")) == c["runs"] for c in classes.values()
+    )
 
 
 def _non_green(result) -> dict[str, str]:
@@ -98,3 +112,40 @@ def test_two_equally_broken_estimates_are_not_green():
     bad = _non_green(r)
     assert bad.get("online") == "red" and bad.get("map_log") == "red"
     assert bad.get("consistency") == "red"
+
+
+def test_class_rates_count_each_class_on_its_own():
+    results = [
+        {"class": HEALTHY, "overall": "green"},
+        {"class": HEALTHY, "overall": "amber"},
+        {"class": "broken: noise-x10", "overall": "red"},
+        {"class": "broken: map-x3", "overall": "red"},
+        {"class": TEXTBOOK, "overall": "red"},
+    ]
+    assert class_rates(results) == {
+        HEALTHY: {"runs": 2, "green": 1, "amber": 1, "red": 0},
+        "broken": {"runs": 2, "green": 0, "amber": 0, "red": 2},
+        TEXTBOOK: {"runs": 1, "green": 0, "amber": 0, "red": 1},
+    }
+
+
+def test_a_recovered_nees_off_says_whose_computation_it_judges():
+    """simple1, noise c, seed 15: the reference EKF-SLAM is itself overconfident (its online
+    NEES q ≈ 14): the recovered lamp says the run's filter is inconsistent, not slamrel."""
+    r = run_pipeline("simple1", noise="c", seed=15)
+    lines = {j.key: j for j in run_verdict(RunFacts.of(r)).lines}
+    assert r.recovery_result is not None and r.recovery_result.map_prior == "deconditioned"
+    rec, on = lines["consistency"], lines["online_consistency"]
+    assert rec.level != "green" and on.level != "green"
+    assert "the filter's own online NEES is off too" in rec.value
+    assert f"q = {on.measure:.3g}" in rec.value
+
+
+@pytest.mark.slow
+def test_a_recovered_nees_off_with_a_consistent_filter_blames_the_recovery():
+    """simple2, noise a, seed 13: online consistent, recovered amber: slamrel's recovery."""
+    r = run_pipeline("simple2", noise="a", seed=13)
+    lines = {j.key: j for j in run_verdict(RunFacts.of(r)).lines}
+    assert lines["online_consistency"].level == "green"
+    assert lines["consistency"].level == "amber"
+    assert "this judges slamrel's recovery" in lines["consistency"].value

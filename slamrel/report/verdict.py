@@ -72,7 +72,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -566,6 +566,8 @@ def _consistency_lines(facts: RunFacts) -> list[Judgement]:
                 facts.online_nees_values,
             )  # fmt: skip
         )
+    if n is not None and main == "recovered" and lines[0].level != "green":
+        lines[0] = replace(lines[0], value=lines[0].value + _whose(lines[0], lines[1:2]))
     if n is not None and facts.nees_values is not None:
         v = np.asarray(facts.nees_values, dtype=np.float64)
         v = v[np.isfinite(v)]
@@ -585,6 +587,26 @@ def _consistency_lines(facts: RunFacts) -> list[Judgement]:
             )
         )
     return lines
+
+
+def _whose(recovered: Judgement, online: Sequence[Judgement]) -> str:
+    """Whose computation a recovered NEES that is not green judges: the run's (the online
+    filter is off the same way) or slamrel's recovery (the online one is consistent)."""
+    if not online:
+        return (
+            "; judges the recovered covariance, slamrel's computation from the map's stated "
+            "covariance and the run's models (no online covariances tell the filter's share)"
+        )
+    on = online[0]
+    if on.level == "green":
+        return (
+            f"; the online filter is consistent (q = {_g(on.measure)}): this judges slamrel's "
+            "recovery in the final map, not the filter's online estimate"
+        )
+    return (
+        f"; the filter's own online NEES is off too (q = {_g(on.measure)}): the run's "
+        "filter is inconsistent, and the recovery inherits its map's covariance"
+    )
 
 
 def _map_log_lines(facts: RunFacts) -> list[Judgement]:
