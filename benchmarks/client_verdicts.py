@@ -1,10 +1,10 @@
 """The verdict on healthy runs of the independent textbook EKF-SLAM (issue 36's third class).
 
 The client (``tests/clients/textbook_ekfslam.py``, shares no code with slamrel's EKF-SLAM) is
-run with its pose noise ``Cx`` set to the true noise of its controls per step
-(``--tuned``: σ_x = σ_y = σ_v·dt, σ_θ = σ_ω·dt; the sideways σ overstates the true, zero,
-sideways noise: the world-frame diagonal cannot say it) or with its PythonRobotics defaults
-(five to thirty times the true noise), exported with its own model (``velocity-euler``,
+run with its pose noise ``Cx`` set to the true noise of its controls per step and proper
+landmark initialisation (``--tuned``: σ_x = σ_y = σ_v·dt, σ_θ = σ_ω·dt; the sideways σ
+overstates the true, zero, sideways noise: the world-frame diagonal cannot say it) or with its
+PythonRobotics defaults (``Cx`` five to thirty times the true noise, improper initialisation), exported with its own model (``velocity-euler``,
 ``map_source: log``) and judged by ``slamrel run``'s pipeline (``slamrel.studies.calibration.
 judged_case``, class ``textbook EKF-SLAM healthy``). The study code cannot import from
 ``tests/``, so this class runs here (and in ``tests/test_calibration.py``).
@@ -32,10 +32,13 @@ from slamrel.studies.calibration import TEXTBOOK, judged_case  # noqa: E402
 
 
 def tuned_config() -> Config:
-    """``Cx`` from the true control noise over one step (the client's ``dt``)."""
+    """``Cx`` from the true control noise over one step (the client's ``dt``), landmarks
+    initialised properly (from the pose and the measurement with their Jacobians; the default
+    ``improper`` one enters at ``1 · I`` uncorrelated with the pose and then updates with the
+    same measurement a second time: overconfident by construction)."""
     c = Config()
     sx = c.control_sigma[0] * c.dt
-    return Config(cx=(sx, sx, c.control_sigma[1] * c.dt))
+    return Config(cx=(sx, sx, c.control_sigma[1] * c.dt), init="proper")
 
 
 def textbook_case(seed: int, tuned: bool = True) -> dict:  # type: ignore[type-arg]

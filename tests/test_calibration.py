@@ -149,3 +149,16 @@ def test_a_recovered_nees_off_with_a_consistent_filter_blames_the_recovery():
     assert lines["online_consistency"].level == "green"
     assert lines["consistency"].level == "amber"
     assert "this judges slamrel's recovery" in lines["consistency"].value
+
+
+def test_a_map_scored_against_itself_is_not_judged():
+    """A surveyed map whose "true" landmarks are its own numbers (MRCLAM): map NEES 0 is no
+    evidence of a conservative map, so the lamp is not judged and says why."""
+    from slamrel.pipeline import RunInput, score_bundle
+    from slamrel.report.verdict import NOT_JUDGED
+
+    b = healthy_bundle("simple1", 0, "marginal", odometry=None, error_scale=0.0)
+    v = run_verdict(RunFacts.of(score_bundle(RunInput(b, name="same map"))))
+    line = next(j for j in v.lines if j.key == "map_consistency")
+    assert line.level == NOT_JUDGED and line.measure == 0.0
+    assert "the reference landmarks are the map itself" in line.value

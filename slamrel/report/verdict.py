@@ -122,6 +122,10 @@ OVERCONFIDENT = (1.5, 3.0)
 CONSERVATIVE = (0.5, 0.1)
 #: The map–log lamp: green/amber ranges of the mean NIS over its dof.
 NIS_RANGES = ((0.75, 1.25), (0.5, 1.5))
+#: A map NEES per dof below this is rounding, not an error: the reference landmarks are the
+#: map's own numbers (MRCLAM's surveyed map against the same survey gives ~1e-28); no map
+#: estimated from data comes within 1e-12 of its truth in units of its own σ.
+SAME_MAP_Q = 1e-12
 #: The NIS tail probability (innovations beyond the 99.9 % bound are the tail).
 NIS_TAIL = 0.999
 
@@ -657,6 +661,19 @@ def _map_consistency_lines(facts: RunFacts) -> list[Judgement]:
     if m is None:
         return []
     q = m.value / m.dof
+    if q < SAME_MAP_Q:  # the "true" landmarks are the map's own numbers (a surveyed map)
+        return [
+            Judgement(
+                "map consistency",
+                f"not judged: map NEES {_g(m.value)} over {m.dof} dof ({m.landmarks} landmarks): "
+                "the reference landmarks are the map itself (a surveyed map scored against its "
+                "own survey), so nothing independent judges its stated covariance",
+                NOT_JUDGED,
+                f"q below {SAME_MAP_Q:g}: the map's error against its reference is rounding only",
+                "map_consistency",
+                q,
+            )
+        ]
     level, direction = _chi2_level(q, 2, m.landmarks)
     return [
         Judgement(
