@@ -60,6 +60,23 @@ def compare_priors(world: str, noise: str, seed: int) -> dict[str, float | bool]
     }
 
 
+def fej_case(world: str, noise: str, seed: int) -> dict:  # type: ignore[type-arg]
+    """The reference run with the EKF-SLAM's first-estimate Jacobians (FEJ-EKF), judged."""
+    from slamrel.backends.ekf_slam import ekf_slam_bundle
+    from slamrel.pipeline import RunInput, score_bundle
+    from slamrel.simulation.bundles import world_bundle
+    from slamrel.simulation.worlds import make_world
+    from slamrel.studies.calibration import judged_case
+
+    w = make_world(world, noise=noise, seed=seed)
+    bundle, slam = ekf_slam_bundle(world_bundle(w), seed=seed, jacobians="fej")
+    inp = RunInput(
+        bundle, name=f"{world}/{noise}/seed {seed} (FEJ)", online=slam.online,
+        online_covariance=slam.online_covariance, dead_reckoning=w.odometry,
+    )  # fmt: skip
+    return judged_case(score_bundle(inp, seed=seed), "reference EKF-SLAM healthy (FEJ)")
+
+
 def _summary(records: list[dict], worlds, noises) -> list[str]:  # type: ignore[no-untyped-def]
     lines = []
     overall = collections.Counter(r["result"]["overall"] for r in records)
@@ -106,12 +123,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", type=_seeds, default=_seeds("10-19"))
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--compare-priors", type=int, default=0, metavar="K")
+    p.add_argument("--jacobians", choices=("standard", "fej"), default="standard")
     a = p.parse_args(argv)
     worlds, noises = a.worlds.split(","), a.noise.split(",")
     tasks = [
         Task(
             f"ref-{w}-{n}-{s}",
-            "slamrel.studies.calibration:reference_case",
+            "slamrel.studies.calibration:reference_case"
+            if a.jacobians == "standard"
+            else "benchmarks.reference_verdicts:fej_case",
             {"world": w, "noise": n, "seed": s},
         )
         for w, n, s in itertools.product(worlds, noises, a.seeds)

@@ -73,6 +73,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="factor on the noise the filter assumes (default: %(default)s)",
     )
     p.add_argument(
+        "--jacobians",
+        choices=("standard", "fej"),
+        default="standard",
+        help="where the EKF-SLAM evaluates its Jacobians: standard (the latest estimates) or fej "
+        "(first estimates, Huang et al. 2008: keeps the unobservable directions, so the "
+        "filter does not become overconfident; known associations) (WORLD only; default: "
+        "%(default)s)",
+    )
+    p.add_argument(
         "--relations",
         metavar="FILE",
         help="reference relations (Freiburg .relations, e.g. from slamrel relations align) "
@@ -107,6 +116,12 @@ def run(args: argparse.Namespace) -> int:
     is_dir = Path(args.source).is_dir()
     if not is_dir:
         check_rate(args.source, args.rate)
+    elif args.jacobians != "standard":  # a bundle's map was made already: nothing to apply
+        raise OptionError(
+            "applies to a built-in WORLD (the reference EKF-SLAM run here), not to a bundle "
+            "whose map was made already; run slamrel slam --jacobians fej on its log instead",
+            option="--jacobians",
+        )
     assoc_file = association_file(args.associate)
     check_outputs(
         [],
@@ -121,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
         inp = simulate_run_input(
             args.source, noise=args.noise, seed=args.seed, rate=args.rate,
             corrupt_fraction=args.corrupt, noise_scale=args.noise_scale,
+            jacobians=args.jacobians,
         )  # fmt: skip
     inp = _with_references(inp, args.relations, args.reference_map)
     associate = _association(args.associate, inp, assoc_file)
