@@ -162,3 +162,31 @@ def test_a_map_scored_against_itself_is_not_judged():
     line = next(j for j in v.lines if j.key == "map_consistency")
     assert line.level == NOT_JUDGED and line.measure == 0.0
     assert "the reference landmarks are the map itself" in line.value
+
+
+@pytest.mark.slow
+def test_textbook_client_class_is_judged_and_its_duplicate_landmarks_are_red(tmp_path):
+    """The class "textbook EKF-SLAM healthy" (tests/clients; benchmarks/client_verdicts.py
+    runs ten seeds): the client tuned to its true noise with proper initialisation still opens
+    a new landmark where its gate misses the old one (31 client landmarks for 12 true ones on
+    seed 12); the map consistency lamp sees those duplicates (joint map NEES far above its
+    dof), the recovered consistency does not blame slamrel for it."""
+    import math
+
+    from clients.export import online
+    from clients.measure import export
+    from clients.textbook_ekfslam import Config, run
+
+    from slamrel.pipeline import RunInput, score_bundle
+    from slamrel.studies.calibration import judged_case
+
+    c = Config()
+    cfg = Config(cx=(0.1, 0.1, c.control_sigma[1] * c.dt), init="proper")
+    r = run(12, cfg)
+    assert r.n_client_landmarks > r.landmarks.shape[0]  # duplicates: the oracle of the red
+    bundle, _ = export(r, tmp_path, "velocity-euler")
+    assert bundle.map_source == "log"
+    res = judged_case(score_bundle(RunInput(bundle, name="textbook", online=online(r))), TEXTBOOK)
+    assert res["class"] == TEXTBOOK and res["overall"] == "red"
+    assert res["levels"]["map_consistency"] == "red" and res["values"]["map_consistency"] > 3
+    assert math.isfinite(res["values"]["consistency"])
