@@ -337,8 +337,9 @@ class _Filter:
             self.n += 2
             return lid
         gate = g.outlier if self.rejected_run < g.max_rejected_run else np.inf
-        lin = (self.prior, self.first[slot : slot + 2]) if self.fej else None
-        if not _update(self.mu, self.cov, self.n, slot, meas, self.r_cov, t, m, gate, lin):
+        # FEJ: the Jacobians at the step's predicted pose and the landmark's first estimate
+        fej = {"lin": (self.prior, self.first[slot : slot + 2])} if self.fej else {}
+        if not _update(self.mu, self.cov, self.n, slot, meas, self.r_cov, t, m, gate, **fej):
             self.rejected_run += 1
             return None  # outside the validation gate: rejected
         self.rejected_run = 0
