@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from recovery.constants import MAP_SOURCES
 from recovery.models import MotionModel, SensorModel
 from relation_metric.arrays import Array
 from relation_metric.checks import check_covariances, check_joint_covariance
@@ -94,6 +95,11 @@ class Bundle:
     skipped_invalid : int
         Measurements dropped by the reader for a range ≤ 0 or a non-finite range or bearing
         (only with ``skip_invalid_measurements``; counted, warned about).
+    map_source : {"log", "independent"} or None
+        Where the map came from (``bundle.json``'s ``map_source``,
+        :data:`~recovery.constants.MAP_SOURCES`): ``log``, estimated from this very log (an
+        EKF-SLAM's final map), or ``independent`` of it (surveyed); ``None`` when the bundle
+        does not say (read as ``independent``, and the recovery says it assumed so).
 
     Raises
     ------
@@ -137,8 +143,14 @@ class Bundle:
     time: str = "seconds"
     initialisation: str = "updates"
     measurement_unprocessed: NDArray[np.bool_] | None = None
+    map_source: str | None = None
 
     def __post_init__(self) -> None:
+        if self.map_source is not None and self.map_source not in MAP_SOURCES:
+            raise InputError(
+                f"map_source: expected one of {', '.join(MAP_SOURCES)}, got {self.map_source!r}",
+                path=_where(self, "bundle.json"),
+            )
         ro = object.__setattr__
         for name in (
             "measurement_times",

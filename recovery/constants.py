@@ -12,6 +12,8 @@ __all__ = [
     "MAP_MODES",
     "MAP_PRIORS",
     "DEFAULT_MAP_PRIOR",
+    "MAP_PRIOR_CHOICES",
+    "MAP_SOURCES",
     "BATCH_MAX_ITERATIONS",
     "SMOOTHER_CHI2_RESOLUTION",
     "SMOOTHER_MAX_ITERATIONS",
@@ -36,8 +38,16 @@ MAP_MODES = ("joint", "marginal", "ignore")
 #: final map), so its covariance already holds the log's information and the poses'
 #: covariance is the law of total covariance over it (docs/recovery.md).
 MAP_PRIORS = ("independent", "deconditioned")
+#: ``map_source`` of a bundle (``bundle.json``): where its map came from. ``log``: estimated
+#: from this very log (an EKF-SLAM's final map); ``independent``: made apart from it (surveyed,
+#: or drawn apart from the log's noise). A bundle that does not say is read as ``independent``.
+MAP_SOURCES = ("log", "independent")
+#: What ``map_prior`` may ask for: a prior of :data:`MAP_PRIORS`, or ``auto`` — ``deconditioned``
+#: when the bundle states ``map_source: log`` and the method is the smoother or the batch, else
+#: ``independent`` (:func:`recovery.recover.resolve_map_prior` says which and why).
+MAP_PRIOR_CHOICES = ("auto", *MAP_PRIORS)
 #: The map prior of :func:`recovery.recover.recover` when none is asked for.
-DEFAULT_MAP_PRIOR = "independent"
+DEFAULT_MAP_PRIOR = "auto"
 #: Iterations of ``method="batch"`` (to numerical convergence; the smoother stops earlier).
 BATCH_MAX_ITERATIONS = 50
 #: The smoother's Gauss–Newton steps stop after one that lowers χ² (twice the cost) by less

@@ -421,6 +421,9 @@ class Recovery:
     map_prior : str
         Where the map's error comes from (:data:`~recovery.constants.MAP_PRIORS`):
         ``independent`` of the log, or ``deconditioned`` (the map made from this log).
+    map_prior_reason : str
+        Why that prior (:func:`recovery.recover.resolve_map_prior`): asked for, the bundle's
+        ``map_source``, or assumed because the bundle does not say.
     """
 
     method: str
@@ -439,6 +442,7 @@ class Recovery:
     map_uncertainty: MapUncertainty | None = None
     map_correction: Array | None = None
     map_prior: str = "independent"
+    map_prior_reason: str = ""
 
     @property
     def stretches(self) -> tuple[Stretch, ...]:
@@ -458,14 +462,14 @@ class Recovery:
             "map_uncertainty_rule": (
                 self.map_uncertainty.rule if self.map_uncertainty is not None else None
             ),
+            "map_prior": self.map_prior,
+            "map_prior_rule": MAP_PRIOR_RULES[self.map_prior],
+            "map_prior_reason": self.map_prior_reason,
             "poses": len(self.trajectory),
             "measurements": self.counts.as_dict(),
             "divergence": self.divergence.as_dict(),
             "nis": self.nis_stats.as_dict(),
         }
-        if self.map_prior != "independent":  # only then: earlier reports keep their bytes
-            out["map_prior"] = self.map_prior
-            out["map_prior_rule"] = MAP_PRIOR_RULES[self.map_prior]
         dead = self.counts.dead_reckoning()
         if dead is not None:  # only then: the reports of observed runs keep their bytes
             out["dead_reckoning"] = dead

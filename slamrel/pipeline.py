@@ -25,7 +25,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -257,17 +257,19 @@ def simulate_run_input(
     corrupt_fraction: float = 0.0,
     noise_scale: float = 1.0,
     process_noise_scale: float = 1.0,
+    jacobians: Literal["standard", "fej"] = "standard",
 ) -> RunInput:
     """Simulate a built-in world and run the reference EKF-SLAM on it (no I/O).
 
     The input carries the filter's online estimate and covariances (for validation) and the
-    world's odometry as dead reckoning. ``corrupt_fraction``, ``noise_scale`` and
-    ``process_noise_scale`` are passed to :func:`slamrel.backends.ekf_slam.ekf_slam_bundle`.
+    world's odometry as dead reckoning. ``corrupt_fraction``, ``noise_scale``,
+    ``process_noise_scale`` and ``jacobians`` are passed to
+    :func:`slamrel.backends.ekf_slam.ekf_slam_bundle`.
     """
     w = make_world(world, noise=noise, seed=seed, rate=rate)
     bundle, slam = ekf_slam_bundle(
         world_bundle(w), corrupt_fraction=corrupt_fraction, noise_scale=noise_scale, seed=seed,
-        process_noise_scale=process_noise_scale,
+        process_noise_scale=process_noise_scale, jacobians=jacobians,
     )  # fmt: skip
     return RunInput(
         bundle, name=f"{world}/{noise}/seed {seed}", online=slam.online,
@@ -298,9 +300,9 @@ def run_pipeline(
     ``rate``, ``corrupt_fraction``, ``noise_scale``, ``process_noise_scale``), or a
     :class:`RunInput` (e.g. from :func:`read_run_input` for a bundle directory).
     ``max_outlier_run``, ``on_divergence``, ``robust`` and ``map_prior`` (``None``: the
-    default of :func:`recovery.recover.recover`, ``independent``: a bundle does not say
-    whether its map was made from its log, and ``slamrel recover`` must give the same bundle
-    the same covariances) are passed to :func:`recovery.recover.recover`, ``associate`` and
+    default of :func:`recovery.recover.recover`, ``auto``: de-conditioned when the bundle
+    states that its map was made from its log, so that ``slamrel recover`` gives the same
+    bundle the same covariances) are passed to :func:`recovery.recover.recover`, ``associate`` and
     ``align`` to :func:`map_comparison`.
     """
     inp = source

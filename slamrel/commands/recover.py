@@ -126,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
             on_divergence="raise" if args.fail_on_divergence else "reenter",
             robust=args.robust,
             robust_threshold=args.robust_threshold,
+            map_prior=args.map_prior,
             progress=not args.quiet and sys.stderr.isatty(),
         )
     write_trajectory(args.output, result.trajectory, format=fmt)
@@ -159,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
             f"{c.unassociated}, outside the log {c.outside}, unknown landmark "
             f"{c.skipped_unknown}; map uncertainty: {result.map_mode}"
         )
+        print(f"map prior: {result.map_prior} ({result.map_prior_reason})")
         dead = c.dead_reckoning()
         if dead is not None:
             print(f"note: {dead}")

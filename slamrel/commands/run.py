@@ -86,6 +86,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "range or bearing instead of refusing the bundle",
     )
     p.add_argument(
+        "--jacobians",
+        choices=("standard", "fej"),
+        default="standard",
+        help="where the EKF-SLAM evaluates its Jacobians: standard (the latest estimates) or fej "
+        "(first estimates, Huang et al. 2008: keeps the unobservable directions, so the "
+        "filter does not become overconfident; known associations) (WORLD only; default: "
+        "%(default)s)",
+    )
+    p.add_argument(
         "--relations",
         metavar="FILE",
         help="reference relations (Freiburg .relations, e.g. from slamrel relations align) "
@@ -121,6 +130,12 @@ def run(args: argparse.Namespace) -> int:
     _simulation_options(args, is_dir)
     if not is_dir:
         check_rate(args.source, args.rate)
+    elif args.jacobians != "standard":  # a bundle's map was made already: nothing to apply
+        raise OptionError(
+            "applies to a built-in WORLD (the reference EKF-SLAM run here), not to a bundle "
+            "whose map was made already; run slamrel slam --jacobians fej on its log instead",
+            option="--jacobians",
+        )
     assoc_file = association_file(args.associate)
     check_outputs(
         [],
@@ -140,6 +155,7 @@ def run(args: argparse.Namespace) -> int:
         inp = simulate_run_input(
             args.source, noise=args.noise, seed=args.seed, rate=args.rate,
             corrupt_fraction=args.corrupt, noise_scale=args.noise_scale,
+            jacobians=args.jacobians,
         )  # fmt: skip
     inp = _with_references(inp, args.relations, args.reference_map)
     associate = _association(args.associate, inp, assoc_file)
@@ -148,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
         result = run_pipeline(
             inp, seed=args.seed, max_outlier_run=args.max_outlier_run or None,
             robust=args.robust, on_divergence="raise" if args.fail_on_divergence else "reenter",
-            associate=associate, align=args.align,
+            associate=associate, align=args.align, map_prior=args.map_prior,
         )  # fmt: skip
     html = write_report(result, args.output, force=args.force)
     if not args.quiet:

@@ -72,6 +72,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "(default: no gate); rejected measurements are counted",
     )
     m.add_argument(
+        "--jacobians",
+        choices=("standard", "fej"),
+        default="standard",
+        help="where the EKF-SLAM evaluates its Jacobians: standard (the latest estimates) or fej "
+        "(first estimates, Huang et al. 2008: keeps the unobservable directions, so the "
+        "filter does not become overconfident; known associations) (default: %(default)s)",
+    )
+    m.add_argument(
         "--seed", type=opt.seed, default=0, help="seed of the corruption (default: %(default)s)"
     )
     m.add_argument(
@@ -118,6 +126,7 @@ def run_slam(args: argparse.Namespace) -> int:
             noise_scale=args.noise_scale,
             outlier_gate=args.outlier_gate,
             seed=args.seed,
+            jacobians=args.jacobians,
         )
 
     def online(folder: Path) -> None:

@@ -14,8 +14,8 @@ that time (``Bundle.snapped``), and measurements outside the log's span are warn
 ``pose_noise`` gives a ``MotionModelWarning``.
 
 Landmark ids are integers. Manifest defaults: ``initial_pose`` ``[0, 0, 0]``,
-``initial_covariance`` ``1e-9 I``, ``description`` empty; velocity model ``integration``
-``"arc"``, ``control_stamp`` ``"start"``.
+``initial_covariance`` ``1e-9 I``, ``description`` empty, ``map_source`` not stated;
+velocity model ``integration`` ``"arc"``, ``control_stamp`` ``"start"``.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from recovery.bundle import INITIALISATIONS, TIME_UNITS, Bundle
-from recovery.constants import MAX_SIGMA, MAX_VARIANCE, MIN_SENSOR_SIGMA
+from recovery.constants import MAP_SOURCES, MAX_SIGMA, MAX_VARIANCE, MIN_SENSOR_SIGMA
 from recovery.models import (
     CONTROL_STAMPS,
     INTEGRATIONS,
@@ -111,6 +111,7 @@ _MANIFEST_KEYS = {
         "description",
         "time",
         "initialisation",
+        "map_source",
     ),
     "motion_model": (
         "type",
@@ -525,6 +526,16 @@ def _read_manifest(path: Path) -> dict[str, Any]:
                     line=_line_of_key(text, key),
                 )
             out[key] = doc[key]
+    source = doc.get("map_source")
+    if source is not None:  # where the map came from (docs/bundle.md); absent: not stated
+        if source not in MAP_SOURCES:
+            raise InputError(
+                f"map_source: expected one of {', '.join(map(repr, MAP_SOURCES))}, got "
+                f"{_shown(source)}",
+                path=name,
+                line=_line_of_key(text, "map_source"),
+            )
+        out["map_source"] = source
     pose = doc.get("initial_pose", [0.0, 0.0, 0.0])
     out["initial_pose"] = np.array(
         _numbers(
@@ -1087,6 +1098,8 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
     for key, default in (("time", "seconds"), ("initialisation", "updates")):
         if getattr(bundle, key) != default:  # written when stated (older bundles unchanged)
             meta[key] = getattr(bundle, key)
+    if bundle.map_source is not None:  # only then: bundles that do not say keep their bytes
+        meta["map_source"] = bundle.map_source
     write_text_atomic(root / "bundle.json", json.dumps(meta, indent=2) + "\n")
     if bundle.controls is not None:
         c = bundle.controls

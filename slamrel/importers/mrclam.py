@@ -566,6 +566,7 @@ def mrclam_bundle(
         map_ids=ids,
         map_xy=lm[:, 1:3],
         map_marginals=np.stack([np.diag(np.square(s)) for s in lm[:, 3:5]]),
+        map_source="independent",  # the surveyed landmarks, not estimated from this log
         initial_pose=x0,
         initial_covariance=np.diag([1e-4, 1e-4, 1e-4]),
         controls=c,

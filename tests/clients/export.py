@@ -82,6 +82,7 @@ def odometry_bundle(run: Run) -> Bundle:
         map_xy=xy,
         map_marginals=marg,
         map_covariance=joint,
+        map_source="log",  # the client's final map, estimated from this very log
         initial_pose=np.zeros(3),
         initial_covariance=run.initial_covariance,
         description=(
@@ -122,6 +123,7 @@ def true_map_bundle(bundle: Bundle, run: Run) -> Bundle:
         map_xy=run.landmarks,
         map_marginals=np.zeros((n, 2, 2)),
         map_covariance=None,
+        map_source="independent",  # the true landmarks, not the client's estimate
         path=None,
     )
 
@@ -159,6 +161,7 @@ def write_velocity_euler_bundle(run: Run, directory: Path) -> Path:
         "initial_covariance": run.initial_covariance.tolist(),
         "description": "textbook EKF-SLAM client, its own motion model (Euler, stamp end, "
         "world-frame pose noise)",
+        "map_source": "log",
     }
     (root / "bundle.json").write_text(json.dumps(meta, indent=2) + "\n")
     c = np.column_stack((run.times, run.controls))
@@ -224,6 +227,7 @@ def velocity_bundle(run: Run, *, shift: bool = True) -> Bundle:
         map_xy=xy,
         map_marginals=marg,
         map_covariance=joint,
+        map_source="log",  # the client's final map, estimated from this very log
         initial_pose=np.zeros(3),
         initial_covariance=run.initial_covariance,
         description=f"textbook EKF-SLAM client as today's velocity model (shift={shift})",
