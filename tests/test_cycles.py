@@ -17,6 +17,7 @@ from slamrel.scans.cycles import (
     check_scan_relations,
     compose_cycles,
     find_cycles,
+    mark_contradicted,
 )
 from slamrel.scans.proposals import Proposals
 from slamrel.scans.relations import ScanRelations
@@ -170,14 +171,11 @@ def test_chain_joins_loop_relations():
     assert got.unchecked < alone.unchecked
 
 
-def test_scan_relations_flagged_ones_stay_out():
-    x, pairs, delta, cov, bad = _lap_world(6, laps=2, bad_share=0.05)
+def _scan_relations(pairs, delta, cov, flags) -> ScanRelations:
     p = len(pairs)
-    flags = np.where(np.arange(p) % 50 == 0, "low overlap", "")
-    result = ScanRelations(
-        proposals=Proposals(
-            pairs, pairs[:, 0] * 0.2, pairs[:, 1] * 0.2, np.full(p, "x"), np.zeros(p)
-        ),
+    t1, t2 = pairs[:, 0] * 0.2, pairs[:, 1] * 0.2
+    return ScanRelations(
+        proposals=Proposals(pairs, t1, t2, np.full(p, "x"), np.zeros(p)),
         guess=delta,
         delta=delta,
         covariance=cov,
@@ -190,6 +188,13 @@ def test_scan_relations_flagged_ones_stay_out():
         flags=flags,
         suspicion=np.zeros(p),
     )
+
+
+def test_scan_relations_flagged_ones_stay_out():
+    x, pairs, delta, cov, bad = _lap_world(6, laps=2, bad_share=0.05)
+    p = len(pairs)
+    flags = np.where(np.arange(p) % 50 == 0, "low overlap", "")
+    result = _scan_relations(pairs, delta, cov, flags)
     got = check_scan_relations(result)
     use = flags == ""
     direct = check_cycles(pairs[use, 0], pairs[use, 1], delta[use], cov[use])
@@ -205,3 +210,50 @@ def test_options_bound_the_work():
     owner, edges, _ = find_cycles(pairs[:, 0], pairs[:, 1], np.ones(len(pairs), bool), small)
     assert np.bincount(owner).max() <= 3
     assert (edges[:, 3] == -1).all()
+
+
+def test_mark_contradicted_adds_the_flag_and_raises_suspicion():
+    _, pairs, delta, cov, bad = _lap_world(8, laps=2, bad_share=0.05)
+    p = len(pairs)
+    result = _scan_relations(pairs, delta, cov, np.full(p, ""))
+    check = check_scan_relations(result)
+    assert check.count > 0
+    marked = mark_contradicted(result, check)
+    c = check.contradicted
+    assert (marked.flags[c] == "contradicted").all() and (marked.flags[~c] == "").all()
+    assert (marked.suspicion[c] > 1.5).all() and (marked.suspicion[~c] == 0).all()
+    assert marked.flagged.sum() == check.count
+    # a relation already flagged keeps its flags, the new one appended
+    first = np.flatnonzero(c)[0]
+    flags = np.where(np.arange(p) == first, "degenerate", "")
+    again = mark_contradicted(_scan_relations(pairs, delta, cov, flags), check)
+    assert again.flags[first] == "degenerate, contradicted"
+
+
+def _flaser_log(path, scans) -> None:
+    lines = []
+    for k in range(len(scans)):
+        r = " ".join(f"{v:.4f}" for v in scans.ranges[k])
+        pose = " ".join(f"{v:.6f}" for v in scans.laser_pose[k])
+        t = scans.timestamps[k]
+        lines.append(f"FLASER {scans.ranges.shape[1]} {r} {pose} {pose} {t:.3f} sim {t:.3f}\n")
+    path.write_text("".join(lines))
+
+
+def test_align_cycle_check_option(tmp_path, capsys):
+    """``relations align --cycle-check``: the flags written in the report are those of
+    ``check_scan_relations`` on the command's own alignments (here: none contradicted in a
+    well-observed room, every relation in some cycle)."""
+    from slamrel.cli import main
+    from slamrel.simulation.laser import laser_world, loop_path, simulate_laser_log
+
+    corners = np.array([[1.5, 1.5], [10.5, 1.5], [10.5, 4.5], [1.5, 4.5]])
+    log = simulate_laser_log(laser_world("room"), loop_path(corners, 0.25)[:60], seed=3)
+    path = tmp_path / "room.clf"
+    _flaser_log(path, log.scans)
+    out, report = tmp_path / "r.relations", tmp_path / "r.csv"
+    args = ["relations", "align", str(path), "-o", str(out), "--report", str(report)]
+    assert main([*args, "--distance", "0.25", "--cycle-check"]) == 0
+    text = capsys.readouterr().out
+    assert "cycle check: 0 contradicted by their cycles" in text
+    assert "contradicted" not in report.read_text()

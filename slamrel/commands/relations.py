@@ -112,6 +112,12 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
     _add_align_pair_arguments(a)
     _add_align_search_arguments(a)
     a.add_argument(
+        "--cycle-check",
+        action="store_true",
+        help="also test the unflagged relations against the short cycles they close with "
+        "each other, and flag those their neighbours contradict ('contradicted')",
+    )
+    a.add_argument(
         "--time-tolerance",
         type=float,
         default=0.05,
@@ -373,6 +379,11 @@ def run_align(args: argparse.Namespace) -> int:
     prop = _align_pairs(args, scans, poses)
     options = _align_options(args)
     result = align_scans(scans, prop, guesses_from_poses(poses, prop), options)
+    if args.cycle_check:
+        from slamrel.scans.cycles import check_scan_relations, mark_contradicted
+
+        check = check_scan_relations(result)
+        result = mark_contradicted(result, check)
     write_relations(args.output, result.relation_set())
     _write_align_extras(args, scans, result, poses, options, bag)
     if not args.quiet:
@@ -385,6 +396,11 @@ def run_align(args: argparse.Namespace) -> int:
             f"{flagged} flagged for review, {int((result.initialiser == 'correlative').sum())} "
             f"re-initialised by the correlative search"
         )
+        if args.cycle_check:
+            print(
+                f"cycle check: {check.count} contradicted by their cycles ({check.n_cycles} "
+                f"cycles; {check.unchecked} relations in none)"
+            )
     return 0
 
 

@@ -52,6 +52,7 @@ __all__ = [
     "find_cycles",
     "compose_cycles",
     "blame",
+    "mark_contradicted",
 ]
 
 
@@ -470,3 +471,17 @@ def check_scan_relations(
         blamed=spread(got.blamed, 0),
         n_cycles=got.n_cycles,
     )
+
+
+def mark_contradicted(result: ScanRelations, check: CycleCheck) -> ScanRelations:
+    """``result`` with the flag ``contradicted`` added to the relations ``check`` contradicts;
+    their suspicion is raised to at least ``1 + blamed / cycles`` (1.5–2), so the review
+    visits them."""
+    from dataclasses import replace
+
+    c = check.contradicted
+    flags = result.flags.astype(object)
+    flags[c] = [f"{f}, contradicted" if f else "contradicted" for f in flags[c]]
+    share = check.blamed / np.maximum(check.cycles, 1)
+    suspicion = np.where(c, np.maximum(result.suspicion, 1.0 + share), result.suspicion)
+    return replace(result, flags=flags.astype(str), suspicion=suspicion)
