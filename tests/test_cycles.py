@@ -21,44 +21,12 @@ from slamrel.scans.cycles import (
 )
 from slamrel.scans.proposals import Proposals
 from slamrel.scans.relations import ScanRelations
+from slamrel.simulation.relation_sets import lap_relations
 
 
 def _lap_world(seed: int, laps: int = 2, bad_share: float = 0.08):
-    """Keyframes 0.5 m apart around a 30 × 20 m block, ``laps`` times (each lap shifted a
-    little); relations: consecutive, skip-one and loop pairs (within 1 m, > 20 keyframes
-    apart), 3 mm / 0.06° noise with that covariance, and a planted ``bad_share`` of gross
-    errors (0.15–1 m or 3–15°)."""
-    rng = np.random.default_rng(seed)
-    corners = np.array([[0, 0], [30, 0], [30, 20], [0, 20]], float)
-    pts = []
-    for _ in range(laps):
-        off = rng.normal(0, 0.2, 2)
-        for c in range(4):
-            p, q = corners[c] + off, corners[(c + 1) % 4] + off
-            n = int(np.hypot(*(q - p)) / 0.5)
-            h = np.arctan2(q[1] - p[1], q[0] - p[0])
-            pts += [[*(p + (q - p) * s / n), h + rng.normal(0, 0.05)] for s in range(n)]
-    x = np.array(pts)
-    n = len(x)
-    k = np.arange(n)
-    pairs = [np.column_stack((k[:-1], k[1:])), np.column_stack((k[:-2], k[2:]))]
-    d = np.hypot(x[:, None, 0] - x[None, :, 0], x[:, None, 1] - x[None, :, 1])
-    ii, jj = np.nonzero((d < 1.0) & (k[None, :] - k[:, None] > 20))
-    pairs = np.concatenate((*pairs, np.column_stack((ii, jj))))
-    true = se2.between(x[pairs[:, 0]], x[pairs[:, 1]])
-    sd = np.array([0.003, 0.003, 0.001])
-    delta = se2.compose(true, rng.normal(0, 1, true.shape) * sd)
-    cov = np.broadcast_to(np.diag(sd**2), (len(pairs), 3, 3)).copy()
-    bad = rng.random(len(pairs)) < bad_share
-    nb = int(bad.sum())
-    err = np.zeros((nb, 3))
-    shift = rng.random(nb) < 0.5
-    ang, r = rng.uniform(0, 2 * np.pi, nb), rng.uniform(0.15, 1.0, nb)
-    err[shift, 0], err[shift, 1] = (r * np.cos(ang))[shift], (r * np.sin(ang))[shift]
-    turn = rng.choice([-1, 1], nb) * rng.uniform(np.radians(3), np.radians(15), nb)
-    err[~shift, 2] = turn[~shift]
-    delta[bad] = se2.compose(delta[bad], err)
-    return x, pairs, delta, cov, bad
+    w = lap_relations(seed, laps=laps, bad_share=bad_share)
+    return w.poses, w.pairs, w.delta, w.covariance, w.bad
 
 
 def _fd_composition(delta, edges, signs, eps=1e-6):

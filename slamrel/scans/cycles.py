@@ -18,9 +18,11 @@ cycle *fails* when χ² exceeds the ``1 − alpha`` quantile of χ²(3).
 
 Who is to blame (:func:`blame`): a relation is **contradicted** when at least
 ``min_failed`` of its cycles fail *because of it* and they are more than ``fail_share`` of
-its cycles — a failed cycle is laid on it when no other edge of that cycle fails
-elsewhere (in more than ``fail_share`` of its cycles without this relation; an edge in no
-other cycle, such as one step of the chain, is no evidence either way). The
+its cycles — a failed cycle is laid on it when every other edge of that cycle passes
+elsewhere (fails in at most ``fail_share`` of its cycles without this relation). A relation
+in no other cycle cannot clear itself (two bad relations at one scan must not put the blame
+on the good one they share); a step of the chain in no other cycle counts as passing (the
+chain is short, sequential motion). The
 decision is greedy: the worst candidate first; its cycles are then set aside (they are
 explained), so a second bad relation nearby is judged by the cycles left. A relation whose
 failed cycles cannot be laid on it alone (two bad neighbours, or only one cycle) is not
@@ -308,7 +310,11 @@ def compose_cycles(
 
 
 def blame(
-    members: NDArray[np.int64], failed: NDArray[np.bool_], n_edges: int, options: CycleOptions
+    members: NDArray[np.int64],
+    failed: NDArray[np.bool_],
+    n_edges: int,
+    options: CycleOptions,
+    trusted: NDArray[np.bool_] | None = None,
 ) -> tuple[NDArray[np.bool_], NDArray[np.int64]]:
     """Which edges their cycles contradict (module docstring), greedily.
 
@@ -318,6 +324,9 @@ def blame(
         Edges of each distinct cycle (``-1`` padding).
     failed : (C,) bool
     n_edges : int
+    trusted : (n_edges,) bool, optional
+        Edges (the chain's) that count as passing when they are in no other cycle; any
+        other edge must pass in cycles of its own to clear a cycle it shares.
 
     Returns
     -------
@@ -325,6 +334,7 @@ def blame(
     blamed : (n_edges,) int
         Failed cycles laid on each contradicted edge.
     """
+    trust = np.zeros(n_edges, bool) if trusted is None else trusted
     cyc, edge = np.nonzero(members >= 0)
     edge = members[cyc, edge]
     order = np.argsort(edge, kind="stable")
@@ -344,7 +354,7 @@ def blame(
         e = int(np.flatnonzero(cand)[np.lexsort((-bad[cand], -share[cand]))[0]])
         mine = cycles_of[offsets[e] : offsets[e + 1]]
         mine = mine[alive[mine]]
-        laid = _laid_on(members[mine], failed[mine], e, (tot, bad), options)
+        laid = _laid_on(members[mine], failed[mine], e, (tot, bad, trust), options)
         if laid >= options.min_failed and laid > options.fail_share * tot[e]:
             flagged[e], blamed[e] = True, laid
             alive[mine] = False
@@ -362,14 +372,14 @@ def _laid_on(
     its: NDArray[np.int64],
     its_failed: NDArray[np.bool_],
     e: int,
-    counts: tuple[NDArray[np.int64], NDArray[np.int64]],
+    counts: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]],
     options: CycleOptions,
 ) -> int:
     """How many of ``e``'s failed cycles (``its``: the members of its alive cycles) are laid
-    on it: no other edge of the cycle fails elsewhere (in more than ``fail_share`` of its
-    cycles without ``e``; an edge in no other cycle, e.g. a step of the chain, is no
-    counter-evidence)."""
-    tot, bad = counts
+    on it: every other edge of the cycle passes elsewhere (fails at most ``fail_share`` of
+    its cycles without ``e``; a relation in no other cycle does not pass, a trusted step of
+    the chain does)."""
+    tot, bad, trusted = counts
     on = its >= 0
     ids, where = np.unique(its[on], return_inverse=True)
     shared_tot = np.bincount(where, minlength=ids.size)
@@ -377,7 +387,7 @@ def _laid_on(
     shared_bad = np.bincount(where[f], minlength=ids.size)
     else_tot = tot[ids] - shared_tot
     else_bad = bad[ids] - shared_bad
-    passes = else_bad <= options.fail_share * else_tot
+    passes = (else_bad <= options.fail_share * else_tot) & ((else_tot > 0) | trusted[ids])
     passes[ids == e] = True
     ok = np.ones(its.shape, bool)
     ok[on] = passes[where]
@@ -421,7 +431,7 @@ def check_cycles(
     c, sc = compose_cycles(d, cov, edges[first_of], signs[first_of])
     chi2 = np.einsum("ci,ci->c", c, np.linalg.solve(sc, c[..., None])[..., 0])
     failed = chi2 > chi2_dist.ppf(1.0 - opt.alpha, 3)
-    flagged, blamed = blame(np.sort(edges[first_of], axis=1), failed, f.size, opt)
+    flagged, blamed = blame(np.sort(edges[first_of], axis=1), failed, f.size, opt, ~tested)
     return CycleCheck(
         contradicted=flagged[:m],
         cycles=np.bincount(owner, minlength=f.size)[:m],
