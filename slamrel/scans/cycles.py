@@ -469,16 +469,15 @@ def check_scan_relations(
         options=options,
     )
 
-    def spread(values: NDArray[np.generic], fill: object) -> NDArray[np.generic]:
-        out = np.full(p, fill, dtype=values.dtype)
-        out[idx] = values
-        return out
-
+    contradicted = np.zeros(p, bool)
+    contradicted[idx] = got.contradicted
+    counts = np.zeros((3, p), np.int64)
+    counts[:, idx] = (got.cycles, got.failed, got.blamed)
     return CycleCheck(
-        contradicted=spread(got.contradicted, False),
-        cycles=spread(got.cycles, 0),
-        failed=spread(got.failed, 0),
-        blamed=spread(got.blamed, 0),
+        contradicted=contradicted,
+        cycles=counts[0],
+        failed=counts[1],
+        blamed=counts[2],
         n_cycles=got.n_cycles,
     )
 
