@@ -225,3 +225,15 @@ def test_align_cycle_check_option(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "cycle check: 0 contradicted by their cycles" in text
     assert "contradicted" not in report.read_text()
+
+
+def test_confirmed_means_cycles_and_none_failed():
+    _, pairs, delta, cov, bad = _lap_world(9, laps=2, bad_share=0.05)
+    got = check_cycles(pairs[:, 0], pairs[:, 1], delta, cov)
+    conf = got.confirmed()
+    np.testing.assert_array_equal(conf, (got.cycles >= 2) & (got.failed == 0))
+    assert not (conf & bad).any()  # a gross error fails its cycles
+    # without gross errors nearly every relation is confirmed (alpha = 0.01 a cycle)
+    _, pairs, delta, cov, _ = _lap_world(9, laps=2, bad_share=0.0)
+    assert check_cycles(pairs[:, 0], pairs[:, 1], delta, cov).confirmed().mean() > 0.9
+    assert (got.confirmed(min_cycles=10) <= conf).all()

@@ -119,6 +119,12 @@ class CycleCheck:
         """Number of contradicted relations."""
         return int(np.count_nonzero(self.contradicted))
 
+    def confirmed(self, min_cycles: int = 2) -> NDArray[np.bool_]:
+        """Relations in at least ``min_cycles`` cycles, none of which failed. (Relations
+        wrong by the same amount, e.g. neighbouring loop pairs slid alike along a corridor,
+        close their short cycles with each other: confirmation is evidence, not proof.)"""
+        return (self.cycles >= min_cycles) & (self.failed == 0)
+
     @property
     def unchecked(self) -> int:
         """Relations in no cycle (nothing to test them against)."""
