@@ -165,3 +165,27 @@ def test_option_mistakes_exit_2_and_times_count_exits_3(tmp_path, capsys):
     times = _write(tmp_path, "times.txt", "1\n2\n3\n")
     assert main(["relations", "from-graph", str(path), "-o", out, "--times", str(times)]) == 3
     assert f"3 timestamps for the graph's {g.n_poses} pose vertices" in capsys.readouterr().err
+
+
+def test_landmark_edges_are_counted_not_used(tmp_path, capsys):
+    g, bad, _ = _graph(4)
+    with_lm = PoseGraph(
+        poses=g.poses,
+        landmarks=np.array([[5.0, 5.0]]),
+        pp_i=g.pp_i,
+        pp_j=g.pp_j,
+        pp_z=g.pp_z,
+        pp_info=g.pp_info,
+        pl_k=np.array([0, 3]),
+        pl_l=np.array([0, 0]),
+        pl_z=se2.inverse_transform_points(g.poses[[0, 3]], np.array([[5.0, 5.0]] * 2)),
+        pl_info=np.broadcast_to(np.eye(2), (2, 2, 2)),
+    )
+    a, b = tmp_path / "lm.g2o", tmp_path / "plain.g2o"
+    write_g2o_graph(a, with_lm)
+    write_g2o_graph(b, g)
+    ra, rb = tmp_path / "a.relations", tmp_path / "b.relations"
+    assert main(["relations", "from-graph", str(a), "-o", str(ra), "--min-travel", "50"]) == 0
+    assert "2 pose-landmark edges not used" in capsys.readouterr().out
+    assert main(["relations", "from-graph", str(b), "-o", str(rb), "--min-travel", "50"]) == 0
+    np.testing.assert_array_equal(np.loadtxt(ra), np.loadtxt(rb))

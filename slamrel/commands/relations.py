@@ -316,9 +316,10 @@ def run_from_graph(args: argparse.Namespace) -> int:
     if not args.quiet:
         n = got.counts()
         base = "vertex ids" if args.times is None else args.times
+        unused = f"; {graph.pl_k.size} pose-landmark edges not used" if graph.pl_k.size else ""
         print(
             f"{n['kept']} relations from {got.first.size} loop closures of {args.graph} "
-            f"({got.sequential} sequential edges; times: {base}) -> {args.output}"
+            f"({got.sequential} sequential edges{unused}; times: {base}) -> {args.output}"
         )
         print(
             f"dropped {n[SHORT]} with less than {args.min_travel:g} m travelled, {n[OUTLIER]} "
