@@ -1,6 +1,7 @@
 """``slamrel relations generate``: select reference relations from a trajectory;
 ``slamrel relations align``: make them from a laser log (CARMEN, or a ROS bag's
-``sensor_msgs/LaserScan`` topic) by scan alignment."""
+``sensor_msgs/LaserScan`` topic) by scan alignment; ``slamrel relations from-graph``: from
+the loop closures of an optimised pose graph."""
 
 from __future__ import annotations
 
@@ -48,6 +49,52 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     add_strategy_arguments(g, default="consecutive")
     g.set_defaults(func=run_generate)
     _register_align(rsub)
+    _register_from_graph(rsub)
+
+
+def _register_from_graph(rsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """``relations from-graph``: Cartographer's ``autogenerate_ground_truth`` on g2o/TORO."""
+    from slamrel.backends.graph_relations import MAX_ERROR_THETA, MAX_ERROR_XY, MIN_TRAVEL
+
+    f = rsub.add_parser(
+        "from-graph",
+        help="make reference relations from an optimised pose graph's loop closures",
+        description="Keep the loop closures (edges between non-consecutive poses) of an "
+        "optimised g2o or TORO pose graph that agree with the graph's own vertices within "
+        "outlier thresholds and span a least travelled distance (Cartographer's "
+        "autogenerate_ground_truth), and write them as a Freiburg .relations file. The "
+        "relations' times are the vertex ids (as the g2o trajectory reader's), or --times.",
+    )
+    f.add_argument("graph", metavar="GRAPH", help="optimised pose graph (.g2o, or TORO .graph)")
+    f.add_argument("-o", "--output", required=True, metavar="OUT", help="output .relations")
+    f.add_argument(
+        "--min-travel",
+        type=float,
+        default=MIN_TRAVEL,
+        help="least distance travelled along the graph's poses between the two ends of a "
+        "loop closure [m] (Cartographer's min_covered_distance; default %(default)g)",
+    )
+    f.add_argument(
+        "--max-error-xy",
+        type=float,
+        default=MAX_ERROR_XY,
+        help="drop loop closures whose translation disagrees with the vertices by more than "
+        "this [m] (outlier_threshold_meters; default %(default)g)",
+    )
+    f.add_argument(
+        "--max-error-theta",
+        type=float,
+        default=MAX_ERROR_THETA,
+        help="the same for the rotation [rad] (outlier_threshold_radians; default %(default)g)",
+    )
+    f.add_argument(
+        "--times",
+        metavar="FILE",
+        help="timestamps of the pose vertices, one a line in increasing vertex-id order "
+        "(default: the vertex id is the time)",
+    )
+    f.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    f.set_defaults(func=run_from_graph)
 
 
 def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -65,6 +112,12 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
     _add_align_guess_arguments(a)
     _add_align_pair_arguments(a)
     _add_align_search_arguments(a)
+    a.add_argument(
+        "--cycle-check",
+        action="store_true",
+        help="also test the unflagged relations against the short cycles they close with "
+        "each other, and flag those their neighbours contradict ('contradicted')",
+    )
     a.add_argument(
         "--time-tolerance",
         type=float,
@@ -231,6 +284,90 @@ def run_generate(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_from_graph(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from relation_metric.errors import InputError, OptionError
+    from relation_metric.relations import RelationSet
+    from slamrel.backends.graph_relations import OUTLIER, SHORT, graph_relations
+    from slamrel.formats.relations import write_relations
+
+    if not args.min_travel >= 0:
+        raise OptionError("--min-travel must be zero or positive")
+    for name in ("max_error_xy", "max_error_theta"):
+        if not getattr(args, name) > 0:
+            raise OptionError(f"--{name.replace('_', '-')} must be positive")
+    check_outputs([args.output], [args.graph, args.times])
+    graph, ids = _read_pose_graph(args.graph)
+    times = ids.astype(np.float64) if args.times is None else _vertex_times(args.times, ids.size)
+    got = graph_relations(
+        graph,
+        min_travel=args.min_travel,
+        max_error_xy=args.max_error_xy,
+        max_error_theta=args.max_error_theta,
+    )
+    if got.first.size == 0:
+        raise InputError(
+            f"no loop closures: all {got.sequential} pose-pose edges join consecutive poses "
+            "(in vertex-id order); relations are made from edges between non-consecutive poses",
+            path=args.graph,
+        )
+    k = got.kept
+    rel = RelationSet(times[got.first[k]], times[got.second[k]], got.delta[k], key="time")
+    write_relations(args.output, rel)
+    if not args.quiet:
+        n = got.counts()
+        base = "vertex ids" if args.times is None else args.times
+        unused = f"; {graph.pl_k.size} pose-landmark edges not used" if graph.pl_k.size else ""
+        print(
+            f"{n['kept']} relations from {got.first.size} loop closures of {args.graph} "
+            f"({got.sequential} sequential edges{unused}; times: {base}) -> {args.output}"
+        )
+        print(
+            f"dropped {n[SHORT]} with less than {args.min_travel:g} m travelled, {n[OUTLIER]} "
+            f"outliers (> {args.max_error_xy:g} m or > {args.max_error_theta:g} rad from the "
+            "vertices)"
+        )
+    return 0
+
+
+def _read_pose_graph(path: str) -> tuple[Any, Any]:
+    """A g2o or TORO graph (its vertices the optimum) and its pose ids; iSAM text holds no
+    vertices and is refused."""
+    from relation_metric.errors import InputError
+    from slamrel.formats.g2o import read_g2o_graph
+    from slamrel.formats.isam import is_isam
+    from slamrel.formats.text import read_source
+    from slamrel.formats.toro import is_toro, read_toro_graph
+
+    src = read_source(path)
+    if is_isam(src):
+        raise InputError(
+            "iSAM text holds no vertex poses (no optimum to check the loop closures "
+            "against); expected a g2o (VERTEX_SE2/EDGE_SE2) or TORO (VERTEX2/EDGE2) graph",
+            path=path,
+        )
+    if is_toro(src):
+        return read_toro_graph(path)
+    graph, ids, _ = read_g2o_graph(path, source=src)
+    return graph, ids
+
+
+def _vertex_times(path: str, n: int) -> Any:
+    """``--times``: one timestamp a pose vertex, in increasing vertex-id order."""
+    from relation_metric.errors import InputError
+    from slamrel.formats.text import read_numeric_table
+
+    values, _ = read_numeric_table(path, columns=("t",), describe="a times file (one a line)")
+    if values.shape[0] != n:
+        raise InputError(
+            f"{values.shape[0]} timestamps for the graph's {n} pose vertices; expected one a "
+            "vertex, in increasing vertex-id order",
+            path=path,
+        )
+    return values[:, 0]
+
+
 def run_align(args: argparse.Namespace) -> int:
     from slamrel.formats.laser import read_laser_scans
     from slamrel.formats.relations import write_relations
@@ -245,6 +382,11 @@ def run_align(args: argparse.Namespace) -> int:
     prop = _align_pairs(args, scans, poses)
     options = _align_options(args)
     result = align_scans(scans, prop, guesses_from_poses(poses, prop), options)
+    if args.cycle_check:
+        from slamrel.scans.cycles import check_scan_relations, mark_contradicted
+
+        check = check_scan_relations(result)
+        result = mark_contradicted(result, check)
     write_relations(args.output, result.relation_set())
     _write_align_extras(args, scans, result, poses, options, bag)
     if not args.quiet:
@@ -257,6 +399,11 @@ def run_align(args: argparse.Namespace) -> int:
             f"{flagged} flagged for review, {int((result.initialiser == 'correlative').sum())} "
             f"re-initialised by the correlative search"
         )
+        if args.cycle_check:
+            print(
+                f"cycle check: {check.count} contradicted by their cycles ({check.n_cycles} "
+                f"cycles; {check.unchecked} relations in none)"
+            )
     return 0
 
 
