@@ -75,7 +75,10 @@ class GlobalOptions:
     link_xy, link_theta : float
         Window of a chain link's search when ICP loses it (0.5 m, 0.2 rad).
     ambiguity, min_score : float
-        Flag thresholds (0.85, 0.25).
+        Flag thresholds (0.95, 0.25; calibrated on corridor worlds 101–102).
+    weak_geometry : bool
+        Flag ``weak geometry`` (False: a corridor's weak direction is what the submap
+        search and its ambiguity test judge; the condition stays in the report).
     max_refine, max_refine_angle : float
         ``unstable`` when ICP moves farther from the search's answer (0.1 m, 0.03 rad).
     """
@@ -92,8 +95,9 @@ class GlobalOptions:
     chain_gap: float = 1.5
     link_xy: float = 0.5
     link_theta: float = 0.2
-    ambiguity: float = 0.85
+    ambiguity: float = 0.95
     min_score: float = 0.25
+    weak_geometry: bool = False
     max_refine: float = 0.1
     max_refine_angle: float = 0.03
 
@@ -296,11 +300,15 @@ def align_scans_global(
 ) -> tuple[ScanRelations, Chain]:
     """Align every proposed pair without leaning on the given poses beyond the chain's links
     (module docstring); ``poses`` ``(N, 3)`` are the scans' given laser poses."""
+    from dataclasses import replace
+
     from slamrel.scans.relations import collect_relations
 
     opt = options or AlignOptions()
-    store = _Scans(scans, opt, global_options or GlobalOptions())
-    gopt = store.gopt
+    gopt = global_options or GlobalOptions()
+    if not gopt.weak_geometry:
+        opt = replace(opt, limits=replace(opt.limits, min_condition=0.0))
+    store = _Scans(scans, opt, gopt)
     pairs = proposals.pairs
     chain = scan_chain(scans, poses, pairs.ravel(), store)
     pos = {int(n): k for k, n in enumerate(chain.nodes.tolist())}
