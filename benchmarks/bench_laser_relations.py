@@ -5,9 +5,9 @@ it is lost) as the named baseline, timed in the same run (CPU seconds,
 ``time.process_time``, the whole pipeline: scan preparation, chain, search, ICP, flags).
 
 Per world and pooled: flagged share; gross (> 10 cm or > 2° from the truth) among the
-unflagged; recall of the flags on the gross ones; flag precision (flagged pairs that are
-gross, or ambiguous, i.e. more than 10 cm/2° away... counted as gross only); unflagged
-median and 99th percentile (translation, rotation); pairs per CPU-second.
+unflagged; recall of the flags on the gross ones; flag precision (the share of flagged
+pairs that are gross); unflagged median and 99th percentile (translation, rotation); loop
+pairs usable (unflagged and not gross); pairs per CPU-second.
 
     python benchmarks/bench_laser_relations.py [SEED ...]      (default: seeds 101-104)
 """

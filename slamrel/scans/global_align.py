@@ -8,8 +8,9 @@ a branch-and-bound search over a window from the chain's drift, an ambiguity tes
    branch and bound over ``±link_xy, ±link_theta``; the chain poses compose the links.
    Its own travel ``D_ij`` (path length between two scans) sizes the windows below.
 2. **Local pairs** (``D_ij ≤ local_travel``): ICP from the chain's relation, judged as
-   :func:`slamrel.scans.relations.align_scans` judges (the large correction measured from
-   the given poses' relation).
+   :func:`slamrel.scans.relations.align_scans` judges, except that a ``large correction``
+   (from the given poses' relation) is one beyond the link window ``link_xy + drift_xy D``,
+   ``link_theta + drift_theta D``: within it, it is the given motion's error.
 3. **Distant pairs** (loops): the reference is a **local submap** — the returns of the chain
    scans within ``submap_travel`` of scan ``i`` along the path, moved into ``i``'s frame by
    the chain — and so is the current side (around ``j``). Branch and bound
@@ -330,7 +331,16 @@ def align_scans_global(
         else:
             centre = between(chain.poses[a], chain.poses[b])
             al = align(store.prep(i), store.prep(j), centre, opt.icp)
-        flags, susp = _judge(al, opt.limits, given[k])
+        # a correction within the window a chain link searches is the given motion's error
+        # (real odometry turns 3-10° wrong between scans), not a slipped alignment
+        local = replace(
+            opt.limits,
+            max_correction=max(opt.limits.max_correction, gopt.link_xy + gopt.drift_xy * travel),
+            max_correction_angle=max(
+                opt.limits.max_correction_angle, gopt.link_theta + gopt.drift_theta * travel
+            ),
+        )
+        flags, susp = _judge(al, local, given[k])
         out.append((al, "chain", flags, susp))
     result = collect_relations(
         proposals, given, out, score=score, second=second, second_ratio=ratio
