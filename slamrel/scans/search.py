@@ -111,7 +111,8 @@ class SearchResult:
 
 @dataclass(frozen=True)
 class LikelihoodGrid:
-    """The grids ``L_0 … L_H`` over one area (``(X + 2^H, Y + 2^H)`` float32 each, zero-padded).
+    """The grids ``L_0 … L_H`` over one area (``(X + 1 + 2^H, Y + 1 + 2^H)`` float32 each,
+    with a zero border: one cell below, ``2^H`` above).
 
     Attributes
     ----------
@@ -146,6 +147,8 @@ def likelihood_grid(
     r, sig = options.resolution, options.sigma
     shape = (np.ceil((np.asarray(hi) - lo) / r).astype(int) + 1).tolist()
     pad = 2**options.levels
+    lo = np.asarray(lo, dtype=np.float64) - r  # a zero border of one cell below
+    shape = [shape[0] + 1, shape[1] + 1]
     table = np.zeros((shape[0] + pad, shape[1] + pad), dtype=np.float32)
     w = int(np.ceil(3 * sig / r))
     off = np.arange(-w, w + 1)
@@ -156,7 +159,7 @@ def likelihood_grid(
     dx = lo[0] + (cx + 0.5) * r - points[:, 0, None]
     dy = lo[1] + (cy + 0.5) * r - points[:, 1, None]
     val = np.exp(-(dx * dx + dy * dy) / (2 * sig * sig)).astype(np.float32)
-    ok = (cx >= 0) & (cx < shape[0]) & (cy >= 0) & (cy < shape[1])
+    ok = (cx >= 1) & (cx < shape[0]) & (cy >= 1) & (cy < shape[1])
     np.maximum.at(table, (cx[ok], cy[ok]), val[ok])
     pyramid = [table]
     for h in range(1, options.levels + 1):
@@ -167,7 +170,7 @@ def likelihood_grid(
         nxt2 = nxt.copy()
         np.maximum(nxt2[:, :-s], nxt[:, s:], out=nxt2[:, :-s])
         pyramid.append(nxt2)
-    return LikelihoodGrid(np.asarray(lo, dtype=np.float64), r, pyramid)
+    return LikelihoodGrid(lo, r, pyramid)
 
 
 def _score(
@@ -180,11 +183,11 @@ def _score(
 ) -> NDArray[np.float64]:
     """Mean of ``L_h`` at the points of rotation ``k`` moved by ``(u, v)`` cells, per node."""
     table = grid.pyramid[h]
-    ix = base[k, :, 0] + u[:, None]
-    iy = base[k, :, 1] + v[:, None]
-    ok = (ix >= 0) & (ix < table.shape[0]) & (iy >= 0) & (iy < table.shape[1])
-    val = table[np.where(ok, ix, 0), np.where(ok, iy, 0)]
-    return np.where(ok, val, 0.0).mean(axis=1)
+    nx, ny = table.shape
+    # cells outside clip onto the zero border: 0 at level 0, an upper bound above it
+    ix = np.clip(base[k, :, 0] + u[:, None], 0, nx - 1)
+    iy = np.clip(base[k, :, 1] + v[:, None], 0, ny - 1)
+    return table.ravel().take(ix * ny + iy).mean(axis=1, dtype=np.float64)
 
 
 def _greedy(
