@@ -225,6 +225,35 @@ def _add_align_search_arguments(a: argparse.ArgumentParser) -> None:
     """How each pair is aligned (the correlative search, the readings used) and when a
     relation is flagged for review."""
     a.add_argument(
+        "--aligner",
+        choices=("global", "icp"),
+        default="global",
+        help="global: a scan-matched chain, then distant pairs searched by branch and bound "
+        "submap against submap over a window from the chain's drift, ambiguity flagged; "
+        "icp: ICP from each pair's guess, a correlative search where it is lost (the aligner "
+        "before issue 37) (default: %(default)s)",
+    )
+    a.add_argument(
+        "--drift-xy",
+        type=float,
+        default=0.01,
+        help="global: search window growth per metre travelled between the scans [m/m] "
+        "(default 0.01; window 0.3 m + drift)",
+    )
+    a.add_argument(
+        "--drift-theta",
+        type=float,
+        default=0.0005,
+        help="global: rotation window growth [rad/m] (default 0.0005; window 0.05 rad + drift)",
+    )
+    a.add_argument(
+        "--ambiguity",
+        type=float,
+        default=0.95,
+        help="global: flag a relation whose second hypothesis (a distinct pose) scores at "
+        "least this share of the best (default 0.95)",
+    )
+    a.add_argument(
         "--global-search",
         choices=("never", "flagged", "always"),
         default="flagged",
@@ -381,7 +410,20 @@ def run_align(args: argparse.Namespace) -> int:
     scans, poses, summary = _align_guesses(args, scans, bag)
     prop = _align_pairs(args, scans, poses)
     options = _align_options(args)
-    result = align_scans(scans, prop, guesses_from_poses(poses, prop), options)
+    if args.aligner == "global":
+        from slamrel.scans.global_align import align_scans_global
+
+        result, chain = align_scans_global(scans, prop, poses, options, _global_options(args))
+        how = (
+            f"{int((result.initialiser == 'search').sum())} searched by branch and bound "
+            f"(chain of {len(chain.nodes)} scans, {chain.fallback} link(s) kept as given)"
+        )
+    else:
+        result = align_scans(scans, prop, guesses_from_poses(poses, prop), options)
+        how = (
+            f"{int((result.initialiser == 'correlative').sum())} re-initialised by the "
+            "correlative search"
+        )
     if args.cycle_check:
         from slamrel.scans.cycles import check_scan_relations, mark_contradicted
 
@@ -391,13 +433,13 @@ def run_align(args: argparse.Namespace) -> int:
     _write_align_extras(args, scans, result, poses, options, bag)
     if not args.quiet:
         flagged = int(result.flagged.sum())
+        failed = int(result.failed.sum())
         print(
-            f"{len(result)} relations from {len(scans)} {scans.record} scans "
+            f"{len(result) - failed} relations from {len(scans)} {scans.record} scans "
             f"({summary}) -> {args.output}"
         )
         print(
-            f"{flagged} flagged for review, {int((result.initialiser == 'correlative').sum())} "
-            f"re-initialised by the correlative search"
+            f"{flagged} flagged for review ({failed} failed: left out, listed in the report), {how}"
         )
         if args.cycle_check:
             print(
@@ -405,6 +447,15 @@ def run_align(args: argparse.Namespace) -> int:
                 f"cycles; {check.unchecked} relations in none)"
             )
     return 0
+
+
+def _global_options(args: argparse.Namespace) -> Any:
+    """The guess-independent aligner's options from the command line."""
+    from slamrel.scans.global_align import GlobalOptions
+
+    return GlobalOptions(
+        drift_xy=args.drift_xy, drift_theta=args.drift_theta, ambiguity=args.ambiguity
+    )
 
 
 def _checked_align_options(args: argparse.Namespace) -> bool:
@@ -417,6 +468,10 @@ def _checked_align_options(args: argparse.Namespace) -> bool:
     for name in (*names, "max_correction_angle"):
         if not getattr(args, name) > 0:
             raise OptionError(f"--{name.replace('_', '-')} must be positive")
+    if not (0 <= args.drift_xy <= 1 and 0 <= args.drift_theta <= 0.1):
+        raise OptionError("--drift-xy must lie in [0, 1] and --drift-theta in [0, 0.1]")
+    if not 0 < args.ambiguity <= 1:
+        raise OptionError("--ambiguity must lie in (0, 1]")
     if args.max_range is not None and not args.max_range > 0:
         raise OptionError("--max-range must be positive")
     bag = names_bag(args.log)
