@@ -362,16 +362,20 @@
     return { w: r.width, h: r.height, dpr };
   }
   const toScreen = (x, y, s) => [s.w / 2 + (x - view.cx) * view.scale, s.h / 2 - (y - view.cy) * view.scale];
+  // both poses of the relation, the estimate's pose of the current scan and the reference
+  // scan's returns within FIT_MARGIN of them (the map context around the pair; zoom out with -)
+  const FIT_MARGIN = 4;
   function fit() {
     if (selected < 0) return;
-    const r = rels[selected], p = SCANS[r.i].p;
-    const xs = [r.delta[0]], ys = [r.delta[1]];
-    if (r.estimate) { xs.push(r.estimate[0]); ys.push(r.estimate[1]); }
-    for (let m = 0; m < p.length; m += 2) { xs.push(p[m]); ys.push(p[m + 1]); }
-    xs.sort((a, b) => a - b); ys.sort((a, b) => a - b);
-    const q = (a, f) => a[Math.min(a.length - 1, Math.floor(f * a.length))] ?? 0;
-    const x0 = Math.min(q(xs, 0.02), 0), x1 = Math.max(q(xs, 0.98), 0);
-    const y0 = Math.min(q(ys, 0.02), 0), y1 = Math.max(q(ys, 0.98), 0);
+    const r = rels[selected], p = SCANS[r.i].p, at = [[0, 0], [r.delta[0], r.delta[1]]];
+    if (r.estimate) at.push([r.estimate[0], r.estimate[1]]);
+    let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+    for (const [x, y] of at) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y); }
+    const near = [x0 - FIT_MARGIN, x1 + FIT_MARGIN, y0 - FIT_MARGIN, y1 + FIT_MARGIN];
+    for (let m = 0; m < p.length; m += 2) {
+      if (p[m] < near[0] || p[m] > near[1] || p[m + 1] < near[2] || p[m + 1] > near[3]) continue;
+      x0 = Math.min(x0, p[m]); x1 = Math.max(x1, p[m]); y0 = Math.min(y0, p[m + 1]); y1 = Math.max(y1, p[m + 1]);
+    }
     const s = size();
     view.cx = (x0 + x1) / 2; view.cy = (y0 + y1) / 2;
     view.scale = 0.85 * Math.min(s.w / Math.max(x1 - x0, 1), s.h / Math.max(y1 - y0, 1));
@@ -520,6 +524,7 @@
     const text = relationsText(), state = stateText();
     $("relations-output").value = text;
     $("state-output").value = state;
+    $("outputs").hidden = false;
     for (const [id, t, type] of [["download", text, "text/plain"], ["download-state", state, "application/json"]]) {
       const a = $(id);
       if (a.href) URL.revokeObjectURL(a.href);
