@@ -280,12 +280,16 @@
     }
     return best;
   }
+  function windowed(k, x0) {
+    const r = rels[k];
+    const box = { lo: [x0[0] - WIN.xy, x0[1] - WIN.xy, x0[2] - WIN.theta], hi: [x0[0] + WIN.xy, x0[1] + WIN.xy, x0[2] + WIN.theta] };
+    const c = windowSearch(SCANS[r.i], SCANS[r.j], x0);
+    return icp(SCANS[r.i], SCANS[r.j], c.d, box);
+  }
   function realignWindow() {
     if (selected < 0) { say("select a relation first (n)"); return; }
     const r = rels[selected], t0 = performance.now(), x0 = r.delta.slice();
-    const box = { lo: [x0[0] - WIN.xy, x0[1] - WIN.xy, x0[2] - WIN.theta], hi: [x0[0] + WIN.xy, x0[1] + WIN.xy, x0[2] + WIN.theta] };
-    const c = windowSearch(SCANS[r.i], SCANS[r.j], x0);
-    const out = icp(SCANS[r.i], SCANS[r.j], c.d, box);
+    const out = windowed(selected, x0);
     if (!out.ok) { say("re-align failed: too few matches in the window"); return; }
     lastWindow = { k: selected, x0 };
     change(selected, { delta: out.delta, edited: true });
@@ -611,7 +615,7 @@
     relations: () => rels.map((r) => ({ status: r.status, delta: r.delta.slice(), edited: r.edited, suspicion: r.suspicion })),
     selected: () => selected, select, scale: () => view.scale, counts,
     icp: (k, x0, box) => icp(SCANS[rels[k].i], SCANS[rels[k].j], x0, box || null),
-    windowSearch: (k, x0) => windowSearch(SCANS[rels[k].i], SCANS[rels[k].j], x0),
+    windowed,
     profile, relationsText, stateText, load, mapPoints: () => MAP.length / 2,
   };
   refresh();
