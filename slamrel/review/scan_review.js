@@ -231,12 +231,13 @@
     return [m[0][3] / m[0][0], m[1][3] / m[1][1], m[2][3] / m[2][2]];
   }
   // ------------------------------------------------------------------- windowed re-align
-  // A correlative search (Olson 2009) over the window: the reference scan rasterised on 1 cm
-  // cells, each cell scored exp(-d^2 / 2 sigma^2) (sigma 1.5 cm) by its distance d to the
-  // reference returns (neighbours along the scan joined by 1 cm steps), the current scan's
-  // returns summed over the raster for every (dx, dy) on 1 cm steps and theta on 0.1 deg steps
-  // within the window; then the ICP from the best cell, held inside the window.
-  const RCELL = 0.01, RSIG = 0.015, RRAD = 3;
+  // A correlative search (Olson 2009) over the window: the reference scan rasterised on 2 cm
+  // cells, each cell scored exp(-d^2 / 2 sigma^2) (sigma 2 cm) by its distance d to the
+  // reference returns (neighbours along the scan joined by 2 cm steps), the current scan's
+  // returns summed over the raster for every (dx, dy) on 2 cm steps and theta on 0.2 deg steps
+  // within the window; then the ICP from the best candidate, held inside the window (the ICP
+  // gives the precision, the search the basin).
+  const RCELL = 0.02, RSIG = 0.02, RRAD = 3, RTHETA = 0.2 * DEG;
   function raster(ref) {
     if (ref.raster) return ref.raster;
     const h = new Map(), p = ref.p;
@@ -260,11 +261,11 @@
     return h;
   }
   function windowSearch(ref, cur, x0) {
-    const h = raster(ref), nxy = Math.round(WIN.xy / RCELL), nth = Math.round(WIN.theta / (0.1 * DEG));
+    const h = raster(ref), nxy = Math.round(WIN.xy / RCELL), nth = Math.round(WIN.theta / RTHETA);
     let best = { score: -1, d: x0.slice(), dist: Infinity };
     const m = cur.p.length / 2, ix = new Int32Array(m), iy = new Int32Array(m);
     for (let t = -nth; t <= nth; t++) {
-      const th = x0[2] + t * 0.1 * DEG, c = Math.cos(th), s = Math.sin(th);
+      const th = x0[2] + t * RTHETA, c = Math.cos(th), s = Math.sin(th);
       for (let k = 0; k < m; k++) {
         const px = cur.p[2 * k], py = cur.p[2 * k + 1];
         ix[k] = Math.round((c * px - s * py + x0[0]) / RCELL); iy[k] = Math.round((s * px + c * py + x0[1]) / RCELL);
