@@ -342,7 +342,7 @@
     if (selected < 0) { pctx.fillText("cost along the weak direction", 6, 14); return; }
     const r = rels[selected], p = profile(selected), top = Math.max(...p.cost.map((c) => c[1]), 1e-6);
     const X = (s) => 6 + (s + PROFILE.half) / (2 * PROFILE.half) * (w - 12), Y = (v) => hgt - 16 - v / top * (hgt - 34);
-    pctx.fillText(`RMS cost [cm] along the weak direction (${p.weak[0].toFixed(2)}, ${p.weak[1].toFixed(2)}), ±${PROFILE.half} m`, 6, 12);
+    pctx.fillText(`RMS cost [cm] along the weak direction (${p.weak[0].toFixed(2)}, ${p.weak[1].toFixed(2)})`, 6, 12);
     const mark = (d, colour) => {
       if (!d) return;
       const s = (d[0] - r.delta[0]) * p.weak[0] + (d[1] - r.delta[1]) * p.weak[1];
@@ -355,7 +355,7 @@
     pctx.stroke();
     pctx.fillStyle = "#333";
     pctx.fillText(`-${PROFILE.half} m`, 4, hgt - 3); pctx.fillText(`+${PROFILE.half} m`, w - 34, hgt - 3);
-    pctx.fillText(`${(100 * top).toFixed(1)}`, w - 30, 26);
+    pctx.fillText(`max ${(100 * top).toFixed(1)}`, w - 52, 26);
   }
 
   // ------------------------------------------------------------------- drawing
