@@ -613,7 +613,12 @@ def _write_align_extras(
 
         spec = split_bag_spec(args.log) if bag else None
         name = Path(args.log).name if spec is None else f"{Path(spec.path).name}:{spec.topic}"
-        write_scan_review(args.review, scans, result, poses, options, name=name)
+        second = None  # the search's second hypotheses, where the global aligner found any
+        if result.second is not None and result.second_ratio is not None:
+            import numpy as np
+
+            second = np.column_stack([result.second, result.second_ratio])
+        write_scan_review(args.review, scans, result, poses, options, name=name, second=second)
 
 
 def _bag_guesses(
