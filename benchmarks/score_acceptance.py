@@ -98,13 +98,20 @@ def _review(res: ScanRelations, cycle_check: bool, confirm: bool) -> tuple[np.nd
 
 
 def run(
-    seed: int, *, cycle_check: bool = False, confirm: bool = False, guesses: str = "odometry"
+    seed: int,
+    *,
+    cycle_check: bool = False,
+    confirm: bool = False,
+    guesses: str = "odometry",
+    aligner: str = "global",
 ) -> dict:
     """One simulated log: relations made and reviewed, three estimates scored both ways.
 
     ``guesses``: the poses that propose the pairs and give the alignments their guesses —
     the log's ``odometry`` (the honest start), or the ``truth`` (to check that the harness
-    can pass when the aligner gets every pair right)."""
+    can pass when the aligner gets every pair right). ``aligner``: ``global`` (the command's
+    default, :func:`slamrel.scans.global_align.align_scans_global`) or ``icp`` (ICP from the
+    guess, :func:`slamrel.scans.relations.align_scans`)."""
     walls = laser_world("loop")
     truth = loop_path(CORNERS, 0.3)
     truth = np.vstack((truth, truth[:60]))  # on past the start: loop closures
@@ -114,7 +121,12 @@ def run(
     start = odo if guesses == "odometry" else log.truth
     prop = _pairs(start, s.timestamps)
     t0 = time.process_time()
-    res = align_scans(s, prop, guesses_from_poses(start, prop), AlignOptions())
+    if aligner == "global":
+        from slamrel.scans.global_align import align_scans_global
+
+        res, _ = align_scans_global(s, prop, start, AlignOptions())
+    else:
+        res = align_scans(s, prop, guesses_from_poses(start, prop), AlignOptions())
     cpu = time.process_time() - t0
     accept, contradicted, confirmed = _review(res, cycle_check, confirm)
     true = guesses_from_poses(log.truth, prop)
@@ -182,11 +194,18 @@ def main() -> None:
     ap.add_argument("--cycle-check", action="store_true")
     ap.add_argument("--confirm", action="store_true")
     ap.add_argument("--guesses", choices=("odometry", "truth"), default="odometry")
+    ap.add_argument("--aligner", choices=("global", "icp"), default="global")
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args()
     out = []
     for seed in args.seeds:
-        r = run(seed, cycle_check=args.cycle_check, confirm=args.confirm, guesses=args.guesses)
+        r = run(
+            seed,
+            cycle_check=args.cycle_check,
+            confirm=args.confirm,
+            guesses=args.guesses,
+            aligner=args.aligner,
+        )
         out.append(r)
         print(
             f"seed {seed}, guesses from {r['guesses']}: {r['pairs']} pairs ({r['loop_pairs']} "

@@ -105,3 +105,8 @@ STRATEGY_OPTION_WORDS = {
         "a larger --min-separation-time (or --min-separation-distance)"
     ),
 }
+
+#: ``relations from-graph``'s defaults, Cartographer's (``autogenerate_ground_truth_main.cc``):
+#: the travel a loop closure must span [m] and its largest disagreement with the optimum
+#: [m, rad]. Here (not in ``backends.graph_relations``) so that ``--help`` imports no numpy.
+GRAPH_MIN_TRAVEL, GRAPH_MAX_ERROR_XY, GRAPH_MAX_ERROR_THETA = 100.0, 0.15, 0.02

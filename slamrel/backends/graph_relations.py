@@ -31,11 +31,16 @@ from numpy.typing import NDArray
 
 from relation_metric.se2 import between, compose, inverse
 from slamrel.backends.graph import PoseGraph
+from slamrel.constants import GRAPH_MAX_ERROR_THETA, GRAPH_MAX_ERROR_XY, GRAPH_MIN_TRAVEL
 
 __all__ = ["GraphRelations", "graph_relations", "MIN_TRAVEL", "MAX_ERROR_XY", "MAX_ERROR_THETA"]
 
-#: Cartographer's defaults (``autogenerate_ground_truth_main.cc``).
-MIN_TRAVEL, MAX_ERROR_XY, MAX_ERROR_THETA = 100.0, 0.15, 0.02
+#: Cartographer's defaults (``autogenerate_ground_truth_main.cc``; :mod:`slamrel.constants`).
+MIN_TRAVEL, MAX_ERROR_XY, MAX_ERROR_THETA = (
+    GRAPH_MIN_TRAVEL,
+    GRAPH_MAX_ERROR_XY,
+    GRAPH_MAX_ERROR_THETA,
+)
 
 #: Reasons a loop closure is dropped.
 SHORT, OUTLIER = "short travel", "outlier"

@@ -54,7 +54,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _register_from_graph(rsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """``relations from-graph``: Cartographer's ``autogenerate_ground_truth`` on g2o/TORO."""
-    from slamrel.backends.graph_relations import MAX_ERROR_THETA, MAX_ERROR_XY, MIN_TRAVEL
+    from slamrel.constants import GRAPH_MAX_ERROR_THETA as MAX_ERROR_THETA
+    from slamrel.constants import GRAPH_MAX_ERROR_XY as MAX_ERROR_XY
+    from slamrel.constants import GRAPH_MIN_TRAVEL as MIN_TRAVEL
 
     f = rsub.add_parser(
         "from-graph",
