@@ -190,17 +190,23 @@ def run(args: argparse.Namespace) -> int:
                 "note: a large gated fraction is a finding about the map (wrong associations "
                 "or an inconsistent map), not noise"
             )
-        if truth is not None and truth.curve is None:
-            print(
-                "note: no NEES: no recovered pose after the first lies at a ground-truth time "
-                "(within 1 µs; is groundtruth.csv in the time base of the log?)"
-            )
-        if truth is not None and truth.curve is not None:
-            frame, mean = truth.frame, truth.curve.summary.mean
-            print(f"mean pose NEES vs ground truth: {mean:.3f} (3 dof), {frame.description}")
-            if frame.aligned and truth.unaligned is not None:
-                print(f"  unaligned, in the truth frame: {truth.unaligned.mean:.3f}")
+        if truth is not None:
+            _print_truth(truth)
     return 0
+
+
+def _print_truth(truth: _TruthScores) -> None:
+    """The summary's lines on the NEES against the bundle's ground truth."""
+    if truth.curve is None:
+        print(
+            "note: no NEES: no recovered pose after the first lies at a ground-truth time "
+            "(within 1 µs; is groundtruth.csv in the time base of the log?)"
+        )
+        return
+    frame, mean = truth.frame, truth.curve.summary.mean
+    print(f"mean pose NEES vs ground truth: {mean:.3f} (3 dof), {frame.description}")
+    if frame.aligned and truth.unaligned is not None:
+        print(f"  unaligned, in the truth frame: {truth.unaligned.mean:.3f}")
 
 
 class _TruthScores(NamedTuple):

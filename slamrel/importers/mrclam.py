@@ -31,6 +31,7 @@ from relation_metric.errors import InputError
 from relation_metric.ids import integer_ids, rows_of
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, readonly
+from slamrel.formats.bundle import InvalidMeasurementWarning
 from slamrel.formats.text import PathLike, RowLines, read_numeric_table
 
 __all__ = [
@@ -210,7 +211,7 @@ def _without_nonpositive_ranges(
         f"{path}: {bad.size} measurement(s) with a range of 0 or below left out (the first at "
         f"line {lines(k)}: range {float(meas[k, 2]):g}); a range-bearing model needs a "
         "positive range",
-        UserWarning,
+        InvalidMeasurementWarning,
         stacklevel=3,
     )
     keep = np.ones(meas.shape[0], dtype=bool)

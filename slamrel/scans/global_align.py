@@ -161,6 +161,9 @@ def _chain_nodes(
     extra = []
     spacing = gap / 1.5
     for a in np.flatnonzero(np.diff(t) > gap).tolist():
+        if (t[a + 1] - t[a]) / spacing > used[a + 1] - used[a]:  # more marks than scans
+            extra.append(np.arange(used[a] + 1, used[a + 1]))  # (a jump): every scan between
+            continue
         marks = np.arange(t[a] + spacing, t[a + 1] - spacing / 2, spacing)
         extra.append(np.searchsorted(travel, marks))
     allk = np.concatenate([used, *extra]) if extra else used
@@ -221,6 +224,30 @@ def _thinned(points: NDArray[np.float64], n: int) -> NDArray[np.float64]:
     return points[:: max(1, -(-points.shape[0] // n))]
 
 
+#: A guess farther than this [m] from where its scans could overlap is refused as input
+#: (a pose at 1e20 m), not searched: no drive moves that far between two scans.
+MAX_GUESS_DISTANCE = 1e7
+
+
+def _refuse_hopeless(
+    store: _Scans, i: int, j: int, centre: NDArray[np.float64], reach: float
+) -> None:
+    """Refuse a guess that puts scan ``j`` more than :data:`MAX_GUESS_DISTANCE` beyond any
+    overlap with scan ``i`` (file and line of ``j``)."""
+    apart = float(np.hypot(centre[0], centre[1]))
+    if not apart > reach + MAX_GUESS_DISTANCE:
+        return
+    line = int(store.scans.lines[j])
+    raise InputError(
+        f"the guess puts the scan of line {line} {apart:.6g} m from the scan of line "
+        f"{int(store.scans.lines[i])}, but their returns reach {reach:.6g} m together: no "
+        "placement it tries lets them overlap; expected poses (the log's, or --estimate's) "
+        "that put the two scans near each other",
+        path=store.scans.path,
+        line=line,
+    )
+
+
 def _search(
     store: _Scans,
     ref_scans: list[int],
@@ -243,6 +270,7 @@ def _search(
     reach = float(np.max(np.hypot(cur[:, 0], cur[:, 1]))) + wxy + 4 * sopt.sigma
     lo = np.maximum(ref.min(axis=0), centre[:2] - reach) - 4 * sopt.sigma
     hi = np.minimum(ref.max(axis=0), centre[:2] + reach) + 4 * sopt.sigma
+    empty = bool(np.any(hi < lo))  # no placement in the window overlaps the reference
     hi = np.maximum(hi, lo + sopt.resolution)
     cells = grid_cells(lo, hi, sopt.resolution)
     window_cells = (2 * wxy / sopt.resolution + 1) ** 2
@@ -257,6 +285,10 @@ def _search(
             path=store.scans.path,
             line=line,
         )
+    if empty:  # no match (and no grid cell to index: a far centre overflows the cast)
+        _refuse_hopeless(store, ref_scans[0], cur_scans[0], centre, reach)
+        nan3 = np.full(3, np.nan)
+        return SearchResult(np.asarray(centre, float).copy(), 0.0, nan3, 0.0, 0, False)
     grid = likelihood_grid(ref, lo, hi, sopt)
     return branch_and_bound(grid, cur, centre, wxy, wth, sopt)
 
