@@ -40,7 +40,7 @@ from relation_metric.se2 import between, cumulative_compose
 from slamrel.formats.laser import LaserScans
 from slamrel.scans.matching import Alignment, PreparedScan, align, prepare_scan, transform
 from slamrel.scans.proposals import Proposals
-from slamrel.scans.relations import AlignOptions, ScanRelations, _judge
+from slamrel.scans.relations import AlignOptions, ScanRelations, _judge, far_guess_error
 from slamrel.scans.search import (
     SearchOptions,
     SearchResult,
@@ -237,14 +237,8 @@ def _refuse_hopeless(
     apart = float(np.hypot(centre[0], centre[1]))
     if not apart > reach + MAX_GUESS_DISTANCE:
         return
-    line = int(store.scans.lines[j])
-    raise InputError(
-        f"the guess puts the scan of line {line} {apart:.6g} m from the scan of line "
-        f"{int(store.scans.lines[i])}, but their returns reach {reach:.6g} m together: no "
-        "placement it tries lets them overlap; expected poses (the log's, or --estimate's) "
-        "that put the two scans near each other",
-        path=store.scans.path,
-        line=line,
+    raise far_guess_error(
+        store.scans, (i, j), apart, reach, ": no placement it tries lets them overlap"
     )
 
 

@@ -227,14 +227,29 @@ def _refuse_far_guess(
     cells = table_cells(ref.points, cur.points, guess, options)
     if cells <= MAX_HOPELESS_CELLS:
         return
+    raise far_guess_error(
+        scans,
+        pair,
+        apart,
+        reach,
+        f" and the correlative search moves ±{options.search_xy:g} m: no placement it tries "
+        f"lets them overlap, and its table would need {cells:.3g} cells (limit "
+        f"{MAX_HOPELESS_CELLS})",
+    )
+
+
+def far_guess_error(
+    scans: LaserScans, pair: tuple[int, int], apart: float, reach: float, why: str
+) -> Exception:
+    """The input error of a guess that puts scan ``pair[1]`` ``apart`` m from scan
+    ``pair[0]``, farther than their returns ``reach`` together (``why``: the search's words),
+    at the line of ``pair[1]``; both aligners refuse such a guess with it."""
     from relation_metric.errors import InputError
 
     i, j = pair
-    raise InputError(
+    return InputError(
         f"the guess puts the scan of line {int(scans.lines[j])} {apart:.6g} m from the scan of "
-        f"line {int(scans.lines[i])}, but their returns reach {reach:.6g} m together and the "
-        f"correlative search moves ±{options.search_xy:g} m: no placement it tries lets them "
-        f"overlap, and its table would need {cells:.3g} cells (limit {MAX_HOPELESS_CELLS}); "
+        f"line {int(scans.lines[i])}, but their returns reach {reach:.6g} m together{why}; "
         "expected poses (the log's, or --estimate's) that put the two scans near each other",
         path=scans.path,
         line=int(scans.lines[j]),
