@@ -311,7 +311,17 @@ def recover(
         **kw,  # type: ignore[arg-type]
     )
     weights = None if robust is None else fr.weights
-    est = _estimate(method, inp, fr, mu, weights, prior.prior)
+    try:
+        est = _estimate(method, inp, fr, mu, weights, prior.prior)
+    except np.linalg.LinAlgError as exc:
+        from relation_metric.errors import DivergenceError
+
+        raise DivergenceError(
+            f"the {method} could not factor a covariance or information matrix ({exc}): "
+            "in float64 it is singular or indefinite, as when the motion or sensor noise is "
+            "many orders of magnitude beyond the motion and the map; expected noise on their "
+            "scale (--method filter needs no such factorisation)"
+        ) from None
     if mount is not None:
         poses, covariances = to_robot_frame(est.poses, est.covariances, mount)
         est = replace(est, poses=poses, covariances=covariances)

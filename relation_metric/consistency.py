@@ -86,9 +86,20 @@ def nees(errors: ArrayLike, covariances: ArrayLike) -> NDArray[np.float64]:
     try:
         low = np.linalg.cholesky(p)
     except np.linalg.LinAlgError:
-        raise InputError("a covariance is not positive definite") from None
+        k = next(i for i in range(p.shape[0]) if not _positive_definite(p[i]))
+        raise InputError(
+            f"covariance {k} (0-based) is not positive definite: its NEES eᵀ P⁻¹ e is undefined"
+        ) from None
     w = np.linalg.solve(low, e[..., None])[..., 0]  # L⁻¹ e, so ‖w‖² = eᵀ P⁻¹ e
     return np.einsum("nd,nd->n", w, w)
+
+
+def _positive_definite(p: NDArray[np.float64]) -> bool:
+    try:
+        np.linalg.cholesky(p)
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
 def pose_nees(estimate: ArrayLike, truth: ArrayLike, covariances: ArrayLike) -> NDArray[np.float64]:

@@ -112,8 +112,14 @@ class TimeOrder:
         plural = "" if self.out_of_order == 1 else "s"
         return (
             f"{self.out_of_order} {what}{plural} out of time order (largest step back "
-            f"{self.max_step_back:.6f} s{where})"
+            f"{_seconds(self.max_step_back)} s{where})"
         )
+
+
+def _seconds(t: float) -> str:
+    """A time for a message: 6 decimals (microseconds), or 6 significant digits from 1e15 s
+    (where the decimals are no longer held; 1e300 s would print 301 digits)."""
+    return f"{t:.6f}" if abs(t) < 1e15 else f"{t:.6g}"
 
 
 def _line(lines: Lines, k: int) -> int | None:
@@ -186,10 +192,10 @@ def sort_by_time(
             earlier = _line(lines, j)
             at = f" (line {earlier})" if earlier is not None else f" ({what} {j})"
             raise InputError(
-                f"time goes backwards by {float(back[k]):.6f} s: {what} at t = "
-                f"{float(t[k]):.6f} s after t = {float(t[j]):.6f} s{at}; steps back of up to "
-                f"{tolerance:g} s are put in time order and counted, larger ones are refused "
-                "(expected times in order)",
+                f"time goes backwards by {_seconds(float(back[k]))} s: {what} at t = "
+                f"{_seconds(float(t[k]))} s after t = {_seconds(float(t[j]))} s{at}; steps back "
+                f"of up to {tolerance:g} s are put in time order and counted, larger ones are "
+                "refused (expected times in order)",
                 path=path,
                 line=_line(lines, k),
             )
@@ -206,8 +212,8 @@ def check_in_order(t: ArrayLike, *, path: str | os.PathLike[str] | None = None) 
     if back.size:
         k = int(back[0])
         raise InputError(
-            f"time goes backwards at pose {k + 1}: t = {float(t[k + 1]):.6f} s after "
-            f"t = {float(t[k]):.6f} s; expected non-decreasing timestamps (read files with "
+            f"time goes backwards at pose {k + 1}: t = {_seconds(float(t[k + 1]))} s after "
+            f"t = {_seconds(float(t[k]))} s; expected non-decreasing timestamps (read files with "
             "read_trajectory, which puts the poses in time order)",
             path=path,
         )

@@ -7,6 +7,7 @@ speak bad grammar, and checks the one clear message now given.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -311,3 +312,101 @@ def test_a_disconnected_graph_names_the_file_ids(tmp_path, capsys):
     err = _err(["solve", f, "-o", str(tmp_path / "out"), "-q"], capsys)
     assert "2 disconnected parts (sizes 2, 1)" in err
     assert "e.g. pose 30, share no factor with pose 10, which holds the gauge" in err
+
+
+# ------------------------------- a bundle's controls and initial_pose beyond float64's reach
+
+
+def _bundle(tmp_path: Path, **files: str) -> Path:
+    from tests.test_readers_fuzz import BUNDLE
+
+    b = tmp_path / "b"
+    b.mkdir()
+    for name, text in {**BUNDLE, **files}.items():
+        (b / name).write_text(text)
+    return b
+
+
+@pytest.mark.parametrize(
+    ("rows", "said"),
+    [
+        ("0,1e300,0\n1,1,0.1\n", "controls.csv:2: v = 1e+300: beyond 1e+30 m/s"),
+        ("0,1,0\n1,1,-1e300\n", "controls.csv:3: omega = -1e+300: beyond 1e+30 rad/s"),
+        ("0,1,0\n1e300,1,0.1\n2e300,0,0\n", "controls.csv:2: v = 1: the controls' path up to"),
+        ("0,1,0\n1,3e29,0\n", "controls.csv:3: v = 3e+29: the controls' path up to this row"),
+    ],
+)
+def test_controls_beyond_float64s_reach_are_refused_at_their_line(tmp_path, capsys, rows, said):
+    """v = 1e300 used to run, with slamrel's own "floating-point problem … bug" warnings (an
+    omega of 1e300: exit 0 with them). The speed, yaw rate, and the path and turn of the held
+    rows (Σ |v| Δt: 3e29 m/s held for 8 s) are bounded like positions (1e30)."""
+    end = "" if "e300,0,0" in rows else "9,0,0\n"
+    b = _bundle(tmp_path, **{"controls.csv": "t,v,omega\n" + rows + end})
+    err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt"), "-q"], capsys)
+    assert f"{b / said}" in err, err
+    assert "floating-point problem" not in err
+    assert not (tmp_path / "x.txt").exists()
+
+
+def test_controls_inside_the_bound_give_no_bug_warning(tmp_path, capsys):
+    """v = 1e29 m/s held for 1 s (path 1e29 m < 1e30): read. The filter then places the robot
+    1e29 m away, where its metre-scale covariance and the map are lost in rounding: one
+    error naming the bundle (exit 3), and none of slamrel's own "floating-point problem"
+    warnings."""
+    b = _bundle(tmp_path, **{"controls.csv": "t,v,omega\n0,1e29,0\n1,1,0.1\n2,1,0.1\n3,0,0\n"})
+    err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt"), "--method", "filter"], capsys)
+    assert f"error: {b}: " in err and "floating-point problem" not in err
+
+
+@pytest.mark.parametrize("model", ["velocity", "odometry"])
+def test_a_log_spanning_no_time_names_its_file(tmp_path, capsys, model):
+    """It used to name the bundle folder only ("the controls/odometry span no time")."""
+    files = {"controls.csv": "t,v,omega\n1,1,0\n1,1,0.1\n"}
+    name = "controls.csv"
+    if model == "odometry":
+        manifest = json.loads(_bundle_json())
+        manifest["motion_model"] = {
+            "type": "odometry",
+            "sigma_x": 0.1,
+            "sigma_y": 0.1,
+            "sigma_theta": 0.01,
+        }
+        files = {"bundle.json": json.dumps(manifest), "odometry.csv": "t,x,y,theta\n1,0,0,0\n"
+                 "1,1,0,0\n"}  # fmt: skip
+        name = "odometry.csv"
+    b = _bundle(tmp_path, **files)
+    err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt"), "-q"], capsys)
+    line = ":3" if model == "velocity" else ""
+    assert f"{b / name}{line}: all 2 {'control' if line else 'odometry'} rows have t = 1.0" in err
+    assert "span" in err
+
+
+def _bundle_json() -> str:
+    from tests.test_readers_fuzz import BUNDLE_JSON
+
+    return BUNDLE_JSON
+
+
+@pytest.mark.parametrize(("pose", "said"), [([1e31, 0, 0], "x = 1e+31"), ([0, 0, -2e30], "θ")])
+def test_initial_pose_beyond_1e30_is_refused_at_its_line(tmp_path, capsys, pose, said):
+    """1e31 used to be accepted (the filter then named no line, the smoother "diverged")."""
+    manifest = json.loads(_bundle_json())
+    manifest["initial_pose"] = pose
+    b = _bundle(tmp_path, **{"bundle.json": json.dumps(manifest, indent=2)})
+    line = 1 + json.dumps(manifest, indent=2).splitlines().index('  "initial_pose": [')
+    err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt"), "-q"], capsys)
+    assert f"{b / 'bundle.json'}:{line}: initial_pose: {said}" in err, err
+    assert "is beyond 1e+30" in err
+
+
+@pytest.mark.parametrize("method", ["smoother", "batch"])
+def test_noise_beyond_float64s_precision_is_an_error_not_a_crash(tmp_path, capsys, method):
+    """sigma_v = sigma_omega = 1e10 (allowed: below 1e30) swamps the initial covariance: the
+    smoother's prior covariances are singular in float64. It used to be "internal error
+    (LinAlgError: Singular matrix)", exit 1."""
+    manifest = json.loads(_bundle_json())
+    manifest["motion_model"] = {"type": "velocity", "sigma_v": 1e10, "sigma_omega": 1e10}
+    b = _bundle(tmp_path, **{"bundle.json": json.dumps(manifest)})
+    err = _err(["recover", str(b), "--method", method, "-o", str(tmp_path / "x.txt")], capsys)
+    assert f"{b}: the {method} could not factor a covariance" in err
+    assert "--method filter" in err and not (tmp_path / "x.txt").exists()

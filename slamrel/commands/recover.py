@@ -129,13 +129,14 @@ def run(args: argparse.Namespace) -> int:
             map_prior=args.map_prior,
             progress=not args.quiet and sys.stderr.isatty(),
         )
+    with errors_about(args.bundle):  # before any output: a NEES it cannot form is an error
+        truth = _against_truth(bundle, result)
     write_trajectory(args.output, result.trajectory, format=fmt)
     if args.covariances:
         buf = io.BytesIO()
         np.save(buf, np.asarray(result.covariances), allow_pickle=False)
         write_bytes_atomic(args.covariances, buf.getvalue())
     report = result.report()
-    truth = _against_truth(bundle, result)
     if truth is not None:  # the NEES of slamrel run, in the frame placed by the start pose
         divergence = report["divergence"]
         assert isinstance(divergence, dict)

@@ -51,7 +51,7 @@ from relation_metric.arrays import Array, PathLike
 from relation_metric.checks import check_covariances, check_joint_covariance
 from relation_metric.errors import InputError
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
-from relation_metric.trajectory import Trajectory, check_coordinates
+from relation_metric.trajectory import MAX_COORDINATE, Trajectory, check_coordinates
 from slamrel.constants import BUNDLE_FORMAT as FORMAT
 from slamrel.formats.landmark_csv import read_landmark_csv, write_landmark_csv
 from slamrel.formats.text import (
@@ -547,6 +547,7 @@ def _read_manifest(path: Path) -> dict[str, Any]:
             minimum=None,
         )
     )
+    _check_initial_pose(out["initial_pose"], name, _line_of_key(text, "initial_pose"))
     cov = doc.get("initial_covariance")
     if cov is None:
         out["initial_covariance"] = 1e-9 * np.eye(3)
@@ -572,6 +573,65 @@ def _read_manifest(path: Path) -> dict[str, Any]:
         _check_psd(mat, what="initial_covariance", path=name, line=line)
         out["initial_covariance"] = mat
     return out
+
+
+def _check_initial_pose(pose: Array, path: str, line: int | None) -> None:
+    """``initial_pose`` ``[x, y, θ]``: a position within ``MAX_COORDINATE`` (as every other
+    position slamrel reads) and a heading within it too (an angle of 1e31 rad is no heading)."""
+    big = np.flatnonzero(np.abs(pose) > MAX_COORDINATE)
+    if big.size:
+        k = int(big[0])
+        raise InputError(
+            f"initial_pose: {'x y θ'.split()[k]} = {float(pose[k]):.6g} is beyond "
+            f"{MAX_COORDINATE:.0e} (m, or rad for θ); expected a pose in the map frame",
+            path=path,
+            line=line,
+        )
+
+
+def _check_controls(
+    cols: dict[str, Array], lines: NDArray[np.int64], path: Path, control_stamp: str
+) -> None:
+    """``controls.csv`` in time order: the times span some time, and speeds, yaw rates, the
+    path ``Σ |v_k| Δt_k`` and the turn ``Σ |ω_k| Δt_k`` of the held rows stay within
+    ``MAX_COORDINATE`` (m, rad), as every position slamrel reads: beyond it, the squares
+    and products of the dead-reckoned poses leave float64.
+
+    The first offending row is named by its line (``lines`` (K,), in time order).
+    """
+    t, v, w = cols["t"], cols["v"], cols["omega"]
+    if t.shape[0] >= 2 and t[-1] == t[0]:
+        raise InputError(
+            f"all {t.shape[0]} control rows have t = {float(t[0])!r}: the controls span no "
+            "time; expected increasing times (the last row ends the run)",
+            path=path,
+            line=int(lines[-1]),
+        )
+    dt = np.diff(t)
+    held = slice(1, None) if control_stamp == "end" else slice(None, -1)
+    hrow = np.arange(t.shape[0])[held]
+    for name, x, unit, what in (("v", v, "m", "path"), ("omega", w, "rad", "turn")):
+        big = np.abs(x) > MAX_COORDINATE
+        with np.errstate(over="ignore"):
+            run = np.cumsum(np.abs(x[held]) * dt)
+        far = np.zeros_like(big)
+        far[hrow] = ~(run <= MAX_COORDINATE)
+        _refuse_first(
+            big | far,
+            lambda k, name=name, x=x, unit=unit, what=what: (
+                f"{name} = {float(x[k]):.6g}: "
+                + (
+                    f"beyond {MAX_COORDINATE:.0e} {unit}/s"
+                    if abs(x[k]) > MAX_COORDINATE
+                    else f"the controls' {what} up to this row is beyond {MAX_COORDINATE:.0e} "
+                    f"{unit}"
+                )
+                + " (their squares and products must stay inside float64); expected "
+                f"{'speeds in m/s' if name == 'v' else 'yaw rates in rad/s'}"
+            ),
+            path,
+            lines,
+        )
 
 
 def _read_csv(
@@ -858,11 +918,19 @@ def _read_motion_log(root: Path, motion: MotionModel, reordered: dict[str, int])
         p = root / "controls.csv"
         cols, lines = _read_csv(p, required=("t", "v", "omega"))
         cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "control")
+        _check_controls(cols, lines, p, motion.control_stamp)
         return {"controls": np.column_stack((cols["t"], cols["v"], cols["omega"]))}
     p = root / "odometry.csv"
     if not p.is_file():
         raise InputError(f"missing required file; expected columns {CSV_HEADER}", path=p)
     odometry, reordered[p.name] = _read_pose_log(p, "odometry pose")
+    t = odometry.timestamps
+    if t.shape[0] >= 2 and t[-1] == t[0]:
+        raise InputError(
+            f"all {t.shape[0]} odometry rows have t = {float(t[0])!r}: the odometry spans no "
+            "time; expected increasing times (the last row ends the run)",
+            path=p,
+        )
     return {"odometry": odometry}
 
 
