@@ -167,6 +167,24 @@ def test_option_mistakes_exit_2_and_times_count_exits_3(tmp_path, capsys):
     assert f"3 timestamps for the graph's {g.n_poses} pose vertices" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(("k", "value"), [(5, -1.0), (7, 6.0)])
+def test_times_that_do_not_increase_are_refused_at_their_line(tmp_path, capsys, k, value):
+    """A --times file whose stamps go back (or repeat) used to be read as given: relations
+    with their two times swapped or equal, exit 0 (issue 39, round 3's audit)."""
+    g, _, _ = _graph(3)
+    path = tmp_path / "t.g2o"
+    write_g2o_graph(path, g)
+    stamps = [f"{100.0 + j}" for j in range(g.n_poses)]
+    stamps[k] = f"{100.0 + value}"
+    times = _write(tmp_path, "times.txt", "# stamps\n" + "\n".join(stamps) + "\n")
+    out = tmp_path / "o.relations"
+    argv = ["relations", "from-graph", str(path), "-o", str(out), "--times", str(times)]
+    assert main(argv) == 3
+    err = capsys.readouterr().err
+    assert f"{times}:{k + 2}: t = {100.0 + value} after t = {100.0 + k - 1}: expected " in err
+    assert "Traceback" not in err and not out.exists()
+
+
 def test_landmark_edges_are_counted_not_used(tmp_path, capsys):
     g, bad, _ = _graph(4)
     with_lm = PoseGraph(

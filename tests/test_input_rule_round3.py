@@ -410,3 +410,18 @@ def test_noise_beyond_float64s_precision_is_an_error_not_a_crash(tmp_path, capsy
     err = _err(["recover", str(b), "--method", method, "-o", str(tmp_path / "x.txt")], capsys)
     assert f"{b}: the {method} could not factor a covariance" in err
     assert "--method filter" in err and not (tmp_path / "x.txt").exists()
+
+
+def test_slam_far_from_the_origin_gives_no_bug_warning(tmp_path, capsys):
+    """initial_pose (1e30, -1e30): a 1.5 m range is lost in rounding, so a new landmark lands
+    on the robot's very position and the next nearest-neighbour search divided 0 by 0
+    (slamrel's own "floating-point problem … bug" warning). Such a landmark has no range or
+    bearing: no measurement is associated with it."""
+    manifest = json.loads(_bundle_json())
+    manifest["initial_pose"] = [1e30, -1e30, 0]
+    b = _bundle(tmp_path, **{"bundle.json": json.dumps(manifest)})
+    out = tmp_path / "s"
+    assert main(["slam", str(b), "-o", str(out), "--association", "nn"]) == 0
+    got = capsys.readouterr()
+    assert "floating-point problem" not in got.err, got.err
+    assert "EKF-SLAM: 3 landmarks" in got.out

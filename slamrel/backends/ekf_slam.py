@@ -468,6 +468,10 @@ def _nearest(
     dx = lms[:, 0] - mu[0]
     dy = lms[:, 1] - mu[1]
     qd = dx * dx + dy * dy
+    # a landmark at the robot's very position (rounding at coordinates far from the origin):
+    # no range or bearing is defined, so no measurement can be it (distance inf below)
+    at_robot = qd == 0.0
+    qd = np.where(at_robot, 1.0, qd)
     rr = np.sqrt(qd)
     h = np.column_stack((rr, se2.wrap_angle(np.arctan2(dy, dx) - mu[2])))
     hl = np.stack(
@@ -493,7 +497,7 @@ def _nearest(
     )
     nu = meas[None, :] - h
     nu[:, 1] = se2.wrap_angle(nu[:, 1])
-    d2 = np.einsum("ka,kab,kb->k", nu, np.linalg.inv(s), nu)
+    d2 = np.where(at_robot, np.inf, np.einsum("ka,kab,kb->k", nu, np.linalg.inv(s), nu))
     best = int(np.argmin(d2))
     if d2[best] <= g_in:
         return 3 + 2 * best, best

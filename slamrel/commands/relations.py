@@ -386,17 +386,29 @@ def _read_pose_graph(path: str) -> tuple[Any, Any]:
 
 def _vertex_times(path: str, n: int) -> Any:
     """``--times``: one timestamp a pose vertex, in increasing vertex-id order."""
+    import numpy as np
+
     from relation_metric.errors import InputError
     from slamrel.formats.text import read_numeric_table
 
-    values, _ = read_numeric_table(path, columns=("t",), describe="a times file (one a line)")
+    values, lines = read_numeric_table(path, columns=("t",), describe="a times file (one a line)")
     if values.shape[0] != n:
         raise InputError(
             f"{values.shape[0]} timestamps for the graph's {n} pose vertices; expected one a "
             "vertex, in increasing vertex-id order",
             path=path,
         )
-    return values[:, 0]
+    t = values[:, 0]
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if back.size:  # a relation's two times would come out swapped or equal
+        k = int(back[0]) + 1
+        raise InputError(
+            f"t = {float(t[k])!r} after t = {float(t[k - 1])!r}: expected increasing "
+            "timestamps, one a pose vertex in increasing vertex-id order",
+            path=path,
+            line=lines(k),
+        )
+    return t
 
 
 def run_align(args: argparse.Namespace) -> int:
