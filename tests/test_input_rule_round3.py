@@ -425,3 +425,46 @@ def test_slam_far_from_the_origin_gives_no_bug_warning(tmp_path, capsys):
     got = capsys.readouterr()
     assert "floating-point problem" not in got.err, got.err
     assert "EKF-SLAM: 3 landmarks" in got.out
+
+
+@pytest.mark.parametrize("aligner", ["global", "icp"])
+def test_align_with_no_pair_selected_writes_an_empty_set(tmp_path, capsys, aligner):
+    """--distance inf (or 1e300) selects no pair: the global aligner's chain indexed an empty
+    list ("internal error (IndexError …)"); both aligners now say 0 relations, exit 0."""
+    from tests.test_input_rule import _carmen
+
+    log = tmp_path / "log.clf"
+    log.write_text(_carmen([10.0 + 0.2 * k for k in range(8)]))
+    out = tmp_path / "o.relations"
+    argv = ["relations", "align", str(log), "-o", str(out), "--aligner", aligner]
+    assert main([*argv, "--distance", "inf", "--angle", "inf"]) == 0
+    said = capsys.readouterr()
+    assert "0 relations from 8 FLASER scans" in said.out and "internal error" not in said.err
+    assert [ln for ln in out.read_text().splitlines() if not ln.startswith("#")] == []
+
+
+def test_a_json_integer_beyond_pythons_digit_limit_is_refused_at_its_line(tmp_path, capsys):
+    """A 5,000-digit integer in bundle.json: Python refuses to convert it ("internal error
+    (ValueError: Exceeds the limit (4300 digits) …)"). Refused at its line."""
+    text = _bundle_json().replace('"sigma_v": 0.1', '"sigma_v": ' + "9" * 5000)
+    b = _bundle(tmp_path, **{"bundle.json": text})
+    line = 1 + next(k for k, ln in enumerate(text.splitlines()) if "9999" in ln)
+    err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt")], capsys)
+    assert f"{b / 'bundle.json'}:{line}: a number of more than 4300 digits" in err
+
+
+def test_a_step_covariance_beyond_1e60_is_refused_at_its_line(tmp_path, capsys):
+    """An entry of 1e300 in step_covariance.csv used to run into "filter diverged" naming
+    only the folder; 1e60 (the largest variance a model accepts) is the bound."""
+    manifest = json.loads(_bundle_json())
+    manifest["motion_model"] = {"type": "velocity", "step_covariance": {"frame": "body"}}
+    rows = "".join(f"{t},0.01,0,0,0.01,0,0.001\n" for t in range(4)).replace("1,0.01", "1,1e300")
+    b = _bundle(
+        tmp_path,
+        **{
+            "bundle.json": json.dumps(manifest),
+            "step_covariance.csv": "t,cxx,cxy,cxt,cyy,cyt,ctt\n" + rows,
+        },
+    )
+    err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt")], capsys)
+    assert f"{b / 'step_covariance.csv'}:3: step covariance: an entry of 1e+300 is beyond" in err

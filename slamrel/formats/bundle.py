@@ -371,6 +371,15 @@ def _read_step_covariances(root: Path, log_t: Array, log_name: str) -> Array:
             line=int(lines[k]) if k < lines.shape[0] else None,
         )
     cov = _upper_to_full(cols)
+    entry = np.abs(cov).max(axis=(1, 2))
+    _refuse_first(
+        entry > MAX_VARIANCE,
+        lambda k: f"step covariance: an entry of {float(entry[k]):.6g} is beyond "
+        f"{MAX_VARIANCE:.0e} (the largest variance a motion model accepts: products of "
+        "covariances must stay inside float64)",
+        p,
+        lines,
+    )
     check_covariances(cov, path=str(p), lines=lines, what="step covariance")
     return cov
 

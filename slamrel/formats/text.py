@@ -25,6 +25,7 @@ import json
 import math
 import os
 import re
+import sys
 import warnings
 from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -994,6 +995,16 @@ def loads_json(text: str, *, path: str) -> object:
     """
     try:
         return json.loads(text, object_pairs_hook=_unique_pairs)
+    except json.JSONDecodeError:
+        raise
+    except ValueError:  # an integer of more digits than Python converts (4300)
+        most = sys.get_int_max_str_digits()
+        digits = re.search(rf"\d{{{most + 1},}}", text)
+        raise InputError(
+            f"a number of more than {most} digits; expected numbers a float64 can hold",
+            path=path,
+            line=None if digits is None else text.count("\n", 0, digits.start()) + 1,
+        ) from None
     except _RepeatedKey:
         key, first, line = _repeated_key(text)
         raise InputError(

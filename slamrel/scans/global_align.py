@@ -197,6 +197,8 @@ def scan_chain(
         else:
             motion[k] = a.delta
         links.append(a)
+    if not nodes.size:  # no pair proposed (e.g. --distance beyond the whole drive)
+        return Chain(nodes, np.zeros((0, 3)), np.zeros(0), [], np.zeros((0, 3)), 0)
     chain = cumulative_compose(motion, poses[nodes[0]])
     travel = np.concatenate(([0.0], np.cumsum(np.hypot(motion[:, 0], motion[:, 1]))))
     return Chain(nodes, chain, travel, links, guess, fallback)
