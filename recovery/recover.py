@@ -582,8 +582,12 @@ def _check_finite(
     """
     from relation_metric.checks import bad_covariances
     from relation_metric.errors import DivergenceError
+    from relation_metric.trajectory import MAX_COORDINATE
 
-    bad = ~(np.isfinite(poses).all(axis=1) & np.isfinite(covs).all(axis=(1, 2)))
+    # a position beyond MAX_COORDINATE (the bound of every position slamrel reads) is a
+    # recovery that left the map's scale, not a trajectory to write
+    far = ~(np.abs(poses[:, :2]) <= MAX_COORDINATE).all(axis=1)
+    bad = ~(np.isfinite(poses).all(axis=1) & np.isfinite(covs).all(axis=(1, 2))) | far
     n_rep = 0
     if not bad.any():
         neg = np.zeros(covs.shape[0], dtype=bool)
@@ -598,8 +602,10 @@ def _check_finite(
             bad = neg
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise DivergenceError(
-            f"recovery diverged at t={float(times[k]):.6f} s (pose {k}): non-finite or non-PSD "
-            "covariance"
+        what = (
+            f"position ({poses[k, 0]:.6g}, {poses[k, 1]:.6g}) beyond {MAX_COORDINATE:.0e} m"
+            if far[k] and np.isfinite(poses[k]).all()
+            else "non-finite or non-PSD covariance"
         )
+        raise DivergenceError(f"recovery diverged at t={float(times[k]):.6f} s (pose {k}): {what}")
     return covs, n_rep

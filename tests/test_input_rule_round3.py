@@ -356,6 +356,10 @@ def test_controls_inside_the_bound_give_no_bug_warning(tmp_path, capsys):
     b = _bundle(tmp_path, **{"controls.csv": "t,v,omega\n0,1e29,0\n1,1,0.1\n2,1,0.1\n3,0,0\n"})
     err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt"), "--method", "filter"], capsys)
     assert f"error: {b}: " in err and "floating-point problem" not in err
+    # the smoother: a recovered position beyond 1e30 m is a divergence, not "pose 1: position
+    # (4e+28, 3.5e+54) is beyond 1e+30 m; expected coordinates in metres" about no file
+    err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt")], capsys)
+    assert f"error: {b}: " in err and "diverged at t=" in err and "pose 1: position" not in err
 
 
 @pytest.mark.parametrize("model", ["velocity", "odometry"])
