@@ -586,7 +586,7 @@ def _check_finite(
 
     # a position beyond MAX_COORDINATE (the bound of every position slamrel reads) is a
     # recovery that left the map's scale, not a trajectory to write
-    far = ~(np.abs(poses[:, :2]) <= MAX_COORDINATE).all(axis=1)
+    far = np.asarray(~(np.abs(poses[:, :2]) <= MAX_COORDINATE).all(axis=1), dtype=bool)
     bad = ~(np.isfinite(poses).all(axis=1) & np.isfinite(covs).all(axis=(1, 2))) | far
     n_rep = 0
     if not bad.any():

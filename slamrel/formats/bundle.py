@@ -374,9 +374,11 @@ def _read_step_covariances(root: Path, log_t: Array, log_name: str) -> Array:
     entry = np.abs(cov).max(axis=(1, 2))
     _refuse_first(
         entry > MAX_VARIANCE,
-        lambda k: f"step covariance: an entry of {float(entry[k]):.6g} is beyond "
-        f"{MAX_VARIANCE:.0e} (the largest variance a motion model accepts: products of "
-        "covariances must stay inside float64)",
+        lambda k: (
+            f"step covariance: an entry of {float(entry[k]):.6g} is beyond "
+            f"{MAX_VARIANCE:.0e} (the largest variance a motion model accepts: products of "
+            "covariances must stay inside float64)"
+        ),
         p,
         lines,
     )
@@ -625,22 +627,20 @@ def _check_controls(
             run = np.cumsum(np.abs(x[held]) * dt)
         far = np.zeros_like(big)
         far[hrow] = ~(run <= MAX_COORDINATE)
-        _refuse_first(
-            big | far,
-            lambda k, name=name, x=x, unit=unit, what=what: (
-                f"{name} = {float(x[k]):.6g}: "
-                + (
-                    f"beyond {MAX_COORDINATE:.0e} {unit}/s"
-                    if abs(x[k]) > MAX_COORDINATE
-                    else f"the controls' {what} up to this row is beyond {MAX_COORDINATE:.0e} "
-                    f"{unit}"
-                )
-                + " (their squares and products must stay inside float64); expected "
-                f"{'speeds in m/s' if name == 'v' else 'yaw rates in rad/s'}"
-            ),
-            path,
-            lines,
-        )
+        _refuse_first(big | far, partial(_control_beyond, name, x, unit, what), path, lines)
+
+
+def _control_beyond(name: str, x: Array, unit: str, what: str, k: int) -> str:
+    """The message of :func:`_check_controls` about row ``k`` of column ``name`` (``x``)."""
+    beyond = (
+        f"beyond {MAX_COORDINATE:.0e} {unit}/s"
+        if abs(x[k]) > MAX_COORDINATE
+        else f"the controls' {what} up to this row is beyond {MAX_COORDINATE:.0e} {unit}"
+    )
+    return (
+        f"{name} = {float(x[k]):.6g}: {beyond} (their squares and products must stay inside "
+        f"float64); expected {'speeds in m/s' if name == 'v' else 'yaw rates in rad/s'}"
+    )
 
 
 def _read_csv(
@@ -813,7 +813,7 @@ def read_bundle(
     )
 
 
-def _refuse_first(bad: Array, message: Callable[[int], str], path: Path, lines: Any) -> None:
+def _refuse_first(bad: NDArray[Any], message: Callable[[int], str], path: Path, lines: Any) -> None:
     """:class:`InputError` at the first row where ``bad`` (J,) holds, if any: the message of
     its index, its line (``lines`` (J,), or None)."""
     hit = np.flatnonzero(bad)
