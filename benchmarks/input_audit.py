@@ -464,43 +464,30 @@ def bag_cases() -> None:
 
 
 def corrupt(storage: str, name: str):
-    """A bag whose /pose message 3 is cut to 7 bytes (cannot deserialize)."""
+    """The bag of ``tests/test_bags.py``'s writer with /pose message 4 cut to 7 bytes (it
+    cannot deserialize): the writer's ``write`` wrapped, nothing else copied."""
 
     def make(d: Path) -> None:
         import numpy as np
-        from rosbags.rosbag1 import Writer as Writer1
-        from rosbags.rosbag2 import StoragePlugin
-        from rosbags.rosbag2 import Writer as Writer2
-        from rosbags.typesys import Stores, get_typestore
 
-        from tests.test_bags import TYPES, _messages, _truth
+        import tests.test_bags as tb
 
-        ts = get_typestore(Stores.ROS1_NOETIC if storage == "ros1" else Stores.LATEST)
-        ros1 = storage == "ros1"
-        ser = (
-            (lambda m, t: ts.serialize_ros1(m, t))
-            if ros1
-            else (lambda m, t: ts.serialize_cdr(m, t))
-        )
-        path = d / name
-        w = (
-            Writer1(path)
-            if ros1
-            else Writer2(
-                path,
-                version=9,
-                storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3,
-            )
-        )
-        truth = _truth(np.random.default_rng(0))
-        with w:
-            for kind in ("pose", "posecov"):
-                c = w.add_connection(f"/{kind}", TYPES[kind], typestore=ts)
-                for i, m in enumerate(_messages(ts, truth, kind)):
-                    raw = ser(m, TYPES[kind])
-                    if kind == "pose" and i == 3:
-                        raw = bytes(raw[:7])
-                    w.write(c, 10**9 * (i + 1), raw)
+        kept = (tb.Writer1, tb.Writer2)
+
+        def cut(base: type) -> type:
+            class Cut(base):  # type: ignore[misc, valid-type]
+                def write(self, conn: Any, stamp: int, data: bytes) -> None:
+                    if conn.topic == "/pose" and stamp == 4 * 10**9:
+                        data = bytes(data[:7])
+                    super().write(conn, stamp, data)
+
+            return Cut
+
+        tb.Writer1, tb.Writer2 = cut(kept[0]), cut(kept[1])
+        try:
+            tb._write(d / name, storage, tb._truth(np.random.default_rng(0)))
+        finally:
+            tb.Writer1, tb.Writer2 = kept
 
     return make
 
