@@ -1086,7 +1086,7 @@ def table_names(names: list[str]):
         widths = {len(r) for r in rows}
         if len(widths) != 1:
             return f"table.csv rows of widths {widths}"
-        got = sorted(r[0] for r in rows[1:])
+        got = sorted(r[1] for r in rows[1:] if r[0] == "run")
         if got != sorted(names):
             return f"names {got}"
         md = (d / "out" / "table.md").read_text().splitlines()
