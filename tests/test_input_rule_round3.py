@@ -472,3 +472,19 @@ def test_a_step_covariance_beyond_1e60_is_refused_at_its_line(tmp_path, capsys):
     )
     err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt")], capsys)
     assert f"{b / 'step_covariance.csv'}:3: step covariance: an entry of 1e+300 is beyond" in err
+
+
+@pytest.mark.parametrize("option", ["--time-tolerance", "--loop-min-travel"])
+@pytest.mark.parametrize("value", ["-1", "nan"])
+def test_align_refuses_a_negative_or_nan_tolerance(tmp_path, capsys, option, value):
+    """--time-tolerance and --loop-min-travel of -1 or nan were accepted (exit 0, the value
+    unused without --at / --loops, or a loop rule that compares nothing): exit 2 now."""
+    from tests.test_input_rule import _carmen
+
+    log = tmp_path / "log.clf"
+    log.write_text(_carmen([10.0 + 0.2 * k for k in range(4)]))
+    out = tmp_path / "o.relations"
+    argv = ["relations", "align", str(log), "-o", str(out), "--loops", option, value]
+    assert main(argv) == 2
+    assert f"{option} must be 0 or more" in capsys.readouterr().err
+    assert not out.exists()

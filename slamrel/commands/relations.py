@@ -488,6 +488,9 @@ def _checked_align_options(args: argparse.Namespace) -> bool:
         raise OptionError("--ambiguity must lie in (0, 1]")
     if args.max_range is not None and not args.max_range > 0:
         raise OptionError("--max-range must be positive")
+    for name in ("loop_min_travel", "time_tolerance"):  # read only with --loops, --at
+        if not getattr(args, name) >= 0:
+            raise OptionError(f"--{name.replace('_', '-')} must be 0 or more")
     bag = names_bag(args.log)
     if bag:
         if args.record:
