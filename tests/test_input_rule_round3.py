@@ -488,3 +488,14 @@ def test_align_refuses_a_negative_or_nan_tolerance(tmp_path, capsys, option, val
     assert main(argv) == 2
     assert f"{option} must be 0 or more" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_json_integer_beyond_float64_is_refused_not_a_crash(tmp_path, capsys):
+    """A 400-digit integer in initial_pose: math.isfinite raised OverflowError ("internal
+    error (OverflowError: int too large to convert to float)"). Refused as not finite."""
+    manifest = json.loads(_bundle_json())
+    manifest["initial_pose"] = [10**400 - 1, 0, 0]
+    b = _bundle(tmp_path, **{"bundle.json": json.dumps(manifest, indent=2)})
+    err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt")], capsys)
+    assert f"{b / 'bundle.json'}:" in err
+    assert "initial_pose: expected a finite number, got 9999999999" in err

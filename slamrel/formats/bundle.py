@@ -164,18 +164,21 @@ def _number(
     minimum: float | None = 0.0,
     maximum: float | None = None,
 ) -> float:
+    shown = _shown(value)
+    if isinstance(value, int) and not isinstance(value, bool):  # JSON integers are exact
+        value = float(value) if abs(value) < 2**1024 else math.inf  # beyond float64: inf
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise InputError(
-            f"{what}: expected a finite number, got {_shown(value)}", path=path, line=line
+            f"{what}: expected a finite number, got {shown}", path=path, line=line
         )
     if minimum is not None and value < minimum:
         raise InputError(
-            f"{what}: expected a number >= {minimum}, got {_shown(value)}", path=path, line=line
+            f"{what}: expected a number >= {minimum}, got {shown}", path=path, line=line
         )
     if maximum is not None and abs(value) > maximum:
         raise InputError(
             f"{what}: expected a magnitude of at most {maximum:.0e} (squares and products of "
-            f"it must stay inside float64), got {_shown(value)}",
+            f"it must stay inside float64), got {shown}",
             path=path,
             line=line,
         )
