@@ -1194,6 +1194,21 @@ def build() -> None:
 # ------------------------------------------------------------------------------ running
 
 
+#: Options whose value may be negative (a time offset or bound): only nan is never valid.
+SIGNED = ("--t_offset", "--t_start", "--t_end")
+
+
+def _never_valid(c: Case) -> bool:
+    """An option value no command can use: nan, or -1 for an option that is a size, a
+    tolerance or a threshold."""
+    for k, word in enumerate(c.argv[:-1]):
+        if word.startswith("-") and not word[1:2].isdigit():
+            v = c.argv[k + 1]
+            if v == "nan" or (v == "-1" and word not in SIGNED):
+                return True
+    return False
+
+
 def judge(c: Case, rc: int, out: str, err: str, d: Path) -> str | None:
     text = out + err
     for bad in BAD:
@@ -1202,6 +1217,8 @@ def judge(c: Case, rc: int, out: str, err: str, d: Path) -> str | None:
     if c.expect == "optionish":  # an option value: exit 2, or a score/refusal that is sound
         if rc == 2:
             return None
+        if _never_valid(c):
+            return f"exit {rc} for {c.name}: expected 2 (an option value nothing can use)"
         if rc in (0, 3):
             return None if rc == 0 else (None if "error:" in err else "exit 3 without error line")
         return f"exit {rc}"
@@ -1270,6 +1287,7 @@ def run_case(c: Case, root: Path) -> tuple[str | None, int, str]:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--only", default="")
+    ap.add_argument("--classes", default="", help="comma-separated classes to run")
     ap.add_argument("--json")
     a = ap.parse_args()
     build()
@@ -1278,6 +1296,8 @@ def main() -> None:
     t0 = time.time()
     for c in CASES:
         if a.only and a.only not in f"{c.cls} {c.name}":
+            continue
+        if a.classes and c.cls not in a.classes.split(","):
             continue
         verdict, rc, last = run_case(c, root)
         results.append(
