@@ -1194,8 +1194,9 @@ def build() -> None:
 # ------------------------------------------------------------------------------ running
 
 
-#: Options whose value may be negative (a time offset or bound): only nan is never valid.
-SIGNED = ("--t_offset", "--t_start", "--t_end")
+#: Options whose value may be negative (a time offset or bound; evo's --n_to_align -1: all
+#: poses): only nan is never valid.
+SIGNED = ("--t_offset", "--t_start", "--t_end", "--n_to_align")  # evo: -1 aligns all poses
 
 
 def _never_valid(c: Case) -> bool:
