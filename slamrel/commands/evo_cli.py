@@ -48,10 +48,11 @@ def _kind_parsers(kinds: argparse._SubParsersAction, metric: str) -> None:  # ty
         "kitti": "KITTI pose files (3x4 [R | t] a line; paired pose by pose)",
         "euroc": "an EuRoC ground-truth CSV and a TUM estimate",
         "bag": "two topics of a ROS 1 bag",
-        "bag2": "two topics of a ROS 2 bag (sqlite3 or MCAP)",
+        "bag2": "two topics of a ROS 2 bag (sqlite3 or MCAP; alias: mcap)",
     }
     for kind, text in what.items():
-        p = kinds.add_parser(kind, help=text, description=f"{metric.upper()} of {text}.")
+        alias = {"aliases": ["mcap"]} if kind == "bag2" else {}  # evo's alias of bag2
+        p = kinds.add_parser(kind, help=text, description=f"{metric.upper()} of {text}.", **alias)
         if kind in ("bag", "bag2"):
             p.add_argument("reference", metavar="BAG", help="the ROS bag")
             p.add_argument("ref_topic", metavar="REF_TOPIC", help="reference trajectory topic")
@@ -78,7 +79,7 @@ def _kind_parsers(kinds: argparse._SubParsersAction, metric: str) -> None:  # ty
                 "first); counted and said (default: %(default)s)",
             )
         _output_arguments(p)
-        p.set_defaults(func=run, evo_metric=metric)
+        p.set_defaults(func=run, evo_metric=metric, evo_kind=kind)
 
 
 def _algorithm_arguments(p: argparse.ArgumentParser, metric: str) -> None:
