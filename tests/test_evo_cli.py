@@ -614,3 +614,30 @@ def test_save_plot_writes_the_errors_it_scored(tmp_path: Path) -> None:
     before = gt.read_bytes()
     assert main(["ape", "euroc", str(gt), str(est), "--save_plot", str(gt)]) == 3  # an input
     assert gt.read_bytes() == before
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("to", ["tum", "kitti"])
+def test_convert_keep_writes_what_evo_traj_writes(to: str, evo_bin: Path, tmp_path: Path) -> None:
+    """``traj convert --duplicate-stamps keep`` against ``evo_traj tum --save_as_tum`` /
+    ``--save_as_kitti`` on an estimate with 4 repeated timestamps (evo writes every row)."""
+    _, est, _, _ = _repeated_pair(tmp_path)
+    src = tmp_path / "in.txt"
+    src.write_text(est.read_text())
+    run = subprocess.run(
+        [str(evo_bin / "evo_traj"), "tum", "in.txt", f"--save_as_{to}", "--no_warnings"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    ours = tmp_path / f"ours.{to}"
+    argv = ["traj", "convert", str(src), "-o", str(ours), "--duplicate-stamps", "keep", "-q"]
+    assert main(argv) == 0
+    theirs, mine = np.loadtxt(tmp_path / f"in.{to}"), np.loadtxt(ours)
+    assert mine.shape == theirs.shape == (204, 8 if to == "tum" else 12)
+    if to == "tum":  # a quaternion and its negative are one rotation
+        sign = np.sign(np.einsum("ni,ni->n", mine[:, 4:], theirs[:, 4:]))
+        mine[:, 4:] *= sign[:, None]
+    np.testing.assert_allclose(mine, theirs, rtol=1e-12, atol=1e-15)
