@@ -36,6 +36,9 @@ from slamrel.cli import main
 TOL = 1e-9
 EVO_VENV = ROOT / "benchmarks" / ".venv-evo"
 
+# fr2_desk's ground truth repeats a timestamp: evo keeps both poses, which --downsample and
+# --motion_filter count
+KEEP = ["--duplicate_stamps", "keep"]
 # (name, metric, kind, inputs, options): inputs are keys of the `inputs` fixture
 CASES = [
     ("ape/none", "ape", "tum", "fr1", []),
@@ -68,6 +71,20 @@ CASES = [
     ("rpe/rot_part", "rpe", "tum", "fr2", ["-r", "rot_part"]),
     ("rpe/point_distance", "rpe", "tum", "fr1", ["-r", "point_distance", "-d", "20"]),
     ("rpe/t_start", "rpe", "tum", "fr1", ["--t_start", "1305031110"]),
+    ("ape/change_unit_mm", "ape", "tum", "fr2", ["-as", "--change_unit", "mm"]),
+    ("rpe/change_unit_rad", "rpe", "tum", "fr1", ["-r", "angle_deg", "--change_unit", "rad"]),
+    ("rpe/change_unit_cm", "rpe", "tum", "fr1", ["-d", "0.2", "-u", "m", "--change_unit", "cm"]),
+    ("ape/downsample", "ape", "tum", "fr2", ["-as", "--downsample", "500", *KEEP]),
+    ("rpe/downsample", "rpe", "tum", "fr1", ["--downsample", "300", "-d", "2"]),
+    ("rpe/motion_filter", "rpe", "tum", "fr2", ["--motion_filter", "0.05", "5", *KEEP]),
+    (
+        "ape/motion_filter_downsample",
+        "ape",
+        "tum",
+        "fr1",
+        ["-a", "--motion_filter", "0.02", "2", "--downsample", "2000"],
+    ),
+    ("rpe/motion_filter_angle", "rpe", "tum", "fr1", ["--motion_filter", "1", "3", "-r", "full"]),
     ("bag/ape_a", "ape", "bag", "bag", ["-a"]),
     ("bag/rpe", "rpe", "bag", "bag", ["-d", "1", "-u", "m"]),
     ("bag/odom_ape_a", "ape", "bag", "ros1_odom", ["-a"]),
@@ -80,6 +97,7 @@ CASES = [
     ("bag2_mcap/odom_ape_a", "ape", "bag2", "mcap_odom", ["-a"]),
     ("bag2_mcap/cov_rpe_full", "rpe", "bag2", "mcap_cov", ["-d", "5", "-r", "full"]),
     ("bag2_mcap/tf_rpe_m", "rpe", "bag2", "mcap_tf", ["-d", "0.1", "-u", "m", "--all_pairs"]),
+    ("bag2_mcap/odom_rpe_filter", "rpe", "bag2", "mcap_odom", ["--motion_filter", "0.01", "1"]),
     ("bag2_mcap/euroc_ape_origin", "ape", "mcap", "mcap_euroc", ["--align_origin"]),
     ("kitti/ape_a", "ape", "kitti", "kitti", ["-a"]),
     ("kitti/ape_xz", "ape", "kitti", "kitti", ["-a", "--project_to_plane", "xz"]),
@@ -96,6 +114,14 @@ CASES = [
         ["-a", "-d", "50", "-u", "m", "--project_to_plane", "xz"],
     ),
     ("kitti_e/ape_full", "ape", "kitti", "kitti_e", ["-r", "full"]),
+    ("kitti_e/rpe_downsample", "rpe", "kitti", "kitti_e", ["--downsample", "200", "-r", "full"]),
+    (
+        "kitti/ape_downsample_km",
+        "ape",
+        "kitti",
+        "kitti",
+        ["--downsample", "99", "--change_unit", "km"],
+    ),
     (
         "kitti_e/ape_xz_deg",
         "ape",

@@ -118,6 +118,28 @@ def _algorithm_arguments(p: argparse.ArgumentParser, metric: str) -> None:
         "(default: %(default)s, all)",
     )
     p.add_argument(
+        "--change_unit",
+        choices=("deg", "rad", "mm", "cm", "m", "km"),
+        help="report the errors in this unit: lengths in lengths, angles in angles "
+        "(default: none, the relation's own)",
+    )
+    p.add_argument(
+        "--downsample",
+        type=opt.positive_int,
+        metavar="N",
+        help="keep at most N evenly spaced poses of each trajectory, before the association "
+        "(default: none)",
+    )
+    p.add_argument(
+        "--motion_filter",
+        type=opt.nonnegative_float,
+        nargs=2,
+        metavar=("DISTANCE", "ANGLE_DEGREES"),
+        help="keep a pose only when the path since the last kept pose reaches DISTANCE [m] or "
+        "its rotation from it reaches ANGLE_DEGREES; before the association, as evo; not "
+        "for KITTI (default: none)",
+    )
+    p.add_argument(
         "--project_to_plane",
         choices=PLANES,
         help="project the trajectories to 2D in this plane, after the alignment (KITTI's "
