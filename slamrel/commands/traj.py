@@ -215,8 +215,8 @@ def _info_text(path: str, e: dict[str, object]) -> str:
             f"  repeats      {rep['count']} pose(s) repeat the previous pose's timestamp, "
             f"{rep['differing']} with a different pose (first at line {rep['first_line']}):\n"
             "               a reference keeps the first of each; an estimate with different "
-            "poses is refused\n               ('slamrel ape|rpe --duplicate_stamps keep' "
-            "keeps them all, as evo)"
+            "poses is refused\n               ('slamrel ape|rpe --duplicate_stamps keep', "
+            "'evaluate|traj convert --duplicate-stamps keep' keep them all, as evo)"
         )
     if "message_type" in e:
         child = f" -> {e['child_frame_id']}" if e["child_frame_id"] else ""
