@@ -51,8 +51,10 @@ def _kind_parsers(kinds: argparse._SubParsersAction, metric: str) -> None:  # ty
         "bag2": "two topics of a ROS 2 bag (sqlite3 or MCAP; alias: mcap)",
     }
     for kind, text in what.items():
-        alias = {"aliases": ["mcap"]} if kind == "bag2" else {}  # evo's alias of bag2
-        p = kinds.add_parser(kind, help=text, description=f"{metric.upper()} of {text}.", **alias)
+        aliases = ["mcap"] if kind == "bag2" else []  # evo's alias of bag2
+        p = kinds.add_parser(
+            kind, help=text, description=f"{metric.upper()} of {text}.", aliases=aliases
+        )
         if kind in ("bag", "bag2"):
             p.add_argument("reference", metavar="BAG", help="the ROS bag")
             p.add_argument("ref_topic", metavar="REF_TOPIC", help="reference trajectory topic")
