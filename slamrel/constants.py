@@ -20,6 +20,7 @@ __all__ = [
     "NOISE_HELP",
     "POSE_ONLY_METHODS",
     "PAIRS_FROM",
+    "DUPLICATE_STAMPS",
     "EVO_MAX_TIME_DIFF",
     "STRATEGY_OPTION_WORDS",
     "PLOT_MODES",
@@ -82,7 +83,12 @@ EVALUATE_DEFAULTS: dict[str, Any] = {
     "t_offset": 0.0,
     "t_start": None,
     "t_end": None,
+    "duplicate_stamps": "refuse",
 }
+#: What to do with poses that share a timestamp (``--duplicate-stamps``, ape/rpe's
+#: ``--duplicate_stamps``): keep them all (evo's reading), keep the first of each, or the
+#: role's rule (a reference keeps the first, an estimate with two different poses is refused).
+DUPLICATE_STAMPS = ("keep", "first", "refuse")
 #: Where relations generated from a trajectory take their pose pairs (``--pairs-from``).
 PAIRS_FROM = ("reference", "estimate")
 #: The planes of ``slamrel evaluate --plot-mode``

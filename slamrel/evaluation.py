@@ -235,6 +235,8 @@ def _load_estimate(
         role="estimate",
         planar=options.planar,
         times=options.times,
+        repeats=options.duplicate_stamps,
+        repeats_option="--duplicate-stamps",
     )
     _refuse_if_strict(options, loaded, estimate)
     _note_projection(notes, "estimate", loaded)
@@ -444,6 +446,8 @@ def load_reference(
         planar=options.planar,
         times=options.reference_times,
         format_option="--reference-format",
+        repeats=options.duplicate_stamps,
+        repeats_option="--duplicate-stamps",
     )
     ref = Path(reference)
     _refuse_if_strict(options, loaded, str(ref / "groundtruth.csv" if ref.is_dir() else ref))

@@ -16,8 +16,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from relation_metric.constants import MODES, STRATEGIES
+from slamrel.constants import DUPLICATE_STAMPS, PAIRS_FROM, TRAJECTORY_FORMATS
 from slamrel.constants import EVALUATE_DEFAULTS as _DEFAULT
-from slamrel.constants import PAIRS_FROM, TRAJECTORY_FORMATS
 
 __all__ = ["EvaluateOptions", "SCORING_OPTIONS"]
 
@@ -102,6 +102,10 @@ class EvaluateOptions:
     t_start: float | None = _DEFAULT["t_start"]
     #: ... and ``t ≤ t_end`` [s] (evo's ``--t_end``); None: no bound.
     t_end: float | None = _DEFAULT["t_end"]
+    #: Poses of REFERENCE and ESTIMATE that share a timestamp (one of ``DUPLICATE_STAMPS``):
+    #: ``"keep"`` all (evo's reading), ``"first"`` of each, or ``"refuse"``: a reference keeps
+    #: the first of each, an estimate with two different poses at one time is refused.
+    duplicate_stamps: str = _DEFAULT["duplicate_stamps"]
 
     def __post_init__(self) -> None:
         for name in ("format", "reference_format", "odometry_format"):
@@ -136,6 +140,7 @@ class EvaluateOptions:
         _integer(self, "seed", 0, _MAX_SEED, "a seed in [0, 2**63 - 1]")
         _number(self, "seconds", lambda v: v > 0.0, "a finite positive number")
         _choice("pairs_from", self.pairs_from, PAIRS_FROM)
+        _choice("duplicate_stamps", self.duplicate_stamps, DUPLICATE_STAMPS)
         _number(self, "t_offset", lambda v: True, "a finite number")
         for name in ("t_start", "t_end"):
             if getattr(self, name) is not None:

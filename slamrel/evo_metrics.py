@@ -40,6 +40,7 @@ from relation_metric.pose_error import (
     absolute_pose_errors,
     relative_pose_errors,
 )
+from relation_metric.pose_filters import downsample_ids, motion_filter_ids
 from relation_metric.stats import evo_statistics
 from relation_metric.time_association import synchronize
 from relation_metric.trajectory import Trajectory
@@ -47,7 +48,14 @@ from slamrel.evaluation import load_trajectory
 from slamrel.formats.bags import one_opening
 from slamrel.formats.trajectories import read_kitti_matrices
 
-__all__ = ["EvoOptions", "EvoResult", "evo_files", "INPUT_KINDS", "RELATION_TITLES"]
+__all__ = [
+    "EvoOptions",
+    "EvoResult",
+    "evo_files",
+    "INPUT_KINDS",
+    "RELATION_TITLES",
+    "CHANGE_UNITS",
+]
 
 #: evo's input kinds (its sub-commands) and the formats of (reference, estimate).
 INPUT_KINDS = {
@@ -68,6 +76,9 @@ RELATION_TITLES = {
     "point_distance": ("point distance", "m"),
 }
 _DELTA_UNIT_WORDS = {"f": "frames", "d": "deg", "r": "rad", "m": "m"}
+#: evo's ``--change_unit`` units: metres per length unit; the angles convert to each other.
+_METRES = {"mm": 1e-3, "cm": 1e-2, "m": 1, "km": 1e3}
+CHANGE_UNITS = ("deg", "rad", *_METRES)
 
 
 @dataclass(frozen=True)
@@ -78,6 +89,9 @@ class EvoOptions:
     ``estimate`` file paths, or for bags the bag in ``reference`` and the topics in
     ``ref_topic``/``est_topic``. ``n_to_align`` −1 means all poses (evo's default).
     ``duplicate_stamps`` ``"keep"`` (evo's reading), ``"first"`` or ``"refuse"`` (module doc).
+    ``change_unit`` one of :data:`CHANGE_UNITS` (the errors converted after they are computed);
+    ``downsample`` at most N poses of each trajectory, ``motion_filter`` (metres, degrees):
+    both before the association, as evo (:mod:`relation_metric.pose_filters`).
     """
 
     metric: str
@@ -102,6 +116,9 @@ class EvoOptions:
     t_end: float | None = None
     project_to_plane: str | None = None
     duplicate_stamps: str = "refuse"
+    change_unit: str | None = None
+    downsample: int | None = None
+    motion_filter: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -134,6 +151,7 @@ def evo_files(options: EvoOptions) -> EvoResult:
     o = options
     _check(o)
     ref, est, ref_name, est_name, rotations = _load(o)
+    ref, est, rotations = _thinned(o, ref, est, rotations)
     timed = o.kind != "kitti"
     if timed:
         ref = _cropped(ref, o.t_start, o.t_end)
@@ -171,7 +189,9 @@ def evo_files(options: EvoOptions) -> EvoResult:
             rotations=rotations,
         )
     title = evo_title(o)
-    name, unit = RELATION_TITLES[o.pose_relation]
+    unit = _unit(o)
+    errors = _converted(pe.errors, RELATION_TITLES[o.pose_relation][1], unit)
+    pe = PoseErrors(errors, pe.first, pe.second, pe.alignment)
     info = {
         "title": title,
         "ref_name": ref_name,
@@ -191,6 +211,14 @@ def _check(o: EvoOptions) -> None:
         raise OptionError(
             f"the alignment needs at least 2 poses, got {o.n_to_align} (-1: all, the default)",
             option="--n_to_align",
+        )
+    if o.change_unit is not None:
+        _converted(np.ones(1), RELATION_TITLES[o.pose_relation][1], o.change_unit)
+    if o.kind == "kitti" and o.motion_filter is not None:
+        raise OptionError(
+            "needs timestamps, and KITTI files have none (as evo: it could break the "
+            "pose-by-pose pairing)",
+            option="--motion_filter",
         )
     if o.kind not in INPUT_KINDS:
         raise OptionError(f"unknown input kind {o.kind!r}", option=o.kind)
@@ -244,6 +272,47 @@ def _load(o: EvoOptions) -> tuple[Trajectory, Trajectory, str, str, Any]:
     return ref.trajectory.lifted(), est.trajectory.lifted(), names[0], names[1], None
 
 
+def _thinned(o: EvoOptions, ref: Trajectory, est: Trajectory, rotations: Any) -> tuple:
+    """evo's ``--downsample`` then ``--motion_filter`` of both trajectories (and of KITTI's
+    rotation blocks), before the association."""
+    if o.downsample is None and o.motion_filter is None:
+        return ref, est, rotations
+    trajectories = [ref, est]
+    blocks = list(rotations) if rotations is not None else None
+    for k, traj in enumerate(trajectories):
+        ids = np.arange(len(traj))
+        if o.downsample is not None:
+            ids = downsample_ids(len(traj), o.downsample)
+        if o.motion_filter is not None:
+            sub = Trajectory(traj.timestamps[ids], traj.poses[ids])
+            metres, degrees = o.motion_filter
+            ids = ids[motion_filter_ids(sub, metres, float(np.radians(degrees)))]
+        trajectories[k] = Trajectory(traj.timestamps[ids], traj.poses[ids])
+        if blocks is not None:
+            blocks[k] = blocks[k][ids]
+    return trajectories[0], trajectories[1], None if blocks is None else tuple(blocks)
+
+
+def _unit(o: EvoOptions) -> str:
+    """The unit of the errors reported: ``--change_unit``'s, else the relation's."""
+    return o.change_unit or RELATION_TITLES[o.pose_relation][1]
+
+
+def _converted(errors: NDArray[np.float64], unit: str, new: str) -> NDArray[np.float64]:
+    """evo's ``PE.change_unit``: lengths through metres, radians and degrees both ways."""
+    if new == unit:
+        return errors
+    if unit == "unit-less":
+        raise OptionError(f"the {unit} errors do not convert (as evo)", option="--change_unit")
+    if unit in _METRES and new in _METRES:
+        return errors * (_METRES[unit] / _METRES[new])
+    if (unit, new) == ("rad", "deg"):
+        return np.rad2deg(errors)
+    if (unit, new) == ("deg", "rad"):
+        return np.deg2rad(errors)
+    raise OptionError(f"cannot convert {unit} to {new} (as evo)", option="--change_unit")
+
+
 def _cropped(ref: Trajectory, t_start: float | None, t_end: float | None) -> Trajectory:
     """evo's ``reduce_to_time_range`` of the reference, applied when ``t_start or t_end``."""
     if not (t_start or t_end):
@@ -264,7 +333,7 @@ def _cropped(ref: Trajectory, t_start: float | None, t_end: float | None) -> Tra
 
 def evo_title(o: EvoOptions) -> str:
     """The title evo gives the result (printed first, and ``info.json``'s ``title``)."""
-    name, unit = RELATION_TITLES[o.pose_relation]
+    name, unit = RELATION_TITLES[o.pose_relation][0], _unit(o)
     if o.metric == "ape":
         title = f"APE w.r.t. {name} ({unit})"
     else:

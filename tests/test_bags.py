@@ -698,3 +698,52 @@ def test_ros1_pose_stamped_decoded_at_once_as_rosbags_decodes_each(tmp_path, rng
     msgs[1].header.frame_id = "odom_long"
     raw = [bytes(ts.serialize_ros1(m, TYPES["pose"])) for m in msgs]
     assert bags._ros1_pose_stamped(raw) is None
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_ros2_pose_stamped_decoded_at_once_as_rosbags_decodes_each(
+    tmp_path, rng, monkeypatch, storage
+):
+    """The vectorised ROS 2 (CDR) PoseStamped path gives rosbags' per-message numbers bit
+    for bit, for frame_id lengths with and without padding before the pose, and steps aside
+    (None) for mixed sizes, a frame_id that changes, or a big-endian message."""
+    import slamrel.formats.bags as bags
+
+    truth = _truth(rng)
+    bag = _write(tmp_path / f"p_{storage}", storage, truth)
+    spec = split_bag_spec(f"{bag}:/pose")
+    fast = read_bag_poses(spec)
+    monkeypatch.setattr(bags, "_ros2_pose_stamped", lambda raw: None)
+    slow = read_bag_poses(spec)
+    monkeypatch.undo()
+    np.testing.assert_array_equal(fast.timestamps, slow.timestamps)
+    np.testing.assert_array_equal(fast.poses, slow.poses)
+    assert fast.frame_id == slow.frame_id == "map"
+    ts = get_typestore(Stores.LATEST)
+    for frame in ("", "m", "odom", "world", "base_link", "a" * 11):
+        msgs = _messages(ts, truth, "pose")
+        for m in msgs:
+            m.header.frame_id = frame
+        raw = [bytes(ts.serialize_cdr(m, TYPES["pose"])) for m in msgs]
+        got = bags._ros2_pose_stamped(raw)
+        assert got is not None, frame
+        each = [ts.deserialize_cdr(r, TYPES["pose"]) for r in raw]
+        stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in each]
+        np.testing.assert_array_equal(got[0], stamps)
+        rows = [
+            (p.position.x, p.position.y, p.position.z)
+            + (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
+            for p in (m.pose for m in each)
+        ]
+        np.testing.assert_array_equal(got[1], rows)
+        assert got[2] == frame
+    msgs = _messages(ts, truth, "pose")[:2]
+    msgs[1].header.frame_id = "pam"
+    raw = [bytes(ts.serialize_cdr(m, TYPES["pose"])) for m in msgs]
+    assert len(raw[0]) == len(raw[1])
+    assert bags._ros2_pose_stamped(raw) is None  # "map" and "pam": one size, two frames
+    msgs[1].header.frame_id = "odom_long"
+    raw = [bytes(ts.serialize_cdr(m, TYPES["pose"])) for m in msgs]
+    assert bags._ros2_pose_stamped(raw) is None
+    big = [bytes(ts.serialize_cdr(m, TYPES["pose"], little_endian=False)) for m in msgs[:1]]
+    assert bags._ros2_pose_stamped(big) is None

@@ -112,16 +112,17 @@ def test_readme_has_one_small_figure_from_docs_img() -> None:
 def _leaf_parsers(
     parser: argparse.ArgumentParser, words: tuple[str, ...] = ()
 ) -> list[tuple[tuple[str, ...], argparse.ArgumentParser]]:
-    """Every (sub-)command's parser with its words (``("traj", "info")``), leaves only."""
+    """Every (sub-)command's parser with its words (``("traj", "info")``), leaves only; an
+    alias (``ape mcap`` of ``ape bag2``, evo's) is its command's parser, described there."""
     subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
     if not subs:
         return [(words, parser)]
-    return [
-        leaf
+    firsts = [
+        (name, child)
         for action in subs
-        for name, child in action.choices.items()
-        for leaf in _leaf_parsers(child, (*words, name))
+        for name, child in {id(c): (n, c) for n, c in reversed(action.choices.items())}.values()
     ]
+    return [leaf for name, child in firsts for leaf in _leaf_parsers(child, (*words, name))]
 
 
 def _section(page: Path, heading: str) -> str:

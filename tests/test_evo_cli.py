@@ -7,7 +7,11 @@ install evo`` when it does not exist, which takes a minute: the tests that need 
 ``stats.json`` and every value of ``error_array.npy`` must agree to 1e-9 relative, with the
 same count. The inputs are the TUM RGB-D sequences and the ROS 1 bag of ``../shared/data``
 and files this module generates with a seeded generator (KITTI poses written with 17
-digits, an EuRoC ground-truth CSV and its TUM estimate).
+digits, an EuRoC ground-truth CSV and its TUM estimate), and bags it writes with rosbags'
+writers from them (no ROS 2 bag lies in ``../shared/data``): a ROS 1 bag, a ROS 2 sqlite3
+bag and a ROS 2 MCAP bag, each with PoseStamped, Odometry, PoseWithCovarianceStamped and
+TransformStamped topics (:func:`_write_bag`). tf chains are not compared: evo from PyPI
+cannot read them (its ``tf_cache`` imports ROS's ``tf2_py``).
 
 The fast test checks a few cases against numbers evo 1.38.1 printed (:data:`EVO`), so the
 default tier guards the definitions without evo installed.
@@ -32,6 +36,9 @@ from slamrel.cli import main
 TOL = 1e-9
 EVO_VENV = ROOT / "benchmarks" / ".venv-evo"
 
+# fr2_desk's ground truth repeats a timestamp: evo keeps both poses, which --downsample and
+# --motion_filter count
+KEEP = ["--duplicate_stamps", "keep"]
 # (name, metric, kind, inputs, options): inputs are keys of the `inputs` fixture
 CASES = [
     ("ape/none", "ape", "tum", "fr1", []),
@@ -64,8 +71,34 @@ CASES = [
     ("rpe/rot_part", "rpe", "tum", "fr2", ["-r", "rot_part"]),
     ("rpe/point_distance", "rpe", "tum", "fr1", ["-r", "point_distance", "-d", "20"]),
     ("rpe/t_start", "rpe", "tum", "fr1", ["--t_start", "1305031110"]),
+    ("ape/change_unit_mm", "ape", "tum", "fr2", ["-as", "--change_unit", "mm"]),
+    ("rpe/change_unit_rad", "rpe", "tum", "fr1", ["-r", "angle_deg", "--change_unit", "rad"]),
+    ("rpe/change_unit_cm", "rpe", "tum", "fr1", ["-d", "0.2", "-u", "m", "--change_unit", "cm"]),
+    ("ape/downsample", "ape", "tum", "fr2", ["-as", "--downsample", "500", *KEEP]),
+    ("rpe/downsample", "rpe", "tum", "fr1", ["--downsample", "300", "-d", "2"]),
+    ("rpe/motion_filter", "rpe", "tum", "fr2", ["--motion_filter", "0.05", "5", *KEEP]),
+    (
+        "ape/motion_filter_downsample",
+        "ape",
+        "tum",
+        "fr1",
+        ["-a", "--motion_filter", "0.02", "2", "--downsample", "2000"],
+    ),
+    ("rpe/motion_filter_angle", "rpe", "tum", "fr1", ["--motion_filter", "1", "3", "-r", "full"]),
     ("bag/ape_a", "ape", "bag", "bag", ["-a"]),
     ("bag/rpe", "rpe", "bag", "bag", ["-d", "1", "-u", "m"]),
+    ("bag/odom_ape_a", "ape", "bag", "ros1_odom", ["-a"]),
+    ("bag/transform_rpe", "rpe", "bag", "ros1_tf", ["-d", "0.2", "-u", "m"]),
+    ("bag/euroc_ape_as", "ape", "bag", "ros1_euroc", ["-as"]),
+    ("bag2_db3/odom_ape_a", "ape", "bag2", "sqlite3_odom", ["-a"]),
+    ("bag2_db3/cov_rpe_m", "rpe", "bag2", "sqlite3_cov", ["-d", "0.2", "-u", "m"]),
+    ("bag2_db3/tf_ape_as_deg", "ape", "bag2", "sqlite3_tf", ["-as", "-r", "angle_deg"]),
+    ("bag2_db3/euroc_rpe", "rpe", "bag2", "sqlite3_euroc", ["-d", "10", "--all_pairs"]),
+    ("bag2_mcap/odom_ape_a", "ape", "bag2", "mcap_odom", ["-a"]),
+    ("bag2_mcap/cov_rpe_full", "rpe", "bag2", "mcap_cov", ["-d", "5", "-r", "full"]),
+    ("bag2_mcap/tf_rpe_m", "rpe", "bag2", "mcap_tf", ["-d", "0.1", "-u", "m", "--all_pairs"]),
+    ("bag2_mcap/odom_rpe_filter", "rpe", "bag2", "mcap_odom", ["--motion_filter", "0.01", "1"]),
+    ("bag2_mcap/euroc_ape_origin", "ape", "mcap", "mcap_euroc", ["--align_origin"]),
     ("kitti/ape_a", "ape", "kitti", "kitti", ["-a"]),
     ("kitti/ape_xz", "ape", "kitti", "kitti", ["-a", "--project_to_plane", "xz"]),
     ("kitti/rpe_100m", "rpe", "kitti", "kitti", ["-d", "100", "-u", "m", "-r", "angle_deg"]),
@@ -81,6 +114,14 @@ CASES = [
         ["-a", "-d", "50", "-u", "m", "--project_to_plane", "xz"],
     ),
     ("kitti_e/ape_full", "ape", "kitti", "kitti_e", ["-r", "full"]),
+    ("kitti_e/rpe_downsample", "rpe", "kitti", "kitti_e", ["--downsample", "200", "-r", "full"]),
+    (
+        "kitti/ape_downsample_km",
+        "ape",
+        "kitti",
+        "kitti",
+        ["--downsample", "99", "--change_unit", "km"],
+    ),
     (
         "kitti_e/ape_xz_deg",
         "ape",
@@ -207,6 +248,81 @@ def _repeated_pair(folder: Path) -> tuple[Path, Path, Path, Path]:
     return gt_csv, est_rep, gt_rep, exact
 
 
+#: The topics of the generated bags: (topic, message type, source rows) — see :func:`_write_bag`.
+BAG_TOPICS = (
+    ("/groundtruth", "geometry_msgs/msg/PoseStamped", "fr1_gt"),
+    ("/odom", "nav_msgs/msg/Odometry", "fr1_est"),
+    ("/pose_cov", "geometry_msgs/msg/PoseWithCovarianceStamped", "fr1_est"),
+    ("/transform", "geometry_msgs/msg/TransformStamped", "fr1_est"),
+    ("/euroc_gt", "geometry_msgs/msg/TransformStamped", "euroc_gt"),
+    ("/euroc_odom", "nav_msgs/msg/Odometry", "euroc_est"),
+)
+
+
+def _bag_message(T, msgtype: str, row: np.ndarray, ros1: bool):  # noqa: ANN001, ANN202
+    """One message of ``msgtype`` for a TUM row ``t x y z qx qy qz qw`` (stamp split into
+    sec + nanosec, as evo writes it: ``int((t - sec) * 1e9)``)."""
+    sec = int(row[0] // 1)
+    stamp = T["builtin_interfaces/msg/Time"](sec=sec, nanosec=int((row[0] - sec) * 1e9))
+    header = T["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}), stamp=stamp, frame_id="world")
+    x, y, z, qx, qy, qz, qw = (float(v) for v in row[1:])
+    q = T["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw)
+    if msgtype.endswith("TransformStamped"):
+        v = T["geometry_msgs/msg/Vector3"](x=x, y=y, z=z)
+        tf = T["geometry_msgs/msg/Transform"](translation=v, rotation=q)
+        return T[msgtype](header=header, child_frame_id="cam", transform=tf)
+    pose = T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=x, y=y, z=z), orientation=q
+    )
+    if msgtype.endswith("PoseStamped"):
+        return T[msgtype](header=header, pose=pose)
+    cov = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.eye(6).ravel())
+    if msgtype.endswith("PoseWithCovarianceStamped"):
+        return T[msgtype](header=header, pose=cov)
+    zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+    twist = T["geometry_msgs/msg/TwistWithCovariance"](
+        twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=np.zeros(36)
+    )
+    return T[msgtype](header=header, child_frame_id="cam", pose=cov, twist=twist)
+
+
+def _write_bag(path: Path, storage: str, rows: dict[str, np.ndarray]) -> Path:
+    """A ROS 1 bag (``storage`` ``"ros1"``) or a ROS 2 bag folder (``"sqlite3"``, ``"mcap"``)
+    written with rosbags' writers, holding :data:`BAG_TOPICS`: the TUM RGB-D fr1_xyz ground
+    truth as PoseStamped, its RGBD-SLAM estimate as Odometry, PoseWithCovarianceStamped and
+    TransformStamped, and the generated EuRoC pair. Each message is also stored at its stamp."""
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
+    from rosbags.typesys import Stores, get_typestore
+
+    ros1 = storage == "ros1"
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.LATEST)
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    writer = Writer1(path) if ros1 else Writer2(path, version=9, storage_plugin=plugin)
+    serialize = ts.serialize_ros1 if ros1 else ts.serialize_cdr
+    with writer as w:
+        for topic, msgtype, source in BAG_TOPICS:
+            c = w.add_connection(topic, msgtype, typestore=ts)
+            for row in rows[source]:
+                msg = _bag_message(ts.types, msgtype, row, ros1)
+                w.write(c, int(row[0] * 1e9), serialize(msg, msgtype))
+    return path
+
+
+def _generated_bags(folder: Path, tum: Path, euroc: tuple[Path, Path]) -> dict[str, Path]:
+    """The three bags of :func:`_write_bag` (no ROS 2 bag lies in ``../shared/data``)."""
+    gt = np.loadtxt(euroc[0], delimiter=",")
+    rows = {
+        "fr1_gt": np.loadtxt(tum / "freiburg1_xyz-groundtruth.txt"),
+        "fr1_est": np.loadtxt(tum / "freiburg1_xyz-rgbdslam.txt"),
+        "euroc_gt": np.column_stack((gt[:, 0] * 1e-9, gt[:, 1:4], gt[:, 5:8], gt[:, 4])),
+        "euroc_est": np.loadtxt(euroc[1]),
+    }
+    names = {"ros1": "gen.bag", "sqlite3": "gen_db3", "mcap": "gen_mcap"}
+    return {k: _write_bag(folder / name, k, rows) for k, name in names.items()}
+
+
 @pytest.fixture(scope="session")
 def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
     """The positional arguments of each input (after the kind), real and generated."""
@@ -216,7 +332,15 @@ def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
     kitti_e = _kitti_pair(folder, "%e")
     euroc = _euroc_pair(folder)
     rep = _repeated_pair(folder)
-    return {
+    bags = _generated_bags(folder, tum, euroc)
+    topics = {"odom": "/odom", "cov": "/pose_cov", "tf": "/transform"}
+    generated = {
+        f"{kind}_{what}": [str(bags[kind]), "/groundtruth", topic]
+        for kind in bags
+        for what, topic in topics.items()
+    }
+    generated |= {f"{k}_euroc": [str(b), "/euroc_gt", "/euroc_odom"] for k, b in bags.items()}
+    return generated | {
         "fr1": [
             str(tum / "freiburg1_xyz-groundtruth.txt"),
             str(tum / "freiburg1_xyz-rgbdslam.txt"),
@@ -516,3 +640,30 @@ def test_save_plot_writes_the_errors_it_scored(tmp_path: Path) -> None:
     before = gt.read_bytes()
     assert main(["ape", "euroc", str(gt), str(est), "--save_plot", str(gt)]) == 3  # an input
     assert gt.read_bytes() == before
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("to", ["tum", "kitti"])
+def test_convert_keep_writes_what_evo_traj_writes(to: str, evo_bin: Path, tmp_path: Path) -> None:
+    """``traj convert --duplicate-stamps keep`` against ``evo_traj tum --save_as_tum`` /
+    ``--save_as_kitti`` on an estimate with 4 repeated timestamps (evo writes every row)."""
+    _, est, _, _ = _repeated_pair(tmp_path)
+    src = tmp_path / "in.txt"
+    src.write_text(est.read_text())
+    run = subprocess.run(
+        [str(evo_bin / "evo_traj"), "tum", "in.txt", f"--save_as_{to}", "--no_warnings"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    ours = tmp_path / f"ours.{to}"
+    argv = ["traj", "convert", str(src), "-o", str(ours), "--duplicate-stamps", "keep", "-q"]
+    assert main(argv) == 0
+    theirs, mine = np.loadtxt(tmp_path / f"in.{to}"), np.loadtxt(ours)
+    assert mine.shape == theirs.shape == (204, 8 if to == "tum" else 12)
+    if to == "tum":  # a quaternion and its negative are one rotation
+        sign = np.sign(np.einsum("ni,ni->n", mine[:, 4:], theirs[:, 4:]))
+        mine[:, 4:] *= sign[:, None]
+    np.testing.assert_allclose(mine, theirs, rtol=1e-12, atol=1e-15)

@@ -25,7 +25,12 @@ from slamrel.commands.common import (
     input_files,
     stats_table,
 )
-from slamrel.constants import EVALUATE_DEFAULTS, PLOT_MODES, TRAJECTORY_FORMATS
+from slamrel.constants import (
+    DUPLICATE_STAMPS,
+    EVALUATE_DEFAULTS,
+    PLOT_MODES,
+    TRAJECTORY_FORMATS,
+)
 
 if TYPE_CHECKING:  # the library is imported in run(): start-up stays light
     from slamrel.evaluation import FileEvaluation
@@ -139,6 +144,14 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
         "--strict",
         action="store_true",
         help="unassociated relations, and trajectories not in time order, are an error",
+    )
+    p.add_argument(
+        "--duplicate-stamps",
+        choices=DUPLICATE_STAMPS,
+        default=DEFAULT.duplicate_stamps,
+        help="poses of REFERENCE and ESTIMATE that share a timestamp: keep all (as evo), keep "
+        "the first of each, or refuse two different estimate poses at one time (a reference "
+        "keeps its first); counted and said (default: %(default)s)",
     )
     p.add_argument(
         "--skip-invalid-poses",

@@ -48,10 +48,13 @@ def _kind_parsers(kinds: argparse._SubParsersAction, metric: str) -> None:  # ty
         "kitti": "KITTI pose files (3x4 [R | t] a line; paired pose by pose)",
         "euroc": "an EuRoC ground-truth CSV and a TUM estimate",
         "bag": "two topics of a ROS 1 bag",
-        "bag2": "two topics of a ROS 2 bag (sqlite3 or MCAP)",
+        "bag2": "two topics of a ROS 2 bag (sqlite3 or MCAP; alias: mcap)",
     }
     for kind, text in what.items():
-        p = kinds.add_parser(kind, help=text, description=f"{metric.upper()} of {text}.")
+        aliases = ["mcap"] if kind == "bag2" else []  # evo's alias of bag2
+        p = kinds.add_parser(
+            kind, help=text, description=f"{metric.upper()} of {text}.", aliases=aliases
+        )
         if kind in ("bag", "bag2"):
             p.add_argument("reference", metavar="BAG", help="the ROS bag")
             p.add_argument("ref_topic", metavar="REF_TOPIC", help="reference trajectory topic")
@@ -78,7 +81,7 @@ def _kind_parsers(kinds: argparse._SubParsersAction, metric: str) -> None:  # ty
                 "first); counted and said (default: %(default)s)",
             )
         _output_arguments(p)
-        p.set_defaults(func=run, evo_metric=metric)
+        p.set_defaults(func=run, evo_metric=metric, evo_kind=kind)
 
 
 def _algorithm_arguments(p: argparse.ArgumentParser, metric: str) -> None:
@@ -115,6 +118,28 @@ def _algorithm_arguments(p: argparse.ArgumentParser, metric: str) -> None:
         metavar="N",
         help="the number of poses to use for Umeyama alignment, counted from the start "
         "(default: %(default)s, all)",
+    )
+    p.add_argument(
+        "--change_unit",
+        choices=("deg", "rad", "mm", "cm", "m", "km"),
+        help="report the errors in this unit: lengths in lengths, angles in angles "
+        "(default: none, the relation's own)",
+    )
+    p.add_argument(
+        "--downsample",
+        type=opt.positive_int,
+        metavar="N",
+        help="keep at most N evenly spaced poses of each trajectory, before the association "
+        "(default: none)",
+    )
+    p.add_argument(
+        "--motion_filter",
+        type=opt.nonnegative_float,
+        nargs=2,
+        metavar=("DISTANCE", "ANGLE_DEGREES"),
+        help="keep a pose only when the path since the last kept pose reaches DISTANCE [m] or "
+        "its rotation from it reaches ANGLE_DEGREES; before the association, as evo; not "
+        "for KITTI (default: none)",
     )
     p.add_argument(
         "--project_to_plane",

@@ -13,7 +13,7 @@ import argparse
 import os
 from typing import Any
 
-from slamrel.constants import TRAJECTORY_FORMATS
+from slamrel.constants import DUPLICATE_STAMPS, TRAJECTORY_FORMATS
 
 HELP = "inspect and convert trajectories (bag topics, info, TUM/KITTI/CSV)"
 #: Formats ``traj convert`` writes, and the output extensions that name one.
@@ -75,6 +75,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="KITTI output: also write the timestamps, one a line (KITTI's times.txt)",
     )
     _read_arguments(c)
+    c.add_argument(
+        "--duplicate-stamps",
+        choices=DUPLICATE_STAMPS,
+        default="refuse",
+        help="poses that share a timestamp: write them all (as evo_traj --save_as_tum), the "
+        "first of each, or refuse two different poses at one time (exact repeats are written "
+        "once); counted and said (default: %(default)s)",
+    )
     c.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     c.set_defaults(func=run_convert)
 
@@ -207,8 +215,8 @@ def _info_text(path: str, e: dict[str, object]) -> str:
             f"  repeats      {rep['count']} pose(s) repeat the previous pose's timestamp, "
             f"{rep['differing']} with a different pose (first at line {rep['first_line']}):\n"
             "               a reference keeps the first of each; an estimate with different "
-            "poses is refused\n               ('slamrel ape|rpe --duplicate_stamps keep' "
-            "keeps them all, as evo)"
+            "poses is refused\n               ('slamrel ape|rpe --duplicate_stamps keep', "
+            "'evaluate|traj convert --duplicate-stamps keep' keep them all, as evo)"
         )
     if "message_type" in e:
         child = f" -> {e['child_frame_id']}" if e["child_frame_id"] else ""
@@ -242,7 +250,13 @@ def run_convert(args: argparse.Namespace) -> int:
         raise OptionError("is for a KITTI output (--to kitti)", option="--output-times")
     check_outputs([args.output, args.output_times], input_files([args.trajectory, args.times]))
     loaded = load_trajectory(
-        args.trajectory, args.format, role="estimate", planar=args.planar, times=args.times
+        args.trajectory,
+        args.format,
+        role="estimate",
+        planar=args.planar,
+        times=args.times,
+        repeats=args.duplicate_stamps,
+        repeats_option="--duplicate-stamps",
     )
     traj = loaded.trajectory
     if traj.group.name == "SE3" and fmt in ("csv", "plain"):
@@ -258,5 +272,8 @@ def run_convert(args: argparse.Namespace) -> int:
     if not args.quiet:
         dim = "3-D" if traj.group.name == "SE3" else "2-D"
         times = f" (+ times {args.output_times})" if args.output_times else ""
-        print(f"{len(traj)} {dim} poses ({loaded.format}) -> {args.output} ({fmt}){times}")
+        rep = loaded.repeated.count
+        how = "written" if args.duplicate_stamps == "keep" else "dropped"
+        said = f"; {rep} repeated timestamp(s) {how}" if rep else ""
+        print(f"{len(traj)} {dim} poses ({loaded.format}) -> {args.output} ({fmt}){times}{said}")
     return 0

@@ -425,9 +425,9 @@ def _typed_topic(topics: Mapping[str, BagTopic], spec: BagSpec, types: tuple[str
 def _read_topic(reader: Any, topic: str, msgtype: str) -> BagPoses:
     """Poses (and covariances) of one pose topic, in bag order."""
     connections = [c for c in reader.connections if c.topic == topic]
-    if msgtype == _POSE and not reader.is2:
+    if msgtype == _POSE:
         raw = [r for _, _, r in _messages(reader, connections, decode=False)]
-        fast = _ros1_pose_stamped(raw)
+        fast = _ros2_pose_stamped(raw) if reader.is2 else _ros1_pose_stamped(raw)
         if fast is not None:
             return BagPoses(fast[0], fast[1], None, msgtype, fast[2], "")
     stamps: list[float] = []
@@ -486,6 +486,41 @@ def _ros1_pose_stamped(raw: list[bytes]) -> tuple[NDArray, NDArray, str] | None:
     stamps = head[:, 1].astype(np.float64) + head[:, 2].astype(np.float64) * 1e-9
     poses = np.ascontiguousarray(buf[:, 16 + flen :]).view("<f8").astype(np.float64)
     return stamps, poses, bytes(buf[0, 16 : 16 + flen]).decode("utf-8", "replace")
+
+
+#: The CDR encapsulation header of a little-endian ROS 2 message.
+_CDR_LE = (0, 1, 0, 0)
+
+
+def _ros2_pose_stamped(raw: list[bytes]) -> tuple[NDArray, NDArray, str] | None:
+    """ROS 2 ``PoseStamped`` messages (CDR) decoded at once, as :func:`_ros1_pose_stamped`.
+
+    The layout after the 4-byte encapsulation header ``00 01 00 00`` (little-endian), offsets
+    from the header's end: ``int32 sec, uint32 nanosec, uint32 len, frame_id[len]`` (NUL
+    included), padding to a multiple of 8, ``float64 x y z qx qy qz qw``. Decoded when every
+    message has that header, one size and one frame_id; None otherwise (the caller then
+    deserialises each message with rosbags).
+    """
+    if not raw or len({len(r) for r in raw}) != 1:
+        return None
+    size = len(raw[0])
+    if size < 16 + 56:
+        return None
+    buf = np.frombuffer(b"".join(raw), dtype=np.uint8).reshape(-1, size)
+    if tuple(buf[0, :4]) != _CDR_LE or (buf[:, :4] != buf[0, :4]).any():
+        return None
+    head = np.ascontiguousarray(buf[:, 4:16])
+    flen = int(head[0].view("<u4")[2])
+    start = 4 + -(-(12 + flen) // 8) * 8
+    if flen < 1 or start + 56 != size or (head.view("<u4")[:, 2] != flen).any():
+        return None
+    if (buf[:, 16 : 16 + flen] != buf[0, 16 : 16 + flen]).any() or buf[0, 15 + flen] != 0:
+        return None
+    sec = head[:, :4].copy().view("<i4")[:, 0].astype(np.float64)
+    nanosec = head[:, 4:8].copy().view("<u4")[:, 0].astype(np.float64)
+    poses = np.ascontiguousarray(buf[:, start:]).view("<f8").astype(np.float64)
+    frame = bytes(buf[0, 16 : 15 + flen]).decode("utf-8", "replace")
+    return sec + nanosec * 1e-9, poses, frame
 
 
 @dataclass
