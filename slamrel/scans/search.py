@@ -152,15 +152,23 @@ def likelihood_grid(
     table = np.zeros((shape[0] + pad, shape[1] + pad), dtype=np.float32)
     w = int(np.ceil(3 * sig / r))
     off = np.arange(-w, w + 1)
-    ox, oy = (a.ravel() for a in np.meshgrid(off, off, indexing="ij"))
     cell = np.floor((points - lo) / r).astype(np.int64)  # (K, 2)
-    cx = cell[:, 0, None] + ox[None, :]
-    cy = cell[:, 1, None] + oy[None, :]
-    dx = lo[0] + (cx + 0.5) * r - points[:, 0, None]
-    dy = lo[1] + (cy + 0.5) * r - points[:, 1, None]
-    val = np.exp(-(dx * dx + dy * dy) / (2 * sig * sig)).astype(np.float32)
-    ok = (cx >= 1) & (cx < shape[0]) & (cy >= 1) & (cy < shape[1])
-    np.maximum.at(table, (cx[ok], cy[ok]), val[ok])
+    # the (2w+1)² kernel cell (a, b) of point k is (cell_k + off_a, cell_k + off_b): the
+    # offsets per axis (K, 2w+1) broadcast to (K, 2w+1, 2w+1), the same values and sums
+    cx = cell[:, 0, None] + off[None, :]
+    cy = cell[:, 1, None] + off[None, :]
+    okx = (cx >= 1) & (cx < shape[0])
+    oky = (cy >= 1) & (cy < shape[1])
+    near = okx.any(axis=1) & oky.any(axis=1)  # points whose kernel meets the grid
+    cx, cy, okx, oky, pts = cx[near], cy[near], okx[near], oky[near], points[near]
+    dx = lo[0] + (cx + 0.5) * r - pts[:, 0, None]
+    dy = lo[1] + (cy + 0.5) * r - pts[:, 1, None]
+    d2 = (dx * dx)[:, :, None] + (dy * dy)[:, None, :]
+    val = np.exp(-d2 / (2 * sig * sig)).astype(np.float32)
+    ok = okx[:, :, None] & oky[:, None, :]
+    lin = cx[:, :, None] * table.shape[1] + cy[:, None, :]
+    # one flat index: ufunc.at's fast path (a tuple of index arrays is ~6x slower)
+    np.maximum.at(table.ravel(), lin[ok], val[ok])
     pyramid = [table]
     for h in range(1, options.levels + 1):
         s = 2 ** (h - 1)
@@ -190,9 +198,45 @@ def _score(
     return table.ravel().take(ix * ny + iy).mean(axis=1, dtype=np.float64)
 
 
+#: Largest padded level [cells] (16 MB of float32); a larger one reads through the clip.
+_PAD_LIMIT = 2**22
+
+
+class _Lookup:
+    """:func:`_score` without the clip: each level ``L_h`` padded by edge replication so
+    that every lookup of the search (rotated points ``base`` moved by ``u, v ∈ ±half``)
+    lands inside it — the replicated border is exactly the value the clip reads — and the
+    points' cells as flat indices, so a node's score is one ``take`` of ``(N, M)``.
+    Falls back to :func:`_score` when the padding would exceed ``limit`` cells a level."""
+
+    def __init__(
+        self, grid: LikelihoodGrid, base: NDArray[np.int64], half: int, limit: int
+    ) -> None:
+        self.grid, self.base = grid, base
+        nx, ny = grid.pyramid[0].shape
+        lo = np.minimum(base.min(axis=(0, 1)) - half, 0)  # (2,) most negative index
+        hi = np.maximum(base.max(axis=(0, 1)) + half, [nx - 1, ny - 1])
+        shape = hi - lo + 1
+        self.padded = bool(float(shape[0]) * float(shape[1]) <= limit)
+        if not self.padded:
+            return
+        pad = ((int(-lo[0]), int(hi[0] - nx + 1)), (int(-lo[1]), int(hi[1] - ny + 1)))
+        self.stride = int(shape[1])
+        self.tables = [np.pad(t, pad, mode="edge").ravel() for t in grid.pyramid]
+        self.flat = (base[:, :, 0] - lo[0]) * self.stride + (base[:, :, 1] - lo[1])  # (T, M)
+
+    def score(
+        self, h: int, k: NDArray[np.int64], u: NDArray[np.int64], v: NDArray[np.int64]
+    ) -> NDArray[np.float64]:
+        """``_score(grid, base, h, k, u, v)``, the same values."""
+        if not self.padded:
+            return _score(self.grid, self.base, h, k, u, v)
+        idx = self.flat[k] + (u * self.stride + v)[:, None]
+        return self.tables[h].take(idx).mean(axis=1, dtype=np.float64)
+
+
 def _greedy(
-    grid: LikelihoodGrid,
-    base: NDArray[np.int64],
+    look: _Lookup,
     top: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]],
     half: int,
 ) -> float:
@@ -201,9 +245,9 @@ def _greedy(
     n = int(np.argmax(b))
     kk, uu, vv = k[n : n + 1], u[n : n + 1], v[n : n + 1]
     best = 0.0
-    for h in range(len(grid.pyramid) - 1, 0, -1):
+    for h in range(len(look.grid.pyramid) - 1, 0, -1):
         ck, cu, cv = _children(kk, uu, vv, h, half)
-        s = _score(grid, base, h - 1, ck, cu, cv)
+        s = look.score(h - 1, ck, cu, cv)
         if s.size == 0:
             return 0.0
         n = int(np.argmax(s))
@@ -262,9 +306,10 @@ def branch_and_bound(
     tk, tu, tv = (
         a.ravel() for a in np.meshgrid(np.arange(thetas.size), starts, starts, indexing="ij")
     )
-    bounds = _score(grid, base, top_h, tk, tu, tv)
+    look = _Lookup(grid, base, half, _PAD_LIMIT)
+    bounds = look.score(top_h, tk, tu, tv)
     nodes = int(bounds.size)
-    best = _greedy(grid, base, (tk, tu, tv, bounds), half)
+    best = _greedy(look, (tk, tu, tv, bounds), half)
     truncated = False
     k, u, v = tk, tu, tv
     for h in range(top_h, 0, -1):
@@ -275,7 +320,7 @@ def branch_and_bound(
             pick = np.argpartition(-bounds, options.max_nodes)[: options.max_nodes]
             k, u, v = k[pick], u[pick], v[pick]
         k, u, v = _children(k, u, v, h, half)
-        bounds = _score(grid, base, h - 1, k, u, v)
+        bounds = look.score(h - 1, k, u, v)
         nodes += int(bounds.size)
         if h == 1 and bounds.size:
             best = max(best, float(bounds.max()))
