@@ -134,6 +134,42 @@ def grid_cells(lo: NDArray[np.float64], hi: NDArray[np.float64], resolution: flo
     return float(np.prod(np.ceil(ext / resolution) + 1))
 
 
+#: Points per block of :func:`_splat`.
+_SPLAT = 1024
+
+
+def _splat(
+    flat: NDArray[np.float32],
+    shape: tuple[int, int, int],
+    cell: NDArray[np.int64],
+    points: NDArray[np.float64],
+    kernel: tuple[NDArray[np.float64], float, float, int],
+) -> None:
+    """``flat = max(flat, kernel)`` of ``points`` ``(K, 2)`` in cells ``cell`` ``(K, 2)``.
+
+    ``flat`` is the table raveled, ``shape = (Y', X, Y)`` its row length and the area whose
+    cells ``[1, X) × [1, Y)`` take values (the border stays zero); ``kernel = (lo, r, σ, w)``.
+    Kernel cell ``(a, b)`` of point ``k`` is ``cell_k + (o_a, o_b)``, ``o = −w … w``, value
+    ``exp(−‖c − p_k‖² / (2σ²))``: the offsets per axis ``(K, 2w+1)`` broadcast to
+    ``(K, 2w+1, 2w+1)``."""
+    lo, r, sig, w = kernel
+    off = np.arange(-w, w + 1)
+    cx = cell[:, 0, None] + off[None, :]
+    cy = cell[:, 1, None] + off[None, :]
+    dx = lo[0] + (cx + 0.5) * r - points[:, 0, None]
+    dy = lo[1] + (cy + 0.5) * r - points[:, 1, None]
+    d2 = (dx * dx)[:, :, None] + (dy * dy)[:, None, :]
+    val = np.exp(-d2 / (2 * sig * sig)).astype(np.float32)
+    lin = cx[:, :, None] * shape[0] + cy[:, None, :]
+    ok = ((cx >= 1) & (cx < shape[1]))[:, :, None] & ((cy >= 1) & (cy < shape[2]))[:, None, :]
+    if ok.all():
+        lin, val = lin.ravel(), val.ravel()
+    else:
+        lin, val = lin[ok], val[ok]
+    # one flat index: ufunc.at's fast path (a tuple of index arrays is ~6x slower)
+    np.maximum.at(flat, lin, val)
+
+
 def likelihood_grid(
     points: NDArray[np.float64],
     lo: NDArray[np.float64],
@@ -151,24 +187,16 @@ def likelihood_grid(
     shape = [shape[0] + 1, shape[1] + 1]
     table = np.zeros((shape[0] + pad, shape[1] + pad), dtype=np.float32)
     w = int(np.ceil(3 * sig / r))
-    off = np.arange(-w, w + 1)
     cell = np.floor((points - lo) / r).astype(np.int64)  # (K, 2)
-    # the (2w+1)² kernel cell (a, b) of point k is (cell_k + off_a, cell_k + off_b): the
-    # offsets per axis (K, 2w+1) broadcast to (K, 2w+1, 2w+1), the same values and sums
-    cx = cell[:, 0, None] + off[None, :]
-    cy = cell[:, 1, None] + off[None, :]
-    okx = (cx >= 1) & (cx < shape[0])
-    oky = (cy >= 1) & (cy < shape[1])
-    near = okx.any(axis=1) & oky.any(axis=1)  # points whose kernel meets the grid
-    cx, cy, okx, oky, pts = cx[near], cy[near], okx[near], oky[near], points[near]
-    dx = lo[0] + (cx + 0.5) * r - pts[:, 0, None]
-    dy = lo[1] + (cy + 0.5) * r - pts[:, 1, None]
-    d2 = (dx * dx)[:, :, None] + (dy * dy)[:, None, :]
-    val = np.exp(-d2 / (2 * sig * sig)).astype(np.float32)
-    ok = okx[:, :, None] & oky[:, None, :]
-    lin = cx[:, :, None] * table.shape[1] + cy[:, None, :]
-    # one flat index: ufunc.at's fast path (a tuple of index arrays is ~6x slower)
-    np.maximum.at(table.ravel(), lin[ok], val[ok])
+    inside = np.all((cell - w >= 1) & (cell + w < np.array(shape)), axis=1)
+    meets = np.all((cell + w >= 1) & (cell - w < np.array(shape)), axis=1)
+    flat = table.ravel()
+    for part in (np.flatnonzero(inside), np.flatnonzero(meets & ~inside)):
+        for a in range(0, part.size, _SPLAT):  # blocks that stay in the cache
+            at = part[a : a + _SPLAT]
+            _splat(
+                flat, (table.shape[1], shape[0], shape[1]), cell[at], points[at], (lo, r, sig, w)
+            )
     pyramid = [table]
     for h in range(1, options.levels + 1):
         s = 2 ** (h - 1)
@@ -200,6 +228,8 @@ def _score(
 
 #: Largest padded level [cells] (16 MB of float32); a larger one reads through the clip.
 _PAD_LIMIT = 2**22
+#: Lookups per block of :meth:`_Lookup.score` (512 KB of indices).
+_BLOCK = 65536
 
 
 class _Lookup:
@@ -228,11 +258,24 @@ class _Lookup:
     def score(
         self, h: int, k: NDArray[np.int64], u: NDArray[np.int64], v: NDArray[np.int64]
     ) -> NDArray[np.float64]:
-        """``_score(grid, base, h, k, u, v)``, the same values."""
+        """``_score(grid, base, h, k, u, v)``, the same values; in blocks of about
+        ``_BLOCK`` lookups that stay in the cache (each row's mean is the same sum)."""
         if not self.padded:
             return _score(self.grid, self.base, h, k, u, v)
-        idx = self.flat[k] + (u * self.stride + v)[:, None]
-        return self.tables[h].take(idx).mean(axis=1, dtype=np.float64)
+        table, flat = self.tables[h], self.flat
+        n, m = k.shape[0], flat.shape[1]
+        rows = max(1, _BLOCK // max(m, 1))
+        out = np.empty(n, dtype=np.float64)
+        idx = np.empty((min(rows, n), m), dtype=np.int64)
+        val = np.empty((min(rows, n), m), dtype=np.float32)
+        shift = u * self.stride + v
+        for a in range(0, n, rows):
+            b = min(a + rows, n)
+            ib, vb = idx[: b - a], val[: b - a]
+            np.add(flat[k[a:b]], shift[a:b, None], out=ib)
+            table.take(ib, out=vb)
+            vb.mean(axis=1, dtype=np.float64, out=out[a:b])
+        return out
 
 
 def _greedy(
