@@ -165,11 +165,12 @@ class _Scans:
         """``likelihood_grid(ref, lo, hi)``, kept for the next searches of the same reference
         ``key`` over the same area (the pairs of one scan come together: a few suffice)."""
         k = (key, lo.tobytes(), hi.tobytes())
-        if k not in self._grids:
-            if len(self._grids) >= _KEEP_GRIDS:
+        got = self._grids.get(k)
+        if got is None:
+            got = self._grids[k] = likelihood_grid(ref, lo, hi, self.gopt.search)
+            while len(self._grids) > _KEEP_GRIDS:
                 self._grids.pop(next(iter(self._grids)))
-            self._grids[k] = likelihood_grid(ref, lo, hi, self.gopt.search)
-        return self._grids[k]
+        return got
 
 
 def _chain_nodes(
