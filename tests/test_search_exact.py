@@ -12,7 +12,7 @@ import slamrel.scans.global_align as global_align
 from slamrel.scans.global_align import align_scans_global
 from slamrel.scans.matching import _cycle
 from slamrel.scans.proposals import Proposals
-from slamrel.scans.search import SearchOptions, _Lookup, _score, likelihood_grid
+from slamrel.scans.search import SearchOptions, _edge_pad, _Lookup, _score, likelihood_grid
 from slamrel.simulation.corridors import corridor_log, true_pairs
 
 
@@ -37,6 +37,12 @@ def test_padded_lookups_equal_the_clipping_score(limit):
     u, v = rng.integers(-half, half + 1, (2, n))
     for h in range(len(grid.pyramid)):
         np.testing.assert_array_equal(look.score(h, k, u, v), _score(grid, base, h, k, u, v))
+
+
+def test_edge_pad_equals_numpy_pad():
+    t = np.random.default_rng(5).random((6, 4)).astype(np.float32)
+    for pad in [((0, 0), (0, 0)), ((2, 0), (0, 3)), ((1, 4), (5, 2))]:
+        np.testing.assert_array_equal(_edge_pad(t, pad), np.pad(t, pad, mode="edge"))
 
 
 def test_kernel_splat_equals_a_per_point_loop():

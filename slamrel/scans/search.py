@@ -232,6 +232,19 @@ _PAD_LIMIT = 2**22
 _BLOCK = 65536
 
 
+def _edge_pad(t: NDArray[np.float32], pad: tuple[tuple[int, int], ...]) -> NDArray[np.float32]:
+    """``np.pad(t, pad, mode="edge")`` of a 2-D table, in five slice copies."""
+    (a0, a1), (b0, b1) = pad
+    nx, ny = t.shape
+    out = np.empty((nx + a0 + a1, ny + b0 + b1), dtype=t.dtype)
+    out[a0 : a0 + nx, b0 : b0 + ny] = t
+    out[:a0, b0 : b0 + ny] = t[0]
+    out[a0 + nx :, b0 : b0 + ny] = t[-1]
+    out[:, :b0] = out[:, b0 : b0 + 1]
+    out[:, b0 + ny :] = out[:, b0 + ny - 1 : b0 + ny]
+    return out
+
+
 class _Lookup:
     """:func:`_score` without the clip: each level ``L_h`` padded by edge replication so
     that every lookup of the search (rotated points ``base`` moved by ``u, v ∈ ±half``)
@@ -252,7 +265,7 @@ class _Lookup:
             return
         pad = ((int(-lo[0]), int(hi[0] - nx + 1)), (int(-lo[1]), int(hi[1] - ny + 1)))
         self.stride = int(shape[1])
-        self.tables = [np.pad(t, pad, mode="edge").ravel() for t in grid.pyramid]
+        self.tables = [_edge_pad(t, pad).ravel() for t in grid.pyramid]
         self.flat = (base[:, :, 0] - lo[0]) * self.stride + (base[:, :, 1] - lo[1])  # (T, M)
 
     def score(
