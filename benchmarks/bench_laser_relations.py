@@ -10,12 +10,26 @@ pairs that are gross); unflagged median and 99th percentile (translation, rotati
 pairs usable (unflagged and not gross); pairs per CPU-second.
 
     python benchmarks/bench_laser_relations.py [SEED ...]      (default: seeds 101-104)
+    python benchmarks/bench_laser_relations.py --whole [SEED ...] [--mit]
+
+``--whole`` times the **whole command** instead, as a user runs it: each world written as a
+CARMEN log (``FLASER``, 361 beams, ranges in mm) with its true pairs as a ``.relations``
+file, then ``python -m slamrel relations align LOG --at PAIRS`` run as a child process for
+each aligner; CPU seconds are the child's user + sys (``RUSAGE_CHILDREN``: start-up,
+imports, reading, chain, search, ICP, flags, writing). ``--mit`` adds ``mit-csail.clf`` at
+the authors' 1,172 pairs (``$SLAMREL_DATA/freiburg``). Pairs per CPU-second of the global
+aligner against today's (``--aligner icp``) in the same run.
 """
 
 from __future__ import annotations
 
+import os
+import resource
+import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -71,7 +85,77 @@ def summary(name: str, r: dict) -> str:
     )
 
 
+def write_world(seed: int, folder: Path) -> tuple[Path, Path, int]:
+    """Corridor world ``seed`` as a CARMEN log and its true pairs as a ``.relations`` file."""
+    from relation_metric.relations import RelationSet
+    from slamrel.formats.relations import write_relations
+
+    _, log = corridor_log(seed)
+    s = log.scans
+    pairs, _ = true_pairs(log.truth, s.timestamps, seed=seed)
+    ranges = np.where(np.isfinite(s.ranges), s.ranges, 81.91)
+    path = folder / f"corridor{seed}.clf"
+    with open(path, "w") as f:
+        for k in range(s.timestamps.size):
+            r = " ".join(f"{v:.3f}" for v in ranges[k])
+            x, y, t = s.laser_pose[k]
+            f.write(
+                f"FLASER {ranges.shape[1]} {r} {x:.6f} {y:.6f} {t:.6f} {x:.6f} {y:.6f} "
+                f"{t:.6f} {s.timestamps[k]:.6f} bench {s.timestamps[k]:.6f}\n"
+            )
+    t = s.timestamps
+    truth = between(log.truth[pairs[:, 0]], log.truth[pairs[:, 1]])
+    rel = folder / f"corridor{seed}.relations"
+    write_relations(rel, RelationSet(t[pairs[:, 0]], t[pairs[:, 1]], truth))
+    return path, rel, len(pairs)
+
+
+def whole_command(log: Path, pairs: Path, aligner: str, out: Path) -> float:
+    """CPU seconds (user + sys) of ``slamrel relations align`` as a child process."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cmd = [sys.executable, "-m", "slamrel", "relations", "align", str(log), "--at", str(pairs)]
+    cmd += ["-o", str(out), "--aligner", aligner, "-q"]
+    subprocess.run(cmd, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def main_whole(args: list[str]) -> None:
+    """``--whole``: pairs per CPU-second of the whole command (module docstring)."""
+    seeds = [int(a) for a in args if a.isdigit()] or [103, 104, 105]
+    aligners = ("global", "icp")
+    total = {a: [0, 0.0] for a in aligners}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        runs = [(f"seed {seed}", *write_world(seed, folder)) for seed in seeds]
+        if "--mit" in args:
+            data = Path(os.environ.get("SLAMREL_DATA", ROOT.parent / "shared" / "data"))
+            fr = data / "freiburg"
+            n = sum(1 for line in open(fr / "mit-csail.relations") if line.strip())
+            runs.append(("mit-csail", fr / "mit-csail.clf", fr / "mit-csail.relations", n))
+        for name, log, rel, n in runs:
+            line = f"{name:10s} {n:5d} pairs"
+            for a in aligners:
+                cpu = whole_command(log, rel, a, folder / f"out-{a}.relations")
+                total[a][0] += n
+                total[a][1] += cpu
+                line += f"   {a}: {cpu:6.2f} CPU-s {n / cpu:6.1f} pairs/CPU-s"
+            print(line, flush=True)
+    speed = {a: total[a][0] / total[a][1] for a in aligners}
+    print(
+        f"all        {total['global'][0]:5d} pairs   global {speed['global']:.1f} pairs/CPU-s, "
+        f"icp {speed['icp']:.1f}; ratio global/icp (baseline: today's aligner, whole "
+        f"command): {speed['global'] / speed['icp']:.2f}"
+    )
+
+
 def main() -> None:
+    if "--whole" in sys.argv[1:]:
+        main_whole(sys.argv[1:])
+        return
     seeds = [int(a) for a in sys.argv[1:]] or [101, 102, 103, 104]
     aligners = ("global", "icp")
     pooled: dict[str, list[dict]] = {a: [] for a in aligners}

@@ -42,6 +42,7 @@ from slamrel.scans.matching import Alignment, PreparedScan, align, prepare_scan,
 from slamrel.scans.proposals import Proposals
 from slamrel.scans.relations import AlignOptions, ScanRelations, _judge, far_guess_error
 from slamrel.scans.search import (
+    LikelihoodGrid,
     SearchOptions,
     SearchResult,
     branch_and_bound,
@@ -131,12 +132,17 @@ class Chain:
     fallback: int
 
 
+#: Likelihood grids :class:`_Scans` keeps (oldest dropped first).
+_KEEP_GRIDS = 4
+
+
 class _Scans:
     """Prepared scans (ICP) and search returns, made once per scan."""
 
     def __init__(self, scans: LaserScans, opt: AlignOptions, gopt: GlobalOptions) -> None:
         self.scans, self.opt, self.gopt = scans, opt, gopt
         self._prep: dict[int, PreparedScan] = {}
+        self._grids: dict[tuple[object, bytes, bytes], LikelihoodGrid] = {}
 
     def prep(self, k: int) -> PreparedScan:
         if k not in self._prep:
@@ -148,6 +154,23 @@ class _Scans:
         """Returns within ``search_range``."""
         p = self.prep(k).points
         return p[np.hypot(p[:, 0], p[:, 1]) <= self.gopt.search_range]
+
+    def grid(
+        self,
+        key: object,
+        ref: NDArray[np.float64],
+        lo: NDArray[np.float64],
+        hi: NDArray[np.float64],
+    ) -> LikelihoodGrid:
+        """``likelihood_grid(ref, lo, hi)``, kept for the next searches of the same reference
+        ``key`` over the same area (the pairs of one scan come together: a few suffice)."""
+        k = (key, lo.tobytes(), hi.tobytes())
+        got = self._grids.get(k)
+        if got is None:
+            got = self._grids[k] = likelihood_grid(ref, lo, hi, self.gopt.search)
+            while len(self._grids) > _KEEP_GRIDS:
+                self._grids.pop(next(iter(self._grids)))
+        return got
 
 
 def _chain_nodes(
@@ -254,9 +277,11 @@ def _search(
     wth: float,
     ref_pts: NDArray[np.float64] | None = None,
     cur_pts: NDArray[np.float64] | None = None,
+    ref_key: object = None,
 ) -> SearchResult:
     """Branch and bound of ``cur_pts`` (default: scan ``cur_scans[0]``'s search returns)
-    against ``ref_pts`` (default: ``ref_scans[0]``'s), refusing a grid over ``max_cells``."""
+    against ``ref_pts`` (default: ``ref_scans[0]``'s), refusing a grid over ``max_cells``;
+    ``ref_key`` names ``ref_pts`` for the store's grids (None: not kept)."""
     sopt = store.gopt.search
     ref = store.near(ref_scans[0]) if ref_pts is None else ref_pts
     cur = _thinned(store.near(cur_scans[0]), store.gopt.max_points) if cur_pts is None else cur_pts
@@ -285,7 +310,9 @@ def _search(
         _refuse_hopeless(store, ref_scans[0], cur_scans[0], centre, reach)
         nan3 = np.full(3, np.nan)
         return SearchResult(np.asarray(centre, float).copy(), 0.0, nan3, 0.0, 0, False)
-    grid = likelihood_grid(ref, lo, hi, sopt)
+    grid = (
+        likelihood_grid(ref, lo, hi, sopt) if ref_key is None else store.grid(ref_key, ref, lo, hi)
+    )
     return branch_and_bound(grid, cur, centre, wxy, wth, sopt)
 
 
@@ -302,7 +329,7 @@ def _distant(
     cur_pts = _thinned(_points_in(store, chain, b, _submap(store, chain, b)), gopt.max_points)
     wxy = gopt.window_xy + gopt.drift_xy * travel
     wth = gopt.window_theta + gopt.drift_theta * travel
-    s = _search(store, [i], [j], centre, centre, wxy, wth, ref_pts, cur_pts)
+    s = _search(store, [i], [j], centre, centre, wxy, wth, ref_pts, cur_pts, ("submap", a))
     al = align(store.prep(i), store.prep(j), s.delta, opt.icp)
     limits = replace(
         opt.limits, max_correction=gopt.max_refine, max_correction_angle=gopt.max_refine_angle

@@ -249,14 +249,45 @@ def prepare_scan(
     return PreparedScan(p[valid], anchors, normals, cKDTree(anchors))
 
 
-def _cycle(history: list[NDArray[np.float64]], tolerance: float, longest: int = 4) -> int:
-    """The period ``p ≤ longest`` with ``x_k = x_{k−p}`` to ``tolerance`` (seen twice), or 0."""
+def _cycle(history: list[tuple[float, float, float]], tolerance: float, longest: int = 4) -> int:
+    """The period ``p ≤ longest`` with ``x_k = x_{k−p}`` to ``tolerance`` (seen twice), or 0.
+
+    ``history`` holds the iterates as float triples (Python arithmetic: a few hundred
+    nanoseconds a test instead of microseconds for numpy's on 3-vectors)."""
     for p in range(2, longest + 1):
         if len(history) > 2 * p and all(
-            np.abs(history[-1 - q] - history[-1 - q - p]).max() < tolerance for q in range(p)
+            _close(history[-1 - q], history[-1 - q - p], tolerance) for q in range(p)
         ):
             return p
     return 0
+
+
+def _close(a: tuple[float, float, float], b: tuple[float, float, float], tol: float) -> bool:
+    """``max |a − b| < tol`` (False when a difference is NaN, as numpy's max says)."""
+    d0, d1, d2 = abs(a[0] - b[0]), abs(a[1] - b[1]), abs(a[2] - b[2])
+    return d0 < tol and d1 < tol and d2 < tol
+
+
+def _residuals(
+    reference: PreparedScan,
+    q: NDArray[np.float64],
+    k: NDArray[np.int64],
+    ok: NDArray[np.bool_],
+    opt: IcpOptions,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Normals ``n``, points ``q`` and point-to-line residuals ``e`` of the matched points
+    ``ok`` (nearest anchors ``k``), the largest ``1 − trim`` share of ``|e|`` dropped."""
+    kk = k[ok]
+    n = reference.normals[kk]
+    qo = q[ok]
+    e = np.einsum("ij,ij->i", n, qo - reference.anchors[kk])
+    ae = np.abs(e)
+    keep = max(opt.min_matches, int(np.ceil(opt.trim * ae.shape[0])))
+    if keep < ae.shape[0]:
+        cut = np.partition(ae, keep - 1)[keep - 1]
+        sel = np.flatnonzero(ae <= cut)
+        n, qo, e = n[sel], qo[sel], e[sel]
+    return n, qo, e
 
 
 def _median(a: NDArray[np.float64]) -> float:
@@ -319,27 +350,20 @@ def align(
     sigma = opt.min_sigma
     stalled = 0
     history: list[NDArray[np.float64]] = [x]
+    seen: list[tuple[float, float, float]] = [(x[0], x[1], x[2])]
     for it in range(1, opt.max_iterations + 1):
         q = transform(x, pts)
         dist, k = reference.tree.query(q, distance_upper_bound=gate)
         ok = np.isfinite(dist)
-        if int(ok.sum()) < opt.min_matches:
+        if np.count_nonzero(ok) < opt.min_matches:
             return _failed(guess, "too few matches", it)
-        kk = k[ok]
-        n = reference.normals[kk]
-        qo = q[ok]
-        e = np.einsum("ij,ij->i", n, qo - reference.anchors[kk])
-        ae = np.abs(e)
-        keep = max(opt.min_matches, int(np.ceil(opt.trim * ae.shape[0])))
-        if keep < ae.shape[0]:
-            cut = np.partition(ae, keep - 1)[keep - 1]
-            sel = ae <= cut
-            n, qo, e, ae = n[sel], qo[sel], e[sel], ae[sel]
-        sigma = max(_MAD * _median(ae), opt.min_sigma)
+        n, qo, e = _residuals(reference, q, k, ok, opt)
+        sigma = max(_MAD * _median(np.abs(e)), opt.min_sigma)
         w = 1.0 / (1.0 + (e / (_CAUCHY * sigma)) ** 2)
-        rp_x = qo[:, 0] - x[0]
-        rp_y = qo[:, 1] - x[1]
-        jac = np.column_stack((n[:, 0], n[:, 1], n[:, 1] * rp_x - n[:, 0] * rp_y))
+        jac = np.empty((e.shape[0], 3))
+        jac[:, 0] = n[:, 0]
+        jac[:, 1] = n[:, 1]
+        jac[:, 2] = n[:, 1] * (qo[:, 0] - x[0]) - n[:, 0] * (qo[:, 1] - x[1])
         jw = jac * w[:, None]
         h = jw.T @ jac
         g = jw.T @ e
@@ -349,6 +373,7 @@ def align(
             step = -np.linalg.lstsq(h, g, rcond=None)[0]
         x = x + step
         history.append(x)
+        seen.append((float(x[0]), float(x[1]), float(x[2])))
         new_gate = min(opt.max_distance, max(opt.min_distance, opt.gate_sigmas * sigma))
         size = max(float(np.hypot(step[0], step[1])), abs(float(step[2])))
         small = size < opt.tolerance
@@ -357,7 +382,7 @@ def align(
         if (small or stalled >= opt.stall_iterations) and settled:
             converged = True
             break
-        period = _cycle(history, opt.tolerance)
+        period = _cycle(seen, opt.tolerance)
         if period and settled:  # the correspondences repeat: the iteration is periodic
             x = np.mean(history[-period:], axis=0)
             converged = True

@@ -134,6 +134,42 @@ def grid_cells(lo: NDArray[np.float64], hi: NDArray[np.float64], resolution: flo
     return float(np.prod(np.ceil(ext / resolution) + 1))
 
 
+#: Points per block of :func:`_splat`.
+_SPLAT = 1024
+
+
+def _splat(
+    flat: NDArray[np.float32],
+    shape: tuple[int, int, int],
+    cell: NDArray[np.int64],
+    points: NDArray[np.float64],
+    kernel: tuple[NDArray[np.float64], float, float, int],
+) -> None:
+    """``flat = max(flat, kernel)`` of ``points`` ``(K, 2)`` in cells ``cell`` ``(K, 2)``.
+
+    ``flat`` is the table raveled, ``shape = (Y', X, Y)`` its row length and the area whose
+    cells ``[1, X) × [1, Y)`` take values (the border stays zero); ``kernel = (lo, r, σ, w)``.
+    Kernel cell ``(a, b)`` of point ``k`` is ``cell_k + (o_a, o_b)``, ``o = −w … w``, value
+    ``exp(−‖c − p_k‖² / (2σ²))``: the offsets per axis ``(K, 2w+1)`` broadcast to
+    ``(K, 2w+1, 2w+1)``."""
+    lo, r, sig, w = kernel
+    off = np.arange(-w, w + 1)
+    cx = cell[:, 0, None] + off[None, :]
+    cy = cell[:, 1, None] + off[None, :]
+    dx = lo[0] + (cx + 0.5) * r - points[:, 0, None]
+    dy = lo[1] + (cy + 0.5) * r - points[:, 1, None]
+    d2 = (dx * dx)[:, :, None] + (dy * dy)[:, None, :]
+    val = np.exp(-d2 / (2 * sig * sig)).astype(np.float32)
+    lin = cx[:, :, None] * shape[0] + cy[:, None, :]
+    ok = ((cx >= 1) & (cx < shape[1]))[:, :, None] & ((cy >= 1) & (cy < shape[2]))[:, None, :]
+    if ok.all():
+        lin, val = lin.ravel(), val.ravel()
+    else:
+        lin, val = lin[ok], val[ok]
+    # one flat index: ufunc.at's fast path (a tuple of index arrays is ~6x slower)
+    np.maximum.at(flat, lin, val)
+
+
 def likelihood_grid(
     points: NDArray[np.float64],
     lo: NDArray[np.float64],
@@ -151,16 +187,16 @@ def likelihood_grid(
     shape = [shape[0] + 1, shape[1] + 1]
     table = np.zeros((shape[0] + pad, shape[1] + pad), dtype=np.float32)
     w = int(np.ceil(3 * sig / r))
-    off = np.arange(-w, w + 1)
-    ox, oy = (a.ravel() for a in np.meshgrid(off, off, indexing="ij"))
     cell = np.floor((points - lo) / r).astype(np.int64)  # (K, 2)
-    cx = cell[:, 0, None] + ox[None, :]
-    cy = cell[:, 1, None] + oy[None, :]
-    dx = lo[0] + (cx + 0.5) * r - points[:, 0, None]
-    dy = lo[1] + (cy + 0.5) * r - points[:, 1, None]
-    val = np.exp(-(dx * dx + dy * dy) / (2 * sig * sig)).astype(np.float32)
-    ok = (cx >= 1) & (cx < shape[0]) & (cy >= 1) & (cy < shape[1])
-    np.maximum.at(table, (cx[ok], cy[ok]), val[ok])
+    inside = np.all((cell - w >= 1) & (cell + w < np.array(shape)), axis=1)
+    meets = np.all((cell + w >= 1) & (cell - w < np.array(shape)), axis=1)
+    flat = table.ravel()
+    for part in (np.flatnonzero(inside), np.flatnonzero(meets & ~inside)):
+        for a in range(0, part.size, _SPLAT):  # blocks that stay in the cache
+            at = part[a : a + _SPLAT]
+            _splat(
+                flat, (table.shape[1], shape[0], shape[1]), cell[at], points[at], (lo, r, sig, w)
+            )
     pyramid = [table]
     for h in range(1, options.levels + 1):
         s = 2 ** (h - 1)
@@ -190,9 +226,74 @@ def _score(
     return table.ravel().take(ix * ny + iy).mean(axis=1, dtype=np.float64)
 
 
+#: Largest padded level [cells] (16 MB of float32); a larger one reads through the clip.
+_PAD_LIMIT = 2**22
+#: Lookups per block of :meth:`_Lookup.score` (512 KB of indices).
+_BLOCK = 65536
+
+
+def _edge_pad(t: NDArray[np.float32], pad: tuple[tuple[int, int], ...]) -> NDArray[np.float32]:
+    """``np.pad(t, pad, mode="edge")`` of a 2-D table, in five slice copies."""
+    (a0, a1), (b0, b1) = pad
+    nx, ny = t.shape
+    out = np.empty((nx + a0 + a1, ny + b0 + b1), dtype=t.dtype)
+    out[a0 : a0 + nx, b0 : b0 + ny] = t
+    out[:a0, b0 : b0 + ny] = t[0]
+    out[a0 + nx :, b0 : b0 + ny] = t[-1]
+    out[:, :b0] = out[:, b0 : b0 + 1]
+    out[:, b0 + ny :] = out[:, b0 + ny - 1 : b0 + ny]
+    return out
+
+
+class _Lookup:
+    """:func:`_score` without the clip: each level ``L_h`` padded by edge replication so
+    that every lookup of the search (rotated points ``base`` moved by ``u, v ∈ ±half``)
+    lands inside it — the replicated border is exactly the value the clip reads — and the
+    points' cells as flat indices, so a node's score is one ``take`` of ``(N, M)``.
+    Falls back to :func:`_score` when the padding would exceed ``limit`` cells a level."""
+
+    def __init__(
+        self, grid: LikelihoodGrid, base: NDArray[np.int64], half: int, limit: int
+    ) -> None:
+        self.grid, self.base = grid, base
+        nx, ny = grid.pyramid[0].shape
+        lo = np.minimum(base.min(axis=(0, 1)) - half, 0)  # (2,) most negative index
+        hi = np.maximum(base.max(axis=(0, 1)) + half, [nx - 1, ny - 1])
+        shape = hi - lo + 1
+        self.padded = bool(float(shape[0]) * float(shape[1]) <= limit)
+        if not self.padded:
+            return
+        pad = ((int(-lo[0]), int(hi[0] - nx + 1)), (int(-lo[1]), int(hi[1] - ny + 1)))
+        self.stride = int(shape[1])
+        self.tables = [_edge_pad(t, pad).ravel() for t in grid.pyramid]
+        self.flat = (base[:, :, 0] - lo[0]) * self.stride + (base[:, :, 1] - lo[1])  # (T, M)
+
+    def score(
+        self, h: int, k: NDArray[np.int64], u: NDArray[np.int64], v: NDArray[np.int64]
+    ) -> NDArray[np.float64]:
+        """``_score(grid, base, h, k, u, v)``, the same values; in blocks of about
+        ``_BLOCK`` lookups that stay in the cache (each row's mean is the same sum)."""
+        if not self.padded:
+            return _score(self.grid, self.base, h, k, u, v)
+        table, flat = self.tables[h], self.flat
+        n, m = k.shape[0], flat.shape[1]
+        rows = max(1, _BLOCK // max(m, 1))
+        out = np.empty(n, dtype=np.float64)
+        idx = np.empty((min(rows, n), m), dtype=np.int64)
+        val = np.empty((min(rows, n), m), dtype=np.float32)
+        shift = u * self.stride + v
+        for a in range(0, n, rows):
+            b = min(a + rows, n)
+            ib, vb = idx[: b - a], val[: b - a]
+            np.add(flat[k[a:b]], shift[a:b, None], out=ib)
+            table.take(ib, out=vb)
+            np.add.reduce(vb, axis=1, dtype=np.float64, out=out[a:b])
+        out /= m  # np.mean's own steps (sum, then divide), without its per-call checks
+        return out
+
+
 def _greedy(
-    grid: LikelihoodGrid,
-    base: NDArray[np.int64],
+    look: _Lookup,
     top: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]],
     half: int,
 ) -> float:
@@ -201,9 +302,9 @@ def _greedy(
     n = int(np.argmax(b))
     kk, uu, vv = k[n : n + 1], u[n : n + 1], v[n : n + 1]
     best = 0.0
-    for h in range(len(grid.pyramid) - 1, 0, -1):
+    for h in range(len(look.grid.pyramid) - 1, 0, -1):
         ck, cu, cv = _children(kk, uu, vv, h, half)
-        s = _score(grid, base, h - 1, ck, cu, cv)
+        s = look.score(h - 1, ck, cu, cv)
         if s.size == 0:
             return 0.0
         n = int(np.argmax(s))
@@ -262,9 +363,10 @@ def branch_and_bound(
     tk, tu, tv = (
         a.ravel() for a in np.meshgrid(np.arange(thetas.size), starts, starts, indexing="ij")
     )
-    bounds = _score(grid, base, top_h, tk, tu, tv)
+    look = _Lookup(grid, base, half, _PAD_LIMIT)
+    bounds = look.score(top_h, tk, tu, tv)
     nodes = int(bounds.size)
-    best = _greedy(grid, base, (tk, tu, tv, bounds), half)
+    best = _greedy(look, (tk, tu, tv, bounds), half)
     truncated = False
     k, u, v = tk, tu, tv
     for h in range(top_h, 0, -1):
@@ -275,7 +377,7 @@ def branch_and_bound(
             pick = np.argpartition(-bounds, options.max_nodes)[: options.max_nodes]
             k, u, v = k[pick], u[pick], v[pick]
         k, u, v = _children(k, u, v, h, half)
-        bounds = _score(grid, base, h - 1, k, u, v)
+        bounds = look.score(h - 1, k, u, v)
         nodes += int(bounds.size)
         if h == 1 and bounds.size:
             best = max(best, float(bounds.max()))
