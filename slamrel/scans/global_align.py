@@ -67,6 +67,9 @@ class GlobalOptions:
         Pairs at most this far apart along the path are aligned from the chain (3 m).
     submap_travel : float
         Scans within this travel of a pair's scan join its submap (5 m).
+    retry_travel : float
+        A distant pair whose search is ambiguous or scores low is searched again with
+        submaps this large (10 m; not above ``submap_travel``: no retry).
     search_range : float
         Returns beyond this range are left out of the search (not of ICP) (15 m).
     max_points : int
@@ -91,6 +94,7 @@ class GlobalOptions:
     drift_theta: float = 0.0005
     local_travel: float = 3.0
     submap_travel: float = 5.0
+    retry_travel: float = 10.0
     search_range: float = 15.0
     max_points: int = 250
     chain_gap: float = 1.5
@@ -192,6 +196,7 @@ def scan_chain(
             b = align(store.prep(i), store.prep(j), s.delta, opt.icp)
             if not b.failed and (a.failed or b.matched_fraction > a.matched_fraction):
                 a = b
+        a = pinned(a, guess[k], gopt.drift_xy * float(np.hypot(guess[k, 0], guess[k, 1])))
         if a.failed:
             fallback += 1
         else:
@@ -202,10 +207,43 @@ def scan_chain(
     return Chain(nodes, chain, travel, links, guess, fallback)
 
 
-def _submap(store: _Scans, chain: Chain, a: int) -> list[int]:
-    """Chain positions within ``submap_travel`` of position ``a``."""
+def pinned(al: Alignment, prior: NDArray[np.float64], sd: float) -> Alignment:
+    """``al`` with its weak direction taken from ``prior`` when ICP calls it degenerate.
+
+    Solution remapping (Zhang, Kaess & Singh 2016, "On degeneracy of optimization-based
+    state estimation problems"): along the weak direction ``w`` (translation, rotation
+    marginalised out) the scans do not tell where the answer lies, and ICP slides there
+    by up to tens of centimetres (corridor worlds: 36 cm on 1 m pairs whose odometry is
+    within 3 cm). The translation keeps ICP's component across ``w`` and ``prior``'s along
+    it, ``t = t* − d w``, ``d = wᵀ(t* − t_prior)``; the rotation follows its conditional
+    optimum ``θ = θ* − Λ_θθ⁻¹ Λ_θt (t − t*)`` (``Λ = Σ⁻¹``); the covariance gains
+    ``sd² v vᵀ`` along that move ``v``. Not degenerate, or failed: ``al`` unchanged.
+    """
+    from dataclasses import replace
+
+    if al.failed or not al.degenerate or not np.isfinite(al.covariance).all():
+        return al
+    w = np.asarray(al.weak_direction, dtype=np.float64)
+    info = np.linalg.pinv(al.covariance)
+    v = np.array([w[0], w[1], -float(info[2, :2] @ w) / info[2, 2] if info[2, 2] > 0 else 0.0])
+    d = float(w @ (al.delta[:2] - prior[:2]))
+    delta = al.delta - d * v
+    return replace(al, delta=delta, covariance=al.covariance + sd * sd * np.outer(v, v))
+
+
+def _resolved(al: Alignment) -> Alignment:
+    """``al`` judged as not degenerate: :func:`pinned` took its weak direction from the
+    chain or the search (the report keeps its ``condition`` and weak direction)."""
+    from dataclasses import replace
+
+    return replace(al, degenerate=False)
+
+
+def _submap(store: _Scans, chain: Chain, a: int, reach: float | None = None) -> list[int]:
+    """Chain positions within ``reach`` (default ``submap_travel``) of position ``a``."""
     t = chain.travel
-    return np.flatnonzero(np.abs(t - t[a]) <= store.gopt.submap_travel).tolist()
+    reach = store.gopt.submap_travel if reach is None else reach
+    return np.flatnonzero(np.abs(t - t[a]) <= reach).tolist()
 
 
 def _points_in(
@@ -287,6 +325,39 @@ def _search(
     return branch_and_bound(grid, cur, centre, wxy, wth, sopt)
 
 
+def _submap_search(
+    store: _Scans,
+    chain: Chain,
+    pair: tuple[int, int],
+    at: tuple[int, int],
+    travel: float,
+    reach: float,
+) -> SearchResult:
+    """Branch and bound of the submap around ``at[1]`` against the one around ``at[0]``
+    (chain scans within ``reach`` of travel), window from the travel between them."""
+    gopt = store.gopt
+    (i, j), (a, b) = pair, at
+    centre = between(chain.poses[a], chain.poses[b])
+    ref_pts = _points_in(store, chain, a, _submap(store, chain, a, reach))
+    cur_pts = _thinned(
+        _points_in(store, chain, b, _submap(store, chain, b, reach)), gopt.max_points
+    )
+    wxy = gopt.window_xy + gopt.drift_xy * travel
+    wth = gopt.window_theta + gopt.drift_theta * travel
+    return _search(store, [i], [j], centre, centre, wxy, wth, ref_pts, cur_pts)
+
+
+def _ambiguous(s: SearchResult, gopt: GlobalOptions) -> bool:
+    """A second hypothesis scores at least ``ambiguity`` of the best (or the window held
+    too many near-equal ones)."""
+    return bool(s.truncated or s.ratio >= gopt.ambiguity)
+
+
+def _doubtful(s: SearchResult, gopt: GlobalOptions) -> bool:
+    """Ambiguous or below ``min_score``: worth a second search with larger submaps."""
+    return _ambiguous(s, gopt) or s.score < gopt.min_score
+
+
 def _distant(
     store: _Scans, chain: Chain, pair: tuple[int, int], at: tuple[int, int], travel: float
 ) -> tuple[tuple[Alignment, str, list[str], float], SearchResult]:
@@ -294,21 +365,20 @@ def _distant(
     from dataclasses import replace
 
     gopt, opt = store.gopt, store.opt
-    (i, j), (a, b) = pair, at
-    centre = between(chain.poses[a], chain.poses[b])
-    ref_pts = _points_in(store, chain, a, _submap(store, chain, a))
-    cur_pts = _thinned(_points_in(store, chain, b, _submap(store, chain, b)), gopt.max_points)
-    wxy = gopt.window_xy + gopt.drift_xy * travel
-    wth = gopt.window_theta + gopt.drift_theta * travel
-    s = _search(store, [i], [j], centre, centre, wxy, wth, ref_pts, cur_pts)
-    al = align(store.prep(i), store.prep(j), s.delta, opt.icp)
+    i, j = pair
+    s = _submap_search(store, chain, pair, at, travel, gopt.submap_travel)
+    if gopt.retry_travel > gopt.submap_travel and _doubtful(s, gopt):
+        s = _submap_search(store, chain, pair, at, travel, gopt.retry_travel)
+    al = pinned(
+        align(store.prep(i), store.prep(j), s.delta, opt.icp), s.delta, gopt.search.resolution
+    )
     limits = replace(
         opt.limits, max_correction=gopt.max_refine, max_correction_angle=gopt.max_refine_angle
     )
-    flags, susp = _judge(al, limits, s.delta)
+    flags, susp = _judge(_resolved(al), limits, s.delta)
     flags = ["unstable" if f == "large correction" else f for f in flags]
     extra = []
-    if s.truncated or s.ratio >= gopt.ambiguity:
+    if _ambiguous(s, gopt):
         extra.append("ambiguous")
     if s.score < gopt.min_score:
         extra.append("low score")
@@ -356,7 +426,9 @@ def align_scans_global(
             al = chain.links[a]
         else:
             centre = between(chain.poses[a], chain.poses[b])
-            al = align(store.prep(i), store.prep(j), centre, opt.icp)
+            al = pinned(
+                align(store.prep(i), store.prep(j), centre, opt.icp), centre, gopt.drift_xy * travel
+            )
         # a correction within the window a chain link searches is the given motion's error
         # (real odometry turns 3-10° wrong between scans), not a slipped alignment
         local = replace(
@@ -366,7 +438,7 @@ def align_scans_global(
                 opt.limits.max_correction_angle, gopt.link_theta + gopt.drift_theta * travel
             ),
         )
-        flags, susp = _judge(al, local, given[k])
+        flags, susp = _judge(_resolved(al), local, given[k])
         out.append((al, "chain", flags, susp))
     result = collect_relations(
         proposals, given, out, score=score, second=second, second_ratio=ratio
