@@ -31,9 +31,11 @@ A window whose grid would exceed :attr:`SearchOptions.max_cells` is refused with
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from relation_metric.errors import InputError
 from relation_metric.se2 import between, cumulative_compose
@@ -74,6 +76,9 @@ class GlobalOptions:
         Returns beyond this range are left out of the search (not of ICP) (15 m).
     max_points : int
         The current submap's returns are thinned to about this many for the search (250).
+    refine_points : int
+        The current submap's returns are thinned to about this many for the submap ICP
+        that resolves a degenerate loop pair's weak direction (1000).
     chain_gap : float
         Fill-in keyframes where the pairs' scans are farther apart than this (1.5 m).
     link_xy, link_theta : float
@@ -97,6 +102,7 @@ class GlobalOptions:
     retry_travel: float = 10.0
     search_range: float = 15.0
     max_points: int = 250
+    refine_points: int = 1000
     chain_gap: float = 1.5
     link_xy: float = 0.5
     link_theta: float = 0.2
@@ -347,6 +353,36 @@ def _submap_search(
     return _search(store, [i], [j], centre, centre, wxy, wth, ref_pts, cur_pts)
 
 
+def _submap_icp(
+    store: _Scans, chain: Chain, at: tuple[int, int], start: NDArray[np.float64], limits: Any
+) -> NDArray[np.float64]:
+    """Submap-to-submap ICP from the search's answer ``start``: the returns of ``at[1]``'s
+    submap (thinned to ``refine_points``) against the lines of ``at[0]``'s, moved by the
+    chain. Finer than the search's grid along a corridor, whose doors and niches the two
+    scans alone may not see. ``start`` when it fails, is degenerate itself, or moves farther
+    than ``limits.max_correction`` / ``max_correction_angle`` from it."""
+    a, b = at
+    members = _submap(store, chain, a)
+    rel = between(chain.poses[a], chain.poses[members])
+    preps = [store.prep(int(chain.nodes[m])) for m in members]
+    anchors = np.concatenate([transform(rel[q], p.anchors) for q, p in enumerate(preps)])
+    normals = np.concatenate(
+        [transform(np.array([0.0, 0.0, rel[q, 2]]), p.normals) for q, p in enumerate(preps)]
+    )
+    ref = PreparedScan(np.zeros((0, 2)), anchors, normals, cKDTree(anchors))
+    cur = _thinned(_points_in(store, chain, b, _submap(store, chain, b)), store.gopt.refine_points)
+    got = align(ref, PreparedScan(cur, cur[:0], cur[:0], ref.tree), start, store.opt.icp)
+    move = between(start, got.delta)
+    if (
+        got.failed
+        or got.degenerate
+        or np.hypot(move[0], move[1]) > limits.max_correction
+        or abs(move[2]) > limits.max_correction_angle
+    ):
+        return start
+    return got.delta
+
+
 def _ambiguous(s: SearchResult, gopt: GlobalOptions) -> bool:
     """A second hypothesis scores at least ``ambiguity`` of the best (or the window held
     too many near-equal ones)."""
@@ -369,12 +405,12 @@ def _distant(
     s = _submap_search(store, chain, pair, at, travel, gopt.submap_travel)
     if gopt.retry_travel > gopt.submap_travel and _doubtful(s, gopt):
         s = _submap_search(store, chain, pair, at, travel, gopt.retry_travel)
-    al = pinned(
-        align(store.prep(i), store.prep(j), s.delta, opt.icp), s.delta, gopt.search.resolution
-    )
+    al = align(store.prep(i), store.prep(j), s.delta, opt.icp)
     limits = replace(
         opt.limits, max_correction=gopt.max_refine, max_correction_angle=gopt.max_refine_angle
     )
+    if al.degenerate and not al.failed:
+        al = pinned(al, _submap_icp(store, chain, at, s.delta, limits), gopt.search.resolution)
     flags, susp = _judge(_resolved(al), limits, s.delta)
     flags = ["unstable" if f == "large correction" else f for f in flags]
     extra = []
