@@ -8,7 +8,8 @@ import pytest
 
 from relation_metric.errors import InputError
 from relation_metric.se2 import between
-from slamrel.scans.global_align import align_scans_global
+from slamrel.scans.global_align import align_scans_global, pinned
+from slamrel.scans.matching import Alignment, align, prepare_scan
 from slamrel.scans.proposals import Proposals
 from slamrel.scans.search import SearchOptions, _score, branch_and_bound, likelihood_grid
 from slamrel.simulation.corridors import corridor_log, corridor_world, grid_walls, true_pairs
@@ -79,6 +80,56 @@ def test_a_featureless_corridor_is_flagged_ambiguous_along_it():
     assert abs(second[0]) > 0.25 and abs(second[1]) < 0.1  # the second hypothesis: along x
 
 
+def _degenerate(delta, cov, weak):
+    return Alignment(delta, delta, cov, 0.9, 0.01, 0.01, 300, 10, True, 1e-4, weak, True, "")
+
+
+def test_pinned_takes_the_weak_direction_from_the_prior_hand_oracle():
+    """Along ``w`` the prior's value; across it ICP's; the rotation minimises
+    ``(x − x*)ᵀ Σ⁻¹ (x − x*)`` with the translation fixed (found here by a dense scan)."""
+    info = np.array([[4.0, 1.0, 0.5], [1.0, 900.0, 30.0], [0.5, 30.0, 400.0]])
+    cov = np.linalg.inv(info)
+    w = np.array([np.cos(0.3), np.sin(0.3)])
+    icp = np.array([1.20, 0.40, 0.05])
+    prior = np.array([1.00, 0.10, -0.2])
+    got = pinned(_degenerate(icp, cov, w), prior, 0.02)
+    across = np.array([-w[1], w[0]])
+    assert got.delta[:2] @ w == pytest.approx(prior[:2] @ w, abs=1e-12)
+    assert got.delta[:2] @ across == pytest.approx(icp[:2] @ across, abs=1e-12)
+    th = np.linspace(-0.5, 0.5, 200001)
+    dx = np.column_stack((np.broadcast_to(got.delta[:2] - icp[:2], (th.size, 2)), th - icp[2]))
+    best = th[np.argmin(np.einsum("ni,ij,nj->n", dx, info, dx))]
+    assert got.delta[2] == pytest.approx(best, abs=1e-5)
+    move = got.delta - icp
+    np.testing.assert_allclose(
+        got.covariance - cov, 0.02**2 * np.outer(move, move) / (move[:2] @ move[:2]), atol=1e-15
+    )
+    clear = Alignment(icp, icp, cov, 0.9, 0.01, 0.01, 300, 10, True, 0.5, w, False, "")
+    assert pinned(clear, prior, 0.02) is clear  # not degenerate: unchanged
+
+
+def test_a_featureless_corridor_keeps_the_odometry_along_it():
+    """1 m pairs in a corridor without features: ICP of the two scans slides along it
+    (here by up to 4 cm); the relation keeps the odometry's motion along the corridor
+    (composed links, each pinned to the given motion) and ICP's across it."""
+    walls = laser_world("corridor")
+    x = np.arange(0.0, 12.0, 0.2)
+    truth = np.column_stack((x, np.zeros_like(x), np.zeros_like(x)))
+    log = simulate_laser_log(walls, truth, odometry_sigma=(0.003, 0.001, 0.0005), seed=3)
+    s = log.scans
+    i, j = np.array([10, 20, 30]), np.array([15, 25, 35])
+    res, _ = align_scans_global(s, _proposals(np.column_stack((i, j)), s.timestamps), s.laser_pose)
+    odo = between(s.laser_pose[i], s.laser_pose[j])
+    raw = [
+        align(prepare_scan(s.points(a)), prepare_scan(s.points(b)), g) for a, b, g in zip(i, j, odo)
+    ]
+    assert all(r.degenerate for r in raw)
+    assert max(abs(r.delta[0] - 1.0) for r in raw) > 0.03  # ICP alone slides
+    np.testing.assert_allclose(res.delta[:, 0], odo[:, 0], atol=1e-3)
+    np.testing.assert_allclose(res.delta[:, 1:], 0.0, atol=0.005)  # across and θ: ICP's
+    assert not any("degenerate" in f for f in res.flags)
+
+
 def test_an_absurd_window_is_refused():
     """Poses that jump 100 km between two scans: the chain keeps the jump (no alignment
     bridges it), and a window growing with that travel would need an absurd grid."""
@@ -117,12 +168,12 @@ def _corridor_errors(seed, loops):
 
 def test_corridor_world_from_odometry_meets_loose_bounds():
     """Seed 8 (not used to calibrate), a 120 m drive, 15 loop pairs: the unflagged relations
-    are right (at most 1 % gross), millimetre-accurate, and most pairs are unflagged."""
+    are right (at most 1 % gross), millimetre-accurate, and at most 10 % are flagged."""
     et, er, gross, ok, loop = _corridor_errors(8, 15)
     assert loop.sum() >= 10
     assert (gross & ok).sum() <= 0.01 * ok.sum()
     assert np.median(et[ok]) < 0.005 and np.degrees(np.median(er[ok])) < 0.1
-    assert ok.mean() > 0.6
+    assert ok.mean() >= 0.9  # flagged at most 10 % (measured 6 %)
 
 
 @pytest.mark.slow

@@ -31,9 +31,11 @@ A window whose grid would exceed :attr:`SearchOptions.max_cells` is refused with
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from relation_metric.errors import InputError
 from relation_metric.se2 import between, cumulative_compose
@@ -68,10 +70,16 @@ class GlobalOptions:
         Pairs at most this far apart along the path are aligned from the chain (3 m).
     submap_travel : float
         Scans within this travel of a pair's scan join its submap (5 m).
+    retry_travel : float
+        A distant pair whose search is ambiguous or scores low is searched again with
+        submaps this large (10 m; not above ``submap_travel``: no retry).
     search_range : float
         Returns beyond this range are left out of the search (not of ICP) (15 m).
     max_points : int
         The current submap's returns are thinned to about this many for the search (250).
+    refine_points : int
+        The current submap's returns are thinned to about this many for the submap ICP
+        that resolves a degenerate loop pair's weak direction (1000).
     chain_gap : float
         Fill-in keyframes where the pairs' scans are farther apart than this (1.5 m).
     link_xy, link_theta : float
@@ -92,8 +100,10 @@ class GlobalOptions:
     drift_theta: float = 0.0005
     local_travel: float = 3.0
     submap_travel: float = 5.0
+    retry_travel: float = 10.0
     search_range: float = 15.0
     max_points: int = 250
+    refine_points: int = 1000
     chain_gap: float = 1.5
     link_xy: float = 0.5
     link_theta: float = 0.2
@@ -215,6 +225,7 @@ def scan_chain(
             b = align(store.prep(i), store.prep(j), s.delta, opt.icp)
             if not b.failed and (a.failed or b.matched_fraction > a.matched_fraction):
                 a = b
+        a = pinned(a, guess[k], gopt.drift_xy * float(np.hypot(guess[k, 0], guess[k, 1])))
         if a.failed:
             fallback += 1
         else:
@@ -227,10 +238,43 @@ def scan_chain(
     return Chain(nodes, chain, travel, links, guess, fallback)
 
 
-def _submap(store: _Scans, chain: Chain, a: int) -> list[int]:
-    """Chain positions within ``submap_travel`` of position ``a``."""
+def pinned(al: Alignment, prior: NDArray[np.float64], sd: float) -> Alignment:
+    """``al`` with its weak direction taken from ``prior`` when ICP calls it degenerate.
+
+    Solution remapping (Zhang, Kaess & Singh 2016, "On degeneracy of optimization-based
+    state estimation problems"): along the weak direction ``w`` (translation, rotation
+    marginalised out) the scans do not tell where the answer lies, and ICP slides there
+    by up to tens of centimetres (corridor worlds: 36 cm on 1 m pairs whose odometry is
+    within 3 cm). The translation keeps ICP's component across ``w`` and ``prior``'s along
+    it, ``t = t* − d w``, ``d = wᵀ(t* − t_prior)``; the rotation follows its conditional
+    optimum ``θ = θ* − Λ_θθ⁻¹ Λ_θt (t − t*)`` (``Λ = Σ⁻¹``); the covariance gains
+    ``sd² v vᵀ`` along that move ``v``. Not degenerate, or failed: ``al`` unchanged.
+    """
+    from dataclasses import replace
+
+    if al.failed or not al.degenerate or not np.isfinite(al.covariance).all():
+        return al
+    w = np.asarray(al.weak_direction, dtype=np.float64)
+    info = np.linalg.pinv(al.covariance)
+    v = np.array([w[0], w[1], -float(info[2, :2] @ w) / info[2, 2] if info[2, 2] > 0 else 0.0])
+    d = float(w @ (al.delta[:2] - prior[:2]))
+    delta = al.delta - d * v
+    return replace(al, delta=delta, covariance=al.covariance + sd * sd * np.outer(v, v))
+
+
+def _resolved(al: Alignment) -> Alignment:
+    """``al`` judged as not degenerate: :func:`pinned` took its weak direction from the
+    chain or the search (the report keeps its ``condition`` and weak direction)."""
+    from dataclasses import replace
+
+    return replace(al, degenerate=False)
+
+
+def _submap(store: _Scans, chain: Chain, a: int, reach: float | None = None) -> list[int]:
+    """Chain positions within ``reach`` (default ``submap_travel``) of position ``a``."""
     t = chain.travel
-    return np.flatnonzero(np.abs(t - t[a]) <= store.gopt.submap_travel).tolist()
+    reach = store.gopt.submap_travel if reach is None else reach
+    return np.flatnonzero(np.abs(t - t[a]) <= reach).tolist()
 
 
 def _points_in(
@@ -316,6 +360,71 @@ def _search(
     return branch_and_bound(grid, cur, centre, wxy, wth, sopt)
 
 
+def _submap_search(
+    store: _Scans,
+    chain: Chain,
+    pair: tuple[int, int],
+    at: tuple[int, int],
+    travel: float,
+    reach: float,
+) -> SearchResult:
+    """Branch and bound of the submap around ``at[1]`` against the one around ``at[0]``
+    (chain scans within ``reach`` of travel), window from the travel between them."""
+    gopt = store.gopt
+    (i, j), (a, b) = pair, at
+    centre = between(chain.poses[a], chain.poses[b])
+    ref_pts = _points_in(store, chain, a, _submap(store, chain, a, reach))
+    cur_pts = _thinned(
+        _points_in(store, chain, b, _submap(store, chain, b, reach)), gopt.max_points
+    )
+    wxy = gopt.window_xy + gopt.drift_xy * travel
+    wth = gopt.window_theta + gopt.drift_theta * travel
+    return _search(
+        store, [i], [j], centre, centre, wxy, wth, ref_pts, cur_pts, ("submap", a, reach)
+    )
+
+
+def _submap_icp(
+    store: _Scans, chain: Chain, at: tuple[int, int], start: NDArray[np.float64], limits: Any
+) -> NDArray[np.float64]:
+    """Submap-to-submap ICP from the search's answer ``start``: the returns of ``at[1]``'s
+    submap (thinned to ``refine_points``) against the lines of ``at[0]``'s, moved by the
+    chain. Finer than the search's grid along a corridor, whose doors and niches the two
+    scans alone may not see. ``start`` when it fails, is degenerate itself, or moves farther
+    than ``limits.max_correction`` / ``max_correction_angle`` from it."""
+    a, b = at
+    members = _submap(store, chain, a)
+    rel = between(chain.poses[a], chain.poses[members])
+    preps = [store.prep(int(chain.nodes[m])) for m in members]
+    anchors = np.concatenate([transform(rel[q], p.anchors) for q, p in enumerate(preps)])
+    normals = np.concatenate(
+        [transform(np.array([0.0, 0.0, rel[q, 2]]), p.normals) for q, p in enumerate(preps)]
+    )
+    ref = PreparedScan(np.zeros((0, 2)), anchors, normals, cKDTree(anchors))
+    cur = _thinned(_points_in(store, chain, b, _submap(store, chain, b)), store.gopt.refine_points)
+    got = align(ref, PreparedScan(cur, cur[:0], cur[:0], ref.tree), start, store.opt.icp)
+    move = between(start, got.delta)
+    if (
+        got.failed
+        or got.degenerate
+        or np.hypot(move[0], move[1]) > limits.max_correction
+        or abs(move[2]) > limits.max_correction_angle
+    ):
+        return start
+    return got.delta
+
+
+def _ambiguous(s: SearchResult, gopt: GlobalOptions) -> bool:
+    """A second hypothesis scores at least ``ambiguity`` of the best (or the window held
+    too many near-equal ones)."""
+    return bool(s.truncated or s.ratio >= gopt.ambiguity)
+
+
+def _doubtful(s: SearchResult, gopt: GlobalOptions) -> bool:
+    """Ambiguous or below ``min_score``: worth a second search with larger submaps."""
+    return _ambiguous(s, gopt) or s.score < gopt.min_score
+
+
 def _distant(
     store: _Scans, chain: Chain, pair: tuple[int, int], at: tuple[int, int], travel: float
 ) -> tuple[tuple[Alignment, str, list[str], float], SearchResult]:
@@ -323,21 +432,20 @@ def _distant(
     from dataclasses import replace
 
     gopt, opt = store.gopt, store.opt
-    (i, j), (a, b) = pair, at
-    centre = between(chain.poses[a], chain.poses[b])
-    ref_pts = _points_in(store, chain, a, _submap(store, chain, a))
-    cur_pts = _thinned(_points_in(store, chain, b, _submap(store, chain, b)), gopt.max_points)
-    wxy = gopt.window_xy + gopt.drift_xy * travel
-    wth = gopt.window_theta + gopt.drift_theta * travel
-    s = _search(store, [i], [j], centre, centre, wxy, wth, ref_pts, cur_pts, ("submap", a))
+    i, j = pair
+    s = _submap_search(store, chain, pair, at, travel, gopt.submap_travel)
+    if gopt.retry_travel > gopt.submap_travel and _doubtful(s, gopt):
+        s = _submap_search(store, chain, pair, at, travel, gopt.retry_travel)
     al = align(store.prep(i), store.prep(j), s.delta, opt.icp)
     limits = replace(
         opt.limits, max_correction=gopt.max_refine, max_correction_angle=gopt.max_refine_angle
     )
-    flags, susp = _judge(al, limits, s.delta)
+    if al.degenerate and not al.failed:
+        al = pinned(al, _submap_icp(store, chain, at, s.delta, limits), gopt.search.resolution)
+    flags, susp = _judge(_resolved(al), limits, s.delta)
     flags = ["unstable" if f == "large correction" else f for f in flags]
     extra = []
-    if s.truncated or s.ratio >= gopt.ambiguity:
+    if _ambiguous(s, gopt):
         extra.append("ambiguous")
     if s.score < gopt.min_score:
         extra.append("low score")
@@ -385,7 +493,9 @@ def align_scans_global(
             al = chain.links[a]
         else:
             centre = between(chain.poses[a], chain.poses[b])
-            al = align(store.prep(i), store.prep(j), centre, opt.icp)
+            al = pinned(
+                align(store.prep(i), store.prep(j), centre, opt.icp), centre, gopt.drift_xy * travel
+            )
         # a correction within the window a chain link searches is the given motion's error
         # (real odometry turns 3-10° wrong between scans), not a slipped alignment
         local = replace(
@@ -395,7 +505,7 @@ def align_scans_global(
                 opt.limits.max_correction_angle, gopt.link_theta + gopt.drift_theta * travel
             ),
         )
-        flags, susp = _judge(al, local, given[k])
+        flags, susp = _judge(_resolved(al), local, given[k])
         out.append((al, "chain", flags, susp))
     result = collect_relations(
         proposals, given, out, score=score, second=second, second_ratio=ratio
