@@ -134,7 +134,9 @@ def _slam_estimates(bundle: Bundle) -> tuple[dict[str, Trajectory], int]:
     return est, int(run.landmark_ids.size)
 
 
-def _laser_relations(log: SimulatedLog) -> tuple[Proposals, ScanRelations, ScriptedReview]:
+def _laser_relations(
+    log: SimulatedLog, confirm: bool
+) -> tuple[Proposals, ScanRelations, ScriptedReview]:
     """Pairs and guesses from the chain, the global aligner, the scripted review."""
     from slamrel.scans.global_align import align_scans_global
     from slamrel.scans.own_guesses import chain_guesses
@@ -144,18 +146,19 @@ def _laser_relations(log: SimulatedLog) -> tuple[Proposals, ScanRelations, Scrip
     own = chain_guesses(s, s.laser_pose).poses
     prop = align_pairs(own, s.timestamps)
     res, _ = align_scans_global(s, prop, own)
-    return prop, res, scripted_review(res)
+    return prop, res, scripted_review(res, confirm=confirm)
 
 
-def end_to_end(seed: int) -> EndToEnd:
-    """The story of one seed (module docstring)."""
+def end_to_end(seed: int, *, confirm: bool = True) -> EndToEnd:
+    """The story of one seed (module docstring); ``confirm=False``: the review rejects every
+    flagged relation, whatever its cycles say."""
     from slamrel.simulation.pillars import pillar_log
 
     world = pillar_log(seed)
     log, truth = world.laser, world.laser.truth
     times = log.scans.timestamps
     estimates, mapped = _slam_estimates(world.bundle)
-    prop, res, review = _laser_relations(log)
+    prop, res, review = _laser_relations(log, confirm)
     ok = review.accepted
     true_at = se2.between(truth[prop.pairs[:, 0]], truth[prop.pairs[:, 1]])
     err = se2.between(true_at, res.delta)
