@@ -112,7 +112,7 @@ def line_of_sight(
         t = (ap[..., 0] * e[..., 1] - ap[..., 1] * e[..., 0]) / d
         s = (ap[..., 0] * r[..., 1] - ap[..., 1] * r[..., 0]) / d
     cross = (np.abs(d) > 1e-12) & (t >= 0) & (t <= 1) & (s >= 0) & (s <= 1)
-    return ~cross.any(axis=1)
+    return np.asarray(~cross.any(axis=1), dtype=bool)
 
 
 def _detect(

@@ -171,7 +171,7 @@ def end_to_end(seed: int, *, confirm: bool = True) -> EndToEnd:
         ),
         "true_accepted": RelationSet(prop.t1[ok], prop.t2[ok], true_at[ok]),
     }
-    scores = {}
+    scores: dict[str, dict[str, tuple[float, float]]] = {}
     for name, traj in estimates.items():
         scores[name] = {}
         for ref, rel in refs.items():
