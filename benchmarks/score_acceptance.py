@@ -33,7 +33,7 @@ translational error within 10 % (ratio reviewed / true in 0.9–1.1); the rotati
 are reported beside them.
 
     python benchmarks/score_acceptance.py [--seeds 0 1 2] [--cycle-check] [--confirm]
-        [--guesses chain|odometry|truth] [--json OUT]
+        [--guesses chain|odometry|truth] [--world loop|corridor] [--json OUT]
 """
 
 from __future__ import annotations
@@ -90,6 +90,7 @@ def run(
     confirm: bool = False,
     guesses: str = "odometry",
     aligner: str = "global",
+    world: str = "loop",
 ) -> dict:
     """One simulated log: relations made and reviewed, three estimates scored both ways.
 
@@ -98,10 +99,14 @@ def run(
     can pass when the aligner gets every pair right). ``aligner``: ``global`` (the command's
     default, :func:`slamrel.scans.global_align.align_scans_global`) or ``icp`` (ICP from the
     guess, :func:`slamrel.scans.relations.align_scans`)."""
-    walls = laser_world("loop")
-    truth = loop_path(CORNERS, 0.3)
-    truth = np.vstack((truth, truth[:60]))  # on past the start: loop closures
-    log = simulate_laser_log(walls, truth, seed=seed)
+    if world == "corridor":  # slamrel.simulation.corridors: a 200 m drive, world ``seed``
+        from slamrel.simulation.corridors import corridor_log
+
+        _, log = corridor_log(seed)
+    else:
+        truth = loop_path(CORNERS, 0.3)
+        truth = np.vstack((truth, truth[:60]))  # on past the start: loop closures
+        log = simulate_laser_log(laser_world("loop"), truth, seed=seed)
     s = log.scans
     odo = s.laser_pose
     t0 = time.process_time()
@@ -186,6 +191,12 @@ def main() -> None:
     ap.add_argument("--confirm", action="store_true")
     ap.add_argument("--guesses", choices=("odometry", "chain", "truth"), default="chain")
     ap.add_argument("--aligner", choices=("global", "icp"), default="global")
+    ap.add_argument(
+        "--world",
+        choices=("loop", "corridor"),
+        default="loop",
+        help="loop (default) or a corridor world of slamrel.simulation.corridors (seeds 101...)",
+    )
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args()
     out = []
@@ -196,6 +207,7 @@ def main() -> None:
             confirm=args.confirm,
             guesses=args.guesses,
             aligner=args.aligner,
+            world=args.world,
         )
         out.append(r)
         print(
