@@ -3,14 +3,18 @@ gives the ranking and the means of scoring against the true relations.
 
 A simulated laser log of the ``"loop"`` world (:mod:`slamrel.simulation.laser`: the corridor
 around the block, driven once and on past the start, 1 cm range noise, drifting odometry).
-Relations are made as ``slamrel relations align`` makes them today, through its public
-function :func:`slamrel.scans.relations.align_scans`: consecutive keyframes every 0.5 m and
-loop pairs (``--loops``), guesses from the log's own odometry, default options. The
-scripted review accepts the unflagged relations and rejects the flagged ones; with
-``--cycle-check`` the relations the cycle check contradicts
-(:func:`slamrel.scans.cycles.check_scan_relations`) are rejected too; with ``--confirm`` the
-relations flagged only for a ``large correction`` that their cycles confirm (≥ 2 cycles,
-none failed) are accepted.
+Relations are made as ``slamrel relations align`` makes them, through its public functions:
+consecutive keyframes every 0.5 m and loop pairs (``--loops``), the global aligner
+(:func:`slamrel.scans.global_align.align_scans_global`, default options). Pairs and guesses
+come from ``--guesses``: ``chain`` (default) the scans' own scan-matched odometry
+(:func:`slamrel.scans.own_guesses.chain_guesses`, built from the log's odometry: no truth,
+no estimate), ``odometry`` the log's odometry itself (from which seed 2 proposes no loop
+pair), ``truth`` the true poses (a check that the harness can pass). The scripted review
+accepts the unflagged relations and rejects the flagged ones; with ``--cycle-check`` the
+relations the cycle check contradicts (:func:`slamrel.scans.cycles.check_scan_relations`)
+are rejected too; with ``--confirm`` the relations flagged only ``large correction`` or only
+``ambiguous`` that their cycles confirm (≥ 2 cycles, none failed, with the unflagged ones)
+are accepted — what a person does with a flagged relation its neighbours agree with.
 
 Three estimates of different quality are scored (relation metric, paper mode) against
 
@@ -29,7 +33,7 @@ translational error within 10 % (ratio reviewed / true in 0.9–1.1); the rotati
 are reported beside them.
 
     python benchmarks/score_acceptance.py [--seeds 0 1 2] [--cycle-check] [--confirm]
-        [--guesses truth] [--json OUT]
+        [--guesses chain|odometry|truth] [--world loop|corridor] [--json OUT]
 """
 
 from __future__ import annotations
@@ -47,10 +51,10 @@ from relation_metric.trajectory import Trajectory
 from slamrel.scans.proposals import Proposals, consecutive_pairs, loop_pairs
 from slamrel.scans.relations import (
     AlignOptions,
-    ScanRelations,
     align_scans,
     guesses_from_poses,
 )
+from slamrel.scans.scripted_review import scripted_review
 from slamrel.simulation.laser import laser_world, loop_path, simulate_laser_log
 
 CORNERS = np.array([[1.5, 1.5], [28.5, 1.5], [28.5, 18.5], [1.5, 18.5]])
@@ -79,24 +83,6 @@ def _pairs(poses: np.ndarray, times: np.ndarray) -> Proposals:
     return prop + loop_pairs(poses, times, radius=1.0, min_travel=10.0, distance=0.5, angle=0.3)
 
 
-def _review(res: ScanRelations, cycle_check: bool, confirm: bool) -> tuple[np.ndarray, int, int]:
-    """The scripted review: accept the unflagged relations; with ``cycle_check`` not those
-    the cycle check contradicts; with ``confirm`` also the relations flagged only for a
-    ``large correction`` whose cycles (with the unflagged ones) confirm them (≥ 2 cycles,
-    none failed). Returns the accepted mask and the counts contradicted and confirmed."""
-    from slamrel.scans.cycles import check_scan_relations
-
-    accept = ~res.flagged
-    if not (cycle_check or confirm):
-        return accept, 0, 0
-    moved = res.flags == "large correction"
-    check = check_scan_relations(res, use=accept | moved if confirm else accept)
-    if cycle_check:
-        accept &= ~check.contradicted
-    extra = moved & check.confirmed() & ~check.contradicted if confirm else moved & False
-    return accept | extra, check.count, int(extra.sum())
-
-
 def run(
     seed: int,
     *,
@@ -104,6 +90,7 @@ def run(
     confirm: bool = False,
     guesses: str = "odometry",
     aligner: str = "global",
+    world: str = "loop",
 ) -> dict:
     """One simulated log: relations made and reviewed, three estimates scored both ways.
 
@@ -112,15 +99,23 @@ def run(
     can pass when the aligner gets every pair right). ``aligner``: ``global`` (the command's
     default, :func:`slamrel.scans.global_align.align_scans_global`) or ``icp`` (ICP from the
     guess, :func:`slamrel.scans.relations.align_scans`)."""
-    walls = laser_world("loop")
-    truth = loop_path(CORNERS, 0.3)
-    truth = np.vstack((truth, truth[:60]))  # on past the start: loop closures
-    log = simulate_laser_log(walls, truth, seed=seed)
+    if world == "corridor":  # slamrel.simulation.corridors: a 200 m drive, world ``seed``
+        from slamrel.simulation.corridors import corridor_log
+
+        _, log = corridor_log(seed)
+    else:
+        truth = loop_path(CORNERS, 0.3)
+        truth = np.vstack((truth, truth[:60]))  # on past the start: loop closures
+        log = simulate_laser_log(laser_world("loop"), truth, seed=seed)
     s = log.scans
     odo = s.laser_pose
-    start = odo if guesses == "odometry" else log.truth
-    prop = _pairs(start, s.timestamps)
     t0 = time.process_time()
+    start = {"odometry": odo, "truth": log.truth}.get(guesses)
+    if start is None:  # scan-matched odometry: the scans' own chain (slamrel.scans.own_guesses)
+        from slamrel.scans.own_guesses import chain_guesses
+
+        start = chain_guesses(s, odo).poses
+    prop = _pairs(start, s.timestamps)
     if aligner == "global":
         from slamrel.scans.global_align import align_scans_global
 
@@ -128,7 +123,8 @@ def run(
     else:
         res = align_scans(s, prop, guesses_from_poses(start, prop), AlignOptions())
     cpu = time.process_time() - t0
-    accept, contradicted, confirmed = _review(res, cycle_check, confirm)
+    review = scripted_review(res, cycle_check=cycle_check, confirm=confirm)
+    accept, contradicted, confirmed = review.accepted, review.contradicted, review.confirmed
     true = guesses_from_poses(log.truth, prop)
     err = se2.between(true, res.delta)
     gross = (np.hypot(err[:, 0], err[:, 1]) > 0.1) | (np.abs(err[:, 2]) > np.radians(2))
@@ -193,8 +189,14 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--cycle-check", action="store_true")
     ap.add_argument("--confirm", action="store_true")
-    ap.add_argument("--guesses", choices=("odometry", "truth"), default="odometry")
+    ap.add_argument("--guesses", choices=("odometry", "chain", "truth"), default="chain")
     ap.add_argument("--aligner", choices=("global", "icp"), default="global")
+    ap.add_argument(
+        "--world",
+        choices=("loop", "corridor"),
+        default="loop",
+        help="loop (default) or a corridor world of slamrel.simulation.corridors (seeds 101...)",
+    )
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args()
     out = []
@@ -205,6 +207,7 @@ def main() -> None:
             confirm=args.confirm,
             guesses=args.guesses,
             aligner=args.aligner,
+            world=args.world,
         )
         out.append(r)
         print(

@@ -86,6 +86,7 @@ ALLOWED: dict[str, tuple[str, ...]] = {
         FORMATS,
         BACKENDS,
         SIMULATION,
+        SCANS,  # studies.end_to_end: laser reference relations beside EKF-SLAM
         PLOTS,
         RUNS,
         REPORT,

@@ -178,6 +178,14 @@ def _add_align_guess_arguments(a: argparse.ArgumentParser) -> None:
     )
     a.add_argument("--estimate-format", choices=TRAJECTORY_FORMATS, help="format of TRAJ")
     a.add_argument(
+        "--chain-guesses",
+        action="store_true",
+        help="propose the pairs from, and guess by, the scans' own scan-matched odometry: "
+        "keyframes of the poses above (the log's, or TRAJ's) linked by ICP, the other scans "
+        "placed from them by the poses' motion (a drifting odometry finds its loop pairs; "
+        "the reference leans on the poses only between neighbouring keyframes)",
+    )
+    a.add_argument(
         "--skip-invalid-poses",
         action="store_true",
         help="skip (and count) estimate pose records with non-finite values instead of "
@@ -422,8 +430,21 @@ def run_align(args: argparse.Namespace) -> int:
     )
     scans = read_laser_scans(args.log, record=args.record)
     scans, poses, summary = _align_guesses(args, scans, bag)
-    prop = _align_pairs(args, scans, poses)
     options = _align_options(args)
+    if args.chain_guesses:
+        from slamrel.scans.own_guesses import chain_guesses
+
+        own = chain_guesses(
+            scans,
+            poses,
+            distance=args.distance,
+            angle=args.angle,
+            options=options,
+            global_options=_global_options(args),
+        )
+        poses = own.poses
+        summary += f"; pairs and guesses from the scans' chain of {len(own.chain.nodes)} scans"
+    prop = _align_pairs(args, scans, poses)
     if args.aligner == "global":
         from slamrel.scans.global_align import align_scans_global
 

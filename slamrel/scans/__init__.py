@@ -10,6 +10,8 @@
 ``relations``       the pipeline (propose → initialise → align → judge) as typed results
 ``cycles``          the set-level check: each relation against the short cycles it closes
                     with the others (χ² of the composition), contradicted ones flagged
+``own_guesses``     pairs and guesses from the scans' own scan-matched chain (not the odometry)
+``scripted_review`` a review by rule (flags, cycle check) for benchmarks, tests, notebooks
 ==================  =========================================================================
 
 Pure maths (numpy/scipy), no file I/O and no CLI: the readers are in
