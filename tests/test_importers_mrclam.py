@@ -379,3 +379,36 @@ def test_dataset7_fit_check_finds_correlated_heavy_tailed_errors():
         c = fit_noise(read_mrclam_robot(d, robot), lms).check
         assert c is not None and c.pairs > 1000
         assert c.range_correlation > 0.8 and c.beyond_999 > 0.01
+
+
+def test_thin_sightings_keeps_one_per_landmark_per_spacing():
+    """Hand oracle: landmark 6 seen at 0, 0.4, 0.9, 1.0, 2.5 s and landmark 7 at 0.5, 0.6 s,
+    spacing 1 s: 6 keeps 0, 1.0 (the first ≥ 1 s after 0) and 2.5; 7 keeps 0.5."""
+    from slamrel.importers.mrclam import thin_sightings
+
+    t = np.array([0.0, 0.4, 0.5, 0.6, 0.9, 1.0, 2.5])
+    ids = np.array([6, 6, 7, 7, 6, 6, 6])
+    keep = thin_sightings(t, ids, 1.0)
+    assert keep.tolist() == [True, False, True, False, False, True, True]
+    assert thin_sightings(t, ids, 0.0).all()
+
+
+@pytest.mark.realdata
+def test_dataset7_decorrelated_bundle_counts_what_it_leaves_out():
+    """--decorrelate 5: every kept sighting of a landmark is ≥ 5 s after the previous kept
+    one, the description counts the rest, and the motion noise is fitted over 5 s windows
+    (larger than over 1 s: the odometry's errors persist too)."""
+    import re
+
+    from slamrel.importers.mrclam import mrclam_bundle
+
+    d = require_data("mrclam", "MRCLAM_Dataset7")
+    full, thin = mrclam_bundle(d, 2), mrclam_bundle(d, 2, decorrelate=5.0)
+    left = int(re.search(r"(\d+) of (\d+) landmark sightings left out", thin.description)[1])
+    assert left + thin.measurements.shape[0] == full.measurements.shape[0]
+    for lm in np.unique(thin.measurement_landmarks):
+        assert np.diff(thin.measurement_times[thin.measurement_landmarks == lm]).min() >= 5.0
+    assert "noise fitted over 5 s windows" in thin.description
+    assert thin.motion.alpha[0] > full.motion.alpha[0]
+    with pytest.raises(InputError, match="decorrelate"):
+        mrclam_bundle(d, 2, decorrelate=-1.0)
