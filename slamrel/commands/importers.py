@@ -68,6 +68,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="velocity-model noise growing with the commanded speeds (fitted alpha, zero at "
         "rest) or constant per control row (fitted sigma_v, sigma_omega) (default: %(default)s)",
     )
+    mr.add_argument(
+        "--decorrelate",
+        type=opt.float_at_least(0.0),
+        default=0.0,
+        metavar="SECONDS",
+        help="the data's errors persist over seconds: fit the motion noise over SECONDS windows "
+        "and keep one sighting per landmark every SECONDS (the rest counted, left out), so "
+        "white-noise models fit them (0: off; dataset 7: 5; default: %(default)s)",
+    )
     add_force_argument(mr)
     mr.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     mr.set_defaults(func=run_import_mrclam)
@@ -129,6 +138,7 @@ def _mrclam_robot(args: argparse.Namespace, robot: int, out: Path) -> Bundle:
             robot,
             calibrate=not args.no_calibrate,
             motion_noise=args.motion_noise,
+            decorrelate=args.decorrelate,
         )
     if not args.quiet:
         assert bundle.controls is not None  # MRCLAM bundles use the velocity model
