@@ -15,10 +15,8 @@ import pytest
 
 import slamrel.backends.ekf_slam as ekf
 from relation_metric.consistency import pose_nees
-from relation_metric.errors import InputError
 from slamrel.backends.ekf_slam import ekf_slam_bundle
 from slamrel.simulation.bundles import world_bundle
-from slamrel.simulation.linear_gaussian import linear_world
 from slamrel.simulation.worlds import make_world
 
 
@@ -83,17 +81,4 @@ def test_oc_keeps_pose_and_map_consistent_where_the_standard_filter_is_not() -> 
     assert 0.5 < map_q["oc"] < min(1.5, map_q["standard"]), map_q
 
 
-def test_oc_is_the_standard_filter_in_the_linear_limit() -> None:
-    log = linear_world(21)
-    std, _ = ekf_slam_bundle(log)
-    oc, _ = ekf_slam_bundle(log, jacobians="oc")
-    assert std.map_covariance is not None and oc.map_covariance is not None
-    sd = np.sqrt(np.diag(std.map_covariance)).reshape(-1, 2)
-    assert np.abs((oc.map_xy - std.map_xy) / sd).max() < 1e-2
-    scale = np.abs(std.map_covariance).max()
-    assert np.abs(oc.map_covariance - std.map_covariance).max() < 1e-3 * scale
-
-
-def test_oc_needs_known_associations() -> None:
-    with pytest.raises(InputError, match="'oc' with known associations"):
-        ekf_slam_bundle(linear_world(22), association="nn", jacobians="oc")
+# The linear limit and the refusal of nn association: tests/test_ekfslam_fej.py.
