@@ -71,7 +71,8 @@ def jacobians_case(world: str, noise: str, seed: int, jacobians: str) -> dict:  
     inp = replace(inp, name=f"{inp.name} ({jacobians})")
     result = score_bundle(inp, seed=seed)
     case = judged_case(result, f"reference EKF-SLAM healthy ({jacobians})")
-    ev = result.evaluations.get("recovered", {}).get("global")
+    evs = result.evaluations.get("recovered")
+    ev = None if evs is None else evs.get("global")
     case["accuracy"] = None if ev is None else float(ev.translation.abs.mean)
     return case
 
