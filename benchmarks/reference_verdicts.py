@@ -21,6 +21,7 @@ import collections
 import itertools
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from slamrel.constants import NOISE_NAMES, WORLDS
@@ -60,21 +61,20 @@ def compare_priors(world: str, noise: str, seed: int) -> dict[str, float | bool]
     }
 
 
-def fej_case(world: str, noise: str, seed: int) -> dict:  # type: ignore[type-arg]
-    """The reference run with the EKF-SLAM's first-estimate Jacobians (FEJ-EKF), judged."""
-    from slamrel.backends.ekf_slam import ekf_slam_bundle
-    from slamrel.pipeline import RunInput, score_bundle
-    from slamrel.simulation.bundles import world_bundle
-    from slamrel.simulation.worlds import make_world
+def jacobians_case(world: str, noise: str, seed: int, jacobians: str) -> dict:  # type: ignore[type-arg]
+    """The reference run with the EKF-SLAM's ``jacobians`` (``fej``: first-estimate, FEJ-EKF;
+    ``oc``: observability-constrained, OC-EKF), judged."""
+    from slamrel.pipeline import score_bundle, simulate_run_input
     from slamrel.studies.calibration import judged_case
 
-    w = make_world(world, noise=noise, seed=seed)
-    bundle, slam = ekf_slam_bundle(world_bundle(w), seed=seed, jacobians="fej")
-    inp = RunInput(
-        bundle, name=f"{world}/{noise}/seed {seed} (FEJ)", online=slam.online,
-        online_covariance=slam.online_covariance, dead_reckoning=w.odometry,
-    )  # fmt: skip
-    return judged_case(score_bundle(inp, seed=seed), "reference EKF-SLAM healthy (FEJ)")
+    inp = simulate_run_input(world, noise=noise, seed=seed, jacobians=jacobians)  # type: ignore[arg-type]
+    inp = replace(inp, name=f"{inp.name} ({jacobians})")
+    result = score_bundle(inp, seed=seed)
+    case = judged_case(result, f"reference EKF-SLAM healthy ({jacobians})")
+    evs = result.evaluations.get("recovered")
+    ev = None if evs is None else evs.get("global")
+    case["accuracy"] = None if ev is None else float(ev.translation.abs.mean)
+    return case
 
 
 def _summary(records: list[dict], worlds, noises) -> list[str]:  # type: ignore[no-untyped-def]
@@ -123,16 +123,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", type=_seeds, default=_seeds("10-19"))
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--compare-priors", type=int, default=0, metavar="K")
-    p.add_argument("--jacobians", choices=("standard", "fej"), default="standard")
+    p.add_argument("--jacobians", choices=("standard", "fej", "oc"), default="standard")
     a = p.parse_args(argv)
     worlds, noises = a.worlds.split(","), a.noise.split(",")
     tasks = [
         Task(
-            f"ref-{w}-{n}-{s}",
-            "slamrel.studies.calibration:reference_case"
-            if a.jacobians == "standard"
-            else "benchmarks.reference_verdicts:fej_case",
-            {"world": w, "noise": n, "seed": s},
+            f"ref-{a.jacobians}-{w}-{n}-{s}",
+            "benchmarks.reference_verdicts:jacobians_case",
+            {"world": w, "noise": n, "seed": s, "jacobians": a.jacobians},
         )
         for w, n, s in itertools.product(worlds, noises, a.seeds)
     ]

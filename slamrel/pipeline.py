@@ -257,7 +257,7 @@ def simulate_run_input(
     corrupt_fraction: float = 0.0,
     noise_scale: float = 1.0,
     process_noise_scale: float = 1.0,
-    jacobians: Literal["standard", "fej"] = "standard",
+    jacobians: Literal["standard", "fej", "oc"] = "standard",
 ) -> RunInput:
     """Simulate a built-in world and run the reference EKF-SLAM on it (no I/O).
 

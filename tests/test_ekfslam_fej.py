@@ -16,10 +16,12 @@ from slamrel.pipeline import simulate_run_input
 from slamrel.simulation.linear_gaussian import linear_world
 
 
-def test_fej_is_the_standard_filter_in_the_linear_limit() -> None:
+@pytest.mark.parametrize("jacobians", ["fej", "oc"])
+def test_fej_is_the_standard_filter_in_the_linear_limit(jacobians: str) -> None:
+    """FEJ, and OC (tests/test_ekfslam_oc.py) too."""
     log = linear_world(21)
     std, _ = ekf_slam_bundle(log)
-    fej, _ = ekf_slam_bundle(log, jacobians="fej")
+    fej, _ = ekf_slam_bundle(log, jacobians=jacobians)  # type: ignore[arg-type]
     assert std.map_covariance is not None and fej.map_covariance is not None
     sd = np.sqrt(np.diag(std.map_covariance)).reshape(-1, 2)
     assert np.abs((fej.map_xy - std.map_xy) / sd).max() < 1e-2
@@ -27,9 +29,10 @@ def test_fej_is_the_standard_filter_in_the_linear_limit() -> None:
     assert np.abs(fej.map_covariance - std.map_covariance).max() < 1e-3 * scale
 
 
-def test_fej_needs_known_associations() -> None:
-    with pytest.raises(InputError, match="'fej' with known associations"):
-        ekf_slam_bundle(linear_world(22), association="nn", jacobians="fej")
+@pytest.mark.parametrize("jacobians", ["fej", "oc"])
+def test_fej_needs_known_associations(jacobians: str) -> None:
+    with pytest.raises(InputError, match=f"'{jacobians}' with known associations"):
+        ekf_slam_bundle(linear_world(22), association="nn", jacobians=jacobians)  # type: ignore[arg-type]
 
 
 def test_fej_keeps_the_filter_consistent_where_the_standard_one_is_not() -> None:

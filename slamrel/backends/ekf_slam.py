@@ -106,7 +106,7 @@ def ekf_slam(
     max_rejected_run: int = 10,
     true_ids: NDArray[np.int64] | None = None,
     noise_scale: float = 1.0,
-    jacobians: Literal["standard", "fej"] = "standard",
+    jacobians: Literal["standard", "fej", "oc"] = "standard",
 ) -> EkfSlamResult:
     """Run EKF-SLAM over a log.
 
@@ -146,8 +146,13 @@ def ekf_slam(
         Jacobian from the predicted poses ``x̂_{k+1|k} − x̂_{k|k−1}``, the measurement Jacobian
         at the step's predicted pose and the landmark's first estimate, so that the filter's
         linearised system keeps the unobservable directions of the true one (the standard
-        EKF gains spurious heading information and becomes overconfident). Known
-        associations only.
+        EKF gains spurious heading information and becomes overconfident). Or
+        *observability-constrained* (``"oc"``, after Huang, Mourikis & Roumeliotis 2010): every
+        Jacobian at the latest estimates except the heading columns, the only ones the
+        unobservable rotation involves, which are taken at linearisation points that keep it
+        unobservable (:meth:`_Filter.observe`; docs/verdict.md): the pose stays consistent
+        as with FEJ, and the landmarks, linearised at their latest estimates, stay
+        consistent too. ``"fej"`` and ``"oc"``: known associations only.
 
     Returns
     -------
@@ -169,11 +174,12 @@ def ekf_slam(
         initial_covariance,
         sensor.covariance * noise_scale**2,
         _Gates.of(gate, new_landmark_gate, outlier_gate, max_rejected_run),
-        fej=jacobians == "fej",
+        jacobians=jacobians,
     )
-    if jacobians not in ("standard", "fej") or (jacobians == "fej" and not known):
+    if jacobians not in ("standard", "fej", "oc") or (jacobians != "standard" and not known):
         raise InputError(
-            f"jacobians: expected 'standard', or 'fej' with known associations, got {jacobians!r}"
+            "jacobians: expected 'standard', or 'fej' with known associations, or 'oc' with "
+            f"known associations, got {jacobians!r}"
         )
     assoc_out, online, online_cov = f.run(
         steps, np.asarray(steps.sigma) * noise_scale**2, z, ids_in if known else None, grid, used
@@ -248,14 +254,18 @@ class _Gates(NamedTuple):
 
 class _Filter:
     """The state of one run: mean and covariance in buffers of the final size, used size
-    ``n``, landmark slots, and the count of consecutive rejections."""
+    ``n``, landmark slots, and the count of consecutive rejections.
+
+    ``jacobians`` (:func:`ekf_slam`): ``"fej"`` and ``"oc"`` take the motion Jacobian's heading
+    column from the predicted positions (``prior``, the virtual robot ``r_k``); ``first``
+    holds each landmark's first estimate (FEJ) or its virtual position ``λ_i`` (OC)."""
 
     def __init__(
-        self, capacity: int, pose: Array, cov0: Array, r_cov: Array, gates: _Gates, fej: bool
+        self, capacity: int, pose: Array, cov0: Array, r_cov: Array, gates: _Gates, jacobians: str
     ):
-        self.fej = fej  # first-estimate Jacobians (FEJ-EKF)
+        self.jacobians = jacobians
         self.prior = np.asarray(pose, dtype=np.float64).copy()  # x̂_{k|k−1} of this step
-        self.first = np.zeros(capacity)  # each landmark's first estimate (FEJ)
+        self.first = np.zeros(capacity)  # each landmark's first estimate (FEJ) or λ_i (OC)
         self.mu = np.zeros(capacity)
         self.cov = np.zeros((capacity, capacity))
         self.mu[:3] = np.asarray(pose, dtype=np.float64)
@@ -306,7 +316,7 @@ class _Filter:
         fx = se2.compose_jacobian(mu[:3], u)
         q = process_noise(mu[2], sigma)
         mu[:3] = se2.compose(mu[:3], u)
-        if self.fej:  # Φ(x̂_{k+1|k}, x̂_{k|k−1}): the translation between predicted poses
+        if self.jacobians != "standard":  # Φ(x̂_{k+1|k}, x̂_{k|k−1}): between predicted poses
             fx[0, 2] = -(mu[1] - self.prior[1])
             fx[1, 2] = mu[0] - self.prior[0]
         self.prior = mu[:3].copy()
@@ -321,6 +331,13 @@ class _Filter:
         """Associate (``lid`` None: nearest neighbour), then initialise or update.
 
         Returns the landmark id, or None when the measurement was rejected.
+
+        OC (docs/verdict.md): the rotation about the origin, ``n_k = [J r_k; 1; J λ_1; …]``
+        (``J`` the 90° rotation), stays in the null space of the linearised system when the
+        motion Jacobian's heading column is ``J (r_{k+1} − r_k)``, a landmark initialised at
+        step ``ℓ`` gets ``λ_i = r_ℓ + (l̂_i − p̂_ℓ)`` (the initialisation Jacobian's heading
+        column), and every update's heading column is ``−H_l J (λ_i − r_k)``: the virtual
+        robot ``r_k`` is the predicted position ``p̂_{k|k−1}``.
         """
         g = self.gates
         if lid is None:
@@ -333,14 +350,18 @@ class _Filter:
         if slot is None or slot < 0:
             _initialise(self.mu, self.cov, self.n, meas, self.r_cov)
             self.first[self.n : self.n + 2] = self.mu[self.n : self.n + 2]
+            if self.jacobians == "oc":  # λ_i = r_ℓ + (l̂_i − p̂_ℓ)
+                self.first[self.n : self.n + 2] += self.prior[:2] - self.mu[:2]
             self.slot_of[lid] = self.n
             self.ids.append(lid)
             self.n += 2
             return lid
         gate = g.outlier if self.rejected_run < g.max_rejected_run else np.inf
         # FEJ: the Jacobians at the step's predicted pose and the landmark's first estimate
-        fej = {"lin": (self.prior, self.first[slot : slot + 2])} if self.fej else {}
-        if not _update(self.mu, self.cov, self.n, slot, meas, self.r_cov, t, m, gate, **fej):
+        first = self.first[slot : slot + 2]
+        lin = (self.prior, first) if self.jacobians == "fej" else None
+        v = first - self.prior[:2] if self.jacobians == "oc" else None  # OC: λ_i − r_k
+        if not _update(self.mu, self.cov, self.n, slot, meas, self.r_cov, t, m, gate, lin, v):
             self.rejected_run += 1
             return None  # outside the validation gate: rejected
         self.rejected_run = 0
@@ -415,11 +436,14 @@ def _update(
     m: int,
     gate: float = np.inf,
     lin: tuple[Array, Array] | None = None,
+    heading_from: Array | None = None,
 ) -> bool:
     """EKF update with one range-bearing measurement; False (no update) when ``νᵀS⁻¹ν > gate``.
 
     ``lin``: the pose and landmark the Jacobians are evaluated at (FEJ; default the current
-    estimates); the innovation is always against the current estimates.
+    estimates); the innovation is always against the current estimates. ``heading_from``
+    (OC): the landmark-minus-robot vector ``v`` the heading column ``−H_l J v`` is taken at,
+    every other column at the current estimates.
 
     The covariance update is written in a symmetric form, in place, one block of rows at a
     time: with ``S = L Lᵀ`` (Cholesky) and ``W = P Hᵀ L⁻ᵀ`` (n × 2),
@@ -434,6 +458,9 @@ def _update(
     h, hx, hl = range_bearing(mu[:3], mu[slot : slot + 2])
     if lin is not None:
         _, hx, hl = range_bearing(*lin)
+    if heading_from is not None:  # −H_l J v with J v = [−v_y, v_x]
+        hx = hx.copy()
+        hx[:, 2] = hl @ np.array([heading_from[1], -heading_from[0]])
     nu = meas - h
     nu[1] = se2.wrap_angle(nu[1])
     pht = cov[:n, :3] @ hx.T + cov[:n, slot : slot + 2] @ hl.T  # (n, 2)
@@ -548,7 +575,7 @@ def ekf_slam_bundle(
     outlier_gate: float | None = None,
     seed: int = 0,
     process_noise_scale: float = 1.0,
-    jacobians: Literal["standard", "fej"] = "standard",
+    jacobians: Literal["standard", "fej", "oc"] = "standard",
 ) -> tuple[Bundle, EkfSlamResult]:
     """Run :func:`ekf_slam` on ``bundle``'s log; return the SLAM result bundle and the run.
 

@@ -87,11 +87,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument(
         "--jacobians",
-        choices=("standard", "fej"),
+        choices=("standard", "fej", "oc"),
         default="standard",
-        help="where the EKF-SLAM evaluates its Jacobians: standard (the latest estimates) or fej "
-        "(first estimates, Huang et al. 2008: keeps the unobservable directions, so the "
-        "filter does not become overconfident; known associations) (WORLD only; default: "
+        help="where the EKF-SLAM evaluates its Jacobians: standard (the latest estimates), fej "
+        "(first estimates, Huang et al. 2008) or oc (observability-constrained: the heading "
+        "columns at points that keep the rotation unobservable, the rest at the latest "
+        "estimates); fej and oc keep the unobservable directions, so the filter does not "
+        "become overconfident (known associations) (WORLD only; default: "
         "%(default)s)",
     )
     p.add_argument(
@@ -133,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     elif args.jacobians != "standard":  # a bundle's map was made already: nothing to apply
         raise OptionError(
             "applies to a built-in WORLD (the reference EKF-SLAM run here), not to a bundle "
-            "whose map was made already; run slamrel slam --jacobians fej on its log instead",
+            "whose map was made already; run slamrel slam --jacobians on its log instead",
             option="--jacobians",
         )
     assoc_file = association_file(args.associate)

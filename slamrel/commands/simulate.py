@@ -73,11 +73,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     m.add_argument(
         "--jacobians",
-        choices=("standard", "fej"),
+        choices=("standard", "fej", "oc"),
         default="standard",
-        help="where the EKF-SLAM evaluates its Jacobians: standard (the latest estimates) or fej "
-        "(first estimates, Huang et al. 2008: keeps the unobservable directions, so the "
-        "filter does not become overconfident; known associations) (default: %(default)s)",
+        help="where the EKF-SLAM evaluates its Jacobians: standard (the latest estimates), fej "
+        "(first estimates, Huang et al. 2008) or oc (observability-constrained: the heading "
+        "columns at points that keep the rotation unobservable, the rest at the latest "
+        "estimates); fej and oc keep the unobservable directions, so the filter does not "
+        "become overconfident (known associations) (default: %(default)s)",
     )
     m.add_argument(
         "--seed", type=opt.seed, default=0, help="seed of the corruption (default: %(default)s)"
