@@ -47,9 +47,12 @@ Lamps (``green`` / ``amber`` / ``red``):
 * **down-weighted information** (robust ``redescending``, the default) — the share of the
   measurements' information the robust weights took, against its expectation for
   consistent innovations, ``E[1 − w] = e^{−a} − a E₁(a)``, ``a = c²/2`` (χ²(2) innovations,
-  ``w = min(1, c²/d²)``): green ≤ 1.5×, amber ≤ 3×, red above. (A robust estimator always
-  down-weights some perfectly Gaussian innovations — 22 % of them at ``c = 1.75`` — so the
-  fraction itself is no finding.)
+  ``w = min(1, c²/d²)``): green ≤ 1.5× or within the 99.9 % quantile of its sampling law
+  (:func:`downweight_loss_bound`: at the default ``c = √χ²₂(0.999)`` only 0.1 % of
+  consistent innovations are touched, a few measurements' worth per run), red > 3× and
+  beyond the 99.99 % quantile, amber between. (A robust estimator always down-weights some
+  perfectly Gaussian innovations — 22 % of them at ``c = 1.75`` — so the fraction itself is
+  no finding.)
 
 Without ground truth the lamps that need it (the NEES's consistency and excursions, the map's
 consistency) are lines at the level ``not judged`` that say what they need; the accuracy lamps
@@ -99,6 +102,7 @@ __all__ = [
     "run_verdict",
     "nees_excursions",
     "expected_downweight_loss",
+    "downweight_loss_bound",
     "map_nees",
     "MIN_EXCURSION",
     "LEVELS",
@@ -232,6 +236,27 @@ def expected_downweight_loss(threshold: float) -> float:
 
     a = 0.5 * float(threshold) ** 2
     return float(math.exp(-a) - a * exp1(a))
+
+
+def downweight_loss_bound(threshold: float, n: int, p: float) -> float:
+    """The ``p`` quantile of ``S = Σ (1 − w_i)`` over ``n`` consistent innovations (χ²(2)
+    NIS), in measurements, for the redescending weight at ``c = threshold``.
+
+    ``S`` is a compound Poisson sum (only innovations beyond ``c`` contribute): skewed when
+    ``c`` is far in the tail, normal when it is not. Matched on its mean ``n μ`` and variance
+    ``n m₂`` (``μ = E[1 − w]``, ``m₂ = E[(1 − w)²] = (1 + a) e^{−a} − (2a + a²) E₁(a)``,
+    ``a = c²/2``) by a scaled Poisson count, ``S ≈ θ N``, ``θ = m₂/μ``,
+    ``N ~ Poisson(n μ²/m₂)``: the quantile is ``θ F⁻¹(p)``.
+    """
+    from scipy.special import exp1
+    from scipy.stats import poisson
+
+    a = 0.5 * float(threshold) ** 2
+    mu = expected_downweight_loss(threshold)
+    m2 = float((1.0 + a) * math.exp(-a) - (2.0 * a + a * a) * exp1(a))
+    if n <= 0 or mu <= 0.0 or m2 <= 0.0:
+        return 0.0
+    return float(m2 / mu * poisson.ppf(p, n * mu * mu / m2))
 
 
 @dataclass(frozen=True)
@@ -673,13 +698,26 @@ def _measurement_lines(facts: RunFacts) -> list[Judgement]:
         ]
     expected = expected_downweight_loss(robust.threshold)
     r = loss / expected if expected > 0 else float("inf")
+    n = counts.used + counts.gated
+    taken = loss * n  # in measurements
+    bounds = [downweight_loss_bound(robust.threshold, n, p) for p in (0.999, 0.9999)]
+    level = (
+        "green"
+        if r <= 1.5 or taken <= bounds[0]
+        else "red"
+        if r > 3.0 and taken > bounds[1]
+        else "amber"
+    )
     return [
         Judgement(
             "down-weighted information",
-            f"{value}; expected {100 * expected:.1f} % for consistent innovations: {_g(r)}×",
-            _level(r, 1.5, 3.0),
+            f"{value}; expected {100 * expected:.2g} % for consistent innovations: {_g(r)}×; "
+            f"{_g(taken)} measurements' worth of {n} (99.9 % bound {_g(bounds[0])})",
+            level,
             f"share of the information the robust weights took, over its expectation for χ²(2) "
-            f"innovations at c = {_g(robust.threshold)}; green ≤ 1.5×, amber ≤ 3×, red above",
+            f"innovations at c = {_g(robust.threshold)}; green ≤ 1.5× or within the 99.9 % "
+            "quantile of its sampling law, red > 3× and beyond the 99.99 % quantile, amber "
+            "between",
             "measurements",
             r,
         )
