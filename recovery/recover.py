@@ -313,6 +313,8 @@ def recover(
         weights=None if weights is None else readonly(weights),
         map_correction=est.map_correction,
         map_prior=map_prior,
+        filter_poses=None if method == "filter" else readonly(fr.poses),
+        filter_covariances=None if method == "filter" else readonly(fr.covariances),
     )
 
 

@@ -421,6 +421,10 @@ class Recovery:
     map_prior : str
         Where the map's error comes from (:data:`~recovery.constants.MAP_PRIORS`):
         ``independent`` of the log, or ``deconditioned`` (the map made from this log).
+    filter_poses, filter_covariances : ndarray, shape (N, 3), (N, 3, 3), or None
+        The smoother's and the batch's own filter run (the EKF localisation they start
+        from) at the same times, for the filter-vs-smoother agreement of the verdict
+        (``None`` for ``method="filter"``).
     """
 
     method: str
@@ -439,6 +443,8 @@ class Recovery:
     map_uncertainty: MapUncertainty | None = None
     map_correction: Array | None = None
     map_prior: str = "independent"
+    filter_poses: Array | None = None
+    filter_covariances: Array | None = None
 
     @property
     def stretches(self) -> tuple[Stretch, ...]:

@@ -44,6 +44,11 @@ Lamps (``green`` / ``amber`` / ``red``):
   the map's NEES ``eᵀ Σ⁻¹ e`` over its ``2K`` dof (``e`` the error of the ``K`` matched
   landmarks in the NEES frame: joint covariance, or the marginals as independent blocks),
   against the χ²(2K) interval, with the allowances of the consistency lamp;
+* **filter vs smoother agreement** (no truth needed) — the recovery's filter minus its
+  smoother, ``d``, against ``P_f − P_s``, its covariance for consistent estimates
+  (:mod:`relation_metric.agreement`): ``q`` = mean ``dᵀ(P_f − P_s)⁻¹d`` over its dof, judged as
+  the consistency lamp on the overconfident side (``q < 1`` is green: a map made from the log
+  makes the two closer than stated, docs/verdict.md); a filter that diverges is red here;
 * **down-weighted information** (robust ``redescending``, the default) — the share of the
   measurements' information the robust weights took, against its expectation for
   consistent innovations, ``E[1 − w] = e^{−a} − a E₁(a)``, ``a = c²/2`` (χ²(2) innovations,
@@ -81,6 +86,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from relation_metric.agreement import Agreement, estimate_agreement
 from relation_metric.consistency import (
     NeesSummary,
     chi2_quantile,
@@ -90,7 +96,7 @@ from relation_metric.consistency import (
 )
 
 if TYPE_CHECKING:
-    from recovery.results import RecoveryCounts, RobustSettings
+    from recovery.results import Recovery, RecoveryCounts, RobustSettings
     from relation_metric.evaluate import Evaluation
     from slamrel.runs.result import MapSummary, RunResult
 
@@ -327,6 +333,7 @@ class RunFacts:
     has_online: bool = False
     online_difference: float | None = None
     online_difference_relations: int = 0
+    agreement: Agreement | None = None
 
     @classmethod
     def of(cls, result: RunResult) -> RunFacts:
@@ -356,6 +363,7 @@ class RunFacts:
             has_online="online" in result.estimates,
             online_difference=None if diff is None else diff.all.translation.abs.mean,
             online_difference_relations=0 if diff is None else int(diff.all.valid.sum()),
+            agreement=_agreement_of(rec),
         )
 
 
@@ -372,6 +380,15 @@ def _scores_of(result: RunResult, main: str) -> tuple[dict[str, float], Evaluati
     scores = result.reference.scores
     errors = {k: ev.translation.abs.mean for k, ev in scores.items() if ev.valid.any()}
     return errors, scores.get(main), "the reference relations"
+
+
+def _agreement_of(rec: Recovery | None) -> Agreement | None:
+    """The recovery's own filter run against its smoother (or batch): no truth needed."""
+    if rec is None or rec.filter_poses is None or rec.filter_covariances is None:
+        return None
+    return estimate_agreement(
+        rec.filter_poses, rec.filter_covariances, rec.trajectory.poses, rec.covariances
+    )
 
 
 def _map_nees_of(result: RunResult) -> MapNees | None:
@@ -414,6 +431,7 @@ def run_verdict(facts: RunFacts) -> Verdict:
     lines = [
         *_accuracy_lines(facts, health),
         *health,
+        *_agreement_lines(facts),
         *_measurement_lines(facts),
         *(_map_lines(facts.map) if facts.map is not None else []),
     ]
@@ -650,6 +668,35 @@ def _map_log_lines(facts: RunFacts) -> list[Judgement]:
             "[0.5, 1.5], red outside; the tail red above its Poisson 99.99 % quantile and 0.5 %, "
             "amber above the 99.9 % quantile and 0.2 %",
             "map_log",
+            q,
+        )
+    ]
+
+
+def _agreement_lines(facts: RunFacts) -> list[Judgement]:
+    """The recovery's filter against its smoother: ``d = x̂_f − x̂_s`` against
+    ``P_f − P_s`` (:mod:`relation_metric.agreement`), judged as a NEES. Needs no truth."""
+    a = facts.agreement
+    if a is None or not a.dof.any():
+        return []
+    per = a.per_dof
+    n_eff = effective_sample_size(per) if per.size > 1 else 1.0
+    q = a.q
+    level, direction = _chi2_level(q, 3, n_eff)
+    if q < 1.0:  # one-sided: see the rule
+        level, direction = "green", "closer than P_f − P_s allows (not judged)"
+    neg = f"; {a.negative} directions where the smoother is less certain" if a.negative else ""
+    return [
+        Judgement(
+            "filter vs smoother agreement",
+            f"q = {_g(q)}, {direction}; n_eff {n_eff:.0f} of {per.size} poses{neg}",
+            level,
+            "the recovery's filter minus its smoother, d, against P_filter − P_smoother (its "
+            "covariance for consistent estimates, docs/verdict.md): q = mean dᵀ(P_f − P_s)⁻¹d "
+            "over its dof, with the overconfident allowances of the consistency lamp; one-sided: "
+            "estimates closer than stated are no finding (a map made from the log itself "
+            "correlates them, and its smoother's P_s is then too small: docs/recovery.md)",
+            "agreement",
             q,
         )
     ]
