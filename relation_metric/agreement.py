@@ -71,8 +71,11 @@ def estimate_agreement(x_a: ArrayLike, p_a: ArrayLike, x_b: ArrayLike, p_b: Arra
     d = xa - xb
     d[:, 2] = wrap_angle(d[:, 2])
     n = d.shape[0]
-    ok = np.isfinite(pa).all(axis=(1, 2)) & np.isfinite(pb).all(axis=(1, 2))
-    ok &= np.isfinite(d).all(axis=1)
+    ok: NDArray[np.bool_] = np.asarray(
+        np.isfinite(pa).all(axis=(1, 2))
+        & np.isfinite(pb).all(axis=(1, 2))
+        & np.isfinite(d).all(axis=1)
+    )
     ok[ok] = np.linalg.eigvalsh(pa[ok]).min(axis=1) > 0.0
     values, dof = np.zeros(n), np.zeros(n, dtype=np.int64)
     if not ok.any():
