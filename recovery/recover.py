@@ -47,6 +47,7 @@ from recovery.constants import (
 from recovery.ekf import (
     DEFAULT_MAX_OUTLIER_RUN,
     EVENT_KINDS,
+    HEAVY_TAIL_C,
     REENTRY,
     ROBUST_DEFAULTS,
     USED,
@@ -355,10 +356,25 @@ def _robust_settings(
         return None
     c = float(threshold) if threshold is not None else ROBUST_DEFAULTS[robust]
     if scale == "auto":
-        s = _nis_scale(run_filter(inp, **{**kw, "on_divergence": "reenter"}))  # type: ignore[arg-type]
+        plain = run_filter(inp, **{**kw, "on_divergence": "reenter"})  # type: ignore[arg-type]
+        s = _nis_scale(plain)
+        if threshold is None and robust == "redescending" and _heavy_tailed(plain.nis, s):
+            c = HEAVY_TAIL_C
     else:
         s = float(scale)
     return RobustSettings(kind=robust, threshold=c, scale=s, effective=c * s)
+
+
+def _heavy_tailed(nis: Array, scale: float) -> bool:
+    """Whether a plain pass's innovations, standardised by ``ŝ²``, have more beyond the
+    99.9 % χ²(2) bound than consistent ones could: above the Poisson 99.99 % quantile of
+    that count and 0.5 % of them (the map–log lamp's red rule)."""
+    from scipy.stats import poisson
+
+    v = np.asarray(nis, dtype=np.float64)
+    v = v[np.isfinite(v)] / (scale * scale)
+    tail = int((v > chi2_quantile(0.999, 2)).sum())
+    return bool(tail > poisson.ppf(0.9999, 0.001 * v.size) and tail > 0.005 * v.size)
 
 
 @dataclass(frozen=True)
