@@ -94,3 +94,17 @@ def test_lamp_green_on_healthy_not_green_on_an_overconfident_filter():
         levels[name] = (line.level, line.measure)
     assert levels["healthy"][0] == "green" and 0.3 < levels["healthy"][1] < 1.5
     assert levels["x0.1"][0] == "red" and levels["x0.1"][1] > 3.0
+
+
+def test_lamp_levels_by_q():
+    """Healthy runs reach q 2.3 (green, the allowance 3); 4.7 and above is red with any
+    n_eff a run has; q < 1 is never a finding (one-sided)."""
+    from relation_metric.agreement import Agreement
+
+    t = np.random.default_rng(2).chisquare(3, 200)
+    levels = {}
+    for q in (0.2, 2.3, 4.7):
+        a = Agreement(t / t.mean() * 3 * q, np.full(200, 3), 0)
+        (line,) = _agreement_lines(RunFacts("recovered", {}, 0, agreement=a))
+        levels[q] = line.level
+    assert levels == {0.2: "green", 2.3: "green", 4.7: "red"}

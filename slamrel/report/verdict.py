@@ -132,6 +132,11 @@ OVERCONFIDENT = (1.5, 3.0)
 CONSERVATIVE = (0.5, 0.1)
 #: The map–log lamp: green/amber ranges of the mean NIS over its dof.
 NIS_RANGES = ((0.75, 1.25), (0.5, 1.5))
+#: The filter-vs-smoother lamp's allowance on ``q`` (amber/red only above it): healthy runs
+#: by construction reach 2.3 (the joint map error, shared by every pose, correlates the
+#: statistic beyond what ``n_eff`` sees), overconfident filters and 3× map errors start at 4.7
+#: (docs/verdict.md).
+AGREEMENT_ALLOWANCE = 3.0
 #: The NIS tail probability (innovations beyond the 99.9 % bound are the tail).
 NIS_TAIL = 0.999
 
@@ -685,6 +690,8 @@ def _agreement_lines(facts: RunFacts) -> list[Judgement]:
     level, direction = _chi2_level(q, 3, n_eff)
     if q < 1.0:  # one-sided: see the rule
         level, direction = "green", "closer than P_f − P_s allows (not judged)"
+    elif q <= AGREEMENT_ALLOWANCE:
+        level, direction = "green", "within the allowance"
     neg = f"; {a.negative} directions where the smoother is less certain" if a.negative else ""
     return [
         Judgement(
@@ -693,7 +700,8 @@ def _agreement_lines(facts: RunFacts) -> list[Judgement]:
             level,
             "the recovery's filter minus its smoother, d, against P_filter − P_smoother (its "
             "covariance for consistent estimates, docs/verdict.md): q = mean dᵀ(P_f − P_s)⁻¹d "
-            "over its dof, with the overconfident allowances of the consistency lamp; one-sided: "
+            f"over its dof; amber above the 99 % interval of a mean of n_eff χ²(3) values and "
+            f"q > {_g(AGREEMENT_ALLOWANCE)}, red above the 99.99 % one; one-sided: "
             "estimates closer than stated are no finding (a map made from the log itself "
             "correlates them, and its smoother's P_s is then too small: docs/recovery.md)",
             "agreement",
