@@ -42,7 +42,8 @@ CHOICES: dict[str, tuple[str | None, float | None]] = {
     "redesc-1.75": ("redescending", 1.75),  # the default before issue 38
     "huber": ("huber", None),
     "cauchy": ("cauchy", None),
-    "redesc-3.72": ("redescending", 3.717),  # sqrt(chi2_2(0.999)): the new default
+    # sqrt(chi2_2(0.999)): the default on logs without heavy tails
+    "redesc-3.72": ("redescending", 3.717),
 }
 
 #: Healthy runs: the reference EKF-SLAM's, and healthy by construction (exact models).
