@@ -53,6 +53,8 @@ WORK_IMPORTS = {
     "slamrel.formats.trajectories, slamrel.formats.landmark_csv",
     "example": "slamrel.simulation.example, relation_metric.relations, slamrel.formats.trajectories",
     "traj": "slamrel.evaluation, slamrel.formats.bags, slamrel.trajinfo",
+    "ape": "slamrel.evo_metrics, slamrel.formats.results",
+    "rpe": "slamrel.evo_metrics, slamrel.formats.results",
     "nees": "relation_metric.consistency, slamrel.formats.covariances, slamrel.evaluation",
 }
 HEAVY = ("matplotlib", "scipy.stats", "scipy.optimize", "scipy.spatial", "slamrel.pipeline")

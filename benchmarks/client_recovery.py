@@ -16,7 +16,9 @@ noise), ``proper`` (Jacobian-based init), ``cx-as-r`` (R = Cx[0:2, 0:2], PythonR
 habit). Exporters: ``odometry`` (the client's dead reckoning, sigma from Cx), ``velocity``
 (today's velocity model, stamps converted, σ_v, σ_ω from Cx), ``velocity-lag`` (the
 client's end-of-interval stamps written unconverted), ``velocity-euler`` (the client's own
-model; needs the wt-motion reader, reported as unavailable otherwise).
+model; needs the wt-motion reader, reported as unavailable otherwise), ``recorded`` (what
+the client reported to slamrel's BundleRecorder as it ran, its values as written; issue 38:
+``--configs quirks --exporters recorded``).
 
 Acceptance (issue 23): smoother/joint ≤ online and ≤ 1.3 × floor in every seed.
 """
@@ -24,6 +26,7 @@ Acceptance (issue 23): smoother/joint ≤ online and ≤ 1.3 × floor in every s
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import tempfile
 import time
@@ -32,6 +35,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
+from clients.export import recorder_for  # noqa: E402
 from clients.measure import DEFAULT, FLOOR_FACTOR, measure, table  # noqa: E402
 from clients.textbook_ekfslam import Config, run  # noqa: E402
 
@@ -42,8 +46,16 @@ CONFIGS = {
     "proper": Config(init="proper"),
     "cx-as-r": Config(reuse_cx_as_r=True),
     "proper+cx-as-r": Config(init="proper", reuse_cx_as_r=True),
+    # issue 38: what third-party filters write (a sensor mount, a per-step control covariance,
+    # a zero initial covariance, range-0 dropouts); exported by the "recorded" exporter
+    "quirks": Config(
+        mount=(0.3, 0.1, math.radians(5.0)),
+        motion_noise="control",
+        initial_variance=0.0,
+        dropout=0.005,
+    ),
 }
-EXPORTERS = ("odometry", "velocity", "velocity-lag", "velocity-euler")
+EXPORTERS = ("odometry", "velocity", "velocity-lag", "velocity-euler", "recorded")
 
 
 def verdict(rows: dict[int, dict[str, object]]) -> str:
@@ -66,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.configs:
-            runs = {s: run(s, CONFIGS[name]) for s in args.seeds}
+            cfg = CONFIGS[name]  # the recorder only listens: the run is the same with it
+            runs = {s: run(s, cfg, recorder=recorder_for(cfg)) for s in args.seeds}
             for exporter in args.exporters:
                 t0 = time.perf_counter()
                 try:

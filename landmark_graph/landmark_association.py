@@ -29,7 +29,13 @@ __all__ = [
     "Association",
     "associate_by_id",
     "associate_auto",
+    "NoPairsFound",
 ]
+
+
+class NoPairsFound(InputError):
+    """An association that found no pair of landmarks (valid maps: a person can still pair
+    them by hand, e.g. on the page of ``slamrel review``)."""
 
 
 @dataclass(frozen=True)
@@ -126,14 +132,14 @@ def associate_auto(
     """
     e, r = est.xy, ref.xy
     if len(est) < 2 or len(ref) < 2:
-        raise InputError("automatic association needs at least 2 landmarks in each map")
+        raise NoPairsFound("automatic association needs at least 2 landmarks in each map")
     if not (np.isfinite(cutoff) and cutoff > 0):
         raise InputError(f"the association cut-off must be a positive number, got {cutoff}")
     rng = np.random.default_rng(seed)
     tree = cKDTree(r)
     i1, j1, i2, j2 = _hypothesis_pairs(e, r, tree, cutoff, iterations, rng)
     if i1.size == 0:
-        raise InputError("automatic association found no consistent pair of landmarks")
+        raise NoPairsFound("automatic association found no consistent pair of landmarks")
     # exact rigid transform of each hypothesis: rotation taking e2 - e1 onto r2 - r1
     ve, vr = e[i2] - e[i1], r[j2] - r[j1]
     ang = np.arctan2(ve[:, 0] * vr[:, 1] - ve[:, 1] * vr[:, 0], (ve * vr).sum(axis=1))

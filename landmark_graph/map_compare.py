@@ -51,7 +51,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from landmark_graph.constants import ASSOCIATE_MODES, DEFAULT_ASSOCIATE
-from landmark_graph.landmark_association import Association, associate_auto, associate_by_id
+from landmark_graph.landmark_association import (
+    Association,
+    NoPairsFound,
+    associate_auto,
+    associate_by_id,
+)
 from landmark_graph.maps import LandmarkMap
 from landmark_graph.mesh import Mesh, delaunay_mesh
 from landmark_graph.mesh_relations import MeshErrors, mesh_errors
@@ -250,13 +255,25 @@ def choose_association(
     cutoff: float = 1.0,
     seed: int = 0,
     fallback: bool = False,
+    allow_empty: bool = False,
 ) -> AssociationChoice:
     """The association by the rule of the module docstring.
 
     ``fallback``: with ``associate="id"`` and no shared id, associate automatically (and say
-    so) instead of raising. Raises :class:`~relation_metric.errors.InputError` when no pair
-    is found.
+    so) instead of raising. Raises :class:`~landmark_graph.landmark_association.NoPairsFound`
+    when no pair is found — unless ``allow_empty`` and the pairs were to be found by
+    position (``"auto"``, ``"id-or-auto"``; ``"id"`` and a file are the user's own pairs):
+    then the choice holds no pair (every reference landmark missed, every estimated one
+    spurious) and says why in a caution (warned), so that a page can still be made to pair
+    the landmarks by hand.
     """
+    if allow_empty and associate in ("auto", "id-or-auto"):
+        try:
+            return choose_association(
+                estimate, reference, associate, cutoff=cutoff, seed=seed, fallback=fallback
+            )
+        except NoPairsFound as exc:
+            return _no_pairs(estimate, reference, str(associate), exc.message)
     notes: list[str] = []
     requested = associate if isinstance(associate, str) else "file"
     if isinstance(associate, Association):
@@ -313,7 +330,7 @@ def choose_association(
             if associate == "id"
             else "; check the association or the cut-off"
         )
-        raise InputError(f"no landmark of the estimate matches the reference{how}")
+        raise NoPairsFound(f"no landmark of the estimate matches the reference{how}")
     cautions: list[str] = []
     if (source == "file" or requested == "id") and source != "auto" and k >= 2:
         within = _pairs_within(estimate, reference, assoc, cutoff)
@@ -329,6 +346,26 @@ def choose_association(
             )
             warnings.warn(cautions[-1], AssociationWarning, stacklevel=3)
     return AssociationChoice(assoc, source, requested, tuple(notes), tuple(cautions))
+
+
+def _no_pairs(
+    estimate: LandmarkMap, reference: LandmarkMap, requested: str, why: str
+) -> AssociationChoice:
+    """The choice of no pair at all, with the reason as its caution (warned)."""
+    none = np.empty(0, dtype=np.int64)
+    assoc = Association(
+        none,
+        none,
+        np.arange(len(reference), dtype=np.int64),
+        np.arange(len(estimate), dtype=np.int64),
+    )
+    said = (
+        f"{why}: 0 pairs, so no mesh and no edge errors (every landmark counts as missed or "
+        "spurious); pair the landmarks by hand on a review page and pass the saved CSV as the "
+        "association"
+    )
+    warnings.warn(said, AssociationWarning, stacklevel=4)
+    return AssociationChoice(assoc, "auto", requested, (), (said,))
 
 
 @dataclass(frozen=True)
@@ -534,6 +571,7 @@ def compare_maps(
     observable: ArrayLike | None = None,
     reach: SensorReach | None = None,
     fallback: bool = False,
+    allow_empty: bool = False,
 ) -> MapComparison:
     """Associate, align, mesh the matched reference landmarks, score the estimate on the mesh.
 
@@ -561,13 +599,20 @@ def compare_maps(
         (:func:`~landmark_graph.observability.within_reach` with ``reach``); ``None``: all.
     reach : SensorReach, optional
         The reach ``observable`` was computed with (reported).
-    fallback : bool
-        See :func:`choose_association`.
+    fallback, allow_empty : bool
+        See :func:`choose_association` (with ``allow_empty``, no pair gives a comparison of
+        0 pairs: no mesh, OSPA/GOSPA on the maps as given).
     """
     if len(estimate) == 0 or len(reference) == 0:
         raise InputError("empty map: both maps need landmarks")
     choice = choose_association(
-        estimate, reference, associate, cutoff=cutoff, seed=seed, fallback=fallback
+        estimate,
+        reference,
+        associate,
+        cutoff=cutoff,
+        seed=seed,
+        fallback=fallback,
+        allow_empty=allow_empty,
     )
     assoc = choice.association
     er, rr = assoc.estimate_rows, assoc.reference_rows

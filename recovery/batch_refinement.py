@@ -102,7 +102,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.linalg.lapack import dpbsv
 
-from recovery.constants import DEFAULT_MAP_PRIOR, MAP_PRIORS
+from recovery.constants import MAP_PRIORS
 from recovery.ekf import FilterInput, run_filter
 from recovery.lm import Linearisation, LMOptions, levenberg_marquardt, retract_poses
 from recovery.map_uncertainty import block_factor, covariance_factor
@@ -643,7 +643,7 @@ def refine(
     tolerance: float = 1e-10,
     map_factor: Array | None = None,
     cost_tolerance: float = 0.0,
-    map_prior: str = DEFAULT_MAP_PRIOR,
+    map_prior: str = "independent",
 ) -> BatchResult:
     """Levenberg–Marquardt from ``start`` (N, 3) over all poses and the map correction.
 

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from recovery.constants import MAP_SOURCES
 from recovery.models import MotionModel, SensorModel
 from relation_metric.arrays import Array
 from relation_metric.checks import check_covariances, check_joint_covariance
@@ -74,6 +75,31 @@ class Bundle:
     wrapped_bearings : int
         Measurements whose bearing lay outside ``[−π, π)`` (within ``2π`` in magnitude) and
         was wrapped into it by the reader (counted, warned about).
+    time : {"seconds", "steps"}
+        The unit of every ``t``: seconds, or step indices (a log without timestamps: the
+        rows' ``t`` are integers ``0, 1, 2, …``, one per filter step; rates are per step).
+    initialisation : {"updates", "initialises_only"}
+        Whether the filter also updated with the measurement that initialised a landmark
+        (``"updates"``, PythonRobotics' way; the recovery uses it like every other) or only
+        initialised the landmark from it (``"initialises_only"``: the recovery leaves out each
+        landmark's first associated measurement, counted by :meth:`initialising`).
+    measurement_unprocessed : ndarray of bool, shape (J,), or None
+        Measurements of frames the filter never processed (``processed`` 0 in
+        ``measurements.csv``): not used by the recovery whatever their landmark, counted
+        apart from the unassociated ones.
+    step_covariances : ndarray, shape (K, 3, 3), or None
+        With a ``step_covariance`` motion model (only then): one covariance per row of the
+        motion log (``controls`` or ``odometry``), ``[x, y, θ]``, symmetric PSD; velocity: of
+        the increment the row is held over, odometry: of the step that ends at the row (row 0
+        unused).
+    skipped_invalid : int
+        Measurements dropped by the reader for a range ≤ 0 or a non-finite range or bearing
+        (only with ``skip_invalid_measurements``; counted, warned about).
+    map_source : {"log", "independent"} or None
+        Where the map came from (``bundle.json``'s ``map_source``,
+        :data:`~recovery.constants.MAP_SOURCES`): ``log``, estimated from this very log (an
+        EKF-SLAM's final map), or ``independent`` of it (surveyed); ``None`` when the bundle
+        does not say (read as ``independent``, and the recovery says it assumed so).
 
     Raises
     ------
@@ -112,8 +138,19 @@ class Bundle:
     reordered: Mapping[str, int] = field(default_factory=dict)
     snapped: int = 0
     wrapped_bearings: int = 0
+    skipped_invalid: int = 0
+    step_covariances: Array | None = None
+    time: str = "seconds"
+    initialisation: str = "updates"
+    measurement_unprocessed: NDArray[np.bool_] | None = None
+    map_source: str | None = None
 
     def __post_init__(self) -> None:
+        if self.map_source is not None and self.map_source not in MAP_SOURCES:
+            raise InputError(
+                f"map_source: expected one of {', '.join(MAP_SOURCES)}, got {self.map_source!r}",
+                path=_where(self, "bundle.json"),
+            )
         ro = object.__setattr__
         for name in (
             "measurement_times",
@@ -127,7 +164,7 @@ class Bundle:
         ro(self, "measurement_landmarks", readonly(self.measurement_landmarks, np.int64))
         ro(self, "measurement_associated", readonly(self.measurement_associated, np.bool_))
         ro(self, "map_ids", readonly(self.map_ids, np.int64))
-        for name in ("controls", "map_covariance"):
+        for name in ("controls", "map_covariance", "step_covariances"):
             if getattr(self, name) is not None:
                 ro(self, name, readonly(getattr(self, name)))
         lines = self.measurement_lines
@@ -142,14 +179,37 @@ class Bundle:
             ids, xy = self.landmarks_groundtruth
             ro(self, "landmarks_groundtruth", (readonly(ids, np.int64), readonly(xy)))
         _check_models(self)
+        _check_statements(self)
+        _check_step_covariances(self)
         _check_shapes(self)
         _check_values(self)
         _check_covariance_fields(self)
 
     def map_index(self) -> NDArray[np.int64]:
-        """Row of ``map_ids`` of each measurement's landmark, −1 when unassociated, (J,)."""
+        """Row of ``map_ids`` of each measurement's landmark, −1 when unassociated, never
+        processed, or (``initialisation="initialises_only"``) the measurement that
+        initialised its landmark, (J,)."""
         idx = rows_of(self.map_ids, self.measurement_landmarks)
-        return np.where(self.measurement_associated & (idx >= 0), idx, -1)
+        out = np.where(self.measurement_associated & (idx >= 0), idx, -1)
+        if self.measurement_unprocessed is not None:
+            out[self.measurement_unprocessed] = -1
+        out[self.initialising()] = -1
+        return out
+
+    def initialising(self) -> NDArray[np.bool_]:
+        """(J,) The measurements left out as their landmark's initialisation: with
+        ``initialisation="initialises_only"``, the first (in time order) associated,
+        processed measurement of each landmark; none otherwise."""
+        out = np.zeros(self.measurement_times.shape[0], dtype=bool)
+        if self.initialisation != "initialises_only":
+            return out
+        ok = self.measurement_associated.copy()
+        if self.measurement_unprocessed is not None:
+            ok &= ~self.measurement_unprocessed
+        rows = np.flatnonzero(ok)
+        _, first = np.unique(self.measurement_landmarks[rows], return_index=True)
+        out[rows[first]] = True
+        return out
 
     def with_map(self, xy: Array, marginals: Array, covariance: Array | None) -> Bundle:
         """The same bundle with another map (same ids and order)."""
@@ -186,6 +246,54 @@ def _check_models(b: Bundle) -> None:
             raise InputError("the odometry model needs odometry poses", path=b.path)
         if len(b.odometry) < 2:
             raise InputError("expected at least two odometry rows", path=_where(b, "odometry.csv"))
+
+
+#: The values of :attr:`Bundle.time` and :attr:`Bundle.initialisation` (docs/bundle.md).
+TIME_UNITS = ("seconds", "steps")
+INITIALISATIONS = ("updates", "initialises_only")
+
+
+def _check_statements(b: Bundle) -> None:
+    """``time``, ``initialisation`` among their values; ``measurement_unprocessed`` (J,)."""
+    for name, allowed in (("time", TIME_UNITS), ("initialisation", INITIALISATIONS)):
+        if getattr(b, name) not in allowed:
+            raise InputError(
+                f"{name}: unknown value {getattr(b, name)!r}; expected one of {', '.join(allowed)}",
+                path=_where(b, "bundle.json"),
+            )
+    if b.measurement_unprocessed is not None:
+        object.__setattr__(
+            b, "measurement_unprocessed", readonly(b.measurement_unprocessed, np.bool_)
+        )
+        if b.measurement_unprocessed.shape != b.measurement_times.shape:
+            raise InputError(
+                f"measurement_unprocessed: expected shape {b.measurement_times.shape}, got "
+                f"{b.measurement_unprocessed.shape}",
+                path=b.path,
+            )
+
+
+def _check_step_covariances(b: Bundle) -> None:
+    """``step_covariances`` given exactly with a ``step_covariance`` model, one per log row."""
+    wanted = b.motion.step_covariance_frame is not None
+    have = b.step_covariances is not None
+    where = _where(b, "step_covariance.csv")
+    if wanted != have:
+        raise InputError(
+            "step_covariances: expected one covariance per row of the motion log with a "
+            "step_covariance motion model, and none otherwise",
+            path=where if wanted else b.path,
+        )
+    if b.step_covariances is None:
+        return
+    k = b.controls.shape[0] if b.controls is not None else len(b.odometry)  # type: ignore[arg-type]
+    if b.step_covariances.shape != (k, 3, 3):
+        raise InputError(
+            f"step_covariances: expected shape ({k}, 3, 3), one per row of the motion log, "
+            f"got {b.step_covariances.shape}",
+            path=where,
+        )
+    check_covariances(b.step_covariances, path=where, what="step covariance")
 
 
 def _check_shapes(b: Bundle) -> None:

@@ -12,6 +12,8 @@ __all__ = [
     "MAP_MODES",
     "MAP_PRIORS",
     "DEFAULT_MAP_PRIOR",
+    "MAP_PRIOR_CHOICES",
+    "MAP_SOURCES",
     "BATCH_MAX_ITERATIONS",
     "SMOOTHER_CHI2_RESOLUTION",
     "SMOOTHER_MAX_ITERATIONS",
@@ -21,6 +23,7 @@ __all__ = [
     "MAX_SIGMA",
     "MAX_VARIANCE",
     "MIN_SENSOR_SIGMA",
+    "INITIAL_COVARIANCE_FLOOR",
 ]
 
 #: ``method`` of :func:`recovery.recover.recover`: EKF only, EKF + RTS smoother, smoother
@@ -35,8 +38,16 @@ MAP_MODES = ("joint", "marginal", "ignore")
 #: final map), so its covariance already holds the log's information and the poses'
 #: covariance is the law of total covariance over it (docs/recovery.md).
 MAP_PRIORS = ("independent", "deconditioned")
+#: ``map_source`` of a bundle (``bundle.json``): where its map came from. ``log``: estimated
+#: from this very log (an EKF-SLAM's final map); ``independent``: made apart from it (surveyed,
+#: or drawn apart from the log's noise). A bundle that does not say is read as ``independent``.
+MAP_SOURCES = ("log", "independent")
+#: What ``map_prior`` may ask for: a prior of :data:`MAP_PRIORS`, or ``auto`` — ``deconditioned``
+#: when the bundle states ``map_source: log`` and the method is the smoother or the batch, else
+#: ``independent`` (:func:`recovery.recover.resolve_map_prior` says which and why).
+MAP_PRIOR_CHOICES = ("auto", *MAP_PRIORS)
 #: The map prior of :func:`recovery.recover.recover` when none is asked for.
-DEFAULT_MAP_PRIOR = "independent"
+DEFAULT_MAP_PRIOR = "auto"
 #: Iterations of ``method="batch"`` (to numerical convergence; the smoother stops earlier).
 BATCH_MAX_ITERATIONS = 50
 #: The smoother's Gauss–Newton steps stop after one that lowers χ² (twice the cost) by less
@@ -70,3 +81,8 @@ MAX_VARIANCE = MAX_SIGMA**2
 #: the noise-free sensor that σ = 0 states, whose information is infinite (the smoother's
 #: and batch's LinAlgError). Far below any physical noise in metres or radians.
 MIN_SENSOR_SIGMA = 1e-150
+#: Added to the diagonal of an ``initial_covariance`` that is positive semi-definite but not
+#: definite (an exactly zero one: the start pose known exactly, as two third-party EKF-SLAMs
+#: write it): the filter, the smoother and the batch need its inverse. The bundle's default
+#: ``1e-9 I`` says the same thing ("the start pose is known: it defines the map frame").
+INITIAL_COVARIANCE_FLOOR = 1e-9

@@ -51,6 +51,8 @@ _RULES = {
     "marginal": "the per-landmark covariances as a block-diagonal joint covariance: landmark "
     "errors independent of each other and fixed over the run",
     "ignore": "none: the map taken as exact",
+    "exact": "none: the bundle states no map covariance (map.csv without covariance columns, "
+    "no map_covariance.npy), so the map is taken as exact",
 }
 
 
@@ -60,9 +62,10 @@ class MapUncertainty:
 
     Attributes
     ----------
-    mode : {"joint", "marginal", "ignore"}
+    mode : {"joint", "marginal", "ignore", "exact"}
         The form used (``joint`` asked of a bundle without a joint covariance is
-        ``marginal``).
+        ``marginal``; ``joint`` or ``marginal`` asked of a bundle that states no map
+        covariance at all is ``exact``, not reported as a form it does not have).
     rule : str
         The assumption, in words (written into every recovery report).
     covariance : ndarray, shape (2M, 2M) or None
@@ -101,7 +104,9 @@ def map_uncertainty(bundle: Bundle, mode: str = "joint") -> MapUncertainty:
     m = bundle.map_xy.shape[0]
     if mode == "joint" and bundle.map_covariance is None:
         mode = "marginal"
-    if mode == "ignore":
+    if mode == "marginal" and not bundle.map_marginals.any():
+        mode = "exact"  # no covariance stated: the map is exact, and said so
+    if mode in ("ignore", "exact"):
         cov = None
         marg = np.zeros((m, 2, 2))
         factor = np.zeros((2 * m, 0))

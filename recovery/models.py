@@ -75,6 +75,8 @@ INTEGRATIONS = ("arc", "euler")
 #: ``control_stamp`` of the velocity model: a control row is stamped at the start of the
 #: interval it is held over (row k: ``[t_k, t_{k+1})``) or at its end (``(t_{k−1}, t_k]``).
 CONTROL_STAMPS = ("start", "end")
+#: ``sensor_model.noise``: the σ are the filter's assumed noise, or the data's true noise.
+SENSOR_NOISE_SOURCES = ("assumed", "true")
 #: ``pose_noise.frame``: noise on the body-frame increment, or added in the map frame.
 POSE_NOISE_FRAMES = ("body", "world")
 #: The ``sigma`` entries of each motion model, in order (``bundle.json`` keys).
@@ -156,9 +158,15 @@ class MotionModel:
         Process noise ``C`` on the pose, once per control row (velocity) or odometry step,
         instead of noise on the controls: ``x ∘ (u + n)`` (``"body"``) or ``x ∘ u + w``
         (``"world"``), ``n, w ~ N(0, C)``.
+    step_covariance_frame : {"body", "world"} or None
+        A covariance ``C_k`` per control row or odometry step, given with the log
+        (``step_covariance.csv``, ``Bundle.step_covariances``), in the frame named, as
+        ``pose_noise`` but one per row: e.g. an increment-dependent odometry noise
+        ``J C Jᵀ`` as a filter computed it.
 
-    Exactly one of ``sigma``, ``alpha`` and ``pose_noise`` is set; ``sigma`` and ``alpha`` are
-    stored as tuples of float, ``pose_noise`` as a tuple of three rows of float.
+    Exactly one of ``sigma``, ``alpha``, ``pose_noise`` and ``step_covariance_frame`` is
+    set; ``sigma`` and ``alpha`` are stored as tuples of float, ``pose_noise`` as a tuple of
+    three rows of float.
 
     Raises
     ------
@@ -181,6 +189,7 @@ class MotionModel:
     control_stamp: str = "start"
     pose_noise_frame: str | None = None
     pose_noise: tuple[tuple[float, ...], ...] | None = None
+    step_covariance_frame: str | None = None
 
     def __post_init__(self) -> None:
         if self.type not in MOTION_TYPES:
@@ -189,11 +198,12 @@ class MotionModel:
                 f"{', '.join(MOTION_TYPES)}"
             )
         names = SIGMA_NAMES[self.type]
-        given = [f for f in ("sigma", "alpha", "pose_noise") if getattr(self, f) is not None]
+        forms = ("sigma", "alpha", "pose_noise", "step_covariance_frame")
+        given = [f for f in forms if getattr(self, f) is not None]
         if len(given) != 1:
             raise InputError(
                 f"motion_model ({self.type}): expected either sigma ({', '.join(names)}), "
-                "alpha (alpha1..alpha4) or pose_noise, exactly one of them"
+                "alpha (alpha1..alpha4), pose_noise or step_covariance, exactly one of them"
                 + (f"; got {' and '.join(given)}" if given else "")
             )
         _choice(self.integration, INTEGRATIONS, what="motion_model.integration")
@@ -205,6 +215,15 @@ class MotionModel:
                         f"motion_model.{name}: applies to the velocity model only; expected "
                         f"no {name} for the odometry model"
                     )
+        if given == ["step_covariance_frame"]:
+            _choice(
+                self.step_covariance_frame,
+                POSE_NOISE_FRAMES,
+                what="motion_model.step_covariance.frame",
+            )
+            if self.pose_noise_frame is not None:
+                raise InputError("motion_model.pose_noise.frame: given without pose_noise")
+            return
         if given == ["pose_noise"]:
             if self.pose_noise_frame is None:
                 raise InputError(
@@ -236,6 +255,8 @@ class MotionModel:
             out["control_stamp"] = self.control_stamp
         if self.alpha is not None:
             out["alpha"] = list(self.alpha)
+        elif self.step_covariance_frame is not None:
+            out["step_covariance"] = {"frame": self.step_covariance_frame}
         elif self.pose_noise is not None:
             out["pose_noise"] = {
                 "frame": self.pose_noise_frame,
@@ -252,7 +273,11 @@ class SensorModel:
 
     ``max_range`` [m] and ``fov`` [rad] (the full opening angle, centred on the heading) are
     the sensor's reach when the bundle declares it (``None``: not declared); only the map
-    comparison reads them (which true landmarks the run could have seen).
+    comparison reads them (which true landmarks the run could have seen). ``mount``
+    ``(x, y, θ)``: the sensor's pose in the robot frame (``None``: at the robot's origin,
+    facing forward); the measurement is ``h(x ∘ mount, l)``. ``noise``: whether the σ are the
+    filter's assumed noise (``"assumed"``, the default) or the data's true noise (``"true"``,
+    known for a simulation); the recovery uses them either way and reports which.
 
     Raises
     ------
@@ -267,6 +292,8 @@ class SensorModel:
     type: str = "range_bearing"
     max_range: float | None = None
     fov: float | None = None
+    mount: tuple[float, float, float] | None = None
+    noise: str = "assumed"
 
     def __post_init__(self) -> None:
         if self.type != "range_bearing":
@@ -285,6 +312,20 @@ class SensorModel:
                 bound = "a positive number" if name == "max_range" else "an angle in (0, 2π]"
                 raise InputError(f"sensor_model.{name}: expected {bound}, got {value:g}")
             object.__setattr__(self, name, value)
+        _choice(self.noise, SENSOR_NOISE_SOURCES, what="sensor_model.noise")
+        if self.mount is not None:
+            m = np.asarray(self.mount, dtype=np.float64)
+            if m.shape != (3,) or not np.isfinite(m).all() or np.abs(m[:2]).max() > 1e30:
+                raise InputError(
+                    f"sensor_model.mount: expected [x, y, theta], three finite numbers (the "
+                    f"sensor's pose in the robot frame), got {self.mount!s:.60}"
+                )
+            object.__setattr__(self, "mount", (float(m[0]), float(m[1]), float(m[2])))
+
+    @property
+    def mounted(self) -> bool:
+        """Is the sensor mounted off the robot's origin (a ``mount`` other than zero)?"""
+        return self.mount is not None and any(v != 0.0 for v in self.mount)
 
     @property
     def covariance(self) -> Array:
@@ -300,6 +341,10 @@ class SensorModel:
         for name in ("max_range", "fov"):
             if getattr(self, name) is not None:
                 out[name] = getattr(self, name)
+        if self.mount is not None:
+            out["mount"] = list(self.mount)
+        if self.noise != "assumed":  # written when stated (older bundles unchanged)
+            out["noise"] = self.noise
         return out
 
 
@@ -475,7 +520,12 @@ def odometry_delta_covariance(delta: ArrayLike, alpha: tuple[float, ...]) -> Arr
 
 
 def increment_covariance(
-    model: MotionModel, u: ArrayLike, aux: ArrayLike, *, heading: ArrayLike | None = None
+    model: MotionModel,
+    u: ArrayLike,
+    aux: ArrayLike,
+    *,
+    heading: ArrayLike | None = None,
+    step_covariance: ArrayLike | None = None,
 ) -> Array:
     """Body-frame covariance ``Σ`` (..., 3, 3) of increments ``u``.
 
@@ -494,13 +544,23 @@ def increment_covariance(
     heading : array_like, shape (...), optional
         The heading each increment starts from; needed (only) by world-frame ``pose_noise``,
         which is turned into the body frame with it: ``Σ = Rot(θ)ᵀ f C Rot(θ)``.
+    step_covariance : array_like, shape (..., 3, 3), optional
+        With ``model.step_covariance_frame``: the covariance ``C`` of the row (or step) each
+        increment belongs to; it is used as ``pose_noise`` is (``f C``, rotated when world).
     """
     aux = np.asarray(aux, dtype=np.float64)
-    if model.pose_noise is not None:
-        cov = np.asarray(model.pose_noise, dtype=np.float64)
+    frame = model.pose_noise_frame
+    if model.step_covariance_frame is not None:
+        if step_covariance is None:
+            raise ValueError("a step_covariance motion model needs the rows' covariances")
+        frame = model.step_covariance_frame
+    if model.pose_noise is not None or model.step_covariance_frame is not None:
+        cov = np.asarray(
+            model.pose_noise if step_covariance is None else step_covariance, dtype=np.float64
+        )
         frac = 1.0 / aux[..., 3] if model.type == "velocity" else aux
         sig = frac[..., None, None] * cov
-        if model.pose_noise_frame == "world":
+        if frame == "world":
             if heading is None:
                 raise ValueError("world-frame pose noise needs the heading of each increment")
             rot = _rotation(np.broadcast_to(np.asarray(heading, float), frac.shape))

@@ -39,7 +39,8 @@ from recovery.constants import (
     BATCH_MAX_ITERATIONS,
     DEFAULT_MAP_PRIOR,
     DEFAULT_ROBUST,
-    MAP_PRIORS,
+    INITIAL_COVARIANCE_FLOOR,
+    MAP_PRIOR_CHOICES,
     METHODS,
     SMOOTHER_CHI2_RESOLUTION,
     SMOOTHER_MAX_ITERATIONS,
@@ -56,6 +57,7 @@ from recovery.ekf import (
     run_filter,
 )
 from recovery.map_uncertainty import MapUncertainty, map_uncertainty
+from recovery.mount import to_robot_frame, to_sensor_frame
 from recovery.results import (
     BatchCosts,
     Divergence,
@@ -78,6 +80,7 @@ __all__ = [
     "DEFAULT_MAX_OUTLIER_RUN",
     "BatchCosts",
     "Divergence",
+    "MapPriorChoice",
     "NisStats",
     "Recovery",
     "RecoveryCounts",
@@ -86,6 +89,7 @@ __all__ = [
     "disagreement_stretches",
     "filter_input",
     "recover",
+    "resolve_map_prior",
 ]
 
 
@@ -167,7 +171,7 @@ def filter_input(
         u=st.u,
         sigma=st.sigma,
         x0=bundle.initial_pose,
-        p0=bundle.initial_covariance,
+        p0=start_covariance(bundle.initial_covariance),
         meas_grid=st.measurement_grid,
         meas_z=bundle.measurements,
         meas_landmark=bundle.map_index(),
@@ -177,6 +181,19 @@ def filter_input(
         r=bundle.sensor.covariance,
         meas_labels=labels,
     )
+
+
+def start_covariance(p0: Array) -> Array:
+    """The filter's initial covariance: ``p0`` when positive definite, else ``p0 + εI``.
+
+    A positive semi-definite ``initial_covariance`` that is not definite (exactly zero: the
+    start pose known exactly) gets :data:`~recovery.constants.INITIAL_COVARIANCE_FLOOR` on its
+    diagonal (docs/bundle.md), since every method needs the inverse; (3, 3) -> (3, 3).
+    """
+    p0 = np.asarray(p0, dtype=np.float64)
+    if np.linalg.eigvalsh(0.5 * (p0 + p0.T)).min() > 0.0:
+        return p0
+    return p0 + INITIAL_COVARIANCE_FLOOR * np.eye(3)
 
 
 #: How :func:`recovery.batch_refinement.refine` stops for each method: the smoother at the data's
@@ -249,9 +266,12 @@ def recover(
         weighted away. The filter then runs with ``c_eff = c ŝ``.
     progress : bool
         tqdm bar on the filter's epochs.
-    map_prior : {"independent", "deconditioned"}
-        Where the map's error comes from (:data:`~recovery.constants.MAP_PRIORS`).
-        ``"independent"`` (default): a map made apart from the log (surveyed, or drawn
+    map_prior : {"auto", "independent", "deconditioned"}
+        Where the map's error comes from (:data:`~recovery.constants.MAP_PRIOR_CHOICES`).
+        ``"auto"`` (default): ``deconditioned`` when the bundle states ``map_source="log"``
+        and the method is the smoother or the batch, else ``independent``
+        (:func:`resolve_map_prior`; the choice and its reason are in the report).
+        ``"independent"``: a map made apart from the log (surveyed, or drawn
         independently of its noise), whose ``Σ_m`` is a prior the log's measurements add
         to. ``"deconditioned"``: a map made from this very log (an EKF-SLAM's final map and
         its joint covariance), whose ``Σ_m`` already holds the log's information: the poses'
@@ -271,8 +291,12 @@ def recover(
         ``map_prior="deconditioned"`` with the filter.
     """
     _check_options(method, gate, map_prior)
+    prior = resolve_map_prior(bundle, method, map_prior)
     mu = map_uncertainty(bundle, map_mode)
     inp = filter_input(bundle, uncertainty=mu)
+    mount = np.asarray(bundle.sensor.mount) if bundle.sensor.mounted else None
+    if mount is not None:  # the filter runs on the sensor's poses (recovery.mount)
+        inp = to_sensor_frame(inp, mount)
     if method != "filter":  # before any work: the joint problem's dense map terms
         from recovery.batch_refinement import check_joint_size
 
@@ -288,7 +312,13 @@ def recover(
         **kw,  # type: ignore[arg-type]
     )
     weights = None if robust is None else fr.weights
-    est = _estimate(method, inp, fr, mu, weights, map_prior)
+    est = _estimate(method, inp, fr, mu, weights, prior.prior)
+    filt = None if method == "filter" else (fr.poses, fr.covariances)
+    if mount is not None:
+        poses, covariances = to_robot_frame(est.poses, est.covariances, mount)
+        est = replace(est, poses=poses, covariances=covariances)
+        if filt is not None:  # the agreement lamp compares both in the robot's frame
+            filt = to_robot_frame(filt[0], filt[1], mount)
     covs, n_repaired = _check_finite(
         est.poses, est.covariances, inp.times, repair=on_divergence != "raise"
     )
@@ -313,9 +343,56 @@ def recover(
         batch=est.costs,
         weights=None if weights is None else readonly(weights),
         map_correction=est.map_correction,
-        map_prior=map_prior,
-        filter_poses=None if method == "filter" else readonly(fr.poses),
-        filter_covariances=None if method == "filter" else readonly(fr.covariances),
+        map_prior=prior.prior,
+        map_prior_reason=prior.reason,
+        filter_poses=None if filt is None else readonly(filt[0]),
+        filter_covariances=None if filt is None else readonly(filt[1]),
+    )
+
+
+@dataclass(frozen=True)
+class MapPriorChoice:
+    """The map prior a recovery uses (:data:`~recovery.constants.MAP_PRIORS`) and why."""
+
+    prior: str
+    reason: str
+
+
+def resolve_map_prior(
+    bundle: Bundle, method: str, asked: str = DEFAULT_MAP_PRIOR
+) -> MapPriorChoice:
+    """The map prior for ``asked`` (:data:`~recovery.constants.MAP_PRIOR_CHOICES`) on
+    ``bundle`` with ``method``, and the reason in words.
+
+    ``auto``: ``deconditioned`` when the bundle states ``map_source="log"`` (its map was
+    estimated from this log, so its covariance holds the log's information) and the method is
+    the smoother or the batch; else ``independent`` — said to be *assumed* when the bundle does
+    not state where its map came from, and said to count the log twice when the map is the
+    log's but the filter cannot de-condition it. An explicit prior is used as asked.
+    """
+    if asked != "auto":
+        return MapPriorChoice(asked, f"asked for (map prior {asked})")
+    source = bundle.map_source
+    if source == "log" and method != "filter":
+        return MapPriorChoice(
+            "deconditioned", "the bundle states map_source log: its map was made from this log"
+        )
+    if source == "log":
+        return MapPriorChoice(
+            "independent",
+            "the bundle states map_source log, but the filter cannot de-condition the map "
+            "(its pose at t reads only the log before t): the log's information about the map "
+            "counts twice, the covariance is too small; the smoother or the batch de-condition it",
+        )
+    if source == "independent":
+        return MapPriorChoice(
+            "independent", "the bundle states map_source independent: a map made apart from its log"
+        )
+    return MapPriorChoice(
+        "independent",
+        "assumed: the bundle does not state map_source; were its map made from this log (an "
+        "EKF-SLAM's), the recovered covariance would be too small (state map_source log in "
+        "bundle.json)",
     )
 
 
@@ -324,9 +401,9 @@ def _check_options(method: str, gate: float | None, map_prior: str = DEFAULT_MAP
     deconditioned map prior with the filter, or a gate outside ``(0, 1)``, before any work."""
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
-    if map_prior not in MAP_PRIORS:
+    if map_prior not in MAP_PRIOR_CHOICES:
         raise InputError(
-            f"unknown map prior {map_prior!r}; expected one of {', '.join(MAP_PRIORS)}"
+            f"unknown map prior {map_prior!r}; expected one of {', '.join(MAP_PRIOR_CHOICES)}"
         )
     if map_prior == "deconditioned" and method == "filter":
         raise InputError(
@@ -394,7 +471,7 @@ def _estimate(
     fr: FilterResult,
     mu: MapUncertainty,
     weights: Array | None,
-    map_prior: str = DEFAULT_MAP_PRIOR,
+    map_prior: str = "independent",
 ) -> _Estimate:
     """The filter's poses, or the smoother's or batch's refinement of them.
 

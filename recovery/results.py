@@ -425,6 +425,9 @@ class Recovery:
         The smoother's and the batch's own filter run (the EKF localisation they start
         from) at the same times, for the filter-vs-smoother agreement of the verdict
         (``None`` for ``method="filter"``).
+    map_prior_reason : str
+        Why that prior (:func:`recovery.recover.resolve_map_prior`): asked for, the bundle's
+        ``map_source``, or assumed because the bundle does not say.
     """
 
     method: str
@@ -445,6 +448,7 @@ class Recovery:
     map_prior: str = "independent"
     filter_poses: Array | None = None
     filter_covariances: Array | None = None
+    map_prior_reason: str = ""
 
     @property
     def stretches(self) -> tuple[Stretch, ...]:
@@ -464,14 +468,14 @@ class Recovery:
             "map_uncertainty_rule": (
                 self.map_uncertainty.rule if self.map_uncertainty is not None else None
             ),
+            "map_prior": self.map_prior,
+            "map_prior_rule": MAP_PRIOR_RULES[self.map_prior],
+            "map_prior_reason": self.map_prior_reason,
             "poses": len(self.trajectory),
             "measurements": self.counts.as_dict(),
             "divergence": self.divergence.as_dict(),
             "nis": self.nis_stats.as_dict(),
         }
-        if self.map_prior != "independent":  # only then: earlier reports keep their bytes
-            out["map_prior"] = self.map_prior
-            out["map_prior_rule"] = MAP_PRIOR_RULES[self.map_prior]
         dead = self.counts.dead_reckoning()
         if dead is not None:  # only then: the reports of observed runs keep their bytes
             out["dead_reckoning"] = dead

@@ -13,6 +13,9 @@ becomes one motion increment ``u_k`` (body frame) with covariance ``Σ_k``:
   Jacobians scale with ``a``). Uncut rows get ``M`` exactly.
 * odometry model: a piece covering the fraction ``f`` of the step gets the constant-twist
   increment ``exp(f log u)`` and covariance ``f Σ``.
+* ``step_covariance`` (either model): as ``pose_noise`` with the row's own ``C_k``
+  (``Bundle.step_covariances``: velocity, the control row held over the piece; odometry, the
+  row that ends the step).
 * ``pose_noise`` (either model): a piece covering the fraction ``f`` of its row gets ``f C``;
   a world-frame ``C`` is turned into the body frame with the piece's dead-reckoning heading
   (``initial_pose`` composed with the increments before it).
@@ -136,20 +139,37 @@ def build_steps(bundle: Bundle) -> Steps:
         else:
             u, _ = velocity_increment(v, w, piece)
         aux = np.column_stack((v, w, piece, row_dt / piece, offset))
-        sigma = increment_covariance(motion, u, aux, heading=_headings(bundle, motion, u))
+        own = _row_covariances(bundle, row + (motion.control_stamp == "end"))
+        sigma = increment_covariance(
+            motion, u, aux, heading=_headings(bundle, motion, u), step_covariance=own
+        )
     else:
         o = bundle.odometry.poses  # type: ignore[union-attr]
         u_row = se2.between(o[row], o[row + 1])
         f = piece / row_dt
         whole = f == 1.0
         u = np.where(whole[:, None], u_row, se2.exp(f[:, None] * se2.log(u_row)))
-        sigma = increment_covariance(motion, u_row, f, heading=_headings(bundle, motion, u))
+        sigma = increment_covariance(
+            motion,
+            u_row,
+            f,
+            heading=_headings(bundle, motion, u),
+            step_covariance=_row_covariances(bundle, row + 1),
+        )
     return Steps(times=times, u=u, sigma=sigma, measurement_grid=grid)
+
+
+def _row_covariances(bundle: Bundle, rows: NDArray[np.int64]) -> Array | None:
+    """The stated covariance of the log row each step belongs to (``step_covariance``
+    models only; velocity: the row held over the step, odometry: the row that ends it)."""
+    if bundle.step_covariances is None:
+        return None
+    return bundle.step_covariances[rows]
 
 
 def _headings(bundle: Bundle, motion: MotionModel, u: Array) -> Array | None:
     """Dead-reckoning heading at the start of each step (world-frame pose noise only)."""
-    if motion.pose_noise_frame != "world":
+    if "world" not in (motion.pose_noise_frame, motion.step_covariance_frame):
         return None
     before = np.concatenate(([0.0], np.cumsum(u[:-1, 2])))
     return se2.wrap_angle(float(bundle.initial_pose[2]) + before)

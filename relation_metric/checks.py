@@ -28,14 +28,34 @@ from numpy.typing import ArrayLike, NDArray
 from relation_metric.arrays import PathLike
 from relation_metric.errors import InputError
 
-__all__ = ["COV_RTOL", "check_covariances", "check_joint_covariance", "bad_covariances"]
+__all__ = [
+    "COV_RTOL",
+    "MAX_INFORMATION",
+    "check_covariances",
+    "check_joint_covariance",
+    "bad_covariances",
+]
 
 COV_RTOL = 1e-9
 """Relative tolerance of the symmetry and positive semi-definiteness checks."""
 
 
+MAX_INFORMATION = 1e200
+"""Largest information entry a graph file may state (a standard deviation of 1e-100).
+
+A least-squares cost sums ``rᵀ Ω r`` over the edges; with residuals up to twice
+:data:`~relation_metric.trajectory.MAX_COORDINATE` (1e30 m, so ``r² ≤ 4e60``) and up to 1e8
+edges, ``Ω ≤ 1e200`` keeps every cost and normal-equation entry below float64's 1.8e308.
+Beyond it the solver would overflow (a floating-point warning, then a singular system); the
+same bound holds for the inverse of a filter's covariance in a NEES (``eᵀ Σ⁻¹ e``)."""
+
+
 def bad_covariances(
-    cov: ArrayLike, *, allow_unknown: bool = False, definite: bool = False
+    cov: ArrayLike,
+    *,
+    allow_unknown: bool = False,
+    definite: bool = False,
+    max_abs: float | None = None,
 ) -> tuple[NDArray[np.int64], list[str]]:
     """Blocks of ``cov`` (N, k, k) that fail the check, and why.
 
@@ -46,6 +66,8 @@ def bad_covariances(
         An all-NaN block (a covariance the file left empty) passes.
     definite : bool
         Require positive definiteness (the matrix is inverted).
+    max_abs : float, optional
+        Refuse blocks with an entry beyond it in magnitude (e.g. :data:`MAX_INFORMATION`).
 
     Returns
     -------
@@ -69,6 +91,14 @@ def bad_covariances(
         else:
             reasons[k] = "expected finite values"
     ok = finite & ~unknown
+    if max_abs is not None and ok.any():
+        top = np.where(ok, np.abs(np.where(nan, 0.0, flat)).max(axis=1), 0.0)
+        for k in np.flatnonzero(top > max_abs).tolist():
+            reasons[k] = (
+                f"an entry of {float(top[k]):.6g} is beyond {max_abs:.6g}, where sums of "
+                "squares (a solve's cost, a NEES) overflow"
+            )
+        ok &= top <= max_abs
     if ok.any():
         idx = np.flatnonzero(ok)
         m = c[idx]
@@ -112,6 +142,7 @@ def check_covariances(
     what: str | Callable[[int], str] = "covariance",
     allow_unknown: bool = False,
     definite: bool = False,
+    max_abs: float | None = None,
 ) -> None:
     """Raise :class:`InputError` at the first block of ``cov`` (N, k, k) that fails.
 
@@ -125,10 +156,12 @@ def check_covariances(
     what : str or callable
         What the block is (``"covariance"``), or a function of the block index (e.g.
         ``lambda k: f"landmark {ids[k]}: covariance"``).
-    allow_unknown, definite : bool
+    allow_unknown, definite, max_abs :
         See :func:`bad_covariances`.
     """
-    rows, reasons = bad_covariances(cov, allow_unknown=allow_unknown, definite=definite)
+    rows, reasons = bad_covariances(
+        cov, allow_unknown=allow_unknown, definite=definite, max_abs=max_abs
+    )
     if rows.size == 0:
         return
     k = int(rows[0])

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -126,21 +127,52 @@ def absolute_pose_errors(
     align: str = "none",
     n_to_align: int | None = None,
     plane: str | None = None,
+    rotations: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
 ) -> PoseErrors:
     """evo's APE of synchronised trajectories (pose k of both is one pair).
 
     ``align`` (:data:`EVO_ALIGNMENTS`) is fitted on the first ``n_to_align`` poses (None: all)
     and applied to the estimate; then both are projected to ``plane`` (``"xy"``, ``"xz"``,
-    ``"yz"``; :func:`project_to_plane`), as evo does after aligning.
+    ``"yz"``; :func:`project_to_plane`), as evo does after aligning. ``rotations``: the
+    rotation blocks as a file gave them, as in :func:`relative_pose_errors` (``rot_part``
+    and ``full`` of ``E_k = P_k⁻¹ Q_k`` on them, and the projection's angles).
     """
     _check_pair(reference, estimate)
     est, fit = _aligned(reference, estimate, align, n_to_align)
     ref = _by_index(reference)
-    if plane is not None:
-        est, ref = project_to_plane(est, plane), project_to_plane(ref, plane)
+    est, ref, raw = _projected(reference, estimate, est, ref, rotations, align, fit, plane)
     r = absolute_trajectory_error(est, ref, align="none", max_time_diff=0.0)
     k = np.arange(len(ref), dtype=np.int64)
-    return PoseErrors(_relation_values(r.translation, r.rotation, relation), k, k, fit)
+    values = _relation_values(r.translation, r.rotation, relation)
+    if raw is not None and relation in ("rot_part", "full"):
+        values = _matrix_errors(raw[1], raw[0], k, k, relation, first_identity=True)
+    return PoseErrors(values, k, k, fit)
+
+
+def _projected(
+    reference: Trajectory,
+    estimate: Trajectory,
+    est: Trajectory,
+    ref: Trajectory,
+    rotations: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+    align: str,
+    fit: Alignment | None,
+    plane: str | None,
+) -> tuple[Trajectory, Trajectory, Any]:
+    """``est`` and ``ref`` projected to ``plane`` (when given), and the rotation blocks as
+    given after the alignment (:func:`_raw_aligned`; None without ``rotations`` or after a
+    projection, whose rotations are built exactly, as evo's)."""
+    raw = None
+    if rotations is not None:
+        raw = _raw_aligned(reference, estimate, est, rotations, align, fit)
+    if plane is None:
+        return est, ref, raw
+    r_ref, r_est = (None, None) if raw is None else (raw[0][0], raw[1][0])
+    if raw is not None:
+        est = Trajectory(est.timestamps, np.column_stack((raw[1][1], est.poses[:, 3:])))
+    est = project_to_plane(est, plane, rotations=r_est)
+    ref = project_to_plane(ref, plane, rotations=r_ref)
+    return est, ref, None
 
 
 def relative_pose_errors(
@@ -156,18 +188,25 @@ def relative_pose_errors(
     align: str = "none",
     n_to_align: int | None = None,
     plane: str | None = None,
+    rotations: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
 ) -> PoseErrors:
     """evo's RPE of synchronised trajectories (pose k of both is one pair).
 
     The estimate is aligned and both projected as in :func:`absolute_pose_errors` (a rigid
     alignment leaves every ``P_i⁻¹ P_j`` unchanged; a scale does not); the pose pairs are
     :func:`pose_pairs` on the estimate (the reference with ``pairs_from_reference``).
+
+    ``rotations`` (reference, estimate), each ``(N, 3, 3)``: the rotation blocks as a file
+    gave them (KITTI's 3×4 matrices, written with 6–9 digits, are orthonormal to ~1e-7
+    only). Without a projection, ``trans_part``, ``rot_part`` and ``full`` are then computed
+    on them as evo does (:func:`_matrix_errors`: inverses by transposition), not on the
+    re-orthonormalised quaternions of the trajectories; on long relations the two readings
+    differ in the 6th digit (module doc of :mod:`slamrel.evo_metrics`).
     """
     _check_pair(reference, estimate)
     est, fit = _aligned(reference, estimate, align, n_to_align)
     ref = _by_index(reference)
-    if plane is not None:
-        est, ref = project_to_plane(est, plane), project_to_plane(ref, plane)
+    est, ref, raw = _projected(reference, estimate, est, ref, rotations, align, fit, plane)
     i, j = pose_pairs(
         ref if pairs_from_reference else est, delta, delta_unit, rel_delta_tol, all_pairs
     )
@@ -178,7 +217,73 @@ def relative_pose_errors(
     e = relation_errors(
         se3.between(est.poses[i], est.poses[j]), se3.between(ref.poses[i], ref.poses[j])
     )
-    return PoseErrors(_relation_values(e.translation, e.rotation, relation), i, j, fit)
+    values = _relation_values(e.translation, e.rotation, relation)
+    if raw is not None and relation in ("trans_part", "rot_part", "full"):
+        values = _matrix_errors(raw[0], raw[1], i, j, relation)
+    return PoseErrors(values, i, j, fit)
+
+
+def _raw_aligned(
+    reference: Trajectory,
+    estimate: Trajectory,
+    aligned: Trajectory,
+    rotations: tuple[NDArray[np.float64], NDArray[np.float64]],
+    align: str,
+    fit: Alignment | None,
+) -> tuple[tuple[NDArray, NDArray], tuple[NDArray, NDArray]]:
+    """(rotations, positions) of reference and aligned estimate on the rotation blocks as
+    given, with evo's arithmetic: Umeyama's ``R_a`` multiplies them (its positions are those
+    of ``aligned``: Umeyama reads positions only); ``--align_origin``'s map is evo's
+    ``Q_0 · se3_inverse(P_0)`` on the blocks as given."""
+    r_ref, r_est = rotations
+    t_ref = reference.lifted().poses[:, :3]
+    t_est = aligned.poses[:, :3]
+    if align == "origin":
+        t0 = estimate.lifted().poses[0, :3]
+        r_t = r_ref[0] @ r_est[0].T
+        t_t = t_ref[0] - r_t @ t0
+        t_est = estimate.lifted().poses[:, :3] @ r_t.T + t_t
+        r_est = r_t @ r_est
+    elif fit is not None and fit.rotation is not None:
+        r_est = fit.rotation @ r_est
+    return (r_ref, t_ref), (r_est, t_est)
+
+
+def _matrix_errors(
+    ref: tuple[NDArray, NDArray],
+    est: tuple[NDArray, NDArray],
+    i: NDArray,
+    j: NDArray,
+    rel: str,
+    *,
+    first_identity: bool = False,
+) -> NDArray[np.float64]:
+    """evo's RPE on matrices as given: ``E = A⁻¹ B``, ``A = Q_i⁻¹ Q_j``, ``B = P_i⁻¹ P_j``.
+
+    ``ref`` and ``est`` are (rotations ``(N, 3, 3)``, positions ``(N, 3)``); every inverse
+    is evo's ``se3_inverse`` ``[Rᵀ | −Rᵀ t]``, exact only for an orthonormal ``R``. Returns
+    ``‖t(E)‖`` (``trans_part``), ``‖R(E) − I‖_F`` (``rot_part``) or ``‖E − I‖_F`` (``full``).
+    ``first_identity``: ``A = I`` and ``B = ref_k⁻¹ est_k`` (``i == j``): the APE's
+    ``E_k = P_k⁻¹ Q_k`` when called with (estimate, reference).
+    """
+
+    def between(r: NDArray, t: NDArray) -> tuple[NDArray, NDArray]:
+        ri_t = np.swapaxes(r[i], 1, 2)
+        return ri_t @ r[j], np.einsum("nab,nb->na", ri_t, t[j] - t[i])
+
+    if first_identity:
+        ri_t = np.swapaxes(ref[0], 1, 2)
+        ra, ta = np.broadcast_to(np.eye(3), ref[0].shape), np.zeros_like(ref[1])
+        rb, tb = ri_t @ est[0], np.einsum("nab,nb->na", ri_t, est[1] - ref[1])
+    else:
+        ra, ta = between(*ref)
+        rb, tb = between(*est)
+    ra_t = np.swapaxes(ra, 1, 2)
+    trans = np.linalg.norm(np.einsum("nab,nb->na", ra_t, tb - ta), axis=1)
+    if rel == "trans_part":
+        return trans
+    rot = np.linalg.norm(ra_t @ rb - np.eye(3), axis=(1, 2))
+    return rot if rel == "rot_part" else np.sqrt(rot * rot + trans * trans)
 
 
 def pose_pairs(
@@ -293,19 +398,22 @@ def _pairs_by_angle(
     return np.concatenate(firsts), np.concatenate(seconds)
 
 
-def project_to_plane(trajectory: Trajectory, plane: str) -> Trajectory:
+def project_to_plane(
+    trajectory: Trajectory, plane: str, *, rotations: NDArray[np.float64] | None = None
+) -> Trajectory:
     """Poses projected to ``plane`` as evo's ``PosePath3D.project`` does.
 
     The dropped axis (``xy``: z, ``xz``: y, ``yz``: x) is zeroed in the positions, and each
     rotation becomes the rotation about that axis by its static-xyz Euler angle about it
     (``transformations.euler_from_matrix(R, "sxyz")``). A KITTI drive (camera frame, y down)
-    lies in ``xz``.
+    lies in ``xz``. ``rotations`` ``(N, 3, 3)``: the blocks the angles are read from (as a
+    file gave them), instead of the trajectory's quaternions.
     """
     if plane not in PLANES:
         raise InputError(f"plane must be one of {', '.join(PLANES)}, got {plane!r}")
     axis = PLANE_NORMALS[plane]
     p = trajectory.lifted().poses
-    r = se3.to_matrix(p)[:, :3, :3]
+    r = se3.to_matrix(p)[:, :3, :3] if rotations is None else rotations
     cy = np.hypot(r[:, 0, 0], r[:, 1, 0])
     regular = cy > 4.0 * np.finfo(float).eps
     if axis == 0:

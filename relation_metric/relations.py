@@ -18,6 +18,7 @@ the group's ``between`` on the reference poses). Relations live on the reference
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Literal
 
@@ -180,6 +181,7 @@ def generate_relations(
     key: Literal["time", "index"] = "time",
     chained: bool = False,
     seconds: float = 1.0,
+    max_relations: int | None = None,
 ) -> RelationSet:
     """Select relations from a reference trajectory (Kümmerle et al. 2009, Sec. V).
 
@@ -216,6 +218,12 @@ min_distance, seed, seconds :
         ``j_{k+1}`` the first pose at least ``distance`` further along the path. These are
         evo's RPE pairs (``all_pairs=False``, delta in frames or metres); without
         ``chained`` they are evo's ``all_pairs=True`` in frames.
+    max_relations : int, optional
+        The pair budget of the quadratic strategies (``loops``, ``all-pairs``, ``global``,
+        ``random``; default :data:`MAX_RELATIONS`): a selection that would hold more is
+        refused up front (:class:`InputError` saying what to change) instead of filling
+        the memory — scoring costs about 200 bytes a relation. ``loops`` streams its
+        candidate pairs in bounded chunks, so its peak memory follows the pairs kept.
 
     Returns
     -------
@@ -225,6 +233,9 @@ min_distance, seed, seconds :
     n = len(reference)
     if n < 2:
         raise InputError(f"a reference trajectory needs at least 2 poses, has {n}")
+    budget = MAX_RELATIONS if max_relations is None else int(max_relations)
+    if strategy in ("global", "random") and count > budget:
+        raise InputError(_over_budget(f"a count of {count:,}", budget, "a smaller count"))
     if strategy == "consecutive":
         if step < 1:
             raise InputError(f"step must be >= 1, got {step}")
@@ -247,7 +258,7 @@ min_distance, seed, seconds :
             keep = j < n
             i, j = i[keep], j[keep]
     elif strategy == "loops":
-        i, j = _loop_pairs(reference, radius, min_separation_time, min_separation_distance)
+        i, j = _loop_pairs(reference, radius, min_separation_time, min_separation_distance, budget)
     elif strategy == "global":
         xy = reference.positions
         extent = float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0)))
@@ -258,6 +269,14 @@ min_distance, seed, seconds :
     elif strategy == "random":
         i, j = _random_pairs(n, count, seed)
     elif strategy == "all-pairs":
+        if n * (n - 1) // 2 > budget:
+            raise InputError(
+                _over_budget(
+                    f"strategy 'all-pairs' on {n:,} poses makes {n * (n - 1) // 2:,} pairs",
+                    budget,
+                    "strategy 'random' with a count, or strategy 'loops' or 'global'",
+                )
+            )
         i, j = np.triu_indices(n, k=1)
     elif strategy == "time":
         if not (np.isfinite(seconds) and seconds > 0):
@@ -288,36 +307,102 @@ def chain_from_zero(successor: NDArray[np.int64], n: int) -> NDArray[np.int64]:
     return chain[chain < n]
 
 
+MAX_RELATIONS = 5_000_000
+"""The pair budget of the quadratic strategies (about 1 GB when scored; see
+:func:`generate_relations`' ``max_relations``)."""
+
+LOOP_CHUNK_PAIRS = 2_000_000
+"""Candidate pairs ``loops`` materialises at once (24 bytes each, plus their filtering)."""
+
+LOOP_COUNT_SEGMENT = 65_536
+"""Poses whose candidate pairs ``loops`` counts at once."""
+
+
+def _over_budget(what: str, budget: int, change: str) -> str:
+    """The message of a selection over the pair budget: what, the budget, what to change."""
+    return (
+        f"{what}: more than the {budget:,} relations slamrel scores in one run "
+        f"(max_relations; about 200 bytes of memory each); pass {change}, or raise "
+        "max_relations if the memory is there"
+    )
+
+
 def _loop_pairs(
     reference: Trajectory,
     radius: float,
     min_time: float | None,
     min_travel: float | None,
+    budget: int = MAX_RELATIONS,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Pairs ``i < j`` at most ``radius`` apart and at least ``min_time`` s (or ``min_travel``
+    m of path) apart, streamed: the candidates within ``radius`` are counted per pose, then
+    found for blocks of poses holding at most :data:`LOOP_CHUNK_PAIRS` of them, filtered,
+    and kept; more than ``budget`` kept pairs is refused as soon as it is reached.
+    """
     if not radius > 0:
         raise InputError(f"radius must be > 0, got {radius}")
     if min_time is None and min_travel is None:
         raise InputError("loop relations need a minimum separation in time or distance")
     from scipy.spatial import cKDTree  # here, not at import: scipy.spatial costs start-up
 
-    pairs = cKDTree(reference.positions).query_pairs(radius, output_type="ndarray")
-    if pairs.size == 0:
+    xy = np.ascontiguousarray(reference.positions)
+    tree = cKDTree(xy)
+    t = reference.timestamps
+    s = reference.path_length() if min_travel is not None else None
+    kept_i: list[NDArray[np.int64]] = []
+    kept_j: list[NDArray[np.int64]] = []
+    total = 0
+    for lo, hi in _loop_blocks(tree, xy, radius):
+        near = cKDTree(xy[lo:hi]).sparse_distance_matrix(tree, radius, output_type="ndarray")
+        i = near["i"].astype(np.int64) + lo
+        j = near["j"].astype(np.int64)
+        del near
+        up = j > i
+        i, j = i[up], j[up]
+        keep = np.zeros(i.shape, dtype=bool)
+        if min_time is not None:
+            keep |= (t[j] - t[i]) >= min_time
+        if s is not None:
+            keep |= (s[j] - s[i]) >= min_travel  # type: ignore[operator]
+        kept_i.append(i[keep])
+        kept_j.append(j[keep])
+        total += kept_i[-1].size
+        if total > budget:
+            raise InputError(
+                _over_budget(
+                    f"strategy 'loops' finds at least {total:,} pose pairs within radius "
+                    f"{radius:g} m",
+                    budget,
+                    "a smaller radius, a larger min_separation_time (or "
+                    "min_separation_distance), or strategy 'random' with a count",
+                )
+            )
+    if not kept_i:
         return np.empty(0, np.int64), np.empty(0, np.int64)
-    i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
-    swap = i > j
-    i, j = np.where(swap, j, i), np.where(swap, i, j)
-    keep = np.zeros(i.shape, dtype=bool)
-    if min_time is not None:
-        t = reference.timestamps
-        keep |= (t[j] - t[i]) >= min_time
-    if min_travel is not None:
-        s = reference.path_length()
-        keep |= (s[j] - s[i]) >= min_travel
-    return i[keep], j[keep]
+    return np.concatenate(kept_i), np.concatenate(kept_j)
 
 
-MAX_SAMPLED_RELATIONS = 10_000_000
-"""The most relations ``global``/``random`` draw (memory ~ 100 bytes per candidate pair)."""
+def _loop_blocks(tree: object, xy: NDArray[np.float64], radius: float) -> Iterator[tuple[int, int]]:
+    """Blocks ``[lo, hi)`` of poses whose candidate pairs within ``radius`` total at most
+    :data:`LOOP_CHUNK_PAIRS` each (a single pose with more is a block of its own). The
+    candidates are counted per pose without materialising them, a segment of poses at a
+    time, so that a refusal over the budget comes before the rest is counted."""
+    n = len(xy)
+    for start in range(0, n, LOOP_COUNT_SEGMENT):
+        stop = min(start + LOOP_COUNT_SEGMENT, n)
+        counts = tree.query_ball_point(xy[start:stop], radius, return_length=True)  # type: ignore[attr-defined]
+        ends = np.cumsum(counts, dtype=np.int64)
+        lo = 0
+        while lo < stop - start:
+            base = ends[lo - 1] if lo else 0
+            hi = int(np.searchsorted(ends, base + LOOP_CHUNK_PAIRS, side="right"))
+            hi = min(max(hi, lo + 1), stop - start)
+            yield start + lo, start + hi
+            lo = hi
+
+
+MAX_SAMPLED_RELATIONS = MAX_RELATIONS
+"""The most relations ``global``/``random`` draw: the pair budget :data:`MAX_RELATIONS`."""
 
 
 def _random_pairs(
@@ -337,11 +422,6 @@ def _random_pairs(
     """
     if count < 1:
         raise InputError(f"count must be >= 1, got {count}")
-    if count > MAX_SAMPLED_RELATIONS:
-        raise InputError(
-            f"count {count} is more than the {MAX_SAMPLED_RELATIONS} relations slamrel draws; "
-            'use strategy="all-pairs" on a short trajectory, or a smaller count'
-        )
     total = n * (n - 1) // 2
     if xy is None and count >= total:
         if count > total:

@@ -299,25 +299,49 @@ def to_matrix(p: ArrayLike) -> Array:
 def from_matrix(m: ArrayLike) -> Array:
     """Poses ``(..., 7)`` from homogeneous ``(..., 4, 4)`` or ``(..., 3, 4)`` matrices.
 
-    The rotation block is converted with ``scipy.spatial.transform.Rotation`` (which
-    orthonormalises it); ``qw ≥ 0``.
+    scipy's ``Rotation.from_matrix`` written in numpy (scipy.spatial costs start-up: the
+    KITTI reader and every alignment call this): a rotation block whose ``R Rᵀ`` is not the
+    identity (``isclose``, atol 1e-12) is orthonormalised as ``U Vᵀ`` of its SVD, then the
+    quaternion is taken by Markley's rule from the largest of the diagonal and the trace;
+    ``qw ≥ 0``. A block with a non-positive determinant is refused (ValueError), as scipy's.
     """
-    from scipy.spatial.transform import Rotation
-
     m = np.asarray(m, dtype=np.float64)
     if m.shape[-2:] not in ((4, 4), (3, 4)):
         raise ValueError(f"matrices must have shape (..., 4, 4) or (..., 3, 4), got {m.shape}")
     lead = m.shape[:-2]
-    r = m[..., :3, :3].reshape(-1, 3, 3)
-    q = (
-        Rotation.from_matrix(r).as_quat().reshape(lead + (4,))
-        if r.shape[0]
-        else np.zeros(lead + (4,))
-    )
+    r = m[..., :3, :3].reshape(-1, 3, 3).copy()
+    if r.shape[0] and not (np.linalg.det(r) > 0).all():
+        raise ValueError("non-positive determinant (left-handed or null frame) in a rotation")
+    if r.shape[0]:
+        gram = r @ np.swapaxes(r, 1, 2)
+        bent = ~np.isclose(gram, np.eye(3), atol=1e-12).all(axis=(1, 2))
+        if bent.any():
+            u, _, vt = np.linalg.svd(r[bent], full_matrices=False)
+            r[bent] = u @ vt
     out = np.empty(lead + (7,))
     out[..., :3] = m[..., :3, 3]
-    out[..., 3:] = q
+    out[..., 3:] = _markley(r).reshape(lead + (4,))
     return normalize(out)
+
+
+def _markley(r: Array) -> Array:
+    """Unit quaternions ``(N, 4)`` ``[qx, qy, qz, qw]`` of rotation matrices ``(N, 3, 3)``,
+    each from the largest of ``R_00, R_11, R_22, tr R`` (the best-conditioned formula)."""
+    tr = r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2]
+    choice = np.argmax(np.stack((r[:, 0, 0], r[:, 1, 1], r[:, 2, 2], tr), axis=1), axis=1)
+    q = np.stack(
+        (r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1], 1 + tr),
+        axis=1,
+    )
+    for i in range(3):  # three cases, each vectorised over its poses
+        k = np.flatnonzero(choice == i)
+        if k.size:
+            j, l = (i + 1) % 3, (i + 2) % 3
+            q[k, i] = 1 - tr[k] + 2 * r[k, i, i]
+            q[k, j] = r[k, j, i] + r[k, i, j]
+            q[k, l] = r[k, l, i] + r[k, i, l]
+            q[k, 3] = r[k, l, j] - r[k, j, l]
+    return q / np.linalg.norm(q, axis=1)[:, None]
 
 
 def transform_points(p: ArrayLike, points: ArrayLike) -> Array:

@@ -383,7 +383,10 @@ def match_nearest_times(
 
     For each ``query`` stamp, the ``times`` stamp nearest to it (:func:`nearest_index`; ties:
     the earlier) when ``|t_k − q| ≤ max_diff`` seconds — evo's test; ``times`` must be sorted.
-    Several queries may match one time.
+    Several queries may match one time. A query equal to a time that ``times`` repeats
+    takes the last of the repeats, as evo's ``searchsorted(side="right")`` does (any other
+    nearest pose of a repeated time is already the one evo takes: the last of a group before
+    the query, the first of a group after it).
 
     Returns
     -------
@@ -395,6 +398,9 @@ def match_nearest_times(
     if t.size == 0 or q.size == 0:
         return np.empty(0, np.int64), np.empty(0, np.int64)
     k = nearest_index(t, q)
+    if t.size > 1 and bool((t[1:] == t[:-1]).any()):
+        exact = np.flatnonzero(t[k] == q)
+        k[exact] = np.searchsorted(t, q[exact], side="right") - 1
     ok = np.flatnonzero(np.abs(t[k] - q) <= max_diff)
     return ok.astype(np.int64), k[ok]
 

@@ -43,6 +43,7 @@ _EXPORTS: dict[str, str] = {
     "Bundle": "recovery.bundle",
     "read_bundle": "slamrel.formats.bundle",
     "write_bundle": "slamrel.formats.bundle",
+    "BundleRecorder": "slamrel.formats.recorder",
     "MotionModel": "recovery.models",
     "SensorModel": "recovery.models",
     "recover": "recovery.recover",
@@ -81,6 +82,7 @@ __all__ = [
     "Bundle",
     "read_bundle",
     "write_bundle",
+    "BundleRecorder",
     "MotionModel",
     "SensorModel",
     "recover",
@@ -112,6 +114,7 @@ if TYPE_CHECKING:  # what mypy and IDEs see; at run time __getattr__ imports on 
     from slamrel.evaluation_options import EvaluateOptions
     from slamrel.formats.bundle import read_bundle, write_bundle
     from slamrel.formats.landmark_maps import read_map, write_map
+    from slamrel.formats.recorder import BundleRecorder
     from slamrel.formats.relations import read_relations, write_relations
     from slamrel.formats.trajectories import LoadedTrajectory, read_trajectory, write_trajectory
 else:

@@ -21,6 +21,7 @@ __all__ = [
     "POSE_ONLY_METHODS",
     "PAIRS_FROM",
     "EVO_MAX_TIME_DIFF",
+    "STRATEGY_OPTION_WORDS",
     "PLOT_MODES",
 ]
 
@@ -89,3 +90,23 @@ PAIRS_FROM = ("reference", "estimate")
 PLOT_MODES = ("auto", "xy", "xz", "yz", "yx", "zx", "zy", "xyz")
 #: evo's default time tolerance of its pose-by-pose association (``t_max_diff``) [s].
 EVO_MAX_TIME_DIFF = 0.01
+
+#: The strategy parameters of :func:`relation_metric.relations.generate_relations` in the
+#: words of the commands' options (:func:`slamrel.evaluation.in_option_words`); the pair
+#: budget (``max_relations``) has no option.
+STRATEGY_OPTION_WORDS = {
+    " (max_relations; ": " (",
+    ", or raise max_relations if the memory is there": "",
+    "strategy 'random' with a count": "--strategy random with --count N",
+    "strategy 'loops' or 'global'": "--strategy loops or global",
+    "a smaller count": "a smaller --count",
+    "a smaller radius": "a smaller --radius",
+    "a larger min_separation_time (or min_separation_distance)": (
+        "a larger --min-separation-time (or --min-separation-distance)"
+    ),
+}
+
+#: ``relations from-graph``'s defaults, Cartographer's (``autogenerate_ground_truth_main.cc``):
+#: the travel a loop closure must span [m] and its largest disagreement with the optimum
+#: [m, rad]. Here (not in ``backends.graph_relations``) so that ``--help`` imports no numpy.
+GRAPH_MIN_TRAVEL, GRAPH_MAX_ERROR_XY, GRAPH_MAX_ERROR_THETA = 100.0, 0.15, 0.02

@@ -29,7 +29,7 @@ from relation_metric.relations import RelationSet, generate_relations
 from relation_metric.time_association import synchronize
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, RepeatedTimeWarning, zero_length
 from relation_metric.trajectory import Trajectory
-from slamrel.constants import EVO_MAX_TIME_DIFF, TRAJECTORY_FORMATS
+from slamrel.constants import EVO_MAX_TIME_DIFF, STRATEGY_OPTION_WORDS, TRAJECTORY_FORMATS
 from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
 from slamrel.formats.bags import is_bag, names_bag
 from slamrel.formats.relations import read_relations
@@ -39,8 +39,10 @@ from slamrel.formats.trajectories import (
     TRAJECTORY_EXTENSIONS,
     LoadedTrajectory,
     PlanarProjectionWarning,
+    first_of_each_timestamp,
     read_trajectory,
     sniff_trajectory_format,
+    with_repeats_kept,
     without_exact_repeats,
     without_repeated_times,
 )
@@ -163,6 +165,12 @@ def score_files(
         _warn_evo_tolerance(options.max_time_diff)
         ref_sync, est_sync = synchronize(ref_traj, scored, max_diff=options.max_time_diff)
         notes["synchronized_pairs"] = len(ref_sync)
+        if len(ref_sync) < 2:
+            raise InputError(
+                f"--sync pairs only {len(ref_sync)} pose(s) with {estimate} within "
+                f"--max-time-diff {options.max_time_diff:g} s; relations need at least 2",
+                path=reference,
+            )
         relations = _generate_pairs(ref_sync, est_sync, options)
         scored = est_sync
         ate_pair = _same_times(est_sync, ref_sync)
@@ -281,10 +289,16 @@ def _why_no_relations(
         why = f"{dropped} zero-length (t1 == t2) and {dup} repeated line(s) were dropped"
         return f"no relation left to score: {why}; expected at least one relation"
     strategy = options.strategy or "consecutive"
+    knobs = {
+        "consecutive": "a smaller --step",
+        "distance": "a smaller --distance",
+        "time": "fewer --seconds",
+        "loops": "a larger --radius or a smaller --min-separation-time",
+        "global": "a smaller --min-distance",
+    }.get(strategy, "other strategy options")
     return (
         f"no relation was selected: --strategy {strategy} generated none from the "
-        f"{len(ref_traj)} reference poses; expected at least one (loosen the strategy's "
-        "options: --delta, --radius, --step, --count, ...)"
+        f"{len(ref_traj)} reference poses; expected at least one ({knobs})"
     )
 
 
@@ -327,14 +341,20 @@ def _is_relations_file(path: str, options: EvaluateOptions) -> bool:
     return False
 
 
+#: Rows of unit quaternions from which an 8-column file is a TUM trajectory without a warning.
+_SURE_ROWS = 10
+
+
 def _eight_columns_are_relations(path: str) -> bool:
     """Tell a TUM trajectory from Freiburg relations, both 8 numbers a line, by content.
 
     A TUM file's last four columns are unit quaternions (its reader refuses any other); a
     relations file's are ``z roll pitch yaw``, whose norm is 1 only by accident. Every row a
-    unit quaternion (≥ 2 rows) → TUM; otherwise relations. Either way the guess is said in a
-    warning with how to state it; a file that cannot be told apart (fewer than 2 rows, all
-    unit) is refused naming both readings.
+    unit quaternion (≥ 2 rows) → TUM; otherwise relations. Relations are said in a warning
+    with how to state it, and so is TUM on fewer than :data:`_SURE_ROWS` rows; a TUM file of
+    more rows (evo's ``.txt`` files) is read without a word: that many unit norms by accident
+    do not happen. A file that cannot be told apart (fewer than 2 rows, all unit) is refused
+    naming both readings.
     """
 
     with warnings.catch_warnings():
@@ -352,6 +372,8 @@ def _eight_columns_are_relations(path: str) -> bool:
             "reference trajectory",
             path=path,
         )
+    if unit.all() and values.shape[0] >= _SURE_ROWS:
+        return False
     if unit.all():
         warnings.warn(
             f"{path}: read as a TUM trajectory (every row ends in a unit quaternion); rename it "
@@ -431,7 +453,14 @@ def load_reference(
     traj = _windowed(loaded.trajectory, options, notes, reference, "reference")
     if options.sync:  # relations are generated after the pose-by-pose association
         return RelationSet(np.empty(0), np.empty(0), np.empty((0, 3))), traj
-    return _generate(traj, options), traj
+    try:
+        return _generate(traj, options), traj
+    except InputError as exc:
+        if exc.path is not None:
+            raise
+        window = options.t_start is not None or options.t_end is not None
+        said = exc.message + (" inside --t-start/--t-end" if window else "")
+        raise type(exc)(said, path=reference) from None
 
 
 class DuplicateRelationWarning(RepeatedTimeWarning):
@@ -480,21 +509,22 @@ def _generate(
     reference: Trajectory, options: EvaluateOptions, *, key: Literal["time", "index"] = "time"
 ) -> RelationSet:
     """Relations generated from ``reference`` with the strategy options (default consecutive)."""
-    return generate_relations(
-        reference,
-        "consecutive" if options.strategy is None else options.strategy,  # type: ignore[arg-type]
-        step=options.step,
-        distance=options.distance,
-        radius=options.radius,
-        min_separation_time=options.min_separation_time,
-        min_separation_distance=options.min_separation_distance,
-        count=options.count,
-        min_distance=options.min_distance,
-        seed=options.seed,
-        chained=options.chained,
-        seconds=options.seconds,
-        key=key,
-    )
+    with in_option_words(STRATEGY_OPTION_WORDS):
+        return generate_relations(
+            reference,
+            "consecutive" if options.strategy is None else options.strategy,  # type: ignore[arg-type]
+            step=options.step,
+            distance=options.distance,
+            radius=options.radius,
+            min_separation_time=options.min_separation_time,
+            min_separation_distance=options.min_separation_distance,
+            count=options.count,
+            min_distance=options.min_distance,
+            seed=options.seed,
+            chained=options.chained,
+            seconds=options.seconds,
+            key=key,
+        )
 
 
 def _note_projection(notes: dict[str, Any], role: str, loaded: LoadedTrajectory) -> None:
@@ -771,6 +801,8 @@ def load_trajectory(
     planar: bool = False,
     times: str | None = None,
     format_option: str = "--format",
+    repeats: str | None = None,
+    repeats_option: str = "",
 ) -> LoadedTrajectory:
     """Read a trajectory given to ``slamrel evaluate`` (or another command).
 
@@ -789,6 +821,12 @@ def load_trajectory(
     ``planar`` (``--planar``) projects them onto the plane with a warning that states the
     out-of-plane motion discarded. ``times`` is a KITTI times file. The reader's messages
     name the command's options (``format_option`` for its ``format``).
+
+    ``repeats`` overrides the role's rule for poses sharing a timestamp: ``"keep"`` keeps
+    them all as evo does (:func:`with_repeats_kept`), ``"first"`` keeps the first of each
+    (:func:`first_of_each_timestamp`), ``"refuse"`` or None applies the role's rule above;
+    either way they are counted and said. ``repeats_option`` names the command's option in
+    the refusal.
     """
     p = Path(path)
     if p.is_dir() and not is_bag(p):
@@ -826,8 +864,11 @@ def load_trajectory(
             dimension="2d" if planar else "auto",
             times=times,
         )
+    if repeats == "keep":
+        return with_repeats_kept(loaded, path, what=role)
+    if repeats == "first":
+        return first_of_each_timestamp(loaded, path, what=role)
     if role == "reference":
-        loaded = without_repeated_times(loaded, path)
-    else:
-        loaded = without_exact_repeats(loaded, path, what=role)
-    return loaded
+        return without_repeated_times(loaded, path)
+    hint = f"; {repeats_option} keep reads it as evo does" if repeats_option else ""
+    return without_exact_repeats(loaded, path, what=role, hint=hint)

@@ -9,23 +9,31 @@ follows evo's steps in evo's order:
    association; a bound of 0 counts as none, as evo's test ``if t_start or t_end``);
 2. the poses are associated by time (:func:`~relation_metric.time_association.synchronize`,
    evo's nearest-time matching with ``t_max_diff`` and ``t_offset``); KITTI files have no
-   times and are paired pose by pose (they must have as many poses);
+   times and are paired pose by pose (they must have as many poses), and their RPE uses the
+   rotation blocks as written (evo's arithmetic, :func:`relation_metric.pose_error.
+   relative_pose_errors`), not the re-orthonormalised quaternions: on KITTI's own files
+   (6–9 digits) the two readings differ by up to ~5e-5 relative;
 3. the estimate is aligned, both are projected, and the APE or RPE is computed
    (:mod:`relation_metric.pose_error`); the statistics are evo's
    (:func:`~relation_metric.stats.evo_statistics`, population ``std``).
 
-Where slamrel reads a file differently from evo, it says so: a reference pose repeating an
-earlier pose's timestamp is dropped (warned), an estimate with two different poses at one
-timestamp is refused (evo takes one of them silently).
+Where slamrel reads a file differently from evo, it says so: by default a reference pose
+repeating an earlier pose's timestamp is dropped (warned), an estimate with two different
+poses at one timestamp is refused (evo keeps both silently); ``duplicate_stamps="keep"``
+(``--duplicate_stamps keep``) keeps them all as evo does, counted and warned, and gives
+evo's numbers; ``"first"`` keeps the first of each timestamp in both.
 """
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from relation_metric import se3
 from relation_metric.errors import InputError, OptionError
 from relation_metric.pose_error import (
     PoseErrors,
@@ -36,6 +44,8 @@ from relation_metric.stats import evo_statistics
 from relation_metric.time_association import synchronize
 from relation_metric.trajectory import Trajectory
 from slamrel.evaluation import load_trajectory
+from slamrel.formats.bags import one_opening
+from slamrel.formats.trajectories import read_kitti_matrices
 
 __all__ = ["EvoOptions", "EvoResult", "evo_files", "INPUT_KINDS", "RELATION_TITLES"]
 
@@ -67,6 +77,7 @@ class EvoOptions:
     ``metric`` ``"ape"`` or ``"rpe"``; ``kind`` a key of :data:`INPUT_KINDS`; ``reference`` and
     ``estimate`` file paths, or for bags the bag in ``reference`` and the topics in
     ``ref_topic``/``est_topic``. ``n_to_align`` −1 means all poses (evo's default).
+    ``duplicate_stamps`` ``"keep"`` (evo's reading), ``"first"`` or ``"refuse"`` (module doc).
     """
 
     metric: str
@@ -90,6 +101,7 @@ class EvoOptions:
     t_start: float | None = None
     t_end: float | None = None
     project_to_plane: str | None = None
+    duplicate_stamps: str = "refuse"
 
 
 @dataclass(frozen=True)
@@ -121,7 +133,7 @@ def evo_files(options: EvoOptions) -> EvoResult:
     """Read the files of ``options`` and compute the APE or RPE as evo does (module doc)."""
     o = options
     _check(o)
-    ref, est, ref_name, est_name = _load(o)
+    ref, est, ref_name, est_name, rotations = _load(o)
     timed = o.kind != "kitti"
     if timed:
         ref = _cropped(ref, o.t_start, o.t_end)
@@ -135,7 +147,13 @@ def evo_files(options: EvoOptions) -> EvoResult:
     n = None if o.n_to_align == -1 else o.n_to_align
     if o.metric == "ape":
         pe = absolute_pose_errors(
-            ref, est, o.pose_relation, align=align, n_to_align=n, plane=o.project_to_plane
+            ref,
+            est,
+            o.pose_relation,
+            align=align,
+            n_to_align=n,
+            plane=o.project_to_plane,
+            rotations=rotations,
         )
     else:
         pe = relative_pose_errors(
@@ -150,6 +168,7 @@ def evo_files(options: EvoOptions) -> EvoResult:
             align=align,
             n_to_align=n,
             plane=o.project_to_plane,
+            rotations=rotations,
         )
     title = evo_title(o)
     name, unit = RELATION_TITLES[o.pose_relation]
@@ -188,9 +207,18 @@ def _alignment(o: EvoOptions) -> str:
     return "scale" if o.correct_scale else "none"
 
 
-def _load(o: EvoOptions) -> tuple[Trajectory, Trajectory, str, str]:
-    """The two trajectories (SE(3)) and evo's names for them (paths as given, or topics)."""
+def _load(o: EvoOptions) -> tuple[Trajectory, Trajectory, str, str, Any]:
+    """The two trajectories (SE(3)), evo's names for them (paths as given, or topics) and,
+    for KITTI, the rotation blocks as written (else None)."""
     ref_fmt, est_fmt = INPUT_KINDS[o.kind]
+    if o.kind == "kitti":
+        m_ref, _ = read_kitti_matrices(o.reference)
+        m_est, _ = read_kitti_matrices(o.estimate)
+        ref_k, est_k = (
+            Trajectory(np.arange(m.shape[0], dtype=np.float64), se3.from_matrix(m))
+            for m in (m_ref, m_est)
+        )
+        return ref_k, est_k, o.reference, o.estimate, (m_ref[:, :, :3], m_est[:, :, :3])
     if ref_fmt == "bag":
         assert o.ref_topic is not None and o.est_topic is not None
         ref_path, est_path = f"{o.reference}:{o.ref_topic}", f"{o.reference}:{o.est_topic}"
@@ -198,9 +226,22 @@ def _load(o: EvoOptions) -> tuple[Trajectory, Trajectory, str, str]:
     else:
         ref_path, est_path = o.reference, o.estimate
         names = (o.reference, o.estimate)
-    ref = load_trajectory(ref_path, ref_fmt, role="reference", format_option=o.kind)
-    est = load_trajectory(est_path, est_fmt, role="estimate", format_option=o.kind)
-    return ref.trajectory.lifted(), est.trajectory.lifted(), names[0], names[1]
+    with one_opening(o.reference) if ref_fmt == "bag" else nullcontext():
+        ref, est = (
+            load_trajectory(
+                path,
+                fmt,
+                role=role,
+                format_option=o.kind,
+                repeats=o.duplicate_stamps,
+                repeats_option="--duplicate_stamps",
+            )
+            for path, fmt, role in (
+                (ref_path, ref_fmt, "reference"),
+                (est_path, est_fmt, "estimate"),
+            )
+        )
+    return ref.trajectory.lifted(), est.trajectory.lifted(), names[0], names[1], None
 
 
 def _cropped(ref: Trajectory, t_start: float | None, t_end: float | None) -> Trajectory:

@@ -659,8 +659,12 @@ def _acquire(final: Path, path: PathLike, *, wait: bool) -> int:
             os.close(fd)
             raise
         if same:
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+            except OSError as exc:  # a full disk: no lock file is left behind, one error
+                _release(fd, final)
+                raise _os_error(exc, path, "cannot write its lock file") from None
             return fd
         os.close(fd)
 
@@ -970,8 +974,9 @@ def resumable_directory(
             data = None
         if not isinstance(data, dict) or data.get("kind") != kind:
             found = data.get("kind") if isinstance(data, dict) else None
+            article = "an" if kind[:1] in "aeiou" else "a"
             raise InputError(
-                f"exists and is not a {kind} folder slamrel wrote "
+                f"exists and is not {article} {kind} folder slamrel wrote "
                 f"({MANIFEST} says {found!s}); choose a new or empty folder",
                 path=path,
             )

@@ -25,7 +25,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -229,7 +229,7 @@ def _set_labels(evs: SetEvaluations) -> NDArray[np.str_]:
     return labels
 
 
-def read_run_input(directory: str | Path) -> RunInput:
+def read_run_input(directory: str | Path, *, skip_invalid_measurements: bool = False) -> RunInput:
     """Read a SLAM result bundle directory to score (the I/O end of ``slamrel run``).
 
     The bundle (``docs/bundle.md``) is scored against its ``groundtruth.csv`` (required by
@@ -237,7 +237,7 @@ def read_run_input(directory: str | Path) -> RunInput:
     beside it (written by ``slamrel slam --store-online``) is scored too, and with its
     covariance columns gets an online NEES (:func:`slamrel.formats.bundle.read_online`).
     """
-    bundle = read_bundle(directory)
+    bundle = read_bundle(directory, skip_invalid_measurements=skip_invalid_measurements)
     online_path = Path(directory) / "online.csv"
     if not online_path.is_file():
         return RunInput(bundle, name=str(directory))
@@ -257,17 +257,19 @@ def simulate_run_input(
     corrupt_fraction: float = 0.0,
     noise_scale: float = 1.0,
     process_noise_scale: float = 1.0,
+    jacobians: Literal["standard", "fej"] = "standard",
 ) -> RunInput:
     """Simulate a built-in world and run the reference EKF-SLAM on it (no I/O).
 
     The input carries the filter's online estimate and covariances (for validation) and the
-    world's odometry as dead reckoning. ``corrupt_fraction``, ``noise_scale`` and
-    ``process_noise_scale`` are passed to :func:`slamrel.backends.ekf_slam.ekf_slam_bundle`.
+    world's odometry as dead reckoning. ``corrupt_fraction``, ``noise_scale``,
+    ``process_noise_scale`` and ``jacobians`` are passed to
+    :func:`slamrel.backends.ekf_slam.ekf_slam_bundle`.
     """
     w = make_world(world, noise=noise, seed=seed, rate=rate)
     bundle, slam = ekf_slam_bundle(
         world_bundle(w), corrupt_fraction=corrupt_fraction, noise_scale=noise_scale, seed=seed,
-        process_noise_scale=process_noise_scale,
+        process_noise_scale=process_noise_scale, jacobians=jacobians,
     )  # fmt: skip
     return RunInput(
         bundle, name=f"{world}/{noise}/seed {seed}", online=slam.online,
@@ -298,9 +300,9 @@ def run_pipeline(
     ``rate``, ``corrupt_fraction``, ``noise_scale``, ``process_noise_scale``), or a
     :class:`RunInput` (e.g. from :func:`read_run_input` for a bundle directory).
     ``max_outlier_run``, ``on_divergence``, ``robust`` and ``map_prior`` (``None``: the
-    default of :func:`recovery.recover.recover`, ``independent``: a bundle does not say
-    whether its map was made from its log, and ``slamrel recover`` must give the same bundle
-    the same covariances) are passed to :func:`recovery.recover.recover`, ``associate`` and
+    default of :func:`recovery.recover.recover`, ``auto``: de-conditioned when the bundle
+    states that its map was made from its log, so that ``slamrel recover`` gives the same
+    bundle the same covariances) are passed to :func:`recovery.recover.recover`, ``associate`` and
     ``align`` to :func:`map_comparison`.
     """
     inp = source
@@ -373,6 +375,11 @@ def score_bundle(
         rec, rec_error = None, str(exc)
     own = _own_estimates(inp, rec)
     notes = run_notes(rec, rec_error, method, has_online=inp.online is not None)
+    if bundle.skipped_invalid:  # read with --skip-invalid-measurements
+        notes.append(
+            f"{bundle.skipped_invalid} measurement(s) with a range <= 0 or a non-finite range "
+            "or bearing were skipped by the reader (--skip-invalid-measurements) and not used"
+        )
     frame, estimates, evaluations = None, own, {}
     nees: dict[str, NeesCurve] = {}
     nees_truth: dict[str, NeesSummary] = {}
@@ -386,6 +393,7 @@ def score_bundle(
             frame, nees, nees_truth,
             online_without_covariances=inp.online is not None and inp.online_covariance is None,
         )  # fmt: skip
+        notes += _online_singular_note(inp)
     else:
         online_vs_recovered = _online_against_recovered(own, seed=seed)
         notes += no_truth_notes(
@@ -588,8 +596,33 @@ def _estimates_at_truth(
         online_t, online_rows = _at_truth_times(own["online"], truth)
         estimates["online"] = online_t
         if inp.online_covariance is not None:
-            score("online", online_t, inp.online_covariance[online_rows])
+            covs = inp.online_covariance[online_rows]
+            ok = positive_definite_rows(covs)  # zero or singular rows: no NEES (counted)
+            if ok.any():
+                kept = Trajectory(online_t.timestamps[ok], online_t.poses[ok])
+                score("online", kept, covs[ok])
     return estimates, nees, unaligned
+
+
+def positive_definite_rows(covs: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which of the (N, 3, 3) covariances are positive definite (a zero or singular one,
+    as filters write for their first steps, has no NEES), (N,)."""
+    if covs.shape[0] == 0:
+        return np.zeros(0, dtype=bool)
+    return np.asarray(np.linalg.eigvalsh(0.5 * (covs + covs.transpose(0, 2, 1)))[:, 0] > 0.0)
+
+
+def _online_singular_note(inp: RunInput) -> list[str]:
+    """The note counting the online poses whose covariance is zero or singular (no NEES)."""
+    if inp.online_covariance is None:
+        return []
+    n = int((~positive_definite_rows(inp.online_covariance)).sum())
+    if not n:
+        return []
+    return [
+        f"online NEES: {n} of {inp.online_covariance.shape[0]} online poses have a zero or "
+        "singular covariance (online.csv) and no NEES; they are skipped, the others scored"
+    ]
 
 
 def _at_truth_times(est: Trajectory, truth: Trajectory) -> tuple[Trajectory, NDArray[np.int64]]:

@@ -17,7 +17,14 @@ from slamrel.cli import main
 from slamrel.pipeline import run_pipeline
 from slamrel.report.verdict import INFO, RunFacts, run_verdict
 from slamrel.simulation.healthy import healthy_bundle
-from slamrel.studies.calibration import IN_VIEW, broken_bundle
+from slamrel.studies.calibration import (
+    HEALTHY,
+    IN_VIEW,
+    REFERENCE,
+    TEXTBOOK,
+    broken_bundle,
+    class_rates,
+)
 
 
 def test_wrong_associations_pick_another_landmark_in_view():
@@ -70,6 +77,13 @@ def test_calibration_study_separates_healthy_from_broken(tmp_path, capsys):
     # the reference EKF-SLAM's own runs are reported as they are (no expectation)
     assert s["reference_runs"] == 2 * 3 * 5
     assert set(s["reference_q"]) >= {"consistency", "online_consistency", "map_log"}
+    # and every class on its own: runs and overall levels
+    classes = s["classes"]
+    assert classes[HEALTHY]["runs"] == 60 and classes[HEALTHY]["green"] >= 0.95 * 60
+    assert classes[REFERENCE]["runs"] == 30 and classes["broken"]["runs"] == 2 * 3 * 5 * 2
+    assert all(
+        sum(c[lv] for lv in ("green", "amber", "red")) == c["runs"] for c in classes.values()
+    )
 
 
 def _non_green(result) -> dict[str, str]:
@@ -98,3 +112,81 @@ def test_two_equally_broken_estimates_are_not_green():
     bad = _non_green(r)
     assert bad.get("online") == "red" and bad.get("map_log") == "red"
     assert bad.get("consistency") == "red"
+
+
+def test_class_rates_count_each_class_on_its_own():
+    results = [
+        {"class": HEALTHY, "overall": "green"},
+        {"class": HEALTHY, "overall": "amber"},
+        {"class": "broken: noise-x10", "overall": "red"},
+        {"class": "broken: map-x3", "overall": "red"},
+        {"class": TEXTBOOK, "overall": "red"},
+    ]
+    assert class_rates(results) == {
+        HEALTHY: {"runs": 2, "green": 1, "amber": 1, "red": 0},
+        "broken": {"runs": 2, "green": 0, "amber": 0, "red": 2},
+        TEXTBOOK: {"runs": 1, "green": 0, "amber": 0, "red": 1},
+    }
+
+
+def test_a_recovered_nees_off_says_whose_computation_it_judges():
+    """simple1, noise c, seed 15: the reference EKF-SLAM is itself overconfident (its online
+    NEES q ≈ 14): the recovered lamp says the run's filter is inconsistent, not slamrel."""
+    r = run_pipeline("simple1", noise="c", seed=15)
+    lines = {j.key: j for j in run_verdict(RunFacts.of(r)).lines}
+    assert r.recovery_result is not None and r.recovery_result.map_prior == "deconditioned"
+    rec, on = lines["consistency"], lines["online_consistency"]
+    assert rec.level != "green" and on.level != "green"
+    assert "the filter's own online NEES is off too" in rec.value
+    assert f"q = {on.measure:.3g}" in rec.value
+
+
+@pytest.mark.slow
+def test_a_recovered_nees_off_with_a_consistent_filter_blames_the_recovery():
+    """simple2, noise a, seed 13: online consistent, recovered amber: slamrel's recovery."""
+    r = run_pipeline("simple2", noise="a", seed=13)
+    lines = {j.key: j for j in run_verdict(RunFacts.of(r)).lines}
+    assert lines["online_consistency"].level == "green"
+    assert lines["consistency"].level == "amber"
+    assert "this judges slamrel's recovery" in lines["consistency"].value
+
+
+def test_a_map_scored_against_itself_is_not_judged():
+    """A surveyed map whose "true" landmarks are its own numbers (MRCLAM): map NEES 0 is no
+    evidence of a conservative map, so the lamp is not judged and says why."""
+    from slamrel.pipeline import RunInput, score_bundle
+    from slamrel.report.verdict import NOT_JUDGED
+
+    b = healthy_bundle("simple1", 0, "marginal", odometry=None, error_scale=0.0)
+    v = run_verdict(RunFacts.of(score_bundle(RunInput(b, name="same map"))))
+    line = next(j for j in v.lines if j.key == "map_consistency")
+    assert line.level == NOT_JUDGED and line.measure == 0.0
+    assert "the reference landmarks are the map itself" in line.value
+
+
+@pytest.mark.slow
+def test_textbook_client_class_is_judged_and_its_duplicate_landmarks_are_red(tmp_path):
+    """The class "textbook EKF-SLAM healthy" (tests/clients; benchmarks/client_verdicts.py
+    runs ten seeds): the client tuned to its true noise with proper initialisation still opens
+    a new landmark where its gate misses the old one (31 client landmarks for 12 true ones on
+    seed 12); the map consistency lamp sees those duplicates (joint map NEES far above its
+    dof), the recovered consistency does not blame slamrel for it."""
+    import math
+
+    from clients.export import online
+    from clients.measure import export
+    from clients.textbook_ekfslam import Config, run
+
+    from slamrel.pipeline import RunInput, score_bundle
+    from slamrel.studies.calibration import judged_case
+
+    c = Config()
+    cfg = Config(cx=(0.1, 0.1, c.control_sigma[1] * c.dt), init="proper")
+    r = run(12, cfg)
+    assert r.n_client_landmarks > r.landmarks.shape[0]  # duplicates: the oracle of the red
+    bundle, _ = export(r, tmp_path, "velocity-euler")
+    assert bundle.map_source == "log"
+    res = judged_case(score_bundle(RunInput(bundle, name="textbook", online=online(r))), TEXTBOOK)
+    assert res["class"] == TEXTBOOK and res["overall"] == "red"
+    assert res["levels"]["map_consistency"] == "red" and res["values"]["map_consistency"] > 3
+    assert math.isfinite(res["values"]["consistency"])

@@ -124,6 +124,24 @@ def test_evaluate_imports_no_heavy_module(tmp_path: Path) -> None:
         assert _imported_after(code) == set(), reference
 
 
+def test_ape_and_rpe_import_no_heavy_module(tmp_path: Path) -> None:
+    """evo's command lines on TUM files (aligned, scale-corrected, by metres): numpy only."""
+    import numpy as np
+
+    t = np.arange(50) * 0.1
+    rows = np.column_stack((t, np.cos(t), np.sin(t), 0.1 * t, np.zeros((50, 3)), np.ones(50)))
+    ref, est = tmp_path / "r.txt", tmp_path / "e.txt"
+    np.savetxt(ref, rows)
+    rows[:, 1] += 0.01
+    np.savetxt(est, rows)
+    for argv in (
+        ["ape", "tum", str(ref), str(est), "-as", "--silent"],
+        ["rpe", "tum", str(ref), str(est), "-d", "0.2", "-u", "m", "-a", "--silent"],
+    ):
+        code = f"from slamrel.cli import main\nassert main({argv!r}) == 0"
+        assert _imported_after(code) == set(), argv[0]
+
+
 @pytest.mark.parametrize(
     ("owner", "name", "constants", "as_name"),
     [

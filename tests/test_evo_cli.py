@@ -70,8 +70,30 @@ CASES = [
     ("kitti/ape_xz", "ape", "kitti", "kitti", ["-a", "--project_to_plane", "xz"]),
     ("kitti/rpe_100m", "rpe", "kitti", "kitti", ["-d", "100", "-u", "m", "-r", "angle_deg"]),
     ("kitti/rpe_all", "rpe", "kitti", "kitti", ["-d", "50", "-u", "m", "--all_pairs"]),
+    ("kitti_e/rpe_100m", "rpe", "kitti", "kitti_e", ["-d", "100", "-u", "m"]),
+    ("kitti_e/rpe_origin_full", "rpe", "kitti", "kitti_e", ["--align_origin", "-r", "full"]),
+    ("kitti_e/rpe_as_rot", "rpe", "kitti", "kitti_e", ["-as", "-d", "20", "-r", "rot_part"]),
+    (
+        "kitti_e/rpe_xz",
+        "rpe",
+        "kitti",
+        "kitti_e",
+        ["-a", "-d", "50", "-u", "m", "--project_to_plane", "xz"],
+    ),
+    ("kitti_e/ape_full", "ape", "kitti", "kitti_e", ["-r", "full"]),
+    (
+        "kitti_e/ape_xz_deg",
+        "ape",
+        "kitti",
+        "kitti_e",
+        ["-a", "--project_to_plane", "xz", "-r", "angle_deg"],
+    ),
     ("euroc/ape_as", "ape", "euroc", "euroc", ["-as"]),
     ("euroc/rpe", "rpe", "euroc", "euroc", ["-d", "10"]),
+    ("repeats/euroc_ape", "ape", "euroc", "euroc_rep", ["-as", "--duplicate_stamps", "keep"]),
+    ("repeats/euroc_rpe", "rpe", "euroc", "euroc_rep", ["-d", "5", "--duplicate_stamps", "keep"]),
+    ("repeats/tum_ape", "ape", "tum", "tum_rep", ["-a", "--duplicate_stamps", "keep"]),
+    ("repeats/tum_rpe", "rpe", "tum", "tum_rep", ["--all_pairs", "--duplicate_stamps", "keep"]),
 ]
 
 
@@ -106,8 +128,10 @@ def evo_bin() -> Path:
     return found
 
 
-def _kitti_pair(folder: Path) -> tuple[Path, Path]:
-    """A seeded KITTI-like drive (camera frame: y down, z forward) and a noisy estimate."""
+def _kitti_pair(folder: Path, fmt: str = "%.17g") -> tuple[Path, Path]:
+    """A seeded KITTI-like drive (camera frame: y down, z forward) and a noisy estimate,
+    written with ``fmt`` (KITTI's own files: ``%e``, 7 digits, rotations orthonormal to
+    ~1e-7 only)."""
     rng = np.random.default_rng(40)
     n = 600
     yaw = np.cumsum(rng.normal(0.0, 0.01, n))
@@ -121,8 +145,8 @@ def _kitti_pair(folder: Path) -> tuple[Path, Path]:
         r[:, 0, 0], r[:, 0, 2], r[:, 1, 1], r[:, 2, 0], r[:, 2, 2] = c, s, 1.0, -s, c
         p = pos + noise * np.cumsum(rng.normal(0.0, 0.02, (n, 3)), axis=0)
         rows = np.concatenate((r, p[:, :, None]), axis=2).reshape(n, 12)
-        path = folder / name
-        np.savetxt(path, rows, fmt="%.17g")
+        path = folder / (name if fmt == "%.17g" else f"short_{name}")
+        np.savetxt(path, rows, fmt=fmt)
         files.append(path)
     return files[0], files[1]
 
@@ -152,13 +176,46 @@ def _euroc_pair(folder: Path) -> tuple[Path, Path]:
     return gt, est
 
 
+def _repeated_pair(folder: Path) -> tuple[Path, Path, Path, Path]:
+    """Files with repeated timestamps carrying different poses, as evo's EuRoC ``V102.txt``.
+
+    ``est_rep.tum``: the EuRoC estimate with 4 rows written twice at one time, the second
+    pose moved by 5 cm (the shorter trajectory of the association: evo pairs both).
+    ``gt_rep.tum`` / ``est_exact.tum``: a 200 Hz TUM reference whose rows at 3 of the
+    estimate's exact times are written twice with different poses (the longer trajectory:
+    evo's exact match takes the last of them).
+    """
+    gt_csv, est = _euroc_pair(folder)
+    rows = np.loadtxt(est)
+    dup = rows[[50, 100, 101, 150]].copy()
+    dup[:, 1:4] += 0.05
+    rep = np.insert(rows, [51, 101, 102, 151], dup, axis=0)
+    est_rep = folder / "est_rep.tum"
+    np.savetxt(est_rep, rep, fmt="%.17g")
+    g = np.loadtxt(gt_csv, delimiter=",")
+    t = g[:, 0] * 1e-9
+    gt = np.column_stack((t, g[:, 1:4], g[:, 5:8], g[:, 4]))
+    twice = gt[[300, 600, 900]].copy()
+    twice[:, 1:4] -= 0.04
+    gt_rows = np.insert(gt, [301, 601, 901], twice, axis=0)
+    gt_rep = folder / "gt_rep.tum"
+    np.savetxt(gt_rep, gt_rows, fmt="%.17g")
+    exact = folder / "est_exact.tum"
+    sel = gt[::10].copy()
+    sel[:, 1:4] += np.random.default_rng(42).normal(0.0, 0.01, (sel.shape[0], 3))
+    np.savetxt(exact, sel, fmt="%.17g")
+    return gt_csv, est_rep, gt_rep, exact
+
+
 @pytest.fixture(scope="session")
 def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
     """The positional arguments of each input (after the kind), real and generated."""
     folder = tmp_path_factory.mktemp("evo_cli")
     tum = require_data("tum_rgbd")
     kitti = _kitti_pair(folder)
+    kitti_e = _kitti_pair(folder, "%e")
     euroc = _euroc_pair(folder)
+    rep = _repeated_pair(folder)
     return {
         "fr1": [
             str(tum / "freiburg1_xyz-groundtruth.txt"),
@@ -167,7 +224,10 @@ def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[str]]:
         "fr2": [str(tum / "fr2_desk_groundtruth.txt"), str(tum / "fr2_desk_ORB.txt")],
         "bag": [str(require_data("rosbag", "ROS_example.bag")), "groundtruth", "ORB-SLAM"],
         "kitti": [str(p) for p in kitti],
+        "kitti_e": [str(p) for p in kitti_e],
         "euroc": [str(p) for p in euroc],
+        "euroc_rep": [str(rep[0]), str(rep[1])],
+        "tum_rep": [str(rep[2]), str(rep[3])],
     }
 
 
@@ -188,6 +248,18 @@ def _assert_close(ours: dict, theirs: dict, where: str) -> None:
         assert ours[key] == pytest.approx(value, rel=TOL, abs=1e-15), f"{where}: {key}"
 
 
+def _evo_words(args: list[str]) -> list[str]:
+    """The command line without slamrel's own options (``--duplicate_stamps X``): evo's."""
+    out: list[str] = []
+    skip = False
+    for a in args:
+        if skip or a == "--duplicate_stamps":
+            skip = not skip
+            continue
+        out.append(a)
+    return out
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_same_numbers_as_evo(case, evo_bin: Path, inputs: dict, tmp_path: Path) -> None:
@@ -196,7 +268,7 @@ def test_same_numbers_as_evo(case, evo_bin: Path, inputs: dict, tmp_path: Path) 
     ours, theirs = tmp_path / "slamrel.zip", tmp_path / "evo.zip"
     _slamrel(metric, kind, args, ours)
     run = subprocess.run(
-        [str(evo_bin / f"evo_{metric}"), kind, *args, "--save_results", str(theirs)]
+        [str(evo_bin / f"evo_{metric}"), kind, *_evo_words(args), "--save_results", str(theirs)]
         + ["--no_warnings", "--silent"],
         capture_output=True,
         text=True,
@@ -315,3 +387,132 @@ def test_align_and_align_origin_exclude_each_other(tmp_path: Path) -> None:
     with pytest.raises(SystemExit) as stop:
         main(["ape", "kitti", str(gt), str(est), "-a", "--align_origin"])
     assert stop.value.code == 2
+
+
+def test_repeated_stamps_refused_by_default_and_kept_on_request(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """evo's V102.txt case: two poses at one time are refused, naming the option that keeps
+    them; with it every estimate pose is associated (the estimate is the shorter: evo pairs
+    each of its poses, repeats included), and the repeats are counted in a warning."""
+    gt, est, _, _ = _repeated_pair(tmp_path)
+    assert main(["ape", "euroc", str(gt), str(est)]) == 3
+    err = capsys.readouterr().err
+    assert f"{est}:52:" in err and "--duplicate_stamps keep" in err
+    out = tmp_path / "keep.zip"
+    _slamrel("ape", "euroc", [str(gt), str(est), "--duplicate_stamps", "keep"], out)
+    assert "kept all 4 estimate pose(s)" in capsys.readouterr().err
+    _, errors, _ = _read_zip(out)
+    assert errors.size == len(np.loadtxt(est))  # 204 rows, all within 2 ms of a 200 Hz pose
+    first = tmp_path / "first.zip"
+    _slamrel("ape", "euroc", [str(gt), str(est), "--duplicate_stamps", "first"], first)
+    assert _read_zip(first)[1].size == errors.size - 4
+
+
+def test_exact_match_on_a_repeated_time_takes_the_last_as_evo() -> None:
+    """Hand oracle of evo's ``searchsorted(side="right")``: a query equal to a repeated time
+    gets the last of the repeats; queries between times are unchanged."""
+    from relation_metric.time_association import match_nearest_times
+
+    times = np.array([0.0, 1.0, 1.0, 1.0, 2.0, 3.0, 3.0])
+    i, k = match_nearest_times(np.array([1.0, 0.9, 1.2, 2.9, 3.0, 1.7]), times, 0.5)
+    assert i.tolist() == [0, 1, 2, 3, 4, 5]
+    assert k.tolist() == [3, 1, 3, 5, 6, 4]
+
+
+def test_kitti_rotations_used_as_written(tmp_path: Path) -> None:
+    """KITTI's rotation blocks written with 7 digits are orthonormal to ~1e-7 only; the RPE
+    uses them as written, as evo does. Oracle: evo's arithmetic written out pair by pair on
+    4x4 matrices (inverse by transposition), independent of slamrel's vectorised path."""
+    gt, est = _kitti_pair(tmp_path, "%e")
+    out = tmp_path / "r.zip"
+    _slamrel("rpe", "kitti", [str(gt), str(est), "-d", "10", "-r", "full"], out)
+    ours = _read_zip(out)[1]
+
+    def inv(m: np.ndarray) -> np.ndarray:
+        r = np.eye(4)
+        r[:3, :3] = m[:3, :3].T
+        r[:3, 3] = -m[:3, :3].T @ m[:3, 3]
+        return r
+
+    q, p = (np.loadtxt(f).reshape(-1, 3, 4) for f in (gt, est))
+    h = np.tile(np.eye(4), (q.shape[0], 1, 1))
+    qq, pp = h.copy(), h.copy()
+    qq[:, :3], pp[:, :3] = q, p
+    oracle = [
+        np.linalg.norm(inv(inv(qq[i]) @ qq[i + 10]) @ (inv(pp[i]) @ pp[i + 10]) - np.eye(4))
+        for i in range(0, q.shape[0] - 10, 10)
+    ]
+    np.testing.assert_allclose(ours, oracle, rtol=1e-12)
+    # the quaternion reading (re-orthonormalised) differs at this precision: the test can fail
+    from slamrel.evo_metrics import EvoOptions, evo_files
+
+    o = EvoOptions("rpe", "kitti", str(gt), str(est), delta=10, pose_relation="full")
+    r = evo_files(o)
+    from relation_metric.pose_error import relative_pose_errors
+
+    quat = relative_pose_errors(r.reference, r.estimate, "full", delta=10)
+    assert np.abs(quat.errors - ours).max() > 1e-9 * np.abs(ours).max()
+
+
+def _kind_parsers(metric: str) -> dict:
+    import argparse
+
+    from slamrel.cli import build_parser
+
+    def subparsers(p: argparse.ArgumentParser) -> dict:
+        (act,) = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
+        return act.choices
+
+    return subparsers(subparsers(build_parser(metric))[metric])
+
+
+@pytest.mark.parametrize("metric", ["ape", "rpe"])
+def test_help_states_every_default(metric: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """As evo's --help: every option of every input kind says its default, and the rendered
+    text shows the parser's actual default value (a flag: off; no value: none)."""
+    for kind, parser in _kind_parsers(metric).items():
+        with pytest.raises(SystemExit):
+            main([metric, kind, "--help"])
+        text = " ".join(capsys.readouterr().out.split())
+        for action in parser._actions:
+            if not action.option_strings or action.dest == "help":
+                continue
+            if action.default is None:
+                shown = "none"
+            elif action.default is False:
+                shown = "off"
+            else:
+                shown = str(action.default)
+            assert f"(default: {shown}" in " ".join((action.help or "").split()).replace(
+                "%(default)s", shown
+            ), (kind, action.dest)
+            assert action.option_strings[-1] in text, (kind, action.dest)
+
+
+def test_save_plot_writes_the_errors_it_scored(tmp_path: Path) -> None:
+    """--save_plot: a valid PNG and PDF (signature, PNG size in its header); the figure's
+    error line is the error array of the result zip (the oracle: the same run's numbers)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    gt, est = _euroc_pair(tmp_path)
+    png, pdf, out = tmp_path / "e.png", tmp_path / "e.pdf", tmp_path / "r.zip"
+    args = [str(gt), str(est), "-d", "5", "--save_plot", str(png), "--save_results", str(out)]
+    assert main(["rpe", "euroc", *args, "--silent"]) == 0
+    head = png.read_bytes()[:24]
+    assert head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR"
+    width, height = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    assert width > 500 and height > 500
+    assert main(["ape", "euroc", str(gt), str(est), "-a", "--save_plot", str(pdf)]) == 0
+    data = pdf.read_bytes()
+    assert data[:5] == b"%PDF-" and data.rstrip().endswith(b"%%EOF")
+    from slamrel.evo_metrics import EvoOptions, evo_files
+    from slamrel.plots.pose_errors import pose_error_figure
+
+    result = evo_files(EvoOptions("rpe", "euroc", str(gt), str(est), delta=5))
+    fig = pose_error_figure(result)
+    np.testing.assert_array_equal(fig.axes[0].lines[0].get_ydata(), _read_zip(out)[1])
+    before = gt.read_bytes()
+    assert main(["ape", "euroc", str(gt), str(est), "--save_plot", str(gt)]) == 3  # an input
+    assert gt.read_bytes() == before

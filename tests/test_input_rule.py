@@ -339,8 +339,13 @@ def test_align_refuses_a_pose_that_no_correlative_search_can_reach(tmp_path, cap
     assert far != text[3]
     log.write_text("".join(text[:3] + [far] + text[4:]))
     out = tmp_path / "out.relations"
+    _refused(["relations", "align", str(log), "-o", str(out), "--aligner", "icp"], capsys,
+             f"{log}:4:", "the guess puts the scan of line 4 1e+20 m from the scan of line 1",
+             "no placement it tries lets them overlap")  # fmt: skip
+    assert not out.exists()
+    # the global aligner (default): its chain links line 3 to line 4, refused the same way
     _refused(["relations", "align", str(log), "-o", str(out)], capsys, f"{log}:4:",
-             "the guess puts the scan of line 4 1e+20 m from the scan of line 1",
+             "the guess puts the scan of line 4 1e+20 m from the scan of line 3",
              "no placement it tries lets them overlap")  # fmt: skip
     assert not out.exists()
     log.write_text("".join(text[:3] + [far.replace("1e20", "10")] + text[4:]))

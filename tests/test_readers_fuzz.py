@@ -121,9 +121,14 @@ BUNDLE = {
 }
 
 
-def _npy(m: int) -> bytes:
+def _npy(m: int, blocks: list[list[float]] | None = None) -> bytes:
+    """``0.01 I`` (2m × 2m), or the block-diagonal of the ``[cxx, cxy, cyy]`` ``blocks`` (a
+    joint covariance must agree with map.csv's covariances)."""
+    cov = 0.01 * np.eye(2 * m)
+    for k, (cxx, cxy, cyy) in enumerate(blocks or []):
+        cov[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = [[cxx, cxy], [cxy, cyy]]
     buf = io.BytesIO()
-    np.save(buf, 0.01 * np.eye(2 * m), allow_pickle=False)
+    np.save(buf, cov, allow_pickle=False)
     return buf.getvalue()
 
 
@@ -183,7 +188,10 @@ READERS: dict[str, Reader] = {
     "keyword-records": _one("k.txt", KEYWORDS, lambda p: read_keyword_records(p, {"A": 3, "B": 2})),
     "mrclam-robot": Reader(MRCLAM, lambda d: read_mrclam_robot(d, 1), tuple(MRCLAM), True),
     "bundle": Reader(
-        {**BUNDLE, "map_covariance.npy": _npy(3)},
+        {
+            **BUNDLE,
+            "map_covariance.npy": _npy(3, [[0.01, 0, 0.01], [0.02, 0.001, 0.02], [0.01, 0, 0.01]]),
+        },  # fmt: skip
         read_bundle,
         (*BUNDLE, "map_covariance.npy"),
         True,

@@ -219,8 +219,9 @@ def test_divergence_as_dict_from_its_stretches(broken: Recovery) -> None:
 def test_report_is_the_parts_in_order(broken: Recovery) -> None:
     rep = broken.report()
     assert list(rep) == [
-        "method", "map_uncertainty", "map_uncertainty_rule", "poses", "measurements",
-        "divergence", "nis", "iterations", "robust", "batch",
+        "method", "map_uncertainty", "map_uncertainty_rule", "map_prior", "map_prior_rule",
+        "map_prior_reason", "poses", "measurements", "divergence", "nis", "iterations", "robust",
+        "batch",
     ]  # fmt: skip
     assert broken.map_uncertainty is not None
     assert rep["map_uncertainty_rule"] == broken.map_uncertainty.rule
@@ -243,8 +244,9 @@ def test_without_ground_truth_or_robust_update_the_keys_are_absent() -> None:
     assert recovery_nees(b, r) is None
     rep = r.report()
     assert list(rep) == [
-        "method", "map_uncertainty", "map_uncertainty_rule", "poses", "measurements",
-        "divergence", "nis", "iterations",  # the smoother's Gauss-Newton steps
+        "method", "map_uncertainty", "map_uncertainty_rule", "map_prior", "map_prior_rule",
+        "map_prior_reason", "poses", "measurements", "divergence", "nis",
+        "iterations",  # the smoother's Gauss-Newton steps
     ]  # fmt: skip
     assert 1 <= rep["iterations"] <= 10  # type: ignore[operator]
     assert "nees_stretches" not in rep["divergence"]  # type: ignore[operator]

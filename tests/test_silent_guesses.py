@@ -292,7 +292,7 @@ def test_disconnected_pose_graph_is_refused(
             capsys,
             f"{g}",
             "2 disconnected parts",
-            "pose #3",
+            "e.g. pose 3, share no factor with pose 0",  # the file's ids
         )
     assert not (tmp_path / "out").exists()
 

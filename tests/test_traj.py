@@ -94,3 +94,44 @@ def test_convert_round_trips(tmp_path, rng, capsys):
         N,
         7,
     )
+
+
+def test_info_reads_what_evaluate_reads_and_says_the_repeats(tmp_path, capsys):
+    """A file with two different poses at one time (fr2_desk's ground truth has one) is
+    described, not refused: its repeats counted by line, what evaluate and ape/rpe do said."""
+    f = tmp_path / "rep.tum"
+    f.write_text("0 0 0 0 0 0 0 1\n1 1 0 0 0 0 0 1\n1 1 1 0 0 0 0 1\n2 2 0 0 0 0 0 1\n")
+    j = tmp_path / "info.json"
+    assert main(["traj", "info", str(f), "--json", str(j)]) == 0
+    captured = capsys.readouterr()
+    (e,) = json.loads(j.read_text())["trajectories"]
+    assert e["poses"] == 4 and e["repeated_times"] == {"count": 1, "differing": 1, "first_line": 3}
+    assert e["length_m"] == pytest.approx(2 + 2**0.5)  # 1 + 1 + √2: every row kept
+    assert "1 with a different pose (first at line 3)" in captured.out
+    assert "--duplicate_stamps keep" in captured.out and captured.err == ""
+
+
+def test_info_of_kitti_without_times_invents_none(tmp_path, capsys):
+    f = tmp_path / "p.kitti"
+    f.write_text("".join(f"1 0 0 {k} 0 1 0 0 0 0 1 0\n" for k in range(5)))
+    j = tmp_path / "info.json"
+    assert main(["traj", "info", str(f), "--json", str(j)]) == 0
+    out = capsys.readouterr().out
+    (e,) = json.loads(j.read_text())["trajectories"]
+    assert e["times"] is False and e["start_s"] is None and e["rate_hz"] is None
+    assert e["poses"] == 5 and e["length_m"] == 4.0
+    assert "no times, 5 poses" in out and "Hz" not in out
+    times = tmp_path / "times.txt"
+    times.write_text("0\n0.1\n0.2\n0.3\n0.4\n")
+    assert main(["traj", "info", str(f), "--times", str(times), "--json", str(j)]) == 0
+    (e,) = json.loads(j.read_text())["trajectories"]
+    assert e["rate_hz"] == pytest.approx(10.0) and "times" not in e
+
+
+def test_info_of_a_tf_chain_warns_once(tmp_path, capsys):
+    from test_bags import _tf_bag
+
+    _tf_bag(tmp_path / "tf")
+    assert main(["traj", "info", f"{tmp_path / 'tf'}:/tf:map.camera"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("lie outside the time span") == 1, err

@@ -9,7 +9,9 @@
                      earlier variant,
 ``ekf_slam``         EKF-SLAM over range–bearing observations,
 ``sparse_cholesky``  the sparse Cholesky factorisations least squares runs on (with
-                     ``supernodal``, the numpy-only one).
+                     ``supernodal``, the numpy-only one),
+``graph_relations``  reference relations from an optimised graph's loop closures
+                     (Cartographer's ``autogenerate_ground_truth``).
 
 Maths on records only: no command-line code and no file I/O (the graph files are
 :mod:`slamrel.formats`' ``g2o``, ``toro`` and ``isam``).

@@ -36,6 +36,7 @@ step's updates) are stored for validation only.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -105,6 +106,7 @@ def ekf_slam(
     max_rejected_run: int = 10,
     true_ids: NDArray[np.int64] | None = None,
     noise_scale: float = 1.0,
+    jacobians: Literal["standard", "fej"] = "standard",
 ) -> EkfSlamResult:
     """Run EKF-SLAM over a log.
 
@@ -138,6 +140,14 @@ def ekf_slam(
         the used measurements whose given id differs from it).
     noise_scale : float
         Factor on every standard deviation the filter assumes (an inflated-noise filter).
+    jacobians : {"standard", "fej"}
+        Where the Jacobians are evaluated: at the latest estimates (the standard EKF), or at
+        the *first estimates* (Huang, Mourikis & Roumeliotis 2008, FEJ-EKF): the motion
+        Jacobian from the predicted poses ``x̂_{k+1|k} − x̂_{k|k−1}``, the measurement Jacobian
+        at the step's predicted pose and the landmark's first estimate, so that the filter's
+        linearised system keeps the unobservable directions of the true one (the standard
+        EKF gains spurious heading information and becomes overconfident). Known
+        associations only.
 
     Returns
     -------
@@ -159,7 +169,12 @@ def ekf_slam(
         initial_covariance,
         sensor.covariance * noise_scale**2,
         _Gates.of(gate, new_landmark_gate, outlier_gate, max_rejected_run),
+        fej=jacobians == "fej",
     )
+    if jacobians not in ("standard", "fej") or (jacobians == "fej" and not known):
+        raise InputError(
+            f"jacobians: expected 'standard', or 'fej' with known associations, got {jacobians!r}"
+        )
     assoc_out, online, online_cov = f.run(
         steps, np.asarray(steps.sigma) * noise_scale**2, z, ids_in if known else None, grid, used
     )
@@ -235,7 +250,12 @@ class _Filter:
     """The state of one run: mean and covariance in buffers of the final size, used size
     ``n``, landmark slots, and the count of consecutive rejections."""
 
-    def __init__(self, capacity: int, pose: Array, cov0: Array, r_cov: Array, gates: _Gates):
+    def __init__(
+        self, capacity: int, pose: Array, cov0: Array, r_cov: Array, gates: _Gates, fej: bool
+    ):
+        self.fej = fej  # first-estimate Jacobians (FEJ-EKF)
+        self.prior = np.asarray(pose, dtype=np.float64).copy()  # x̂_{k|k−1} of this step
+        self.first = np.zeros(capacity)  # each landmark's first estimate (FEJ)
         self.mu = np.zeros(capacity)
         self.cov = np.zeros((capacity, capacity))
         self.mu[:3] = np.asarray(pose, dtype=np.float64)
@@ -286,6 +306,10 @@ class _Filter:
         fx = se2.compose_jacobian(mu[:3], u)
         q = process_noise(mu[2], sigma)
         mu[:3] = se2.compose(mu[:3], u)
+        if self.fej:  # Φ(x̂_{k+1|k}, x̂_{k|k−1}): the translation between predicted poses
+            fx[0, 2] = -(mu[1] - self.prior[1])
+            fx[1, 2] = mu[0] - self.prior[0]
+        self.prior = mu[:3].copy()
         top = fx @ cov[:3, :n]
         pxx = top[:, :3] @ fx.T + q
         pxx = 0.5 * (pxx + pxx.T)  # 3×3: the covariance stays exactly symmetric
@@ -308,12 +332,15 @@ class _Filter:
             slot = self.slot_of.get(lid)
         if slot is None or slot < 0:
             _initialise(self.mu, self.cov, self.n, meas, self.r_cov)
+            self.first[self.n : self.n + 2] = self.mu[self.n : self.n + 2]
             self.slot_of[lid] = self.n
             self.ids.append(lid)
             self.n += 2
             return lid
         gate = g.outlier if self.rejected_run < g.max_rejected_run else np.inf
-        if not _update(self.mu, self.cov, self.n, slot, meas, self.r_cov, t, m, gate):
+        # FEJ: the Jacobians at the step's predicted pose and the landmark's first estimate
+        fej = {"lin": (self.prior, self.first[slot : slot + 2])} if self.fej else {}
+        if not _update(self.mu, self.cov, self.n, slot, meas, self.r_cov, t, m, gate, **fej):
             self.rejected_run += 1
             return None  # outside the validation gate: rejected
         self.rejected_run = 0
@@ -387,8 +414,12 @@ def _update(
     t: float,
     m: int,
     gate: float = np.inf,
+    lin: tuple[Array, Array] | None = None,
 ) -> bool:
     """EKF update with one range-bearing measurement; False (no update) when ``νᵀS⁻¹ν > gate``.
+
+    ``lin``: the pose and landmark the Jacobians are evaluated at (FEJ; default the current
+    estimates); the innovation is always against the current estimates.
 
     The covariance update is written in a symmetric form, in place, one block of rows at a
     time: with ``S = L Lᵀ`` (Cholesky) and ``W = P Hᵀ L⁻ᵀ`` (n × 2),
@@ -401,6 +432,8 @@ def _update(
     OpenBLAS uses one).
     """
     h, hx, hl = range_bearing(mu[:3], mu[slot : slot + 2])
+    if lin is not None:
+        _, hx, hl = range_bearing(*lin)
     nu = meas - h
     nu[1] = se2.wrap_angle(nu[1])
     pht = cov[:n, :3] @ hx.T + cov[:n, slot : slot + 2] @ hl.T  # (n, 2)
@@ -484,6 +517,24 @@ def _nn_mistakes(assoc: NDArray[np.int64], true_ids: NDArray[np.int64]) -> NDArr
     return wrong
 
 
+def _refuse_missing_ids(bundle: Bundle, used: NDArray[np.bool_]) -> None:
+    """Known association: the first used measurement without a landmark id, refused at its
+    line of the bundle's measurements.csv (the array-level check names no line)."""
+    missing = np.flatnonzero(used & ~np.asarray(bundle.measurement_associated, dtype=bool))
+    if not missing.size:
+        return
+    k = int(missing[0])
+    lines = bundle.measurement_lines
+    line = None if lines is None else int(lines[k]) or None
+    raise InputError(
+        f"measurement without a landmark id (unassociated; {missing.size} such in the log's "
+        "time span): known association needs one for every measurement; "
+        "association='nn' associates them by nearest neighbour",
+        path=None if bundle.path is None else Path(bundle.path) / "measurements.csv",
+        line=line,
+    )
+
+
 def ekf_slam_bundle(
     bundle: Bundle,
     *,
@@ -493,31 +544,44 @@ def ekf_slam_bundle(
     outlier_gate: float | None = None,
     seed: int = 0,
     process_noise_scale: float = 1.0,
+    jacobians: Literal["standard", "fej"] = "standard",
 ) -> tuple[Bundle, EkfSlamResult]:
     """Run :func:`ekf_slam` on ``bundle``'s log; return the SLAM result bundle and the run.
 
     The returned bundle keeps the log (and ground truth) and replaces the map by the filter's
     final map with its marginals and joint covariance, and the measurements' landmark ids by
     the associations the filter made (empty where it rejected a measurement): what a
-    filter-based SLAM system leaves behind. The filter's assumed noise is the bundle's models
-    scaled by ``noise_scale``; the bundle records the models it used. ``outlier_gate`` is the
-    χ² validation gate on known-association updates; rejected measurements are left
-    unassociated in the result bundle and counted in its description.
+    filter-based SLAM system leaves behind, stating ``map_source="log"``. The filter's assumed
+    noise is the bundle's models scaled by ``noise_scale``; the bundle records the models it
+    used. ``outlier_gate`` is the χ² validation gate on known-association updates; rejected
+    measurements are left unassociated in the result bundle and counted in its description.
 
     Experiment knobs: ``corrupt_fraction`` spoils that share of the known associations
     (seeded by ``seed``, :func:`corrupt_associations`); ``process_noise_scale`` scales the
     motion model's standard deviations only (a filter mis-tuned in its process noise;
     ``noise_scale`` scales motion and sensor alike, which leaves the filter's gains, and so
-    its online estimate, unchanged).
+    its online estimate, unchanged); ``jacobians`` as in :func:`ekf_slam`.
     """
+    if bundle.sensor.mounted:
+        raise InputError(
+            "sensor_model.mount: slamrel's reference EKF-SLAM models a sensor at the robot's "
+            "origin only; expected no mount (or [0, 0, 0]) for slamrel slam",
+            path=None if bundle.path is None else Path(bundle.path) / "bundle.json",
+        )
     if process_noise_scale != 1.0:
-        bundle = replace(bundle, motion=_scaled(bundle.motion, process_noise_scale))
+        k2, own = process_noise_scale**2, bundle.step_covariances  # a stated C_k too
+        bundle = replace(
+            bundle,
+            motion=_scaled(bundle.motion, process_noise_scale),
+            step_covariances=None if own is None else k2 * own,
+        )
     steps = build_steps(bundle)
     true_ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks, -1)
     ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks, np.nan)
     _check_fraction(corrupt_fraction)
     if association == "known":
         used = np.asarray(steps.measurement_grid) >= 0
+        _refuse_missing_ids(bundle, used)
         ids = corrupt_associations(ids, used, corrupt_fraction, seed=seed)
     res = ekf_slam(
         steps,
@@ -530,6 +594,7 @@ def ekf_slam_bundle(
         true_ids=true_ids,
         noise_scale=noise_scale,
         outlier_gate=outlier_gate,
+        jacobians=jacobians,
     )
     m = res.landmark_ids.size
     marg = res.map_covariance.reshape(m, 2, m, 2)[np.arange(m), :, np.arange(m), :]
@@ -541,9 +606,11 @@ def ekf_slam_bundle(
             sigma_bearing=noise_scale * sensor.sigma_bearing,
         )
     rejected = int(((res.association < 0) & bundle.measurement_associated).sum())
+    own = bundle.step_covariances  # a stated per-step covariance is the filter's noise too
     out = replace(
         bundle,
         motion=_scaled(bundle.motion, noise_scale),
+        step_covariances=None if own is None else noise_scale**2 * own,
         sensor=sensor,
         measurement_landmarks=np.where(res.association >= 0, res.association, 0),
         measurement_associated=res.association >= 0,
@@ -551,6 +618,7 @@ def ekf_slam_bundle(
         map_xy=res.map_xy,
         map_marginals=marg,
         map_covariance=res.map_covariance,
+        map_source="log",  # the map is the filter's estimate from this very log
         description=(bundle.description + "; " if bundle.description else "")
         + f"EKF-SLAM ({association} association, corrupted {corrupt_fraction:g}, "
         f"noise scale {noise_scale:g}"

@@ -351,7 +351,12 @@ class _NormalEquations:
         return self.cholesky.solve(rhs)[self.perm]
 
 
-def check_connected(graph: PoseGraph) -> None:
+def check_connected(
+    graph: PoseGraph,
+    *,
+    pose_ids: NDArray[np.int64] | None = None,
+    landmark_ids: NDArray[np.int64] | None = None,
+) -> None:
     """Refuse a graph whose poses and landmarks are not one connected component.
 
     The gauge prior holds pose 0 only: a component without it has no prior, its placement
@@ -363,7 +368,8 @@ def check_connected(graph: PoseGraph) -> None:
     ------
     InputError
         Naming how many components there are, their sizes and a pose (or landmark) of
-        the first that does not hold pose 0.
+        the first that does not hold pose 0 — by its file id when ``pose_ids`` and
+        ``landmark_ids`` (graph index → file id) are given, else by its graph index.
     """
     from scipy.sparse.csgraph import connected_components
 
@@ -379,14 +385,20 @@ def check_connected(graph: PoseGraph) -> None:
     sizes = np.bincount(label)
     other = np.flatnonzero(label != label[0])
     k = int(other[0])
-    node = f"pose #{k}" if k < n else f"landmark #{k - n}"
+    if k < n:
+        node = f"pose #{k} (0-based, in id order)" if pose_ids is None else f"pose {pose_ids[k]}"
+    elif landmark_ids is None:
+        node = f"landmark #{k - n} (0-based, in id order)"
+    else:
+        node = f"landmark {landmark_ids[k - n]}"
+    first = "pose 0" if pose_ids is None else f"pose {pose_ids[0]}"
     poses_out = int(np.count_nonzero(label[:n] != label[0]))
     lms_out = int(np.count_nonzero(label[n:] != label[0]))
     raise InputError(
         f"the graph falls into {count} disconnected parts (sizes "
         f"{', '.join(str(int(x)) for x in sizes[:6])}{' ...' if count > 6 else ''}); "
-        f"{poses_out} pose(s) and {lms_out} landmark(s), e.g. {node} (0-based, in file order), "
-        "share no factor with pose 0, which holds the gauge: their placement would be the "
+        f"{poses_out} pose(s) and {lms_out} landmark(s), e.g. {node}, share no factor with "
+        f"{first}, which holds the gauge: their placement would be the "
         "damping's guess. Expected one connected graph (add the missing edges, or solve each "
         "part as its own file)"
     )

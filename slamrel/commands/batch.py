@@ -79,7 +79,12 @@ def run(args: argparse.Namespace) -> int:
     from slamrel.evaluation_options import SCORING_OPTIONS, EvaluateOptions
     from slamrel.formats.manifest import read_manifest
     from slamrel.outputs import resumable_directory, write_text_atomic
-    from slamrel.studies.batch import batch_table, batch_tasks, runs_in_folder
+    from slamrel.studies.batch import (
+        batch_table,
+        batch_tasks,
+        publish_per_relation,
+        runs_in_folder,
+    )
     from slamrel.studies.sweep import run_sweep, stored_results
 
     check_time_window(args)
@@ -90,7 +95,17 @@ def run(args: argparse.Namespace) -> int:
     out = resumable_directory(args.output, kind="evaluate-batch", inputs=[args.source])
     per_relation = out / "per_relation"
     per_relation.mkdir(exist_ok=True)
-    tasks = batch_tasks(runs, options, str(per_relation), ate=args.ate, drift=args.kitti_drift)
+    # each run's per-relation CSV is stored keyed by its options (cases/NAME-<hash>.csv) and
+    # published as per_relation/NAME.csv after the sweep: a rerun with other options or a
+    # deleted file never leaves another run's relations there
+    tasks = batch_tasks(
+        runs,
+        options,
+        str(per_relation),
+        ate=args.ate,
+        drift=args.kitti_drift,
+        store_dir=str(out / "cases"),
+    )
 
     def progress(line: str) -> None:
         if not args.quiet:
@@ -100,6 +115,9 @@ def run(args: argparse.Namespace) -> int:
         tasks, out / "cases", workers=args.workers, scheduler=args.scheduler, progress=progress
     )
     results = stored_results(out / "cases", tasks)
+    stale = publish_per_relation(runs, tasks, results, per_relation)
+    if stale and not args.quiet:
+        print(f"batch: removed {stale} per-relation file(s) of runs without a result now")
     table = batch_table(runs, results, ate=args.ate, drift=args.kitti_drift)
     write_text_atomic(out / "table.csv", table.csv())
     write_text_atomic(out / "table.md", table.markdown())

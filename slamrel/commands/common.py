@@ -10,7 +10,13 @@ from types import SimpleNamespace
 from typing import TYPE_CHECKING, Literal
 
 from landmark_graph.constants import ASSOCIATE_MODES, DEFAULT_ASSOCIATE
-from recovery.constants import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, ROBUST
+from recovery.constants import (
+    DEFAULT_MAP_PRIOR,
+    DEFAULT_MAX_OUTLIER_RUN,
+    DEFAULT_ROBUST,
+    MAP_PRIOR_CHOICES,
+    ROBUST,
+)
 from relation_metric.constants import STRATEGIES
 from relation_metric.errors import InputError, OptionError, SlamrelError
 from slamrel.commands import options as opt
@@ -222,22 +228,24 @@ def relations_from_args(
 ) -> RelationSet:
     """Generate relations from ``reference`` with the strategy options in ``args``."""
     from relation_metric.relations import generate_relations
+    from slamrel.constants import STRATEGY_OPTION_WORDS
 
-    return generate_relations(
-        reference,
-        args.strategy,
-        step=args.step,
-        distance=args.distance,
-        radius=args.radius,
-        min_separation_time=args.min_separation_time,
-        min_separation_distance=args.min_separation_distance,
-        count=args.count,
-        min_distance=args.min_distance,
-        seed=args.seed,
-        chained=getattr(args, "chained", False),
-        seconds=getattr(args, "seconds", EVALUATE_DEFAULTS["seconds"]),
-        key=key,
-    )
+    with in_option_words(STRATEGY_OPTION_WORDS):
+        return generate_relations(
+            reference,
+            args.strategy,
+            step=args.step,
+            distance=args.distance,
+            radius=args.radius,
+            min_separation_time=args.min_separation_time,
+            min_separation_distance=args.min_separation_distance,
+            count=args.count,
+            min_distance=args.min_distance,
+            seed=args.seed,
+            chained=getattr(args, "chained", False),
+            seconds=getattr(args, "seconds", EVALUATE_DEFAULTS["seconds"]),
+            key=key,
+        )
 
 
 def input_files(paths: Sequence[str | None]) -> list[str | None]:
@@ -280,8 +288,8 @@ def check_outputs(
 
 
 def add_recovery_arguments(parser: argparse.ArgumentParser, *, fail_help: str) -> None:
-    """``--max-outlier-run``, ``--fail-on-divergence`` (help: ``fail_help``) and ``--robust``:
-    the recovery filter's options, shared by ``recover`` and ``run``."""
+    """``--max-outlier-run``, ``--fail-on-divergence`` (help: ``fail_help``), ``--robust`` and
+    ``--map-prior``: the recovery's options, shared by ``recover`` and ``run``."""
     parser.add_argument(
         "--max-outlier-run",
         type=opt.nonnegative_int,
@@ -299,6 +307,15 @@ def add_recovery_arguments(parser: argparse.ArgumentParser, *, fail_help: str) -
         help="M-estimator weights on outlying innovations (smoother and batch use the same "
         "weights; the down-weighted fraction is reported; none: the plain EKF; "
         "default: %(default)s)",
+    )
+    parser.add_argument(
+        "--map-prior",
+        choices=MAP_PRIOR_CHOICES,
+        default=DEFAULT_MAP_PRIOR,
+        help="where the map's error comes from: independent of the log (surveyed), or "
+        "deconditioned (made from this log: its covariance already holds the log's "
+        "information; smoother and batch); auto: deconditioned when bundle.json states "
+        "map_source log and the method allows, else independent (default: %(default)s)",
     )
 
 

@@ -20,10 +20,11 @@ HELP = {
 }
 
 EPILOG = """\
-Differences from evo (said where they happen): a reference pose that repeats an earlier
-pose's timestamp is dropped with a warning, and an estimate with two different poses at
-one timestamp is refused (evo keeps both and pairs one of them). Compare the numbers with
-'slamrel evaluate', slamrel's own richer command (relation sets, significance, drift)."""
+Differences from evo (said where they happen): by default a reference pose that repeats an
+earlier pose's timestamp is dropped with a warning, and an estimate with two different
+poses at one timestamp is refused (evo keeps both); --duplicate_stamps keep reads such
+files as evo does. Compare the numbers with 'slamrel evaluate', slamrel's own richer
+command (relation sets, significance, drift)."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -68,6 +69,14 @@ def _kind_parsers(kinds: argparse._SubParsersAction, metric: str) -> None:  # ty
             _delta_arguments(p)
         if kind != "kitti":
             _time_arguments(p)
+            p.add_argument(
+                "--duplicate_stamps",
+                choices=("keep", "first", "refuse"),
+                default="refuse",
+                help="poses that share a timestamp: keep all (as evo), keep the first of each, "
+                "or refuse two different estimate poses at one time (the reference keeps its "
+                "first); counted and said (default: %(default)s)",
+            )
         _output_arguments(p)
         p.set_defaults(func=run, evo_metric=metric)
 
@@ -83,18 +92,21 @@ def _algorithm_arguments(p: argparse.ArgumentParser, metric: str) -> None:
     )
     align = p.add_mutually_exclusive_group()
     align.add_argument(
-        "-a", "--align", action="store_true", help="alignment with Umeyama's method (no scale)"
+        "-a",
+        "--align",
+        action="store_true",
+        help="alignment with Umeyama's method (no scale) (default: off)",
     )
     align.add_argument(
         "--align_origin",
         action="store_true",
-        help="align the trajectory origin to the origin of the reference trajectory",
+        help="align the trajectory origin to the origin of the reference trajectory (default: off)",
     )
     p.add_argument(
         "-s",
         "--correct_scale",
         action="store_true",
-        help="correct scale with Umeyama's method (-as: with the alignment)",
+        help="correct scale with Umeyama's method (-as: with the alignment) (default: off)",
     )
     p.add_argument(
         "--n_to_align",
@@ -138,12 +150,13 @@ def _delta_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--all_pairs",
         action="store_true",
-        help="use all pairs instead of consecutive pairs (default: consecutive)",
+        help="use all pairs instead of consecutive pairs (default: off: consecutive pairs)",
     )
     p.add_argument(
         "--pairs_from_reference",
         action="store_true",
-        help="determine the pose pairs from the reference trajectory (default: the estimate)",
+        help="determine the pose pairs from the reference trajectory (default: off: from the "
+        "estimate)",
     )
 
 
@@ -186,11 +199,30 @@ def _output_arguments(p: argparse.ArgumentParser) -> None:
         metavar="FILE.zip",
         help="write the result as evo's result zip (evo_res reads it) (default: none)",
     )
-    p.add_argument("--silent", action="store_true", help="don't print any output")
+    p.add_argument(
+        "-p",
+        "--plot",
+        action="store_true",
+        help="show the plot: the errors over time and the trajectories coloured by error "
+        "(default: off)",
+    )
+    p.add_argument(
+        "--save_plot",
+        metavar="FILE",
+        help="write the plot to FILE (.png, .pdf or .svg; no window) (default: none)",
+    )
+    p.add_argument(
+        "--plot_mode",
+        choices=("xy", "xz", "yx", "yz", "zx", "zy"),
+        default="xy",
+        help="the plane the trajectories are drawn in (default: %(default)s)",
+    )
+    p.add_argument("--silent", action="store_true", help="don't print any output (default: off)")
     p.add_argument(
         "--no_warnings",
         action="store_true",
-        help="accepted for evo's command lines; slamrel never asks for a confirmation",
+        help="accepted for evo's command lines; slamrel never asks for a confirmation "
+        "(default: off)",
     )
 
 
@@ -200,7 +232,9 @@ def run(args: argparse.Namespace) -> int:
     from slamrel.evo_metrics import EvoOptions, evo_files
     from slamrel.formats.results import write_evo_result
 
-    check_outputs([args.save_results], [args.reference, getattr(args, "estimate", None)])
+    check_outputs(
+        [args.save_results, args.save_plot], [args.reference, getattr(args, "estimate", None)]
+    )
     fields = {
         k: getattr(args, k)
         for k in EvoOptions.__dataclass_fields__
@@ -218,4 +252,21 @@ def run(args: argparse.Namespace) -> int:
         )
     if not args.silent:
         print(result.pretty())
+    if args.save_plot or args.plot:
+        _plots(args, result)
     return 0
+
+
+def _plots(args: argparse.Namespace, result: object) -> None:
+    """``--save_plot`` (written atomically, Agg) and ``--plot`` (a window, the user's backend)."""
+    from slamrel.plots.pose_errors import pose_error_figure
+
+    if args.save_plot:
+        from slamrel.plots.relation_errors import save_figure
+
+        save_figure(pose_error_figure(result, args.plot_mode), args.save_plot)
+    if args.plot:
+        import matplotlib.pyplot as plt
+
+        pose_error_figure(result, args.plot_mode, plt)
+        plt.show()

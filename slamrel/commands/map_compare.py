@@ -59,6 +59,27 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default=0,
         help="seed of the automatic association (default: %(default)s)",
     )
+    p.add_argument(
+        "--trajectory",
+        metavar="TRAJ",
+        help="the poses the sensor was at (a trajectory file, or a SLAM result bundle "
+        "directory: its groundtruth.csv and its sensor's reach): reference landmarks never "
+        "within the sensor's reach of any of them are unobserved, not missed",
+    )
+    p.add_argument(
+        "--max-range",
+        type=opt.length,
+        metavar="R",
+        help="the sensor's reach [m] for --trajectory (default with a bundle: its "
+        "sensor_model.max_range, else its largest measured range; required with a file)",
+    )
+    p.add_argument(
+        "--fov",
+        type=opt.positive_float,
+        metavar="DEG",
+        help="the sensor's full field of view [deg] for --trajectory, centred on the heading "
+        "(default: a bundle's sensor_model.fov, else all around)",
+    )
     p.add_argument("--json", metavar="F", help="write the results as JSON")
     p.add_argument(
         "--per-edge", metavar="F.csv", help="write the per-edge (mesh relation) errors as CSV"
@@ -100,10 +121,13 @@ def run(args: argparse.Namespace) -> int:
     )
     est = read_map(args.estimate)
     ref = read_map(args.reference)
+    observable, reach = _reach(args, ref)
     assoc = association_choice(args.associate, est, ref)
     words = {
         'associate="auto"': "--associate auto",
         "an association of your own": "an association file",
+        "on a review page": "on the page of --review (or slamrel review)",
+        "as the association": "with --associate FILE",
     }
     with errors_about(args.estimate), in_option_words(words):
         res = compare_maps(
@@ -115,6 +139,9 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             thin_angle=np.deg2rad(args.thin_angle),
             align=args.align,
+            allow_empty=True,  # no pair found: the page and the outputs, with 0 pairs said
+            observable=observable,
+            reach=reach,
         )
     out = res.as_dict()
     if args.json:
@@ -139,6 +166,58 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         _print_summary(args, res, out)
     return 0
+
+
+def _reach(args: argparse.Namespace, ref: LandmarkMap) -> tuple[Any, Any]:
+    """Which reference landmarks were ever within the sensor's reach of ``--trajectory``
+    (``(None, None)`` without it): ``(observable (L,), SensorReach)``."""
+    import math
+
+    from relation_metric.errors import OptionError
+
+    if args.trajectory is None:
+        for name in ("max_range", "fov"):
+            if getattr(args, name) is not None:
+                raise OptionError(
+                    "the reach needs the poses it is measured from; give --trajectory too",
+                    option="--" + name.replace("_", "-"),
+                )
+        return None, None
+    from landmark_graph.observability import SensorReach, within_reach
+
+    if args.fov is not None and args.fov > 360.0:
+        raise OptionError(f"expected a field of view in (0, 360], got {args.fov:g}", option="--fov")
+    fov = None if args.fov is None else math.radians(args.fov)
+    if Path(args.trajectory).is_dir():
+        from slamrel.formats.bundle import read_bundle
+        from slamrel.pipeline import sensor_reach
+
+        b = read_bundle(args.trajectory, skip_invalid_measurements=True)
+        if b.groundtruth is None:
+            raise OptionError(
+                f"the bundle {args.trajectory} has no groundtruth.csv to measure the reach "
+                "from; give a trajectory file",
+                option="--trajectory",
+            )
+        own = sensor_reach(b)
+        if args.max_range is None and own is None:
+            raise OptionError("the bundle states no reach; give --max-range", option="--trajectory")
+        if args.max_range is not None:
+            reach = SensorReach(args.max_range, fov, "declared")
+        else:
+            assert own is not None
+            reach = SensorReach(own.max_range, fov if fov is not None else own.fov, own.source)
+        poses = b.groundtruth.poses
+    else:
+        if args.max_range is None:
+            raise OptionError(
+                "a trajectory file states no sensor; give --max-range", option="--trajectory"
+            )
+        from slamrel.formats.trajectories import read_trajectory
+
+        poses = read_trajectory(args.trajectory).trajectory.poses
+        reach = SensorReach(args.max_range, fov, "declared")
+    return within_reach(poses, ref.xy, reach), reach
 
 
 def _write_per_edge(path: str, res: MapComparison, ref: LandmarkMap) -> None:

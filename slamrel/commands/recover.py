@@ -6,11 +6,16 @@ import argparse
 import io
 import sys
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from recovery.constants import MAP_MODES, METHODS
 from slamrel.commands import options as opt
-from slamrel.commands.common import add_recovery_arguments, check_outputs, errors_about
+from slamrel.commands.common import (
+    add_recovery_arguments,
+    check_outputs,
+    errors_about,
+    in_option_words,
+)
 
 if TYPE_CHECKING:
     from recovery.anchoring import NeesFrame
@@ -70,6 +75,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         action="store_true",
         help="drop (and count) measurements whose landmark is not in map.csv",
     )
+    p.add_argument(
+        "--skip-invalid-measurements",
+        action="store_true",
+        help="drop (and count) measurements with a range <= 0 or a non-finite range or "
+        "bearing instead of refusing the bundle",
+    )
     add_recovery_arguments(
         p, fail_help="exit 3 at the first such stretch instead of recovering and reporting it"
     )
@@ -92,14 +103,19 @@ def run(args: argparse.Namespace) -> int:
     from recovery.recover import recover
     from recovery.steps import SNAP_TOLERANCE
     from relation_metric.timeorder import FILTER_TIME_TOLERANCE
-    from slamrel.formats.bundle import read_bundle
+    from slamrel.formats.bundle import SKIP_INVALID_OPTION, read_bundle
     from slamrel.formats.results import write_json
     from slamrel.formats.text import write_bytes_atomic
     from slamrel.formats.trajectories import write_trajectory
 
     fmt = output_format(args.output, args.format)
     check_outputs([args.output, args.covariances, args.report], [args.bundle])
-    bundle = read_bundle(args.bundle, skip_unknown_landmarks=args.skip_unknown_landmarks)
+    with in_option_words({SKIP_INVALID_OPTION: "--skip-invalid-measurements"}):
+        bundle = read_bundle(
+            args.bundle,
+            skip_unknown_landmarks=args.skip_unknown_landmarks,
+            skip_invalid_measurements=args.skip_invalid_measurements,
+        )
     with errors_about(args.bundle):
         result = recover(
             bundle,
@@ -110,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
             on_divergence="raise" if args.fail_on_divergence else "reenter",
             robust=args.robust,
             robust_threshold=args.robust_threshold,
+            map_prior=args.map_prior,
             progress=not args.quiet and sys.stderr.isatty(),
         )
     write_trajectory(args.output, result.trajectory, format=fmt)
@@ -130,8 +147,7 @@ def run(args: argparse.Namespace) -> int:
     report["reordered"] = dict(bundle.reordered)
     if bundle.snapped:  # measurement times snapped to a control/odometry time (float noise)
         report["snapped"] = bundle.snapped
-    if bundle.wrapped_bearings:  # bearings outside [-pi, pi) wrapped by the reader
-        report["wrapped_bearings"] = bundle.wrapped_bearings
+    report |= (statements := _statements(bundle))
     report.setdefault("robust", None)
     if args.report:
         write_json(args.report, report)
@@ -144,9 +160,12 @@ def run(args: argparse.Namespace) -> int:
             f"{c.unassociated}, outside the log {c.outside}, unknown landmark "
             f"{c.skipped_unknown}; map uncertainty: {result.map_mode}"
         )
+        print(f"map prior: {result.map_prior} ({result.map_prior_reason})")
         dead = c.dead_reckoning()
         if dead is not None:
             print(f"note: {dead}")
+        if statements:
+            print("read and stated: " + "; ".join(f"{k} {v}" for k, v in statements.items()))
         moved = {name: n for name, n in bundle.reordered.items() if n}
         if moved:
             print(
@@ -171,17 +190,23 @@ def run(args: argparse.Namespace) -> int:
                 "note: a large gated fraction is a finding about the map (wrong associations "
                 "or an inconsistent map), not noise"
             )
-        if truth is not None and truth.curve is None:
-            print(
-                "note: no NEES: no recovered pose after the first lies at a ground-truth time "
-                "(within 1 µs; is groundtruth.csv in the time base of the log?)"
-            )
-        if truth is not None and truth.curve is not None:
-            frame, mean = truth.frame, truth.curve.summary.mean
-            print(f"mean pose NEES vs ground truth: {mean:.3f} (3 dof), {frame.description}")
-            if frame.aligned and truth.unaligned is not None:
-                print(f"  unaligned, in the truth frame: {truth.unaligned.mean:.3f}")
+        if truth is not None:
+            _print_truth(truth)
     return 0
+
+
+def _print_truth(truth: _TruthScores) -> None:
+    """The summary's lines on the NEES against the bundle's ground truth."""
+    if truth.curve is None:
+        print(
+            "note: no NEES: no recovered pose after the first lies at a ground-truth time "
+            "(within 1 µs; is groundtruth.csv in the time base of the log?)"
+        )
+        return
+    frame, mean = truth.frame, truth.curve.summary.mean
+    print(f"mean pose NEES vs ground truth: {mean:.3f} (3 dof), {frame.description}")
+    if frame.aligned and truth.unaligned is not None:
+        print(f"  unaligned, in the truth frame: {truth.unaligned.mean:.3f}")
 
 
 class _TruthScores(NamedTuple):
@@ -301,3 +326,23 @@ def divergence_summary_text(
         "of this trajectory includes these stretches (--fail-on-divergence to stop instead)"
     )
     return "\n".join(lines)
+
+
+def _statements(bundle: Any) -> dict[str, object]:
+    """What the reader counted and the bundle states beyond the defaults, for the report
+    (docs/bundle.md): wrapped bearings, skipped invalid readings, measurements not used as
+    stated (unprocessed, initialising), the time unit, the sensor noise's source."""
+    out: dict[str, object] = {}
+    if bundle.wrapped_bearings:  # bearings outside [-pi, pi) wrapped by the reader
+        out["wrapped_bearings"] = bundle.wrapped_bearings
+    if bundle.skipped_invalid:  # range <= 0 or non-finite, dropped by the reader
+        out["skipped_invalid"] = bundle.skipped_invalid
+    if bundle.measurement_unprocessed is not None and bundle.measurement_unprocessed.any():
+        out["unprocessed"] = int(bundle.measurement_unprocessed.sum())
+    if bundle.initialisation != "updates":
+        out["initialising"] = int(bundle.initialising().sum())
+    if bundle.time != "seconds":
+        out["time"] = bundle.time
+    if bundle.sensor.noise != "assumed":
+        out["sensor_noise"] = bundle.sensor.noise
+    return out

@@ -1,6 +1,7 @@
 """``slamrel relations generate``: select reference relations from a trajectory;
 ``slamrel relations align``: make them from a laser log (CARMEN, or a ROS bag's
-``sensor_msgs/LaserScan`` topic) by scan alignment."""
+``sensor_msgs/LaserScan`` topic) by scan alignment; ``slamrel relations from-graph``: from
+the loop closures of an optimised pose graph."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 from slamrel.commands.common import (
     add_strategy_arguments,
     check_outputs,
+    errors_about,
     input_files,
     relations_from_args,
 )
@@ -47,6 +49,54 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     add_strategy_arguments(g, default="consecutive")
     g.set_defaults(func=run_generate)
     _register_align(rsub)
+    _register_from_graph(rsub)
+
+
+def _register_from_graph(rsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """``relations from-graph``: Cartographer's ``autogenerate_ground_truth`` on g2o/TORO."""
+    from slamrel.constants import GRAPH_MAX_ERROR_THETA as MAX_ERROR_THETA
+    from slamrel.constants import GRAPH_MAX_ERROR_XY as MAX_ERROR_XY
+    from slamrel.constants import GRAPH_MIN_TRAVEL as MIN_TRAVEL
+
+    f = rsub.add_parser(
+        "from-graph",
+        help="make reference relations from an optimised pose graph's loop closures",
+        description="Keep the loop closures (edges between non-consecutive poses) of an "
+        "optimised g2o or TORO pose graph that agree with the graph's own vertices within "
+        "outlier thresholds and span a least travelled distance (Cartographer's "
+        "autogenerate_ground_truth), and write them as a Freiburg .relations file. The "
+        "relations' times are the vertex ids (as the g2o trajectory reader's), or --times.",
+    )
+    f.add_argument("graph", metavar="GRAPH", help="optimised pose graph (.g2o, or TORO .graph)")
+    f.add_argument("-o", "--output", required=True, metavar="OUT", help="output .relations")
+    f.add_argument(
+        "--min-travel",
+        type=float,
+        default=MIN_TRAVEL,
+        help="least distance travelled along the graph's poses between the two ends of a "
+        "loop closure [m] (Cartographer's min_covered_distance; default %(default)g)",
+    )
+    f.add_argument(
+        "--max-error-xy",
+        type=float,
+        default=MAX_ERROR_XY,
+        help="drop loop closures whose translation disagrees with the vertices by more than "
+        "this [m] (outlier_threshold_meters; default %(default)g)",
+    )
+    f.add_argument(
+        "--max-error-theta",
+        type=float,
+        default=MAX_ERROR_THETA,
+        help="the same for the rotation [rad] (outlier_threshold_radians; default %(default)g)",
+    )
+    f.add_argument(
+        "--times",
+        metavar="FILE",
+        help="timestamps of the pose vertices, one a line in increasing vertex-id order "
+        "(default: the vertex id is the time)",
+    )
+    f.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    f.set_defaults(func=run_from_graph)
 
 
 def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -64,6 +114,12 @@ def _register_align(rsub: argparse._SubParsersAction) -> None:  # type: ignore[t
     _add_align_guess_arguments(a)
     _add_align_pair_arguments(a)
     _add_align_search_arguments(a)
+    a.add_argument(
+        "--cycle-check",
+        action="store_true",
+        help="also test the unflagged relations against the short cycles they close with "
+        "each other, and flag those their neighbours contradict ('contradicted')",
+    )
     a.add_argument(
         "--time-tolerance",
         type=float,
@@ -171,6 +227,35 @@ def _add_align_search_arguments(a: argparse.ArgumentParser) -> None:
     """How each pair is aligned (the correlative search, the readings used) and when a
     relation is flagged for review."""
     a.add_argument(
+        "--aligner",
+        choices=("global", "icp"),
+        default="global",
+        help="global: a scan-matched chain, then distant pairs searched by branch and bound "
+        "submap against submap over a window from the chain's drift, ambiguity flagged; "
+        "icp: ICP from each pair's guess, a correlative search where it is lost (the aligner "
+        "before issue 37) (default: %(default)s)",
+    )
+    a.add_argument(
+        "--drift-xy",
+        type=float,
+        default=0.01,
+        help="global: search window growth per metre travelled between the scans [m/m] "
+        "(default 0.01; window 0.3 m + drift)",
+    )
+    a.add_argument(
+        "--drift-theta",
+        type=float,
+        default=0.0005,
+        help="global: rotation window growth [rad/m] (default 0.0005; window 0.05 rad + drift)",
+    )
+    a.add_argument(
+        "--ambiguity",
+        type=float,
+        default=0.95,
+        help="global: flag a relation whose second hypothesis (a distinct pose) scores at "
+        "least this share of the best (default 0.95)",
+    )
+    a.add_argument(
         "--global-search",
         choices=("never", "flagged", "always"),
         default="flagged",
@@ -218,7 +303,8 @@ def run_generate(args: argparse.Namespace) -> int:
     reference = load_trajectory(
         args.reference, args.format, planar=args.planar, times=args.times
     ).trajectory
-    rel = relations_from_args(reference, args)
+    with errors_about(args.reference):
+        rel = relations_from_args(reference, args)
     write_relations(args.output, rel)
     if not args.quiet:
         dim = "3-D" if reference.group.name == "SE3" else "2-D"
@@ -227,6 +313,90 @@ def run_generate(args: argparse.Namespace) -> int:
             f"-> {args.output}"
         )
     return 0
+
+
+def run_from_graph(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from relation_metric.errors import InputError, OptionError
+    from relation_metric.relations import RelationSet
+    from slamrel.backends.graph_relations import OUTLIER, SHORT, graph_relations
+    from slamrel.formats.relations import write_relations
+
+    if not args.min_travel >= 0:
+        raise OptionError("--min-travel must be zero or positive")
+    for name in ("max_error_xy", "max_error_theta"):
+        if not getattr(args, name) > 0:
+            raise OptionError(f"--{name.replace('_', '-')} must be positive")
+    check_outputs([args.output], [args.graph, args.times])
+    graph, ids = _read_pose_graph(args.graph)
+    times = ids.astype(np.float64) if args.times is None else _vertex_times(args.times, ids.size)
+    got = graph_relations(
+        graph,
+        min_travel=args.min_travel,
+        max_error_xy=args.max_error_xy,
+        max_error_theta=args.max_error_theta,
+    )
+    if got.first.size == 0:
+        raise InputError(
+            f"no loop closures: all {got.sequential} pose-pose edges join consecutive poses "
+            "(in vertex-id order); relations are made from edges between non-consecutive poses",
+            path=args.graph,
+        )
+    k = got.kept
+    rel = RelationSet(times[got.first[k]], times[got.second[k]], got.delta[k], key="time")
+    write_relations(args.output, rel)
+    if not args.quiet:
+        n = got.counts()
+        base = "vertex ids" if args.times is None else args.times
+        unused = f"; {graph.pl_k.size} pose-landmark edges not used" if graph.pl_k.size else ""
+        print(
+            f"{n['kept']} relations from {got.first.size} loop closures of {args.graph} "
+            f"({got.sequential} sequential edges{unused}; times: {base}) -> {args.output}"
+        )
+        print(
+            f"dropped {n[SHORT]} with less than {args.min_travel:g} m travelled, {n[OUTLIER]} "
+            f"outliers (> {args.max_error_xy:g} m or > {args.max_error_theta:g} rad from the "
+            "vertices)"
+        )
+    return 0
+
+
+def _read_pose_graph(path: str) -> tuple[Any, Any]:
+    """A g2o or TORO graph (its vertices the optimum) and its pose ids; iSAM text holds no
+    vertices and is refused."""
+    from relation_metric.errors import InputError
+    from slamrel.formats.g2o import read_g2o_graph
+    from slamrel.formats.isam import is_isam
+    from slamrel.formats.text import read_source
+    from slamrel.formats.toro import is_toro, read_toro_graph
+
+    src = read_source(path)
+    if is_isam(src):
+        raise InputError(
+            "iSAM text holds no vertex poses (no optimum to check the loop closures "
+            "against); expected a g2o (VERTEX_SE2/EDGE_SE2) or TORO (VERTEX2/EDGE2) graph",
+            path=path,
+        )
+    if is_toro(src):
+        return read_toro_graph(path)
+    graph, ids, _ = read_g2o_graph(path, source=src)
+    return graph, ids
+
+
+def _vertex_times(path: str, n: int) -> Any:
+    """``--times``: one timestamp a pose vertex, in increasing vertex-id order."""
+    from relation_metric.errors import InputError
+    from slamrel.formats.text import read_numeric_table
+
+    values, _ = read_numeric_table(path, columns=("t",), describe="a times file (one a line)")
+    if values.shape[0] != n:
+        raise InputError(
+            f"{values.shape[0]} timestamps for the graph's {n} pose vertices; expected one a "
+            "vertex, in increasing vertex-id order",
+            path=path,
+        )
+    return values[:, 0]
 
 
 def run_align(args: argparse.Namespace) -> int:
@@ -242,20 +412,52 @@ def run_align(args: argparse.Namespace) -> int:
     scans, poses, summary = _align_guesses(args, scans, bag)
     prop = _align_pairs(args, scans, poses)
     options = _align_options(args)
-    result = align_scans(scans, prop, guesses_from_poses(poses, prop), options)
+    if args.aligner == "global":
+        from slamrel.scans.global_align import align_scans_global
+
+        result, chain = align_scans_global(scans, prop, poses, options, _global_options(args))
+        how = (
+            f"{int((result.initialiser == 'search').sum())} searched by branch and bound "
+            f"(chain of {len(chain.nodes)} scans, {chain.fallback} link(s) kept as given)"
+        )
+    else:
+        result = align_scans(scans, prop, guesses_from_poses(poses, prop), options)
+        how = (
+            f"{int((result.initialiser == 'correlative').sum())} re-initialised by the "
+            "correlative search"
+        )
+    if args.cycle_check:
+        from slamrel.scans.cycles import check_scan_relations, mark_contradicted
+
+        check = check_scan_relations(result)
+        result = mark_contradicted(result, check)
     write_relations(args.output, result.relation_set())
     _write_align_extras(args, scans, result, poses, options, bag)
     if not args.quiet:
         flagged = int(result.flagged.sum())
+        failed = int(result.failed.sum())
         print(
-            f"{len(result)} relations from {len(scans)} {scans.record} scans "
+            f"{len(result) - failed} relations from {len(scans)} {scans.record} scans "
             f"({summary}) -> {args.output}"
         )
         print(
-            f"{flagged} flagged for review, {int((result.initialiser == 'correlative').sum())} "
-            f"re-initialised by the correlative search"
+            f"{flagged} flagged for review ({failed} failed: left out, listed in the report), {how}"
         )
+        if args.cycle_check:
+            print(
+                f"cycle check: {check.count} contradicted by their cycles ({check.n_cycles} "
+                f"cycles; {check.unchecked} relations in none)"
+            )
     return 0
+
+
+def _global_options(args: argparse.Namespace) -> Any:
+    """The guess-independent aligner's options from the command line."""
+    from slamrel.scans.global_align import GlobalOptions
+
+    return GlobalOptions(
+        drift_xy=args.drift_xy, drift_theta=args.drift_theta, ambiguity=args.ambiguity
+    )
 
 
 def _checked_align_options(args: argparse.Namespace) -> bool:
@@ -268,6 +470,10 @@ def _checked_align_options(args: argparse.Namespace) -> bool:
     for name in (*names, "max_correction_angle"):
         if not getattr(args, name) > 0:
             raise OptionError(f"--{name.replace('_', '-')} must be positive")
+    if not (0 <= args.drift_xy <= 1 and 0 <= args.drift_theta <= 0.1):
+        raise OptionError("--drift-xy must lie in [0, 1] and --drift-theta in [0, 0.1]")
+    if not 0 < args.ambiguity <= 1:
+        raise OptionError("--ambiguity must lie in (0, 1]")
     if args.max_range is not None and not args.max_range > 0:
         raise OptionError("--max-range must be positive")
     bag = names_bag(args.log)
@@ -409,7 +615,12 @@ def _write_align_extras(
 
         spec = split_bag_spec(args.log) if bag else None
         name = Path(args.log).name if spec is None else f"{Path(spec.path).name}:{spec.topic}"
-        write_scan_review(args.review, scans, result, poses, options, name=name)
+        second = None  # the search's second hypotheses, where the global aligner found any
+        if result.second is not None and result.second_ratio is not None:
+            import numpy as np
+
+            second = np.column_stack([result.second, result.second_ratio])
+        write_scan_review(args.review, scans, result, poses, options, name=name, second=second)
 
 
 def _bag_guesses(

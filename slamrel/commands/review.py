@@ -13,6 +13,7 @@ from slamrel.commands.common import (
     association_file,
     check_outputs,
     errors_about,
+    in_option_words,
 )
 
 if TYPE_CHECKING:  # the library is imported where it is used: start-up stays light
@@ -57,7 +58,7 @@ def proposal(
 ) -> Association:
     """The association named by ``--associate id-or-auto|id|auto|FILE`` (as ``map-compare``
     chooses it; by id, a proposal may be empty: pairs can be drawn on the page)."""
-    from landmark_graph.landmark_association import associate_auto, associate_by_id
+    from landmark_graph.landmark_association import associate_by_id
     from landmark_graph.map_compare import choose_association
 
     how = association_choice(mode, est, ref)
@@ -65,9 +66,10 @@ def proposal(
         return how
     if how == "id":
         return associate_by_id(est, ref)
-    if how == "auto":
-        return associate_auto(est, ref, cutoff=cutoff, seed=seed)
-    return choose_association(est, ref, how, cutoff=cutoff, seed=seed).association
+    words = {"on a review page": "on this page", "as the association": "with --associate FILE"}
+    with in_option_words(words):  # no pair found: the page without pairs, said (a warning)
+        choice = choose_association(est, ref, how, cutoff=cutoff, seed=seed, allow_empty=True)
+    return choice.association
 
 
 def run(args: argparse.Namespace) -> int:

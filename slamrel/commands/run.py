@@ -50,27 +50,49 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="DIR",
         help="report directory (default: %(default)s)",
     )
-    p.add_argument("--noise", choices=NOISE_NAMES, default="a", help=NOISE_HELP)
+    # simulated worlds only (refused with a bundle): None = not given, SIMULATION_DEFAULTS
     p.add_argument(
-        "--seed", type=opt.seed, default=0, help="seed of the simulation (default: %(default)s)"
+        "--noise", choices=NOISE_NAMES, default=None, help=NOISE_HELP + " (simulated worlds only)"
+    )
+    p.add_argument(
+        "--seed",
+        type=opt.seed,
+        default=None,
+        help="seed of the simulation and of the global relations' draw (with a bundle only "
+        "the draw, and the run says so; default: 0)",
     )
     p.add_argument(
         "--rate",
         type=opt.nonnegative_int,
-        default=0,
-        help="control steps per measurement step (0: odometry; default: %(default)s)",
+        default=None,
+        help="control steps per measurement step (0: odometry; simulated worlds only; default: 0)",
     )
     p.add_argument(
         "--corrupt",
         type=opt.fraction,
-        default=0.0,
-        help="fraction of associations corrupted (default: %(default)s)",
+        default=None,
+        help="fraction of associations corrupted (simulated worlds only; default: 0)",
     )
     p.add_argument(
         "--noise-scale",
         type=opt.noise_scale,
-        default=1.0,
-        help="factor on the noise the filter assumes (default: %(default)s)",
+        default=None,
+        help="factor on the noise the filter assumes (simulated worlds only; default: 1)",
+    )
+    p.add_argument(
+        "--skip-invalid-measurements",
+        action="store_true",
+        help="with a bundle: drop (and count) measurements with a range <= 0 or a non-finite "
+        "range or bearing instead of refusing the bundle",
+    )
+    p.add_argument(
+        "--jacobians",
+        choices=("standard", "fej"),
+        default="standard",
+        help="where the EKF-SLAM evaluates its Jacobians: standard (the latest estimates) or fej "
+        "(first estimates, Huang et al. 2008: keeps the unobservable directions, so the "
+        "filter does not become overconfident; known associations) (WORLD only; default: "
+        "%(default)s)",
     )
     p.add_argument(
         "--relations",
@@ -105,8 +127,15 @@ def run(args: argparse.Namespace) -> int:
             f"{', '.join(WORLDS)}"
         )
     is_dir = Path(args.source).is_dir()
+    _simulation_options(args, is_dir)
     if not is_dir:
         check_rate(args.source, args.rate)
+    elif args.jacobians != "standard":  # a bundle's map was made already: nothing to apply
+        raise OptionError(
+            "applies to a built-in WORLD (the reference EKF-SLAM run here), not to a bundle "
+            "whose map was made already; run slamrel slam --jacobians fej on its log instead",
+            option="--jacobians",
+        )
     assoc_file = association_file(args.associate)
     check_outputs(
         [],
@@ -116,11 +145,17 @@ def run(args: argparse.Namespace) -> int:
     )
     start = time.perf_counter()
     if is_dir:
-        inp = read_run_input(args.source)
+        from slamrel.formats.bundle import SKIP_INVALID_OPTION
+
+        with in_option_words({SKIP_INVALID_OPTION: "--skip-invalid-measurements"}):
+            inp = read_run_input(
+                args.source, skip_invalid_measurements=args.skip_invalid_measurements
+            )
     else:
         inp = simulate_run_input(
             args.source, noise=args.noise, seed=args.seed, rate=args.rate,
             corrupt_fraction=args.corrupt, noise_scale=args.noise_scale,
+            jacobians=args.jacobians,
         )  # fmt: skip
     inp = _with_references(inp, args.relations, args.reference_map)
     associate = _association(args.associate, inp, assoc_file)
@@ -129,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
         result = run_pipeline(
             inp, seed=args.seed, max_outlier_run=args.max_outlier_run or None,
             robust=args.robust, on_divergence="raise" if args.fail_on_divergence else "reenter",
-            associate=associate, align=args.align,
+            associate=associate, align=args.align, map_prior=args.map_prior,
         )  # fmt: skip
     html = write_report(result, args.output, force=args.force)
     if not args.quiet:
@@ -172,6 +207,38 @@ def run(args: argparse.Namespace) -> int:
             f"written to {html}"
         )
     return 0
+
+
+#: The options of a simulated world and their defaults; with a bundle they are refused.
+SIMULATION_DEFAULTS = {"noise": "a", "rate": 0, "corrupt": 0.0, "noise_scale": 1.0}
+
+
+def _simulation_options(args: argparse.Namespace, is_dir: bool) -> None:
+    """Fill the simulation options' defaults; with a bundle refuse the ones given (exit 2),
+    refuse ``--skip-invalid-measurements`` with a world, and say what ``--seed`` changes."""
+    given = [k for k in SIMULATION_DEFAULTS if getattr(args, k) is not None]
+    if is_dir and given:
+        names = ", ".join("--" + k.replace("_", "-") for k in given)
+        raise OptionError(
+            f"only a simulated world takes {names}; a bundle brings its own log and noise "
+            f"(drop {names})",
+            option="--" + given[0].replace("_", "-"),
+        )
+    if not is_dir and args.skip_invalid_measurements:
+        raise OptionError(
+            "applies to a bundle only (a simulated world has no invalid measurements)",
+            option="--skip-invalid-measurements",
+        )
+    for k, default in SIMULATION_DEFAULTS.items():
+        if getattr(args, k) is None:
+            setattr(args, k, default)
+    if is_dir and args.seed is not None and not args.quiet:
+        print(
+            f"note: --seed {args.seed} draws other global relations than the default seed 0 "
+            "(the bundle's log and the recovery do not depend on it)"
+        )
+    if args.seed is None:
+        args.seed = 0
 
 
 def _with_references(inp: RunInput, relations: str | None, reference_map: str | None) -> RunInput:

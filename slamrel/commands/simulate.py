@@ -6,7 +6,13 @@ import argparse
 from pathlib import Path
 
 from slamrel.commands import options as opt
-from slamrel.commands.common import add_force_argument, check_outputs, check_rate, errors_about
+from slamrel.commands.common import (
+    add_force_argument,
+    check_outputs,
+    check_rate,
+    errors_about,
+    in_option_words,
+)
 from slamrel.constants import NOISE_HELP, NOISE_NAMES, WORLDS
 
 
@@ -66,6 +72,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "(default: no gate); rejected measurements are counted",
     )
     m.add_argument(
+        "--jacobians",
+        choices=("standard", "fej"),
+        default="standard",
+        help="where the EKF-SLAM evaluates its Jacobians: standard (the latest estimates) or fej "
+        "(first estimates, Huang et al. 2008: keeps the unobservable directions, so the "
+        "filter does not become overconfident; known associations) (default: %(default)s)",
+    )
+    m.add_argument(
         "--seed", type=opt.seed, default=0, help="seed of the corruption (default: %(default)s)"
     )
     m.add_argument(
@@ -103,7 +117,8 @@ def run_slam(args: argparse.Namespace) -> int:
 
     check_outputs([], [args.bundle], dirs=[args.output], force=args.force)
     bundle = read_bundle(args.bundle)
-    with errors_about(args.bundle):
+    words = {"association='nn'": "--association nn"}
+    with errors_about(args.bundle), in_option_words(words):
         out, res = ekf_slam_bundle(
             bundle,
             association=args.association,
@@ -111,6 +126,7 @@ def run_slam(args: argparse.Namespace) -> int:
             noise_scale=args.noise_scale,
             outlier_gate=args.outlier_gate,
             seed=args.seed,
+            jacobians=args.jacobians,
         )
 
     def online(folder: Path) -> None:

@@ -185,6 +185,9 @@ def run_solve(args: argparse.Namespace) -> int:
     notes: list[str] = []
     sol = None
     with errors_about(args.graph):
+        from slamrel.backends.least_squares import check_connected
+
+        check_connected(graph, pose_ids=pose_ids, landmark_ids=lm_ids)  # named by file ids
         problem, log = _problem(args, graph, notes)
         if args.method == "toro":
             poses, landmarks, summary = _solve_toro(args, problem, notes)

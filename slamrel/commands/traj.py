@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from typing import Any
 
 from slamrel.constants import TRAJECTORY_FORMATS
 
@@ -130,6 +131,9 @@ def run_topics(args: argparse.Namespace) -> int:
 
 def run_info(args: argparse.Namespace) -> int:
     """``slamrel traj info TRAJ...``."""
+    import warnings
+
+    from relation_metric.timeorder import RepeatedTimeWarning
     from slamrel.commands.common import check_outputs, input_files
     from slamrel.evaluation import load_trajectory
     from slamrel.formats.bags import read_bag_poses, split_bag_spec
@@ -138,14 +142,22 @@ def run_info(args: argparse.Namespace) -> int:
     check_outputs([args.json], input_files(list(args.trajectories)))
     report = []
     for path in args.trajectories:
-        loaded = load_trajectory(
-            path, args.format, role="estimate", planar=args.planar, times=args.times
-        )
+        with warnings.catch_warnings():  # repeats are described below, not warned about
+            warnings.simplefilter("ignore", RepeatedTimeWarning)
+            loaded = load_trajectory(
+                path, args.format, planar=args.planar, times=args.times, repeats="keep"
+            )
         info = trajectory_info(loaded.trajectory)
         entry: dict[str, object] = {"trajectory": path, "format": loaded.format, **info.as_dict()}
+        if loaded.format == "kitti" and args.times is None:
+            entry.update(start_s=None, end_s=None, duration_s=None, rate_hz=None)
+            entry.update(median_step_s=None, max_gap_s=None, times=False)
+        entry["repeated_times"] = loaded.repeated.as_dict()
         spec = split_bag_spec(path)
         if spec is not None:
-            got = read_bag_poses(spec)
+            with warnings.catch_warnings():  # read once above: its warnings were said
+                warnings.simplefilter("ignore")
+                got = read_bag_poses(spec)
             entry.update(
                 message_type=got.msgtype,
                 frame_id=got.frame_id,
@@ -170,15 +182,34 @@ def _info_text(path: str, e: dict[str, object]) -> str:
         return "n/a" if v is None else f"{v:{fmt}} {unit}"
 
     ext = " × ".join(f"{v:.6g}" for v in e["extent_m"])  # type: ignore[attr-defined]
+    if e.get("times", True):
+        time = (
+            f"  time         {e['start_s']:.6f} .. {e['end_s']:.6f} s "
+            f"(duration {e['duration_s']:.6g} s)"
+        )
+        rate = (
+            f"  rate         {num('rate_hz', 'Hz')} (median step {num('median_step_s', 's')}, "
+            f"largest gap {num('max_gap_s', 's')})"
+        )
+    else:
+        time = f"  time         no times, {e['poses']} poses (KITTI: --times FILE gives them)"
+        rate = "  rate         n/a (no times)"
     lines = [
         f"{path}",
         f"  format       {e['format']}, {e['dimension']}, {e['poses']} poses",
-        f"  time         {e['start_s']:.6f} .. {e['end_s']:.6f} s "
-        f"(duration {e['duration_s']:.6g} s)",
+        time,
         f"  length       {num('length_m', 'm')}; extent {ext} m",
-        f"  rate         {num('rate_hz', 'Hz')} (median step {num('median_step_s', 's')}, "
-        f"largest gap {num('max_gap_s', 's')})",
+        rate,
     ]
+    rep: Any = e["repeated_times"]
+    if rep["count"]:
+        lines.append(
+            f"  repeats      {rep['count']} pose(s) repeat the previous pose's timestamp, "
+            f"{rep['differing']} with a different pose (first at line {rep['first_line']}):\n"
+            "               a reference keeps the first of each; an estimate with different "
+            "poses is refused\n               ('slamrel ape|rpe --duplicate_stamps keep' "
+            "keeps them all, as evo)"
+        )
     if "message_type" in e:
         child = f" -> {e['child_frame_id']}" if e["child_frame_id"] else ""
         cov = ", with covariance" if e["covariance"] else ""

@@ -14,8 +14,8 @@ that time (``Bundle.snapped``), and measurements outside the log's span are warn
 ``pose_noise`` gives a ``MotionModelWarning``.
 
 Landmark ids are integers. Manifest defaults: ``initial_pose`` ``[0, 0, 0]``,
-``initial_covariance`` ``1e-9 I``, ``description`` empty; velocity model ``integration``
-``"arc"``, ``control_stamp`` ``"start"``.
+``initial_covariance`` ``1e-9 I``, ``description`` empty, ``map_source`` not stated;
+velocity model ``integration`` ``"arc"``, ``control_stamp`` ``"start"``.
 """
 
 from __future__ import annotations
@@ -25,19 +25,21 @@ import json
 import math
 import warnings
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from recovery.bundle import Bundle
-from recovery.constants import MAX_SIGMA, MAX_VARIANCE, MIN_SENSOR_SIGMA
+from recovery.bundle import INITIALISATIONS, TIME_UNITS, Bundle
+from recovery.constants import MAP_SOURCES, MAX_SIGMA, MAX_VARIANCE, MIN_SENSOR_SIGMA
 from recovery.models import (
     CONTROL_STAMPS,
     INTEGRATIONS,
     MOTION_TYPES,
     POSE_NOISE_FRAMES,
+    SENSOR_NOISE_SOURCES,
     SIGMA_NAMES,
     MotionModel,
     MotionModelWarning,
@@ -46,7 +48,7 @@ from recovery.models import (
 )
 from recovery.steps import SNAP_TOLERANCE, snap_times
 from relation_metric.arrays import Array, PathLike
-from relation_metric.checks import check_covariances
+from relation_metric.checks import check_covariances, check_joint_covariance
 from relation_metric.errors import InputError
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, check_coordinates
@@ -68,10 +70,13 @@ from slamrel.outputs import staged_directory
 
 __all__ = [
     "ONLINE_COVARIANCE_COLUMNS",
+    "InvalidMeasurementWarning",
+    "OnlineCovarianceWarning",
     "OnlineEstimate",
     "read_bundle",
     "read_online",
     "write_bundle",
+    "write_measurements",
     "write_online",
 ]
 
@@ -104,6 +109,9 @@ _MANIFEST_KEYS = {
         "initial_pose",
         "initial_covariance",
         "description",
+        "time",
+        "initialisation",
+        "map_source",
     ),
     "motion_model": (
         "type",
@@ -111,10 +119,20 @@ _MANIFEST_KEYS = {
         "control_stamp",
         "alpha",
         "pose_noise",
+        "step_covariance",
         *sorted({n for names in SIGMA_NAMES.values() for n in names}),
     ),
     "motion_model.pose_noise": ("frame", "covariance"),
-    "sensor_model": ("type", "sigma_range", "sigma_bearing", "max_range", "fov"),
+    "motion_model.step_covariance": ("frame",),
+    "sensor_model": (
+        "type",
+        "sigma_range",
+        "sigma_bearing",
+        "max_range",
+        "fov",
+        "mount",
+        "noise",
+    ),
 }
 
 
@@ -207,6 +225,7 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
             (", ".join(names), any(n in spec for n in names)),
             ("alpha", "alpha" in spec),
             ("pose_noise", "pose_noise" in spec),
+            ("step_covariance", "step_covariance" in spec),
         )
         if given
     ]
@@ -215,6 +234,13 @@ def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
             f"motion_model: give either {' or '.join(forms)}, not both",
             path=path,
             line=line,
+        )
+    if "step_covariance" in spec:
+        return MotionModel(
+            kind,
+            step_covariance_frame=_parse_step_covariance(spec["step_covariance"], text, path),
+            integration=integration,
+            control_stamp=stamp,
         )
     if "pose_noise" in spec:
         frame, cov = _parse_pose_noise(spec["pose_noise"], text, path)
@@ -283,6 +309,72 @@ def _motion_options(spec: dict[str, Any], kind: str, text: str, path: str) -> tu
     return out["integration"], out["control_stamp"]
 
 
+def _parse_step_covariance(spec: Any, text: str, path: str) -> str:
+    """``step_covariance``: ``{"frame": "body" | "world"}`` (the values: step_covariance.csv)."""
+    line = _line_of_key(text, "step_covariance")
+    if not isinstance(spec, dict) or "frame" not in spec:
+        raise InputError(
+            "motion_model.step_covariance: expected an object with frame (body or world)",
+            path=path,
+            line=line,
+        )
+    _refuse_unknown_keys(spec, "motion_model.step_covariance", text, path)
+    return _noise_frame(spec["frame"], "motion_model.step_covariance", path, line)
+
+
+def _noise_frame(frame: Any, where: str, path: str, line: int | None) -> str:
+    """``frame`` of a ``where`` object: one of :data:`POSE_NOISE_FRAMES`, else refused."""
+    if not isinstance(frame, str) or frame not in POSE_NOISE_FRAMES:
+        raise InputError(
+            f"{where}.frame: unknown value {_shown(frame)}; expected one of "
+            f"{', '.join(POSE_NOISE_FRAMES)}",
+            path=path,
+            line=line,
+        )
+    return frame
+
+
+#: The columns of ``step_covariance.csv``: the time of the log row, then the upper triangle
+#: of its 3 × 3 covariance (as ``online.csv``'s).
+STEP_COVARIANCE_COLUMNS = ("t", "cxx", "cxy", "cxt", "cyy", "cyt", "ctt")
+
+
+def _upper_to_full(cols: dict[str, Array]) -> Array:
+    """(N, 3, 3) symmetric matrices from the columns ``cxx, cxy, cxt, cyy, cyt, ctt``."""
+    cxx, cxy, cxt, cyy, cyt, ctt = (cols[c] for c in ONLINE_COVARIANCE_COLUMNS)
+    return np.stack(
+        (
+            np.column_stack((cxx, cxy, cxt)),
+            np.column_stack((cxy, cyy, cyt)),
+            np.column_stack((cxt, cyt, ctt)),
+        ),
+        axis=1,
+    )
+
+
+def _read_step_covariances(root: Path, log_t: Array, log_name: str) -> Array:
+    """``step_covariance.csv``: one covariance per row of the motion log, at the same times."""
+    p = root / "step_covariance.csv"
+    cols, lines = _read_csv(p, required=STEP_COVARIANCE_COLUMNS)
+    cols, lines, _ = _time_ordered(cols, lines, p, "step covariance")
+    t = cols["t"]
+    if t.shape != log_t.shape or not np.array_equal(t, log_t):
+        n = min(t.shape[0], log_t.shape[0])
+        diff = np.flatnonzero(t[:n] != log_t[:n])
+        k = int(diff[0]) if diff.size else n
+        got = f"t = {float(t[k])!r}" if k < t.shape[0] else "no row"
+        want = f"t = {float(log_t[k])!r}" if k < log_t.shape[0] else "no row"
+        raise InputError(
+            f"expected one row per row of {log_name}, at its times ({log_t.shape[0]} rows); "
+            f"row {k + 1} has {got}, {log_name} {want}",
+            path=p,
+            line=int(lines[k]) if k < lines.shape[0] else None,
+        )
+    cov = _upper_to_full(cols)
+    check_covariances(cov, path=str(p), lines=lines, what="step covariance")
+    return cov
+
+
 def _parse_pose_noise(spec: Any, text: str, path: str) -> tuple[str, tuple[tuple[float, ...], ...]]:
     """``pose_noise``: its ``frame`` and its 3 × 3 symmetric PSD ``covariance``."""
     line = _line_of_key(text, "pose_noise")
@@ -296,14 +388,8 @@ def _parse_pose_noise(spec: Any, text: str, path: str) -> tuple[str, tuple[tuple
     for key in ("frame", "covariance"):
         if key not in spec:
             raise InputError(f"motion_model.pose_noise: missing {key}", path=path, line=line)
-    frame = spec["frame"]
-    if not isinstance(frame, str) or frame not in POSE_NOISE_FRAMES:
-        raise InputError(
-            f"motion_model.pose_noise.frame: unknown value {_shown(frame)}; expected one of "
-            f"{', '.join(POSE_NOISE_FRAMES)}",
-            path=path,
-            line=_line_of_key(text, "frame") or line,
-        )
+    where = _line_of_key(text, "frame") or line
+    frame = _noise_frame(spec["frame"], "motion_model.pose_noise", path, where)
     what = "motion_model.pose_noise.covariance"
     where = _line_of_key(text, "covariance") or line
     cov = spec["covariance"]
@@ -375,7 +461,33 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
                 raise InputError(
                     f"sensor_model.{n}: expected {bound}, got {reach[n]}", path=path, line=where
                 )
-    return SensorModel(vals[0], vals[1], max_range=reach.get("max_range"), fov=reach.get("fov"))
+    mount = None
+    if "mount" in spec:  # the sensor's pose in the robot frame
+        mount = _numbers(
+            spec["mount"],
+            3,
+            what="sensor_model.mount",
+            path=path,
+            line=_line_of_key(text, "mount"),
+            minimum=None,
+            maximum=MAX_SIGMA,
+        )
+    noise = spec.get("noise", "assumed")
+    if noise not in SENSOR_NOISE_SOURCES or not isinstance(noise, str):
+        raise InputError(
+            f"sensor_model.noise: unknown value {_shown(noise)}; expected one of "
+            f"{', '.join(SENSOR_NOISE_SOURCES)}",
+            path=path,
+            line=_line_of_key(text, "noise"),
+        )
+    return SensorModel(
+        vals[0],
+        vals[1],
+        max_range=reach.get("max_range"),
+        fov=reach.get("fov"),
+        mount=mount,  # type: ignore[arg-type]
+        noise=noise,
+    )
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:
@@ -404,6 +516,26 @@ def _read_manifest(path: Path) -> dict[str, Any]:
         "sensor": _parse_sensor(doc["sensor_model"], text, name),
         "description": str(doc.get("description", "")),
     }
+    for key, allowed in (("time", TIME_UNITS), ("initialisation", INITIALISATIONS)):
+        if key in doc:
+            if not isinstance(doc[key], str) or doc[key] not in allowed:
+                raise InputError(
+                    f"{key}: unknown value {_shown(doc[key])}; expected one of "
+                    f"{', '.join(allowed)}",
+                    path=name,
+                    line=_line_of_key(text, key),
+                )
+            out[key] = doc[key]
+    source = doc.get("map_source")
+    if source is not None:  # where the map came from (docs/bundle.md); absent: not stated
+        if source not in MAP_SOURCES:
+            raise InputError(
+                f"map_source: expected one of {', '.join(map(repr, MAP_SOURCES))}, got "
+                f"{_shown(source)}",
+                path=name,
+                line=_line_of_key(text, "map_source"),
+            )
+        out["map_source"] = source
     pose = doc.get("initial_pose", [0.0, 0.0, 0.0])
     out["initial_pose"] = np.array(
         _numbers(
@@ -456,7 +588,12 @@ def _read_csv(
 
 
 def _read_csv_with_ids(
-    path: Path, *, required: Sequence[str], id_column: str
+    path: Path,
+    *,
+    required: Sequence[str],
+    id_column: str,
+    empty_ok: Sequence[str] = (),
+    optional: Sequence[str] = (),
 ) -> tuple[dict[str, Any], NDArray[np.int64]]:
     """:func:`_read_csv` with ``id_column`` (may be empty) read as exact int64 ids.
 
@@ -466,7 +603,14 @@ def _read_csv_with_ids(
     if not path.is_file():
         raise InputError(f"missing required file; expected columns {','.join(required)}", path=path)
     src = read_source(path)
-    cols, lines = read_csv_table(path, required=required, empty_ok=(id_column,), source=src)
+    cols, lines = read_csv_table(
+        path,
+        required=required,
+        optional=optional,
+        empty_ok=(id_column,),
+        nonfinite_ok=empty_ok,
+        source=src,
+    )
     ids, present = read_csv_id_column(src, id_column, lines, empty_ok=True)
     out: dict[str, Any] = {**cols, id_column: ids, id_column + "#": present}
     return out, lines
@@ -522,7 +666,12 @@ def _load_matrix(path: Path, n: int, *, what: str) -> Array:
     return np.asarray(arr, dtype=np.float64)
 
 
-def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) -> Bundle:
+def read_bundle(
+    directory: PathLike,
+    *,
+    skip_unknown_landmarks: bool = False,
+    skip_invalid_measurements: bool = False,
+) -> Bundle:
     """Read and validate a SLAM result bundle.
 
     Parsing only: each file is read (with its own line-precise checks: columns, numbers,
@@ -536,6 +685,10 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     skip_unknown_landmarks : bool
         Drop (and count in ``Bundle.skipped_unknown``) measurements whose landmark is not in
         ``map.csv`` instead of raising.
+    skip_invalid_measurements : bool
+        Drop (and count in ``Bundle.skipped_invalid``, with an
+        :class:`InvalidMeasurementWarning` naming the first line) measurements with a range
+        ≤ 0 or a non-finite or empty range or bearing instead of raising.
 
     Returns
     -------
@@ -557,7 +710,8 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
     log = _read_motion_log(root, meta["motion"], reordered)
     map_fields = _read_map(root)
     wrapped: dict[str, int] = {}
-    meas = _read_measurements(root, reordered, wrapped)
+    meas = _read_measurements(root, reordered, wrapped, skip_invalid_measurements)
+    skipped_invalid = meas.pop("skipped_invalid")
     skipped = 0
     if skip_unknown_landmarks:
         unknown = meas["measurement_associated"] & ~np.isin(
@@ -567,6 +721,10 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
         meas = {k: v[~unknown] for k, v in meas.items()}
     log_name = "controls.csv" if meta["motion"].type == "velocity" else "odometry.csv"
     log_t = log["controls"][:, 0] if "controls" in log else log["odometry"].timestamps
+    if meta["motion"].step_covariance_frame is not None:
+        log["step_covariances"] = _read_step_covariances(root, log_t, log_name)
+    if meta.get("time") == "steps":
+        _check_steps((log_t, root / log_name, None), meas)
     snapped = 0
     if log_t.shape[0] >= 2:  # else the Bundle refuses the log (at least two rows)
         meas, snapped = _snap_measurements(meas, log_t, root / "measurements.csv", log_name)
@@ -582,7 +740,44 @@ def read_bundle(directory: PathLike, *, skip_unknown_landmarks: bool = False) ->
         reordered=reordered,
         snapped=snapped,
         wrapped_bearings=wrapped["measurements.csv"],
+        skipped_invalid=skipped_invalid,
     )
+
+
+def _refuse_first(bad: Array, message: Callable[[int], str], path: Path, lines: Any) -> None:
+    """:class:`InputError` at the first row where ``bad`` (J,) holds, if any: the message of
+    its index, its line (``lines`` (J,), or None)."""
+    hit = np.flatnonzero(bad)
+    if hit.size:
+        k = int(hit[0])
+        raise InputError(message(k), path=path, line=None if lines is None else int(lines[k]))
+
+
+def _not_a_step(t: Array, k: int) -> str:
+    """The message of a ``t`` that is no step index (``"time": "steps"``)."""
+    return (
+        f"t = {float(t[k])!r}: expected a step index (an integer), as the manifest's "
+        '"time": "steps" says'
+    )
+
+
+def _check_steps(log: tuple[Array, Path, None], meas: dict[str, Any]) -> None:
+    """``"time": "steps"``: every time of the log and the measurements is a step index."""
+    log_t, log_path, _ = log
+    for t, path, lines in (
+        (log_t, log_path, None),
+        (
+            meas["measurement_times"],
+            log_path.parent / "measurements.csv",
+            meas["measurement_lines"],
+        ),
+    ):
+        _refuse_first(
+            t != np.round(t),
+            partial(_not_a_step, t),
+            path,
+            lines,
+        )
 
 
 def _snap_measurements(
@@ -692,7 +887,34 @@ def _read_map(root: Path) -> dict[str, Any]:
     marg = np.zeros((m, 2, 2)) if table.cov is None else np.nan_to_num(table.cov, nan=0.0)
     p_cov = root / "map_covariance.npy"
     cov = _load_matrix(p_cov, 2 * m, what=f"for {m} landmarks") if p_cov.exists() else None
+    if cov is not None and table.cov is not None:
+        _check_joint_order(cov, marg, table.ids, p_cov, p_map)
     return {"map_ids": table.ids, "map_xy": table.xy, "map_marginals": marg, "map_covariance": cov}
+
+
+def _check_joint_order(
+    cov: Array, marg: Array, ids: NDArray[np.int64], p_cov: Path, p_map: Path
+) -> None:
+    """The joint covariance's diagonal blocks must be ``map.csv``'s covariances, landmark by
+    landmark, within a relative 1e-6 of the landmark's largest entry: a joint covariance in
+    another landmark order than ``map.csv`` (which nothing else would notice) is refused."""
+    check_joint_covariance(cov, path=p_cov, what="map covariance")  # its own defects first
+    m = ids.shape[0]
+    ar = np.arange(m)
+    blocks = cov.reshape(m, 2, m, 2)[ar, :, ar, :]
+    scale = np.maximum(np.abs(blocks).max(axis=(1, 2)), np.abs(marg).max(axis=(1, 2)))
+    off = np.abs(blocks - marg).max(axis=(1, 2)) > 1e-6 * scale
+    if not off.any():
+        return
+    k = int(np.flatnonzero(off)[0])
+    raise InputError(
+        f"its diagonal block {k} (rows {2 * k}, {2 * k + 1}) is not the covariance map.csv "
+        f"gives landmark {int(ids[k])} (row {k + 1} of map.csv: cxx {marg[k, 0, 0]:.6g}, cyy "
+        f"{marg[k, 1, 1]:.6g}; the block: {blocks[k, 0, 0]:.6g}, {blocks[k, 1, 1]:.6g}; "
+        f"{int(off.sum())} of {m} landmarks differ); expected the joint covariance with its "
+        f"landmarks in map.csv's order ({p_map.name})",
+        path=p_cov,
+    )
 
 
 class BearingWrapWarning(UserWarning):
@@ -729,23 +951,94 @@ def _wrapped_bearings(b: Array, lines: NDArray[np.int64], path: Path) -> tuple[A
     return np.where(out, np.mod(b + math.pi, 2 * math.pi) - math.pi, b), count
 
 
+class InvalidMeasurementWarning(UserWarning):
+    """Measurements with a range ≤ 0 or a non-finite range or bearing were skipped (counted)."""
+
+
+#: The parameter that skips invalid measurements, named in the reader's error (the command
+#: line says its own option for it).
+SKIP_INVALID_OPTION = "skip_invalid_measurements=True"
+
+
+def _drop_invalid(
+    cols: dict[str, Any], lines: NDArray[np.int64], path: Path, skip: bool
+) -> tuple[dict[str, Any], NDArray[np.int64], int]:
+    """Rows with a range ≤ 0 or a non-finite (or empty) range or bearing: refused, or dropped.
+
+    Without ``skip`` the first such row is an :class:`InputError` naming its line and the
+    option; with it they are all dropped, counted (returned) and warned about once (the
+    count, the first line, the first value).
+    """
+    r, b = cols["range"], cols["bearing"]
+    bad = ~(np.isfinite(r) & np.isfinite(b) & (r > 0))
+    count = int(np.count_nonzero(bad))
+    if not count:
+        return cols, lines, 0
+    k = int(np.flatnonzero(bad)[0])
+    bad_range = not (np.isfinite(r[k]) and r[k] > 0)
+    what = f"range {float(r[k])!r}" if bad_range else f"bearing {float(b[k])!r}"
+    if not skip:
+        raise InputError(
+            f"{what}: expected a positive range and a finite bearing ({count} such "
+            f"measurement(s)); {SKIP_INVALID_OPTION} skips and counts them",
+            path=path,
+            line=int(lines[k]),
+        )
+    warnings.warn(
+        f"{path}:{int(lines[k])}: {count} measurement(s) with a range <= 0 or a non-finite "
+        f"range or bearing skipped (first: {what}); counted as skipped_invalid",
+        InvalidMeasurementWarning,
+        stacklevel=4,
+    )
+    keep = ~bad
+    return {k2: v[keep] for k2, v in cols.items()}, lines[keep], count
+
+
 def _read_measurements(
-    root: Path, reordered: dict[str, int], wrapped: dict[str, int]
+    root: Path, reordered: dict[str, int], wrapped: dict[str, int], skip_invalid: bool = False
 ) -> dict[str, Any]:
-    """``measurements.csv`` in time order: the five ``measurement*`` fields of the bundle."""
+    """``measurements.csv`` in time order: the five ``measurement*`` fields of the bundle,
+    and ``skipped_invalid`` (see :func:`_drop_invalid`)."""
     p = root / "measurements.csv"
     cols, lines = _read_csv_with_ids(
-        p, required=("t", "range", "bearing", "landmark"), id_column="landmark"
+        p,
+        required=("t", "range", "bearing", "landmark"),
+        id_column="landmark",
+        empty_ok=("range", "bearing"),
+        optional=("processed",),
     )
+    cols, lines, skipped = _drop_invalid(cols, lines, p, skip_invalid)
     cols, lines, reordered[p.name] = _time_ordered(cols, lines, p, "measurement")
     bearing, wrapped[p.name] = _wrapped_bearings(cols["bearing"], lines, p)
-    return {
+    out = {
         "measurement_times": cols["t"],
         "measurements": np.column_stack((cols["range"], bearing)),
         "measurement_landmarks": cols["landmark"].astype(np.int64),
         "measurement_associated": cols["landmark#"].astype(bool),
         "measurement_lines": lines,
     }
+    unprocessed = _unprocessed(cols, lines, p)
+    if unprocessed is not None:  # (every field here is a row array: filtered and sorted alike)
+        out["measurement_unprocessed"] = unprocessed
+    return out | {"skipped_invalid": skipped}
+
+
+def _unprocessed(cols: dict[str, Any], lines: NDArray[np.int64], path: Path) -> Any:
+    """The optional ``processed`` column (1: processed, the default; 0: a frame the filter
+    never processed) as the unprocessed mask, ``None`` without the column."""
+    if "processed" not in cols:
+        return None
+    v = cols["processed"]
+    _refuse_first(
+        (v != 0) & (v != 1),
+        lambda k: (
+            f"processed {float(v[k]):g}: expected 1 (the filter processed this frame) "
+            "or 0 (it never processed it)"
+        ),
+        path,
+        lines,
+    )
+    return v == 0
 
 
 def _read_truth(root: Path, reordered: dict[str, int]) -> dict[str, Any]:
@@ -802,19 +1095,37 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
         "initial_covariance": [[float(v) for v in row] for row in bundle.initial_covariance],
         "description": bundle.description,
     }
+    for key, default in (("time", "seconds"), ("initialisation", "updates")):
+        if getattr(bundle, key) != default:  # written when stated (older bundles unchanged)
+            meta[key] = getattr(bundle, key)
+    if bundle.map_source is not None:  # only then: bundles that do not say keep their bytes
+        meta["map_source"] = bundle.map_source
     write_text_atomic(root / "bundle.json", json.dumps(meta, indent=2) + "\n")
     if bundle.controls is not None:
         c = bundle.controls
         write_csv_table(root / "controls.csv", ["t", "v", "omega"], [c[:, 0], c[:, 1], c[:, 2]])
     if bundle.odometry is not None:
         write_trajectory(root / "odometry.csv", bundle.odometry, format="csv")
-    t = bundle.measurement_times
-    rows = format_csv_table(
-        ["t", "range", "bearing"], [t, bundle.measurements[:, 0], bundle.measurements[:, 1]]
-    ).splitlines()
-    ids = np.where(bundle.measurement_associated, bundle.measurement_landmarks.astype(str), "")
-    text = "t,range,bearing,landmark\n" + "".join(f"{r},{i}\n" for r, i in zip(rows[1:], ids))
-    write_text_atomic(root / "measurements.csv", text)
+    if bundle.step_covariances is not None:
+        c, lt = (
+            bundle.step_covariances,
+            (
+                bundle.controls[:, 0] if bundle.controls is not None else bundle.odometry.timestamps  # type: ignore[union-attr]
+            ),
+        )
+        write_csv_table(
+            root / "step_covariance.csv",
+            list(STEP_COVARIANCE_COLUMNS),
+            [lt, c[:, 0, 0], c[:, 0, 1], c[:, 0, 2], c[:, 1, 1], c[:, 1, 2], c[:, 2, 2]],
+        )
+    write_measurements(
+        root / "measurements.csv",
+        bundle.measurement_times,
+        bundle.measurements,
+        bundle.measurement_landmarks,
+        bundle.measurement_associated,
+        bundle.measurement_unprocessed,
+    )
     write_landmark_csv(root / "map.csv", bundle.map_ids, bundle.map_xy, bundle.map_marginals)
     if bundle.map_covariance is not None:
         buf = io.BytesIO()
@@ -824,6 +1135,28 @@ def _write_bundle_files(root: Path, bundle: Bundle) -> None:
         write_trajectory(root / "groundtruth.csv", bundle.groundtruth, format="csv")
     if bundle.landmarks_groundtruth is not None:
         write_landmark_csv(root / "landmarks_groundtruth.csv", *bundle.landmarks_groundtruth)
+
+
+def write_measurements(
+    path: PathLike,
+    t: Array,
+    z: Array,
+    landmarks: NDArray[Any],
+    associated: NDArray[Any],
+    unprocessed: NDArray[Any] | None = None,
+) -> None:
+    """Write ``measurements.csv`` atomically: ``t,range,bearing`` (``%.17g``) for ``t`` (J,)
+    and ``z`` (J, 2), and the ``landmark`` id (``%d``; empty where not ``associated``); with
+    ``unprocessed`` (J,) holding a True, a ``processed`` column (0 where True)."""
+    rows = format_csv_table(["t", "range", "bearing"], [t, z[:, 0], z[:, 1]]).splitlines()
+    ids = np.where(associated, np.asarray(landmarks).astype(np.int64).astype(str), "")
+    if unprocessed is not None and np.any(unprocessed):
+        ids = np.char.add(ids, np.where(unprocessed, ",0", ",1"))
+        head = "t,range,bearing,landmark,processed\n"
+    else:
+        head = "t,range,bearing,landmark\n"
+    text = head + "".join(f"{r},{i}\n" for r, i in zip(rows[1:], ids))
+    write_text_atomic(path, text)
 
 
 class OnlineEstimate(NamedTuple):
@@ -883,8 +1216,8 @@ def read_online(path: PathLike) -> OnlineEstimate:
             line=head,
         )
     if present:
-        cxx, cxy, cxt, cyy, cyt, ctt = (cols[c] for c in ONLINE_COVARIANCE_COLUMNS)
-        empty = np.flatnonzero(np.isnan(np.column_stack((cxx, cxy, cxt, cyy, cyt, ctt))).any(1))
+        six = np.column_stack([cols[c] for c in ONLINE_COVARIANCE_COLUMNS])
+        empty = np.flatnonzero(np.isnan(six).any(1))
         if empty.size:
             raise InputError(
                 f"{', '.join(ONLINE_COVARIANCE_COLUMNS)}: expected all six numbers, got an "
@@ -892,15 +1225,9 @@ def read_online(path: PathLike) -> OnlineEstimate:
                 path=name,
                 line=int(lines[empty[0]]),
             )
-        cov = np.stack(
-            (
-                np.column_stack((cxx, cxy, cxt)),
-                np.column_stack((cxy, cyy, cyt)),
-                np.column_stack((cxt, cyt, ctt)),
-            ),
-            axis=1,
-        )
+        cov = _upper_to_full(cols)
         check_covariances(cov, path=name, lines=lines, what="online pose covariance")
+        _warn_singular_online(cov, lines, name)
     order, report = sort_by_time(t, tolerance=None, lines=lines, path=name, what="online pose")
     if report.out_of_order:
         warnings.warn(
@@ -911,6 +1238,25 @@ def read_online(path: PathLike) -> OnlineEstimate:
         t, poses = t[order], poses[order]
         cov = None if cov is None else cov[order]
     return OnlineEstimate(Trajectory(t, poses), cov)
+
+
+class OnlineCovarianceWarning(UserWarning):
+    """Online covariances that are zero or singular (no NEES for those poses; counted)."""
+
+
+def _warn_singular_online(cov: Array, lines: NDArray[np.int64], name: str) -> None:
+    """Warn once about covariances of ``online.csv`` that are PSD but not positive definite."""
+    if not cov.shape[0]:
+        return
+    bad = np.flatnonzero(~(np.linalg.eigvalsh(cov)[:, 0] > 0.0))
+    if bad.size:
+        warnings.warn(
+            f"{name}:{int(lines[bad[0]])}: {len(bad)} online pose covariance(s) zero or "
+            "singular (positive semi-definite, not definite); those poses get no online NEES "
+            "(skipped and counted in the notes)",
+            OnlineCovarianceWarning,
+            stacklevel=3,
+        )
 
 
 def write_online(path: PathLike, trajectory: Trajectory, covariances: Array | None = None) -> None:

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from relation_metric.checks import check_covariances
+from relation_metric.checks import MAX_INFORMATION, check_covariances
 from relation_metric.errors import InputError
 from relation_metric.timeorder import TimeOrder, TimeOrderWarning, sort_by_time
 from slamrel.constants import COVARIANCE_LAYOUTS
@@ -114,11 +114,23 @@ def read_pose_covariances(
         t, poses, cov = got.timestamps, got.poses, got.covariances
         lines = np.arange(1, t.size + 1)
         fmt = "bag"
+    elif layout in (None, "se2-cov") and _is_online_csv(name):
+        return _online_csv(name)
     else:
         t, poses, cov, lines, fmt = _read_text(name, layout)
     if poses.shape[1] == 7:
         poses = np.column_stack((poses[:, :3], unit_quaternions(poses[:, 3:], name, lines)))
     check_covariances(cov, path=name, lines=lines, definite=True)  # NEES inverts it
+    with np.errstate(all="ignore"):  # too small to invert: infinite, refused just below
+        info = np.linalg.inv(cov)
+    check_covariances(
+        info,
+        path=name,
+        lines=lines,
+        what="information (inverse covariance; a variance below about 1e-200)",
+        max_abs=MAX_INFORMATION,
+        allow_unknown=False,
+    )
     order, report = sort_by_time(t, lines=lines, path=name, what="pose")
     if report.out_of_order:
         warnings.warn(
@@ -135,6 +147,46 @@ def read_pose_covariances(
             line=int(lines[k]),
         )
     return PosesWithCovariance(t, poses, cov, fmt, lines, report)
+
+
+def _is_online_csv(name: str) -> bool:
+    """Is ``name`` a SLAM result bundle's ``online.csv`` (a header ``t,x,y,theta,cxx,...``)?"""
+    from slamrel.formats.bundle import ONLINE_COVARIANCE_COLUMNS
+    from slamrel.formats.text import read_source
+
+    if not os.path.isfile(name):
+        return False
+    first = next(iter(read_source(name).data_lines()), None)
+    head = {h.strip().lower() for h in first[1].split(",")} if first else set()
+    return {"t", "x", "y", "theta", *ONLINE_COVARIANCE_COLUMNS} <= head
+
+
+def _online_csv(name: str) -> PosesWithCovariance:
+    """A bundle's ``online.csv`` by its one reader (:func:`~slamrel.formats.bundle.read_online`)
+    as ``se2-cov`` rows; poses whose covariance is zero or singular (filters write them for
+    their first steps) have no NEES: left out, counted in a warning (with the first line)."""
+    from slamrel.formats.bundle import OnlineCovarianceWarning, read_online
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        online = read_online(name)
+    for w in caught:  # the reader's own warnings, except the one said again below
+        if not issubclass(w.category, OnlineCovarianceWarning):
+            warnings.warn(w.message, w.category, stacklevel=3)
+    assert online.covariances is not None  # _is_online_csv saw the columns
+    cov = online.covariances
+    ok = np.linalg.eigvalsh(cov)[:, 0] > 0.0
+    t, poses = online.trajectory.timestamps, online.trajectory.poses
+    lines = np.arange(2, t.size + 2)  # rows in time order, after the header
+    if not ok.all():
+        warnings.warn(
+            f"{name}:{int(lines[~ok][0])}: {int((~ok).sum())} of {t.size} online pose "
+            "covariance(s) zero or singular; those poses have no NEES and are left out",
+            OnlineCovarianceWarning,
+            stacklevel=3,
+        )
+    order = sort_by_time(t[ok], lines=lines[ok], path=name, what="pose")[1]
+    return PosesWithCovariance(t[ok], poses[ok], cov[ok], "se2-cov", lines[ok], order)
 
 
 def _read_text(

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from relation_metric.checks import check_covariances
+from relation_metric.checks import MAX_INFORMATION, check_covariances
 from relation_metric.errors import InputError
 from relation_metric.ids import (
     first_missing,
@@ -197,6 +197,7 @@ def read_g2o_graph(
             path=path,
             lines=ln,
             what=f"{kind} information matrix",
+            max_abs=MAX_INFORMATION,
         )
     po = np.argsort(pose_ids)
     lo = np.argsort(lm_ids)

@@ -38,12 +38,18 @@ from numpy.typing import NDArray
 from recovery.bundle import Bundle
 from recovery.models import MotionModel, SensorModel
 from relation_metric import se2
-from relation_metric.checks import check_covariances
+from relation_metric.checks import MAX_INFORMATION, check_covariances
 from relation_metric.errors import InputError
-from relation_metric.ids import first_missing, integer_ids, refuse_self_loops, rows_of
+from relation_metric.ids import first_missing, refuse_self_loops, rows_of
 from relation_metric.trajectory import Trajectory
 from slamrel.backends.graph import PoseGraph, initial_landmarks
-from slamrel.formats.text import PathLike, SourceText, read_keyword_records, read_source
+from slamrel.formats.text import (
+    PathLike,
+    SourceText,
+    exact_record_ids,
+    read_keyword_records,
+    read_source,
+)
 
 __all__ = [
     "IsamData",
@@ -135,7 +141,20 @@ def _information(
                 path=path,
                 line=int(lines[bad[0]]),
             )
-        return np.swapaxes(m, 1, 2) @ m  # Rᵀ R
+        root = np.sqrt(MAX_INFORMATION)
+        big = np.flatnonzero((np.abs(upper) > root).any(axis=1))
+        if big.size:
+            raise InputError(
+                f"{kind}: square-root information entry "
+                f"{float(np.abs(upper[big[0]]).max()):.6g} is beyond {root:.6g} (information "
+                f"beyond {MAX_INFORMATION:.6g}, where the sums of squares of a solve overflow)",
+                path=path,
+                line=int(lines[big[0]]),
+            )
+        rtr = np.swapaxes(m, 1, 2) @ m  # Rᵀ R
+        check_covariances(rtr, path=path, lines=lines, what=f"{kind} information (Rᵀ R)",
+                          max_abs=MAX_INFORMATION)  # fmt: skip
+        return rtr
     sym = m + np.swapaxes(np.triu(m, 1), 1, 2)
     check_covariances(sym, path=path, lines=lines, what=f"{kind} covariance", definite=True)
     with np.errstate(all="ignore"):
@@ -148,6 +167,8 @@ def _information(
             path=path,
             line=int(lines[bad[0]]),
         )
+    check_covariances(info, path=path, lines=lines, what=f"{kind} information (inverse covariance)",
+                      max_abs=MAX_INFORMATION)  # fmt: skip
     return info.astype(np.float64, copy=False)
 
 
@@ -214,23 +235,28 @@ def read_isam(
         (recs["ODOMETRY"][0].reshape(-1, 11), recs[ISAM_ODOMETRY_SYNONYM][0].reshape(-1, 11))
     )[in_file_order]
     z_vals, z_lines = recs["LANDMARK"]
-    for vals, lines, kind in ((o_vals, o_lines, "ODOMETRY"), (z_vals, z_lines, "LANDMARK")):
-        for col in (0, 1):
-            integer_ids(vals[:, col], lines, path, f"{kind} id {col + 1}")
+    # ids exact (as TORO and g2o read them): 3.5 refused, 2**60 never rounded onto 2**60 + 1
+    o_ids, z_ids = (
+        np.stack(
+            [exact_record_ids(vals[:, c], lines, src, c + 1, f"{kind} id {c + 1}") for c in (0, 1)],
+            axis=1,
+        ).reshape(-1, 2)
+        for vals, lines, kind in ((o_vals, o_lines, "ODOMETRY"), (z_vals, z_lines, "LANDMARK"))
+    )
     odo = o_vals
     if odo.shape[0] == 0:
         raise InputError("no ODOMETRY lines", path=path)
-    refuse_self_loops(odo[:, :2], o_lines, path, "ODOMETRY")
+    refuse_self_loops(o_ids, o_lines, path, "ODOMETRY")
     o = odo
     z = z_vals
-    pose_ids = np.unique(o[:, :2].astype(np.int64))
-    landmark_ids = np.unique(z[:, 1].astype(np.int64)) if z.size else np.empty(0, np.int64)
+    pose_ids = np.unique(o_ids)
+    landmark_ids = np.unique(z_ids[:, 1])
     clash = np.intersect1d(pose_ids, landmark_ids)
     if clash.size:
-        line = int(z_lines[np.flatnonzero(z[:, 1] == clash[0])[0]])
+        line = int(z_lines[np.flatnonzero(z_ids[:, 1] == clash[0])[0]])
         raise InputError(f"id {clash[0]} is used for a pose and a landmark", path=path, line=line)
-    pi = np.searchsorted(pose_ids, o[:, 0].astype(np.int64))
-    pj = np.searchsorted(pose_ids, o[:, 1].astype(np.int64))
+    pi = np.searchsorted(pose_ids, o_ids[:, 0])
+    pj = np.searchsorted(pose_ids, o_ids[:, 1])
     _check_convention(o[:, 5:11], 3, noise, path=path, kind="ODOMETRY")
     _check_convention(z[:, 4:7], 2, noise, path=path, kind="LANDMARK")
     info_pp = _information(o[:, 5:11], 3, noise, path=path, lines=o_lines, kind="ODOMETRY")
@@ -247,15 +273,15 @@ def read_isam(
         )
     poses = se2.cumulative_compose(step)
     if z.size:
-        pk = rows_of(pose_ids, z[:, 0].astype(np.int64))
+        pk = rows_of(pose_ids, z_ids[:, 0])
         bad = first_missing(pk)
         if bad is not None:
             raise InputError(
-                f"LANDMARK seen from unknown pose {int(z[bad, 0])}",
+                f"LANDMARK seen from unknown pose {int(z_ids[bad, 0])}",
                 path=path,
                 line=int(z_lines[bad]),
             )
-        pl = rows_of(landmark_ids, z[:, 1].astype(np.int64))
+        pl = rows_of(landmark_ids, z_ids[:, 1])
         info_pl = _information(z[:, 4:7], 2, noise, path=path, lines=z_lines, kind="LANDMARK")
         lm0 = initial_landmarks(poses, pk, pl, z[:, 2:4], landmark_ids.size)
     else:

@@ -432,6 +432,7 @@ def read_csv_table(
     empty_ok: Sequence[str] = (),
     describe: str | None = None,
     source: SourceText | None = None,
+    nonfinite_ok: Sequence[str] = (),
 ) -> CsvTable:
     """Read a comma-separated table of finite numbers with a header line.
 
@@ -451,6 +452,8 @@ def read_csv_table(
         Columns read when present.
     empty_ok : sequence of str
         Columns whose cells may be empty (NaN).
+    nonfinite_ok : sequence of str
+        Columns whose cells may be empty, ``nan`` or ``inf`` (the caller counts them).
     describe : str, optional
         What the file is, for messages (e.g. ``"a landmark map"``).
     source : SourceText, optional
@@ -491,12 +494,14 @@ def read_csv_table(
     rows = data[1:]
     numbers = np.array([n for n, _ in rows], dtype=np.int64)
     body = [t for _, t in rows]
-    maybe_empty = [c for c in wanted if c in empty_ok]
+    maybe_empty = [c for c in wanted if c in empty_ok or c in nonfinite_ok]
+    loose = [c for c in wanted if c in nonfinite_ok]
     values: NDArray[np.float64] | None = None
     if body:
         conv: dict[int | str, Callable[[str], float]] = {
             header.index(c): _float_or_nan for c in maybe_empty
         }
+        conv.update({header.index(c): _float_any for c in loose})
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -520,7 +525,7 @@ def read_csv_table(
             if not (fields_ok and np.isfinite(values[:, strict]).all()):
                 values = None
         if values is None:
-            values = _parse_csv_lines(src, rows, header, wanted, maybe_empty, kind)
+            values = _parse_csv_lines(src, rows, header, wanted, maybe_empty, kind, loose)
     else:
         values = np.empty((0, len(wanted)))
     return CsvTable({c: values[:, i] for i, c in enumerate(wanted)}, numbers)
@@ -707,15 +712,28 @@ def _find(header: list[str], c: Column) -> str | None:
 
 def _float_or_nan(cell: str) -> float:
     """An ``empty_ok`` cell for ``np.loadtxt``: NaN when empty, else as :func:`parse_float`."""
+    value = _float_any(cell)
+    if not math.isfinite(value) and cell.strip():
+        raise ValueError(cell)  # the exact path says which line
+    return value
+
+
+def _float_any(cell: str) -> float:
+    """A ``nonfinite_ok`` cell for ``np.loadtxt``: NaN when empty, ``nan``/``inf`` allowed."""
     cell = cell.strip()
     if not cell:
         return math.nan
     if not cell.isascii() or "_" in cell:
         raise ValueError(cell)
-    value = float(cell)
-    if not math.isfinite(value):
-        raise ValueError(cell)  # the exact path says which line
-    return value
+    return float(cell)
+
+
+def _is_float(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
 
 
 def _parse_csv_lines(
@@ -725,6 +743,7 @@ def _parse_csv_lines(
     wanted: list[str],
     maybe_empty: list[str],
     kind: str,
+    loose: Sequence[str] = (),
 ) -> NDArray[np.float64]:
     """The table line by line: the first bad line raises, else the values (N, len(wanted))."""
     out: list[list[float]] = []
@@ -743,6 +762,8 @@ def _parse_csv_lines(
             tok = fields[i]
             if c in maybe_empty and tok == "":
                 row.append(float("nan"))
+            elif c in loose and tok.isascii() and "_" not in tok and _is_float(tok):
+                row.append(float(tok))
             else:
                 row.append(parse_float(tok, source=src, line=number, what=f"column '{c}'"))
         out.append(row)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from relation_metric.checks import check_covariances
+from relation_metric.checks import MAX_INFORMATION, check_covariances
 from relation_metric.errors import InputError
 from relation_metric.ids import first_missing, refuse_repeated_ids, refuse_self_loops, rows_of
 from relation_metric.trajectory import check_coordinates
@@ -91,7 +91,13 @@ def read_toro_graph(path: PathLike) -> tuple[PoseGraph, NDArray[np.int64]]:
     info = np.zeros((edge.shape[0], 3, 3))
     info[:, _ROWS, _COLS] = edge[:, 5:11]
     info[:, _COLS, _ROWS] = edge[:, 5:11]
-    check_covariances(info, path=path, lines=edge_lines, what="EDGE2 information matrix")
+    check_covariances(
+        info,
+        path=path,
+        lines=edge_lines,
+        what="EDGE2 information matrix",
+        max_abs=MAX_INFORMATION,
+    )
     graph = PoseGraph(
         poses=vert[order, 1:4],
         landmarks=np.empty((0, 2)),

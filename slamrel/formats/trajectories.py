@@ -99,7 +99,10 @@ __all__ = [
     "sniff_trajectory_format",
     "without_repeated_times",
     "without_exact_repeats",
+    "with_repeats_kept",
+    "first_of_each_timestamp",
     "read_trajectory",
+    "read_kitti_matrices",
     "write_trajectory",
     "unit_quaternions",
     "yaw_from_quaternion",
@@ -516,31 +519,43 @@ def _read_3d(
         cut = src.cut_off_line()
         q = unit_quaternions(q, name, lines)
     else:  # kitti
-        values, table_lines = read_numeric_table(
-            path,
-            columns=tuple(f"r{i}{j}" for i in range(3) for j in range(4)),
-            describe="a KITTI pose file (12 numbers: the 3x4 matrix [R | t], row by row)",
-        )
+        m, table_lines = read_kitti_matrices(path)
         lines, cut = table_lines, table_lines.cut_off_line
-        m = values.reshape(-1, 3, 4)
-        r = m[:, :, :3]
-        with np.errstate(over="ignore", invalid="ignore"):
-            dev = np.abs(np.einsum("nij,nik->njk", r, r) - np.eye(3)).max(axis=(1, 2))
-        bad = np.flatnonzero(~(dev <= 1e-3)) if m.shape[0] else np.empty(0, np.int64)
-        if bad.size:
-            k = int(bad[0])
-            raise InputError(
-                f"the rotation block is not orthonormal (|RᵀR − I| up to {float(dev[k]):.3g}); "
-                "expected a KITTI pose [R | t] with a rotation matrix R",
-                path=name,
-                line=lines(k),
-            )
         from relation_metric import se3
 
         poses7 = se3.from_matrix(m) if m.shape[0] else np.zeros((0, 7))
         xyz, q = poses7[:, :3], poses7[:, 3:]
         t = _kitti_times(times, m.shape[0], name)
     return t, _poses_of_dimension(t, xyz, q, name, dimension, discarded), lines, cut
+
+
+def read_kitti_matrices(path: PathLike) -> tuple[NDArray[np.float64], Any]:
+    """The 3×4 matrices ``[R | t]`` of a KITTI pose file as written, shape ``(N, 3, 4)``, and
+    the table's lines; a rotation block off orthonormal by more than 1e-3 is refused.
+
+    The trajectory reader turns them into quaternions (re-orthonormalising a block written
+    with few digits); evo's RPE uses the blocks as given (``slamrel ape|rpe kitti``).
+    """
+    name = os.fspath(path)
+    values, lines = read_numeric_table(
+        path,
+        columns=tuple(f"r{i}{j}" for i in range(3) for j in range(4)),
+        describe="a KITTI pose file (12 numbers: the 3x4 matrix [R | t], row by row)",
+    )
+    m = values.reshape(-1, 3, 4)
+    r = m[:, :, :3]
+    with np.errstate(over="ignore", invalid="ignore"):
+        dev = np.abs(np.einsum("nij,nik->njk", r, r) - np.eye(3)).max(axis=(1, 2))
+    bad = np.flatnonzero(~(dev <= 1e-3)) if m.shape[0] else np.empty(0, np.int64)
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(
+            f"the rotation block is not orthonormal (|RᵀR − I| up to {float(dev[k]):.3g}); "
+            "expected a KITTI pose [R | t] with a rotation matrix R",
+            path=name,
+            line=lines(k),
+        )
+    return m, lines
 
 
 def unit_quaternions(q: NDArray, name: str, lines: Any) -> NDArray:
@@ -637,8 +652,56 @@ def without_repeated_times(loaded: LoadedTrajectory, path: PathLike) -> LoadedTr
     )
 
 
-def without_exact_repeats(
+def with_repeats_kept(
     loaded: LoadedTrajectory, path: PathLike, *, what: str = "estimate"
+) -> LoadedTrajectory:
+    """The trajectory with every pose kept, repeated timestamps too, as evo reads a file.
+
+    evo keeps both poses of a repeated timestamp: the shorter trajectory of an association
+    pairs each of them, the longer one offers the last of them to an exact time match
+    (:func:`relation_metric.time_association.match_nearest_times`). Nothing is dropped; the
+    repeats are counted (``LoadedTrajectory.repeated``) and said (``RepeatedTimeWarning``).
+    """
+    from relation_metric.timeorder import RepeatedTimeWarning
+
+    rep = loaded.repeated
+    if rep.count:
+        warnings.warn(
+            f"{os.fspath(path)}: kept all {rep.count} {what} pose(s) that repeat the previous "
+            f"pose's timestamp ({rep.differing} with a different pose; first at line "
+            f"{rep.first_line}), as evo does",
+            RepeatedTimeWarning,
+            stacklevel=2,
+        )
+    return loaded
+
+
+def first_of_each_timestamp(
+    loaded: LoadedTrajectory, path: PathLike, *, what: str = "estimate"
+) -> LoadedTrajectory:
+    """The first pose (in file order) of each timestamp; the others dropped, counted, said."""
+    from relation_metric.timeorder import RepeatedTimeWarning, first_of_each_time
+
+    rep = loaded.repeated
+    if not rep.count:
+        return loaded
+    traj = loaded.trajectory
+    keep = first_of_each_time(traj.timestamps)
+    warnings.warn(
+        f"{os.fspath(path)}: dropped {rep.count} {what} pose(s) that repeat the previous "
+        f"pose's timestamp ({rep.differing} with a different pose; first at line "
+        f"{rep.first_line}); the first of each timestamp is kept",
+        RepeatedTimeWarning,
+        stacklevel=2,
+    )
+    return loaded._replace(
+        trajectory=Trajectory(traj.timestamps[keep], traj.poses[keep]),
+        repeated_dropped=loaded.repeated_dropped + rep.count,
+    )
+
+
+def without_exact_repeats(
+    loaded: LoadedTrajectory, path: PathLike, *, what: str = "estimate", hint: str = ""
 ) -> LoadedTrajectory:
     """An estimate (or odometry) with one pose per timestamp, or an :class:`InputError`.
 
@@ -657,7 +720,7 @@ def without_exact_repeats(
         raise InputError(
             f"two different {what} poses at t = {rep.time:.9g} s: this line and the one before "
             f"it in time{earlier}; {rep.differing} timestamp repeat(s) carry a different pose. "
-            f"Expected one pose per timestamp (which one is meant is a guess; remove one)",
+            f"Expected one pose per timestamp (which one is meant is a guess; remove one){hint}",
             path=path,
             line=rep.first_line,
         )

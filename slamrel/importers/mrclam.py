@@ -15,7 +15,7 @@ dropped without being counted in :class:`MrclamRobot`.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -31,6 +31,7 @@ from relation_metric.errors import InputError
 from relation_metric.ids import integer_ids, rows_of
 from relation_metric.timeorder import FILTER_TIME_TOLERANCE, TimeOrderWarning, sort_by_time
 from relation_metric.trajectory import Trajectory, readonly
+from slamrel.formats.bundle import InvalidMeasurementWarning
 from slamrel.formats.text import PathLike, RowLines, read_numeric_table
 
 __all__ = [
@@ -67,6 +68,10 @@ class MrclamRobot:
     reordered : dict of str → int
         Rows of each ``.dat`` file that went back in time by at most
         :data:`~relation_metric.timeorder.FILTER_TIME_TOLERANCE` and were put in time order.
+    nonpositive_ranges : int
+        Measurements with a range of 0 or below (the dataset holds some: −0.035 m), left out
+        and warned about, naming the first one's line: a range-bearing model needs a positive
+        range, and refusing the whole run for them would lose it.
     """
 
     robot: int
@@ -76,10 +81,11 @@ class MrclamRobot:
     robot_sightings: int
     unknown_barcodes: dict[int, int]
     reordered: dict[str, int] = field(default_factory=dict)
+    nonpositive_ranges: int = 0
 
 
 def _time_ordered(
-    path: Path, rows: NDArray[np.float64], lines: RowLines, what: str
+    path: Path, rows: NDArray[np.float64], lines: Callable[[int], int], what: str
 ) -> tuple[NDArray[np.float64], int]:
     """``rows`` (time in column 0) under the filter-log rule of ``relation_metric.timeorder``.
 
@@ -108,6 +114,22 @@ def _about(path: Path, also: str) -> Iterator[None]:
         if exc.path is not None:
             raise
         raise InputError(f"{exc.message} ({also})", path=path, line=exc.line) from None
+
+
+def _unique_subjects(path: Path, subjects: NDArray[np.float64], lines: RowLines) -> None:
+    """Landmark subjects: integers, each surveyed once (a repeat is refused at its line:
+    which of two positions is the landmark's is unknown)."""
+    ids = integer_ids(subjects, lines, path, "subject")
+    uniq, first, counts = np.unique(ids, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        dup = int(uniq[counts > 1][0])
+        k = int(np.flatnonzero(ids == dup)[1])
+        raise InputError(
+            f"landmark subject {dup} is given twice (first at line "
+            f"{lines(int(first[counts > 1][0]))}); expected each landmark once",
+            path=path,
+            line=lines(k),
+        )
 
 
 def read_barcodes(directory: PathLike) -> dict[int, int]:
@@ -145,7 +167,8 @@ def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
         meas_path, columns=("time", "barcode", "range", "bearing"), describe="MRCLAM measurements"
     )
     integer_ids(meas[:, 1], meas_lines, meas_path, "barcode")  # at its line, before sorting
-    meas, reordered[meas_path.name] = _time_ordered(meas_path, meas, meas_lines, "measurement")
+    meas, kept_lines, nonpositive = _without_nonpositive_ranges(meas_path, meas, meas_lines)
+    meas, reordered[meas_path.name] = _time_ordered(meas_path, meas, kept_lines, "measurement")
     gt_path = d / f"Robot{robot}_Groundtruth.dat"
     gt, gt_lines = read_numeric_table(
         gt_path, columns=("time", "x", "y", "theta"), describe="MRCLAM ground truth"
@@ -171,7 +194,30 @@ def read_mrclam_robot(directory: PathLike, robot: int) -> MrclamRobot:
         robot_sightings=int(is_robot.sum()),
         unknown_barcodes=dict(zip(unknown_codes.tolist(), unknown_counts.tolist())),
         reordered=reordered,
+        nonpositive_ranges=nonpositive,
     )
+
+
+def _without_nonpositive_ranges(
+    path: Path, meas: NDArray[np.float64], lines: RowLines
+) -> tuple[NDArray[np.float64], Callable[[int], int], int]:
+    """The measurements (``time barcode range bearing``) with a positive range, their line
+    numbers, and how many were left out (warned about, naming the first one's line)."""
+    bad = np.flatnonzero(~(meas[:, 2] > 0))
+    if not bad.size:
+        return meas, lines, 0
+    k = int(bad[0])
+    warnings.warn(
+        f"{path}: {bad.size} measurement(s) with a range of 0 or below left out (the first at "
+        f"line {lines(k)}: range {float(meas[k, 2]):g}); a range-bearing model needs a "
+        "positive range",
+        InvalidMeasurementWarning,
+        stacklevel=3,
+    )
+    keep = np.ones(meas.shape[0], dtype=bool)
+    keep[bad] = False
+    idx = np.flatnonzero(keep)
+    return meas[keep], lambda j: lines(int(idx[j])), int(bad.size)
 
 
 @dataclass(frozen=True)
@@ -484,9 +530,10 @@ def mrclam_bundle(
     d = Path(directory)
     r = read_mrclam_robot(d, robot)
     lm_path = d / "Landmark_Groundtruth.dat"
-    lm, _ = read_numeric_table(
+    lm, lm_lines = read_numeric_table(
         lm_path, columns=("subject", "x", "y", "sx", "sy"), describe="MRCLAM landmarks"
     )
+    _unique_subjects(lm_path, lm[:, 0], lm_lines)
     odo_path = d / f"Robot{robot}_Odometry.dat"
     gt_name = f"Robot{robot}_Groundtruth.dat"
     # the fits work on arrays: their errors name the files the arrays came from
@@ -520,6 +567,7 @@ def mrclam_bundle(
         map_ids=ids,
         map_xy=lm[:, 1:3],
         map_marginals=np.stack([np.diag(np.square(s)) for s in lm[:, 3:5]]),
+        map_source="independent",  # the surveyed landmarks, not estimated from this log
         initial_pose=x0,
         initial_covariance=np.diag([1e-4, 1e-4, 1e-4]),
         controls=c,

@@ -51,6 +51,7 @@ def recovery_notes(rec: Recovery, method: str) -> list[str]:
         f"{counts.gated} were gated ({100 * counts.gated_fraction:.1f}%), "
         f"{counts.unassociated} were unassociated. A large gated fraction is a finding "
         "about the map, not noise.",
+        f"Map prior: {rec.map_prior}, {rec.map_prior_reason}.",
     ]
     dead = counts.dead_reckoning()
     if dead is not None:

@@ -452,6 +452,9 @@ def _csv_field(v: Any) -> str:
     return s
 
 
+csv_field = _csv_field  # public: the batch table quotes its names by the same rule
+
+
 def _csv_text(rows: Sequence[Sequence[Any]]) -> str:
     """Rows as CSV text that :func:`csv.reader` reads back field for field."""
     return "".join(",".join(_csv_field(v) for v in row) + "\n" for row in rows)
@@ -468,6 +471,9 @@ def _md(s: str) -> str:
     """Text for a Markdown table cell: specials escaped, line ends as ``<br>``."""
     text = _MD_TAG.sub("&lt;", _MD_SPECIAL.sub(r"\\\1", s))
     return "<br>".join(text.splitlines()) if ("\n" in text or "\r" in text) else text
+
+
+markdown_cell = _md  # public: the batch table escapes its names by the same rule
 
 
 def _md_row(cells: Iterable[str]) -> str:

@@ -1,28 +1,59 @@
-// slamrel scan relation review: one canvas, no library, no network (see slamrel/review/scans.py).
-// State: one entry per proposed relation with a status and the relation shown; every change
-// is one undoable action. Save writes a Freiburg .relations file and the review state.
+// slamrel scan relation review: canvases, no library, no network (see slamrel/review/scans.py).
+// State: one entry per proposed relation with a status (unreviewed, accepted, rejected) and the
+// relation shown; every change is one undoable action. Save writes a Freiburg .relations file
+// of the accepted relations (headed by the counts) and the review state.
 "use strict";
 (function () {
   const DATA = JSON.parse(document.getElementById("review-data").textContent);
   const R = DATA.relations, SCANS = DATA.scans, ICP = DATA.icp;
+  const WIN = DATA.window || { xy: 0.1, theta: Math.PI / 180 };
   const $ = (id) => document.getElementById(id);
   const canvas = $("map"), ctx = canvas.getContext("2d");
   const inset = $("inset"), ictx = inset.getContext("2d");
-  const DEG = Math.PI / 180;
+  const prof = $("profile"), pctx = prof.getContext("2d");
+  const DEG = Math.PI / 180, STATES = ["unreviewed", "accepted", "rejected"];
+  const triple = (a, k) => (a && a[3 * k] !== null && a[3 * k] !== undefined ? a.slice(3 * k, 3 * k + 3) : null);
 
   const rels = R.t1.map((t1, k) => ({
     t1, t2: R.t2[k], i: R.i[k], j: R.j[k],
     proposed: R.delta.slice(3 * k, 3 * k + 3), delta: R.delta.slice(3 * k, 3 * k + 3),
+    estimate: triple(R.estimate, k), second: triple(R.second, k),
+    secondRatio: R.secondRatio ? R.secondRatio[k] : null,
+    weak: R.weak && R.weak[2 * k] !== null ? [R.weak[2 * k], R.weak[2 * k + 1]] : null,
     matched: R.matched[k], residual: R.residual[k], condition: R.condition[k],
     flags: R.flags[k], suspicion: R.suspicion[k] ?? Infinity,
-    status: "proposed", edited: false,
+    status: "unreviewed", edited: false,
   }));
   const undoStack = [];
-  let selected = -1;
+  let selected = -1, showMap = true, lastWindow = null;
   const view = { cx: 0, cy: 0, scale: 40 };
 
   function say(text) { $("status").textContent = text; }
   const wrap = (a) => Math.atan2(Math.sin(a), Math.cos(a));
+
+  // ------------------------------------------------------------------- the map
+  // cells: base64 of little-endian uint16 pairs relative to origin; a cell's centre in metres
+  const MAP = (() => {
+    const m = DATA.map;
+    if (!m || !m.count) return new Float64Array(0);
+    const bin = atob(m.cells), dv = new DataView(new ArrayBuffer(bin.length));
+    for (let k = 0; k < bin.length; k++) dv.setUint8(k, bin.charCodeAt(k));
+    const out = new Float64Array(2 * m.count);
+    for (let k = 0; k < 2 * m.count; k++) out[k] = (m.origin[k % 2] + dv.getUint16(2 * k, true) + 0.5) * m.resolution;
+    return out;
+  })();
+  const local = { i: -1, pts: null };
+  function mapInFrame(i) { // the map in the frame of used scan i (the reference frame)
+    if (local.i === i) return local.pts;
+    const P = DATA.poses, x = P[3 * i], y = P[3 * i + 1], c = Math.cos(P[3 * i + 2]), s = Math.sin(P[3 * i + 2]);
+    const out = new Float32Array(MAP.length);
+    for (let m = 0; m < MAP.length; m += 2) {
+      const dx = MAP[m] - x, dy = MAP[m + 1] - y;
+      out[m] = c * dx + s * dy; out[m + 1] = -s * dx + c * dy;
+    }
+    local.i = i; local.pts = out;
+    return out;
+  }
 
   // ------------------------------------------------------------------- changes and undo
   function snapshot(k) { const r = rels[k]; return { status: r.status, delta: r.delta.slice(), edited: r.edited }; }
@@ -48,16 +79,23 @@
     const d = rels[selected].delta;
     change(selected, { delta: [d[0] + dx, d[1] + dy, wrap(d[2] + dth)], edited: true, nudge: true });
   }
+  function toSecond() {
+    if (selected < 0) { say("select a relation first (n)"); return; }
+    const s = rels[selected].second;
+    if (!s) { say("this relation has no second hypothesis"); return; }
+    change(selected, { delta: s.slice(), edited: true });
+    say("moved to the second hypothesis");
+  }
 
   // ------------------------------------------------------------------- navigation
   function order() {
     const idx = [];
-    rels.forEach((r, k) => { if (r.status === "proposed") idx.push(k); });
+    rels.forEach((r, k) => { if (r.status === "unreviewed") idx.push(k); });
     return idx.sort((a, b) => rels[b].suspicion - rels[a].suspicion || a - b);
   }
   function step(dir) {
     const o = order();
-    if (!o.length) { say("no undecided relation left"); return; }
+    if (!o.length) { say("no unreviewed relation left"); return; }
     let pos = o.indexOf(selected);
     pos = pos < 0 ? (dir > 0 ? 0 : o.length - 1) : (pos + dir + o.length) % o.length;
     select(o[pos]);
@@ -68,7 +106,7 @@
     const o = order();
     if (o.length) select(o[0]);
   }
-  function select(k) { selected = k; fit(); refresh(); }
+  function select(k) { selected = k; lastWindow = null; fit(); refresh(); }
 
   // ------------------------------------------------------------------- geometry
   function moved(scan, d) {
@@ -79,10 +117,39 @@
     }
     return out;
   }
+  // the reference lines hashed on cells of ICP.maxDistance: the nearest centroid within a gate
+  // no larger than a cell lies in the 3 x 3 cells around a point (the same answer as a search
+  // over every line)
+  const cellKey = (ix, iy) => (ix + 1048576) * 2097152 + (iy + 1048576);
+  function lineHash(ref) {
+    if (ref.hash) return ref.hash;
+    const h = new Map(), c = ICP.maxDistance;
+    for (let l = 0; l < ref.c.length / 2; l++) {
+      const key = cellKey(Math.floor(ref.c[2 * l] / c), Math.floor(ref.c[2 * l + 1] / c));
+      if (!h.has(key)) h.set(key, []);
+      h.get(key).push(l);
+    }
+    ref.hash = h;
+    return h;
+  }
+  function nearestLine(ref, h, x, y, gate) {
+    const c = ICP.maxDistance, ix = Math.floor(x / c), iy = Math.floor(y / c);
+    let best = gate * gate, b = -1;
+    for (let a = -1; a <= 1; a++) for (let q = -1; q <= 1; q++) {
+      const list = h.get(cellKey(ix + a, iy + q));
+      if (!list) continue;
+      for (const l of list) {
+        const dx = x - ref.c[2 * l], dy = y - ref.c[2 * l + 1], d2 = dx * dx + dy * dy;
+        if (d2 < best || (d2 === best && l < b)) { best = d2; b = l; }
+      }
+    }
+    return b;
+  }
   // Point-to-line ICP, as slamrel.scans.matching.align: nearest line centroid within the gate,
-  // trimmed share, Cauchy weights on the robust scale, Gauss-Newton on [tx, ty, theta].
-  function icp(ref, cur, x0) {
-    const x = x0.slice(), L = ref.c.length / 2;
+  // trimmed share, Cauchy weights on the robust scale, Gauss-Newton on [tx, ty, theta]. With a
+  // box {lo, hi} every step is held inside it (a trust region: the window of re-align).
+  function icp(ref, cur, x0, box) {
+    const x = x0.slice(), h = lineHash(ref);
     let gate = ICP.maxDistance, sigma = ICP.minSigma, converged = false, it = 0, matched = 0, rms = NaN;
     let stalled = 0;
     const history = [x.slice()];
@@ -102,11 +169,7 @@
     for (it = 1; it <= ICP.maxIterations; it++) {
       const q = moved(cur, x), res = [];
       for (let m = 0; m < q.length; m += 2) {
-        let best = gate * gate, b = -1;
-        for (let l = 0; l < L; l++) {
-          const dx = q[m] - ref.c[2 * l], dy = q[m + 1] - ref.c[2 * l + 1], d2 = dx * dx + dy * dy;
-          if (d2 < best) { best = d2; b = l; }
-        }
+        const b = nearestLine(ref, h, q[m], q[m + 1], gate);
         if (b >= 0) {
           const nx = ref.n[2 * b], ny = ref.n[2 * b + 1];
           const e = nx * (q[m] - ref.c[2 * b]) + ny * (q[m + 1] - ref.c[2 * b + 1]);
@@ -127,7 +190,12 @@
       }
       const dxv = solve3(H, g);
       if (!dxv) break;
-      x[0] -= dxv[0]; x[1] -= dxv[1]; x[2] -= dxv[2];
+      const prev = x.slice();
+      for (let k = 0; k < 3; k++) {
+        x[k] -= dxv[k];
+        if (box) x[k] = Math.min(box.hi[k], Math.max(box.lo[k], x[k]));
+        dxv[k] = prev[k] - x[k];
+      }
       history.push(x.slice());
       matched = use.filter((r) => Math.abs(r[0]) <= 3 * sigma).length;
       rms = Math.sqrt(s2 / use.length);
@@ -162,14 +230,132 @@
     }
     return [m[0][3] / m[0][0], m[1][3] / m[1][1], m[2][3] / m[2][2]];
   }
-  function realign() {
+  // ------------------------------------------------------------------- windowed re-align
+  // A correlative search (Olson 2009) over the window: the reference scan rasterised on 2 cm
+  // cells, each cell scored exp(-d^2 / 2 sigma^2) (sigma 2 cm) by its distance d to the
+  // reference returns (neighbours along the scan joined by 2 cm steps), the current scan's
+  // returns summed over the raster for every (dx, dy) on 2 cm steps and theta on 0.2 deg steps
+  // within the window; then the ICP from the best candidate, held inside the window (the ICP
+  // gives the precision, the search the basin).
+  const RCELL = 0.02, RSIG = 0.02, RRAD = 3, RTHETA = 0.2 * DEG;
+  function raster(ref) {
+    if (ref.raster) return ref.raster;
+    const h = new Map(), p = ref.p;
+    const stamp = (x, y) => {
+      const ix = Math.round(x / RCELL), iy = Math.round(y / RCELL);
+      for (let a = -RRAD; a <= RRAD; a++) for (let b = -RRAD; b <= RRAD; b++) {
+        const dx = (ix + a) * RCELL - x, dy = (iy + b) * RCELL - y;
+        const v = Math.exp(-(dx * dx + dy * dy) / (2 * RSIG * RSIG)), key = cellKey(ix + a, iy + b);
+        if (v > (h.get(key) ?? 0)) h.set(key, v);
+      }
+    };
+    for (let m = 0; m < p.length; m += 2) {
+      stamp(p[m], p[m + 1]);
+      if (m + 3 >= p.length) continue;
+      const gap = Math.hypot(p[m + 2] - p[m], p[m + 3] - p[m + 1]);
+      if (gap > Math.max(0.3, 0.03 * Math.hypot(p[m], p[m + 1]))) continue;
+      const n = Math.ceil(gap / RCELL);
+      for (let s = 1; s < n; s++) stamp(p[m] + (p[m + 2] - p[m]) * s / n, p[m + 1] + (p[m + 3] - p[m + 1]) * s / n);
+    }
+    ref.raster = h;
+    return h;
+  }
+  function windowSearch(ref, cur, x0) {
+    const h = raster(ref), nxy = Math.round(WIN.xy / RCELL), nth = Math.round(WIN.theta / RTHETA);
+    let best = { score: -1, d: x0.slice(), dist: Infinity };
+    const m = cur.p.length / 2, ix = new Int32Array(m), iy = new Int32Array(m);
+    for (let t = -nth; t <= nth; t++) {
+      const th = x0[2] + t * RTHETA, c = Math.cos(th), s = Math.sin(th);
+      for (let k = 0; k < m; k++) {
+        const px = cur.p[2 * k], py = cur.p[2 * k + 1];
+        ix[k] = Math.round((c * px - s * py + x0[0]) / RCELL); iy[k] = Math.round((s * px + c * py + x0[1]) / RCELL);
+      }
+      for (let a = -nxy; a <= nxy; a++) for (let b = -nxy; b <= nxy; b++) {
+        let score = 0;
+        for (let k = 0; k < m; k++) score += h.get(cellKey(ix[k] + a, iy[k] + b)) ?? 0;
+        const dist = a * a + b * b + t * t;
+        if (score > best.score + 1e-9 || (Math.abs(score - best.score) <= 1e-9 && dist < best.dist)) {
+          best = { score, dist, d: [x0[0] + a * RCELL, x0[1] + b * RCELL, th] };
+        }
+      }
+    }
+    return best;
+  }
+  function windowed(k, x0) {
+    const r = rels[k];
+    const box = { lo: [x0[0] - WIN.xy, x0[1] - WIN.xy, x0[2] - WIN.theta], hi: [x0[0] + WIN.xy, x0[1] + WIN.xy, x0[2] + WIN.theta] };
+    const c = windowSearch(SCANS[r.i], SCANS[r.j], x0);
+    return icp(SCANS[r.i], SCANS[r.j], c.d, box);
+  }
+  function realignWindow() {
+    if (selected < 0) { say("select a relation first (n)"); return; }
+    const r = rels[selected], t0 = performance.now(), x0 = r.delta.slice();
+    const out = windowed(selected, x0);
+    if (!out.ok) { say("re-align failed: too few matches in the window"); return; }
+    lastWindow = { k: selected, x0 };
+    change(selected, { delta: out.delta, edited: true });
+    say(`re-aligned within ±${(100 * WIN.xy).toFixed(0)} cm / ±${(WIN.theta / DEG).toFixed(1)}° in ` +
+      `${(performance.now() - t0).toFixed(0)} ms: matched ${(100 * out.matched).toFixed(0)}%, ` +
+      `residual ${(100 * out.rms).toFixed(1)} cm${out.converged ? "" : " (not converged)"}`);
+  }
+  function realignFree() {
     if (selected < 0) { say("select a relation first (n)"); return; }
     const r = rels[selected], t0 = performance.now();
-    const out = icp(SCANS[r.i], SCANS[r.j], r.delta);
+    const out = icp(SCANS[r.i], SCANS[r.j], r.delta, null);
     if (!out.ok) { say("re-align failed: too few matches from here"); return; }
+    lastWindow = null;
     change(selected, { delta: out.delta, edited: true });
-    say(`re-aligned in ${(performance.now() - t0).toFixed(0)} ms: matched ${(100 * out.matched).toFixed(0)}%, ` +
+    say(`re-aligned freely in ${(performance.now() - t0).toFixed(0)} ms: matched ${(100 * out.matched).toFixed(0)}%, ` +
       `residual ${(100 * out.rms).toFixed(1)} cm${out.converged ? "" : " (not converged)"}`);
+  }
+  // ------------------------------------------------------------------- cost along the weak direction
+  // the trimmed point-to-line cost mean(min(e^2, tau^2)) (tau 10 cm; unmatched points tau^2) of
+  // the current scan shifted by s along the weak direction, s in [-2, 2] m on 2.5 cm steps
+  const PROFILE = { half: 2, step: 0.025, tau: 0.1 };
+  function weakOf(r) {
+    const w = r.weak;
+    return w && Number.isFinite(w[0]) && Number.isFinite(w[1]) && Math.hypot(w[0], w[1]) > 0.5 ? w : [1, 0];
+  }
+  function profile(k) {
+    const r = rels[k], ref = SCANS[r.i], h = lineHash(ref), w = weakOf(r), q = moved(SCANS[r.j], r.delta);
+    const n = Math.round(PROFILE.half / PROFILE.step), tau2 = PROFILE.tau ** 2;
+    const stride = Math.max(1, Math.floor(q.length / 2 / 200)), cost = [];
+    for (let a = -n; a <= n; a++) {
+      const s = a * PROFILE.step;
+      let sum = 0, cnt = 0;
+      for (let m = 0; m < q.length; m += 2 * stride) {
+        const x = q[m] + s * w[0], y = q[m + 1] + s * w[1], b = nearestLine(ref, h, x, y, ICP.maxDistance);
+        let e2 = tau2;
+        if (b >= 0) { const e = ref.n[2 * b] * (x - ref.c[2 * b]) + ref.n[2 * b + 1] * (y - ref.c[2 * b + 1]); e2 = Math.min(e * e, tau2); }
+        sum += e2; cnt++;
+      }
+      cost.push([s, Math.sqrt(sum / Math.max(cnt, 1))]);
+    }
+    return { weak: w, cost };
+  }
+  function drawProfile() {
+    const w = prof.clientWidth, hgt = prof.clientHeight, dpr = window.devicePixelRatio || 1;
+    prof.width = Math.round(w * dpr); prof.height = Math.round(hgt * dpr);
+    pctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+    pctx.clearRect(0, 0, w, hgt);
+    pctx.fillStyle = "#333"; pctx.font = "11px system-ui, sans-serif";
+    if (selected < 0) { pctx.fillText("cost along the weak direction", 6, 14); return; }
+    const r = rels[selected], p = profile(selected), top = Math.max(...p.cost.map((c) => c[1]), 1e-6);
+    const X = (s) => 6 + (s + PROFILE.half) / (2 * PROFILE.half) * (w - 12), Y = (v) => hgt - 16 - v / top * (hgt - 34);
+    pctx.fillText(`RMS cost [cm] along the weak direction (${p.weak[0].toFixed(2)}, ${p.weak[1].toFixed(2)})`, 6, 12);
+    const mark = (d, colour) => {
+      if (!d) return;
+      const s = (d[0] - r.delta[0]) * p.weak[0] + (d[1] - r.delta[1]) * p.weak[1];
+      if (Math.abs(s) > PROFILE.half) return;
+      pctx.strokeStyle = colour; pctx.lineWidth = 2; pctx.beginPath(); pctx.moveTo(X(s), 16); pctx.lineTo(X(s), hgt - 14); pctx.stroke();
+    };
+    mark(r.delta, "#e8710a"); mark(r.estimate, "#555"); mark(r.second, "#8e44ad");
+    pctx.strokeStyle = "#1f5fbf"; pctx.lineWidth = 1.5; pctx.beginPath();
+    p.cost.forEach(([s, v], a) => (a ? pctx.lineTo(X(s), Y(v)) : pctx.moveTo(X(s), Y(v))));
+    pctx.stroke();
+    pctx.fillStyle = "#333";
+    pctx.fillText(`-${PROFILE.half} m`, 4, hgt - 3); pctx.fillText(`+${PROFILE.half} m`, w - 34, hgt - 3);
+    pctx.fillText(`max ${(100 * top).toFixed(1)}`, w - 52, 26);
   }
 
   // ------------------------------------------------------------------- drawing
@@ -181,33 +367,52 @@
     return { w: r.width, h: r.height, dpr };
   }
   const toScreen = (x, y, s) => [s.w / 2 + (x - view.cx) * view.scale, s.h / 2 - (y - view.cy) * view.scale];
+  // both poses of the relation, the estimate's pose of the current scan and the reference
+  // scan's returns within FIT_MARGIN of them (the map context around the pair; zoom out with -)
+  const FIT_MARGIN = 4;
   function fit() {
     if (selected < 0) return;
-    const p = SCANS[rels[selected].i].p;
-    const xs = [], ys = [];
-    for (let m = 0; m < p.length; m += 2) { xs.push(p[m]); ys.push(p[m + 1]); }
-    xs.sort((a, b) => a - b); ys.sort((a, b) => a - b);
-    const q = (a, f) => a[Math.min(a.length - 1, Math.floor(f * a.length))] ?? 0;
-    const x0 = Math.min(q(xs, 0.02), 0), x1 = Math.max(q(xs, 0.98), 0);
-    const y0 = Math.min(q(ys, 0.02), 0), y1 = Math.max(q(ys, 0.98), 0);
+    const r = rels[selected], p = SCANS[r.i].p, at = [[0, 0], [r.delta[0], r.delta[1]]];
+    if (r.estimate) at.push([r.estimate[0], r.estimate[1]]);
+    let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+    for (const [x, y] of at) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y); }
+    const near = [x0 - FIT_MARGIN, x1 + FIT_MARGIN, y0 - FIT_MARGIN, y1 + FIT_MARGIN];
+    for (let m = 0; m < p.length; m += 2) {
+      if (p[m] < near[0] || p[m] > near[1] || p[m + 1] < near[2] || p[m + 1] > near[3]) continue;
+      x0 = Math.min(x0, p[m]); x1 = Math.max(x1, p[m]); y0 = Math.min(y0, p[m + 1]); y1 = Math.max(y1, p[m + 1]);
+    }
     const s = size();
     view.cx = (x0 + x1) / 2; view.cy = (y0 + y1) / 2;
-    view.scale = 0.9 * Math.min(s.w / Math.max(x1 - x0, 1), s.h / Math.max(y1 - y0, 1));
+    view.scale = 0.85 * Math.min(s.w / Math.max(x1 - x0, 1), s.h / Math.max(y1 - y0, 1));
   }
-  function drawPoints(pts, colour, s) {
+  function drawPoints(pts, colour, s, half) {
     ctx.fillStyle = colour;
+    ctx.beginPath();
     for (let m = 0; m < pts.length; m += 2) {
       const [u, v] = toScreen(pts[m], pts[m + 1], s);
-      ctx.fillRect(u - 1.5, v - 1.5, 3, 3);
+      if (u < -2 || v < -2 || u > s.w + 2 || v > s.h + 2) continue;
+      ctx.rect(u - half, v - half, 2 * half, 2 * half);
     }
+    ctx.fill();
   }
-  function drawPose(d, colour, s) {
+  function drawPose(d, colour, s, dashed) {
     const [u, v] = toScreen(d[0], d[1], s), a = -d[2];
-    ctx.strokeStyle = colour; ctx.lineWidth = 2; ctx.beginPath();
-    ctx.moveTo(u + 12 * Math.cos(a), v + 12 * Math.sin(a));
-    ctx.lineTo(u + 6 * Math.cos(a + 2.5), v + 6 * Math.sin(a + 2.5));
-    ctx.lineTo(u + 6 * Math.cos(a - 2.5), v + 6 * Math.sin(a - 2.5));
-    ctx.closePath(); ctx.stroke();
+    ctx.strokeStyle = colour; ctx.lineWidth = 2; ctx.setLineDash(dashed ? [4, 3] : []); ctx.beginPath();
+    ctx.moveTo(u + 14 * Math.cos(a), v + 14 * Math.sin(a));
+    ctx.lineTo(u + 7 * Math.cos(a + 2.5), v + 7 * Math.sin(a + 2.5));
+    ctx.lineTo(u + 7 * Math.cos(a - 2.5), v + 7 * Math.sin(a - 2.5));
+    ctx.closePath(); ctx.stroke(); ctx.setLineDash([]);
+  }
+  function drawLink(a, b, colour, s) {
+    const [u1, v1] = toScreen(a[0], a[1], s), [u2, v2] = toScreen(b[0], b[1], s);
+    ctx.strokeStyle = colour; ctx.lineWidth = 1; ctx.setLineDash([5, 4]);
+    ctx.beginPath(); ctx.moveTo(u1, v1); ctx.lineTo(u2, v2); ctx.stroke(); ctx.setLineDash([]);
+  }
+  function drawWindow(s) {
+    if (!lastWindow || lastWindow.k !== selected) return;
+    const [u, v] = toScreen(lastWindow.x0[0] - WIN.xy, lastWindow.x0[1] + WIN.xy, s), side = 2 * WIN.xy * view.scale;
+    ctx.strokeStyle = "#0a7d32"; ctx.lineWidth = 1.5; ctx.setLineDash([3, 3]);
+    ctx.strokeRect(u, v, Math.max(side, 3), Math.max(side, 3)); ctx.setLineDash([]);
   }
   function draw() {
     const s = size();
@@ -215,29 +420,42 @@
     ctx.clearRect(0, 0, s.w, s.h);
     if (selected >= 0) {
       const r = rels[selected];
-      drawPoints(SCANS[r.i].p, "#1f5fbf", s);
-      drawPoints(moved(SCANS[r.j], r.delta), "#e8710a", s);
+      if (showMap && MAP.length) drawPoints(mapInFrame(r.i), "#b9b9b9", s, 1);
+      drawPoints(SCANS[r.i].p, "#1f5fbf", s, 1.5);
+      if (r.second) drawPoints(moved(SCANS[r.j], r.second), "rgba(142, 68, 173, 0.35)", s, 1.2);
+      drawPoints(moved(SCANS[r.j], r.delta), "#e8710a", s, 1.5);
       drawPose([0, 0, 0], "#1f5fbf", s);
+      if (r.estimate) { drawLink(r.delta, r.estimate, "#555", s); drawPose(r.estimate, "#555", s, true); }
+      if (r.second) drawPose(r.second, "#8e44ad", s, true);
       drawPose(r.delta, "#e8710a", s);
+      drawWindow(s);
     }
     drawInset();
+    drawProfile();
+  }
+  let pending = false;
+  function scheduleDraw() {
+    if (pending) return;
+    pending = true;
+    requestAnimationFrame(() => { pending = false; draw(); });
   }
   function drawInset() {
     const w = inset.clientWidth, h = inset.clientHeight, dpr = window.devicePixelRatio || 1;
     inset.width = Math.round(w * dpr); inset.height = Math.round(h * dpr);
     ictx.setTransform(dpr, 0, 0, dpr, 0, 0);
-    const P = DATA.poses;
+    const T = DATA.track && DATA.track.length ? DATA.track : DATA.poses.filter((v, k) => k % 3 !== 2);
     let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
-    for (let k = 0; k < P.length; k += 3) {
-      x0 = Math.min(x0, P[k]); x1 = Math.max(x1, P[k]); y0 = Math.min(y0, P[k + 1]); y1 = Math.max(y1, P[k + 1]);
+    for (let k = 0; k < T.length; k += 2) {
+      x0 = Math.min(x0, T[k]); x1 = Math.max(x1, T[k]); y0 = Math.min(y0, T[k + 1]); y1 = Math.max(y1, T[k + 1]);
     }
     const sc = 0.9 * Math.min(w / Math.max(x1 - x0, 1e-6), h / Math.max(y1 - y0, 1e-6));
-    const at = (k) => [w / 2 + (P[3 * k] - (x0 + x1) / 2) * sc, h / 2 - (P[3 * k + 1] - (y0 + y1) / 2) * sc];
+    const at = (x, y) => [w / 2 + (x - (x0 + x1) / 2) * sc, h / 2 - (y - (y0 + y1) / 2) * sc];
     ictx.fillStyle = "#888";
-    for (let k = 0; k < P.length / 3; k++) { const [u, v] = at(k); ictx.fillRect(u - 0.5, v - 0.5, 1.2, 1.2); }
+    for (let k = 0; k < T.length; k += 2) { const [u, v] = at(T[k], T[k + 1]); ictx.fillRect(u - 0.5, v - 0.5, 1.2, 1.2); }
     if (selected >= 0) {
+      const P = DATA.poses;
       for (const [k, col] of [[rels[selected].i, "#1f5fbf"], [rels[selected].j, "#e8710a"]]) {
-        const [u, v] = at(k);
+        const [u, v] = at(P[3 * k], P[3 * k + 1]);
         ictx.fillStyle = col; ictx.beginPath(); ictx.arc(u, v, 4, 0, 2 * Math.PI); ictx.fill();
       }
     }
@@ -245,89 +463,118 @@
 
   // ------------------------------------------------------------------- text
   const fmt = (v, f, d) => (v === null || v === undefined || !Number.isFinite(v) ? "–" : (v * f).toFixed(d));
-  function refresh() {
-    const n = { proposed: 0, accepted: 0, rejected: 0 };
+  const FLAG = { failed: "F", "not converged": "N", degenerate: "D", "weak geometry": "W", "low overlap": "O",
+    "high residual": "R", "large correction": "C", ambiguous: "A" };
+  const flagCodes = (f) => (f ? f.split(",").map((x) => x.trim()).filter(Boolean)
+    .map((x) => FLAG[x] ?? x.split(" ").map((w) => w[0].toUpperCase()).join("")).join(" ") : "");
+  const MARK = { unreviewed: "·", accepted: "✓", rejected: "✗" };
+  function counts() {
+    const n = { unreviewed: 0, accepted: 0, rejected: 0 };
     rels.forEach((r) => { n[r.status]++; });
+    return n;
+  }
+  function pairInfo(r, k) {
+    const d = r.delta, e = r.estimate;
+    let text = `#${k + 1}: t1 ${r.t1} → t2 ${r.t2} (Δt ${(r.t2 - r.t1).toFixed(2)} s). ` +
+      `x ${d[0].toFixed(4)} m, y ${d[1].toFixed(4)} m, θ ${(d[2] / DEG).toFixed(3)}°` +
+      `${r.edited ? " (corrected)" : ""}. `;
+    if (e) text += `Estimate's pose ${(100 * Math.hypot(e[0] - d[0], e[1] - d[1])).toFixed(1)} cm, ${(wrap(e[2] - d[2]) / DEG).toFixed(2)}° away. `;
+    if (r.second) text += `Second hypothesis ${(100 * Math.hypot(r.second[0] - d[0], r.second[1] - d[1])).toFixed(1)} cm away` +
+      `${Number.isFinite(r.secondRatio) ? `, score ratio ${r.secondRatio.toFixed(2)}` : ""}. `;
+    return text + `Matched ${fmt(r.matched, 100, 0)}%, residual ${fmt(r.residual, 100, 2)} cm, ` +
+      `condition ${fmt(r.condition, 1, 3)}, suspicion ${fmt(r.suspicion, 1, 2)}. Flags: ${r.flags || "none"}. Status: ${r.status}.`;
+  }
+  function refresh() {
+    const n = counts();
     const edited = rels.filter((r) => r.edited && r.status !== "rejected").length;
     $("summary").textContent = `${rels.length} relations${DATA.name ? " of " + DATA.name : ""}: ` +
-      `${n.accepted} accepted, ${n.rejected} rejected, ${n.proposed} undecided; ${edited} corrected`;
-    if (selected >= 0) {
-      const r = rels[selected], d = r.delta;
-      $("pair-info").innerHTML = "";
-      $("pair-info").textContent = `#${selected + 1}: t1 ${r.t1} → t2 ${r.t2} (Δt ${(r.t2 - r.t1).toFixed(2)} s). ` +
-        `x ${d[0].toFixed(4)} m, y ${d[1].toFixed(4)} m, θ ${(d[2] / DEG).toFixed(3)}°` +
-        `${r.edited ? " (corrected)" : ""}. Matched ${fmt(r.matched, 100, 0)}%, residual ${fmt(r.residual, 100, 2)} cm, ` +
-        `condition ${fmt(r.condition, 1, 3)}, suspicion ${fmt(r.suspicion, 1, 2)}. ` +
-        `Flags: ${r.flags || "none"}. Status: ${r.status}.`;
-    }
+      `${n.accepted} accepted, ${n.rejected} rejected, ${n.unreviewed} unreviewed; ${edited} corrected`;
+    if (selected >= 0) $("pair-info").textContent = pairInfo(rels[selected], selected);
     const body = $("pairs").querySelector("tbody");
-    const rows = rels.map((r, k) => k).sort((a, b) => rels[b].suspicion - rels[a].suspicion || a - b).slice(0, 300);
+    const rows = rels.map((r, k) => k).sort((a, b) => rels[b].suspicion - rels[a].suspicion || a - b).slice(0, 400);
     body.innerHTML = "";
     for (const k of rows) {
       const r = rels[k], tr = document.createElement("tr");
       if (k === selected) tr.className = "selected";
-      for (const text of [k + 1, (r.t2 - r.t1).toFixed(1), fmt(r.matched, 100, 0) + "%", fmt(r.residual, 100, 2), r.flags, r.status + (r.edited ? "*" : "")]) {
+      for (const text of [k + 1, (r.t2 - r.t1).toFixed(1), fmt(r.matched, 100, 0) + "%", fmt(r.residual, 100, 1), flagCodes(r.flags), MARK[r.status] + (r.edited ? "*" : "")]) {
         const td = document.createElement("td"); td.textContent = text; tr.appendChild(td);
       }
-      tr.lastChild.className = r.status === "proposed" ? "" : r.status;
+      tr.children[4].title = r.flags;
+      tr.lastChild.className = r.status === "unreviewed" ? "" : r.status;
+      tr.lastChild.title = r.status;
       tr.addEventListener("click", () => select(k));
       body.appendChild(tr);
     }
-    draw();
+    scheduleDraw();
   }
 
   // ------------------------------------------------------------------- save and load
-  function relationsText() {
-    const lines = ["# t1 t2 x y z roll pitch yaw" + (DATA.name ? ` (reviewed: ${DATA.name})` : "")];
-    for (const r of rels) if (r.status !== "rejected") {
-      lines.push(`${r.t1} ${r.t2} ${r.delta[0]} ${r.delta[1]} 0 0 0 ${r.delta[2]}`);
-    }
+  function relationsText(includeUnreviewed) {
+    const all = includeUnreviewed ?? $("include-unreviewed").checked, n = counts();
+    const keep = rels.filter((r) => r.status === "accepted" || (all && r.status === "unreviewed"));
+    const lines = [
+      `# slamrel scan review${DATA.name ? " of " + DATA.name : ""}: ${n.accepted} accepted, ${n.rejected} rejected, ` +
+        `${n.unreviewed} unreviewed (of ${rels.length})`,
+      `# written: ${keep.length} relations (${all ? "accepted and unreviewed" : "accepted only"})`,
+      "# t1 t2 x y z roll pitch yaw",
+    ];
+    for (const r of keep) lines.push(`${r.t1} ${r.t2} ${r.delta[0]} ${r.delta[1]} 0 0 0 ${r.delta[2]}`);
     return lines.join("\n") + "\n";
   }
   function stateText() {
-    return JSON.stringify({ format: "slamrel-scan-review/1", name: DATA.name,
+    return JSON.stringify({ format: "slamrel-scan-review/2", name: DATA.name,
       relations: rels.map((r) => ({ t1: r.t1, t2: r.t2, status: r.status, delta: r.delta, edited: r.edited })) });
   }
   function save() {
     const text = relationsText(), state = stateText();
     $("relations-output").value = text;
     $("state-output").value = state;
+    $("outputs").hidden = false;
     for (const [id, t, type] of [["download", text, "text/plain"], ["download-state", state, "application/json"]]) {
       const a = $(id);
       if (a.href) URL.revokeObjectURL(a.href);
       a.href = URL.createObjectURL(new Blob([t], { type })); a.hidden = false;
     }
-    say("saved: use the download links, or copy the text below");
+    const n = counts();
+    say(`saved ${text.split("\n").length - 4} relations (${n.accepted} accepted, ${n.rejected} rejected, ` +
+      `${n.unreviewed} unreviewed): use the download links, or copy the text below`);
   }
   function load(text) {
     let st;
     try { st = JSON.parse(text); } catch (e) { say("not a review state: " + e.message); return; }
-    if (!st || st.format !== "slamrel-scan-review/1" || !Array.isArray(st.relations) || st.relations.length !== rels.length) {
+    const formats = ["slamrel-scan-review/1", "slamrel-scan-review/2"];
+    if (!st || !formats.includes(st.format) || !Array.isArray(st.relations) || st.relations.length !== rels.length) {
       say("not a review state of this page (format or relation count differ)"); return;
     }
+    const status = (s) => (s === "proposed" ? "unreviewed" : s);
     for (let k = 0; k < rels.length; k++) {
       const s = st.relations[k];
       if (s.t1 !== rels[k].t1 || s.t2 !== rels[k].t2) { say(`relation ${k + 1} names other times; nothing loaded`); return; }
+      if (!STATES.includes(status(s.status)) || !Array.isArray(s.delta) || s.delta.length !== 3) {
+        say(`relation ${k + 1}: status or relation not understood; nothing loaded`); return;
+      }
     }
-    st.relations.forEach((s, k) => Object.assign(rels[k], { status: s.status, delta: s.delta.slice(), edited: !!s.edited }));
+    st.relations.forEach((s, k) => Object.assign(rels[k], { status: status(s.status), delta: s.delta.slice(), edited: !!s.edited }));
     undoStack.length = 0;
     say("review state loaded");
     refresh();
   }
 
   // ------------------------------------------------------------------- input
+  const reset = () => { if (selected >= 0) change(selected, { delta: rels[selected].proposed.slice(), edited: false }); };
+  const toggleMap = () => { showMap = !showMap; say(showMap ? "map shown" : "map hidden"); scheduleDraw(); };
   document.addEventListener("keydown", (ev) => {
     if (ev.target instanceof HTMLInputElement || ev.target instanceof HTMLTextAreaElement) return;
     const big = ev.shiftKey, t = big ? 0.1 : 0.01, a = (big ? 1 : 0.1) * DEG;
     const keys = {
       n: () => step(1), p: () => step(-1), a: () => decide("accepted"), r: () => decide("rejected"),
-      i: realign, u: undo, s: save, f: () => { fit(); draw(); },
-      "0": () => { if (selected >= 0) change(selected, { delta: rels[selected].proposed.slice(), edited: false }); },
+      i: realignWindow, I: realignFree, h: toSecond, m: toggleMap, u: undo, s: save, f: () => { fit(); scheduleDraw(); },
+      "0": reset,
       q: () => nudge(0, 0, a), e: () => nudge(0, 0, -a), Q: () => nudge(0, 0, a), E: () => nudge(0, 0, -a),
       ArrowLeft: () => nudge(-t, 0, 0), ArrowRight: () => nudge(t, 0, 0),
       ArrowUp: () => nudge(0, t, 0), ArrowDown: () => nudge(0, -t, 0),
-      "+": () => { view.scale *= 1.5; draw(); }, "=": () => { view.scale *= 1.5; draw(); },
-      "-": () => { view.scale /= 1.5; draw(); },
+      "+": () => { view.scale *= 1.5; scheduleDraw(); }, "=": () => { view.scale *= 1.5; scheduleDraw(); },
+      "-": () => { view.scale /= 1.5; scheduleDraw(); },
     };
     const f = keys[ev.key] ?? keys[ev.key.toLowerCase()];
     if (f) { f(); ev.preventDefault(); }
@@ -347,21 +594,30 @@
     const a = (ev.shiftKey ? 1 : 0.1) * DEG * (ev.deltaY < 0 ? 1 : -1);
     nudge(0, 0, a);
   }, { passive: false });
+  prof.addEventListener("click", (ev) => {
+    if (selected < 0) return;
+    const box = prof.getBoundingClientRect(), w = weakOf(rels[selected]);
+    const s = Math.round(((ev.clientX - box.left - 6) / (box.width - 12) * 2 - 1) * PROFILE.half / PROFILE.step) * PROFILE.step;
+    nudge(s * w[0], s * w[1], 0);
+    say(`moved ${(100 * s).toFixed(1)} cm along the weak direction`);
+  });
   const click = { prev: () => step(-1), next: () => step(1), accept: () => decide("accepted"),
-    reject: () => decide("rejected"), realign, reset: () => keysReset(), undo, fit: () => { fit(); draw(); }, save };
-  function keysReset() { if (selected >= 0) change(selected, { delta: rels[selected].proposed.slice(), edited: false }); }
+    reject: () => decide("rejected"), realign: realignWindow, second: toSecond, reset, undo,
+    fit: () => { fit(); scheduleDraw(); }, save, "toggle-map": toggleMap };
   for (const [id, f] of Object.entries(click)) $(id).addEventListener("click", f);
   $("load").addEventListener("change", (ev) => {
     const file = ev.target.files[0];
     if (file) file.text().then(load);
   });
-  window.addEventListener("resize", () => draw());
+  window.addEventListener("resize", () => scheduleDraw());
 
   // for tests and the console
   window.slamrelReview = {
     relations: () => rels.map((r) => ({ status: r.status, delta: r.delta.slice(), edited: r.edited, suspicion: r.suspicion })),
-    selected: () => selected, select, scale: () => view.scale, icp: (k, x0) => icp(SCANS[rels[k].i], SCANS[rels[k].j], x0),
-    relationsText, stateText, load,
+    selected: () => selected, select, scale: () => view.scale, counts,
+    icp: (k, x0, box) => icp(SCANS[rels[k].i], SCANS[rels[k].j], x0, box || null),
+    windowed,
+    profile, relationsText, stateText, load, mapPoints: () => MAP.length / 2,
   };
   refresh();
 })();

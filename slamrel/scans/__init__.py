@@ -8,6 +8,8 @@
 ``proposals``       which scan pairs to align: consecutive by travel, loops by proximity, or
                     the timestamp pairs of an existing relation file
 ``relations``       the pipeline (propose → initialise → align → judge) as typed results
+``cycles``          the set-level check: each relation against the short cycles it closes
+                    with the others (χ² of the composition), contradicted ones flagged
 ==================  =========================================================================
 
 Pure maths (numpy/scipy), no file I/O and no CLI: the readers are in

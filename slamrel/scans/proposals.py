@@ -146,7 +146,8 @@ def pairs_at_times(
         k = int(far[0])
         raise InputError(
             f"{far.size} relation(s) name times with no scan within {tolerance} s; the first, "
-            f"relation {k + 1} ({t1[k]!r} {t2[k]!r}), is {off[k]:.3g} s from the nearest scan",
+            f"relation {k + 1} ({float(t1[k])!r} {float(t2[k])!r}), is {off[k]:.3g} s from "
+            "the nearest scan",
             path=path,
         )
     return Proposals(

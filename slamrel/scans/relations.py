@@ -107,6 +107,13 @@ class ScanRelations:
     flags : (P,) str
         Comma-separated flags (empty: none).
     suspicion : (P,) float
+    score : (P,) float or None
+        The branch-and-bound search's best score (NaN where no search ran; None: the
+        aligner has none, :func:`align_scans`).
+    second : (P, 3) float or None
+        The search's best hypothesis at a distinct pose (NaN where none).
+    second_ratio : (P,) float or None
+        Its score over the best's (0 where none reached the search's ``keep``).
     """
 
     proposals: Proposals
@@ -121,6 +128,9 @@ class ScanRelations:
     initialiser: NDArray[np.str_]
     flags: NDArray[np.str_]
     suspicion: NDArray[np.float64]
+    score: NDArray[np.float64] | None = None
+    second: NDArray[np.float64] | None = None
+    second_ratio: NDArray[np.float64] | None = None
 
     def __len__(self) -> int:
         return len(self.proposals)
@@ -130,9 +140,17 @@ class ScanRelations:
         """Pairs with at least one flag."""
         return self.flags != ""
 
+    @property
+    def failed(self) -> NDArray[np.bool_]:
+        """Pairs no alignment exists for (their ``delta`` is the guess, not a relation)."""
+        return np.array(["failed" in f.split(", ") for f in self.flags.tolist()], dtype=bool)
+
     def relation_set(self) -> RelationSet:
-        """The estimates as a time-keyed :class:`RelationSet` (``t1 t2`` of the proposals)."""
-        return RelationSet(self.proposals.t1, self.proposals.t2, self.delta, key="time")
+        """The estimates as a time-keyed :class:`RelationSet` (``t1 t2`` of the proposals),
+        without the failed pairs: a failed relation is never written as its guess."""
+        ok = ~self.failed
+        p = self.proposals
+        return RelationSet(p.t1[ok], p.t2[ok], self.delta[ok], key="time")
 
 
 def _judge(
@@ -209,14 +227,29 @@ def _refuse_far_guess(
     cells = table_cells(ref.points, cur.points, guess, options)
     if cells <= MAX_HOPELESS_CELLS:
         return
+    raise far_guess_error(
+        scans,
+        pair,
+        apart,
+        reach,
+        f" and the correlative search moves ±{options.search_xy:g} m: no placement it tries "
+        f"lets them overlap, and its table would need {cells:.3g} cells (limit "
+        f"{MAX_HOPELESS_CELLS})",
+    )
+
+
+def far_guess_error(
+    scans: LaserScans, pair: tuple[int, int], apart: float, reach: float, why: str
+) -> Exception:
+    """The input error of a guess that puts scan ``pair[1]`` ``apart`` m from scan
+    ``pair[0]``, farther than their returns ``reach`` together (``why``: the search's words),
+    at the line of ``pair[1]``; both aligners refuse such a guess with it."""
     from relation_metric.errors import InputError
 
     i, j = pair
-    raise InputError(
+    return InputError(
         f"the guess puts the scan of line {int(scans.lines[j])} {apart:.6g} m from the scan of "
-        f"line {int(scans.lines[i])}, but their returns reach {reach:.6g} m together and the "
-        f"correlative search moves ±{options.search_xy:g} m: no placement it tries lets them "
-        f"overlap, and its table would need {cells:.3g} cells (limit {MAX_HOPELESS_CELLS}); "
+        f"line {int(scans.lines[i])}, but their returns reach {reach:.6g} m together{why}; "
         "expected poses (the log's, or --estimate's) that put the two scans near each other",
         path=scans.path,
         line=int(scans.lines[j]),
@@ -251,7 +284,6 @@ def align_scans(
             prepared[k] = prepare_scan(pts)
         return prepared[k]
 
-    p = len(proposals)
     out: list[tuple[Alignment, str, list[str], float]] = []
     for (i, j), g in zip(proposals.pairs.tolist(), guesses, strict=True):
         ref, cur = scan(i), scan(j)
@@ -268,6 +300,18 @@ def align_scans(
                     a, how = b, "correlative"
                     flags, susp = _judge(a, opt.limits, g)
         out.append((a, how, flags, susp))
+    return collect_relations(proposals, guesses, out)
+
+
+def collect_relations(
+    proposals: Proposals,
+    guesses: NDArray[np.float64],
+    out: list[tuple[Alignment, str, list[str], float]],
+    **search: NDArray[np.float64],
+) -> ScanRelations:
+    """:class:`ScanRelations` from one ``(alignment, initialiser, flags, suspicion)`` per
+    pair (and the search's ``score``, ``second``, ``second_ratio`` when there are)."""
+    p = len(proposals)
     al = [o[0] for o in out]
     return ScanRelations(
         proposals=proposals,
@@ -282,6 +326,7 @@ def align_scans(
         initialiser=np.array([o[1] for o in out], dtype=str),
         flags=np.array([", ".join(o[2]) for o in out], dtype=str),
         suspicion=np.array([o[3] for o in out]),
+        **search,
     )
 
 

@@ -34,7 +34,8 @@ __all__ = [
 
 REPORT_COLUMNS = (
     "t1,t2,x,y,theta,guess_x,guess_y,guess_theta,sd_x,sd_y,sd_theta,matched_fraction,"
-    "residual,condition,weak_x,weak_y,initialiser,suspicion,flags"
+    "residual,condition,weak_x,weak_y,initialiser,suspicion,flags,score,second_x,second_y,"
+    "second_theta,second_score_ratio"
 )
 
 
@@ -128,8 +129,14 @@ def format_report(result: ScanRelations) -> str:
             result.weak_direction,
         )
     )
+    n = len(result)
+    score = result.score if result.score is not None else np.full(n, np.nan)
+    second = result.second if result.second is not None else np.full((n, 3), np.nan)
+    ratio = result.second_ratio if result.second_ratio is not None else np.full(n, np.nan)
+    search = np.column_stack((score, second, ratio)).tolist()
     for k, row in enumerate(rows.tolist()):
         nums = ",".join(f"{v:.17g}" for v in row)
+        more = ",".join(f"{v:.9g}" for v in search[k])
         flags = result.flags[k]
-        lines.append(f'{nums},{result.initialiser[k]},{result.suspicion[k]:.6g},"{flags}"')
+        lines.append(f'{nums},{result.initialiser[k]},{result.suspicion[k]:.6g},"{flags}",{more}')
     return "\n".join(lines) + "\n"

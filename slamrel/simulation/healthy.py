@@ -188,6 +188,7 @@ def healthy_bundle(
         map_xy=true_xy + error_scale * err,
         map_marginals=marg,
         map_covariance=joint,
+        map_source="independent",  # its error drawn apart from the log's noise
         landmarks_groundtruth=(ids, true_xy),
         description=(
             f"healthy by construction: world {world}, noise {noise}, seed {seed}, map form "

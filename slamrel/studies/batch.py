@@ -4,8 +4,10 @@ A batch is a list of :class:`~slamrel.formats.manifest.BatchRun` (a manifest fil
 of run folders: :func:`runs_in_folder`). Each run is one :class:`~slamrel.studies.sweep.Task`
 (:func:`evaluate_run`, keyed by its options and the SHA-256 of its input files, so an
 edited file is scored again), run in processes or on Dask and stored atomically: a killed
-batch resumes where it stopped. Each task also writes the run's per-relation CSV
-(``per_relation/NAME.csv``, the input of ``slamrel compare``) before its result is stored.
+batch resumes where it stopped. Each task also writes the run's per-relation CSV, keyed
+like its result (``cases/NAME-<hash>.csv``), before its result is stored;
+:func:`publish_per_relation` copies it to ``per_relation/NAME.csv`` (the input of
+``slamrel compare``).
 :func:`batch_table` makes one table over runs: a row per run and, per (dataset, algorithm),
 the mean, the sample standard deviation (n − 1), the minimum and maximum over its runs of
 each column. The table depends only on the stored results, so an interrupted and resumed
@@ -15,6 +17,7 @@ batch writes it byte for byte as an uninterrupted one.
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 import warnings
 from collections.abc import Sequence
@@ -31,6 +34,7 @@ __all__ = [
     "BatchTable",
     "runs_in_folder",
     "batch_tasks",
+    "publish_per_relation",
     "evaluate_run",
     "batch_table",
     "COLUMNS",
@@ -96,24 +100,56 @@ def batch_tasks(
     *,
     ate: bool,
     drift: bool = False,
+    store_dir: str | None = None,
 ) -> list[Task]:
-    """The sweep's tasks, in run order. ``options``: fields of ``EvaluateOptions``."""
-    return [
-        Task(
-            name=run.name,
-            function="slamrel.studies.batch:evaluate_run",
-            kwargs={
-                "reference": run.reference,
-                "estimate": run.estimate,
-                "options": options,
-                "ate": ate,
-                "drift": drift,
-                "per_relation": str(Path(per_relation_dir) / f"{run.name}.csv"),
-                "digest": [_digest(run.reference), _digest(run.estimate)],
-            },
-        )
-        for run in runs
-    ]
+    """The sweep's tasks, in run order. ``options``: fields of ``EvaluateOptions``.
+
+    Each task writes its per-relation CSV under a name keyed by everything that changes it
+    (``NAME-<hash of inputs, digests and options>.csv`` in ``store_dir``, default
+    ``per_relation_dir``); :func:`publish_per_relation` then gives it the run's name.
+    """
+    tasks = []
+    for run in runs:
+        kwargs: dict[str, Any] = {
+            "reference": run.reference,
+            "estimate": run.estimate,
+            "options": options,
+            "ate": ate,
+            "drift": drift,
+            "digest": [_digest(run.reference), _digest(run.estimate)],
+        }
+        blob = json.dumps(kwargs, sort_keys=True, separators=(",", ":"))
+        keyed = f"{run.name}-{hashlib.sha256(blob.encode()).hexdigest()[:12]}.csv"
+        kwargs["per_relation"] = str(Path(store_dir or per_relation_dir) / keyed)
+        function = "slamrel.studies.batch:evaluate_run"
+        tasks.append(Task(run.name, function, kwargs, outputs=(kwargs["per_relation"],)))
+    return tasks
+
+
+def publish_per_relation(
+    runs: Sequence[BatchRun],
+    tasks: Sequence[Task],
+    results: Sequence[dict[str, Any] | None],
+    per_relation_dir: str | Path,
+) -> int:
+    """``per_relation_dir/NAME.csv``: each run's per-relation CSV of this batch's options
+    (copied from its task's keyed file; rewritten when it differs or was deleted). A run
+    without a result has none: a file left from other options is removed. Returns how many
+    such stale files were removed."""
+    from slamrel.outputs import write_text_atomic
+
+    removed = 0
+    for run, task, res in zip(runs, tasks, results, strict=True):
+        target = Path(per_relation_dir) / f"{run.name}.csv"
+        if res is None:
+            if target.is_file():
+                target.unlink()
+                removed += 1
+            continue
+        text = Path(task.kwargs["per_relation"]).read_text(encoding="utf-8")
+        if not target.is_file() or target.read_text(encoding="utf-8") != text:
+            write_text_atomic(target, text)
+    return removed
 
 
 def evaluate_run(
@@ -195,24 +231,31 @@ class BatchTable:
     failed: tuple[str, ...]
 
     def csv(self) -> str:
-        """As CSV: ``kind,name,dataset,algorithm,<columns>``; numbers ``%.17g``."""
+        """As CSV: ``kind,name,dataset,algorithm,<columns>``; numbers ``%.17g``; names
+        quoted as RFC 4180 says (a name with ``,`` shifts no column)."""
         from slamrel.formats.text import NUMBER_FORMAT
+        from slamrel.report.tables import csv_field
 
         lines = [",".join(("kind", "name", "dataset", "algorithm", *self.columns))]
         for r in self.rows:
             nums = ["" if math.isnan(v) else NUMBER_FORMAT % v for v in r.values]
-            lines.append(",".join((r.kind, r.name, r.dataset, r.algorithm, *nums)))
+            words = (csv_field(w) for w in (r.kind, r.name, r.dataset, r.algorithm))
+            lines.append(",".join((*words, *nums)))
         return "\n".join(lines) + "\n"
 
     def markdown(self) -> str:
-        """As a Markdown table (6 significant digits), the failed runs listed below it."""
+        """As a Markdown table (6 significant digits), the failed runs listed below it;
+        names escaped (a ``|`` ends no cell)."""
+        from slamrel.report.tables import markdown_cell
+
         head = ("kind", "name", "dataset", "algorithm", *self.columns)
         lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for r in self.rows:
             nums = ["" if math.isnan(v) else f"{v:.6g}" for v in r.values]
-            lines.append("| " + " | ".join((r.kind, r.name, r.dataset, r.algorithm, *nums)) + " |")
+            words = (markdown_cell(w) for w in (r.kind, r.name, r.dataset, r.algorithm))
+            lines.append("| " + " | ".join((*words, *nums)) + " |")
         if self.failed:
-            lines += ["", "Failed runs (no row): " + ", ".join(self.failed)]
+            lines += ["", "Failed runs (no row): " + ", ".join(map(markdown_cell, self.failed))]
         return "\n".join(lines) + "\n"
 
 

@@ -36,12 +36,17 @@ from slamrel.studies.sweep import Task
 
 __all__ = [
     "FAULTS",
+    "HEALTHY",
+    "REFERENCE",
+    "TEXTBOOK",
     "RED_LAMPS",
     "CalibrationSummary",
     "broken_bundle",
     "calibration_case",
     "calibration_summary",
     "calibration_tasks",
+    "class_rates",
+    "judged_case",
     "reference_case",
     "write_calibration",
 ]
@@ -57,6 +62,14 @@ FAULTS: dict[str, tuple[str, float]] = {
 
 #: The lamps (verdict line ``key``) one of which must be red on a broken run.
 RED_LAMPS = ("consistency", "excursions", "map_log", "map_consistency", "measurements")
+
+#: The classes of healthy runs whose verdict rates are reported one by one: healthy by
+#: construction (:func:`calibration_case`), the reference EKF-SLAM's own runs
+#: (:func:`reference_case`) and an independent textbook EKF-SLAM's (run outside the package:
+#: ``benchmarks/client_verdicts.py``, the test).
+HEALTHY = "healthy by construction"
+REFERENCE = "reference EKF-SLAM healthy"
+TEXTBOOK = "textbook EKF-SLAM healthy"
 
 _FAULT_STREAM = 0xFA_0024
 #: Seconds either side of a measurement within which another measured landmark is "in view".
@@ -134,7 +147,8 @@ def calibration_case(
     bundle = healthy_bundle(world, seed, form, noise=noise, odometry=None, error_scale=scale)
     if fault != "none":
         bundle = broken_bundle(bundle, fault, seed=seed)
-    return _judged(score_bundle(RunInput(bundle, name=f"{world}/{noise}/{seed}/{form}/{fault}")))
+    result = score_bundle(RunInput(bundle, name=f"{world}/{noise}/{seed}/{form}/{fault}"))
+    return judged_case(result, HEALTHY if fault == "none" else f"broken: {fault}")
 
 
 def reference_case(world: str, noise: str, seed: int) -> dict[str, Any]:
@@ -143,15 +157,18 @@ def reference_case(world: str, noise: str, seed: int) -> dict[str, Any]:
     inconsistent, and the study reports what its lamps say."""
     from slamrel.pipeline import run_pipeline
 
-    return _judged(run_pipeline(world, noise=noise, seed=seed))
+    return judged_case(run_pipeline(world, noise=noise, seed=seed), REFERENCE)
 
 
-def _judged(result: Any) -> dict[str, Any]:
-    """The JSON of a case: the verdict's overall level, and its levels and measures by lamp."""
+def judged_case(result: Any, kind: str) -> dict[str, Any]:
+    """The JSON of a case of the class ``kind``: the verdict's overall level, and its levels and
+    measures by lamp (a case of a class run elsewhere, e.g. ``benchmarks/client_verdicts.py``
+    for :data:`TEXTBOOK`, is judged by this too)."""
     from slamrel.report.verdict import RunFacts, run_verdict
 
     verdict = run_verdict(RunFacts.of(result))
     return {
+        "class": kind,
         "overall": verdict.level,
         "levels": {ln.key: ln.level for ln in verdict.lines},
         "values": {ln.key: ln.measure for ln in verdict.lines},
@@ -215,6 +232,8 @@ class CalibrationSummary:
     reference_q : dict of str → list of float
         Per NEES-type lamp (``consistency``, ``online_consistency``, ``map_log``,
         ``map_consistency``), its ``q`` over the reference runs.
+    classes : dict of str → dict of str → int
+        Per class of run (:func:`class_rates`), its runs and how many were green, amber, red.
     """
 
     healthy_runs: int
@@ -226,10 +245,15 @@ class CalibrationSummary:
     reference_runs: int = 0
     reference_levels: dict[str, dict[str, float]] = field(default_factory=dict)
     reference_q: dict[str, list[float]] = field(default_factory=dict)
+    classes: dict[str, dict[str, int]] = field(default_factory=dict)
 
     def lines(self) -> list[str]:
         """The summary as text, one line per rate."""
         out = [
+            f"class {k}: {c['runs']} runs, green {c['green']}, amber {c['amber']}, red {c['red']}"
+            for k, c in self.classes.items()
+        ]
+        out += [
             f"healthy: {self.healthy_runs} runs, all green {100 * self.healthy_all_green:.0f} %"
             " (green per lamp: "
             + ", ".join(f"{k} {100 * v:.0f} %" for k, v in self.healthy_green_by_lamp.items())
@@ -280,7 +304,9 @@ def calibration_summary(records: Sequence[dict[str, Any]]) -> CalibrationSummary
         red_lamp[fault] = {
             k: float(np.mean([r["levels"].get(k) == "red" for r in rs])) for k in names
         }
+    classes = class_rates([*(r for _, r in cases), *refs])
     return CalibrationSummary(
+        classes=classes,
         healthy_runs=len(healthy),
         healthy_all_green=float(np.mean([r["overall"] == "green" for r in healthy]))
         if healthy
@@ -301,6 +327,19 @@ def calibration_summary(records: Sequence[dict[str, Any]]) -> CalibrationSummary
             if any(k in r["values"] for r in refs)
         },
     )
+
+
+def class_rates(results: Sequence[dict[str, Any]]) -> dict[str, dict[str, int]]:
+    """Per class of run (a result's ``class``; broken runs of every fault as one class
+    ``broken``), its runs and the counts of its overall levels."""
+    out: dict[str, dict[str, int]] = {}
+    for r in results:
+        kind = str(r.get("class", "?"))
+        kind = "broken" if kind.startswith("broken") else kind
+        c = out.setdefault(kind, {"runs": 0, **dict.fromkeys(LEVELS, 0)})
+        c["runs"] += 1
+        c[r["overall"]] = c.get(r["overall"], 0) + 1
+    return out
 
 
 def write_calibration(directory: Any, summary: CalibrationSummary) -> list[Any]:

@@ -58,11 +58,15 @@ class Task:
         ``"module:function"`` of a module-level function (picklable by name).
     kwargs : dict
         JSON-serialisable keyword arguments.
+    outputs : tuple of str
+        Files the task writes besides its result (not part of the key): a stored result
+        whose outputs are missing is computed again.
     """
 
     name: str
     function: str
     kwargs: dict[str, Any] = field(default_factory=dict)
+    outputs: tuple[str, ...] = ()
 
     @property
     def key(self) -> str:
@@ -105,7 +109,19 @@ def _stored_record(path: Path, task: Task) -> tuple[dict[str, Any] | None, str |
         return None, "not a result record (expected a JSON object with a 'result')"
     if record.get("key") != task.key:
         return None, f"the record of another task (key {str(record.get('key'))[:60]!r})"
+    if record.get("result_sha256") != _checksum(record["result"]):
+        return None, (
+            "its result does not match the checksum slamrel stored with it (edited, or "
+            "written by an older slamrel)"
+        )
     return record, None
+
+
+def _checksum(result: Any) -> str:
+    """SHA-256 of a result's canonical JSON (stored with it: a hand-edited result, e.g. a
+    number turned into NaN, is found on resume and computed again)."""
+    blob = json.dumps(result, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(blob.encode()).hexdigest()
 
 
 def _call(function: str, kwargs: dict[str, Any]) -> dict[str, Any]:
@@ -126,6 +142,7 @@ def _store(directory: Path, task: Task, ok: bool, value: Any) -> None:
     err = directory / f"{task.key}.error.json"
     if ok:
         record["result"] = value
+        record["result_sha256"] = _checksum(value)
         write_text_atomic(directory / f"{task.key}.json", json.dumps(record, sort_keys=True))
         if err.exists():
             err.unlink()
@@ -209,8 +226,11 @@ def run_sweep(
     for t in tasks:
         path = out / f"{t.key}.json"
         record, why = _stored_record(path, t)
-        if record is not None:
+        missing = [o for o in t.outputs if not Path(o).is_file()]
+        if record is not None and not missing:
             continue
+        if record is not None:
+            why = f"its output {missing[0]} is missing"
         if why is not None:  # recomputed below, and said
             damaged.append(str(path))
             if progress is not None:

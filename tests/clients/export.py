@@ -8,6 +8,10 @@ Two exporters of the same run:
   ``sigma_x, sigma_y, sigma_theta`` from ``Cx`` — valid because ``Cx`` is isotropic in x-y,
   so the robot-frame ``diag(σ_x², σ_y², σ_θ²)`` rotated into the world is ``Cx`` itself.
   Written with slamrel's own record and writer (``Bundle``, ``write_bundle``).
+* :func:`recorder_for` + :func:`write_recorded_bundle`: the client reports to slamrel's
+  :class:`~slamrel.formats.recorder.BundleRecorder` as it runs (``run(..., recorder=)``),
+  with its values as written (a zero initial covariance, its online covariances, dropout
+  ranges of 0, its per-step control covariance, its sensor mount).
 * :func:`write_velocity_euler_bundle`: the client's motion model as it is, velocity
   controls integrated by forward Euler, stamped at the end of their interval, pose noise
   added in the world frame (the ``motion_model`` keys being added on branch wt-motion).
@@ -26,11 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from clients.textbook_ekfslam import Run
+from clients.textbook_ekfslam import Config, Run
 from recovery.bundle import Bundle
 from recovery.models import MotionModel, SensorModel
 from relation_metric.trajectory import Trajectory
 from slamrel.formats.bundle import write_bundle
+from slamrel.formats.recorder import BundleRecorder
 from slamrel.formats.trajectories import write_trajectory
 
 TRUE_ID_OFFSET = 1000
@@ -77,6 +82,7 @@ def odometry_bundle(run: Run) -> Bundle:
         map_xy=xy,
         map_marginals=marg,
         map_covariance=joint,
+        map_source="log",  # the client's final map, estimated from this very log
         initial_pose=np.zeros(3),
         initial_covariance=run.initial_covariance,
         description=(
@@ -117,6 +123,7 @@ def true_map_bundle(bundle: Bundle, run: Run) -> Bundle:
         map_xy=run.landmarks,
         map_marginals=np.zeros((n, 2, 2)),
         map_covariance=None,
+        map_source="independent",  # the true landmarks, not the client's estimate
         path=None,
     )
 
@@ -154,6 +161,7 @@ def write_velocity_euler_bundle(run: Run, directory: Path) -> Path:
         "initial_covariance": run.initial_covariance.tolist(),
         "description": "textbook EKF-SLAM client, its own motion model (Euler, stamp end, "
         "world-frame pose noise)",
+        "map_source": "log",
     }
     (root / "bundle.json").write_text(json.dumps(meta, indent=2) + "\n")
     c = np.column_stack((run.times, run.controls))
@@ -219,9 +227,58 @@ def velocity_bundle(run: Run, *, shift: bool = True) -> Bundle:
         map_xy=xy,
         map_marginals=marg,
         map_covariance=joint,
+        map_source="log",  # the client's final map, estimated from this very log
         initial_pose=np.zeros(3),
         initial_covariance=run.initial_covariance,
         description=f"textbook EKF-SLAM client as today's velocity model (shift={shift})",
         **_measurement_fields(run),  # type: ignore[arg-type]
         **_truth_fields(run),  # type: ignore[arg-type]
+    )
+
+
+# ------------------------------------------------------------ the recorder (issue 38)
+
+
+def recorder_for(cfg: Config) -> BundleRecorder:
+    """A recorder stating the client's own models: forward Euler, controls stamped at the
+    end of their step, world-frame ``Cx`` or (``motion_noise="control"``) the per-step
+    body-frame covariance ``J M Jᵀ``; its R, its reach and its sensor mount."""
+    if cfg.motion_noise == "control":
+        motion = MotionModel(
+            "velocity", step_covariance_frame="body", integration="euler", control_stamp="end"
+        )
+    else:
+        motion = MotionModel(
+            "velocity",
+            pose_noise_frame="world",
+            pose_noise=tuple(map(tuple, cfg.Cx)),
+            integration="euler",
+            control_stamp="end",
+        )
+    s = np.sqrt(np.diag(cfg.R))
+    sensor = SensorModel(
+        float(s[0]),
+        float(s[1]),
+        max_range=cfg.max_range,
+        mount=cfg.mount if any(cfg.mount) else None,
+    )
+    return BundleRecorder(
+        motion,
+        sensor,
+        initial_covariance=cfg.initial_variance * np.eye(3),
+        description="textbook EKF-SLAM client, recorded as it ran (BundleRecorder)",
+    )
+
+
+def write_recorded_bundle(run: Run, recorder: BundleRecorder, directory: Path) -> Path:
+    """The recorded run with its final map and joint covariance, and the truth."""
+    xy, _, joint = run.client_map()
+    truth = _truth_fields(run)
+    return recorder.write(
+        directory,
+        np.arange(xy.shape[0]),
+        xy,
+        map_covariance=joint,
+        groundtruth=truth["groundtruth"],
+        landmarks_groundtruth=truth["landmarks_groundtruth"],
     )

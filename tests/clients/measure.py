@@ -21,6 +21,7 @@ from clients.export import (
     true_map_bundle,
     velocity_bundle,
     write_odometry_bundle,
+    write_recorded_bundle,
     write_velocity_euler_bundle,
 )
 from clients.textbook_ekfslam import Run
@@ -50,10 +51,17 @@ def export(run: Run, directory: Path, exporter: str = "auto") -> tuple[Bundle, s
 
     ``exporter``: ``"odometry"`` (the fallback), ``"velocity"`` (today's velocity model,
     stamps converted), ``"velocity-lag"`` (the client's stamps written as they are),
-    ``"velocity-euler"`` (the client's own model, wt-motion keys), or ``"auto"``: the client's
-    own model when the reader understands it, else the odometry fallback.
+    ``"velocity-euler"`` (the client's own model, wt-motion keys), ``"recorded"`` (what the
+    client reported to its :class:`~slamrel.formats.recorder.BundleRecorder`, its values as
+    written; invalid readings skipped and counted), or ``"auto"``: the client's own model when
+    the reader understands it, else the odometry fallback.
     """
     root = Path(directory)
+    if exporter == "recorded":  # what the client reported to its BundleRecorder as it ran
+        if run.recorder is None:
+            raise ValueError("the run has no recorder: run(..., recorder=recorder_for(cfg))")
+        path = write_recorded_bundle(run, run.recorder, root / "recorded")
+        return read_bundle(path, skip_invalid_measurements=True), exporter
     if exporter in ("auto", "velocity-euler"):
         path = write_velocity_euler_bundle(run, root / "velocity-euler")
         try:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -82,10 +83,26 @@ class Config:
     associate_gate: float = 9.21  # d² below which the nearest landmark is taken (χ²₂ 99 %)
     new_landmark_gate: float = 9.21  # d² above which a new landmark is opened
     shuffle: bool = True  # measurements of one step in random order
+    # what third-party filters do (issue 38); the defaults keep the runs above bit for bit
+    mount: tuple[float, float, float] = (0.0, 0.0, 0.0)  # sensor pose in the robot frame
+    motion_noise: str = "pose"  # or "control": Q = G_u M G_uᵀ, M = diag(control_sigma²)
+    initial_variance: float = 1e-9  # P0 = initial_variance · I (0: start known exactly)
+    dropout: float = 0.0  # share of readings the sensor reports as range 0 (skipped)
 
     @property
     def Cx(self) -> np.ndarray:
         return np.diag(np.square(self.cx))
+
+    @property
+    def M(self) -> np.ndarray:
+        """Control noise the filter assumes with ``motion_noise="control"``: the true one."""
+        return np.diag(np.square(self.control_sigma))
+
+    def step_covariance(self) -> np.ndarray:
+        """Body-frame covariance of one Euler step under ``M``: ``J M Jᵀ``,
+        ``J = ∂[vΔt, 0, ωΔt]/∂(v, ω)`` (3 × 3, rank 2)."""
+        j = np.array([[self.dt, 0.0], [0.0, 0.0], [0.0, self.dt]])
+        return j @ self.M @ j.T
 
     @property
     def R(self) -> np.ndarray:
@@ -115,6 +132,7 @@ class Run:
     x: np.ndarray  # final state
     P: np.ndarray  # final covariance
     initial_covariance: np.ndarray = field(default_factory=lambda: 1e-9 * np.eye(3))
+    recorder: Any = None  # the BundleRecorder the run reported to, if any
 
     @property
     def n_client_landmarks(self) -> int:
@@ -176,25 +194,42 @@ def predict(x: np.ndarray, P: np.ndarray, u: np.ndarray, cfg: Config) -> None:
     x[2] = wrap(float(x[2]))
     P[:3, :] = g @ P[:3, :]
     P[:, :3] = P[:, :3] @ g.T
-    P[:3, :3] += cfg.Cx
+    if cfg.motion_noise == "control":  # Q = G_u M G_uᵀ at the heading the step starts from
+        gu = np.array([[cfg.dt * math.cos(th), 0.0], [cfg.dt * math.sin(th), 0.0], [0.0, cfg.dt]])
+        P[:3, :3] += gu @ cfg.M @ gu.T
+    else:
+        P[:3, :3] += cfg.Cx
 
 
-def expected(x: np.ndarray, j: int) -> tuple[np.ndarray, np.ndarray, list[int]]:
+def sensor_pose(x: np.ndarray, mount: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The sensor's pose ``x ∘ mount`` and its Jacobian on the robot pose (3 × 3)."""
+    c, s = math.cos(x[2]), math.sin(x[2])
+    ox, oy = c * mount[0] - s * mount[1], s * mount[0] + c * mount[1]
+    a = np.array([[1.0, 0.0, -oy], [0.0, 1.0, ox], [0.0, 0.0, 1.0]])
+    return np.array([x[0] + ox, x[1] + oy, x[2] + mount[2]]), a
+
+
+def expected(
+    x: np.ndarray, j: int, mount: tuple[float, float, float] | None = None
+) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """Predicted measurement of landmark ``j``, its Jacobian on (pose, landmark) (2 × 5), and
-    the state indices of those five columns."""
+    the state indices of those five columns (the sensor at ``x ∘ mount``)."""
     i = 3 + 2 * j
-    dx, dy = x[i] - x[0], x[i + 1] - x[1]
+    p, a = (x, None) if mount is None or not any(mount) else sensor_pose(x, mount)
+    dx, dy = x[i] - p[0], x[i + 1] - p[1]
     q = dx * dx + dy * dy
     r = math.sqrt(q)
-    zhat = np.array([r, wrap(math.atan2(dy, dx) - x[2])])
+    zhat = np.array([r, wrap(math.atan2(dy, dx) - p[2])])
     h = np.array(
         [[-dx / r, -dy / r, 0.0, dx / r, dy / r], [dy / q, -dx / q, -1.0, -dy / q, dx / q]]
     )
+    if a is not None:
+        h[:, :3] = h[:, :3] @ a
     return zhat, h, [0, 1, 2, i, i + 1]
 
 
-def innovation(x: np.ndarray, P: np.ndarray, z: np.ndarray, j: int, R: np.ndarray):  # type: ignore[no-untyped-def]
-    zhat, h, cols = expected(x, j)
+def innovation(x: np.ndarray, P: np.ndarray, z: np.ndarray, j: int, R: np.ndarray, mount=None):  # type: ignore[no-untyped-def]
+    zhat, h, cols = expected(x, j, mount)
     y = z - zhat
     y[1] = wrap(float(y[1]))
     S = h @ P[np.ix_(cols, cols)] @ h.T + R
@@ -214,17 +249,24 @@ def update(
     return x, P
 
 
-def associate(x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray) -> tuple[int, float]:
+def associate(
+    x: np.ndarray,
+    P: np.ndarray,
+    z: np.ndarray,
+    R: np.ndarray,
+    mount=None,  # type: ignore[no-untyped-def]
+) -> tuple[int, float]:
     """Mahalanobis nearest neighbour: (landmark, d²), (-1, inf) in an empty map."""
     m = (x.shape[0] - 3) // 2
     if m == 0:
         return -1, math.inf
     # vectorised over all landmarks
+    p, a = (x, None) if mount is None or not any(mount) else sensor_pose(x, mount)
     lm = x[3:].reshape(m, 2)
-    d = lm - x[:2]
+    d = lm - p[:2]
     q = (d**2).sum(axis=1)
     r = np.sqrt(q)
-    zhat_b = np.arctan2(d[:, 1], d[:, 0]) - x[2]
+    zhat_b = np.arctan2(d[:, 1], d[:, 0]) - p[2]
     y = np.column_stack((z[0] - r, wrap_array(z[1] - zhat_b)))
     H = np.zeros((m, 2, 5))
     H[:, 0, 0], H[:, 0, 1], H[:, 0, 3], H[:, 0, 4] = (
@@ -235,6 +277,8 @@ def associate(x: np.ndarray, P: np.ndarray, z: np.ndarray, R: np.ndarray) -> tup
     )
     H[:, 1, 0], H[:, 1, 1], H[:, 1, 2] = d[:, 1] / q, -d[:, 0] / q, -1.0
     H[:, 1, 3], H[:, 1, 4] = -d[:, 1] / q, d[:, 0] / q
+    if a is not None:
+        H[:, :, :3] = H[:, :, :3] @ a
     idx = np.arange(m)
     li = 3 + 2 * idx
     cols = np.stack([np.zeros(m, int), np.ones(m, int), np.full(m, 2), li, li + 1], axis=1)
@@ -250,15 +294,16 @@ def add_landmark(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Augment the state with a landmark initialised from ``z`` (improper or proper)."""
     r, b = z
-    a = x[2] + b
-    lm = np.array([x[0] + r * math.cos(a), x[1] + r * math.sin(a)])
+    p, sa = (x, np.eye(3)) if not any(cfg.mount) else sensor_pose(x, cfg.mount)
+    a = p[2] + b
+    lm = np.array([p[0] + r * math.cos(a), p[1] + r * math.sin(a)])
     n = x.shape[0]
     P2 = np.zeros((n + 2, n + 2))
     P2[:n, :n] = P
     if cfg.init == "improper":
         P2[n:, n:] = cfg.init_variance * np.eye(2)
     elif cfg.init == "proper":
-        gx = np.array([[1.0, 0.0, -r * math.sin(a)], [0.0, 1.0, r * math.cos(a)]])
+        gx = np.array([[1.0, 0.0, -r * math.sin(a)], [0.0, 1.0, r * math.cos(a)]]) @ sa
         gz = np.array([[math.cos(a), -r * math.sin(a)], [math.sin(a), r * math.cos(a)]])
         P2[n:, :n] = gx @ P[:3, :]
         P2[:n, n:] = P2[n:, :n].T
@@ -268,8 +313,44 @@ def add_landmark(
     return np.concatenate((x, lm)), P2
 
 
-def run(seed: int, cfg: Config | None = None, landmarks: np.ndarray | None = None) -> Run:
-    """Simulate and filter one run (numpy ``default_rng(seed)``)."""
+def _observe(
+    cfg: Config, rng: np.random.Generator, lms: np.ndarray, pose: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The landmarks within range of the sensor at ``pose ∘ mount`` and their noisy
+    range-bearing readings (a ``dropout`` share reported as range 0)."""
+    if any(cfg.mount):
+        pose = sensor_pose(pose, cfg.mount)[0]
+    d = lms - pose[:2]
+    rng_true = np.hypot(d[:, 0], d[:, 1])
+    seen = np.flatnonzero(rng_true <= cfg.max_range)
+    if cfg.shuffle:
+        seen = rng.permutation(seen)
+    zs = np.column_stack(
+        (
+            rng_true[seen] + rng.normal(0.0, cfg.range_sigma, seen.size),
+            wrap_array(np.arctan2(d[seen, 1], d[seen, 0]) - pose[2])
+            + rng.normal(0.0, cfg.bearing_sigma, seen.size),
+        )
+    )
+    if cfg.dropout > 0.0:
+        zs[rng.random(seen.size) < cfg.dropout, 0] = 0.0
+    return seen, zs
+
+
+def run(
+    seed: int,
+    cfg: Config | None = None,
+    landmarks: np.ndarray | None = None,
+    recorder: object | None = None,
+) -> Run:
+    """Simulate and filter one run (numpy ``default_rng(seed)``).
+
+    ``recorder``: a :class:`slamrel.formats.recorder.BundleRecorder` the filter reports to
+    as it runs, as a user's filter would (its control per step, with the step's covariance
+    under ``motion_noise="control"``; each reading with the landmark it was associated with
+    or initialised, none for a dropout the filter skipped or one left between the gates;
+    its own pose and covariance after each step, and before the first).
+    """
     cfg = cfg or Config()
     rng = np.random.default_rng(seed)
     lms = loop_world() if landmarks is None else np.asarray(landmarks, float)
@@ -281,7 +362,12 @@ def run(seed: int, cfg: Config | None = None, landmarks: np.ndarray | None = Non
     online = np.zeros((K + 1, 3))
     controls = np.zeros((K + 1, 2))
     x = np.zeros(3)
-    P = 1e-9 * np.eye(3)
+    P = cfg.initial_variance * np.eye(3)
+    rec: Any = recorder
+    step_cov = cfg.step_covariance() if cfg.motion_noise == "control" else None
+    if rec is not None:  # row 0 opens the log (control_stamp "end"); the start estimate
+        rec.control(0.0, 0.0, 0.0, None if step_cov is None else np.zeros((3, 3)))
+        rec.online(0.0, x, P)
     mt: list[float] = []
     mz: list[np.ndarray] = []
     mtrue: list[int] = []
@@ -295,32 +381,27 @@ def run(seed: int, cfg: Config | None = None, landmarks: np.ndarray | None = Non
         ud = u_cmd + rng.normal(0.0, cfg.control_sigma)  # what the odometry reports
         controls[k] = ud
         dr[k] = euler(dr[k - 1], ud, dt)
-        # observe every landmark within range
-        d = lms - truth[k, :2]
-        rng_true = np.hypot(d[:, 0], d[:, 1])
-        seen = np.flatnonzero(rng_true <= cfg.max_range)
-        if cfg.shuffle:
-            seen = rng.permutation(seen)
-        zs = np.column_stack(
-            (
-                rng_true[seen] + rng.normal(0.0, cfg.range_sigma, seen.size),
-                wrap_array(np.arctan2(d[seen, 1], d[seen, 0]) - truth[k, 2])
-                + rng.normal(0.0, cfg.bearing_sigma, seen.size),
-            )
-        )
+        seen, zs = _observe(cfg, rng, lms, truth[k])  # every landmark within range
         # the filter
         predict(x, P, ud, cfg)
+        if rec is not None:
+            rec.control(times[k], ud[0], ud[1], step_cov)
+        mount = cfg.mount if any(cfg.mount) else None
         for i, z in zip(seen, zs):
-            j, d2 = associate(x, P, z, R)
+            if z[0] <= 0.0:  # a dropout: the filter skips it (the log keeps it)
+                if rec is not None:
+                    rec.measurement(times[k], z[0], z[1], None)
+                continue
+            j, d2 = associate(x, P, z, R, mount)
             new = j < 0 or d2 > cfg.new_landmark_gate
             nis = math.nan
             if new:
                 x, P = add_landmark(x, P, z, cfg)
                 j = (x.shape[0] - 3) // 2 - 1
                 if cfg.init == "improper":  # PythonRobotics updates with it too
-                    x, P = update(x, P, *innovation(x, P, z, j, R))
+                    x, P = update(x, P, *innovation(x, P, z, j, R, mount))
             elif d2 <= cfg.associate_gate:
-                y, S, h, cols = innovation(x, P, z, j, R)
+                y, S, h, cols = innovation(x, P, z, j, R, mount)
                 nis = float(y @ np.linalg.solve(S, y))
                 x, P = update(x, P, y, S, h, cols)
             else:
@@ -331,7 +412,11 @@ def run(seed: int, cfg: Config | None = None, landmarks: np.ndarray | None = Non
             massoc.append(j)
             mnew.append(new)
             mnis.append(nis)
+            if rec is not None:
+                rec.measurement(times[k], z[0], z[1], j if j >= 0 else None)
         online[k] = x[:3]
+        if rec is not None:
+            rec.online(times[k], x[:3], P[:3, :3])
     return Run(
         config=cfg,
         landmarks=lms,
@@ -348,4 +433,6 @@ def run(seed: int, cfg: Config | None = None, landmarks: np.ndarray | None = Non
         nis=np.array(mnis),
         x=x,
         P=P,
+        initial_covariance=cfg.initial_variance * np.eye(3),
+        recorder=rec,
     )

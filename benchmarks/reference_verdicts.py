@@ -1,0 +1,168 @@
+"""The verdict on healthy runs of the reference EKF-SLAM (issue 36), per lamp, with its causes.
+
+``slamrel run WORLD --noise N --seed S`` for every world × noise × seed (seeds not tuned on:
+default 10–19), judged as the main job judges it (the map prior ``auto``: the reference
+EKF-SLAM's bundles state ``map_source: log``, so the smoother de-conditions the map). Each run
+is one task of the resumable sweep (``slamrel.studies.sweep``) in ``--output``; the summary
+prints the overall green/amber/red counts, the counts per lamp, and the runs that are not green
+with the quantities the lamps judged (recovered and online NEES ``q``, map ``q``, NIS ``q``).
+
+``--compare-priors K``: on the first K runs, recover under both map priors and check that the
+trajectory is bit for bit the same and the accuracy (mean translational error on the global
+relations) moves by less than 1 %.
+
+    nice python benchmarks/reference_verdicts.py -o /tmp/refverdicts --seeds 10-19 --workers 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import itertools
+import json
+import sys
+from pathlib import Path
+
+from slamrel.constants import NOISE_NAMES, WORLDS
+from slamrel.studies.sweep import Task, load_results, run_sweep
+
+
+def _seeds(text: str) -> list[int]:
+    lo, _, hi = text.partition("-")
+    return list(range(int(lo), int(hi or lo) + 1))
+
+
+def compare_priors(world: str, noise: str, seed: int) -> dict[str, float | bool]:
+    """Both map priors on one reference run: same trajectory? accuracy change, NEES ratio."""
+    import numpy as np
+
+    from slamrel.pipeline import run_pipeline
+
+    out: dict[str, dict[str, float]] = {}
+    poses = {}
+    for prior in ("independent", "deconditioned"):
+        r = run_pipeline(world, noise=noise, seed=seed, map_prior=prior)
+        poses[prior] = r.recovery_result.trajectory.poses  # type: ignore[union-attr]
+        ev = r.evaluations["recovered"]["global"]
+        out[prior] = {
+            "global": float(ev.translation.abs.mean),
+            "nees": float(r.nees["recovered"].summary.mean),
+        }
+    same = bool(np.array_equal(poses["independent"], poses["deconditioned"]))
+    g0, g1 = out["independent"]["global"], out["deconditioned"]["global"]
+    return {
+        "same_trajectory": same,
+        "global_independent": g0,
+        "global_deconditioned": g1,
+        "accuracy_change": abs(g1 - g0) / g0,
+        "nees_independent": out["independent"]["nees"],
+        "nees_deconditioned": out["deconditioned"]["nees"],
+    }
+
+
+def fej_case(world: str, noise: str, seed: int) -> dict:  # type: ignore[type-arg]
+    """The reference run with the EKF-SLAM's first-estimate Jacobians (FEJ-EKF), judged."""
+    from slamrel.backends.ekf_slam import ekf_slam_bundle
+    from slamrel.pipeline import RunInput, score_bundle
+    from slamrel.simulation.bundles import world_bundle
+    from slamrel.simulation.worlds import make_world
+    from slamrel.studies.calibration import judged_case
+
+    w = make_world(world, noise=noise, seed=seed)
+    bundle, slam = ekf_slam_bundle(world_bundle(w), seed=seed, jacobians="fej")
+    inp = RunInput(
+        bundle, name=f"{world}/{noise}/seed {seed} (FEJ)", online=slam.online,
+        online_covariance=slam.online_covariance, dead_reckoning=w.odometry,
+    )  # fmt: skip
+    return judged_case(score_bundle(inp, seed=seed), "reference EKF-SLAM healthy (FEJ)")
+
+
+def _summary(records: list[dict], worlds, noises) -> list[str]:  # type: ignore[no-untyped-def]
+    lines = []
+    overall = collections.Counter(r["result"]["overall"] for r in records)
+    lines.append(
+        f"runs {len(records)}: overall "
+        + ", ".join(f"{k} {overall[k]}" for k in ("green", "amber", "red"))
+    )
+    lamps = collections.defaultdict(collections.Counter)
+    for r in records:
+        for k, lv in r["result"]["levels"].items():
+            lamps[k][lv] += 1
+    for k, c in lamps.items():
+        lines.append(f"  {k}: " + ", ".join(f"{lv} {n}" for lv, n in sorted(c.items())))
+    for w, n in itertools.product(worlds, noises):
+        rs = [r for r in records if r["kwargs"]["world"] == w and r["kwargs"]["noise"] == n]
+        c = collections.Counter(r["result"]["overall"] for r in rs)
+        lines.append(f"  {w}/{n}: " + ", ".join(f"{k} {c[k]}" for k in ("green", "amber", "red")))
+    lines.append("not green (lamp: level q):")
+    for r in records:
+        res = r["result"]
+        if res["overall"] == "green":
+            continue
+        kw = r["kwargs"]
+        bad = {k: lv for k, lv in res["levels"].items() if lv in ("amber", "red")}
+        vals = res["values"]
+        q = {
+            k: vals.get(k)
+            for k in ("consistency", "online_consistency", "map_consistency", "map_log")
+        }
+        lines.append(
+            f"  {kw['world']}/{kw['noise']}/{kw['seed']}: {res['overall']}; "
+            + ", ".join(f"{k} {lv}" for k, lv in bad.items())
+            + "; q "
+            + ", ".join(f"{k} {v:.2f}" for k, v in q.items() if isinstance(v, (int, float)))
+        )
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--worlds", default=",".join(WORLDS))
+    p.add_argument("--noise", default=",".join(NOISE_NAMES))
+    p.add_argument("--seeds", type=_seeds, default=_seeds("10-19"))
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--compare-priors", type=int, default=0, metavar="K")
+    p.add_argument("--jacobians", choices=("standard", "fej"), default="standard")
+    a = p.parse_args(argv)
+    worlds, noises = a.worlds.split(","), a.noise.split(",")
+    tasks = [
+        Task(
+            f"ref-{w}-{n}-{s}",
+            "slamrel.studies.calibration:reference_case"
+            if a.jacobians == "standard"
+            else "benchmarks.reference_verdicts:fej_case",
+            {"world": w, "noise": n, "seed": s},
+        )
+        for w, n, s in itertools.product(worlds, noises, a.seeds)
+    ]
+    out = Path(a.output)
+    out.mkdir(parents=True, exist_ok=True)
+    run_sweep(tasks, out / "cases", workers=a.workers)
+    lines = _summary(load_results(out / "cases", tasks), worlds, noises)
+    if a.compare_priors:
+        cmp = [
+            Task(f"cmp-{t.kwargs['world']}-{t.kwargs['noise']}-{t.kwargs['seed']}",
+                 "benchmarks.reference_verdicts:compare_priors", t.kwargs)
+            for t in tasks[:: max(1, len(tasks) // a.compare_priors)][: a.compare_priors]
+        ]  # fmt: skip
+        run_sweep(cmp, out / "compare", workers=a.workers)
+        res = [r["result"] for r in load_results(out / "compare", cmp)]
+        lines.append(
+            f"priors compared on {len(res)} runs: trajectory identical on "
+            f"{sum(r['same_trajectory'] for r in res)}; accuracy change max "
+            f"{100 * max(r['accuracy_change'] for r in res):.4f} %; NEES ratio "
+            f"{min(r['nees_deconditioned'] / r['nees_independent'] for r in res):.2f}–"
+            f"{max(r['nees_deconditioned'] / r['nees_independent'] for r in res):.2f}"
+        )
+    text = "\n".join(lines)
+    print(text)
+    (out / "summary.txt").write_text(text + "\n")
+    json.dump(
+        [r for r in load_results(out / "cases", tasks)], open(out / "records.json", "w"), indent=1
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

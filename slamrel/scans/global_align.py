@@ -1,0 +1,374 @@
+"""Reference relations that do not depend on the guess: a scan-matched chain, local submaps,
+a branch-and-bound search over a window from the chain's drift, an ambiguity test, ICP.
+
+1. **Chain** (scan-matched odometry). The scans the pairs use, plus fill-in keyframes where
+   two of them are more than ``chain_gap`` apart along the path, sorted in time, are linked
+   by point-to-line ICP from the given poses' motion (the log's odometry, or an estimate's);
+   a link ICP leaves failed or lost (low overlap, high residual) is searched again by
+   branch and bound over ``±link_xy, ±link_theta``; the chain poses compose the links.
+   Its own travel ``D_ij`` (path length between two scans) sizes the windows below.
+2. **Local pairs** (``D_ij ≤ local_travel``): ICP from the chain's relation, judged as
+   :func:`slamrel.scans.relations.align_scans` judges, except that a ``large correction``
+   (from the given poses' relation) is one beyond the link window ``link_xy + drift_xy D``,
+   ``link_theta + drift_theta D``: within it, it is the given motion's error.
+3. **Distant pairs** (loops): the reference is a **local submap** — the returns of the chain
+   scans within ``submap_travel`` of scan ``i`` along the path, moved into ``i``'s frame by
+   the chain — and so is the current side (around ``j``). Branch and bound
+   (:mod:`slamrel.scans.search`) over ``centre ± [w_xy, w_xy, w_θ]``,
+   ``w_xy = window_xy + drift_xy · D_ij`` and ``w_θ = window_theta + drift_theta · D_ij``
+   (the chain's error grows with the travel between the scans), centred on the chain's
+   relation; the best candidate is refined by ICP of the two scans themselves.
+   Flags: ``ambiguous`` (a second hypothesis at a distinct pose scores at least
+   ``ambiguity`` of the best, or the window held too many near-equal ones), ``low score``
+   (best below ``min_score``), ``unstable`` (ICP moved more than ``max_refine`` /
+   ``max_refine_angle`` from the search's answer), and the ICP's own ``failed``,
+   ``not converged``, ``degenerate``, ``low overlap``, ``high residual``.
+
+A window whose grid would exceed :attr:`SearchOptions.max_cells` is refused with
+:class:`~relation_metric.errors.InputError` (the scan's line, the travel, the window).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relation_metric.errors import InputError
+from relation_metric.se2 import between, cumulative_compose
+from slamrel.formats.laser import LaserScans
+from slamrel.scans.matching import Alignment, PreparedScan, align, prepare_scan, transform
+from slamrel.scans.proposals import Proposals
+from slamrel.scans.relations import AlignOptions, ScanRelations, _judge, far_guess_error
+from slamrel.scans.search import (
+    SearchOptions,
+    SearchResult,
+    branch_and_bound,
+    grid_cells,
+    likelihood_grid,
+)
+
+__all__ = ["GlobalOptions", "align_scans_global", "Chain", "scan_chain"]
+
+
+@dataclass(frozen=True)
+class GlobalOptions:
+    """Parameters of :func:`align_scans_global` (metres, radians; see the module docstring).
+
+    Attributes
+    ----------
+    search : SearchOptions
+    window_xy, window_theta : float
+        Window at zero travel (0.3 m, 0.05 rad).
+    drift_xy, drift_theta : float
+        Window growth per metre travelled between the two scans (0.01, 0.0005 rad/m).
+    local_travel : float
+        Pairs at most this far apart along the path are aligned from the chain (3 m).
+    submap_travel : float
+        Scans within this travel of a pair's scan join its submap (5 m).
+    search_range : float
+        Returns beyond this range are left out of the search (not of ICP) (15 m).
+    max_points : int
+        The current submap's returns are thinned to about this many for the search (250).
+    chain_gap : float
+        Fill-in keyframes where the pairs' scans are farther apart than this (1.5 m).
+    link_xy, link_theta : float
+        Window of a chain link's search when ICP loses it (0.5 m, 0.2 rad).
+    ambiguity, min_score : float
+        Flag thresholds (0.95, 0.25; calibrated on corridor worlds 101–102).
+    weak_geometry : bool
+        Flag ``weak geometry`` (False: a corridor's weak direction is what the submap
+        search and its ambiguity test judge; the condition stays in the report).
+    max_refine, max_refine_angle : float
+        ``unstable`` when ICP moves farther from the search's answer (0.1 m, 0.03 rad).
+    """
+
+    search: SearchOptions = field(default_factory=SearchOptions)
+    window_xy: float = 0.3
+    window_theta: float = 0.05
+    drift_xy: float = 0.01
+    drift_theta: float = 0.0005
+    local_travel: float = 3.0
+    submap_travel: float = 5.0
+    search_range: float = 15.0
+    max_points: int = 250
+    chain_gap: float = 1.5
+    link_xy: float = 0.5
+    link_theta: float = 0.2
+    ambiguity: float = 0.95
+    min_score: float = 0.25
+    weak_geometry: bool = False
+    max_refine: float = 0.1
+    max_refine_angle: float = 0.03
+
+
+@dataclass(frozen=True)
+class Chain:
+    """Scan-matched odometry over some scans.
+
+    Attributes
+    ----------
+    nodes : (n,) int
+        Scan indices, in time order.
+    poses : (n, 3) float
+        Chain poses (the first node at its given pose).
+    travel : (n,) float
+        Path length from the first node [m].
+    links : list of Alignment
+        ``links[k]`` aligns ``nodes[k + 1]`` to ``nodes[k]``.
+    link_guess : (n − 1, 3) float
+        The given poses' motion of each link.
+    fallback : int
+        Links neither ICP nor the search could align (the given motion kept).
+    """
+
+    nodes: NDArray[np.int64]
+    poses: NDArray[np.float64]
+    travel: NDArray[np.float64]
+    links: list[Alignment]
+    link_guess: NDArray[np.float64]
+    fallback: int
+
+
+class _Scans:
+    """Prepared scans (ICP) and search returns, made once per scan."""
+
+    def __init__(self, scans: LaserScans, opt: AlignOptions, gopt: GlobalOptions) -> None:
+        self.scans, self.opt, self.gopt = scans, opt, gopt
+        self._prep: dict[int, PreparedScan] = {}
+
+    def prep(self, k: int) -> PreparedScan:
+        if k not in self._prep:
+            pts = self.scans.points(k, min_range=self.opt.min_range, max_range=self.opt.max_range)
+            self._prep[k] = prepare_scan(pts)
+        return self._prep[k]
+
+    def near(self, k: int) -> NDArray[np.float64]:
+        """Returns within ``search_range``."""
+        p = self.prep(k).points
+        return p[np.hypot(p[:, 0], p[:, 1]) <= self.gopt.search_range]
+
+
+def _chain_nodes(
+    poses: NDArray[np.float64], used: NDArray[np.int64], gap: float
+) -> NDArray[np.int64]:
+    """``used`` (sorted, unique) plus scans every ``gap / 1.5`` m of the given poses' travel
+    wherever two used scans are more than ``gap`` apart."""
+    step = between(poses[:-1], poses[1:])
+    travel = np.concatenate(([0.0], np.cumsum(np.hypot(step[:, 0], step[:, 1]))))
+    t = travel[used]
+    extra = []
+    spacing = gap / 1.5
+    for a in np.flatnonzero(np.diff(t) > gap).tolist():
+        if (t[a + 1] - t[a]) / spacing > used[a + 1] - used[a]:  # more marks than scans
+            extra.append(np.arange(used[a] + 1, used[a + 1]))  # (a jump): every scan between
+            continue
+        marks = np.arange(t[a] + spacing, t[a + 1] - spacing / 2, spacing)
+        extra.append(np.searchsorted(travel, marks))
+    allk = np.concatenate([used, *extra]) if extra else used
+    return np.unique(allk).astype(np.int64)
+
+
+def scan_chain(
+    scans: LaserScans,
+    poses: NDArray[np.float64],
+    used: NDArray[np.int64],
+    store: _Scans,
+) -> Chain:
+    """The chain over ``used`` (and fill-ins), see the module docstring, step 1."""
+    gopt, opt = store.gopt, store.opt
+    nodes = _chain_nodes(poses, np.unique(used), gopt.chain_gap)
+    guess = between(poses[nodes[:-1]], poses[nodes[1:]])
+    links: list[Alignment] = []
+    motion = guess.copy()
+    fallback = 0
+    for k, (i, j) in enumerate(zip(nodes[:-1].tolist(), nodes[1:].tolist(), strict=True)):
+        a = align(store.prep(i), store.prep(j), guess[k], opt.icp)
+        flags = _judge(a, opt.limits, guess[k])[0]
+        if {"failed", "low overlap", "high residual"} & set(flags):
+            centre = guess[k]
+            s = _search(store, [i], [j], np.zeros(3), centre, gopt.link_xy, gopt.link_theta)
+            b = align(store.prep(i), store.prep(j), s.delta, opt.icp)
+            if not b.failed and (a.failed or b.matched_fraction > a.matched_fraction):
+                a = b
+        if a.failed:
+            fallback += 1
+        else:
+            motion[k] = a.delta
+        links.append(a)
+    chain = cumulative_compose(motion, poses[nodes[0]])
+    travel = np.concatenate(([0.0], np.cumsum(np.hypot(motion[:, 0], motion[:, 1]))))
+    return Chain(nodes, chain, travel, links, guess, fallback)
+
+
+def _submap(store: _Scans, chain: Chain, a: int) -> list[int]:
+    """Chain positions within ``submap_travel`` of position ``a``."""
+    t = chain.travel
+    return np.flatnonzero(np.abs(t - t[a]) <= store.gopt.submap_travel).tolist()
+
+
+def _points_in(
+    store: _Scans, chain: Chain, a: int, members: list[int], stride: int = 1
+) -> NDArray[np.float64]:
+    """Search returns of the chain scans ``members`` in the frame of chain position ``a``."""
+    rel = between(chain.poses[a], chain.poses[members])
+    parts = [
+        transform(rel[q], store.near(int(chain.nodes[m]))[::stride]) for q, m in enumerate(members)
+    ]
+    return np.concatenate(parts) if parts else np.zeros((0, 2))
+
+
+def _thinned(points: NDArray[np.float64], n: int) -> NDArray[np.float64]:
+    """Every ``⌈K / n⌉``-th of ``points`` ``(K, 2)``."""
+    return points[:: max(1, -(-points.shape[0] // n))]
+
+
+#: A guess farther than this [m] from where its scans could overlap is refused as input
+#: (a pose at 1e20 m), not searched: no drive moves that far between two scans.
+MAX_GUESS_DISTANCE = 1e7
+
+
+def _refuse_hopeless(
+    store: _Scans, i: int, j: int, centre: NDArray[np.float64], reach: float
+) -> None:
+    """Refuse a guess that puts scan ``j`` more than :data:`MAX_GUESS_DISTANCE` beyond any
+    overlap with scan ``i`` (file and line of ``j``)."""
+    apart = float(np.hypot(centre[0], centre[1]))
+    if not apart > reach + MAX_GUESS_DISTANCE:
+        return
+    raise far_guess_error(
+        store.scans, (i, j), apart, reach, ": no placement it tries lets them overlap"
+    )
+
+
+def _search(
+    store: _Scans,
+    ref_scans: list[int],
+    cur_scans: list[int],
+    _unused: NDArray[np.float64],
+    centre: NDArray[np.float64],
+    wxy: float,
+    wth: float,
+    ref_pts: NDArray[np.float64] | None = None,
+    cur_pts: NDArray[np.float64] | None = None,
+) -> SearchResult:
+    """Branch and bound of ``cur_pts`` (default: scan ``cur_scans[0]``'s search returns)
+    against ``ref_pts`` (default: ``ref_scans[0]``'s), refusing a grid over ``max_cells``."""
+    sopt = store.gopt.search
+    ref = store.near(ref_scans[0]) if ref_pts is None else ref_pts
+    cur = _thinned(store.near(cur_scans[0]), store.gopt.max_points) if cur_pts is None else cur_pts
+    if ref.shape[0] < 3 or cur.shape[0] < 3:
+        nan3 = np.full(3, np.nan)
+        return SearchResult(np.asarray(centre, float).copy(), 0.0, nan3, 0.0, 0, False)
+    reach = float(np.max(np.hypot(cur[:, 0], cur[:, 1]))) + wxy + 4 * sopt.sigma
+    lo = np.maximum(ref.min(axis=0), centre[:2] - reach) - 4 * sopt.sigma
+    hi = np.minimum(ref.max(axis=0), centre[:2] + reach) + 4 * sopt.sigma
+    empty = bool(np.any(hi < lo))  # no placement in the window overlaps the reference
+    hi = np.maximum(hi, lo + sopt.resolution)
+    cells = grid_cells(lo, hi, sopt.resolution)
+    window_cells = (2 * wxy / sopt.resolution + 1) ** 2
+    if cells > sopt.max_cells or window_cells > sopt.max_cells:
+        line = int(store.scans.lines[cur_scans[0]])
+        raise InputError(
+            f"the search window ±{wxy:.4g} m around the guess of the scan of line {line} "
+            f"against the scan of line {int(store.scans.lines[ref_scans[0]])} needs "
+            f"{max(cells, window_cells):.3g} grid cells (limit {sopt.max_cells}); expected "
+            "poses whose motion between the two scans is a plausible drive (the window "
+            "grows with the travel between them)",
+            path=store.scans.path,
+            line=line,
+        )
+    if empty:  # no match (and no grid cell to index: a far centre overflows the cast)
+        _refuse_hopeless(store, ref_scans[0], cur_scans[0], centre, reach)
+        nan3 = np.full(3, np.nan)
+        return SearchResult(np.asarray(centre, float).copy(), 0.0, nan3, 0.0, 0, False)
+    grid = likelihood_grid(ref, lo, hi, sopt)
+    return branch_and_bound(grid, cur, centre, wxy, wth, sopt)
+
+
+def _distant(
+    store: _Scans, chain: Chain, pair: tuple[int, int], at: tuple[int, int], travel: float
+) -> tuple[tuple[Alignment, str, list[str], float], SearchResult]:
+    """Search the submaps of a distant pair, refine by ICP, judge (module docstring, 3)."""
+    from dataclasses import replace
+
+    gopt, opt = store.gopt, store.opt
+    (i, j), (a, b) = pair, at
+    centre = between(chain.poses[a], chain.poses[b])
+    ref_pts = _points_in(store, chain, a, _submap(store, chain, a))
+    cur_pts = _thinned(_points_in(store, chain, b, _submap(store, chain, b)), gopt.max_points)
+    wxy = gopt.window_xy + gopt.drift_xy * travel
+    wth = gopt.window_theta + gopt.drift_theta * travel
+    s = _search(store, [i], [j], centre, centre, wxy, wth, ref_pts, cur_pts)
+    al = align(store.prep(i), store.prep(j), s.delta, opt.icp)
+    limits = replace(
+        opt.limits, max_correction=gopt.max_refine, max_correction_angle=gopt.max_refine_angle
+    )
+    flags, susp = _judge(al, limits, s.delta)
+    flags = ["unstable" if f == "large correction" else f for f in flags]
+    extra = []
+    if s.truncated or s.ratio >= gopt.ambiguity:
+        extra.append("ambiguous")
+    if s.score < gopt.min_score:
+        extra.append("low score")
+    if extra:
+        flags = flags + extra
+        susp = max(susp, s.ratio / gopt.ambiguity, gopt.min_score / max(s.score, 1e-9), 1 + 1e-9)
+    return (al, "search", flags, susp), s
+
+
+def align_scans_global(
+    scans: LaserScans,
+    proposals: Proposals,
+    poses: NDArray[np.float64],
+    options: AlignOptions | None = None,
+    global_options: GlobalOptions | None = None,
+) -> tuple[ScanRelations, Chain]:
+    """Align every proposed pair without leaning on the given poses beyond the chain's links
+    (module docstring); ``poses`` ``(N, 3)`` are the scans' given laser poses."""
+    from dataclasses import replace
+
+    from slamrel.scans.relations import collect_relations
+
+    opt = options or AlignOptions()
+    gopt = global_options or GlobalOptions()
+    if not gopt.weak_geometry:
+        opt = replace(opt, limits=replace(opt.limits, min_condition=0.0))
+    store = _Scans(scans, opt, gopt)
+    pairs = proposals.pairs
+    chain = scan_chain(scans, poses, pairs.ravel(), store)
+    pos = {int(n): k for k, n in enumerate(chain.nodes.tolist())}
+    given = between(poses[pairs[:, 0]], poses[pairs[:, 1]])
+    out: list[tuple[Alignment, str, list[str], float]] = []
+    p = len(proposals)
+    score, ratio = np.full(p, np.nan), np.zeros(p)
+    second = np.full((p, 3), np.nan)
+    for k, (i, j) in enumerate(pairs.tolist()):
+        a, b = pos[i], pos[j]
+        travel = abs(float(chain.travel[b] - chain.travel[a]))
+        if travel > gopt.local_travel:
+            row, s = _distant(store, chain, (i, j), (a, b), travel)
+            out.append(row)
+            score[k], ratio[k], second[k] = s.score, s.ratio, s.second
+            continue
+        if b == a + 1:
+            al = chain.links[a]
+        else:
+            centre = between(chain.poses[a], chain.poses[b])
+            al = align(store.prep(i), store.prep(j), centre, opt.icp)
+        # a correction within the window a chain link searches is the given motion's error
+        # (real odometry turns 3-10° wrong between scans), not a slipped alignment
+        local = replace(
+            opt.limits,
+            max_correction=max(opt.limits.max_correction, gopt.link_xy + gopt.drift_xy * travel),
+            max_correction_angle=max(
+                opt.limits.max_correction_angle, gopt.link_theta + gopt.drift_theta * travel
+            ),
+        )
+        flags, susp = _judge(al, local, given[k])
+        out.append((al, "chain", flags, susp))
+    result = collect_relations(
+        proposals, given, out, score=score, second=second, second_ratio=ratio
+    )
+    return result, chain
