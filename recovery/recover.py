@@ -57,7 +57,7 @@ from recovery.ekf import (
     run_filter,
 )
 from recovery.map_uncertainty import MapUncertainty, map_uncertainty
-from recovery.mount import to_robot_frame, to_sensor_frame
+from recovery.mount import loadings_to_robot_frame, to_robot_frame, to_sensor_frame
 from recovery.results import (
     BatchCosts,
     Divergence,
@@ -316,7 +316,10 @@ def recover(
     filt = None if method == "filter" else (fr.poses, fr.covariances)
     if mount is not None:
         poses, covariances = to_robot_frame(est.poses, est.covariances, mount)
-        est = replace(est, poses=poses, covariances=covariances)
+        loadings = est.map_loadings
+        if loadings is not None:
+            loadings = loadings_to_robot_frame(est.poses, loadings, mount)
+        est = replace(est, poses=poses, covariances=covariances, map_loadings=loadings)
         if filt is not None:  # the agreement lamp compares both in the robot's frame
             filt = to_robot_frame(filt[0], filt[1], mount)
     covs, n_repaired = _check_finite(
@@ -345,6 +348,7 @@ def recover(
         map_correction=est.map_correction,
         map_prior=prior.prior,
         map_prior_reason=prior.reason,
+        map_loadings=None if est.map_loadings is None else readonly(est.map_loadings),
         filter_poses=None if filt is None else readonly(filt[0]),
         filter_covariances=None if filt is None else readonly(filt[1]),
     )
@@ -463,6 +467,7 @@ class _Estimate:
     iterations: int = 0
     costs: BatchCosts | None = None
     map_correction: Array | None = None
+    map_loadings: Array | None = None
 
 
 def _estimate(
@@ -504,6 +509,7 @@ def _estimate(
             else None
         ),
         map_correction=None if br.map_correction is None else readonly(br.map_correction),
+        map_loadings=br.map_loadings,
     )
 
 

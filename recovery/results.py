@@ -421,6 +421,12 @@ class Recovery:
     map_prior : str
         Where the map's error comes from (:data:`~recovery.constants.MAP_PRIORS`):
         ``independent`` of the log, or ``deconditioned`` (the map made from this log).
+    map_loadings : ndarray, shape (N, 3, r), or None
+        The smoother's and the batch's map loadings ``V``: each pose's error is
+        ``a_k + V_k ξ`` with ``ξ ~ N(0, I_r)`` the map's error, shared by every pose
+        (:meth:`recovery.batch_refinement._JointProblem.map_loadings`), so the poses' errors
+        are correlated by ``V_k V_lᵀ``; the verdict's consistency lamp uses it. ``None`` for
+        the filter.
     filter_poses, filter_covariances : ndarray, shape (N, 3), (N, 3, 3), or None
         The smoother's and the batch's own filter run (the EKF localisation they start
         from) at the same times, for the filter-vs-smoother agreement of the verdict
@@ -449,6 +455,7 @@ class Recovery:
     filter_poses: Array | None = None
     filter_covariances: Array | None = None
     map_prior_reason: str = ""
+    map_loadings: Array | None = None
 
     @property
     def stretches(self) -> tuple[Stretch, ...]:

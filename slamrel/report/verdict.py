@@ -94,6 +94,8 @@ from relation_metric.consistency import (
     flag_runs,
     mean_chi2_interval,
 )
+from relation_metric.errors import InputError
+from relation_metric.nees_law import NeesLaw
 
 if TYPE_CHECKING:
     from recovery.results import Recovery, RecoveryCounts, RobustSettings
@@ -343,6 +345,7 @@ class RunFacts:
     online_difference: float | None = None
     online_difference_relations: int = 0
     agreement: Agreement | None = None
+    nees_law: NeesLaw | None = None
 
     @classmethod
     def of(cls, result: RunResult) -> RunFacts:
@@ -373,6 +376,7 @@ class RunFacts:
             online_difference=None if diff is None else diff.all.translation.abs.mean,
             online_difference_relations=0 if diff is None else int(diff.all.valid.sum()),
             agreement=_agreement_of(rec),
+            nees_law=None if curve is None or main != "recovered" else _nees_law_of(result),
         )
 
 
@@ -398,6 +402,32 @@ def _agreement_of(rec: Recovery | None) -> Agreement | None:
     return estimate_agreement(
         rec.filter_poses, rec.filter_covariances, rec.trajectory.poses, rec.covariances
     )
+
+
+def _nees_law_of(result: RunResult) -> NeesLaw | None:
+    """The law of the recovered mean NEES with the map's error every pose shares
+    (:func:`~relation_metric.nees_law.shared_error_law`), on the poses the NEES is computed at
+    (:func:`slamrel.runs.nees.recovery_nees`); the log's own serial correlation from the NEES
+    sequence's ``n_eff``. ``None`` without map loadings (the filter)."""
+    from relation_metric.nees_law import shared_error_law
+    from slamrel.runs.nees import at_truth_times
+
+    rec, truth = result.recovery_result, result.bundle.groundtruth
+    curve = result.nees.get("recovered")
+    if rec is None or rec.map_loadings is None or truth is None or curve is None:
+        return None
+    got = at_truth_times(rec.trajectory, truth)
+    if got is None:
+        return None
+    rows = got[1][1:]  # the NEES leaves the prior out
+    v = np.asarray(curve.values, dtype=np.float64)
+    if rows.size != v.size or not np.isfinite(v).all() or v.size < 2:
+        return None
+    tau = v.size / effective_sample_size(v)
+    try:
+        return shared_error_law(rec.covariances[rows], rec.map_loadings[rows], local_factor=tau)
+    except InputError:
+        return None
 
 
 def _map_nees_of(result: RunResult) -> MapNees | None:
@@ -584,18 +614,27 @@ _CHI2_RULE = (
 
 
 def _nees_line(
-    what: str, key: str, n: NeesSummary, values: NDArray[np.float64] | None
+    what: str,
+    key: str,
+    n: NeesSummary,
+    values: NDArray[np.float64] | None,
+    law: NeesLaw | None = None,
 ) -> Judgement:
+    """The consistency lamp of one estimate; ``n_eff`` from ``law`` (the map's error shared
+    by every pose) when given, else the NEES sequence's (:func:`effective_sample_size`)."""
     v = None if values is None else np.asarray(values, dtype=np.float64)
     v = None if v is None else v[np.isfinite(v)]
     n_eff = effective_sample_size(v) if v is not None and v.size else 1.0
+    shared = ""
+    if law is not None and math.isfinite(law.n_eff) and law.n_eff > 0:
+        n_eff, shared = law.n_eff, " (the map's error shared by every pose)"
     q = n.mean / n.dof
     level, direction = _chi2_level(q, n.dof, n_eff)
     return Judgement(
         what,
-        f"NEES mean {_g(n.mean)} (dof {n.dof}): q = {_g(q)}, {direction}; n_eff {n_eff:.0f} "
-        f"of {0 if v is None else v.size} steps; {100 * n.inside:.0f} % of steps inside "
-        f"[{_g(n.band[0])}, {_g(n.band[1])}]",
+        f"NEES mean {_g(n.mean)} (dof {n.dof}): q = {_g(q)}, {direction}; n_eff {n_eff:.3g} "
+        f"of {0 if v is None else v.size} steps{shared}; {100 * n.inside:.0f} % of steps "
+        f"inside [{_g(n.band[0])}, {_g(n.band[1])}]",
         level,
         _CHI2_RULE,
         key,
@@ -608,7 +647,11 @@ def _consistency_lines(facts: RunFacts) -> list[Judgement]:
     n, main = facts.nees, facts.main
     lines = []
     if n is not None:
-        lines.append(_nees_line(f"consistency ({main})", "consistency", n, facts.nees_values))
+        lines.append(
+            _nees_line(
+                f"consistency ({main})", "consistency", n, facts.nees_values, facts.nees_law
+            )  # fmt: skip
+        )
     if facts.online_nees is not None:
         lines.append(
             _nees_line(
