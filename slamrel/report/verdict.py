@@ -19,7 +19,9 @@ Lamps (``green`` / ``amber`` / ``red``):
   mean of ``n_eff`` independent χ²(d) values (:func:`~relation_metric.consistency.
   mean_chi2_interval`; ``n_eff`` the effective sample size of the NEES sequence,
   :func:`~relation_metric.consistency.effective_sample_size`: a recovered trajectory's NEES
-  is correlated over time). Overconfident: amber when ``q`` is above the 99 % interval *and*
+  is correlated over time; for the smoother and the batch ``n_eff = h/3`` of the mean NEES's
+  moment-matched ``g χ²(h)`` with the map's error every pose shares,
+  :func:`~relation_metric.nees_law.shared_error_law`, docs/verdict.md). Overconfident: amber when ``q`` is above the 99 % interval *and*
   above :data:`OVERCONFIDENT` ``[0]`` (1.5), red when above the 99.99 % interval and above
   ``OVERCONFIDENT[1]`` (3). Conservative: amber below the 99 % interval and below
   :data:`CONSERVATIVE` ``[0]`` (0.5), red below ``CONSERVATIVE[1]`` (0.1: covariances ten
