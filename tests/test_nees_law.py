@@ -112,3 +112,21 @@ def test_the_quick_start_lamp_counts_the_shared_map(quickstart_run):
     assert facts.nees_law.n_eff < effective_sample_size(facts.nees_values) / 5
     line = next(j for j in run_verdict(facts).lines if j.key == "consistency")
     assert "shared by every pose" in line.value and line.level == "green"
+
+
+def test_loadings_follow_the_pose_into_the_robot_frame():
+    """``x = s ∘ m⁻¹``: the robot poses' loadings are the finite-difference derivative of the
+    robot pose along each sensor-pose loading."""
+    from recovery.mount import loadings_to_robot_frame, to_robot_frame
+
+    rng = np.random.default_rng(5)
+    s = rng.normal(size=(6, 3))
+    v = rng.normal(size=(6, 3, 2))
+    mount = np.array([0.3, 0.1, 0.2])
+    got = loadings_to_robot_frame(s, v, mount)
+    eye = np.broadcast_to(np.eye(3), (6, 3, 3))
+    h = 1e-6
+    for j in range(2):
+        up = to_robot_frame(s + h * v[:, :, j], eye, mount)[0]
+        down = to_robot_frame(s - h * v[:, :, j], eye, mount)[0]
+        np.testing.assert_allclose((up - down) / (2 * h), got[:, :, j], atol=1e-7)
