@@ -316,10 +316,18 @@ def recover(
     filt = None if method == "filter" else (fr.poses, fr.covariances)
     if mount is not None:
         poses, covariances = to_robot_frame(est.poses, est.covariances, mount)
-        loadings = est.map_loadings
+        loadings, ind = est.map_loadings, est.independent_covariances
         if loadings is not None:
             loadings = loadings_to_robot_frame(est.poses, loadings, mount)
-        est = replace(est, poses=poses, covariances=covariances, map_loadings=loadings)
+        if ind is not None:
+            ind = to_robot_frame(est.poses, ind, mount)[1]
+        est = replace(
+            est,
+            poses=poses,
+            covariances=covariances,
+            map_loadings=loadings,
+            independent_covariances=ind,
+        )
         if filt is not None:  # the agreement lamp compares both in the robot's frame
             filt = to_robot_frame(filt[0], filt[1], mount)
     covs, n_repaired = _check_finite(
@@ -349,6 +357,9 @@ def recover(
         map_prior=prior.prior,
         map_prior_reason=prior.reason,
         map_loadings=None if est.map_loadings is None else readonly(est.map_loadings),
+        agreement_covariances=None
+        if est.independent_covariances is None
+        else readonly(est.independent_covariances),
         filter_poses=None if filt is None else readonly(filt[0]),
         filter_covariances=None if filt is None else readonly(filt[1]),
     )
@@ -468,6 +479,7 @@ class _Estimate:
     costs: BatchCosts | None = None
     map_correction: Array | None = None
     map_loadings: Array | None = None
+    independent_covariances: Array | None = None
 
 
 def _estimate(
@@ -510,6 +522,7 @@ def _estimate(
         ),
         map_correction=None if br.map_correction is None else readonly(br.map_correction),
         map_loadings=br.map_loadings,
+        independent_covariances=br.independent_covariances,
     )
 
 

@@ -427,6 +427,11 @@ class Recovery:
         (:meth:`recovery.batch_refinement._JointProblem.map_loadings`), so the poses' errors
         are correlated by ``V_k V_lᵀ``; the verdict's consistency lamp uses it. ``None`` for
         the filter.
+    agreement_covariances : ndarray, shape (N, 3, 3), or None
+        With the deconditioned map prior, the smoother's covariances under the independent
+        one — the filter's own map model (a Schmidt filter cannot de-condition the map), so
+        that the filter-vs-smoother agreement compares two estimates of one model; ``None``
+        otherwise (``covariances`` are that).
     filter_poses, filter_covariances : ndarray, shape (N, 3), (N, 3, 3), or None
         The smoother's and the batch's own filter run (the EKF localisation they start
         from) at the same times, for the filter-vs-smoother agreement of the verdict
@@ -456,6 +461,7 @@ class Recovery:
     filter_covariances: Array | None = None
     map_prior_reason: str = ""
     map_loadings: Array | None = None
+    agreement_covariances: Array | None = None
 
     @property
     def stretches(self) -> tuple[Stretch, ...]:

@@ -21,13 +21,13 @@ Lamps (``green`` / ``amber`` / ``red``):
   :func:`~relation_metric.consistency.effective_sample_size`: a recovered trajectory's NEES
   is correlated over time; for the smoother and the batch ``n_eff = h/3`` of the mean NEES's
   moment-matched ``g χ²(h)`` with the map's error every pose shares,
-  :func:`~relation_metric.nees_law.shared_error_law`, docs/verdict.md). Overconfident: amber when ``q`` is above the 99 % interval *and*
-  above :data:`OVERCONFIDENT` ``[0]`` (1.5), red when above the 99.99 % interval and above
-  ``OVERCONFIDENT[1]`` (3). Conservative: amber below the 99 % interval and below
-  :data:`CONSERVATIVE` ``[0]`` (0.5), red below ``CONSERVATIVE[1]`` (0.1: covariances ten
-  times the error's say nothing). The allowances are the recovery's approximations
-  (linearisation; with a joint map covariance the recovered covariance is conservative,
-  docs/verdict.md gives the calibration);
+  :func:`~relation_metric.nees_law.shared_error_law`, docs/verdict.md). Overconfident:
+  amber when ``q`` is above the 99 % interval *and* above :data:`OVERCONFIDENT` ``[0]``
+  (1.5), red when above the 99.99 % interval and above ``OVERCONFIDENT[1]`` (3).
+  Conservative: amber below the 99 % interval and below :data:`CONSERVATIVE` ``[0]`` (0.5),
+  red below ``CONSERVATIVE[1]`` (0.1: covariances ten times the error's say nothing). The
+  allowances are the recovery's approximations (linearisation; with a joint map covariance
+  the recovered covariance is conservative, docs/verdict.md gives the calibration);
 * **NEES excursions** — runs of at least :data:`MIN_EXCURSION` consecutive steps with NEES
   above the 95 % single-pose band (:func:`nees_excursions`, no merging of runs), as a share
   of the steps: green ≤ 5 %, amber ≤ 20 %, red above. A consistent estimator is above the
@@ -398,12 +398,14 @@ def _scores_of(result: RunResult, main: str) -> tuple[dict[str, float], Evaluati
 
 
 def _agreement_of(rec: Recovery | None) -> Agreement | None:
-    """The recovery's own filter run against its smoother (or batch): no truth needed."""
+    """The recovery's own filter run against its smoother (or batch): no truth needed. The
+    smoother's covariances are taken under the filter's map model (the independent prior:
+    :attr:`~recovery.results.Recovery.agreement_covariances` when the map was de-conditioned),
+    so that ``P_f − P_s`` is ``d``'s covariance under one model."""
     if rec is None or rec.filter_poses is None or rec.filter_covariances is None:
         return None
-    return estimate_agreement(
-        rec.filter_poses, rec.filter_covariances, rec.trajectory.poses, rec.covariances
-    )
+    ps = rec.covariances if rec.agreement_covariances is None else rec.agreement_covariances
+    return estimate_agreement(rec.filter_poses, rec.filter_covariances, rec.trajectory.poses, ps)
 
 
 def _nees_law_of(result: RunResult) -> NeesLaw | None:
