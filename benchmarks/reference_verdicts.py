@@ -9,7 +9,8 @@ with the quantities the lamps judged (recovered and online NEES ``q``, map ``q``
 
 ``--compare-priors K``: on the first K runs, recover under both map priors and check that the
 trajectory is bit for bit the same and the accuracy (mean translational error on the global
-relations) moves by less than 1 %.
+relations) moves by less than 1 %. ``--consistency-before-after``: each run judged also with the
+consistency lamp's ``n_eff`` of the NEES sequence alone (before the map's shared error counted).
 
     nice python benchmarks/reference_verdicts.py -o /tmp/refverdicts --seeds 10-19 --workers 2
 """
@@ -77,6 +78,42 @@ def jacobians_case(world: str, noise: str, seed: int, jacobians: str) -> dict:  
     return case
 
 
+def lamp_before_after(world: str, noise: str, seed: int) -> dict:  # type: ignore[type-arg]
+    """The reference run judged as :func:`~slamrel.studies.calibration.reference_case`, and
+    under ``"before"`` the same run's verdict with the consistency lamp's ``n_eff`` of the NEES
+    sequence alone (before the map's shared error was counted, ``RunFacts.nees_law`` None)."""
+    from dataclasses import replace
+
+    from slamrel.pipeline import run_pipeline
+    from slamrel.report.verdict import RunFacts, run_verdict
+    from slamrel.studies.calibration import REFERENCE, judged_case
+
+    result = run_pipeline(world, noise=noise, seed=seed)
+    out = judged_case(result, REFERENCE)
+    before = run_verdict(replace(RunFacts.of(result), nees_law=None))
+    out["before"] = {
+        "overall": before.level,
+        "levels": {ln.key: ln.level for ln in before.lines},
+    }
+    return out
+
+
+def _before_after(records: list[dict]) -> list[str]:  # type: ignore[type-arg]
+    """Overall and consistency counts before and after the shared-error ``n_eff``."""
+    lines = []
+    for when in ("before", "after"):
+        res = [r["result"] if when == "after" else r["result"]["before"] for r in records]
+        o = collections.Counter(r["overall"] for r in res)
+        c = collections.Counter(r["levels"].get("consistency") for r in res)
+        lines.append(
+            f"{when}: overall "
+            + ", ".join(f"{k} {o[k]}" for k in ("green", "amber", "red"))
+            + "; recovered consistency "
+            + ", ".join(f"{k} {c[k]}" for k in ("green", "amber", "red"))
+        )
+    return lines
+
+
 def _summary(records: list[dict], worlds, noises) -> list[str]:  # type: ignore[no-untyped-def]
     lines = []
     overall = collections.Counter(r["result"]["overall"] for r in records)
@@ -124,10 +161,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--compare-priors", type=int, default=0, metavar="K")
     p.add_argument("--jacobians", choices=("standard", "fej", "oc"), default="standard")
+    p.add_argument("--consistency-before-after", action="store_true")
     a = p.parse_args(argv)
     worlds, noises = a.worlds.split(","), a.noise.split(",")
     tasks = [
         Task(
+            f"ref-before-after-{w}-{n}-{s}",
+            "benchmarks.reference_verdicts:lamp_before_after",
+            {"world": w, "noise": n, "seed": s},
+        )
+        if a.consistency_before_after
+        else Task(
             f"ref-{a.jacobians}-{w}-{n}-{s}",
             "benchmarks.reference_verdicts:jacobians_case",
             {"world": w, "noise": n, "seed": s, "jacobians": a.jacobians},
@@ -138,6 +182,8 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     run_sweep(tasks, out / "cases", workers=a.workers)
     lines = _summary(load_results(out / "cases", tasks), worlds, noises)
+    if a.consistency_before_after:
+        lines += _before_after(load_results(out / "cases", tasks))
     if a.compare_priors:
         cmp = [
             Task(f"cmp-{t.kwargs['world']}-{t.kwargs['noise']}-{t.kwargs['seed']}",

@@ -198,8 +198,9 @@ VALIDATION = [
         "(noise b) over a grid of **process-noise scale** {0.03, 0.1, 0.3, 1, 10} (the "
         "filter's assumed motion noise, relative to the true one) × **wrong associations** "
         "{0, 0.2, 0.5, 1, 2%}, and recovers each run with the CLI's default recovery (no "
-        "gate; redescending robust weights `(c/d)²` beyond `c = 1.75` standardised by the "
-        "scale of a plain pass; stretches where map and log disagree are re-entered and "
+        "gate; redescending robust weights `(c/d)²` beyond `c = √χ²₂(0.999) ≈ 3.72`, or "
+        "`c = 1.75` when a plain pass's innovations are heavy-tailed, standardised by the "
+        "scale of that pass; stretches where map and log disagree are re-entered and "
         "reported)."
     ),
     new_code_cell(
@@ -268,7 +269,8 @@ VALIDATION = [
         "ratios are to min(plain EKF, "
         "99.9%-gated EKF). Variants: `plain` and `gated` without re-entry or weights, "
         "`reentry` (plain + re-entry, the default before), `default` (redescending weights, "
-        "`c = 1.75`), `cauchy` (iterated, `c = 1.5`).\n\n"
+        "`c = 1.75` here: every robot's innovations are heavy-tailed), `cauchy` (iterated, "
+        "`c = 1.5`).\n\n"
         "Why the plain EKF loses: at the Vicon poses the measurements are heavy-tailed — the "
         "bearing residuals of robots 3 and 5 have a standard deviation of 0.08–0.09 rad "
         "against the fitted 0.008–0.009, and robot 5 sees landmark 9 with a bias of +0.078 rad "

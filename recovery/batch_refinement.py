@@ -135,8 +135,11 @@ MEMORY_SHARE = 0.5
 
 @dataclass(frozen=True)
 class BatchResult:
-    """Refined poses (N, 3), covariances (N, 3, 3), iterations, costs (½ rᵀ W r + ½ ηᵀη)
-    and the map correction ``L η`` (M, 2) estimated with them."""
+    """Refined poses (N, 3), covariances (N, 3, 3), iterations, costs (½ rᵀ W r + ½ ηᵀη),
+    the map correction ``L η`` (M, 2) estimated with them and the poses' map loadings
+    ``V`` (N, 3, r) of :meth:`_JointProblem.map_loadings` (their errors' shared part);
+    with the deconditioned prior, also the covariances under the independent one (the
+    filter's own map model, for the filter-vs-smoother agreement)."""
 
     poses: Array
     covariances: Array
@@ -144,6 +147,8 @@ class BatchResult:
     cost_initial: float
     cost_final: float
     map_correction: Array | None = None
+    map_loadings: Array | None = None
+    independent_covariances: Array | None = None
 
 
 def regularised_sigma(sigma: Array) -> Array:
@@ -558,27 +563,32 @@ class _JointProblem:
         return JointState(retract_chain(s.poses, delta[:nx]), s.eta + delta[nx:])
 
     def map_covariance_term(self, s: JointState, *, deconditioned: bool = False) -> Array:
-        """What the map's uncertainty adds to each pose's covariance ``(A⁻¹)_kk``, (N, 3, 3),
-        at ``s`` (undamped), with ``Y = A⁻¹ B`` (``−Y`` the poses' sensitivity to ``η``).
+        """What the map's uncertainty adds to each pose's covariance ``(A⁻¹)_kk``, (N, 3, 3):
+        ``V_k V_kᵀ`` of :meth:`map_loadings`."""
+        v = self.map_loadings(s)[1 if deconditioned else 0]
+        return v @ v.transpose(0, 2, 1)
 
-        Independent map (default): ``(Y S⁻¹ Yᵀ)_kk``, ``S = C − Bᵀ Y`` — the poses' block of
-        ``H⁻¹``, the map's prior ``Σ_m`` and the log's information about the map added.
-        ``deconditioned``: ``(Y Yᵀ)_kk`` — the law of total covariance
+    def map_loadings(self, s: JointState) -> tuple[Array, Array]:
+        """``V`` (N, 3, r) under each map prior, ``(independent, deconditioned)``: the poses'
+        errors' share of the map's error, ``e_k = a_k + V_k ξ`` with ``ξ ~ N(0, I_r)`` the
+        same for every pose, so ``Cov(e_k, e_l) = (A⁻¹)_kl + V_k V_lᵀ``, at ``s`` (undamped),
+        with ``Y = A⁻¹ B`` (``−Y`` the poses' sensitivity to ``η``).
+
+        Independent map: ``V = Y S^{-T/2}``, ``(Y S⁻¹ Yᵀ)_kk``, ``S = C − Bᵀ Y`` — the poses'
+        block of ``H⁻¹``, the map's prior ``Σ_m`` and the log's information about the map
+        added. Deconditioned: ``V = Y``, ``(Y Yᵀ)_kk`` — the law of total covariance
         ``Cov(X | Z) = A⁻¹ + A⁻¹ B Σ_m Bᵀ A⁻¹`` for a map whose ``Σ_m = L Lᵀ`` is already the
         posterior given this log (``η``'s prior stands for ``Cov(m | Z)``, so ``S`` is
         ``I``: the log's information about the map is not added a second time).
         """
         n = s.poses.shape[0]
         if not self.rank:
-            return np.zeros((n, 3, 3))
+            return np.zeros((n, 3, 0)), np.zeros((n, 3, 0))
         ab0, b, c = self.linearise(s).system
         y = _cholesky_solve(ab0.copy(order="F"), np.asfortranarray(b))
-        if deconditioned:
-            v = y.reshape(n, 3, self.rank)
-        else:
-            chol = scipy.linalg.cholesky(c - b.T @ y, lower=True)
-            v = scipy.linalg.solve_triangular(chol, y.T, lower=True).T.reshape(n, 3, self.rank)
-        return v @ v.transpose(0, 2, 1)
+        chol = scipy.linalg.cholesky(c - b.T @ y, lower=True)
+        v = scipy.linalg.solve_triangular(chol, y.T, lower=True).T
+        return v.reshape(n, 3, self.rank), y.reshape(n, 3, self.rank)
 
 
 def map_factor_of(inp: FilterInput) -> Array:
@@ -703,10 +713,22 @@ def refine(
     x[:, 2] = se2.wrap_angle(x[:, 2])
     state = JointState(x, res.x.eta)
     covs = batch_covariances(problem.map_inp(state.eta), x, used, weights, regularised=reg)
-    covs = covs + problem.map_covariance_term(state, deconditioned=map_prior == "deconditioned")
+    independent, deconditioned = problem.map_loadings(state)
+    loadings = deconditioned if map_prior == "deconditioned" else independent
+    filters_model = None  # the filter's own map model, when the prior is not it
+    if map_prior == "deconditioned":
+        filters_model = covs + independent @ independent.transpose(0, 2, 1)
+    covs = covs + loadings @ loadings.transpose(0, 2, 1)
     shift = (factor @ state.eta).reshape(-1, 2) if problem.rank else np.zeros_like(inp.map_xy)
     return BatchResult(
-        x, covs, res.iterations, float(res.costs[0]), float(res.costs[-1]), map_correction=shift
+        x,
+        covs,
+        res.iterations,
+        float(res.costs[0]),
+        float(res.costs[-1]),
+        map_correction=shift,
+        map_loadings=loadings,
+        independent_covariances=filters_model,
     )
 
 

@@ -25,7 +25,7 @@ from recovery.ekf import FilterInput
 from relation_metric import se2
 from relation_metric.arrays import Array
 
-__all__ = ["to_sensor_frame", "to_robot_frame", "conjugation_jacobian"]
+__all__ = ["to_sensor_frame", "to_robot_frame", "loadings_to_robot_frame", "conjugation_jacobian"]
 
 
 def _sandwich(j: Array, c: Array) -> Array:
@@ -60,3 +60,11 @@ def to_robot_frame(poses: Array, covariances: Array, mount: Array) -> tuple[Arra
     mi = np.broadcast_to(se2.inverse(np.asarray(mount, dtype=np.float64)), poses.shape)
     b = se2.compose_jacobian(poses, mi)
     return se2.compose(poses, mi), _sandwich(b, covariances)
+
+
+def loadings_to_robot_frame(poses: Array, loadings: Array, mount: Array) -> Array:
+    """The sensor poses' (N, 3) map loadings ``V`` (N, 3, r) for the robot's poses: ``B V``
+    with ``B`` the Jacobian of :func:`to_robot_frame` (so ``B V Vᵀ Bᵀ`` is its covariance
+    term)."""
+    mi = np.broadcast_to(se2.inverse(np.asarray(mount, dtype=np.float64)), poses.shape)
+    return se2.compose_jacobian(poses, mi) @ loadings

@@ -421,6 +421,21 @@ class Recovery:
     map_prior : str
         Where the map's error comes from (:data:`~recovery.constants.MAP_PRIORS`):
         ``independent`` of the log, or ``deconditioned`` (the map made from this log).
+    map_loadings : ndarray, shape (N, 3, r), or None
+        The smoother's and the batch's map loadings ``V``: each pose's error is
+        ``a_k + V_k ξ`` with ``ξ ~ N(0, I_r)`` the map's error, shared by every pose
+        (:meth:`recovery.batch_refinement._JointProblem.map_loadings`), so the poses' errors
+        are correlated by ``V_k V_lᵀ``; the verdict's consistency lamp uses it. ``None`` for
+        the filter.
+    agreement_covariances : ndarray, shape (N, 3, 3), or None
+        With the deconditioned map prior, the smoother's covariances under the independent
+        one — the filter's own map model (a Schmidt filter cannot de-condition the map), so
+        that the filter-vs-smoother agreement compares two estimates of one model; ``None``
+        otherwise (``covariances`` are that).
+    filter_poses, filter_covariances : ndarray, shape (N, 3), (N, 3, 3), or None
+        The smoother's and the batch's own filter run (the EKF localisation they start
+        from) at the same times, for the filter-vs-smoother agreement of the verdict
+        (``None`` for ``method="filter"``).
     map_prior_reason : str
         Why that prior (:func:`recovery.recover.resolve_map_prior`): asked for, the bundle's
         ``map_source``, or assumed because the bundle does not say.
@@ -442,7 +457,11 @@ class Recovery:
     map_uncertainty: MapUncertainty | None = None
     map_correction: Array | None = None
     map_prior: str = "independent"
+    filter_poses: Array | None = None
+    filter_covariances: Array | None = None
     map_prior_reason: str = ""
+    map_loadings: Array | None = None
+    agreement_covariances: Array | None = None
 
     @property
     def stretches(self) -> tuple[Stretch, ...]:

@@ -90,8 +90,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default=None,
         metavar="C",
         help="the M-estimator's threshold on the innovation's Mahalanobis distance, in units "
-        "of the scale estimated from a plain pass (default: 1.75 redescending, 1.5 huber and "
-        "cauchy)",
+        "of the scale estimated from a plain pass (default: 3.717 = √χ²₂(0.999) redescending, "
+        "1.5 huber and cauchy)",
     )
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar, no summary")
     p.set_defaults(func=run)

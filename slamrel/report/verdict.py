@@ -19,13 +19,15 @@ Lamps (``green`` / ``amber`` / ``red``):
   mean of ``n_eff`` independent χ²(d) values (:func:`~relation_metric.consistency.
   mean_chi2_interval`; ``n_eff`` the effective sample size of the NEES sequence,
   :func:`~relation_metric.consistency.effective_sample_size`: a recovered trajectory's NEES
-  is correlated over time). Overconfident: amber when ``q`` is above the 99 % interval *and*
-  above :data:`OVERCONFIDENT` ``[0]`` (1.5), red when above the 99.99 % interval and above
-  ``OVERCONFIDENT[1]`` (3). Conservative: amber below the 99 % interval and below
-  :data:`CONSERVATIVE` ``[0]`` (0.5), red below ``CONSERVATIVE[1]`` (0.1: covariances ten
-  times the error's say nothing). The allowances are the recovery's approximations
-  (linearisation; with a joint map covariance the recovered covariance is conservative,
-  docs/verdict.md gives the calibration);
+  is correlated over time; for the smoother and the batch ``n_eff = h/3`` of the mean NEES's
+  moment-matched ``g χ²(h)`` with the map's error every pose shares,
+  :func:`~relation_metric.nees_law.shared_error_law`, docs/verdict.md). Overconfident:
+  amber when ``q`` is above the 99 % interval *and* above :data:`OVERCONFIDENT` ``[0]``
+  (1.5), red when above the 99.99 % interval and above ``OVERCONFIDENT[1]`` (3).
+  Conservative: amber below the 99 % interval and below :data:`CONSERVATIVE` ``[0]`` (0.5),
+  red below ``CONSERVATIVE[1]`` (0.1: covariances ten times the error's say nothing). The
+  allowances are the recovery's approximations (linearisation; with a joint map covariance
+  the recovered covariance is conservative, docs/verdict.md gives the calibration);
 * **NEES excursions** — runs of at least :data:`MIN_EXCURSION` consecutive steps with NEES
   above the 95 % single-pose band (:func:`nees_excursions`, no merging of runs), as a share
   of the steps: green ≤ 5 %, amber ≤ 20 %, red above. A consistent estimator is above the
@@ -44,12 +46,20 @@ Lamps (``green`` / ``amber`` / ``red``):
   the map's NEES ``eᵀ Σ⁻¹ e`` over its ``2K`` dof (``e`` the error of the ``K`` matched
   landmarks in the NEES frame: joint covariance, or the marginals as independent blocks),
   against the χ²(2K) interval, with the allowances of the consistency lamp;
+* **filter vs smoother agreement** (no truth needed) — the recovery's filter minus its
+  smoother, ``d``, against ``P_f − P_s``, its covariance for consistent estimates
+  (:mod:`relation_metric.agreement`): ``q`` = mean ``dᵀ(P_f − P_s)⁻¹d`` over its dof, judged as
+  the consistency lamp on the overconfident side (``q < 1`` is green: a map made from the log
+  makes the two closer than stated, docs/verdict.md); a filter that diverges is red here;
 * **down-weighted information** (robust ``redescending``, the default) — the share of the
   measurements' information the robust weights took, against its expectation for
   consistent innovations, ``E[1 − w] = e^{−a} − a E₁(a)``, ``a = c²/2`` (χ²(2) innovations,
-  ``w = min(1, c²/d²)``): green ≤ 1.5×, amber ≤ 3×, red above. (A robust estimator always
-  down-weights some perfectly Gaussian innovations — 22 % of them at ``c = 1.75`` — so the
-  fraction itself is no finding.)
+  ``w = min(1, c²/d²)``): green ≤ 1.5× or within the 99.9 % quantile of its sampling law
+  (:func:`downweight_loss_bound`: at the default ``c = √χ²₂(0.999)`` only 0.1 % of
+  consistent innovations are touched, a few measurements' worth per run), red > 3× and
+  beyond the 99.99 % quantile, amber between. (A robust estimator always down-weights some
+  perfectly Gaussian innovations — 22 % of them at ``c = 1.75`` — so the fraction itself is
+  no finding.)
 
 Without ground truth the lamps that need it (the NEES's consistency and excursions, the map's
 consistency) are lines at the level ``not judged`` that say what they need; the accuracy lamps
@@ -78,6 +88,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from relation_metric.agreement import Agreement, estimate_agreement
 from relation_metric.consistency import (
     NeesSummary,
     chi2_quantile,
@@ -85,9 +96,11 @@ from relation_metric.consistency import (
     flag_runs,
     mean_chi2_interval,
 )
+from relation_metric.errors import InputError
+from relation_metric.nees_law import NeesLaw
 
 if TYPE_CHECKING:
-    from recovery.results import RecoveryCounts, RobustSettings
+    from recovery.results import Recovery, RecoveryCounts, RobustSettings
     from relation_metric.evaluate import Evaluation
     from slamrel.runs.result import MapSummary, RunResult
 
@@ -99,6 +112,7 @@ __all__ = [
     "run_verdict",
     "nees_excursions",
     "expected_downweight_loss",
+    "downweight_loss_bound",
     "map_nees",
     "gaussian_breaks",
     "MIN_EXCURSION",
@@ -123,6 +137,11 @@ OVERCONFIDENT = (1.5, 3.0)
 CONSERVATIVE = (0.5, 0.1)
 #: The map–log lamp: green/amber ranges of the mean NIS over its dof.
 NIS_RANGES = ((0.75, 1.25), (0.5, 1.5))
+#: The filter-vs-smoother lamp's allowance on ``q`` (amber/red only above it): healthy runs
+#: by construction reach 2.3 (the joint map error, shared by every pose, correlates the
+#: statistic beyond what ``n_eff`` sees), overconfident filters and 3× map errors start at 4.7
+#: (docs/verdict.md).
+AGREEMENT_ALLOWANCE = 3.0
 #: A map NEES per dof below this is rounding, not an error: the reference landmarks are the
 #: map's own numbers (MRCLAM's surveyed map against the same survey gives ~1e-28); no map
 #: estimated from data comes within 1e-12 of its truth in units of its own σ.
@@ -247,6 +266,27 @@ def expected_downweight_loss(threshold: float) -> float:
     return float(math.exp(-a) - a * exp1(a))
 
 
+def downweight_loss_bound(threshold: float, n: int, p: float) -> float:
+    """The ``p`` quantile of ``S = Σ (1 − w_i)`` over ``n`` consistent innovations (χ²(2)
+    NIS), in measurements, for the redescending weight at ``c = threshold``.
+
+    ``S`` is a compound Poisson sum (only innovations beyond ``c`` contribute): skewed when
+    ``c`` is far in the tail, normal when it is not. Matched on its mean ``n μ`` and variance
+    ``n m₂`` (``μ = E[1 − w]``, ``m₂ = E[(1 − w)²] = (1 + a) e^{−a} − (2a + a²) E₁(a)``,
+    ``a = c²/2``) by a scaled Poisson count, ``S ≈ θ N``, ``θ = m₂/μ``,
+    ``N ~ Poisson(n μ²/m₂)``: the quantile is ``θ F⁻¹(p)``.
+    """
+    from scipy.special import exp1
+    from scipy.stats import poisson
+
+    a = 0.5 * float(threshold) ** 2
+    mu = expected_downweight_loss(threshold)
+    m2 = float((1.0 + a) * math.exp(-a) - (2.0 * a + a * a) * exp1(a))
+    if n <= 0 or mu <= 0.0 or m2 <= 0.0:
+        return 0.0
+    return float(m2 / mu * poisson.ppf(p, n * mu * mu / m2))
+
+
 @dataclass(frozen=True)
 class RunFacts:
     """What the verdict judges: typed parts of a run's results (:meth:`of`).
@@ -319,6 +359,8 @@ class RunFacts:
     online_difference: float | None = None
     online_difference_relations: int = 0
     nis_landmarks: NDArray[np.int64] | None = None
+    agreement: Agreement | None = None
+    nees_law: NeesLaw | None = None
 
     @classmethod
     def of(cls, result: RunResult) -> RunFacts:
@@ -349,6 +391,8 @@ class RunFacts:
             has_online="online" in result.estimates,
             online_difference=None if diff is None else diff.all.translation.abs.mean,
             online_difference_relations=0 if diff is None else int(diff.all.valid.sum()),
+            agreement=_agreement_of(rec),
+            nees_law=None if curve is None or main != "recovered" else _nees_law_of(result),
         )
 
 
@@ -365,6 +409,43 @@ def _scores_of(result: RunResult, main: str) -> tuple[dict[str, float], Evaluati
     scores = result.reference.scores
     errors = {k: ev.translation.abs.mean for k, ev in scores.items() if ev.valid.any()}
     return errors, scores.get(main), "the reference relations"
+
+
+def _agreement_of(rec: Recovery | None) -> Agreement | None:
+    """The recovery's own filter run against its smoother (or batch): no truth needed. The
+    smoother's covariances are taken under the filter's map model (the independent prior:
+    :attr:`~recovery.results.Recovery.agreement_covariances` when the map was de-conditioned),
+    so that ``P_f − P_s`` is ``d``'s covariance under one model."""
+    if rec is None or rec.filter_poses is None or rec.filter_covariances is None:
+        return None
+    ps = rec.covariances if rec.agreement_covariances is None else rec.agreement_covariances
+    return estimate_agreement(rec.filter_poses, rec.filter_covariances, rec.trajectory.poses, ps)
+
+
+def _nees_law_of(result: RunResult) -> NeesLaw | None:
+    """The law of the recovered mean NEES with the map's error every pose shares
+    (:func:`~relation_metric.nees_law.shared_error_law`), on the poses the NEES is computed at
+    (:func:`slamrel.runs.nees.recovery_nees`); the log's own serial correlation from the NEES
+    sequence's ``n_eff``. ``None`` without map loadings (the filter)."""
+    from relation_metric.nees_law import shared_error_law
+    from slamrel.runs.nees import at_truth_times
+
+    rec, truth = result.recovery_result, result.bundle.groundtruth
+    curve = result.nees.get("recovered")
+    if rec is None or rec.map_loadings is None or truth is None or curve is None:
+        return None
+    got = at_truth_times(rec.trajectory, truth)
+    if got is None:
+        return None
+    rows = got[1][1:]  # the NEES leaves the prior out
+    v = np.asarray(curve.values, dtype=np.float64)
+    if rows.size != v.size or not np.isfinite(v).all() or v.size < 2:
+        return None
+    tau = v.size / effective_sample_size(v)
+    try:
+        return shared_error_law(rec.covariances[rows], rec.map_loadings[rows], local_factor=tau)
+    except InputError:
+        return None
 
 
 def _map_nees_of(result: RunResult) -> MapNees | None:
@@ -405,6 +486,7 @@ def run_verdict(facts: RunFacts) -> Verdict:
     lines = [
         *_accuracy_lines(facts, health),
         *health,
+        *_agreement_lines(facts),
         *_measurement_lines(facts),
         *(_map_lines(facts.map) if facts.map is not None else []),
     ]
@@ -649,18 +731,27 @@ _CHI2_RULE = (
 
 
 def _nees_line(
-    what: str, key: str, n: NeesSummary, values: NDArray[np.float64] | None
+    what: str,
+    key: str,
+    n: NeesSummary,
+    values: NDArray[np.float64] | None,
+    law: NeesLaw | None = None,
 ) -> Judgement:
+    """The consistency lamp of one estimate; ``n_eff`` from ``law`` (the map's error shared
+    by every pose) when given, else the NEES sequence's (:func:`effective_sample_size`)."""
     v = None if values is None else np.asarray(values, dtype=np.float64)
     v = None if v is None else v[np.isfinite(v)]
     n_eff = effective_sample_size(v) if v is not None and v.size else 1.0
+    shared = ""
+    if law is not None and math.isfinite(law.n_eff) and law.n_eff > 0:
+        n_eff, shared = law.n_eff, " (the map's error shared by every pose)"
     q = n.mean / n.dof
     level, direction = _chi2_level(q, n.dof, n_eff)
     return Judgement(
         what,
-        f"NEES mean {_g(n.mean)} (dof {n.dof}): q = {_g(q)}, {direction}; n_eff {n_eff:.0f} "
-        f"of {0 if v is None else v.size} steps; {100 * n.inside:.0f} % of steps inside "
-        f"[{_g(n.band[0])}, {_g(n.band[1])}]",
+        f"NEES mean {_g(n.mean)} (dof {n.dof}): q = {_g(q)}, {direction}; n_eff {n_eff:.3g} "
+        f"of {0 if v is None else v.size} steps{shared}; {100 * n.inside:.0f} % of steps "
+        f"inside [{_g(n.band[0])}, {_g(n.band[1])}]",
         level,
         _CHI2_RULE,
         key,
@@ -673,7 +764,11 @@ def _consistency_lines(facts: RunFacts) -> list[Judgement]:
     n, main = facts.nees, facts.main
     lines = []
     if n is not None:
-        lines.append(_nees_line(f"consistency ({main})", "consistency", n, facts.nees_values))
+        lines.append(
+            _nees_line(
+                f"consistency ({main})", "consistency", n, facts.nees_values, facts.nees_law
+            )  # fmt: skip
+        )
     if facts.online_nees is not None:
         lines.append(
             _nees_line(
@@ -769,6 +864,38 @@ def _map_log_lines(facts: RunFacts) -> list[Judgement]:
     ]
 
 
+def _agreement_lines(facts: RunFacts) -> list[Judgement]:
+    """The recovery's filter against its smoother: ``d = x̂_f − x̂_s`` against
+    ``P_f − P_s`` (:mod:`relation_metric.agreement`), judged as a NEES. Needs no truth."""
+    a = facts.agreement
+    if a is None or not a.dof.any():
+        return []
+    per = a.per_dof
+    n_eff = effective_sample_size(per) if per.size > 1 else 1.0
+    q = a.q
+    level, direction = _chi2_level(q, 3, n_eff)
+    if q < 1.0:  # one-sided: see the rule
+        level, direction = "green", "closer than P_f − P_s allows (not judged)"
+    elif q <= AGREEMENT_ALLOWANCE:
+        level, direction = "green", "within the allowance"
+    neg = f"; {a.negative} directions where the smoother is less certain" if a.negative else ""
+    return [
+        Judgement(
+            "filter vs smoother agreement",
+            f"q = {_g(q)}, {direction}; n_eff {n_eff:.0f} of {per.size} poses{neg}",
+            level,
+            "the recovery's filter minus its smoother, d, against P_filter − P_smoother (its "
+            "covariance for consistent estimates, docs/verdict.md): q = mean dᵀ(P_f − P_s)⁻¹d "
+            f"over its dof; amber above the 99 % interval of a mean of n_eff χ²(3) values and "
+            f"q > {_g(AGREEMENT_ALLOWANCE)}, red above the 99.99 % one; one-sided: "
+            "estimates closer than stated are no finding (a map made from the log itself "
+            "correlates them, and its smoother's P_s is then too small: docs/recovery.md)",
+            "agreement",
+            q,
+        )
+    ]
+
+
 def _map_consistency_lines(facts: RunFacts) -> list[Judgement]:
     m = facts.map_nees
     if m is None:
@@ -825,13 +952,26 @@ def _measurement_lines(facts: RunFacts) -> list[Judgement]:
         ]
     expected = expected_downweight_loss(robust.threshold)
     r = loss / expected if expected > 0 else float("inf")
+    n = counts.used + counts.gated
+    taken = loss * n  # in measurements
+    bounds = [downweight_loss_bound(robust.threshold, n, p) for p in (0.999, 0.9999)]
+    level = (
+        "green"
+        if r <= 1.5 or taken <= bounds[0]
+        else "red"
+        if r > 3.0 and taken > bounds[1]
+        else "amber"
+    )
     return [
         Judgement(
             "down-weighted information",
-            f"{value}; expected {100 * expected:.1f} % for consistent innovations: {_g(r)}×",
-            _level(r, 1.5, 3.0),
+            f"{value}; expected {100 * expected:.2g} % for consistent innovations: {_g(r)}×; "
+            f"{_g(taken)} measurements' worth of {n} (99.9 % bound {_g(bounds[0])})",
+            level,
             f"share of the information the robust weights took, over its expectation for χ²(2) "
-            f"innovations at c = {_g(robust.threshold)}; green ≤ 1.5×, amber ≤ 3×, red above",
+            f"innovations at c = {_g(robust.threshold)}; green ≤ 1.5× or within the 99.9 % "
+            "quantile of its sampling law, red > 3× and beyond the 99.99 % quantile, amber "
+            "between",
             "measurements",
             r,
         )
