@@ -321,7 +321,7 @@ def recover(
             f"the {method} could not factor a covariance or information matrix ({exc}): "
             "in float64 it is singular or indefinite, as when the motion or sensor noise is "
             "many orders of magnitude beyond the motion and the map; expected noise on their "
-            "scale (--method filter needs no such factorisation)"
+            "scale (method filter needs no such factorisation)"
         ) from None
     filt = None if method == "filter" else (fr.poses, fr.covariances)
     if mount is not None:
