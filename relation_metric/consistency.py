@@ -40,6 +40,7 @@ a consistent estimator exceeds it once in 10 000 values.
 """
 
 __all__ = [
+    "poisson_quantile",
     "OUTLIER_PROBABILITY",
     "flag_runs",
     "nees",
@@ -273,6 +274,21 @@ def chi2_quantile(probability: float, dof: int) -> float:
     from scipy.stats import chi2  # here, not at import: scipy.stats costs start-up
 
     return float(chi2.ppf(p, dof))
+
+
+def poisson_quantile(probability: float, mean: float) -> int:
+    """The Poisson quantile ``min{k : P(X ≤ k) ≥ probability}``, ``X ~ Poisson(mean)``, as
+    ``scipy.stats.poisson.ppf`` gives it, without importing scipy.stats (start-up):
+    ``P(X ≤ k) = Q(k + 1, mean)``, the regularised upper incomplete gamma function."""
+    from scipy.special import gammaincc
+
+    lam = max(float(mean), 0.0)
+    if lam == 0.0:
+        return 0
+    ks = np.arange(0, int(lam + 12.0 * math.sqrt(lam) + 40.0), dtype=np.float64)
+    cdf = gammaincc(ks + 1.0, lam)
+    hit = np.flatnonzero(cdf >= float(probability))
+    return int(ks[hit[0]]) if hit.size else int(ks[-1])
 
 
 def _chi2_3_quantile(p: float, z: float) -> float:

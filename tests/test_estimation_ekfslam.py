@@ -190,9 +190,12 @@ def test_bad_input():
         )
 
 
-def _update_full_product(mu, cov, n, slot, meas, r_cov, t, m, gate=np.inf):
+def _update_full_product(
+    mu, cov, n, slot, meas, r_cov, t, m, gate=np.inf, lin=None, heading_from=None
+):
     """The update as it was before the blocked in-place form (full ``K Hᵀ`` product +
-    ``0.5·(P + Pᵀ)`` pass)."""
+    ``0.5·(P + Pᵀ)`` pass); the standard Jacobians only (no ``lin``/``heading_from``)."""
+    assert lin is None and heading_from is None
     from recovery.models import range_bearing
 
     h, hx, hl = range_bearing(mu[:3], mu[slot : slot + 2])

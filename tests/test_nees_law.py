@@ -130,3 +130,14 @@ def test_loadings_follow_the_pose_into_the_robot_frame():
         up = to_robot_frame(s + h * v[:, :, j], eye, mount)[0]
         down = to_robot_frame(s - h * v[:, :, j], eye, mount)[0]
         np.testing.assert_allclose((up - down) / (2 * h), got[:, :, j], atol=1e-7)
+
+
+@pytest.mark.parametrize("mean", [0.0, 0.004, 0.7, 3.0, 12.5, 480.0])
+@pytest.mark.parametrize("probability", [0.5, 0.99, 0.9999])
+def test_poisson_quantile_equals_scipy_stats(mean: float, probability: float) -> None:
+    """The start-up-light Poisson quantile equals scipy.stats.poisson.ppf (the oracle)."""
+    from scipy.stats import poisson
+
+    from relation_metric.consistency import poisson_quantile
+
+    assert poisson_quantile(probability, mean) == int(poisson.ppf(probability, mean))

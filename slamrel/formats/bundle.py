@@ -168,9 +168,7 @@ def _number(
     if isinstance(value, int) and not isinstance(value, bool):  # JSON integers are exact
         value = float(value) if abs(value) < 2**1024 else math.inf  # beyond float64: inf
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise InputError(
-            f"{what}: expected a finite number, got {shown}", path=path, line=line
-        )
+        raise InputError(f"{what}: expected a finite number, got {shown}", path=path, line=line)
     if minimum is not None and value < minimum:
         raise InputError(
             f"{what}: expected a number >= {minimum}, got {shown}", path=path, line=line
