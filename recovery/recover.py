@@ -471,12 +471,11 @@ def _heavy_tailed(nis: Array, scale: float) -> bool:
     """Whether a plain pass's innovations, standardised by ``ŝ²``, have more beyond the
     99.9 % χ²(2) bound than consistent ones could: above the Poisson 99.99 % quantile of
     that count and 0.5 % of them (the map–log lamp's red rule)."""
-    from relation_metric.consistency import poisson_quantile
+    from relation_metric.consistency import nis_tail_level
 
     v = np.asarray(nis, dtype=np.float64)
     v = v[np.isfinite(v)] / (scale * scale)
-    tail = int((v > chi2_quantile(0.999, 2)).sum())
-    return bool(tail > poisson_quantile(0.9999, 0.001 * v.size) and tail > 0.005 * v.size)
+    return nis_tail_level(int((v > chi2_quantile(0.999, 2)).sum()), v.size) == "red"
 
 
 @dataclass(frozen=True)

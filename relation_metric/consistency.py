@@ -40,6 +40,7 @@ a consistent estimator exceeds it once in 10 000 values.
 """
 
 __all__ = [
+    "nis_tail_level",
     "poisson_quantile",
     "OUTLIER_PROBABILITY",
     "flag_runs",
@@ -289,6 +290,21 @@ def poisson_quantile(probability: float, mean: float) -> int:
     cdf = gammaincc(ks + 1.0, lam)
     hit = np.flatnonzero(cdf >= float(probability))
     return int(ks[hit[0]]) if hit.size else int(ks[-1])
+
+
+def nis_tail_level(tail: int, n: int, probability: float = 0.999) -> str:
+    """How far ``tail`` of ``n`` consistent innovations beyond their ``probability`` bound
+    exceed the ``(1 − probability)·n`` expected: ``"red"`` above the Poisson 99.99 % quantile
+    of that count and 0.5 % of ``n``, ``"amber"`` above its 99.9 % quantile and 0.2 %, else
+    ``"green"`` — the one home of the NIS tail rule (map–log lamp, its cause, the robust
+    default's heavy-tail switch)."""
+    lam = (1.0 - probability) * n
+    share = tail / n if n else 0.0
+    if tail > poisson_quantile(0.9999, lam) and share > 0.005:
+        return "red"
+    if tail > poisson_quantile(0.999, lam) and share > 0.002:
+        return "amber"
+    return "green"
 
 
 def _chi2_3_quantile(p: float, z: float) -> float:

@@ -141,3 +141,24 @@ def test_poisson_quantile_equals_scipy_stats(mean: float, probability: float) ->
     from relation_metric.consistency import poisson_quantile
 
     assert poisson_quantile(probability, mean) == int(poisson.ppf(probability, mean))
+
+
+def test_nis_tail_level_is_the_poisson_rule_written_with_scipy() -> None:
+    """The shared NIS tail rule against the rule written out with scipy.stats (the oracle):
+    red above the 99.99 % Poisson quantile and 0.5 %, amber above 99.9 % and 0.2 %."""
+    from scipy.stats import poisson
+
+    from relation_metric.consistency import nis_tail_level
+
+    for n in (0, 50, 400, 2183, 10_000):
+        lam = 0.001 * n
+        for tail in range(0, max(3, n // 40)):
+            share = tail / n if n else 0.0
+            want = (
+                "red"
+                if tail > poisson.ppf(0.9999, lam) and share > 0.005
+                else "amber"
+                if tail > poisson.ppf(0.999, lam) and share > 0.002
+                else "green"
+            )
+            assert nis_tail_level(tail, n) == want, (tail, n)

@@ -12,6 +12,7 @@ import pytest
 from relation_metric import se2
 from slamrel.scans.own_guesses import chain_guesses
 from slamrel.simulation.laser import laser_world, loop_path, simulate_laser_log
+from tests.test_cycles import _flaser_log
 
 CORNERS = np.array([[1.5, 1.5], [28.5, 1.5], [28.5, 18.5], [1.5, 18.5]])
 
@@ -53,16 +54,6 @@ def test_a_single_scan_is_its_own_guess():
     log = simulate_laser_log(laser_world("loop"), truth, seed=0)
     got = chain_guesses(log.scans, log.scans.laser_pose)
     np.testing.assert_array_equal(got.poses, log.scans.laser_pose)
-
-
-def _flaser_log(path, scans) -> None:
-    lines = []
-    for k in range(len(scans)):
-        r = " ".join(f"{v:.4f}" for v in scans.ranges[k])
-        pose = " ".join(f"{v:.6f}" for v in scans.laser_pose[k])
-        t = scans.timestamps[k]
-        lines.append(f"FLASER {scans.ranges.shape[1]} {r} {pose} {pose} {t:.3f} sim {t:.3f}\n")
-    path.write_text("".join(lines))
 
 
 def _loop_pairs(path) -> np.ndarray:

@@ -95,6 +95,7 @@ from relation_metric.consistency import (
     effective_sample_size,
     flag_runs,
     mean_chi2_interval,
+    nis_tail_level,
 )
 from relation_metric.errors import InputError
 from relation_metric.nees_law import NeesLaw
@@ -514,7 +515,6 @@ def gaussian_breaks(facts: RunFacts) -> list[str]:
       white-noise filter takes a run of such measurements for about ``(1 + ρ)/(1 − ρ)`` times
       the information it holds (AR(1)), which is how much too high to expect the NEES.
     """
-    from scipy.stats import poisson
 
     if facts.nis is None:
         return []
@@ -526,11 +526,7 @@ def gaussian_breaks(facts: RunFacts) -> list[str]:
     bound = chi2_quantile(NIS_TAIL, 2)
     tail = int((v > bound).sum())
     median = float(np.median(v))
-    if (
-        tail > poisson.ppf(0.999, (1 - NIS_TAIL) * v.size)
-        and tail > 0.002 * v.size
-        and median <= 1.25 * 2 * math.log(2)
-    ):
+    if nis_tail_level(tail, v.size, NIS_TAIL) != "green" and median <= 1.25 * 2 * math.log(2):
         p = math.exp(-bound / 2)
         rest = float(v[v <= bound].mean()) / (2 - bound * p / (1 - p))
         causes.append(
@@ -825,7 +821,6 @@ def _map_log_lines(facts: RunFacts) -> list[Judgement]:
     """The recovery filter's NIS: its mean over the dof and its tail beyond the 99.9 % bound."""
     if facts.nis is None:
         return []
-    from scipy.stats import poisson
 
     v = np.asarray(facts.nis, dtype=np.float64)
     v = v[np.isfinite(v)]
@@ -841,13 +836,7 @@ def _map_log_lines(facts: RunFacts) -> list[Judgement]:
     q_level = (
         "green" if g_lo <= q <= g_hi else "amber" if a_lo <= q <= a_hi else "red"
     ) if math.isfinite(q) else "amber"  # fmt: skip
-    tail_level = (
-        "red"
-        if tail > poisson.ppf(0.9999, lam) and share > 0.005
-        else "amber"
-        if tail > poisson.ppf(0.999, lam) and share > 0.002
-        else "green"
-    )
+    tail_level = nis_tail_level(tail, n, NIS_TAIL)
     return [
         Judgement(
             "map–log agreement (NIS)",
