@@ -150,6 +150,7 @@ def test_trajectories_are_drawn_on_the_reference(simulated) -> None:
     assert rms(drawn, ref) <= rms(est.poses[:, :2], ref) + 1e-9
 
 
+@pytest.mark.slow
 def test_a_landmark_fit_beyond_c_does_not_place_the_map() -> None:
     """The same corrupted map paired by id (forced): its fit leaves metres of residual, so
     every estimate is drawn by its own SE(2) fit on the reference, and the caption says why."""

@@ -144,6 +144,7 @@ def test_each_nees_and_divergence_key_is_written_once(
     }  # fmt: skip
 
 
+@pytest.mark.slow
 def test_one_nees_per_estimate_the_one_the_page_shows(
     report: tuple[Path, _Page, dict[str, Any]], tmp_path: Path
 ) -> None:

@@ -31,6 +31,7 @@ def _need_distributed() -> None:
         pytest.skip(message)
 
 
+@pytest.mark.slow
 def test_small_study_writes_tables_and_a_rerun_skips_everything(tmp_path, capsys):
     out = tmp_path / "study"
     assert main(["study", "pose-only", "--runs", "1", "-o", str(out), "-q", *SMALL]) == 0
