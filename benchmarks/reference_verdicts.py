@@ -244,6 +244,25 @@ def _summary(records: list[dict], worlds, noises) -> list[str]:  # type: ignore[
     return lines
 
 
+def _grid_tasks(
+    prefix: str,
+    function: str,
+    worlds: list[str],
+    noises: list[str],
+    seeds: list[int],
+    extra: dict[str, str],
+) -> list[Task]:
+    """One task ``PREFIX-WORLD-NOISE-SEED`` of this module's ``function`` per world × noise × seed."""
+    return [
+        Task(
+            f"{prefix}-{w}-{n}-{s}",
+            f"benchmarks.reference_verdicts:{function}",
+            {"world": w, "noise": n, "seed": s, **extra},
+        )
+        for w, n, s in itertools.product(worlds, noises, seeds)
+    ]
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("-o", "--output", required=True)
@@ -259,20 +278,12 @@ def main(argv: list[str] | None = None) -> int:
     worlds, noises = a.worlds.split(","), a.noise.split(",")
     if a.rigid_removed:
         return _rigid_main(a, worlds, noises)
-    tasks = [
-        Task(
-            f"ref-before-after-{w}-{n}-{s}",
-            "benchmarks.reference_verdicts:lamp_before_after",
-            {"world": w, "noise": n, "seed": s},
-        )
+    grid = (worlds, noises, a.seeds)
+    tasks = (
+        _grid_tasks("ref-before-after", "lamp_before_after", *grid, {})
         if a.consistency_before_after
-        else Task(
-            f"ref-{a.jacobians}-{w}-{n}-{s}",
-            "benchmarks.reference_verdicts:jacobians_case",
-            {"world": w, "noise": n, "seed": s, "jacobians": a.jacobians},
-        )
-        for w, n, s in itertools.product(worlds, noises, a.seeds)
-    ]
+        else _grid_tasks(f"ref-{a.jacobians}", "jacobians_case", *grid, {"jacobians": a.jacobians})
+    )
     out = Path(a.output)
     out.mkdir(parents=True, exist_ok=True)
     run_sweep(tasks, out / "cases", workers=a.workers)
@@ -304,14 +315,14 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _rigid_main(a: argparse.Namespace, worlds: list[str], noises: list[str]) -> int:
-    tasks = [
-        Task(
-            f"rigid-{a.jacobians}-{w}-{n}-{s}",
-            "benchmarks.reference_verdicts:rigid_removed_case",
-            {"world": w, "noise": n, "seed": s, "jacobians": a.jacobians},
-        )
-        for w, n, s in itertools.product(worlds, noises, a.seeds)
-    ]
+    tasks = _grid_tasks(
+        f"rigid-{a.jacobians}",
+        "rigid_removed_case",
+        worlds,
+        noises,
+        a.seeds,
+        {"jacobians": a.jacobians},
+    )
     out = Path(a.output)
     out.mkdir(parents=True, exist_ok=True)
     run_sweep(tasks, out / "rigid", workers=a.workers)
