@@ -164,6 +164,11 @@ def _rigid_summary(records: list[dict], jacobians: str) -> list[str]:  # type: i
         f"translation m {mm([float(np.hypot(*r['rigid'][:2])) for r in res])}",
         f"  recovered q before {mm([r['before']['q'] for r in res])} -> rigid removed "
         f"{mm([r['after']['q'] for r in res])}",
+        "  recovered consistency green/amber/red "
+        + " -> rigid removed ".join(
+            "/".join(str(sum(r[w]["level"] == lv for r in res)) for lv in ("green", "amber", "red"))
+            for w in ("before", "after")
+        ),
         "  mean abs position error [m] before "
         f"{np.mean([r['before']['position_error'] for r in res]):.3f} -> rigid removed "
         f"{np.mean([r['after']['position_error'] for r in res]):.3f}",
