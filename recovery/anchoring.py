@@ -47,8 +47,10 @@ __all__ = [
     "ASSOCIATIONS",
     "Anchoring",
     "NeesFrame",
+    "RigidSplit",
     "anchor_on_landmarks",
     "anchor_on_start",
+    "rigid_split",
     "start_frame",
     "shared_by_id",
     "truth_at_start",
@@ -271,3 +273,150 @@ def start_frame(
     a = anchor_on_start(initial_pose, initial_covariance, truth_start)
     reason = "" if a is not None else "the run's start pose is the ground truth's"
     return NeesFrame(a, reason, map_anchoring)
+
+
+@dataclass(frozen=True)
+class RigidSplit:
+    """A map's error split into a rigid motion of the whole map and what is left (issue 36).
+
+    With ``m`` the estimated landmarks and ``t`` the true ones, both ``(n, 2)``, the rigid part
+    is the motion ``T(p) = R(θ) p + d`` of the *true* map that comes closest to the estimate in
+    the metric ``W`` of the map's stated covariance ``P`` (``W = P⁻¹``; the identity without
+    one) — the gauge of the map, a translation and a rotation no landmark measurement fixes:
+
+        (R1)  T̂ = argmin_T  ρ(T)ᵀ W ρ(T),   ρ(T) = vec(m) − vec(T(t))   (2n,)
+        (R2)  rigid part     g = vec(T̂(t)) − vec(t),   residual  r = ρ(T̂),   g + r = vec(m − t)
+        (R3)  NEES_rigid = eᵀ W e − rᵀ W r,   NEES_residual = rᵀ W r,   e = vec(m − t)
+
+    ``vec`` stacks ``[x₀, y₀, x₁, y₁, …]``, the order of ``bundle.map_covariance``. (R1) is
+    solved by Gauss–Newton from Umeyama's unweighted closed form (exact for ``W = I``). When
+    ``e ~ N(0, P)`` and ``T`` is linearised (small angle), (R3) splits the map's NEES
+    ``eᵀ P⁻¹ e ~ χ²_{2n}`` into the P⁻¹-orthogonal projection of ``e`` on the 3 gauge
+    directions, χ²₃, and its complement, χ²_{2n−3} (Cochran): a map drawn from its stated
+    covariance has both about their degrees of freedom; a map whose covariance under-states the
+    gauge (a filter's spurious heading information) has the rigid NEES too large only.
+
+    Attributes
+    ----------
+    dx, dy, dtheta : float
+        ``T̂``: the true map moved by ``R(dθ) p + [dx, dy]`` is closest to the estimate
+        (``dθ`` in rad, ``[−π, π)``): the estimate ≈ the truth moved by it.
+    rigid : ndarray, shape (n, 2)
+        ``T̂(t) − t``, the rigid part of the error ``m − t`` [m].
+    residual : ndarray, shape (n, 2)
+        ``m − T̂(t)``, the rest [m].
+    nees_rigid, nees_residual : float or None
+        (R3) over 3 and ``2n − 3`` degrees of freedom; ``None`` without a covariance.
+    """
+
+    dx: float
+    dy: float
+    dtheta: float
+    rigid: Array
+    residual: Array
+    nees_rigid: float | None
+    nees_residual: float | None
+
+    @property
+    def dof_rigid(self) -> int:
+        return 3
+
+    @property
+    def dof_residual(self) -> int:
+        return 2 * int(self.rigid.shape[0]) - 3
+
+    def remove(
+        self, map_xy: ArrayLike, map_covariance: ArrayLike | None = None
+    ) -> tuple[Array, Array | None]:
+        """A map ``(M, 2)`` (and its covariance ``(2M, 2M)``) moved by ``T̂⁻¹``: the estimate's
+        rigid part taken away, its shape (every distance between landmarks) kept; the
+        covariance rotated by ``blockdiag(R(−dθ), …)``."""
+        c, s = np.cos(self.dtheta), np.sin(self.dtheta)
+        rinv = np.array([[c, s], [-s, c]])
+        xy = (np.asarray(map_xy, dtype=np.float64) - [self.dx, self.dy]) @ rinv.T
+        if map_covariance is None:
+            return xy, None
+        p = np.asarray(map_covariance, dtype=np.float64)
+        m = p.shape[0] // 2
+        q = p.reshape(m, 2, m, 2)
+        q = np.einsum("ab,ibjc,dc->iajd", rinv, q, rinv)
+        return xy, q.reshape(2 * m, 2 * m)
+
+
+def _gauge_jacobian(rotated: Array) -> Array:
+    """``∂ vec(T(t)) / ∂ [dx, dy, θ]``, ``(2n, 3)``, with ``rotated = R(θ) t``
+    (``R'(θ) t = J R(θ) t``, ``J`` the quarter turn)."""
+    n = rotated.shape[0]
+    g = np.zeros((n, 2, 3))
+    g[:, 0, 0] = 1.0
+    g[:, 1, 1] = 1.0
+    g[:, 0, 2] = -rotated[:, 1]
+    g[:, 1, 2] = rotated[:, 0]
+    return g.reshape(2 * n, 3)
+
+
+def rigid_split(
+    map_est: ArrayLike, map_true: ArrayLike, cov: ArrayLike | None = None
+) -> RigidSplit:
+    """The :class:`RigidSplit` of an estimated map ``(n, 2)`` against the true one ``(n, 2)``
+    (row ``k`` of each the same landmark, ``n ≥ 2``), in the metric of ``cov`` ``(2n, 2n)``
+    (``[x, y]`` per landmark, the estimate's covariance) or unweighted without it.
+
+    Raises :class:`~relation_metric.errors.InputError` for mismatched shapes, fewer than 2
+    landmarks, or a covariance that is not symmetric positive definite.
+    """
+    from relation_metric.errors import InputError
+
+    m = np.asarray(map_est, dtype=np.float64)
+    t = np.asarray(map_true, dtype=np.float64)
+    if m.ndim != 2 or m.shape[1:] != (2,) or m.shape != t.shape or m.shape[0] < 2:
+        raise InputError(
+            "rigid split: two maps of the same shape (n ≥ 2, 2) expected, "
+            f"got {m.shape} and {t.shape}"
+        )
+    n = m.shape[0]
+    e = (m - t).reshape(-1)
+    al = umeyama(t, m)
+    d, th = np.array(al.translation[:2], dtype=np.float64), float(al.angle)
+    w: Array | None = None
+    if cov is not None:
+        p = np.asarray(cov, dtype=np.float64)
+        if p.shape != (2 * n, 2 * n) or not np.allclose(p, p.T, rtol=1e-9, atol=1e-15):
+            raise InputError(
+                f"rigid split: a symmetric ({2 * n}, {2 * n}) covariance expected, got {p.shape}"
+            )
+        try:
+            chol = np.linalg.cholesky(p)
+        except np.linalg.LinAlgError:
+            raise InputError("rigid split: the map covariance is not positive definite") from None
+        w = np.linalg.inv(chol)  # whitening: W = wᵀ w
+        for _ in range(50):
+            moved = _moved(t, d, th)
+            a = w @ _gauge_jacobian(moved - d)
+            b = w @ (m - moved).reshape(-1)
+            step = np.linalg.lstsq(a, b, rcond=None)[0]
+            d, th = d + step[:2], th + float(step[2])
+            if float(np.max(np.abs(step))) < 1e-14:
+                break
+    moved = _moved(t, d, th)
+    residual = m - moved
+    nr = nt = None
+    if w is not None:
+        we, wr = w @ e, w @ residual.reshape(-1)
+        nr = float(wr @ wr)
+        nt = float(we @ we) - nr
+    return RigidSplit(
+        dx=float(d[0]),
+        dy=float(d[1]),
+        dtheta=float(se2.wrap_angle(th)),
+        rigid=moved - t,
+        residual=residual,
+        nees_rigid=nt,
+        nees_residual=nr,
+    )
+
+
+def _moved(t: Array, d: Array, theta: float) -> Array:
+    """``R(θ) t + d`` for points ``t`` ``(n, 2)``."""
+    c, s = np.cos(theta), np.sin(theta)
+    return t @ np.array([[c, -s], [s, c]]).T + d
