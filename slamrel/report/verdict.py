@@ -751,22 +751,39 @@ def _consistency_lines(facts: RunFacts) -> list[Judgement]:
     if n is not None and facts.nees_values is not None:
         v = np.asarray(facts.nees_values, dtype=np.float64)
         v = v[np.isfinite(v)]
-        runs = nees_excursions(v, float(n.band[1]))
+        scale = _excursion_scale(lines[0])
+        runs = nees_excursions(v, scale * float(n.band[1]))
         cover = sum(runs) / v.size if v.size else 0.0
+        scaled = (
+            f"; band × q = {_g(scale)}, the overconfidence the consistency lamp judges amber"
+            if scale != 1.0
+            else ""
+        )
         lines.append(
             Judgement(
                 "NEES excursions",
                 f"{len(runs)} (longest {max(runs, default=0)} steps, "
-                f"{100 * cover:.0f} % of {v.size})",
+                f"{100 * cover:.0f} % of {v.size}{scaled})",
                 _level(cover, 0.05, 0.2),
                 f"share of the steps in runs of ≥ {MIN_EXCURSION} steps with NEES above the 95 % "
-                "band (a consistent estimator is above it 2.5 % of the time); green ≤ 5 %, "
-                "amber ≤ 20 %, red above",
+                "band (a consistent estimator is above it 2.5 % of the time; where the "
+                "consistency lamp is amber for overconfidence, the band × its q: the excursions "
+                "judge what is local, not that scale again); green ≤ 5 %, amber ≤ 20 %, red above",
                 "excursions",
                 cover,
             )
         )
     return lines
+
+
+def _excursion_scale(consistency: Judgement) -> float:
+    """``q`` of a consistency lamp that is amber for overconfidence (``q > 1``), else 1: the
+    factor on the excursions' band, so that a uniform overconfidence already judged amber
+    is not judged again, step by step, by the excursions (a red consistency lamp keeps it)."""
+    q = consistency.measure
+    if consistency.level == "amber" and q is not None and math.isfinite(q) and q > 1.0:
+        return float(q)
+    return 1.0
 
 
 def _whose(recovered: Judgement, online: Sequence[Judgement]) -> str:
