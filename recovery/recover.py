@@ -70,7 +70,7 @@ from recovery.results import (
 from recovery.smoother import smooth
 from recovery.steps import Steps, build_steps
 from relation_metric.arrays import Array
-from relation_metric.consistency import chi2_quantile, flag_runs
+from relation_metric.consistency import chi2_quantile, flag_runs, nis_persistence
 from relation_metric.errors import InputError
 from relation_metric.trajectory import Trajectory, readonly
 
@@ -219,6 +219,7 @@ def recover(
     robust_scale: float | str = "auto",
     progress: bool = False,
     map_prior: str = DEFAULT_MAP_PRIOR,
+    persistence: bool = True,
 ) -> Recovery:
     """Recover the trajectory of a SLAM run by localisation in its final map.
 
@@ -279,6 +280,15 @@ def recover(
         poses' block of the joint information with the log's information about the map
         counted a second time (docs/recovery.md). The trajectory is the same under both;
         smoother and batch only.
+    persistence : bool
+        Default ``True``: when the first pass's innovations are correlated in time along
+        each landmark's track (:func:`~relation_metric.consistency.nis_persistence`: lag-1
+        correlation ``ρ`` significantly above 0), a white-noise filter counts a persisting
+        error's sightings as independent; a second whole pass with the measurement noise
+        ``R × (1 + ρ)/(1 − ρ)`` gives the covariances (and the map loadings, the filter's
+        covariances), while the trajectory stays the first pass's (the score judges the
+        filter's map). The factor and ``ρ`` are in :class:`Recovery`; without a significant
+        ``ρ`` the factor is exactly 1 and nothing is re-run. ``False``: one pass.
 
     Returns
     -------
@@ -304,26 +314,15 @@ def recover(
     kw = dict(gate=gate, max_outlier_run=max_outlier_run, on_divergence=on_divergence)
     robust = None if robust == "none" else robust
     settings = _robust_settings(inp, kw, robust, robust_threshold, robust_scale)
-    fr: FilterResult = run_filter(
-        inp,
-        robust=robust,
-        robust_threshold=None if settings is None else settings.effective,
-        progress=progress,
-        **kw,  # type: ignore[arg-type]
-    )
+    threshold = None if settings is None else settings.effective
+    setup = _PassSetup(method, mu, prior.prior, kw, robust, threshold)
+    fr, est = _pass(setup, inp, progress)
     weights = None if robust is None else fr.weights
-    try:
-        est = _estimate(method, inp, fr, mu, weights, prior.prior)
-    except np.linalg.LinAlgError as exc:
-        from relation_metric.errors import DivergenceError
-
-        raise DivergenceError(
-            f"the {method} could not factor a covariance or information matrix ({exc}): "
-            "in float64 it is singular or indefinite, as when the motion or sensor noise is "
-            "many orders of magnitude beyond the motion and the map; expected noise on their "
-            "scale (method filter needs no such factorisation)"
-        ) from None
-    filt = None if method == "filter" else (fr.poses, fr.covariances)
+    pers = nis_persistence(fr.nis, bundle.measurement_landmarks) if persistence else None
+    filt_covs = fr.covariances
+    if pers is not None and pers.significant:
+        est, filt_covs = _persistent_pass(setup, inp, est, pers.factor)
+    filt = None if method == "filter" else (fr.poses, filt_covs)
     if mount is not None:
         poses, covariances = to_robot_frame(est.poses, est.covariances, mount)
         loadings, ind = est.map_loadings, est.independent_covariances
@@ -372,7 +371,69 @@ def recover(
         else readonly(est.independent_covariances),
         filter_poses=None if filt is None else readonly(filt[0]),
         filter_covariances=None if filt is None else readonly(filt[1]),
+        persistence_factor=1.0 if pers is None else pers.factor,
+        persistence_rho=0.0 if pers is None else pers.rho,
     )
+
+
+@dataclass(frozen=True)
+class _PassSetup:
+    """What every pass of one :func:`recover` call shares: the method, the map's
+    uncertainty and prior, the filter's options, the robust kind and effective threshold."""
+
+    method: str
+    mu: MapUncertainty
+    prior: str
+    kw: Mapping[str, object]
+    robust: str | None
+    threshold: float | None
+
+
+def _pass(
+    setup: _PassSetup, inp: FilterInput, progress: bool = False
+) -> tuple[FilterResult, _Estimate]:
+    """One whole pass of the method on ``inp``: the filter run and its estimate."""
+    method = setup.method
+    fr: FilterResult = run_filter(
+        inp,
+        robust=setup.robust,
+        robust_threshold=setup.threshold,
+        progress=progress,
+        **setup.kw,  # type: ignore[arg-type]
+    )
+    weights = None if setup.robust is None else fr.weights
+    try:
+        return fr, _estimate(method, inp, fr, setup.mu, weights, setup.prior)
+    except np.linalg.LinAlgError as exc:
+        from relation_metric.errors import DivergenceError
+
+        raise DivergenceError(
+            f"the {method} could not factor a covariance or information matrix ({exc}): "
+            "in float64 it is singular or indefinite, as when the motion or sensor noise is "
+            "many orders of magnitude beyond the motion and the map; expected noise on their "
+            "scale (method filter needs no such factorisation)"
+        ) from None
+
+
+def _persistent_pass(
+    setup: _PassSetup, inp: FilterInput, first: _Estimate, factor: float
+) -> tuple[_Estimate, Array]:
+    """``first`` with the covariances of a second whole pass whose measurement noise is
+    ``R × factor`` (:func:`~relation_metric.consistency.nis_persistence`), and that pass's
+    filter covariances; the poses (and the map correction) stay the first pass's: the score
+    judges the filter's map, the second pass only says how much the persisting errors are
+    worth. The robust threshold (on the Mahalanobis distance) is divided by ``√factor`` so
+    that about the same innovations are down-weighted as in the first pass."""
+    th = None if setup.threshold is None else setup.threshold / math.sqrt(factor)
+    inp2 = replace(inp, r=np.asarray(inp.r) * factor)
+    fr2, second = _pass(replace(setup, threshold=th), inp2)
+    est = replace(
+        first,
+        covariances=second.covariances,
+        map_loadings=second.map_loadings,
+        independent_covariances=second.independent_covariances,
+    )
+    return est, fr2.covariances
 
 
 @dataclass(frozen=True)

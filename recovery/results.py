@@ -439,6 +439,11 @@ class Recovery:
     map_prior_reason : str
         Why that prior (:func:`recovery.recover.resolve_map_prior`): asked for, the bundle's
         ``map_source``, or assumed because the bundle does not say.
+    persistence_factor, persistence_rho : float
+        The innovations' lag-1 correlation ``ρ`` along each landmark's track and the factor
+        ``(1 + ρ)/(1 − ρ)`` the covariances' second pass inflated ``R`` by
+        (:func:`~relation_metric.consistency.nis_persistence`); exactly 1 and 0 when the
+        innovations are not significantly correlated in time (one pass).
     """
 
     method: str
@@ -462,6 +467,8 @@ class Recovery:
     map_prior_reason: str = ""
     map_loadings: Array | None = None
     agreement_covariances: Array | None = None
+    persistence_factor: float = 1.0
+    persistence_rho: float = 0.0
 
     @property
     def stretches(self) -> tuple[Stretch, ...]:
@@ -498,4 +505,14 @@ class Recovery:
             out["robust"] = self.robust.as_dict()
         if self.batch is not None:
             out["batch"] = self.batch.as_dict()
+        if self.persistence_factor != 1.0:  # only then: consistent runs keep their bytes
+            out["persistence"] = {
+                "rho": self.persistence_rho,
+                "factor": self.persistence_factor,
+                "rule": (
+                    "the innovations' lag-1 correlation rho along each landmark's track is "
+                    "significantly above 0: the covariances come from a second pass with the "
+                    "measurement noise R x (1 + rho)/(1 - rho), the trajectory from the first"
+                ),
+            }
         return out

@@ -222,7 +222,12 @@ def test_report_is_the_parts_in_order(broken: Recovery) -> None:
         "method", "map_uncertainty", "map_uncertainty_rule", "map_prior", "map_prior_rule",
         "map_prior_reason", "poses", "measurements", "divergence", "nis", "iterations", "robust",
         "batch",
-    ]  # fmt: skip
+    ] + (["persistence"] if broken.persistence_factor != 1.0 else [])  # fmt: skip
+    if broken.persistence_factor != 1.0:  # the injected stretch persists along its tracks
+        p = rep["persistence"]
+        assert isinstance(p, dict)
+        rho = broken.persistence_rho
+        assert p["rho"] == rho and p["factor"] == pytest.approx((1 + rho) / (1 - rho))
     assert broken.map_uncertainty is not None
     assert rep["map_uncertainty_rule"] == broken.map_uncertainty.rule
     assert rep["measurements"] == broken.counts.as_dict()

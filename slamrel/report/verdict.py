@@ -90,11 +90,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from relation_metric.agreement import Agreement, estimate_agreement
 from relation_metric.consistency import (
+    FAR_LAG,
     NeesSummary,
     chi2_quantile,
     effective_sample_size,
     flag_runs,
     mean_chi2_interval,
+    nis_persistence,
     nis_tail_level,
 )
 from relation_metric.errors import InputError
@@ -149,14 +151,6 @@ AGREEMENT_ALLOWANCE = 3.0
 SAME_MAP_Q = 1e-12
 #: The NIS tail probability (innovations beyond the 99.9 % bound are the tail).
 NIS_TAIL = 0.999
-#: How much more the NIS of successive sightings of one landmark correlate (rank) than those
-#: :data:`FAR_LAG` sightings apart, above which the innovations are called correlated in
-#: time (also beyond the 99.9 % bound of no difference). A consistent filter's innovations
-#: are white but for the map's error, fixed per landmark, which correlates both alike
-#: (healthy-by-construction runs correlate up to 0.33 at either lag).
-NIS_CORRELATION = 0.2
-#: The far lag, in sightings of the same landmark.
-FAR_LAG = 10
 
 
 @dataclass(frozen=True)
@@ -508,12 +502,14 @@ def gaussian_breaks(facts: RunFacts) -> list[str]:
       noise or wrong associations. Said with the mean NIS of the rest over its expectation
       ``E[χ²₂ | ≤ b] = 2 − b e^{−b/2} / (1 − e^{−b/2})``.
     * **correlated in time** — the rank correlation of the NIS of successive sightings of
-      one landmark exceeds that of sightings :data:`FAR_LAG` apart by ``ρ_s`` above
-      :data:`NIS_CORRELATION` and its 99.9 % bound ``3.29 √(1/n₁ + 1/n₁₀)`` (pairs each
-      more than 30): an error that fades over sightings (a fixed map error does not). For Gaussian
+      one landmark exceeds that of sightings ``FAR_LAG`` apart by ``ρ_s`` above
+      ``NIS_CORRELATION`` and its 99.9 % bound ``3.29 √(1/n₁ + 1/n₁₀)`` (pairs each more
+      than 30): an error that fades over sightings (a fixed map error does not). For Gaussian
       innovations correlated ``ρ``, squared ones correlate ``ρ²``: ``ρ ≈ √ρ_s``, and a
       white-noise filter takes a run of such measurements for about ``(1 + ρ)/(1 − ρ)`` times
-      the information it holds (AR(1)), which is how much too high to expect the NEES.
+      the information it holds (AR(1)), which is how much too high to expect the NEES. The
+      one rule is :func:`~relation_metric.consistency.nis_persistence`, which
+      :func:`recovery.recover.recover` also uses for its second pass.
     """
 
     if facts.nis is None:
@@ -540,42 +536,18 @@ def gaussian_breaks(facts: RunFacts) -> list[str]:
                 else "; the plain EKF used them at full weight (--robust down-weights them)"
             )
         )
-    near, pairs = _successive_rank_correlation(facts)
-    far, far_pairs = _successive_rank_correlation(facts, FAR_LAG)
-    rho_s = near - far  # the part that fades: a fixed map error correlates both alike
-    if (
-        min(pairs, far_pairs) > 30
-        and rho_s > NIS_CORRELATION
-        and rho_s > 3.29 * math.sqrt(1 / pairs + 1 / far_pairs)
-    ):
-        rho = math.sqrt(rho_s)
+    per = nis_persistence(facts.nis, facts.nis_landmarks)
+    if per.significant:
         causes.append(
             f"innovations correlated in time: rank correlation of the NIS of successive "
-            f"sightings of a landmark {_g(near)}, of sightings {FAR_LAG} apart {_g(far)} "
+            f"sightings of a landmark {_g(per.near)}, of sightings {FAR_LAG} apart {_g(per.far)} "
             f"(equal for white innovations in a map with a fixed error), errors correlated "
-            f"about √{_g(rho_s)} = {_g(rho)} from one sighting to the next: a white-noise "
-            f"filter counts such measurements as about {_g((1 + rho) / (1 - rho))}× the "
+            f"about √{_g(per.rho_s)} = {_g(per.rho)} from one sighting to the next: a white-noise "
+            f"filter counts such measurements as about {_g(per.factor)}× the "
             "information they hold (the NEES that much too high); a persisting sensor or "
             "odometry error, not in the models"
         )
     return causes
-
-
-def _successive_rank_correlation(facts: RunFacts, lag: int = 1) -> tuple[float, int]:
-    """Spearman correlation of the NIS of sightings of one landmark ``lag`` sightings apart
-    (measurements ``lag`` apart when the landmarks are not known), and the pairs."""
-    from scipy.stats import rankdata
-
-    v = np.asarray(facts.nis, dtype=np.float64)
-    lm = facts.nis_landmarks
-    order = np.arange(v.size) if lm is None else np.lexsort((np.arange(v.size), lm))
-    a, b = order[:-lag], order[lag:]
-    ok = np.isfinite(v[a]) & np.isfinite(v[b])
-    if lm is not None:
-        ok &= np.asarray(lm)[a] == np.asarray(lm)[b]
-    if ok.sum() < 3:
-        return float("nan"), int(ok.sum())
-    return float(np.corrcoef(rankdata(v[a[ok]]), rankdata(v[b[ok]]))[0, 1]), int(ok.sum())
 
 
 def _with_causes(facts: RunFacts, health: Sequence[Judgement]) -> list[Judgement]:
@@ -779,22 +751,39 @@ def _consistency_lines(facts: RunFacts) -> list[Judgement]:
     if n is not None and facts.nees_values is not None:
         v = np.asarray(facts.nees_values, dtype=np.float64)
         v = v[np.isfinite(v)]
-        runs = nees_excursions(v, float(n.band[1]))
+        scale = _excursion_scale(lines[0])
+        runs = nees_excursions(v, scale * float(n.band[1]))
         cover = sum(runs) / v.size if v.size else 0.0
+        scaled = (
+            f"; band × q = {_g(scale)}, the overconfidence the consistency lamp judges amber"
+            if scale != 1.0
+            else ""
+        )
         lines.append(
             Judgement(
                 "NEES excursions",
                 f"{len(runs)} (longest {max(runs, default=0)} steps, "
-                f"{100 * cover:.0f} % of {v.size})",
+                f"{100 * cover:.0f} % of {v.size}{scaled})",
                 _level(cover, 0.05, 0.2),
                 f"share of the steps in runs of ≥ {MIN_EXCURSION} steps with NEES above the 95 % "
-                "band (a consistent estimator is above it 2.5 % of the time); green ≤ 5 %, "
-                "amber ≤ 20 %, red above",
+                "band (a consistent estimator is above it 2.5 % of the time; where the "
+                "consistency lamp is amber for overconfidence, the band × its q: the excursions "
+                "judge what is local, not that scale again); green ≤ 5 %, amber ≤ 20 %, red above",
                 "excursions",
                 cover,
             )
         )
     return lines
+
+
+def _excursion_scale(consistency: Judgement) -> float:
+    """``q`` of a consistency lamp that is amber for overconfidence (``q > 1``), else 1: the
+    factor on the excursions' band, so that a uniform overconfidence already judged amber
+    is not judged again, step by step, by the excursions (a red consistency lamp keeps it)."""
+    q = consistency.measure
+    if consistency.level == "amber" and q is not None and math.isfinite(q) and q > 1.0:
+        return float(q)
+    return 1.0
 
 
 def _whose(recovered: Judgement, online: Sequence[Judgement]) -> str:
