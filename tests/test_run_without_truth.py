@@ -122,6 +122,11 @@ def test_reference_map_is_compared_as_map_compare_does(tmp_path: Path) -> None:
     assert m["map"]["association"]["matched"] == want["association"]["matched"] > 0
     assert m["map"]["ospa"]["value"] == pytest.approx(want["ospa"]["value"], rel=1e-12)
     assert m["map"]["translation"] == want["translation"]
+    # no true trajectory, no reach: the report must not call an unseen landmark unobserved
+    html = " ".join((rep / "report.html").read_text().split())
+    assert "unobserved, not missed" not in html
+    assert "no landmark is told unobserved" in html
+    assert m["map"]["association"]["unobserved"] == 0
 
 
 def test_reference_options_refused_where_they_do_not_fit(tmp_path: Path) -> None:

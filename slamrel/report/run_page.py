@@ -251,8 +251,8 @@ def _map_figure(result: RunResult) -> Figure | None:
         return None
     frame = (result.map or {}).get("ospa", {}).get("frame", "")
     return Figure(
-        "The SLAM map against the true landmarks: the Delaunay mesh of the true "
-        "landmarks, each edge coloured by its length error"
+        f"The SLAM map against {_map_reference(result)}: their Delaunay mesh, each edge "
+        "coloured by its length error"
         + (f"; the SLAM map drawn {frame}" if frame else ""),
         figure_png(map_figure(result.map_comparison)),
     )
@@ -305,6 +305,8 @@ def report_sections(
             ms,
             [] if figures.map is None else [figures.map],
             [] if review is None else [review],
+            reference=_map_reference(result),
+            reach=result.bundle.groundtruth is not None,
         )
     return RunSections(summary, consistency, _agreement_section(result), map_section)
 
@@ -547,23 +549,53 @@ def _agreement_paragraphs(a: Divergence, ns: Sequence[NeesBlowup], t0: float) ->
 _MAP_COUNTS = ("matched", "missed", "unobserved", "spurious")
 
 
-def _map_section(m: MapSummary, figures: list[Figure], links: list[tuple[str, str]]) -> Section:
-    """Relations of the landmark map (Delaunay mesh) and the association / set distances."""
+def _map_reference(result: RunResult) -> str:
+    """What the SLAM map is compared with, in words: the bundle's true landmarks or the
+    ``--reference-map`` (given only when the bundle has no true landmarks)."""
+    if result.bundle.landmarks_groundtruth is not None:
+        return "the true landmarks"
+    return "the reference map's landmarks (--reference-map)"
+
+
+def _map_section(
+    m: MapSummary,
+    figures: list[Figure],
+    links: list[tuple[str, str]],
+    *,
+    reference: str = "the true landmarks",
+    reach: bool = True,
+) -> Section:
+    """Relations of the landmark map (Delaunay mesh) and the association / set distances.
+
+    ``reference``: what the map is compared with, in words; ``reach``: whether there is a
+    true trajectory to tell unobserved landmarks by (without one, every landmark of the
+    reference the map lacks is missed, and the section says so).
+    """
+    if reach:
+        unseen = (
+            f"Landmarks of {reference} that never came within the sensor's reach of the true "
+            "trajectory are unobserved, not missed; OSPA and GOSPA are computed without them"
+            + (
+                f" (on all of them: OSPA {m.ospa_all:.3g} m, GOSPA {m.gospa_all:.3g} m)."
+                if m.unobserved and m.ospa_all is not None and m.gospa_all is not None
+                else "."
+            )
+        )
+    else:
+        unseen = (
+            "Without ground truth there is no true trajectory to measure the sensor's reach "
+            f"from, so no landmark is told unobserved: every landmark of {reference} the SLAM "
+            "map lacks counts as missed, also one the robot never came near, and OSPA and "
+            "GOSPA are computed on all of them."
+        )
     return Section(
         "Map",
         paragraphs=[
-            "Relations of the landmark map: the Delaunay mesh over the true "
-            "landmarks; per edge the length error, per triangle corner the angle "
-            "error — local and independent of the map's frame.",
+            f"Relations of the landmark map: the Delaunay mesh over {reference}; per edge the "
+            "length error, per triangle corner the angle error — local and independent of the "
+            "map's frame.",
             f"Landmarks associated {m.association or 'by id'}; OSPA, GOSPA and the figure in "
-            f"the frame: {m.frame or 'as given'}. True landmarks that never came within the "
-            "sensor's reach of the true trajectory are unobserved, not missed; OSPA and GOSPA "
-            "are computed without them"
-            + (
-                f" (on all true landmarks: OSPA {m.ospa_all:.3g} m, GOSPA {m.gospa_all:.3g} m)."
-                if m.unobserved and m.ospa_all is not None and m.gospa_all is not None
-                else "."
-            ),
+            f"the frame: {m.frame or 'as given'}. " + unseen,
         ],
         tables=[
             Table(
