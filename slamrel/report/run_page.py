@@ -252,8 +252,7 @@ def _map_figure(result: RunResult) -> Figure | None:
     frame = (result.map or {}).get("ospa", {}).get("frame", "")
     return Figure(
         f"The SLAM map against {_map_reference(result)}: their Delaunay mesh, each edge "
-        "coloured by its length error"
-        + (f"; the SLAM map drawn {frame}" if frame else ""),
+        "coloured by its length error" + (f"; the SLAM map drawn {frame}" if frame else ""),
         figure_png(map_figure(result.map_comparison)),
     )
 
