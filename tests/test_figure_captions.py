@@ -124,3 +124,23 @@ def test_report_caption_matches_its_figure():
         assert int(pct) == round(100 * hidden_share(lines["ground truth"], lines[label]))
     assert stated  # the caption does say it
     pyplot().close(fig)
+
+
+def test_one_panel_timeline_legend_clears_its_title():
+    """Without ground truth, --relations gives one panel: the timelines' legend (right) must
+    not overlap their title (left), as it did at one panel's width."""
+    from slamrel.plots.run import SetPanel, relation_sets_figure
+
+    rng = np.random.default_rng(1)
+    n = 50
+    xy = np.column_stack((np.arange(n, dtype=float), np.zeros(n)))
+    panel = SetPanel(
+        "reference", np.arange(n, dtype=float), rng.uniform(0.01, 0.1, n),
+        rng.uniform(0.001, 0.01, n), xy, rng.uniform(0.0, 0.1, n), high=0.1,
+    )  # fmt: skip
+    fig = relation_sets_figure([panel], xy)
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    title, legend = ax.title.get_window_extent(), ax.get_legend().get_window_extent()
+    assert title.x1 <= legend.x0 or legend.y0 >= title.y1
+    pyplot().close(fig)

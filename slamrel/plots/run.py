@@ -215,7 +215,8 @@ def relation_sets_figure(
     from matplotlib.gridspec import GridSpec
 
     cols = max(1, len(panels))
-    fig = plt.figure(figsize=(4.2 * cols, 11.5), constrained_layout=True)
+    # at least two panels wide: the timelines' legend (right) must clear their title (left)
+    fig = plt.figure(figsize=(4.2 * max(cols, 2), 11.5), constrained_layout=True)
     gs = GridSpec(3, cols, figure=fig, height_ratios=[1, 1, 2.3])
     ax_t = fig.add_subplot(gs[0, :])
     ax_r = fig.add_subplot(gs[1, :], sharex=ax_t)
