@@ -127,3 +127,11 @@ def test_noise_help_states_the_noise_types():
         numbers = [float(x) for x in re.findall(r"\d+\.\d+", part)]
         assert numbers == [nt.sigma_dx, nt.sigma_dtheta, nt.sigma_observation], name
         assert nt.sigma_dx == nt.sigma_dy
+
+
+def test_run_help_names_its_input_one_way():
+    """Issue 38: `run --help` called its input a "SLAM result bundle" and a "log bundle"."""
+    text = dict(_commands(build_parser()))["slamrel run"].format_help()
+    flat = " ".join(text.split())  # argparse wraps lines anywhere
+    assert "log bundle" not in flat
+    assert flat.count("SLAM result bundle directory") >= 2  # the description and SOURCE

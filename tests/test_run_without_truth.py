@@ -97,6 +97,11 @@ def test_relations_scores_equal_evaluate(tmp_path: Path) -> None:
     rows = _verdict_rows((rep / "report.html").read_text())
     assert rows["recovered vs dead reckoning (on the reference relations)"] == "green"
     assert rows["consistency (recovered)"] == "not judged"
+    # the relation-errors figure is drawn on the reference relations given, with no truth line
+    html = " ".join((rep / "report.html").read_text().split())
+    assert "one panel for the reference relations given (" in html
+    assert "global.relations): each pose" in html
+    assert (rep / "figure_2.png").exists()
     # with ground truth, --relations adds its scores and changes nothing else
     plain, with_rel = tmp_path / "plain", tmp_path / "with"
     assert main(["run", str(SIM_BUNDLE), "-o", str(plain), "-q"]) == 0
@@ -122,6 +127,11 @@ def test_reference_map_is_compared_as_map_compare_does(tmp_path: Path) -> None:
     assert m["map"]["association"]["matched"] == want["association"]["matched"] > 0
     assert m["map"]["ospa"]["value"] == pytest.approx(want["ospa"]["value"], rel=1e-12)
     assert m["map"]["translation"] == want["translation"]
+    # no true trajectory, no reach: the report must not call an unseen landmark unobserved
+    html = " ".join((rep / "report.html").read_text().split())
+    assert "unobserved, not missed" not in html
+    assert "no landmark is told unobserved" in html
+    assert m["map"]["association"]["unobserved"] == 0
 
 
 def test_reference_options_refused_where_they_do_not_fit(tmp_path: Path) -> None:

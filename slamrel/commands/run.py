@@ -41,7 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         nargs="?",
         default="simple1",
         metavar="SOURCE",
-        help="a built-in world name or a log bundle (default: %(default)s)",
+        help="a built-in world name or a SLAM result bundle directory (default: %(default)s)",
     )
     p.add_argument(
         "-o",

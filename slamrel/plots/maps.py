@@ -9,7 +9,11 @@ import numpy as np
 from landmark_graph.map_compare import MapComparison
 from slamrel.plots.relation_errors import pyplot
 
-__all__ = ["MAP_LEGEND", "map_figure"]
+__all__ = ["MAP_COLOUR", "MAP_LEGEND", "map_figure"]
+
+#: The SLAM map's markers, in this figure and the run report's trajectory figure: hollow
+#: purple circles (red is the colour of the stretches where the map and the log disagree).
+MAP_COLOUR = "tab:purple"
 
 #: The legend of :func:`map_figure`: below the plot, where it covers no landmark.
 MAP_LEGEND: dict[str, Any] = {
@@ -41,7 +45,7 @@ def map_figure(res: MapComparison) -> Any:
     fig.colorbar(lc, ax=ax, label="edge length error [m] (clipped at p99)")
     ax.plot(res.reference.xy[:, 0], res.reference.xy[:, 1], "k+", ms=8, label="reference")
     est = res.estimate_xy
-    ax.plot(est[:, 0], est[:, 1], "o", mfc="none", color="tab:red", label="estimate")
+    ax.plot(est[:, 0], est[:, 1], "o", mfc="none", color=MAP_COLOUR, label="estimate")
     if res.missed.size:
         m = res.reference.xy[res.missed]
         ax.plot(m[:, 0], m[:, 1], "x", ms=9, color="tab:gray", label="missed (reference)")

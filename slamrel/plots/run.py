@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 
 from relation_metric.consistency import NeesOverTime, NeesSummary
 from relation_metric.trajectory import Trajectory
+from slamrel.plots.maps import MAP_COLOUR
 from slamrel.plots.relation_errors import pyplot
 
 __all__ = [
@@ -23,6 +24,7 @@ __all__ = [
     "relation_sets_figure",
     "mark_stretches_xy",
     "mark_stretches_time",
+    "estimate_colours",
 ]
 
 #: One colour per relation set, the same in every figure.
@@ -54,9 +56,19 @@ class TimeSpan(Protocol):
 #: Drawing order of :func:`trajectories_figure`: the reference beneath everything, the
 #: landmarks above it, the estimates on top (an estimate lying on the reference must show).
 TRAJECTORY_ZORDER = {"reference": 1.0, "landmarks": 2.0, "estimates": 3.0}
-#: The SLAM map's markers in :func:`trajectories_figure`: hollow purple circles (red is the
-#: colour of the stretches where the map and the log disagree, :func:`mark_stretches_xy`).
-MAP_COLOUR = "tab:purple"
+#: One colour per estimate, the same in every figure (not green: the NEES band; not red: the
+#: map/log disagreement; not purple: the map); other names take :data:`OTHER_COLOURS` in turn.
+ESTIMATE_COLOURS = {"recovered": "tab:blue", "online": "tab:orange", "dead_reckoning": "tab:brown"}
+OTHER_COLOURS = ("tab:cyan", "tab:olive", "tab:pink")
+#: The reference of :func:`trajectories_figure`: lighter and thinner than the estimates.
+REFERENCE_STYLE: dict[str, Any] = {"color": "0.6", "lw": 0.8}
+ESTIMATE_WIDTH = 1.2
+
+
+def estimate_colours(names: Sequence[str]) -> dict[str, str]:
+    """The colour of each estimate (:data:`ESTIMATE_COLOURS`; others in turn)."""
+    others = iter(OTHER_COLOURS * (1 + len(names)))
+    return {k: ESTIMATE_COLOURS.get(k) or next(others) for k in names}
 
 
 def trajectories_figure(
@@ -72,23 +84,25 @@ def trajectories_figure(
 
     The estimates and the map are drawn as given: the caller moves them into the reference's
     frame first and says how in ``labels`` (legend text per estimate name) or ``title``.
-    The reference (``None``: there is none) is a thin grey line beneath the estimates
-    (:data:`TRAJECTORY_ZORDER`), so that an estimate lying on it stays visible, and the first
-    estimate (the main one) lies on top of the others; the map is
+    The reference (``None``: there is none) is a thin light grey line beneath the estimates
+    (:data:`TRAJECTORY_ZORDER`, :data:`REFERENCE_STYLE`), so that an estimate lying on it
+    stays visible, and the first estimate (the main one) lies on top of the others; each
+    estimate has its colour (:func:`estimate_colours`, as in :func:`nees_figure`); the map is
     hollow purple circles (:data:`MAP_COLOUR`), true landmarks black crosses.
     """
     plt = pyplot()
     z = TRAJECTORY_ZORDER
     fig, ax = plt.subplots(figsize=(7, 7), constrained_layout=True)
     if reference is not None:
-        ax.plot(reference.poses[:, 0], reference.poses[:, 1], "-", color="0.5", lw=1.5,
-                label="ground truth", zorder=z["reference"])  # fmt: skip
+        ax.plot(reference.poses[:, 0], reference.poses[:, 1], "-", label="ground truth",
+                zorder=z["reference"], **REFERENCE_STYLE)  # fmt: skip
     n = len(estimates)
+    colours = estimate_colours(list(estimates))
     for k, (name, est) in enumerate(estimates.items()):
         label = name if labels is None else labels.get(name, name)
         # the first estimate (the main one) on top of the others, the legend in their order
-        ax.plot(est.poses[:, 0], est.poses[:, 1], "-", lw=1, label=label,
-                zorder=z["estimates"] + 0.01 * (n - k))  # fmt: skip
+        ax.plot(est.poses[:, 0], est.poses[:, 1], "-", lw=ESTIMATE_WIDTH, label=label,
+                color=colours[name], zorder=z["estimates"] + 0.01 * (n - k))  # fmt: skip
     if landmarks is not None and landmarks.size:
         ax.plot(landmarks[:, 0], landmarks[:, 1], "k+", ms=7, label="true landmarks",
                 zorder=z["landmarks"])  # fmt: skip
@@ -121,6 +135,7 @@ def nees_figure(
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 3.5), constrained_layout=True)
     band = None
+    colours = estimate_colours(list(curves))
     for name, v in curves.items():
         t = times[name] if isinstance(times, Mapping) else times
         if np.shape(t) != np.shape(v):
@@ -129,6 +144,7 @@ def nees_figure(
             t,
             np.maximum(v, 1e-6),
             lw=1,
+            color=colours[name],
             label=f"{name} (mean {summaries[name].mean:.3g})",
         )
         band = summaries[name].band
@@ -199,7 +215,8 @@ def relation_sets_figure(
     from matplotlib.gridspec import GridSpec
 
     cols = max(1, len(panels))
-    fig = plt.figure(figsize=(4.2 * cols, 11.5), constrained_layout=True)
+    # at least two panels wide: the timelines' legend (right) must clear their title (left)
+    fig = plt.figure(figsize=(4.2 * max(cols, 2), 11.5), constrained_layout=True)
     gs = GridSpec(3, cols, figure=fig, height_ratios=[1, 1, 2.3])
     ax_t = fig.add_subplot(gs[0, :])
     ax_r = fig.add_subplot(gs[1, :], sharex=ax_t)

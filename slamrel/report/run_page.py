@@ -9,16 +9,17 @@ and the file cannot disagree. :func:`slamrel.pipeline.write_report` writes the f
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import NamedTuple
+from collections.abc import Mapping, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from recovery.ekf import DEFAULT_MAX_OUTLIER_RUN
 from recovery.results import Divergence, NisStats
 from relation_metric.consistency import OUTLIER_PROBABILITY, NeesBlowup
-from relation_metric.evaluate import pose_errors
+from relation_metric.evaluate import Evaluation, pose_errors
 from relation_metric.trajectory import Trajectory
+from slamrel.plots.legend_words import hidden_share, legend_words
 from slamrel.plots.maps import map_figure
 from slamrel.plots.run import (
     TIMELINE_LEGEND,
@@ -80,46 +81,73 @@ def report_figures(result: RunResult) -> RunFigures:
     }
     lgt = result.bundle.landmarks_groundtruth if truth is not None else None
     map_xy = result.bundle.map_xy
-    red = (
-        " Red dots: recovered poses where the map and the log disagree."
-        if stretches and "recovered" in drawn
-        else ""
-    )
-    if truth is not None:
-        what = (
-            "Estimates (coloured lines) against the ground truth (the grey line beneath them), "
-            + ("with the true landmarks (black crosses) and " if lgt else "with ")
-            + "the SLAM map (hollow purple circles), in the ground truth's frame: "
-            f"{_frames_text(result)}."
-        )
-    else:
-        what = (
-            "Estimates (coloured lines) and the SLAM map (hollow purple circles) as estimated, "
-            "in the SLAM map's frame: the bundle has no ground truth, so nothing is aligned "
-            "and no line is the truth."
-        )
-    trajectories = Figure(
-        what + red,
-        figure_png(
-            mark_stretches_xy(
-                trajectories_figure(
-                    truth,
-                    drawn,
-                    labels={k: f"{k} ({frames[k].short})" for k in drawn if frames[k].short},
-                    landmarks=lgt[1] if lgt else None,
-                    mapped=frames["map"].apply(map_xy) if map_xy.size else None,
-                ),
-                stretches,
-                drawn.get("recovered"),
-            )
+    fig = mark_stretches_xy(
+        trajectories_figure(
+            truth,
+            drawn,
+            labels={k: f"{k} ({frames[k].short})" for k in drawn if frames[k].short},
+            landmarks=lgt[1] if lgt else None,
+            mapped=frames["map"].apply(map_xy) if map_xy.size else None,
         ),
+        stretches,
+        drawn.get("recovered"),
     )
+    trajectories = Figure(_trajectories_caption(result, fig), figure_png(fig))
     return RunFigures(
         trajectories,
-        _errors_figure(result, drawn, stretches) if result.evaluations else None,
+        _errors_figure(result, drawn, stretches)
+        if result.evaluations or result.reference is not None
+        else None,
         _nees_figure(result, stretches) if truth is not None else None,
         _map_figure(result),
     )
+
+
+def _trajectories_caption(result: RunResult, fig: Any) -> str:
+    """Figure 1's caption: each drawn thing named in the words of its legend handle
+    (:func:`slamrel.plots.legend_words.legend_words`), and how much of each line lies hidden
+    under a line drawn above it (:func:`slamrel.plots.legend_words.hidden_share`)."""
+    fig.canvas.draw()  # the final layout: the hidden shares are measured in display pixels
+    ax = fig.axes[0]
+    words = legend_words(ax)
+    lines = {ln.get_label(): ln for ln in ax.get_lines()}
+    labels = {k: f"{k} ({f.short})" if f.short else k for k, f in result.display_frames.items()}
+    names = [k for k in result.estimates if labels[k] in words]
+    est = "; ".join(f"{k} {words[labels[k]]}" for k in names)
+    truth = result.bundle.groundtruth is not None
+    parts = [
+        f"Estimates ({est})"
+        + (f" against the ground truth ({words['ground truth']}, beneath them)" if truth else "")
+    ]
+    for label, what in (("true landmarks", "the true landmarks"), ("SLAM map", "the SLAM map")):
+        if label in words:
+            parts.append(f"{what} ({words[label]})")
+    text = ", ".join(parts[:-1]) + " and " + parts[-1] if len(parts) > 1 else parts[0]
+    if truth:
+        text += f", in the ground truth's frame: {_frames_text(result)}."
+    else:
+        text += (
+            " as estimated, in the SLAM map's frame: the bundle has no ground truth, so "
+            "nothing is aligned and no line is the truth."
+        )
+    if "map/log disagree" in words:
+        text += (
+            f" {words['map/log disagree'].capitalize()}: recovered poses where the map and the "
+            "log disagree."
+        )
+    # what lies under what: the reference under each estimate, each estimate under the main
+    pairs = [("ground truth", k) for k in names if truth] + [(k, names[0]) for k in names[1:]]
+    hidden = [
+        f"{under} under {over} "
+        f"{100 * hidden_share(lines[labels.get(under, under)], lines[labels[over]]):.0f} %"
+        for under, over in pairs
+    ]
+    if hidden:
+        text += (
+            " Share of a line's points drawn under another's line width (hidden where the "
+            "two agree to within it): " + ", ".join(hidden) + "."
+        )
+    return text
 
 
 def _frames_text(result: RunResult) -> str:
@@ -134,11 +162,19 @@ def _errors_figure(
     result: RunResult, drawn: dict[str, Trajectory], stretches: Sequence[TimeSpan]
 ) -> Figure:
     """The main estimate's relation errors over time and, one panel per relation set, where
-    along the trajectory they are."""
+    along the trajectory they are: the sets drawn from the ground truth, or without it the
+    reference relations given (``--relations``), one panel."""
     main = result.main_estimate
-    evs = result.evaluations[main]
     tb = result.time_base
-    names = [(r.name, r.absent) for r in result.relation_sets] or [(k, "") for k in evs.sets]
+    evs: Mapping[str, Evaluation | None]
+    if result.evaluations:
+        evs = result.evaluations[main]
+        sets = result.evaluations[main].sets
+        names = [(r.name, r.absent) for r in result.relation_sets] or [(k, "") for k in sets]
+    else:
+        assert result.reference is not None
+        evs = {"reference": result.reference.scores.get(main)}
+        names = [("reference", "")]
     est = drawn[main]
     panels = []
     for name, absent in names:
@@ -167,12 +203,19 @@ def _errors_figure(
         span=(0.0, tb.duration),
     )  # fmt: skip
     fig = mark_stretches_time(fig, stretches, t0=tb.t0, axes=(0, 1), legend=TIMELINE_LEGEND)
+    where = (
+        f"{result.display_frames[main].description}, the ground truth in grey beneath"
+        if truth is not None
+        else "as estimated (no ground truth)"
+    )
+    panels_are = "one panel per relation set"
+    if not result.evaluations and result.reference is not None:
+        panels_are = f"one panel for the reference relations given ({result.reference.source})"
     return Figure(
-        f"Where the {main} trajectory is wrong, one panel per relation set: each pose a "
+        f"Where the {main} trajectory is wrong, {panels_are}: each pose a "
         "relation of the set ends at, coloured by the mean translational error of the set's "
         "relations ending there, on the set's own scale from 0 to its 95th percentile "
-        "(stated under each panel; larger errors in the top colour); the estimate "
-        f"{result.display_frames[main].description}, the ground truth in grey beneath. Above: "
+        f"(stated under each panel; larger errors in the top colour); the estimate {where}. Above: "
         "every scored relation's translational and rotational error at its mid-time, in "
         "seconds since the run's start, by set"
         + ("; shaded: stretches where the map and the log disagree." if stretches else "."),
@@ -251,9 +294,8 @@ def _map_figure(result: RunResult) -> Figure | None:
         return None
     frame = (result.map or {}).get("ospa", {}).get("frame", "")
     return Figure(
-        "The SLAM map against the true landmarks: the Delaunay mesh of the true "
-        "landmarks, each edge coloured by its length error"
-        + (f"; the SLAM map drawn {frame}" if frame else ""),
+        f"The SLAM map against {_map_reference(result)}: their Delaunay mesh, each edge "
+        "coloured by its length error" + (f"; the SLAM map drawn {frame}" if frame else ""),
         figure_png(map_figure(result.map_comparison)),
     )
 
@@ -305,6 +347,8 @@ def report_sections(
             ms,
             [] if figures.map is None else [figures.map],
             [] if review is None else [review],
+            reference=_map_reference(result),
+            reach=result.bundle.groundtruth is not None,
         )
     return RunSections(summary, consistency, _agreement_section(result), map_section)
 
@@ -547,23 +591,54 @@ def _agreement_paragraphs(a: Divergence, ns: Sequence[NeesBlowup], t0: float) ->
 _MAP_COUNTS = ("matched", "missed", "unobserved", "spurious")
 
 
-def _map_section(m: MapSummary, figures: list[Figure], links: list[tuple[str, str]]) -> Section:
-    """Relations of the landmark map (Delaunay mesh) and the association / set distances."""
+def _map_reference(result: RunResult) -> str:
+    """What the SLAM map is compared with, in words: the bundle's true landmarks or the
+    ``--reference-map`` (given only when the bundle has no true landmarks)."""
+    if result.bundle.landmarks_groundtruth is not None:
+        return "the true landmarks"
+    return "the reference map's landmarks (--reference-map)"
+
+
+def _map_section(
+    m: MapSummary,
+    figures: list[Figure],
+    links: list[tuple[str, str]],
+    *,
+    reference: str = "the true landmarks",
+    reach: bool = True,
+) -> Section:
+    """Relations of the landmark map (Delaunay mesh) and the association / set distances.
+
+    ``reference``: what the map is compared with, in words; ``reach``: whether there is a
+    true trajectory to tell unobserved landmarks by (without one, every landmark of the
+    reference the map lacks is missed, and the section says so).
+    """
+    if reach:
+        unseen = (
+            f"{reference[0].upper() + reference[1:]} that never came within the sensor's reach "
+            "of the true trajectory are unobserved, not missed; OSPA and GOSPA are computed "
+            "without them"
+            + (
+                f" (on all of them: OSPA {m.ospa_all:.3g} m, GOSPA {m.gospa_all:.3g} m)."
+                if m.unobserved and m.ospa_all is not None and m.gospa_all is not None
+                else "."
+            )
+        )
+    else:
+        unseen = (
+            "Without ground truth there is no true trajectory to measure the sensor's reach "
+            f"from, so no landmark is told unobserved: every landmark of {reference} the SLAM "
+            "map lacks counts as missed, also one the robot never came near, and OSPA and "
+            "GOSPA are computed on all of them."
+        )
     return Section(
         "Map",
         paragraphs=[
-            "Relations of the landmark map: the Delaunay mesh over the true "
-            "landmarks; per edge the length error, per triangle corner the angle "
-            "error — local and independent of the map's frame.",
+            f"Relations of the landmark map: the Delaunay mesh over {reference}; per edge the "
+            "length error, per triangle corner the angle error — local and independent of the "
+            "map's frame.",
             f"Landmarks associated {m.association or 'by id'}; OSPA, GOSPA and the figure in "
-            f"the frame: {m.frame or 'as given'}. True landmarks that never came within the "
-            "sensor's reach of the true trajectory are unobserved, not missed; OSPA and GOSPA "
-            "are computed without them"
-            + (
-                f" (on all true landmarks: OSPA {m.ospa_all:.3g} m, GOSPA {m.gospa_all:.3g} m)."
-                if m.unobserved and m.ospa_all is not None and m.gospa_all is not None
-                else "."
-            ),
+            f"the frame: {m.frame or 'as given'}. " + unseen,
         ],
         tables=[
             Table(
