@@ -188,8 +188,9 @@ def _add_align_guess_arguments(a: argparse.ArgumentParser) -> None:
     a.add_argument(
         "--skip-invalid-poses",
         action="store_true",
-        help="skip (and count) estimate pose records with non-finite values instead of "
-        "refusing the file",
+        help="CARMEN logs only (FLASER, ROBOTLASER1, ODOM records): skip (and count) "
+        "estimate pose records with non-finite values instead of refusing the file; other "
+        "formats refuse them whatever this option",
     )
 
 
