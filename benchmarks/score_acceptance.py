@@ -33,7 +33,12 @@ translational error within 10 % (ratio reviewed / true in 0.9–1.1); the rotati
 are reported beside them.
 
     python benchmarks/score_acceptance.py [--seeds 0 1 2] [--cycle-check] [--confirm]
-        [--guesses chain|odometry|truth] [--world loop|corridor] [--json OUT]
+        [--guesses chain|odometry|truth] [--world loop|corridor] [--loop-max-angle DEG]
+        [--json OUT]
+
+Loop pairs are kept only where the two headings differ by at most ``--loop-max-angle``
+(:data:`LOOP_MAX_ANGLE`, 45°; 180 keeps every one, ``relations align``'s default): pairs
+seen from opposite headings are the aliasing ones in corridors.
 """
 
 from __future__ import annotations
@@ -59,6 +64,9 @@ from slamrel.simulation.laser import laser_world, loop_path, simulate_laser_log
 
 CORNERS = np.array([[1.5, 1.5], [28.5, 1.5], [28.5, 18.5], [1.5, 18.5]])
 ESTIMATES = ("jitter", "odometry", "drift")
+#: Largest heading difference of a loop pair [rad] (``--loop-max-angle`` in degrees): two
+#: scans of a corridor seen from opposite headings share little and alias most.
+LOOP_MAX_ANGLE = np.pi / 4
 
 
 def estimates(truth: np.ndarray, odometry: np.ndarray, seed: int) -> dict[str, np.ndarray]:
@@ -77,10 +85,13 @@ def _score(rel: RelationSet, times: np.ndarray, poses: np.ndarray) -> tuple[floa
     return float(ev.translation.abs.mean), float(ev.rotation.abs.mean)
 
 
-def _pairs(poses: np.ndarray, times: np.ndarray) -> Proposals:
-    """``relations align --loops``' pairs with its defaults, proposed from ``poses``."""
+def _pairs(poses: np.ndarray, times: np.ndarray, max_angle: float = LOOP_MAX_ANGLE) -> Proposals:
+    """``relations align --loops``' pairs with its defaults, proposed from ``poses``, loop
+    pairs at most ``max_angle`` [rad] apart in heading (``--loop-max-angle``)."""
     prop = consecutive_pairs(poses, times, distance=0.5, angle=0.3)
-    return prop + loop_pairs(poses, times, radius=1.0, min_travel=10.0, distance=0.5, angle=0.3)
+    return prop + loop_pairs(
+        poses, times, radius=1.0, min_travel=10.0, distance=0.5, angle=0.3, max_angle=max_angle
+    )
 
 
 def run(
@@ -91,6 +102,7 @@ def run(
     guesses: str = "odometry",
     aligner: str = "global",
     world: str = "loop",
+    loop_max_angle: float = LOOP_MAX_ANGLE,
 ) -> dict:
     """One simulated log: relations made and reviewed, three estimates scored both ways.
 
@@ -115,7 +127,7 @@ def run(
         from slamrel.scans.own_guesses import chain_guesses
 
         start = chain_guesses(s, odo).poses
-    prop = _pairs(start, s.timestamps)
+    prop = _pairs(start, s.timestamps, loop_max_angle)
     if aligner == "global":
         from slamrel.scans.global_align import align_scans_global
 
@@ -130,7 +142,7 @@ def run(
     gross = (np.hypot(err[:, 0], err[:, 1]) > 0.1) | (np.abs(err[:, 2]) > np.radians(2))
     p = prop.pairs
     reviewed = RelationSet(prop.t1[accept], prop.t2[accept], res.delta[accept])
-    ideal = _pairs(log.truth, s.timestamps)
+    ideal = _pairs(log.truth, s.timestamps, loop_max_angle)
     true_ideal = RelationSet(ideal.t1, ideal.t2, guesses_from_poses(log.truth, ideal))
     true_prop = RelationSet(prop.t1, prop.t2, true)
     true_acc = RelationSet(prop.t1[accept], prop.t2[accept], true[accept])
@@ -150,6 +162,7 @@ def run(
         "true_pairs": len(ideal),
         "true_loop_pairs": int(np.count_nonzero(ideal.kind == "loop")),
         "guesses": guesses,
+        "loop_max_angle_deg": float(np.degrees(loop_max_angle)),
         "flagged": int(res.flagged.sum()),
         "contradicted": contradicted,
         "confirmed": confirmed,
@@ -197,8 +210,17 @@ def main() -> None:
         default="loop",
         help="loop (default) or a corridor world of slamrel.simulation.corridors (seeds 101...)",
     )
+    ap.add_argument(
+        "--loop-max-angle",
+        type=float,
+        default=float(np.degrees(LOOP_MAX_ANGLE)),
+        metavar="DEG",
+        help="largest heading difference of a loop pair [deg] (default 45; 180: any)",
+    )
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args()
+    if not 0 < args.loop_max_angle <= 180:
+        ap.error("--loop-max-angle must lie in (0, 180] degrees")
     out = []
     for seed in args.seeds:
         r = run(
@@ -208,12 +230,14 @@ def main() -> None:
             guesses=args.guesses,
             aligner=args.aligner,
             world=args.world,
+            loop_max_angle=float(np.radians(args.loop_max_angle)),
         )
         out.append(r)
         print(
             f"seed {seed}, guesses from {r['guesses']}: {r['pairs']} pairs ({r['loop_pairs']} "
             f"loop; from the truth {r['true_pairs']}, {r['true_loop_pairs']} loop), "
-            f"{r['flagged']} flagged, "
+            f"{r['flagged']} flagged ({100 * r['flagged'] / r['pairs']:.1f} %; loop pairs "
+            f"within {r['loop_max_angle_deg']:g}°), "
             f"{r['contradicted']} contradicted, {r['confirmed']} confirmed, "
             f"{r['accepted']} accepted "
             f"({r['gross_accepted']} of {r['gross']} gross ones accepted); "

@@ -350,3 +350,46 @@ def test_align_refuses_a_pose_that_no_correlative_search_can_reach(tmp_path, cap
     assert not out.exists()
     log.write_text("".join(text[:3] + [far.replace("1e20", "10")] + text[4:]))
     assert main(["relations", "align", str(log), "-o", str(out), "-q"]) == 0
+
+
+def test_align_refuses_a_correlative_window_that_would_not_fit_in_memory(tmp_path, capsys):
+    """``--search-xy 200`` on scans whose returns reach 1 m: the lookup table spans
+    2 · (1 + 200 + 4 · 0.05 + 8 · 0.03) + 8 · 0.05 ≈ 403 m a side at 3 cm, ≈ 13,400² ≈ 1.8e8
+    cells (1.3 GiB), beyond 2^27 ≈ 1.34e8: one clear error (exit 3) before any table is
+    built, not a process that swaps or dies. The default window (±1.5 m) runs."""
+    log = tmp_path / "log.clf"
+    log.write_text(_carmen([10.0 + 0.2 * k for k in range(6)]))
+    out = tmp_path / "out.relations"
+    argv = ["relations", "align", str(log), "-o", str(out), "--aligner", "icp"]
+    argv += ["--global-search", "always"]
+    err = _refused([*argv, "--search-xy", "200"], capsys, f"{log}:",
+                   "±200 m at 0.03 m cells", "would not fit in memory",
+                   "limit 134217728 cells", "expected a smaller --search-xy")  # fmt: skip
+    assert err.count("error") == 1
+    assert not out.exists()
+    assert main([*argv, "-q"]) == 0
+
+
+@pytest.mark.parametrize("command", [["evaluate"], ["relations", "align"]])
+def test_skip_invalid_poses_says_it_is_for_carmen_logs_only(tmp_path, capsys, command):
+    """``--skip-invalid-poses`` reaches only the CARMEN reader (``skip_invalid`` of
+    ``load_trajectory``); the help says so, and a TUM estimate with a NaN is still refused
+    with it (exit 3), as the help promises."""
+    with pytest.raises(SystemExit):
+        main([*command, "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "--skip-invalid-poses" in help_text
+    start = help_text.rindex("--skip-invalid-poses")
+    assert "CARMEN logs only" in help_text[start : start + 400]
+    est = tmp_path / "est.tum"
+    est.write_text("10.0 0 0 0 0 0 0 1\n10.2 nan 0 0 0 0 0 1\n10.4 0.2 0 0 0 0 0 1\n")
+    if command == ["evaluate"]:
+        ref = tmp_path / "ref.tum"
+        ref.write_text(_tum([10.0, 10.2, 10.4]))
+        argv = ["evaluate", str(ref), str(est)]
+    else:
+        log = tmp_path / "log.clf"
+        log.write_text(_carmen([10.0, 10.2, 10.4]))
+        argv = ["relations", "align", str(log), "--estimate", str(est)]
+        argv += ["-o", str(tmp_path / "out.relations")]
+    _refused([*argv, "--skip-invalid-poses"], capsys, f"{est}:2:", "expected a finite number")

@@ -499,3 +499,47 @@ def test_a_json_integer_beyond_float64_is_refused_not_a_crash(tmp_path, capsys):
     err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt")], capsys)
     assert f"{b / 'bundle.json'}:" in err
     assert "initial_pose: expected a finite number, got 9999999999" in err
+
+
+@pytest.mark.parametrize("value", ["0", "-5", "181", "nan"])
+def test_align_refuses_a_loop_max_angle_out_of_range(tmp_path, capsys, value):
+    """--loop-max-angle is a heading difference in (0, 180] degrees: else exit 2."""
+    from tests.test_input_rule import _carmen
+
+    log = tmp_path / "log.clf"
+    log.write_text(_carmen([10.0 + 0.2 * k for k in range(4)]))
+    out = tmp_path / "o.relations"
+    argv = ["relations", "align", str(log), "-o", str(out), "--loops"]
+    assert main([*argv, "--loop-max-angle", value]) == 2
+    assert "--loop-max-angle must lie in (0, 180] degrees" in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_loop_max_angle_drops_the_loop_pairs_seen_from_opposite_headings(tmp_path, capsys):
+    """Out 4 m along x, a half turn on the spot, back along −x: every loop pair joins the two
+    legs, seen from headings π apart. At 180° (the default) they are proposed; at 45° none
+    is, and the pairs are exactly the consecutive ones (the run without --loops)."""
+    ranges = " ".join(["1.00"] * 181)
+    poses = [(0.25 * k, 0.0, 0.0) for k in range(17)]
+    poses += [(4.0, 0.0, 0.25 * k) for k in range(1, 13)] + [(4.0, 0.0, np.pi)]
+    poses += [(4.0 - 0.25 * k, 0.0, np.pi) for k in range(1, 17)]
+    log = tmp_path / "log.clf"
+    log.write_text(
+        "".join(
+            f"FLASER 181 {ranges} {x} {y} {t} {x} {y} {t} {10 + 0.2 * n} host {10 + 0.2 * n}\n"
+            for n, (x, y, t) in enumerate(poses)
+        )
+    )
+
+    def rows(*extra: str) -> int:
+        rep = tmp_path / "r.csv"
+        argv = ["relations", "align", str(log), "-o", str(tmp_path / "o.relations"), "-q"]
+        argv += ["--aligner", "icp", "--global-search", "never", "--report", str(rep)]
+        assert main([*argv, *extra]) == 0
+        return len(rep.read_text().splitlines()) - 1
+
+    loops = ["--loops", "--loop-min-travel", "2"]
+    consecutive = rows()
+    assert rows(*loops, "--loop-max-angle", "45") == consecutive
+    assert rows(*loops, "--loop-max-angle", "180") > consecutive

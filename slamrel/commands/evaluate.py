@@ -156,8 +156,9 @@ def _association_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--skip-invalid-poses",
         action="store_true",
-        help="skip CARMEN pose records with non-finite values "
-        "(counted; default in metricevaluator mode)",
+        help="CARMEN logs only (FLASER, ROBOTLASER1, ODOM records): skip pose records with "
+        "non-finite values (counted; default in metricevaluator mode); other formats refuse "
+        "them whatever this option",
     )
     p.add_argument(
         "--ate",

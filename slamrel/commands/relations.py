@@ -6,6 +6,7 @@ the loop closures of an optimised pose graph."""
 from __future__ import annotations
 
 import argparse
+import math
 from typing import TYPE_CHECKING, Any
 
 from slamrel.commands.common import (
@@ -188,8 +189,9 @@ def _add_align_guess_arguments(a: argparse.ArgumentParser) -> None:
     a.add_argument(
         "--skip-invalid-poses",
         action="store_true",
-        help="skip (and count) estimate pose records with non-finite values instead of "
-        "refusing the file",
+        help="CARMEN logs only (FLASER, ROBOTLASER1, ODOM records): skip (and count) "
+        "estimate pose records with non-finite values instead of refusing the file; other "
+        "formats refuse them whatever this option",
     )
 
 
@@ -228,6 +230,14 @@ def _add_align_pair_arguments(a: argparse.ArgumentParser) -> None:
         type=float,
         default=10.0,
         help="least travel between the two scans of a loop pair [m] (default 10)",
+    )
+    a.add_argument(
+        "--loop-max-angle",
+        type=float,
+        default=180.0,
+        metavar="DEG",
+        help="largest heading difference of the two scans of a loop pair [deg], in (0, 180] "
+        "(default 180: any; scans seen from opposite headings alias most in corridors)",
     )
 
 
@@ -509,6 +519,8 @@ def _checked_align_options(args: argparse.Namespace) -> bool:
         raise OptionError("--ambiguity must lie in (0, 1]")
     if args.max_range is not None and not args.max_range > 0:
         raise OptionError("--max-range must be positive")
+    if not 0 < args.loop_max_angle <= 180:
+        raise OptionError("--loop-max-angle must lie in (0, 180] degrees")
     for name in ("loop_min_travel", "time_tolerance"):  # read only with --loops, --at
         if not getattr(args, name) >= 0:
             raise OptionError(f"--{name.replace('_', '-')} must be 0 or more")
@@ -608,6 +620,7 @@ def _align_pairs(
             min_travel=args.loop_min_travel,
             distance=args.distance,
             angle=args.angle,
+            max_angle=math.radians(args.loop_max_angle),
         )
     return prop
 

@@ -202,14 +202,16 @@ def _better(a: Alignment, b: Alignment, limits: QualityLimits) -> bool:
     return bool(a.failed) or b.matched_fraction >= a.matched_fraction + 0.1
 
 
-#: Lookup-table cells (1 GB of float64) beyond which a correlative search whose window lets
-#: the two scans overlap nowhere is refused rather than run: it cannot succeed, and its table
-#: grows with the square of the guess's distance (a pose at 1e20 m asked for a table of
-#: negative size). Searches of scans that can overlap are never refused.
-MAX_HOPELESS_CELLS = 2**27
+#: Lookup-table cells (1 GB of float64) beyond which a correlative search is refused rather
+#: than run: its table (the reference's returns and every place the current scan reaches from
+#: the window) would not fit in memory. A window that lets the two scans overlap nowhere is
+#: refused as a far guess (it cannot succeed, and its table grows with the square of the
+#: guess's distance: a pose at 1e20 m asked for a table of negative size); a window merely too
+#: large (``--search-xy``) is refused as such.
+MAX_TABLE_CELLS = 2**27
 
 
-def _refuse_far_guess(
+def _refuse_large_table(
     scans: LaserScans,
     pair: tuple[int, int],
     ref: PreparedScan,
@@ -217,24 +219,35 @@ def _refuse_far_guess(
     guess: NDArray[np.float64],
     options: CorrelativeOptions,
 ) -> None:
-    """Refuse the correlative search of a pair whose guess puts the scans so far apart that
-    no placement in the window lets their returns overlap, when its lookup table would
-    exceed :data:`MAX_HOPELESS_CELLS`; the poses of the two scans' lines made the guess."""
+    """Refuse the correlative search of a pair whose lookup table would exceed
+    :data:`MAX_TABLE_CELLS`: as a far guess when no placement in the window lets the scans
+    overlap (the poses of the two scans' lines made the guess), else as a window too large."""
+    cells = table_cells(ref.points, cur.points, guess, options)
+    if cells <= MAX_TABLE_CELLS:
+        return
     reach = float(np.max(np.hypot(*ref.points.T)) + np.max(np.hypot(*cur.points.T)))
     apart = float(np.hypot(guess[0], guess[1]))
-    if apart <= reach + options.search_xy + 4 * options.sigma:
-        return
-    cells = table_cells(ref.points, cur.points, guess, options)
-    if cells <= MAX_HOPELESS_CELLS:
-        return
-    raise far_guess_error(
-        scans,
-        pair,
-        apart,
-        reach,
-        f" and the correlative search moves ±{options.search_xy:g} m: no placement it tries "
-        f"lets them overlap, and its table would need {cells:.3g} cells (limit "
-        f"{MAX_HOPELESS_CELLS})",
+    if apart > reach + options.search_xy + 4 * options.sigma:
+        raise far_guess_error(
+            scans,
+            pair,
+            apart,
+            reach,
+            f" and the correlative search moves ±{options.search_xy:g} m: no placement it "
+            f"tries lets them overlap, and its table would need {cells:.3g} cells (limit "
+            f"{MAX_TABLE_CELLS})",
+        )
+    from relation_metric.errors import InputError
+
+    i, j = pair
+    raise InputError(
+        f"the correlative search of the scans of lines {int(scans.lines[i])} and "
+        f"{int(scans.lines[j])} (±{options.search_xy:g} m at {options.resolution:g} m cells) "
+        f"needs a lookup table of {cells:.3g} cells, {8 * cells / 2**30:.3g} GiB of float64: "
+        f"it would not fit in memory (limit {MAX_TABLE_CELLS} cells); expected a smaller "
+        "--search-xy",
+        path=scans.path,
+        line=int(scans.lines[j]),
     )
 
 
@@ -293,7 +306,7 @@ def align_scans(
         lost = bool({"failed", "low overlap", "high residual"} & set(flags))
         if opt.global_search == "always" or (opt.global_search == "flagged" and lost):
             if ref.points.shape[0] and cur.points.shape[0]:
-                _refuse_far_guess(scans, (i, j), ref, cur, g, opt.correlative)
+                _refuse_large_table(scans, (i, j), ref, cur, g, opt.correlative)
                 c = correlative_match(ref.points, cur.points, g, opt.correlative)
                 b = align(ref, cur, c.delta, opt.icp)
                 if _better(a, b, opt.limits):
