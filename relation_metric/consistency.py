@@ -356,13 +356,24 @@ class NisPersistence:
         return self.near - self.far
 
 
+def _ranks(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Ranks 1..n of ``x`` (shape ``(n,)``), ties given their mean rank — as
+    ``scipy.stats.rankdata``'s default, without importing scipy.stats (start-up)."""
+    order = np.argsort(x, kind="stable")
+    sx = x[order]
+    first = np.r_[True, sx[1:] != sx[:-1]]
+    starts = np.flatnonzero(first)
+    mean_rank = starts + (np.diff(np.r_[starts, sx.size]) - 1) / 2.0 + 1.0
+    ranks = np.empty(x.size)
+    ranks[order] = mean_rank[np.cumsum(first) - 1]
+    return ranks
+
+
 def _rank_correlation_at(
     nis: NDArray[np.float64], landmarks: NDArray[np.int64] | None, lag: int
 ) -> tuple[float, int]:
     """Spearman correlation of the NIS of sightings of one landmark ``lag`` sightings apart
     (measurements ``lag`` apart when ``landmarks`` is ``None``), and the number of pairs."""
-    from scipy.stats import rankdata
-
     idx = np.arange(nis.size)
     order = idx if landmarks is None else np.lexsort((idx, landmarks))
     a, b = order[:-lag], order[lag:]
@@ -371,7 +382,7 @@ def _rank_correlation_at(
         ok &= landmarks[a] == landmarks[b]
     if ok.sum() < 3:
         return float("nan"), int(ok.sum())
-    return float(np.corrcoef(rankdata(nis[a[ok]]), rankdata(nis[b[ok]]))[0, 1]), int(ok.sum())
+    return float(np.corrcoef(_ranks(nis[a[ok]]), _ranks(nis[b[ok]]))[0, 1]), int(ok.sum())
 
 
 def nis_persistence(nis: ArrayLike, landmarks: ArrayLike | None = None) -> NisPersistence:

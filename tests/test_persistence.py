@@ -54,6 +54,15 @@ def test_factor_is_the_rule_recomputed(rng):
     assert p.rho == pytest.approx(rho) and p.factor == pytest.approx((1 + rho) / (1 - rho))
 
 
+def test_tied_values_are_ranked_as_spearman_ranks_them(rng):
+    """NIS written with few digits ties often: ties take their mean rank, as in spearmanr."""
+    nis, lm = _ar1_tracks(0.8, rng)
+    nis = np.round(nis, 1)
+    p = nis_persistence(nis, lm)
+    assert p.near == pytest.approx(_spearman_at(nis, lm, 1), abs=1e-12)
+    assert p.far == pytest.approx(_spearman_at(nis, lm, FAR_LAG), abs=1e-12)
+
+
 @pytest.mark.parametrize("rho", [0.7, 0.8])
 def test_ar1_errors_give_about_the_known_factor(rho):
     """AR(1) errors of known ρ: the factor is above 1 and within 30 % below the true

@@ -237,7 +237,7 @@ def _add_align_pair_arguments(a: argparse.ArgumentParser) -> None:
         default=180.0,
         metavar="DEG",
         help="largest heading difference of the two scans of a loop pair [deg], in (0, 180] "
-        "(default 180: any; scans seen from opposite headings alias most in corridors)",
+        "(default: 180, any; scans seen from opposite headings alias most in corridors)",
     )
 
 
