@@ -190,6 +190,7 @@ def test_map_compare_cutoff_beyond_float64_is_a_usage_error(tmp_path):
 SMALL = ["--worlds", "hu-simple1", "--noise", "a", "--methods", "full,m1,m2", "--runs", "1"]
 
 
+@pytest.mark.slow
 def test_study_resumes_over_a_damaged_case_file(tmp_path, capsys):
     out = tmp_path / "study"
     assert main(["study", "pose-only", "-o", str(out), "-q", *SMALL]) == 0

@@ -70,6 +70,7 @@ def test_corrupted_associations_are_recorded():
     )
 
 
+@pytest.mark.slow
 def test_outlier_gate_rejects_gross_outliers_and_keeps_good_data():
     """Injected 3 m range outliers are rejected; good data is rejected at about 1 − p."""
     w = make_world("complex1", noise="a", seed=4)
@@ -99,6 +100,7 @@ def test_outlier_gate_rejects_gross_outliers_and_keeps_good_data():
         ekf_slam_bundle(b, outlier_gate=1.0)
 
 
+@pytest.mark.slow
 def test_gated_filter_recovers_from_an_unmodelled_turn():
     """A 1 rad bump the odometry never saw: without the rejected-run rule the gated filter
     rejects the measurements that would correct it and stays lost."""
@@ -215,6 +217,7 @@ def _update_full_product(
     return True
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("world, gate", [("complex1", None), ("simple2", 0.999)])
 def test_symmetric_update_equals_the_old_formula(monkeypatch, world, gate):
     """The in-place symmetric update gives the old formula's results to 1e-12 (seeded run)."""

@@ -95,6 +95,7 @@ def tables(draw: st.DrawFn, tokens: st.SearchStrategy[str]) -> tuple[str, int]:
     return text, ncols
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(tables(decimal_tokens()))
 def test_equals_python_float_bit_for_bit(table):

@@ -130,6 +130,7 @@ def test_a_featureless_corridor_keeps_the_odometry_along_it():
     assert not any("degenerate" in f for f in res.flags)
 
 
+@pytest.mark.slow
 def test_an_absurd_window_is_refused():
     """Poses that jump 100 km between two scans: the chain keeps the jump (no alignment
     bridges it), and a window growing with that travel would need an absurd grid."""
@@ -166,6 +167,7 @@ def _corridor_errors(seed, loops):
     return et, er, (et > 0.10) | (er > np.radians(2.0)), ~res.flagged, kind == "loop"
 
 
+@pytest.mark.slow
 def test_corridor_world_from_odometry_meets_loose_bounds():
     """Seed 8 (not used to calibrate), a 120 m drive, 15 loop pairs: the unflagged relations
     are right (at most 1 % gross), millimetre-accurate, and at most 10 % are flagged."""

@@ -271,6 +271,7 @@ def test_resample_controls_keeps_the_motion_and_splits_gaps():
     np.testing.assert_array_equal(resample_controls(c[:3]), c[:3])  # nothing to split
 
 
+@pytest.mark.slow
 @pytest.mark.realdata
 def test_cli_chain_on_another_dataset_directory(tmp_path):
     """The documented commands, unchanged, on a directory that is not dataset 7: the middle

@@ -87,6 +87,7 @@ def test_vectorised_association_equals_the_per_landmark_innovation() -> None:
     assert math.isclose(d2, min(scalar), rel_tol=1e-10)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("init", ["improper", "proper"])
 def test_client_run_is_healthy_and_seeded(init: str) -> None:
     a, b = run(0, Config(init=init)), run(0, Config(init=init))

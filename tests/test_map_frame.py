@@ -298,6 +298,7 @@ def test_run_with_disjoint_ids_falls_back_to_auto(tmp_path, capsys):
     assert any("shares an id" in n for n in notes)
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore:only .* distinct pose pairs")
 def test_run_takes_an_association_file_and_no_align(tmp_path, capsys):
     base = read_bundle(SIM)

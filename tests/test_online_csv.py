@@ -95,6 +95,7 @@ def _nees_by_hand(bundle: Path) -> float:
     return float(np.mean(np.einsum("ka,kab,kb->k", e, np.linalg.inv(p), e)))
 
 
+@pytest.mark.slow
 def test_run_on_a_bundle_with_online_covariances_reports_the_online_nees(tmp_path: Path) -> None:
     sim, slam, rep = tmp_path / "sim", tmp_path / "slam", tmp_path / "rep"
     assert main(["simulate", "simple1", "--seed", "2", "-o", str(sim), "-q"]) == 0

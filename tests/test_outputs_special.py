@@ -229,6 +229,7 @@ def test_concurrent_writers_one_wins_the_others_fail_clearly(tmp_path: Path) -> 
     assert _hidden(tmp_path, "cx") == []  # no partial, no lock file
 
 
+@pytest.mark.slow
 def test_two_concurrent_runs_one_wins(tmp_path: Path) -> None:
     procs = [_cli("run", "simple1", "-o", "cc", "-q", cwd=tmp_path) for _ in range(2)]
     results = [(p.wait(timeout=300), p.stderr.read() if p.stderr else "") for p in procs]
@@ -250,6 +251,7 @@ def test_concurrent_force_writers_all_replace_whole(tmp_path: Path) -> None:
     assert _hidden(tmp_path, "cx") == []
 
 
+@pytest.mark.slow
 def test_a_held_claim_refuses_then_waits_with_force(tmp_path: Path) -> None:
     out = tmp_path / "cx"
     outputs.claim_outputs([out])  # this test process is "another slamrel" writing cx
@@ -307,6 +309,7 @@ def test_signal_while_writing_leaves_no_partial(tmp_path: Path, signame: str) ->
     assert _hidden(tmp_path, "big") == []
 
 
+@pytest.mark.slow
 def test_sigterm_stops_a_study_with_its_workers_at_once(tmp_path: Path) -> None:
     """SIGTERM reaches the study's process only (not its worker processes, unlike Ctrl-C in
     a terminal): leaving the pool used to run every pending case first, for minutes."""

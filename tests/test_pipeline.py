@@ -50,6 +50,7 @@ def test_run_writes_a_consistent_report(tmp_path):
     ]
 
 
+@pytest.mark.slow
 def test_interrupted_run_leaves_no_partial_report(tmp_path, monkeypatch):
     out = tmp_path / "rep"
 
@@ -61,6 +62,7 @@ def test_interrupted_run_leaves_no_partial_report(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_run_on_a_bundle_directory(tmp_path):
     sim, slam, rep = tmp_path / "sim", tmp_path / "slam", tmp_path / "rep"
     assert main(["simulate", "simple2", "--seed", "3", "-o", str(sim), "-q"]) == 0

@@ -107,6 +107,7 @@ def test_runs_bridges_short_gaps() -> None:
     assert [a.tolist() for a in flag_runs(np.zeros(5, dtype=bool), 1)] == [[], []]
 
 
+@pytest.mark.slow
 def test_diverging_bundle_exits_0_with_trajectory_and_intervals(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
     b = _shifted(tmp_path)
     out, rep = tmp_path / "t.txt", tmp_path / "r.json"

@@ -59,6 +59,7 @@ def test_perfect_map_filter_consistent_smoother_and_batch_better(motion: str) ->
         assert np.mean(np.array(rmse[m]) < np.array(rmse["filter"])) > 0.9
 
 
+@pytest.mark.slow
 def test_perturbed_map_needs_the_map_covariance() -> None:
     means = {}
     for mode in ("joint", "marginal", "ignore"):

@@ -144,6 +144,7 @@ def test_consecutive_pairs_meet_targets_from_drifting_odometry():
     assert np.mean(et < 5 * sd + 0.005) > 0.8
 
 
+@pytest.mark.slow
 def test_loop_pairs_meet_targets_with_the_global_initialiser():
     walls = laser_world("loop")
     corners = np.array([[1.5, 1.5], [28.5, 1.5], [28.5, 18.5], [1.5, 18.5]])

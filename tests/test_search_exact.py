@@ -91,6 +91,7 @@ def test_cycle_on_triples_equals_its_numpy_statement():
         assert _cycle(hist, 1e-6) == numpy_cycle(hist, 1e-6)
 
 
+@pytest.mark.slow
 def test_kept_grids_change_no_result(monkeypatch):
     _, log = corridor_log(8, length=120.0)
     s = log.scans

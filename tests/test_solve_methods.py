@@ -34,6 +34,7 @@ def test_solve_toro_on_a_pose_graph(tmp_path, rng, capsys):
     assert graph_cost(trajectory(tmp_path / "lm"), g) <= graph_cost(got, g)
 
 
+@pytest.mark.slow
 def test_solve_pose_only_m2_on_a_landmark_graph_matches_the_study(tmp_path, capsys):
     w = make_world("hu-simple1", noise="a", seed=3)
     log = LandmarkLog.from_world(w)

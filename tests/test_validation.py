@@ -28,6 +28,7 @@ def test_recovered_ranks_runs_like_online(capsys):
     assert ratio.max() < 1.25 and ratio.min() > 0.25
 
 
+@pytest.mark.slow
 def test_tuning_study_on_a_small_grid():
     """The grid's bookkeeping on 2 × 2 runs of a small world (fast; the full grid is slow)."""
     from slamrel.studies.faithfulness import tuning_study

@@ -52,6 +52,7 @@ def test_least_squares_converges_from_odometry(vp, least_squares):
     assert 0.5 < 2 * sol.cost[-1] / dof < 1.5  # measured 0.89
 
 
+@pytest.mark.slow
 def test_grown_and_fixed_step_schemes_reach_one_minimum(vp, least_squares):
     """The default geometric growth (500 poses, x2) and the fixed 500-pose step it replaced
     end at the same minimum, cost 3091.97 (measured before the sparse Cholesky back-ends)."""
@@ -81,6 +82,7 @@ def test_ekf_slam_and_recovery_run(ekf):
     assert len(rec.trajectory) == 6969 and rec.counts.used == 3640
 
 
+@pytest.mark.slow
 def test_cli_chain_and_map_compare(vp, tmp_path, capsys):
     """What a user runs; the maps keep the file's landmark ids through g2o, so map-compare
     associates them by id."""
