@@ -219,7 +219,7 @@ def recover(
     robust_scale: float | str = "auto",
     progress: bool = False,
     map_prior: str = DEFAULT_MAP_PRIOR,
-    persistence: bool = True,
+    persistence: bool = False,
 ) -> Recovery:
     """Recover the trajectory of a SLAM run by localisation in its final map.
 
@@ -281,14 +281,16 @@ def recover(
         counted a second time (docs/recovery.md). The trajectory is the same under both;
         smoother and batch only.
     persistence : bool
-        Default ``True``: when the first pass's innovations are correlated in time along
+        Default ``False`` (one pass): it also hides a map whose stated covariance is
+        too small, whose error persists along each track too (docs/verdict.md). ``True``:
+        when the first pass's innovations are correlated in time along
         each landmark's track (:func:`~relation_metric.consistency.nis_persistence`: lag-1
         correlation ``ρ`` significantly above 0), a white-noise filter counts a persisting
         error's sightings as independent; a second whole pass with the measurement noise
         ``R × (1 + ρ)/(1 − ρ)`` gives the covariances (and the map loadings, the filter's
         covariances), while the trajectory stays the first pass's (the score judges the
         filter's map). The factor and ``ρ`` are in :class:`Recovery`; without a significant
-        ``ρ`` the factor is exactly 1 and nothing is re-run. ``False``: one pass.
+        ``ρ`` the factor is exactly 1 and nothing is re-run.
 
     Returns
     -------

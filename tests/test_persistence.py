@@ -105,7 +105,7 @@ def test_healthy_bundle_is_unchanged():
     """White Gaussian measurement errors: factor 1, one pass, the very recovery of
     ``persistence=False``, and no ``persistence`` key in the report."""
     b = healthy_bundle("simple1", 0, "marginal")
-    on, off = recover(b), recover(b, persistence=False)
+    on, off = recover(b, persistence=True), recover(b)
     assert on.persistence_factor == 1.0 and on.persistence_rho == 0.0
     np.testing.assert_array_equal(on.trajectory.poses, off.trajectory.poses)
     np.testing.assert_array_equal(on.covariances, off.covariances)
@@ -121,7 +121,7 @@ def test_persisting_errors_inflate_the_covariances_only(seed):
     NEES moves towards its dof 3 — on these simple1 runs the one-pass NEES mean is already
     2.4–2.7 and the second pass takes it to 0.56–0.74 (docs/verdict.md, Real robots)."""
     b = _with_noise("ar1", seed)
-    on, off = recover(b), recover(b, persistence=False)
+    on, off = recover(b, persistence=True), recover(b)
     assert on.persistence_factor > 1.0 and 0.0 < on.persistence_rho < 1.0
     rho = on.persistence_rho
     assert on.persistence_factor == pytest.approx((1 + rho) / (1 - rho))
