@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from relation_metric.se2 import wrap_angle_float
 from slamrel.formats.laser import LaserScans
 from slamrel.scans.cycles import check_scan_relations
 from slamrel.scans.matching import IcpOptions, PreparedScan, align, prepare_scan
@@ -105,7 +106,7 @@ class HandWindow:
 
 def _inside(delta: NDArray[np.float64], placed: NDArray[np.float64], w: HandWindow) -> bool:
     d = delta - placed
-    d[2] = (d[2] + np.pi) % (2 * np.pi) - np.pi
+    d[2] = wrap_angle_float(float(d[2]))
     tol = 1e-9
     return bool(
         abs(d[0]) <= w.half_xy + tol
