@@ -50,6 +50,7 @@ __all__ = [
     "RigidSplit",
     "anchor_on_landmarks",
     "anchor_on_start",
+    "gauge_jacobian",
     "rigid_split",
     "start_frame",
     "shared_by_id",
@@ -343,7 +344,7 @@ class RigidSplit:
         return xy, q.reshape(2 * m, 2 * m)
 
 
-def _gauge_jacobian(rotated: Array) -> Array:
+def gauge_jacobian(rotated: Array) -> Array:
     """``∂ vec(T(t)) / ∂ [dx, dy, θ]``, ``(2n, 3)``, with ``rotated = R(θ) t``
     (``R'(θ) t = J R(θ) t``, ``J`` the quarter turn)."""
     n = rotated.shape[0]
@@ -392,7 +393,7 @@ def rigid_split(
         w = np.linalg.inv(chol)  # whitening: W = wᵀ w
         for _ in range(50):
             moved = _moved(t, d, th)
-            a = w @ _gauge_jacobian(moved - d)
+            a = w @ gauge_jacobian(moved - d)
             b = w @ (m - moved).reshape(-1)
             step = np.linalg.lstsq(a, b, rcond=None)[0]
             d, th = d + step[:2], th + float(step[2])

@@ -137,7 +137,8 @@ MEMORY_SHARE = 0.5
 class BatchResult:
     """Refined poses (N, 3), covariances (N, 3, 3), iterations, costs (½ rᵀ W r + ½ ηᵀη),
     the map correction ``L η`` (M, 2) estimated with them and the poses' map loadings
-    ``V`` (N, 3, r) of :meth:`_JointProblem.map_loadings` (their errors' shared part);
+    ``V`` (N, 3, r) of :meth:`_JointProblem.map_loadings` (their errors' shared part) with
+    their link ``T`` (r, r) to the map's own error (:meth:`_JointProblem.map_link`);
     with the deconditioned prior, also the covariances under the independent one (the
     filter's own map model, for the filter-vs-smoother agreement)."""
 
@@ -149,6 +150,7 @@ class BatchResult:
     map_correction: Array | None = None
     map_loadings: Array | None = None
     independent_covariances: Array | None = None
+    map_link: Array | None = None
 
 
 def regularised_sigma(sigma: Array) -> Array:
@@ -568,7 +570,24 @@ class _JointProblem:
         v = self.map_loadings(s)[1 if deconditioned else 0]
         return v @ v.transpose(0, 2, 1)
 
-    def map_loadings(self, s: JointState) -> tuple[Array, Array]:
+    @staticmethod
+    def map_link(chol: Array, *, deconditioned: bool) -> Array:
+        """``T = Cov(ξ, ζ)`` (r, r): how the loadings' ``ξ`` (:meth:`map_loadings`) is tied to
+        the map's own error ``m̂ − m = L ζ``, ``ζ ~ N(0, I_r)``, errors taken as estimate −
+        truth, so that ``Cov(e_k, m̂ − m) = V_k T Lᵀ`` (what a fit of the map's error, its
+        rigid placement say, tells about each pose's: :mod:`recovery.anchoring`).
+
+        Deconditioned (the map is the posterior of this log): the poses given the map are
+        ``x | m ~ N(μ_x − A⁻¹ B (m − m̂), A⁻¹)``, so ``e = a − Y ζ``, ``ξ = −ζ``, ``T = −I``.
+        Independent (the map a prior the log adds to): the joint solution's error is
+        ``H⁻¹`` times the prior's noise, ``ζ``, whose column of ``H⁻¹`` on the poses is
+        ``−Y S⁻¹``; with ``V = Y R⁻ᵀ`` (``S = R Rᵀ``, ``chol`` = ``R``) ``T = −R⁻¹``.
+        """
+        if deconditioned:
+            return -np.eye(chol.shape[0])
+        return -scipy.linalg.solve_triangular(chol, np.eye(chol.shape[0]), lower=True)
+
+    def map_loadings(self, s: JointState) -> tuple[Array, Array, Array]:
         """``V`` (N, 3, r) under each map prior, ``(independent, deconditioned)``: the poses'
         errors' share of the map's error, ``e_k = a_k + V_k ξ`` with ``ξ ~ N(0, I_r)`` the
         same for every pose, so ``Cov(e_k, e_l) = (A⁻¹)_kl + V_k V_lᵀ``, at ``s`` (undamped),
@@ -579,16 +598,17 @@ class _JointProblem:
         added. Deconditioned: ``V = Y``, ``(Y Yᵀ)_kk`` — the law of total covariance
         ``Cov(X | Z) = A⁻¹ + A⁻¹ B Σ_m Bᵀ A⁻¹`` for a map whose ``Σ_m = L Lᵀ`` is already the
         posterior given this log (``η``'s prior stands for ``Cov(m | Z)``, so ``S`` is
-        ``I``: the log's information about the map is not added a second time).
+        ``I``: the log's information about the map is not added a second time). The third
+        array is ``R``, the lower Cholesky factor of ``S`` (:meth:`map_link`).
         """
         n = s.poses.shape[0]
         if not self.rank:
-            return np.zeros((n, 3, 0)), np.zeros((n, 3, 0))
+            return np.zeros((n, 3, 0)), np.zeros((n, 3, 0)), np.zeros((0, 0))
         ab0, b, c = self.linearise(s).system
         y = _cholesky_solve(ab0.copy(order="F"), np.asfortranarray(b))
         chol = scipy.linalg.cholesky(c - b.T @ y, lower=True)
         v = scipy.linalg.solve_triangular(chol, y.T, lower=True).T
-        return v.reshape(n, 3, self.rank), y.reshape(n, 3, self.rank)
+        return v.reshape(n, 3, self.rank), y.reshape(n, 3, self.rank), chol
 
 
 def map_factor_of(inp: FilterInput) -> Array:
@@ -713,8 +733,9 @@ def refine(
     x[:, 2] = se2.wrap_angle(x[:, 2])
     state = JointState(x, res.x.eta)
     covs = batch_covariances(problem.map_inp(state.eta), x, used, weights, regularised=reg)
-    independent, deconditioned = problem.map_loadings(state)
+    independent, deconditioned, chol = problem.map_loadings(state)
     loadings = deconditioned if map_prior == "deconditioned" else independent
+    link = problem.map_link(chol, deconditioned=map_prior == "deconditioned")
     filters_model = None  # the filter's own map model, when the prior is not it
     if map_prior == "deconditioned":
         filters_model = covs + independent @ independent.transpose(0, 2, 1)
@@ -729,6 +750,7 @@ def refine(
         map_correction=shift,
         map_loadings=loadings,
         independent_covariances=filters_model,
+        map_link=link,
     )
 
 

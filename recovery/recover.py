@@ -368,6 +368,7 @@ def recover(
         map_prior=prior.prior,
         map_prior_reason=prior.reason,
         map_loadings=None if est.map_loadings is None else readonly(est.map_loadings),
+        map_link=None if est.map_link is None else readonly(est.map_link),
         agreement_covariances=None
         if est.independent_covariances is None
         else readonly(est.independent_covariances),
@@ -434,6 +435,7 @@ def _persistent_pass(
         covariances=second.covariances,
         map_loadings=second.map_loadings,
         independent_covariances=second.independent_covariances,
+        map_link=second.map_link,
     )
     return est, fr2.covariances
 
@@ -552,6 +554,7 @@ class _Estimate:
     map_correction: Array | None = None
     map_loadings: Array | None = None
     independent_covariances: Array | None = None
+    map_link: Array | None = None
 
 
 def _estimate(
@@ -595,6 +598,7 @@ def _estimate(
         map_correction=None if br.map_correction is None else readonly(br.map_correction),
         map_loadings=br.map_loadings,
         independent_covariances=br.independent_covariances,
+        map_link=br.map_link,
     )
 
 

@@ -427,6 +427,11 @@ class Recovery:
         (:meth:`recovery.batch_refinement._JointProblem.map_loadings`), so the poses' errors
         are correlated by ``V_k V_lᵀ``; the verdict's consistency lamp uses it. ``None`` for
         the filter.
+    map_link : ndarray, shape (r, r), or None
+        ``T = Cov(ξ, ζ)``, the loadings' ``ξ`` against the map's own error ``m̂ − m = L ζ``
+        (:meth:`recovery.batch_refinement._JointProblem.map_link`): ``Cov(e_k, m̂ − m) =
+        V_k T Lᵀ``; the map-frame NEES (:mod:`recovery.anchoring`) conditions each pose on the
+        map's placement with it. ``None`` for the filter.
     agreement_covariances : ndarray, shape (N, 3, 3), or None
         With the deconditioned map prior, the smoother's covariances under the independent
         one — the filter's own map model (a Schmidt filter cannot de-condition the map), so
@@ -466,6 +471,7 @@ class Recovery:
     filter_covariances: Array | None = None
     map_prior_reason: str = ""
     map_loadings: Array | None = None
+    map_link: Array | None = None
     agreement_covariances: Array | None = None
     persistence_factor: float = 1.0
     persistence_rho: float = 0.0
