@@ -57,7 +57,15 @@ from slamrel.report.html import render_html
 from slamrel.report.notes import map_notes, nees_notes, no_truth_notes, run_notes
 from slamrel.report.run_page import report_figures, report_sections
 from slamrel.report.verdict import RunFacts, run_verdict
-from slamrel.runs.nees import NeesCurve, at_truth_times, estimate_nees, placed_frame
+from slamrel.runs.nees import (
+    NeesCurve,
+    PlacementNees,
+    at_truth_times,
+    estimate_nees,
+    map_pairs,
+    placed_frame,
+    placement_nees,
+)
 from slamrel.runs.result import ReferenceScores, RelationSetRule, RunResult, SetEvaluations
 from slamrel.runs.time_base import TimeBase
 from slamrel.simulation.bundles import world_bundle
@@ -383,11 +391,13 @@ def score_bundle(
     frame, estimates, evaluations = None, own, {}
     nees: dict[str, NeesCurve] = {}
     nees_truth: dict[str, NeesSummary] = {}
+    placement = None
     online_vs_recovered = None
     if truth is not None and relations is not None:
         # the NEES frame's landmark fit on the comparison's pairs (none when it failed)
         frame = placed_frame(bundle) if map_cmp is None else landmark_frame(bundle, map_cmp)[0]
         estimates, nees, nees_truth = _estimates_at_truth(inp, own, rec, frame)
+        placement = _placement_nees(bundle, rec, map_cmp, frame)
         evaluations = {k: _evaluate_sets(relations.sets, est) for k, est in estimates.items()}
         notes += nees_notes(
             frame, nees, nees_truth,
@@ -417,6 +427,7 @@ def score_bundle(
         recovery_error=rec_error,
         nees_frame=frame,
         nees_truth_frame=nees_truth,
+        nees_placement=placement,
         relation_sets=() if relations is None else relations.rules,
         reference=_reference_scores(inp, own),
         online_vs_recovered=online_vs_recovered,
@@ -567,6 +578,20 @@ def _own_estimates(inp: RunInput, rec: Recovery | None) -> dict[str, Trajectory]
     if inp.online is not None:
         own["online"] = inp.online
     return own
+
+
+def _placement_nees(
+    bundle: Bundle, rec: Recovery | None, map_cmp: MapComparison | None, frame: NeesFrame
+) -> PlacementNees | None:
+    """The recovered NEES conditioned on the map's placement
+    (:func:`slamrel.runs.nees.placement_nees`), fitted on the map comparison's pairs with the
+    true landmarks; ``None`` where it is not defined."""
+    if rec is None or map_cmp is None or bundle.landmarks_groundtruth is None:
+        return None
+    a = map_cmp.association
+    truth = np.asarray(map_cmp.reference.xy)[np.asarray(a.reference_rows)]
+    rows, t = map_pairs(bundle, a.estimate_rows, truth, frame)
+    return placement_nees(bundle, rec, frame, rows, t)
 
 
 def _estimates_at_truth(

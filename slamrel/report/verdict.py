@@ -103,6 +103,7 @@ from relation_metric.errors import InputError
 from relation_metric.nees_law import NeesLaw
 
 if TYPE_CHECKING:
+    from recovery.placement import Placement
     from recovery.results import Recovery, RecoveryCounts, RobustSettings
     from relation_metric.evaluate import Evaluation
     from slamrel.runs.result import MapSummary, RunResult
@@ -356,12 +357,16 @@ class RunFacts:
     nis_landmarks: NDArray[np.int64] | None = None
     agreement: Agreement | None = None
     nees_law: NeesLaw | None = None
+    placement: Placement | None = None
 
     @classmethod
     def of(cls, result: RunResult) -> RunFacts:
         main = result.main_estimate
         rec = result.recovery_result
         curve = result.nees.get(main)
+        placed = result.nees_placement if main == "recovered" else None
+        if placed is not None:  # the recovered NEES in the map's frame (its placement out)
+            curve = placed.curve
         online = result.nees.get("online") if main != "online" else None
         errors, scored, scored_on = _scores_of(result, main)
         diff = result.online_vs_recovered
@@ -388,6 +393,7 @@ class RunFacts:
             online_difference_relations=0 if diff is None else int(diff.all.valid.sum()),
             agreement=_agreement_of(rec),
             nees_law=None if curve is None or main != "recovered" else _nees_law_of(result),
+            placement=None if placed is None else placed.placement,
         )
 
 
@@ -429,34 +435,36 @@ def _nees_law_of(result: RunResult) -> NeesLaw | None:
     curve = result.nees.get("recovered")
     if rec is None or rec.map_loadings is None or truth is None or curve is None:
         return None
-    got = at_truth_times(rec.trajectory, truth)
-    if got is None:
-        return None
-    rows = got[1][1:]  # the NEES leaves the prior out
+    placed = result.nees_placement
+    if placed is not None:  # the shared error left once the map's placement is known
+        curve = placed.curve
+        covs, loadings = placed.placement.covariances[1:], placed.placement.loadings[1:]
+    else:
+        got = at_truth_times(rec.trajectory, truth)
+        if got is None:
+            return None
+        rows = got[1][1:]  # the NEES leaves the prior out
+        covs, loadings = rec.covariances[rows], rec.map_loadings[rows]
     v = np.asarray(curve.values, dtype=np.float64)
-    if rows.size != v.size or not np.isfinite(v).all() or v.size < 2:
+    if covs.shape[0] != v.size or not np.isfinite(v).all() or v.size < 2:
         return None
     tau = v.size / effective_sample_size(v)
     try:
-        return shared_error_law(rec.covariances[rows], rec.map_loadings[rows], local_factor=tau)
+        return shared_error_law(covs, loadings, local_factor=tau)
     except InputError:
         return None
 
 
 def _map_nees_of(result: RunResult) -> MapNees | None:
     """The map's NEES in the NEES frame: the true landmarks moved into the map's frame."""
+    from slamrel.runs.nees import map_pairs
+
     b, mc = result.bundle, result.map_comparison
     if mc is None or b.landmarks_groundtruth is None:
         return None
     a = mc.association
-    rows = np.asarray(a.estimate_rows)
     truth = np.asarray(mc.reference.xy)[np.asarray(a.reference_rows)]
-    frame = result.nees_frame
-    if frame is not None and frame.anchoring is not None:
-        an = frame.anchoring  # truth ← map; its inverse takes the truth into the map frame
-        c, s = math.cos(an.dtheta), math.sin(an.dtheta)
-        d = truth - np.array([an.dx, an.dy])
-        truth = np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]))
+    rows, truth = map_pairs(b, a.estimate_rows, truth, result.nees_frame)
     est = np.asarray(b.map_xy)[rows]
     if b.map_covariance is not None:
         idx = np.stack((2 * rows, 2 * rows + 1), axis=1).ravel()
@@ -746,6 +754,8 @@ def _consistency_lines(facts: RunFacts) -> list[Judgement]:
                 facts.online_nees_values,
             )  # fmt: skip
         )
+    if n is not None and facts.placement is not None:
+        lines[0] = replace(lines[0], value=lines[0].value + _placement_words(facts.placement))
     if n is not None and main == "recovered" and lines[0].level != "green":
         lines[0] = replace(lines[0], value=lines[0].value + _whose(lines[0], lines[1:2]))
     if n is not None and facts.nees_values is not None:
@@ -774,6 +784,17 @@ def _consistency_lines(facts: RunFacts) -> list[Judgement]:
             )
         )
     return lines
+
+
+def _placement_words(p: Placement) -> str:
+    """What the recovered NEES leaves out: the map's placement, with its size and NEES."""
+    sp = p.split
+    nees = "" if sp.nees_rigid is None else f", NEES {_g(sp.nees_rigid)} for 3 dof"
+    return (
+        f"; in the map's frame: the map's placement (a rigid motion of the whole map, which "
+        f"no relation sees: {math.degrees(sp.dtheta):.2g}°, {math.hypot(sp.dx, sp.dy):.2g} m"
+        f"{nees}, on {p.landmarks} landmarks) taken out of each pose and its covariance"
+    )
 
 
 def _excursion_scale(consistency: Judgement) -> float:

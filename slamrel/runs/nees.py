@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from recovery.anchoring import Anchoring, NeesFrame, start_frame, truth_at_start
 from recovery.bundle import Bundle
 from recovery.ekf import DEFAULT_MAX_OUTLIER_RUN
+from recovery.placement import Placement, condition_on_placement
 from recovery.results import Recovery
 from relation_metric.consistency import (
     NeesBlowup,
@@ -32,17 +33,21 @@ from relation_metric.consistency import (
     pose_nees,
     summarize_nees,
 )
+from relation_metric.errors import InputError
 from relation_metric.time_association import match_nearest_times, nearest_index
 from relation_metric.trajectory import Trajectory
 from slamrel.runs.time_base import TimeBase
 
 __all__ = [
     "NeesCurve",
+    "PlacementNees",
     "at_truth_times",
     "blowups",
     "estimate_nees",
     "frame_by_id",
+    "map_pairs",
     "placed_frame",
+    "placement_nees",
     "recovery_nees",
     "truth_at",
 ]
@@ -154,3 +159,78 @@ def recovery_nees(
         return None
     frame = frame_by_id(bundle) if frame is None else frame
     return estimate_nees(truth, got[0], recovery.covariances[got[1]], frame)
+
+
+class PlacementNees(NamedTuple):
+    """The recovered NEES conditioned on the map's placement (:mod:`recovery.placement`).
+
+    ``curve`` as :func:`estimate_nees` gives it (in the NEES frame, the prior left out);
+    ``placement`` the conditioning, at ``rows`` of the recovery (the poses at ground-truth
+    times, the first included)."""
+
+    curve: NeesCurve
+    placement: Placement
+    rows: NDArray[np.int64]
+
+
+def map_pairs(
+    bundle: Bundle, rows: ArrayLike, truth_xy: ArrayLike, frame: NeesFrame | None
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Map rows and their true positions ``(n, 2)`` taken into the map frame: by the inverse
+    of ``frame``'s anchoring (truth ← map) when it has one, else as they are."""
+    t = np.asarray(truth_xy, dtype=np.float64)
+    if frame is not None and frame.anchoring is not None:
+        an = frame.anchoring
+        c, s = np.cos(an.dtheta), np.sin(an.dtheta)
+        d = t - np.array([an.dx, an.dy])
+        t = np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]))
+    return np.asarray(rows, dtype=np.int64), t
+
+
+def placement_nees(
+    bundle: Bundle,
+    recovery: Recovery,
+    frame: NeesFrame,
+    map_rows: ArrayLike,
+    map_truth: ArrayLike,
+) -> PlacementNees | None:
+    """The recovered NEES with each pose conditioned on the map's placement, fitted on the
+    map rows ``map_rows`` whose true positions ``map_truth`` ``(n, 2)`` are given in the map
+    frame (:func:`map_pairs`).
+
+    ``None`` where it is not defined: no ground truth, a recovery without map loadings (the
+    filter), a map without uncertainty, fewer than 3 landmarks with a true position, or a map
+    covariance over them that is not positive definite.
+    """
+    truth = bundle.groundtruth
+    rows = np.asarray(map_rows, dtype=np.int64)
+    mu = recovery.map_uncertainty
+    if (
+        truth is None
+        or recovery.map_loadings is None
+        or recovery.map_link is None
+        or mu is None
+        or mu.rank == 0
+        or rows.size < 3
+    ):
+        return None
+    got = at_truth_times(recovery.trajectory, truth)
+    if got is None or len(got[0]) < 2:
+        return None
+    est, at = got
+    idx = np.column_stack((2 * rows, 2 * rows + 1)).ravel()
+    try:
+        pl = condition_on_placement(
+            est.poses,
+            recovery.covariances[at],
+            recovery.map_loadings[at],
+            recovery.map_link,
+            mu.factor[idx],
+            np.asarray(bundle.map_xy)[rows],
+            map_truth,
+        )
+    except InputError:
+        return None
+    moved = Trajectory(est.timestamps, pl.poses)
+    curve = estimate_nees(truth, moved, pl.covariances, frame)[0]
+    return PlacementNees(curve, pl, at)

@@ -25,7 +25,7 @@ from relation_metric.errors import SlamrelError
 from relation_metric.evaluate import Evaluation, error_summaries
 from relation_metric.stats import Summary
 from relation_metric.trajectory import Trajectory
-from slamrel.runs.nees import NeesCurve, blowups, truth_at
+from slamrel.runs.nees import NeesCurve, PlacementNees, blowups, truth_at
 from slamrel.runs.time_base import TimeBase
 
 __all__ = [
@@ -266,6 +266,11 @@ class RunResult:
         The frame of ``nees`` (:mod:`recovery.anchoring`): its description, the anchoring.
     nees_truth_frame : dict of name → NeesSummary
         The same NEES with the poses compared with the ground truth as they are (unaligned).
+    nees_placement : PlacementNees or None
+        The recovered NEES with each pose conditioned on the map's placement (its rigid
+        motion, which no relation sees: :mod:`recovery.placement`); the verdict's recovered
+        consistency judges it. ``None`` where it is not defined (no true landmarks, the
+        filter, a map without uncertainty).
     relation_sets : tuple of RelationSetRule
         How each relation set was made (:func:`default_relations`), absent sets included.
     reference : ReferenceScores or None
@@ -298,6 +303,7 @@ class RunResult:
     recovery_error: str | None = None
     nees_frame: NeesFrame | None = None
     nees_truth_frame: dict[str, NeesSummary] = field(default_factory=dict)
+    nees_placement: PlacementNees | None = None
     relation_sets: tuple[RelationSetRule, ...] = ()
     reference: ReferenceScores | None = None
     online_vs_recovered: SetEvaluations | None = None
@@ -438,6 +444,27 @@ class RunResult:
         """Where the map and the log disagree (``None`` when no recovery ran)."""
         return None if self.recovery_result is None else self.recovery_result.divergence
 
+    @property
+    def placement_dict(self) -> dict[str, Any] | None:
+        """``metrics.json`` ``nees_map_placement``: the recovered NEES conditioned on the map's
+        placement and the placement itself (``dx``, ``dy`` [m], ``dtheta`` [rad], its NEES
+        over 3 dof, the landmarks it was fitted on)."""
+        pn = self.nees_placement
+        if pn is None:
+            return None
+        sp = pn.placement.split
+        return {
+            "recovered": pn.curve.summary.as_dict(),
+            "placement": {
+                "dx": sp.dx,
+                "dy": sp.dy,
+                "dtheta": sp.dtheta,
+                "nees": sp.nees_rigid,
+                "dof": sp.dof_rigid,
+                "landmarks": pn.placement.landmarks,
+            },
+        }
+
     @cached_property
     def map_summary(self) -> MapSummary | None:
         """The map comparison's numbers the report shows, when there is one."""
@@ -459,6 +486,8 @@ class RunResult:
         out["nees"] = {k: v.summary.as_dict() for k, v in self.nees.items()}
         out["nees_frame"] = None if self.nees_frame is None else self.nees_frame.as_dict()
         out["nees_truth_frame"] = {k: v.as_dict() for k, v in self.nees_truth_frame.items()}
+        if self.nees_placement is not None:
+            out["nees_map_placement"] = self.placement_dict
         out["time_base"] = self.time_base.as_dict()
         out["relation_sets"] = [r.as_dict() for r in self.relation_sets]
         out["notes"] = self.notes
