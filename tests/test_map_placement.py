@@ -165,3 +165,47 @@ def test_bad_shapes_are_one_clear_error() -> None:
             np.zeros((4, 3)), np.zeros((4, 3, 3)), np.zeros((4, 3, 2)), np.eye(3),
             np.eye(4), np.zeros((2, 2)), np.zeros((2, 2)),
         )  # fmt: skip
+
+
+def _placed_off(bundle, sigmas: float):  # type: ignore[no-untyped-def]
+    """``bundle`` with its map moved by a rigid motion of NEES ``3 sigmas²`` in the map's stated
+    placement covariance (the map's shape, and its covariance, unchanged)."""
+    rm, rt = shared_by_id(bundle.map_ids, bundle.landmarks_groundtruth[0])
+    assert rm.size == bundle.map_ids.size
+    cov = bundle.map_covariance
+    g = gauge_jacobian(bundle.map_xy)
+    sigma_g = np.linalg.inv(g.T @ np.linalg.solve(cov, g))
+    motion = np.linalg.cholesky(sigma_g) @ (sigmas * np.array([1.0, -1.0, 1.0]))
+    return replace(bundle, map_xy=se2.transform_points(motion, bundle.map_xy))
+
+
+@pytest.mark.parametrize(
+    ("sigmas", "scale"), [(8.0, 1.0), pytest.param(0.0, 3.0, marks=pytest.mark.slow)]
+)
+def test_run_judges_the_recovered_nees_in_the_maps_frame(sigmas: float, scale: float) -> None:
+    """``slamrel run``'s verdict: a healthy map moved as a whole by 8 σ of its placement is
+    judged green in the map's frame (the absolute NEES is not), and the lamp says what was
+    taken out; a map whose error is 3× its covariance is still red (its map lamps: on this
+    joint form the recovered consistency was green before the placement was taken out, q 0.70,
+    and is now, q 0.65)."""
+    from slamrel.pipeline import RunInput, score_bundle
+    from slamrel.report.verdict import RunFacts, run_verdict
+    from slamrel.simulation.healthy import healthy_bundle
+
+    b = _placed_off(healthy_bundle("simple1", 0, "joint", error_scale=scale), sigmas)
+    result = score_bundle(RunInput(b, name="placed off"))
+    assert result.nees_placement is not None
+    absolute = result.nees["recovered"].summary.mean / 3
+    conditioned = result.nees_placement.curve.summary.mean / 3
+    verdict = run_verdict(RunFacts.of(result))
+    lines = {ln.key: ln for ln in verdict.lines}
+    line = lines["consistency"]
+    assert "the map's placement" in line.value
+    metrics = result.metrics()["nees_map_placement"]
+    assert metrics["placement"]["landmarks"] == b.map_ids.size
+    if scale == 1.0:
+        assert metrics["placement"]["nees"] > 100  # 8² × 3 = 192 drawn, plus the map's own
+        assert absolute > 2.0 * conditioned, (absolute, conditioned)
+        assert line.level == "green", line.value
+    else:
+        assert verdict.level == "red" and lines["map_consistency"].level == "red"
