@@ -53,7 +53,7 @@ from relation_metric import se2
 from relation_metric.evaluate import evaluate
 from relation_metric.relations import RelationSet
 from relation_metric.trajectory import Trajectory
-from slamrel.scans.proposals import Proposals, consecutive_pairs, loop_pairs
+from slamrel.scans.proposals import SPACINGS, Proposals, consecutive_pairs, loop_pairs
 from slamrel.scans.relations import (
     AlignOptions,
     align_scans,
@@ -67,6 +67,9 @@ ESTIMATES = ("jitter", "odometry", "drift")
 #: Largest heading difference of a loop pair [rad] (``--loop-max-angle`` in degrees): two
 #: scans of a corridor seen from opposite headings share little and alias most.
 LOOP_MAX_ANGLE = np.pi / 4
+#: How keyframes are spaced (``--keyframes``, :func:`slamrel.scans.proposals.keyframes`):
+#: ``travel`` keeps the drifting guesses' pairs as dense as the truth's.
+KEYFRAMES = "travel"
 
 
 def estimates(truth: np.ndarray, odometry: np.ndarray, seed: int) -> dict[str, np.ndarray]:
@@ -85,12 +88,25 @@ def _score(rel: RelationSet, times: np.ndarray, poses: np.ndarray) -> tuple[floa
     return float(ev.translation.abs.mean), float(ev.rotation.abs.mean)
 
 
-def _pairs(poses: np.ndarray, times: np.ndarray, max_angle: float = LOOP_MAX_ANGLE) -> Proposals:
+def _pairs(
+    poses: np.ndarray,
+    times: np.ndarray,
+    max_angle: float = LOOP_MAX_ANGLE,
+    spacing: str = KEYFRAMES,
+) -> Proposals:
     """``relations align --loops``' pairs with its defaults, proposed from ``poses``, loop
-    pairs at most ``max_angle`` [rad] apart in heading (``--loop-max-angle``)."""
-    prop = consecutive_pairs(poses, times, distance=0.5, angle=0.3)
+    pairs at most ``max_angle`` [rad] apart in heading (``--loop-max-angle``), keyframes
+    by ``spacing`` (``--keyframes``)."""
+    prop = consecutive_pairs(poses, times, distance=0.5, angle=0.3, spacing=spacing)
     return prop + loop_pairs(
-        poses, times, radius=1.0, min_travel=10.0, distance=0.5, angle=0.3, max_angle=max_angle
+        poses,
+        times,
+        radius=1.0,
+        min_travel=10.0,
+        distance=0.5,
+        angle=0.3,
+        max_angle=max_angle,
+        spacing=spacing,
     )
 
 
@@ -103,6 +119,7 @@ def run(
     aligner: str = "global",
     world: str = "loop",
     loop_max_angle: float = LOOP_MAX_ANGLE,
+    keyframes: str = KEYFRAMES,
 ) -> dict:
     """One simulated log: relations made and reviewed, three estimates scored both ways.
 
@@ -127,7 +144,7 @@ def run(
         from slamrel.scans.own_guesses import chain_guesses
 
         start = chain_guesses(s, odo).poses
-    prop = _pairs(start, s.timestamps, loop_max_angle)
+    prop = _pairs(start, s.timestamps, loop_max_angle, keyframes)
     if aligner == "global":
         from slamrel.scans.global_align import align_scans_global
 
@@ -142,7 +159,7 @@ def run(
     gross = (np.hypot(err[:, 0], err[:, 1]) > 0.1) | (np.abs(err[:, 2]) > np.radians(2))
     p = prop.pairs
     reviewed = RelationSet(prop.t1[accept], prop.t2[accept], res.delta[accept])
-    ideal = _pairs(log.truth, s.timestamps, loop_max_angle)
+    ideal = _pairs(log.truth, s.timestamps, loop_max_angle, keyframes)
     true_ideal = RelationSet(ideal.t1, ideal.t2, guesses_from_poses(log.truth, ideal))
     true_prop = RelationSet(prop.t1, prop.t2, true)
     true_acc = RelationSet(prop.t1[accept], prop.t2[accept], true[accept])
@@ -163,6 +180,7 @@ def run(
         "true_loop_pairs": int(np.count_nonzero(ideal.kind == "loop")),
         "guesses": guesses,
         "loop_max_angle_deg": float(np.degrees(loop_max_angle)),
+        "keyframes": keyframes,
         "flagged": int(res.flagged.sum()),
         "contradicted": contradicted,
         "confirmed": confirmed,
@@ -217,6 +235,12 @@ def main() -> None:
         metavar="DEG",
         help="largest heading difference of a loop pair [deg] (default 45; 180: any)",
     )
+    ap.add_argument(
+        "--keyframes",
+        choices=SPACINGS,
+        default=KEYFRAMES,
+        help="keyframe spacing of the pairs (relations align --keyframes; default travel)",
+    )
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args()
     if not 0 < args.loop_max_angle <= 180:
@@ -231,6 +255,7 @@ def main() -> None:
             aligner=args.aligner,
             world=args.world,
             loop_max_angle=float(np.radians(args.loop_max_angle)),
+            keyframes=args.keyframes,
         )
         out.append(r)
         print(

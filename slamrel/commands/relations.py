@@ -223,6 +223,15 @@ def _add_align_pair_arguments(a: argparse.ArgumentParser) -> None:
         help="keyframe spacing by rotation [rad] (default 0.3)",
     )
     a.add_argument(
+        "--keyframes",
+        choices=("motion", "travel"),
+        default="motion",
+        help="motion: a keyframe where the motion since the last one reaches --distance "
+        "(each overshoot adds up: drifting poses keep fewer keyframes than exact ones); "
+        "travel: one every --distance of path length, as dense from drifting poses as from "
+        "true ones (default: %(default)s)",
+    )
+    a.add_argument(
         "--loop-radius", type=float, default=1.0, help="loop pair radius [m] (default 1.0)"
     )
     a.add_argument(
@@ -611,7 +620,13 @@ def _align_pairs(
             tolerance=args.time_tolerance,
             path=args.at,
         )
-    prop = consecutive_pairs(poses, scans.timestamps, distance=args.distance, angle=args.angle)
+    prop = consecutive_pairs(
+        poses,
+        scans.timestamps,
+        distance=args.distance,
+        angle=args.angle,
+        spacing=args.keyframes,
+    )
     if args.loops:
         prop = prop + loop_pairs(
             poses,
@@ -621,6 +636,7 @@ def _align_pairs(
             distance=args.distance,
             angle=args.angle,
             max_angle=math.radians(args.loop_max_angle),
+            spacing=args.keyframes,
         )
     return prop
 
