@@ -59,7 +59,14 @@ from relation_metric import se2
 from relation_metric.evaluate import evaluate
 from relation_metric.relations import RelationSet
 from relation_metric.trajectory import Trajectory
-from slamrel.scans.proposals import SPACINGS, Proposals, consecutive_pairs, loop_pairs
+from slamrel.scans.proposals import (
+    LOOP_GROWTH_ANGLE,
+    SPACINGS,
+    Proposals,
+    consecutive_pairs,
+    keep_within_reach,
+    loop_pairs,
+)
 from slamrel.scans.relations import (
     AlignOptions,
     align_scans,
@@ -99,10 +106,13 @@ def _pairs(
     times: np.ndarray,
     max_angle: float = LOOP_MAX_ANGLE,
     spacing: str = KEYFRAMES,
+    growth: float = 0.0,
 ) -> Proposals:
     """``relations align --loops``' pairs with its defaults, proposed from ``poses``, loop
     pairs at most ``max_angle`` [rad] apart in heading (``--loop-max-angle``), keyframes
-    by ``spacing`` (``--keyframes``)."""
+    by ``spacing`` (``--keyframes``); ``growth`` [m/m] widens the loop pairs' radius and
+    heading limit by the travel between them (``--loop-growth``: candidates, see
+    :func:`slamrel.scans.proposals.within_reach`)."""
     prop = consecutive_pairs(poses, times, distance=0.5, angle=0.3, spacing=spacing)
     return prop + loop_pairs(
         poses,
@@ -113,6 +123,8 @@ def _pairs(
         angle=0.3,
         max_angle=max_angle,
         spacing=spacing,
+        growth=growth,
+        growth_angle=growth * LOOP_GROWTH_ANGLE,
     )
 
 
@@ -126,6 +138,7 @@ def run(
     world: str = "loop",
     loop_max_angle: float = LOOP_MAX_ANGLE,
     keyframes: str = KEYFRAMES,
+    loop_growth: float = 0.0,
 ) -> dict:
     """One simulated log: relations made and reviewed, three estimates scored both ways.
 
@@ -150,13 +163,17 @@ def run(
         from slamrel.scans.own_guesses import chain_guesses
 
         start = chain_guesses(s, odo).poses
-    prop = _pairs(start, s.timestamps, loop_max_angle, keyframes)
+    prop = _pairs(start, s.timestamps, loop_max_angle, keyframes, loop_growth)
     if aligner == "global":
         from slamrel.scans.global_align import align_scans_global
 
         res, _ = align_scans_global(s, prop, start, AlignOptions())
     else:
         res = align_scans(s, prop, guesses_from_poses(start, prop), AlignOptions())
+    candidates = len(prop)
+    if loop_growth > 0:  # the loop rule on the aligned motion: what the scans say
+        res = keep_within_reach(res, radius=1.0, max_angle=loop_max_angle)
+        prop = res.proposals
     cpu = time.process_time() - t0
     review = scripted_review(res, cycle_check=cycle_check, confirm=confirm)
     accept, contradicted, confirmed = review.accepted, review.contradicted, review.confirmed
@@ -187,6 +204,8 @@ def run(
         "guesses": guesses,
         "loop_max_angle_deg": float(np.degrees(loop_max_angle)),
         "keyframes": keyframes,
+        "loop_growth": loop_growth,
+        "candidates": candidates,
         "flagged": int(res.flagged.sum()),
         "contradicted": contradicted,
         "confirmed": confirmed,
@@ -247,6 +266,15 @@ def main() -> None:
         default=KEYFRAMES,
         help="keyframe spacing of the pairs (relations align --keyframes; default travel)",
     )
+    ap.add_argument(
+        "--loop-growth",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="loop candidates within 1 m + M per metre travelled between them (and the "
+        "heading limit + 0.05 M rad/m), kept when their aligned motion is within 1 m and "
+        "the heading limit (default 0: the pairs the guesses propose)",
+    )
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args()
     if not 0 < args.loop_max_angle <= 180:
@@ -262,10 +290,11 @@ def main() -> None:
             world=args.world,
             loop_max_angle=float(np.radians(args.loop_max_angle)),
             keyframes=args.keyframes,
+            loop_growth=args.loop_growth,
         )
         out.append(r)
         print(
-            f"seed {seed}, guesses from {r['guesses']}: {r['pairs']} pairs ({r['loop_pairs']} "
+            f"seed {seed}, guesses from {r['guesses']}: {r['pairs']} pairs of {r['candidates']} candidates ({r['loop_pairs']} "
             f"loop; from the truth {r['true_pairs']}, {r['true_loop_pairs']} loop), "
             f"{r['flagged']} flagged ({100 * r['flagged'] / r['pairs']:.1f} %; loop pairs "
             f"within {r['loop_max_angle_deg']:g}°), "

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from slamrel.cli import main
-from slamrel.scans.proposals import consecutive_pairs, keyframes, loop_pairs
+from slamrel.scans.proposals import consecutive_pairs, keyframes, loop_pairs, within_reach
 
 
 def _drive(steps: np.ndarray) -> np.ndarray:
@@ -133,3 +133,61 @@ def test_chain_proposes_as_many_pairs_as_the_truth_when_keyframes_go_by_travel()
     (got, got_loops), (want, want_loops) = travel
     assert abs(got - want) <= 0.03 * want and abs(got_loops - want_loops) <= 0.1 * want_loops
     assert motion[0][1] < 0.85 * motion[1][1], motion
+
+
+def _out_and_back(turn: float) -> np.ndarray:
+    """30 m out along x (0.1 m steps), a half turn on the spot, 30 m back 0.4 m aside; the
+    way back (from the turn on) rotated by ``turn`` [rad] about the turning point."""
+    out = [(0.1 * k, 0.0, 0.0) for k in range(301)]
+    spin = [(30.0, 0.0, 0.1 * k) for k in range(1, 32)] + [(30.0, 0.4, np.pi)]
+    back = [(30.0 - 0.1 * k, 0.4, np.pi) for k in range(1, 301)]
+    rest = np.array(spin + back)
+    c, s = np.cos(turn), np.sin(turn)
+    d = rest[:, :2] - [30.0, 0.0]
+    rest = np.column_stack(
+        (30.0 + c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1], rest[:, 2] + turn)
+    )
+    return np.vstack((np.array(out), rest))
+
+
+def test_loop_candidates_within_the_drift_then_kept_by_the_aligned_motion():
+    """Guesses that drift 3° on the way back (1.6 m farther off at its end) propose 28 of the
+    truth's 201 loop pairs within 1 m. Candidates within 1 m + 5 cm per metre travelled
+    between the two scans, kept where the scans' motion (here the true one: a perfect
+    aligner) lies within 1 m, are the pairs the truth proposes, give or take the few its
+    keyframes place otherwise."""
+    truth, guess = _out_and_back(0.0), _out_and_back(np.radians(-3.0))
+    times = np.arange(truth.shape[0], dtype=float)
+    key = dict(radius=1.0, min_travel=10.0, distance=0.5, angle=0.3, spacing="travel")
+    want = loop_pairs(truth, times, **key)
+    plain = loop_pairs(guess, times, **key)
+    cand = loop_pairs(guess, times, growth=0.05, growth_angle=0.01, **key)
+    assert len(want) > 100 and len(plain) < 0.5 * len(want)
+    assert {tuple(p) for p in plain.pairs.tolist()} <= {tuple(p) for p in cand.pairs.tolist()}
+    i, j = cand.pairs.T
+    moved = np.column_stack((truth[j, :2] - truth[i, :2], truth[j, 2] - truth[i, 2]))
+    c, s = np.cos(truth[i, 2]), np.sin(truth[i, 2])  # j in i's frame, written out
+    delta = np.column_stack(
+        (c * moved[:, 0] + s * moved[:, 1], -s * moved[:, 0] + c * moved[:, 1], moved[:, 2])
+    )
+    keep = within_reach(cand, delta, radius=1.0)
+    assert np.all(np.hypot(*(truth[j[keep], :2] - truth[i[keep], :2]).T) <= 1.0)
+    assert abs(int(keep.sum()) - len(want)) <= 0.05 * len(want), (int(keep.sum()), len(want))
+    # a consecutive pair is never dropped, a loop pair beyond the heading limit is
+    both = consecutive_pairs(truth, times, distance=0.5, angle=0.3) + cand
+    far = np.zeros((len(both), 3))
+    far[:, 0] = 5.0
+    kept = within_reach(both, far, radius=1.0)
+    assert kept.tolist() == (both.kind != "loop").tolist()
+    near = np.zeros((len(both), 3))
+    near[:, 2] = np.pi
+    assert not within_reach(both, near, radius=1.0, max_angle=np.pi / 4)[both.kind == "loop"].any()
+
+
+@pytest.mark.parametrize("value", ["-0.01", "nan", "inf", "2"])
+def test_cli_loop_growth_out_of_range_exits_2(tmp_path, capsys, value):
+    log = tmp_path / "log.clf"
+    log.write_text("")
+    argv = ["relations", "align", str(log), "-o", str(tmp_path / "o.relations"), "--loops"]
+    assert main([*argv, "--loop-growth", value]) == 2
+    assert "--loop-growth must lie in [0, 1]" in capsys.readouterr().err
