@@ -83,11 +83,10 @@ def test_pairs_follow_the_spacing_and_refuse_an_unknown_one():
         keyframes(poses, 0.5, 0.3, spacing="time")
 
 
-def test_cli_keyframes_travel_proposes_one_pair_per_distance_of_path(tmp_path):
-    """Steps of 0.11 m: by motion a keyframe every fifth scan (0.55 m), by travel one per
-    0.5 m of path (``relations align --keyframes travel``)."""
+def report_rows(tmp_path, poses: list[tuple[float, float, float]]):
+    """A CARMEN log of ``poses`` (every range 1 m, 0.2 s apart) and a function counting the
+    pairs ``relations align`` (ICP, no search) aligns on it with extra options."""
     ranges = " ".join(["1.00"] * 181)
-    poses = [(0.11 * k, 0.0, 0.0) for k in range(60)]
     log = tmp_path / "log.clf"
     log.write_text(
         "".join(
@@ -103,6 +102,13 @@ def test_cli_keyframes_travel_proposes_one_pair_per_distance_of_path(tmp_path):
         assert main([*argv, *extra]) == 0
         return len(rep.read_text().splitlines()) - 1
 
+    return rows
+
+
+def test_cli_keyframes_travel_proposes_one_pair_per_distance_of_path(tmp_path):
+    """Steps of 0.11 m: by motion a keyframe every fifth scan (0.55 m), by travel one per
+    0.5 m of path (``relations align --keyframes travel``)."""
+    rows = report_rows(tmp_path, [(0.11 * k, 0.0, 0.0) for k in range(60)])
     assert rows() == len(range(0, 60, 5)) - 1
     assert rows("--keyframes", "travel") == int(0.11 * 59 / 0.5)
 
