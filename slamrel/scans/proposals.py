@@ -181,7 +181,10 @@ def loop_pairs(
     poses' accumulated uncertainty: a drifting odometry places a place it revisits the
     farther off the longer it drove in between. Such pairs are *candidates*: once aligned,
     :func:`within_reach` keeps those whose aligned motion meets ``radius`` and
-    ``max_angle``, so the pairs kept are the ones the true poses would propose.
+    ``max_angle``, so the pairs kept are the ones the true poses would propose. (The search
+    first gathers every keyframe pair within the widest reach, ``radius + growth`` × the
+    whole travel: its work grows with the drive's length; keep ``growth`` small on long
+    drives.)
     """
     key = keyframes(poses, distance, angle, spacing=spacing)
     p = poses[key]
