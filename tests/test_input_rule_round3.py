@@ -520,25 +520,12 @@ def test_loop_max_angle_drops_the_loop_pairs_seen_from_opposite_headings(tmp_pat
     """Out 4 m along x, a half turn on the spot, back along −x: every loop pair joins the two
     legs, seen from headings π apart. At 180° (the default) they are proposed; at 45° none
     is, and the pairs are exactly the consecutive ones (the run without --loops)."""
-    ranges = " ".join(["1.00"] * 181)
+    from tests.test_proposals import report_rows
+
     poses = [(0.25 * k, 0.0, 0.0) for k in range(17)]
     poses += [(4.0, 0.0, 0.25 * k) for k in range(1, 13)] + [(4.0, 0.0, np.pi)]
     poses += [(4.0 - 0.25 * k, 0.0, np.pi) for k in range(1, 17)]
-    log = tmp_path / "log.clf"
-    log.write_text(
-        "".join(
-            f"FLASER 181 {ranges} {x} {y} {t} {x} {y} {t} {10 + 0.2 * n} host {10 + 0.2 * n}\n"
-            for n, (x, y, t) in enumerate(poses)
-        )
-    )
-
-    def rows(*extra: str) -> int:
-        rep = tmp_path / "r.csv"
-        argv = ["relations", "align", str(log), "-o", str(tmp_path / "o.relations"), "-q"]
-        argv += ["--aligner", "icp", "--global-search", "never", "--report", str(rep)]
-        assert main([*argv, *extra]) == 0
-        return len(rep.read_text().splitlines()) - 1
-
+    rows = report_rows(tmp_path, poses)
     loops = ["--loops", "--loop-min-travel", "2"]
     consecutive = rows()
     assert rows(*loops, "--loop-max-angle", "45") == consecutive

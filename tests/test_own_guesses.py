@@ -113,3 +113,33 @@ def test_cli_chain_guesses_on_a_short_log(tmp_path, capsys):
         err = se2.between(se2.between(log.truth[k1], log.truth[k2]), rel.delta)
         assert np.hypot(err[:, 0], err[:, 1]).max() < 0.01
         assert np.abs(err[:, 2]).max() < np.radians(0.2)
+
+
+@pytest.mark.slow
+def test_cli_loop_growth_finds_the_loop_pairs_from_the_odometry(tmp_path, capsys):
+    """``relations align --loops --loop-growth 0.02`` from the log's own odometry (no chain
+    guesses) on the loop world's seed 2, where the odometry alone proposes no loop pair:
+    candidates within 1 m + 2 cm per metre travelled, kept where the aligned motion lies
+    within 1 m, are about the truth's 97 loop pairs, each within 10 cm / 2° of the true
+    relation and 1 m of each other in truth."""
+    from slamrel.cli import main
+    from slamrel.formats.relations import read_relations
+
+    truth = loop_path(CORNERS, 0.3)
+    log = simulate_laser_log(laser_world("loop"), np.vstack((truth, truth[:60])), seed=2)
+    path = tmp_path / "loop.clf"
+    _flaser_log(path, log.scans)
+    out = tmp_path / "grown.relations"
+    args = ["relations", "align", str(path), "--loops", "--loop-growth", "0.02", "-o", str(out)]
+    assert main(args) == 0
+    assert "loop candidate(s) aligned beyond reach, left out" in capsys.readouterr().out
+    loops = _loop_pairs(out)
+    assert 90 <= loops.sum() <= 105, loops.sum()
+    rel = read_relations(out)
+    k1 = np.rint(rel.first / 0.2).astype(int)
+    k2 = np.rint(rel.second / 0.2).astype(int)
+    apart = se2.between(log.truth[k1], log.truth[k2])
+    err = se2.between(apart, rel.delta)
+    assert np.hypot(err[loops, 0], err[loops, 1]).max() < 0.1
+    assert np.abs(err[loops, 2]).max() < np.radians(2)
+    assert np.hypot(apart[loops, 0], apart[loops, 1]).max() <= 1.05

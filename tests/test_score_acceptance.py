@@ -46,8 +46,13 @@ def test_scoring_against_reviewed_relations_matches_the_truth(tmp_path):
     flagged-ambiguous or large-correction ones whose cycles confirm them accepted), then each
     estimate's mean translational error within 10 % of its score at the truth's pairs, and
     the same ranking. (Seeds 0-5 were looked at while choosing the review rule; 6-7 held
-    out gave the same, ratios 0.97-1.06.)"""
-    for r in _run(tmp_path, "--seeds", "0", "1", "2", "--cycle-check", "--confirm"):
+    out gave the same, ratios 0.97-1.06.) Keyframes by motion, as measured then: this
+    world's true path repeats its first 60 poses exactly, so by travel (0.3 m steps, 0.5 m
+    marks) the truth's second-pass keyframes fall on the first pass's and it proposes 158
+    loop pairs where a second pass shifted by a random ±0.15 m proposes 146 on average (the
+    chain: 144-148); the jitter estimate then misses by 12 % on seed 1."""
+    args = ("--seeds", "0", "1", "2", "--cycle-check", "--confirm", "--keyframes", "motion")
+    for r in _run(tmp_path, *args):
         assert r["guesses"] == "chain"
         assert r["gross_accepted"] == 0, r["seed"]
         assert r["same_ranking"] and r["within_10_percent"], (r["seed"], r["ratio"])
@@ -60,3 +65,37 @@ def test_odometry_guesses_miss_the_loop_pairs(tmp_path):
     (r,) = _run(tmp_path, "--seeds", "2", "--guesses", "odometry")
     assert r["loop_pairs"] == 0 and r["true_loop_pairs"] > 50
     assert not r["within_10_percent"]
+
+
+@pytest.mark.slow
+def test_corridor_worlds_score_drifting_estimates_within_10_percent(tmp_path):
+    """Corridor worlds (0.1 m steps, loop pairs within 45°), guesses from the chain,
+    keyframes by travel (the harness's default): the pairs proposed hold the truth's loop
+    pairs within 5 %, and the two drifting estimates (the log's odometry, the 5 % drift)
+    score within 10 % of the truth with the same ranking. Measured (reviewed / true):
+    odometry 0.961-0.990, drift 0.966-1.009; seeds 103 and 107 were tuned on. The jitter
+    estimate (5 mm / 0.05° off the truth) is not asserted: it misses on 103 and 108
+    (1.149, 1.108) by the aligned relations' own error (3.4 mm mean against its 9 mm)."""
+    seeds = ("103", "107", "108", "109", "110")
+    for r in _run(tmp_path, "--world", "corridor", "--seeds", *seeds):
+        assert r["keyframes"] == "travel" and r["guesses"] == "chain"
+        assert abs(r["loop_pairs"] - r["true_loop_pairs"]) <= 0.05 * r["true_loop_pairs"]
+        assert r["same_ranking"] and r["gross_accepted"] == 0, r["seed"]
+        for e in ("odometry", "drift"):
+            assert abs(r["ratio"][e][0] - 1) <= 0.10, (r["seed"], r["ratio"])
+
+
+@pytest.mark.slow
+def test_loop_growth_gives_the_odometry_the_truths_loop_pairs(tmp_path):
+    """From the log's own odometry (1.6 m off after 200 m) with loop candidates within 1 m
+    + 2 cm per metre travelled, kept by their aligned motion (``--loop-growth 0.02``, chosen
+    on worlds 103 and 107; these two held out): at least 97 % of the truth's loop pairs, and
+    the drifting estimates within 10 % of the truth (measured 0.955 / 0.967 on 108,
+    1.012 / 0.991 on 110; without growth 0.651 / 0.740 and 0.924 / 0.963)."""
+    args = ("--world", "corridor", "--guesses", "odometry", "--loop-growth", "0.02")
+    for r in _run(tmp_path, *args, "--seeds", "108", "110"):
+        assert r["loop_pairs"] >= 0.97 * r["true_loop_pairs"], r["seed"]
+        assert r["candidates"] > r["pairs"]
+        assert r["same_ranking"] and r["gross_accepted"] == 0, r["seed"]
+        for e in ("odometry", "drift"):
+            assert abs(r["ratio"][e][0] - 1) <= 0.10, (r["seed"], r["ratio"])

@@ -223,6 +223,15 @@ def _add_align_pair_arguments(a: argparse.ArgumentParser) -> None:
         help="keyframe spacing by rotation [rad] (default 0.3)",
     )
     a.add_argument(
+        "--keyframes",
+        choices=("motion", "travel"),
+        default="motion",
+        help="motion: a keyframe where the motion since the last one reaches --distance "
+        "(each overshoot adds up: drifting poses keep fewer keyframes than exact ones); "
+        "travel: one every --distance of path length, as dense from drifting poses as from "
+        "true ones (default: %(default)s)",
+    )
+    a.add_argument(
         "--loop-radius", type=float, default=1.0, help="loop pair radius [m] (default 1.0)"
     )
     a.add_argument(
@@ -238,6 +247,16 @@ def _add_align_pair_arguments(a: argparse.ArgumentParser) -> None:
         metavar="DEG",
         help="largest heading difference of the two scans of a loop pair [deg], in (0, 180] "
         "(default: 180, any; scans seen from opposite headings alias most in corridors)",
+    )
+    a.add_argument(
+        "--loop-growth",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="loop candidates within --loop-radius + M per metre travelled between the two "
+        "scans (the heading limit + 0.05 M rad/m: the poses' accumulated drift), aligned, "
+        "then kept where the aligned motion lies within --loop-radius and --loop-max-angle "
+        "(default 0: the pairs the poses propose)",
     )
 
 
@@ -469,6 +488,14 @@ def run_align(args: argparse.Namespace) -> int:
             f"{int((result.initialiser == 'correlative').sum())} re-initialised by the "
             "correlative search"
         )
+    if args.loops and args.loop_growth > 0:  # the loop rule on what the scans say
+        from slamrel.scans.proposals import keep_within_reach
+
+        candidates = len(result)
+        result = keep_within_reach(
+            result, radius=args.loop_radius, max_angle=math.radians(args.loop_max_angle)
+        )
+        how += f"; {candidates - len(result)} loop candidate(s) aligned beyond reach, left out"
     if args.cycle_check:
         from slamrel.scans.cycles import check_scan_relations, mark_contradicted
 
@@ -521,6 +548,8 @@ def _checked_align_options(args: argparse.Namespace) -> bool:
         raise OptionError("--max-range must be positive")
     if not 0 < args.loop_max_angle <= 180:
         raise OptionError("--loop-max-angle must lie in (0, 180] degrees")
+    if not 0 <= args.loop_growth <= 1:
+        raise OptionError("--loop-growth must lie in [0, 1] m per metre")
     for name in ("loop_min_travel", "time_tolerance"):  # read only with --loops, --at
         if not getattr(args, name) >= 0:
             raise OptionError(f"--{name.replace('_', '-')} must be 0 or more")
@@ -600,7 +629,12 @@ def _align_pairs(
     """The pairs of scans to align: those of ``--at``'s relations, or consecutive keyframes
     (and, with ``--loops``, loop pairs)."""
     from slamrel.formats.relations import read_relations
-    from slamrel.scans.proposals import consecutive_pairs, loop_pairs, pairs_at_times
+    from slamrel.scans.proposals import (
+        LOOP_GROWTH_ANGLE,
+        consecutive_pairs,
+        loop_pairs,
+        pairs_at_times,
+    )
 
     if args.at:
         given = read_relations(args.at)
@@ -611,7 +645,13 @@ def _align_pairs(
             tolerance=args.time_tolerance,
             path=args.at,
         )
-    prop = consecutive_pairs(poses, scans.timestamps, distance=args.distance, angle=args.angle)
+    prop = consecutive_pairs(
+        poses,
+        scans.timestamps,
+        distance=args.distance,
+        angle=args.angle,
+        spacing=args.keyframes,
+    )
     if args.loops:
         prop = prop + loop_pairs(
             poses,
@@ -621,6 +661,9 @@ def _align_pairs(
             distance=args.distance,
             angle=args.angle,
             max_angle=math.radians(args.loop_max_angle),
+            spacing=args.keyframes,
+            growth=args.loop_growth,
+            growth_angle=LOOP_GROWTH_ANGLE * args.loop_growth,
         )
     return prop
 
