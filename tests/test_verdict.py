@@ -106,8 +106,11 @@ def test_information_lines_never_set_the_level():
         ({"ours": 1.0}, "accuracy", "green"),  # as good as odometry: boundary
         ({"ours": 1.2}, "accuracy", "amber"),
         ({"ours": 1.6}, "accuracy", "red"),
-        ({"online": 0.2}, "online", "green"),  # factor 2
-        ({"online": 0.3}, "online", "amber"),
+        ({"online": 0.4}, "online", "green"),  # the online worse by 4: the map it had then
+        ({"online": 0.5}, "online", "amber"),
+        ({"online": 0.9}, "online", "red"),
+        ({"online": 0.05}, "online", "green"),  # the recovered worse by 2
+        ({"online": 0.04}, "online", "amber"),
         ({"online": 0.02}, "online", "red"),  # factor 5 the other way
         # NEES 2× its dof on 400 independent steps: far outside the χ² interval, above 1.5
         ({"nees": 2.0 * HEALTHY_NEES}, "consistency", "amber"),
