@@ -94,6 +94,17 @@ def _rigid_action(poses: Array) -> Array:
     return j
 
 
+def _shared_left(v: Array, q: Array, sigma_g: Array) -> Array:
+    """(P4): ``V (I − W)^{1/2}`` with ``W = Q Σ_g⁻¹ Qᵀ`` (r, r) of rank 3, eigenvalues in
+    ``[0, 1]``: with ``Q = U S`` (``U`` r × 3 orthonormal) and ``S Σ_g⁻¹ Sᵀ = E Λ Eᵀ``,
+    ``(I − W)^{1/2} = I − (U E) diag(1 − √(1 − λ)) (U E)ᵀ`` — O(N r), no r × r matrix."""
+    u, s = np.linalg.qr(q)  # (r, 3), (3, 3)
+    lam, e = np.linalg.eigh(s @ np.linalg.solve(sigma_g, s.T))
+    basis = u @ e
+    shrink = 1.0 - np.sqrt(np.clip(1.0 - lam, 0.0, None))
+    return v - ((v @ basis) * shrink) @ basis.T
+
+
 def condition_on_placement(
     poses: ArrayLike,
     covariances: ArrayLike,
@@ -162,13 +173,12 @@ def condition_on_placement(
     moved = x - resp @ g  # (P3), to first order in the placement
     moved[:, 2] = se2.wrap_angle(moved[:, 2])
     cond = p - resp @ c.transpose(0, 2, 1)
-    w, u = np.linalg.eigh(np.eye(r) - q @ np.linalg.solve(sigma_g, q.T))  # (P4)
-    keep = w > 1e-12 * max(1.0, float(w.max(initial=0.0)))
+    shared = _shared_left(v, q, sigma_g)
     return Placement(
         split=split,
         covariance=sigma_g,
         response=resp,
         poses=moved,
         covariances=0.5 * (cond + cond.transpose(0, 2, 1)),
-        loadings=v @ (u[:, keep] * np.sqrt(w[keep])),
+        loadings=shared,
     )
