@@ -39,6 +39,30 @@ def test_padded_lookups_equal_the_clipping_score(limit):
         np.testing.assert_array_equal(look.score(h, k, u, v), _score(grid, base, h, k, u, v))
 
 
+def test_padded_levels_equal_numpy_edge_pad_of_the_pyramid():
+    """The grid's padded levels (built once, kept while later searches fit them) hold
+    ``np.pad(L_h, margin, mode="edge")``; a search reaching farther gets new ones."""
+    grid, _, _ = _grid_and_points(4)
+    nx, ny = grid.table.shape
+    want = grid.pyramid
+    for first, last, fresh in [
+        ((-3, -5), (nx + 2, ny - 1), True),
+        ((-1, 0), (nx - 4, ny - 1), False),  # inside the kept margin: the same tables
+        ((-30, -2), (nx + 1, ny + 4), True),
+    ]:
+        before = grid._kept.get("padded")
+        got = grid.padded(np.array(first), np.array(last), 2**22)
+        assert got is not None
+        tables, margin = got
+        assert (got is not before) == fresh
+        (a0, a1), (b0, b1) = margin
+        assert a0 >= -first[0] and b0 >= -first[1]
+        assert a1 >= last[0] - (nx - 1) and b1 >= last[1] - (ny - 1)
+        for t, level in zip(tables, want, strict=True):
+            np.testing.assert_array_equal(t, np.pad(level, margin, mode="edge"))
+    assert grid.padded(np.array([-50, 0]), np.array([nx, ny]), 100 * ny) is None  # too large
+
+
 def test_edge_pad_equals_numpy_pad():
     t = np.random.default_rng(5).random((6, 4)).astype(np.float32)
     for pad in [((0, 0), (0, 0)), ((2, 0), (0, 3)), ((1, 4), (5, 2))]:
