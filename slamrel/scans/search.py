@@ -375,8 +375,9 @@ class _Lookup:
         for a in range(0, n, rows):
             b = min(a + rows, n)
             ib, vb = idx[: b - a], val[: b - a]
-            np.add(flat[k[a:b]], shift[a:b, None], out=ib)
-            table.take(ib, out=vb)
+            flat.take(k[a:b], axis=0, out=ib, mode="clip")  # the points' cells, then moved
+            ib += shift[a:b, None]
+            table.take(ib, out=vb, mode="clip")  # in bounds; "raise" would buffer out
             np.add.reduce(vb, axis=1, dtype=np.float64, out=out[a:b])
         out /= m  # np.mean's own steps (sum, then divide), without its per-call checks
         return out
