@@ -1,7 +1,8 @@
 """The fast paths of the search give the values of their plain definitions (issue 37, speed):
 the padded block lookups against the clipping :func:`_score`, the blocked kernel splat
-against a per-point loop, the cycle test on float triples against its numpy statement, and
-the store's kept grids against building every grid anew."""
+against a per-point loop, the cycle test on float triples against its numpy statement, the
+grid's kept padded levels against ``np.pad``, and the store's kept grids and submaps
+against building every one anew."""
 
 from __future__ import annotations
 
@@ -136,6 +137,7 @@ def test_kept_grids_change_no_result(monkeypatch):
     kept, _ = align_scans_global(s, prop, s.laser_pose)
     n_kept = len(built)
     monkeypatch.setattr(global_align, "_KEEP_GRIDS", 0)
+    monkeypatch.setattr(global_align, "_KEEP_SUBMAPS", 0)  # the submaps' returns anew too
     fresh, _ = align_scans_global(s, prop, s.laser_pose)
     assert len(pairs) >= 6 and n_kept <= len(built) - n_kept - len(loops)  # repeats kept
     np.testing.assert_array_equal(kept.delta, fresh.delta)
