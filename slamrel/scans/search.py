@@ -244,28 +244,28 @@ def _splat(
     ``flat`` is the table raveled, ``shape = (Y', X, Y)`` its row length and the area whose
     cells ``[1, X) × [1, Y)`` take values (the border stays zero); ``kernel = (lo, r, σ, w)``.
     Kernel cell ``(a, b)`` of point ``k`` is ``cell_k + (o_a, o_b)``, ``o = −w … w``, value
-    ``exp(−‖c − p_k‖² / (2σ²))``: the offsets per axis ``(K, 2w+1)`` broadcast to
-    ``(K, 2w+1, 2w+1)``."""
+    ``exp(−‖c − p_k‖² / (2σ²))``: the offsets per axis ``(2w+1, K)`` broadcast to
+    ``(2w+1, 2w+1, K)``, the points along the last axis (long inner loops; the order of a
+    maximum does not change it)."""
     lo, r, sig, w = kernel
-    off = np.arange(-w, w + 1)
-    cx = cell[:, 0, None] + off[None, :]
-    cy = cell[:, 1, None] + off[None, :]
-    dx = lo[0] + (cx + 0.5) * r - points[:, 0, None]
-    dy = lo[1] + (cy + 0.5) * r - points[:, 1, None]
+    off = np.arange(-w, w + 1)[:, None]  # (2w+1, 1): the points run along the last axis
+    cx = off + cell[None, :, 0]
+    cy = off + cell[None, :, 1]
+    dx = lo[0] + (cx + 0.5) * r - points[None, :, 0]
+    dy = lo[1] + (cy + 0.5) * r - points[None, :, 1]
     # separable: exp(−(dx² + dy²)/2σ²) = exp(−dx²/2σ²) · exp(−dy²/2σ²), 2(2w+1) exps a point
     # (the float64 product differs from exp of the sum by float64 roundings, far below the
     # float32 table's: the same tables on corridor worlds 103-105, measured)
     s = -1.0 / (2 * sig * sig)
     ex, ey = np.exp(dx * dx * s), np.exp(dy * dy * s)
-    val: NDArray[np.float32] = np.empty((cell.shape[0], off.size, off.size), dtype=np.float32)
-    np.multiply(ex[:, :, None], ey[:, None, :], out=val, casting="same_kind")
-    lin = (cell[:, 0] * shape[0] + cell[:, 1])[:, None, None] + (
-        off[:, None] * shape[0] + off[None, :]
-    )
+    n = off.shape[0]
+    val: NDArray[np.float32] = np.empty((n, n, cell.shape[0]), dtype=np.float32)
+    np.multiply(ex[:, None, :], ey[None, :, :], out=val, casting="same_kind")
+    lin = (off * shape[0] + off.T)[:, :, None] + (cell[:, 0] * shape[0] + cell[:, 1])[None, None]
     if inside:
         lin, val = lin.ravel(), val.ravel()
     else:
-        ok = ((cx >= 1) & (cx < shape[1]))[:, :, None] & ((cy >= 1) & (cy < shape[2]))[:, None, :]
+        ok = ((cx >= 1) & (cx < shape[1]))[:, None, :] & ((cy >= 1) & (cy < shape[2]))[None, :, :]
         lin, val = lin[ok], val[ok]
     # one flat index: ufunc.at's fast path (a tuple of index arrays is ~6x slower)
     np.maximum.at(flat, lin, val)
