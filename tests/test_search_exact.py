@@ -13,7 +13,7 @@ import slamrel.scans.global_align as global_align
 from slamrel.scans.global_align import align_scans_global
 from slamrel.scans.matching import _cycle
 from slamrel.scans.proposals import Proposals
-from slamrel.scans.search import SearchOptions, _edge_pad, _Lookup, _score, likelihood_grid
+from slamrel.scans.search import SearchOptions, _Lookup, _score, likelihood_grid
 from slamrel.simulation.corridors import corridor_log, true_pairs
 
 
@@ -62,12 +62,6 @@ def test_padded_levels_equal_numpy_edge_pad_of_the_pyramid():
         for t, level in zip(tables, want, strict=True):
             np.testing.assert_array_equal(t, np.pad(level, margin, mode="edge"))
     assert grid.padded(np.array([-50, 0]), np.array([nx, ny]), 100 * ny) is None  # too large
-
-
-def test_edge_pad_equals_numpy_pad():
-    t = np.random.default_rng(5).random((6, 4)).astype(np.float32)
-    for pad in [((0, 0), (0, 0)), ((2, 0), (0, 3)), ((1, 4), (5, 2))]:
-        np.testing.assert_array_equal(_edge_pad(t, pad), np.pad(t, pad, mode="edge"))
 
 
 def test_kernel_splat_equals_a_per_point_loop():

@@ -180,7 +180,7 @@ class LikelihoodGrid:
 
 def _pyramid(table: NDArray[np.float32], levels: int, margin: Margin) -> list[NDArray[np.float32]]:
     """``L_0 … L_H`` of ``table`` (``L_0``), each padded by ``margin`` cells of edge
-    replication (:func:`_edge_pad`'s values); no margin: the levels themselves."""
+    replication (``np.pad(L_h, margin, mode="edge")``); no margin: the levels themselves."""
     (a0, a1), (b0, b1) = margin
     nx, ny = table.shape
     shape = (nx + a0 + a1, ny + b0 + b1)
@@ -207,7 +207,7 @@ def _pyramid(table: NDArray[np.float32], levels: int, margin: Margin) -> list[ND
 
 
 def _fill_margin(t: NDArray[np.float32], margin: Margin) -> None:
-    """Fill the ``margin`` of ``t`` by edge replication of its inside, as :func:`_edge_pad`."""
+    """Fill the ``margin`` of ``t`` by edge replication of its inside (``np.pad``'s ``edge``)."""
     (a0, a1), (b0, b1) = margin
     nx, ny = t.shape[0] - a0 - a1, t.shape[1] - b0 - b1
     if a0:
@@ -321,19 +321,6 @@ def _score(
 _PAD_LIMIT = 2**22
 #: Lookups per block of :meth:`_Lookup.score` (512 KB of indices).
 _BLOCK = 65536
-
-
-def _edge_pad(t: NDArray[np.float32], pad: tuple[tuple[int, int], ...]) -> NDArray[np.float32]:
-    """``np.pad(t, pad, mode="edge")`` of a 2-D table, in five slice copies."""
-    (a0, a1), (b0, b1) = pad
-    nx, ny = t.shape
-    out = np.empty((nx + a0 + a1, ny + b0 + b1), dtype=t.dtype)
-    out[a0 : a0 + nx, b0 : b0 + ny] = t
-    out[:a0, b0 : b0 + ny] = t[0]
-    out[a0 + nx :, b0 : b0 + ny] = t[-1]
-    out[:, :b0] = out[:, b0 : b0 + 1]
-    out[:, b0 + ny :] = out[:, b0 + ny - 1 : b0 + ny]
-    return out
 
 
 class _Lookup:
