@@ -1,7 +1,8 @@
 """The fast paths of the search give the values of their plain definitions (issue 37, speed):
 the padded block lookups against the clipping :func:`_score`, the blocked kernel splat
-against a per-point loop, the cycle test on float triples against its numpy statement, and
-the store's kept grids against building every grid anew."""
+against a per-point loop, the cycle test on float triples against its numpy statement, the
+grid's kept padded levels against ``np.pad``, and the store's kept grids and submaps
+against building every one anew."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import slamrel.scans.global_align as global_align
 from slamrel.scans.global_align import align_scans_global
 from slamrel.scans.matching import _cycle
 from slamrel.scans.proposals import Proposals
-from slamrel.scans.search import SearchOptions, _edge_pad, _Lookup, _score, likelihood_grid
+from slamrel.scans.search import SearchOptions, _Lookup, _score, likelihood_grid
 from slamrel.simulation.corridors import corridor_log, true_pairs
 
 
@@ -39,10 +40,28 @@ def test_padded_lookups_equal_the_clipping_score(limit):
         np.testing.assert_array_equal(look.score(h, k, u, v), _score(grid, base, h, k, u, v))
 
 
-def test_edge_pad_equals_numpy_pad():
-    t = np.random.default_rng(5).random((6, 4)).astype(np.float32)
-    for pad in [((0, 0), (0, 0)), ((2, 0), (0, 3)), ((1, 4), (5, 2))]:
-        np.testing.assert_array_equal(_edge_pad(t, pad), np.pad(t, pad, mode="edge"))
+def test_padded_levels_equal_numpy_edge_pad_of_the_pyramid():
+    """The grid's padded levels (built once, kept while later searches fit them) hold
+    ``np.pad(L_h, margin, mode="edge")``; a search reaching farther gets new ones."""
+    grid, _, _ = _grid_and_points(4)
+    nx, ny = grid.table.shape
+    want = grid.pyramid
+    for first, last, fresh in [
+        ((-3, -5), (nx + 2, ny - 1), True),
+        ((-1, 0), (nx - 4, ny - 1), False),  # inside the kept margin: the same tables
+        ((-30, -2), (nx + 1, ny + 4), True),
+    ]:
+        before = grid._kept.get("padded")
+        got = grid.padded(np.array(first), np.array(last), 2**22)
+        assert got is not None
+        tables, margin = got
+        assert (got is not before) == fresh
+        (a0, a1), (b0, b1) = margin
+        assert a0 >= -first[0] and b0 >= -first[1]
+        assert a1 >= last[0] - (nx - 1) and b1 >= last[1] - (ny - 1)
+        for t, level in zip(tables, want, strict=True):
+            np.testing.assert_array_equal(t, np.pad(level, margin, mode="edge"))
+    assert grid.padded(np.array([-50, 0]), np.array([nx, ny]), 100 * ny) is None  # too large
 
 
 def test_kernel_splat_equals_a_per_point_loop():
@@ -112,6 +131,7 @@ def test_kept_grids_change_no_result(monkeypatch):
     kept, _ = align_scans_global(s, prop, s.laser_pose)
     n_kept = len(built)
     monkeypatch.setattr(global_align, "_KEEP_GRIDS", 0)
+    monkeypatch.setattr(global_align, "_KEEP_SUBMAPS", 0)  # the submaps' returns anew too
     fresh, _ = align_scans_global(s, prop, s.laser_pose)
     assert len(pairs) >= 6 and n_kept <= len(built) - n_kept - len(loops)  # repeats kept
     np.testing.assert_array_equal(kept.delta, fresh.delta)

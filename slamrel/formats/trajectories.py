@@ -886,7 +886,8 @@ def carmen_floats(
     """``fields[start:start + count]`` as floats; a bad token raises :class:`InputError`."""
     try:
         chunk = fields[start : start + count]
-        if any(not tok.isascii() or "_" in tok for tok in chunk):
+        joined = "".join(chunk)  # a token is non-ASCII or holds "_" iff their join does
+        if not joined.isascii() or "_" in joined:
             raise ValueError
         return np.array(chunk, dtype=np.float64)
     except ValueError:

@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 __all__ = ["CorrelativeOptions", "CorrelativeMatch", "correlative_match", "table_cells"]
 
@@ -135,6 +134,8 @@ def correlative_match(
     -------
     CorrelativeMatch
     """
+    from scipy import ndimage  # here, not at import: the default global aligner never needs it
+
     opt = options or CorrelativeOptions()
     guess = np.asarray(guess, dtype=np.float64).reshape(3)
     m = current.shape[0]

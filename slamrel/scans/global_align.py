@@ -152,7 +152,9 @@ class _Scans:
     def __init__(self, scans: LaserScans, opt: AlignOptions, gopt: GlobalOptions) -> None:
         self.scans, self.opt, self.gopt = scans, opt, gopt
         self._prep: dict[int, PreparedScan] = {}
+        self._near: dict[int, NDArray[np.float64]] = {}
         self._grids: dict[tuple[object, bytes, bytes], LikelihoodGrid] = {}
+        self.submaps: dict[tuple[int, float], NDArray[np.float64]] = {}
 
     def prep(self, k: int) -> PreparedScan:
         if k not in self._prep:
@@ -162,8 +164,11 @@ class _Scans:
 
     def near(self, k: int) -> NDArray[np.float64]:
         """Returns within ``search_range``."""
-        p = self.prep(k).points
-        return p[np.hypot(p[:, 0], p[:, 1]) <= self.gopt.search_range]
+        got = self._near.get(k)
+        if got is None:
+            p = self.prep(k).points
+            got = self._near[k] = p[np.hypot(p[:, 0], p[:, 1]) <= self.gopt.search_range]
+        return got
 
     def grid(
         self,
@@ -288,6 +293,22 @@ def _points_in(
     return np.concatenate(parts) if parts else np.zeros((0, 2))
 
 
+#: Submaps' returns :func:`_submap_points` keeps (oldest dropped first).
+_KEEP_SUBMAPS = 16
+
+
+def _submap_points(store: _Scans, chain: Chain, a: int, reach: float) -> NDArray[np.float64]:
+    """``_points_in`` of the submap of chain position ``a`` (``reach``), kept for the next
+    pairs of the same scan (a scan's pairs come together; a submap is the same each time)."""
+    key = (a, reach)
+    got = store.submaps.get(key)
+    if got is None:
+        got = store.submaps[key] = _points_in(store, chain, a, _submap(store, chain, a, reach))
+        while len(store.submaps) > _KEEP_SUBMAPS:
+            store.submaps.pop(next(iter(store.submaps)))
+    return got
+
+
 def _thinned(points: NDArray[np.float64], n: int) -> NDArray[np.float64]:
     """Every ``⌈K / n⌉``-th of ``points`` ``(K, 2)``."""
     return points[:: max(1, -(-points.shape[0] // n))]
@@ -373,10 +394,8 @@ def _submap_search(
     gopt = store.gopt
     (i, j), (a, b) = pair, at
     centre = between(chain.poses[a], chain.poses[b])
-    ref_pts = _points_in(store, chain, a, _submap(store, chain, a, reach))
-    cur_pts = _thinned(
-        _points_in(store, chain, b, _submap(store, chain, b, reach)), gopt.max_points
-    )
+    ref_pts = _submap_points(store, chain, a, reach)
+    cur_pts = _thinned(_submap_points(store, chain, b, reach), gopt.max_points)
     wxy = gopt.window_xy + gopt.drift_xy * travel
     wth = gopt.window_theta + gopt.drift_theta * travel
     return _search(
@@ -401,7 +420,9 @@ def _submap_icp(
         [transform(np.array([0.0, 0.0, rel[q, 2]]), p.normals) for q, p in enumerate(preps)]
     )
     ref = PreparedScan(np.zeros((0, 2)), anchors, normals, cKDTree(anchors))
-    cur = _thinned(_points_in(store, chain, b, _submap(store, chain, b)), store.gopt.refine_points)
+    cur = _thinned(
+        _submap_points(store, chain, b, store.gopt.submap_travel), store.gopt.refine_points
+    )
     got = align(ref, PreparedScan(cur, cur[:0], cur[:0], ref.tree), start, store.opt.icp)
     move = between(start, got.delta)
     if (

@@ -274,20 +274,21 @@ def _residuals(
     k: NDArray[np.int64],
     ok: NDArray[np.bool_],
     opt: IcpOptions,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Normals ``n``, points ``q`` and point-to-line residuals ``e`` of the matched points
-    ``ok`` (nearest anchors ``k``), the largest ``1 − trim`` share of ``|e|`` dropped."""
-    kk = k[ok]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Normals ``n``, points ``q``, point-to-line residuals ``e`` and ``|e|`` of the matched
+    points ``ok`` (nearest anchors ``k``), the largest ``1 − trim`` share of ``|e|`` dropped."""
+    at = np.flatnonzero(ok)
+    kk = k[at]
     n = reference.normals[kk]
-    qo = q[ok]
+    qo = q[at]
     e = np.einsum("ij,ij->i", n, qo - reference.anchors[kk])
     ae = np.abs(e)
     keep = max(opt.min_matches, int(np.ceil(opt.trim * ae.shape[0])))
     if keep < ae.shape[0]:
         cut = np.partition(ae, keep - 1)[keep - 1]
         sel = np.flatnonzero(ae <= cut)
-        n, qo, e = n[sel], qo[sel], e[sel]
-    return n, qo, e
+        n, qo, e, ae = n[sel], qo[sel], e[sel], ae[sel]
+    return n, qo, e, ae
 
 
 def _median(a: NDArray[np.float64]) -> float:
@@ -357,8 +358,8 @@ def align(
         ok = np.isfinite(dist)
         if np.count_nonzero(ok) < opt.min_matches:
             return _failed(guess, "too few matches", it)
-        n, qo, e = _residuals(reference, q, k, ok, opt)
-        sigma = max(_MAD * _median(np.abs(e)), opt.min_sigma)
+        n, qo, e, ae = _residuals(reference, q, k, ok, opt)
+        sigma = max(_MAD * _median(ae), opt.min_sigma)
         w = 1.0 / (1.0 + (e / (_CAUCHY * sigma)) ** 2)
         jac = np.empty((e.shape[0], 3))
         jac[:, 0] = n[:, 0]

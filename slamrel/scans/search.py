@@ -28,7 +28,8 @@ it moves about one cell per step).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -109,6 +110,14 @@ class SearchResult:
         return self.second_score / self.score if self.score > 0 else 0.0
 
 
+#: A margin of padded tables: cells below and above on each axis, ``((a0, a1), (b0, b1))``.
+Margin = tuple[tuple[int, int], tuple[int, int]]
+
+#: Cells added to each side of the margin a search needs when the padded tables are built,
+#: so that the next searches of the same grid (a neighbouring pair) fit them as well.
+_SLACK = 8
+
+
 @dataclass(frozen=True)
 class LikelihoodGrid:
     """The grids ``L_0 … L_H`` over one area (``(X + 1 + 2^H, Y + 1 + 2^H)`` float32 each,
@@ -119,13 +128,96 @@ class LikelihoodGrid:
     lo : (2,) float
         Lower corner [m] of cell ``(0, 0)``.
     resolution : float
-    pyramid : list of (X', Y') float32
-        ``pyramid[h][c] = max L`` over the ``2^h × 2^h`` cells from ``c``.
+    table : (X', Y') float32
+        ``L_0``.
+    levels : int
+        ``H``.
+
+    The levels ``L_h`` are made when first asked for: :attr:`pyramid`, or :meth:`padded`
+    (each level padded by edge replication, as the search reads them: built once a grid
+    and kept while its searches fit them, not once a search).
     """
 
     lo: NDArray[np.float64]
     resolution: float
-    pyramid: list[NDArray[np.float32]]
+    table: NDArray[np.float32]
+    levels: int
+    _kept: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def pyramid(self) -> list[NDArray[np.float32]]:
+        """``pyramid[h][c] = max L`` over the ``2^h × 2^h`` cells from ``c``, ``h = 0 … H``."""
+        got: list[NDArray[np.float32]] | None = self._kept.get("pyramid")
+        if got is None:
+            got = self._kept["pyramid"] = _pyramid(self.table, self.levels, ((0, 0), (0, 0)))
+        return got
+
+    def padded(
+        self, first: NDArray[np.int64], last: NDArray[np.int64], limit: int
+    ) -> tuple[list[NDArray[np.float32]], Margin] | None:
+        """The levels padded by edge replication to hold the cells ``first … last`` (each
+        ``(2,)``, of ``L_0``'s indices) and their margin; None when such a level would exceed
+        ``limit`` cells. Kept for the next call that they hold."""
+        nx, ny = self.table.shape
+        kept: tuple[list[NDArray[np.float32]], Margin] | None = self._kept.get("padded")
+        if kept is not None:
+            (a0, a1), (b0, b1) = kept[1]
+            if first[0] >= -a0 and first[1] >= -b0 and last[0] < nx + a1 and last[1] < ny + b1:
+                return kept
+        need = [
+            [max(int(-first[q]), 0), max(int(last[q]) - (n - 1), 0)] for q, n in ((0, nx), (1, ny))
+        ]
+        if (nx + need[0][0] + need[0][1]) * (ny + need[1][0] + need[1][1]) > limit:
+            return None
+        grow = [[m + _SLACK if m else 0 for m in side] for side in need]
+        margin: Margin = ((grow[0][0], grow[0][1]), (grow[1][0], grow[1][1]))
+        if (nx + sum(grow[0])) * (ny + sum(grow[1])) > limit:
+            margin = ((need[0][0], need[0][1]), (need[1][0], need[1][1]))
+        kept = (_pyramid(self.table, self.levels, margin), margin)
+        self._kept["padded"] = kept
+        return kept
+
+
+def _pyramid(table: NDArray[np.float32], levels: int, margin: Margin) -> list[NDArray[np.float32]]:
+    """``L_0 … L_H`` of ``table`` (``L_0``), each padded by ``margin`` cells of edge
+    replication (``np.pad(L_h, margin, mode="edge")``); no margin: the levels themselves."""
+    (a0, a1), (b0, b1) = margin
+    nx, ny = table.shape
+    shape = (nx + a0 + a1, ny + b0 + b1)
+    if margin == ((0, 0), (0, 0)):
+        first = table
+    else:  # L_0's edges are its zero border: its margin is zero
+        first = np.zeros(shape, dtype=np.float32)
+        first[a0 : a0 + nx, b0 : b0 + ny] = table
+    out = [first]
+    prev = table
+    rows = np.empty(table.shape, dtype=np.float32)  # max over 2^h rows, then 2^h columns
+    for h in range(1, levels + 1):
+        s = 2 ** (h - 1)
+        np.maximum(prev[:-s, :], prev[s:, :], out=rows[:-s, :])
+        rows[-s:, :] = prev[-s:, :]
+        whole = np.empty(shape, dtype=np.float32)
+        nxt = whole[a0 : a0 + nx, b0 : b0 + ny]
+        np.maximum(rows[:, :-s], rows[:, s:], out=nxt[:, :-s])
+        nxt[:, -s:] = rows[:, -s:]
+        _fill_margin(whole, margin)
+        out.append(whole)
+        prev = nxt
+    return out
+
+
+def _fill_margin(t: NDArray[np.float32], margin: Margin) -> None:
+    """Fill the ``margin`` of ``t`` by edge replication of its inside (``np.pad``'s ``edge``)."""
+    (a0, a1), (b0, b1) = margin
+    nx, ny = t.shape[0] - a0 - a1, t.shape[1] - b0 - b1
+    if a0:
+        t[:a0, b0 : b0 + ny] = t[a0, b0 : b0 + ny]
+    if a1:
+        t[a0 + nx :, b0 : b0 + ny] = t[a0 + nx - 1, b0 : b0 + ny]
+    if b0:
+        t[:, :b0] = t[:, b0 : b0 + 1]
+    if b1:
+        t[:, b0 + ny :] = t[:, b0 + ny - 1 : b0 + ny]
 
 
 def grid_cells(lo: NDArray[np.float64], hi: NDArray[np.float64], resolution: float) -> float:
@@ -144,27 +236,36 @@ def _splat(
     cell: NDArray[np.int64],
     points: NDArray[np.float64],
     kernel: tuple[NDArray[np.float64], float, float, int],
+    inside: bool,
 ) -> None:
-    """``flat = max(flat, kernel)`` of ``points`` ``(K, 2)`` in cells ``cell`` ``(K, 2)``.
+    """``flat = max(flat, kernel)`` of ``points`` ``(K, 2)`` in cells ``cell`` ``(K, 2)``
+    (``inside``: every kernel cell lies inside the area, none is tested).
 
     ``flat`` is the table raveled, ``shape = (Y', X, Y)`` its row length and the area whose
     cells ``[1, X) × [1, Y)`` take values (the border stays zero); ``kernel = (lo, r, σ, w)``.
     Kernel cell ``(a, b)`` of point ``k`` is ``cell_k + (o_a, o_b)``, ``o = −w … w``, value
-    ``exp(−‖c − p_k‖² / (2σ²))``: the offsets per axis ``(K, 2w+1)`` broadcast to
-    ``(K, 2w+1, 2w+1)``."""
+    ``exp(−‖c − p_k‖² / (2σ²))``: the offsets per axis ``(2w+1, K)`` broadcast to
+    ``(2w+1, 2w+1, K)``, the points along the last axis (long inner loops; the order of a
+    maximum does not change it)."""
     lo, r, sig, w = kernel
-    off = np.arange(-w, w + 1)
-    cx = cell[:, 0, None] + off[None, :]
-    cy = cell[:, 1, None] + off[None, :]
-    dx = lo[0] + (cx + 0.5) * r - points[:, 0, None]
-    dy = lo[1] + (cy + 0.5) * r - points[:, 1, None]
-    d2 = (dx * dx)[:, :, None] + (dy * dy)[:, None, :]
-    val = np.exp(-d2 / (2 * sig * sig)).astype(np.float32)
-    lin = cx[:, :, None] * shape[0] + cy[:, None, :]
-    ok = ((cx >= 1) & (cx < shape[1]))[:, :, None] & ((cy >= 1) & (cy < shape[2]))[:, None, :]
-    if ok.all():
+    off = np.arange(-w, w + 1)[:, None]  # (2w+1, 1): the points run along the last axis
+    cx = off + cell[None, :, 0]
+    cy = off + cell[None, :, 1]
+    dx = lo[0] + (cx + 0.5) * r - points[None, :, 0]
+    dy = lo[1] + (cy + 0.5) * r - points[None, :, 1]
+    # separable: exp(−(dx² + dy²)/2σ²) = exp(−dx²/2σ²) · exp(−dy²/2σ²), 2(2w+1) exps a point
+    # (the float64 product differs from exp of the sum by float64 roundings, far below the
+    # float32 table's: the same tables on corridor worlds 103-105, measured)
+    s = -1.0 / (2 * sig * sig)
+    ex, ey = np.exp(dx * dx * s), np.exp(dy * dy * s)
+    n = off.shape[0]
+    val: NDArray[np.float32] = np.empty((n, n, cell.shape[0]), dtype=np.float32)
+    np.multiply(ex[:, None, :], ey[None, :, :], out=val, casting="same_kind")
+    lin = (off * shape[0] + off.T)[:, :, None] + (cell[:, 0] * shape[0] + cell[:, 1])[None, None]
+    if inside:
         lin, val = lin.ravel(), val.ravel()
     else:
+        ok = ((cx >= 1) & (cx < shape[1]))[:, None, :] & ((cy >= 1) & (cy < shape[2]))[None, :, :]
         lin, val = lin[ok], val[ok]
     # one flat index: ufunc.at's fast path (a tuple of index arrays is ~6x slower)
     np.maximum.at(flat, lin, val)
@@ -191,22 +292,12 @@ def likelihood_grid(
     inside = np.all((cell - w >= 1) & (cell + w < np.array(shape)), axis=1)
     meets = np.all((cell + w >= 1) & (cell - w < np.array(shape)), axis=1)
     flat = table.ravel()
-    for part in (np.flatnonzero(inside), np.flatnonzero(meets & ~inside)):
+    dims = (table.shape[1], shape[0], shape[1])
+    for part, whole in ((np.flatnonzero(inside), True), (np.flatnonzero(meets & ~inside), False)):
         for a in range(0, part.size, _SPLAT):  # blocks that stay in the cache
             at = part[a : a + _SPLAT]
-            _splat(
-                flat, (table.shape[1], shape[0], shape[1]), cell[at], points[at], (lo, r, sig, w)
-            )
-    pyramid = [table]
-    for h in range(1, options.levels + 1):
-        s = 2 ** (h - 1)
-        prev = pyramid[-1]
-        nxt = prev.copy()
-        np.maximum(nxt[:-s, :], prev[s:, :], out=nxt[:-s, :])
-        nxt2 = nxt.copy()
-        np.maximum(nxt2[:, :-s], nxt[:, s:], out=nxt2[:, :-s])
-        pyramid.append(nxt2)
-    return LikelihoodGrid(lo, r, pyramid)
+            _splat(flat, dims, cell[at], points[at], (lo, r, sig, w), whole)
+    return LikelihoodGrid(lo, r, table, options.levels)
 
 
 def _score(
@@ -232,19 +323,6 @@ _PAD_LIMIT = 2**22
 _BLOCK = 65536
 
 
-def _edge_pad(t: NDArray[np.float32], pad: tuple[tuple[int, int], ...]) -> NDArray[np.float32]:
-    """``np.pad(t, pad, mode="edge")`` of a 2-D table, in five slice copies."""
-    (a0, a1), (b0, b1) = pad
-    nx, ny = t.shape
-    out = np.empty((nx + a0 + a1, ny + b0 + b1), dtype=t.dtype)
-    out[a0 : a0 + nx, b0 : b0 + ny] = t
-    out[:a0, b0 : b0 + ny] = t[0]
-    out[a0 + nx :, b0 : b0 + ny] = t[-1]
-    out[:, :b0] = out[:, b0 : b0 + 1]
-    out[:, b0 + ny :] = out[:, b0 + ny - 1 : b0 + ny]
-    return out
-
-
 class _Lookup:
     """:func:`_score` without the clip: each level ``L_h`` padded by edge replication so
     that every lookup of the search (rotated points ``base`` moved by ``u, v ∈ ±half``)
@@ -256,17 +334,16 @@ class _Lookup:
         self, grid: LikelihoodGrid, base: NDArray[np.int64], half: int, limit: int
     ) -> None:
         self.grid, self.base = grid, base
-        nx, ny = grid.pyramid[0].shape
-        lo = np.minimum(base.min(axis=(0, 1)) - half, 0)  # (2,) most negative index
-        hi = np.maximum(base.max(axis=(0, 1)) + half, [nx - 1, ny - 1])
-        shape = hi - lo + 1
-        self.padded = bool(float(shape[0]) * float(shape[1]) <= limit)
-        if not self.padded:
+        first = base.min(axis=(0, 1)) - half  # (2,) the lookups' extreme cells
+        last = base.max(axis=(0, 1)) + half
+        got = grid.padded(first, last, limit)
+        self.padded = got is not None
+        if got is None:
             return
-        pad = ((int(-lo[0]), int(hi[0] - nx + 1)), (int(-lo[1]), int(hi[1] - ny + 1)))
-        self.stride = int(shape[1])
-        self.tables = [_edge_pad(t, pad).ravel() for t in grid.pyramid]
-        self.flat = (base[:, :, 0] - lo[0]) * self.stride + (base[:, :, 1] - lo[1])  # (T, M)
+        tables, ((a0, _), (b0, _)) = got
+        self.stride = int(tables[0].shape[1])
+        self.tables = [t.ravel() for t in tables]
+        self.flat = (base[:, :, 0] + a0) * self.stride + (base[:, :, 1] + b0)  # (T, M)
 
     def score(
         self, h: int, k: NDArray[np.int64], u: NDArray[np.int64], v: NDArray[np.int64]
@@ -285,8 +362,9 @@ class _Lookup:
         for a in range(0, n, rows):
             b = min(a + rows, n)
             ib, vb = idx[: b - a], val[: b - a]
-            np.add(flat[k[a:b]], shift[a:b, None], out=ib)
-            table.take(ib, out=vb)
+            flat.take(k[a:b], axis=0, out=ib, mode="clip")  # the points' cells, then moved
+            ib += shift[a:b, None]
+            table.take(ib, out=vb, mode="clip")  # in bounds; "raise" would buffer out
             np.add.reduce(vb, axis=1, dtype=np.float64, out=out[a:b])
         out /= m  # np.mean's own steps (sum, then divide), without its per-call checks
         return out
@@ -302,7 +380,7 @@ def _greedy(
     n = int(np.argmax(b))
     kk, uu, vv = k[n : n + 1], u[n : n + 1], v[n : n + 1]
     best = 0.0
-    for h in range(len(look.grid.pyramid) - 1, 0, -1):
+    for h in range(look.grid.levels, 0, -1):
         ck, cu, cv = _children(kk, uu, vv, h, half)
         s = look.score(h - 1, ck, cu, cv)
         if s.size == 0:
@@ -357,7 +435,7 @@ def branch_and_bound(
     rot = np.stack((c * px - s * py, s * px + c * py), axis=-1)  # (T, M, 2)
     base = np.floor((rot + centre[:2] - grid.lo) / r).astype(np.int64)
     half = int(np.ceil(window_xy / r))
-    top_h = len(grid.pyramid) - 1
+    top_h = grid.levels
     step = 2**top_h
     starts = np.arange(-half, half + 1, step)
     tk, tu, tv = (
