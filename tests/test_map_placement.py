@@ -204,7 +204,7 @@ def test_run_judges_the_recovered_nees_in_the_maps_frame(sigmas: float, scale: f
     metrics = result.metrics()["nees_map_placement"]
     assert metrics["placement"]["landmarks"] == b.map_ids.size
     if scale == 1.0:
-        assert metrics["placement"]["nees"] > 100  # 8² × 3 = 192 drawn, plus the map's own
+        assert metrics["placement"]["rigid_nees"] > 100  # 8² × 3 = 192 drawn, plus the map's own
         assert absolute > 2.0 * conditioned, (absolute, conditioned)
         assert line.level == "green", line.value
     else:

@@ -90,9 +90,10 @@ def test_nees_nis_and_stretch_tables_equal_metrics(
 ) -> None:
     _, page, m = report
     nees = page.tables["NEES (3 dof) of the pose estimates"]
-    assert [row[0] for row in nees] == list(m["nees"])
+    placed = "recovered, in the map's frame"  # metrics.json nees_map_placement.recovered
+    assert [row[0] for row in nees] == [*m["nees"], placed]
     for row in nees:
-        n = m["nees"][row[0]]
+        n = m["nees_map_placement"]["recovered"] if row[0] == placed else m["nees"][row[0]]
         assert _close(row[1], n["mean"]) and _close(row[2], n["band"][0])
         assert _close(row[3], n["band"][1]) and _close(row[4], n["inside"])
     (nis_row,) = page.tables["NIS of the recovery's innovations (2 dof)"]
@@ -133,13 +134,18 @@ def test_each_nees_and_divergence_key_is_written_once(
 ) -> None:
     _, _, m = report
     paths = _key_paths(m)
-    for key in ("nees", "nees_frame", "nees_truth_frame", "divergence", "nees_stretches"):
+    for key in (
+        "nees", "nees_frame", "nees_truth_frame", "nees_map_placement", "divergence",
+        "nees_stretches",
+    ):  # fmt: skip
         assert [p for p in paths if p[-1] == key] == [
             ("divergence", key) if key == "nees_stretches" else (key,)
         ], key
     # no other key of the file is named after the NEES
     assert {p for p in paths if "nees" in p[-1]} == {
-        ("nees",), ("nees_frame",), ("nees_truth_frame",), ("divergence", "nees_stretches"),
+        ("nees",), ("nees_frame",), ("nees_truth_frame",), ("nees_map_placement",),
+        ("nees_map_placement", "placement", "rigid_nees"),  # the placement's own, 3 dof
+        ("divergence", "nees_stretches"),
         ("divergence", "nees_stretches", "nees_max"),  # the blow-ups (this run has some)
     }  # fmt: skip
 
@@ -250,7 +256,10 @@ def test_verdict_reads_the_numbers_metrics_holds(rescored: tuple[Any, Any]) -> N
     assert f.relations == m["trajectory"]["translation"]["abs"]["count"]
     assert f.relations + f.unassociated == m["trajectory"]["relations"]
     assert f.unassociated == m["trajectory"]["unassociated"]
-    assert f.nees is not None and f.nees.as_dict() == m["nees"]["recovered"]
+    # the recovered consistency is judged in the map's frame when it is defined
+    placed = m.get("nees_map_placement")
+    judged = m["nees"]["recovered"] if placed is None else placed["recovered"]
+    assert f.nees is not None and f.nees.as_dict() == judged
     assert f.counts is not None and f.counts.as_dict() == m["recovery"]["measurements"]
     assert f.poses == m["recovery"]["poses"]
     mp, ms = m["map"], f.map

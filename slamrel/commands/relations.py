@@ -256,7 +256,7 @@ def _add_align_pair_arguments(a: argparse.ArgumentParser) -> None:
         help="loop candidates within --loop-radius + M per metre travelled between the two "
         "scans (the heading limit + 0.05 M rad/m: the poses' accumulated drift), aligned, "
         "then kept where the aligned motion lies within --loop-radius and --loop-max-angle "
-        "(default 0: the pairs the poses propose)",
+        "(default: 0, the pairs the poses propose)",
     )
 
 

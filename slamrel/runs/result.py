@@ -448,7 +448,7 @@ class RunResult:
     def placement_dict(self) -> dict[str, Any] | None:
         """``metrics.json`` ``nees_map_placement``: the recovered NEES conditioned on the map's
         placement and the placement itself (``dx``, ``dy`` [m], ``dtheta`` [rad], its NEES
-        over 3 dof, the landmarks it was fitted on)."""
+        ``rigid_nees`` over ``dof`` 3, the landmarks it was fitted on)."""
         pn = self.nees_placement
         if pn is None:
             return None
@@ -459,7 +459,7 @@ class RunResult:
                 "dx": sp.dx,
                 "dy": sp.dy,
                 "dtheta": sp.dtheta,
-                "nees": sp.nees_rigid,
+                "rigid_nees": sp.nees_rigid,
                 "dof": sp.dof_rigid,
                 "landmarks": pn.placement.landmarks,
             },
