@@ -388,8 +388,9 @@ def _consistency_section(result: RunResult, figures: RunFigures) -> Section:
             f"{sp.dy:.3g} m, {np.degrees(sp.dtheta):.3g}°; NEES "
             f"{'—' if sp.nees_rigid is None else f'{sp.nees_rigid:.3g}'} for 3 dof, on "
             f"{placed.placement.landmarks} landmarks), which the poses inherit and "
-            "no relation sees. The verdict's recovered consistency judges this NEES; the row "
-            "above is the absolute one (recovery.placement, docs/verdict.md)."
+            "no relation sees. The verdict's recovered consistency judges this NEES (the "
+            "table's last row); the row 'recovered' is the absolute one (recovery.placement, "
+            "docs/verdict.md)."
         )
     return Section(
         "Consistency",
