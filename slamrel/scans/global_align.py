@@ -76,7 +76,7 @@ class GlobalOptions:
     search_range : float
         Returns beyond this range are left out of the search (not of ICP) (15 m).
     max_points : int
-        The current submap's returns are thinned to about this many for the search (250).
+        The current submap's returns are thinned to about this many for the search (150).
     refine_points : int
         The current submap's returns are thinned to about this many for the submap ICP
         that resolves a degenerate loop pair's weak direction (1000).
@@ -91,6 +91,12 @@ class GlobalOptions:
         search and its ambiguity test judge; the condition stays in the report).
     max_refine, max_refine_angle : float
         ``unstable`` when ICP moves farther from the search's answer (0.1 m, 0.03 rad).
+    icp_tolerance, icp_stall_tolerance, icp_stall_iterations : float, float, int
+        The ICP runs of this aligner stop at a step below ``icp_tolerance`` (1e-4 m and rad),
+        or after ``icp_stall_iterations`` (2) steps in a row below ``icp_stall_tolerance``
+        (5e-4) at a settled gate: :class:`IcpOptions`' ``tolerance``, ``stall_tolerance`` and
+        ``stall_iterations`` (its defaults 1e-6, 1e-4, 4 took twice the iterations for
+        changes of hundredths of a millimetre; corridor worlds 103-105, measured).
     """
 
     search: SearchOptions = field(default_factory=SearchOptions)
@@ -102,7 +108,7 @@ class GlobalOptions:
     submap_travel: float = 5.0
     retry_travel: float = 10.0
     search_range: float = 15.0
-    max_points: int = 250
+    max_points: int = 150
     refine_points: int = 1000
     chain_gap: float = 1.5
     link_xy: float = 0.5
@@ -112,6 +118,9 @@ class GlobalOptions:
     weak_geometry: bool = False
     max_refine: float = 0.1
     max_refine_angle: float = 0.03
+    icp_tolerance: float = 1e-4
+    icp_stall_tolerance: float = 5e-4
+    icp_stall_iterations: int = 2
 
 
 @dataclass(frozen=True)
@@ -493,6 +502,13 @@ def align_scans_global(
     gopt = global_options or GlobalOptions()
     if not gopt.weak_geometry:
         opt = replace(opt, limits=replace(opt.limits, min_condition=0.0))
+    icp = replace(
+        opt.icp,
+        tolerance=gopt.icp_tolerance,
+        stall_tolerance=gopt.icp_stall_tolerance,
+        stall_iterations=gopt.icp_stall_iterations,
+    )
+    opt = replace(opt, icp=icp)
     store = _Scans(scans, opt, gopt)
     pairs = proposals.pairs
     chain = scan_chain(scans, poses, pairs.ravel(), store)
