@@ -104,6 +104,14 @@ class IcpOptions:
         within that tolerance instead of settling below ``tolerance``. When it circles
         exactly (the same iterates again, period 2–4, twice in a row) it stops at the mean
         of the cycle.
+    coarse_stride : int
+        Above 1: iterate on every ``coarse_stride``-th current return until converged, then
+        go on from there, at the gate reached, with every return for at most
+        ``polish_iterations`` steps (the many early iterations at a fraction of the cost;
+        1: every return throughout). Only when the current scan has at least
+        ``4 · coarse_stride · min_matches`` returns.
+    polish_iterations : int
+        Steps with every return after the coarse phase (2).
     """
 
     max_distance: float = 0.5
@@ -117,6 +125,8 @@ class IcpOptions:
     degenerate_ratio: float = 0.02
     stall_tolerance: float = 1e-4
     stall_iterations: int = 4
+    coarse_stride: int = 1
+    polish_iterations: int = 2
 
 
 @dataclass(frozen=True)
@@ -352,6 +362,9 @@ def align(
     stalled = 0
     history: list[NDArray[np.float64]] = [x]
     seen: list[tuple[float, float, float]] = [(x[0], x[1], x[2])]
+    full, polish = pts, -1
+    if opt.coarse_stride > 1 and pts.shape[0] >= opt.coarse_stride * 4 * opt.min_matches:
+        pts = full[:: opt.coarse_stride]  # coarse phase: converge on every stride-th return
     for it in range(1, opt.max_iterations + 1):
         q = transform(x, pts)
         dist, k = reference.tree.query(q, distance_upper_bound=gate)
@@ -380,12 +393,16 @@ def align(
         small = size < opt.tolerance
         stalled = stalled + 1 if size < opt.stall_tolerance else 0
         settled = new_gate >= gate * 0.999
-        if (small or stalled >= opt.stall_iterations) and settled:
-            converged = True
-            break
-        period = _cycle(seen, opt.tolerance)
+        done = (small or stalled >= opt.stall_iterations) and settled
+        period = 0 if done else _cycle(seen, opt.tolerance)
         if period and settled:  # the correspondences repeat: the iteration is periodic
             x = np.mean(history[-period:], axis=0)
+            done = True
+        if done and pts is not full:  # the coarse phase converged: polish on every return
+            pts, polish = full, opt.polish_iterations
+            continue
+        polish -= 1
+        if done or polish == 0:
             converged = True
             break
         gate = min(gate, new_gate) if small or it > 5 else gate
