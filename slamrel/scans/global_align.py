@@ -391,9 +391,12 @@ def _search(
         _refuse_hopeless(store, ref_scans[0], cur_scans[0], centre, reach)
         nan3 = np.full(3, np.nan)
         return SearchResult(np.asarray(centre, float).copy(), 0.0, nan3, 0.0, 0, False)
-    grid = (
-        likelihood_grid(ref, lo, hi, sopt) if ref_key is None else store.grid(ref_key, ref, lo, hi)
-    )
+    whole_lo = ref.min(axis=0) - 4 * sopt.sigma
+    whole_hi = np.maximum(ref.max(axis=0) + 4 * sopt.sigma, whole_lo + sopt.resolution)
+    if ref_key is None or grid_cells(whole_lo, whole_hi, sopt.resolution) > sopt.max_cells:
+        grid = likelihood_grid(ref, lo, hi, sopt)
+    else:  # a named reference: one grid over all of it, kept for every search against it
+        grid = store.grid(ref_key, ref, whole_lo, whole_hi)
     return branch_and_bound(grid, cur, centre, wxy, wth, sopt)
 
 
