@@ -112,6 +112,9 @@ class IcpOptions:
         ``4 · coarse_stride · min_matches`` returns.
     polish_iterations : int
         Steps with every return after the coarse phase (2).
+    shrink_after : int
+        The gate may shrink (towards ``gate_sigmas · σ``) after this many steps, or at the
+        first step below ``tolerance`` (5).
     """
 
     max_distance: float = 0.5
@@ -127,6 +130,7 @@ class IcpOptions:
     stall_iterations: int = 4
     coarse_stride: int = 1
     polish_iterations: int = 2
+    shrink_after: int = 5
 
 
 @dataclass(frozen=True)
@@ -405,7 +409,7 @@ def align(
         if done or polish == 0:
             converged = True
             break
-        gate = min(gate, new_gate) if small or it > 5 else gate
+        gate = min(gate, new_gate) if small or it > opt.shrink_after else gate
     return _summarise(reference, current, x, guess, gate, sigma, it, converged, opt)
 
 
