@@ -250,3 +250,27 @@ def test_coarse_phase_reaches_the_truth_in_fewer_full_steps():
     _assert_targets(et, er)
     et1, _ = _errors(np.array(one), truth)
     assert np.median(et) <= np.median(et1) + 0.002  # within 2 mm of the one-phase ICP
+
+
+def test_raster_lookup_finds_anchors_near_the_nearest():
+    """``NearestRaster`` against brute force (every anchor's distance): the same points find an
+    anchor within the gate, and the one found is at most a raster cell farther than the
+    nearest."""
+    from slamrel.scans.matching import NearestRaster
+
+    log = _room_log()
+    s = log.scans
+    ref = prepare_scan(s.points(0))
+    cur = prepare_scan(s.points(3)).points
+    rng = np.random.default_rng(5)
+    for gate in (0.05, 0.1, 0.3):
+        q = cur + rng.normal(0.0, 0.02, cur.shape)
+        d_all = np.hypot(*(q[:, None, :] - ref.anchors[None, :, :]).transpose(2, 0, 1))
+        best = d_all.min(axis=1)
+        dist, k = NearestRaster(ref.anchors, 0.1, 0.3).query(q, gate)
+        found = np.isfinite(dist)
+        assert np.all(d_all[found, k[found]] == pytest.approx(dist[found]))
+        assert np.all(k[~found] == ref.anchors.shape[0])
+        assert np.all(dist[found] <= best[found] + 0.1 + 1e-12)
+        # nearly every point with an anchor within the gate finds one
+        assert found.sum() >= 0.95 * (best <= gate).sum()

@@ -35,7 +35,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from relation_metric.errors import InputError
 from relation_metric.se2 import between, cumulative_compose
@@ -76,7 +75,9 @@ class GlobalOptions:
     search_range : float
         Returns beyond this range are left out of the search (not of ICP) (15 m).
     max_points : int
-        The current submap's returns are thinned to about this many for the search (150).
+        The current submap's returns are thinned to about this many for the search (250; 150
+        made the searches of lost chain links slip on ``mit-csail.clf``: 90 more failed
+        relations).
     refine_points : int
         The current submap's returns are thinned to about this many for the submap ICP
         that resolves a degenerate loop pair's weak direction (1000).
@@ -107,6 +108,10 @@ class GlobalOptions:
         :attr:`~slamrel.scans.matching.IcpOptions.shrink_after` of this aligner's ICP runs
         (2, its default 5: the gate settles three steps sooner; corridor worlds 103-105:
         15 % fewer iterations, the same flags and accuracy).
+    icp_nearest, icp_raster_reach : str, float
+        :attr:`~slamrel.scans.matching.IcpOptions.nearest` and ``raster_reach`` of this
+        aligner's ICP runs (``"raster"``, 0.3 m: no k-d tree to build or query, and no
+        ``scipy.spatial`` to import; the gate's first steps reach 0.3 m instead of 0.5).
     """
 
     search: SearchOptions = field(default_factory=SearchOptions)
@@ -118,7 +123,7 @@ class GlobalOptions:
     submap_travel: float = 5.0
     retry_travel: float = 10.0
     search_range: float = 15.0
-    max_points: int = 150
+    max_points: int = 250
     refine_points: int = 1000
     chain_gap: float = 1.5
     link_xy: float = 0.5
@@ -133,6 +138,9 @@ class GlobalOptions:
     icp_stall_iterations: int = 2
     icp_coarse_stride: int = 2
     icp_shrink_after: int = 2
+    icp_nearest: str = "raster"
+    fast_links: bool = False
+    icp_raster_reach: float = 0.3
 
 
 @dataclass(frozen=True)
@@ -176,6 +184,7 @@ class _Scans:
         self._near: dict[int, NDArray[np.float64]] = {}
         self._grids: dict[tuple[object, bytes, bytes], LikelihoodGrid] = {}
         self.submaps: dict[tuple[int, float], NDArray[np.float64]] = {}
+        self.link_icp = opt.icp
 
     def prep(self, k: int) -> PreparedScan:
         if k not in self._prep:
@@ -243,12 +252,12 @@ def scan_chain(
     motion = guess.copy()
     fallback = 0
     for k, (i, j) in enumerate(zip(nodes[:-1].tolist(), nodes[1:].tolist(), strict=True)):
-        a = align(store.prep(i), store.prep(j), guess[k], opt.icp)
+        a = align(store.prep(i), store.prep(j), guess[k], store.link_icp)
         flags = _judge(a, opt.limits, guess[k])[0]
         if {"failed", "low overlap", "high residual"} & set(flags):
             centre = guess[k]
             s = _search(store, [i], [j], np.zeros(3), centre, gopt.link_xy, gopt.link_theta)
-            b = align(store.prep(i), store.prep(j), s.delta, opt.icp)
+            b = align(store.prep(i), store.prep(j), s.delta, store.link_icp)
             if not b.failed and (a.failed or b.matched_fraction > a.matched_fraction):
                 a = b
         a = pinned(a, guess[k], gopt.drift_xy * float(np.hypot(guess[k, 0], guess[k, 1])))
@@ -443,11 +452,11 @@ def _submap_icp(
     normals = np.concatenate(
         [transform(np.array([0.0, 0.0, rel[q, 2]]), p.normals) for q, p in enumerate(preps)]
     )
-    ref = PreparedScan(np.zeros((0, 2)), anchors, normals, cKDTree(anchors))
+    ref = PreparedScan(np.zeros((0, 2)), anchors, normals)
     cur = _thinned(
         _submap_points(store, chain, b, store.gopt.submap_travel), store.gopt.refine_points
     )
-    got = align(ref, PreparedScan(cur, cur[:0], cur[:0], ref.tree), start, store.opt.icp)
+    got = align(ref, PreparedScan(cur, cur[:0], cur[:0]), start, store.opt.icp)
     move = between(start, got.delta)
     if (
         got.failed
@@ -524,9 +533,15 @@ def align_scans_global(
         stall_iterations=gopt.icp_stall_iterations,
         coarse_stride=gopt.icp_coarse_stride,
         shrink_after=gopt.icp_shrink_after,
+        nearest=gopt.icp_nearest,
+        raster_reach=gopt.icp_raster_reach,
     )
-    opt = replace(opt, icp=icp)
-    store = _Scans(scans, opt, gopt)
+    store = _Scans(scans, replace(opt, icp=icp), gopt)
+    # the chain's links keep the caller's ICP (exact nearest anchors, full gate and returns,
+    # stricter stop): one slipped link moves every later chain pose, and with it the loop
+    # pairs' windows (mit-csail.clf: 15 failed relations with it, 27-116 without)
+    store.link_icp = icp if gopt.fast_links else opt.icp
+    opt = store.opt
     pairs = proposals.pairs
     chain = scan_chain(scans, poses, pairs.ravel(), store)
     pos = {int(n): k for k, n in enumerate(chain.nodes.tolist())}
