@@ -112,6 +112,11 @@ class GlobalOptions:
         :attr:`~slamrel.scans.matching.IcpOptions.nearest` and ``raster_reach`` of this
         aligner's ICP runs (``"raster"``, 0.3 m: no k-d tree to build or query, and no
         ``scipy.spatial`` to import; the gate's first steps reach 0.3 m instead of 0.5).
+    fast_links : bool
+        The chain's links use the ``icp_*`` settings above too (False: they keep the
+        caller's ICP, exact and strict; on ``mit-csail.clf`` the fast settings slipped a
+        link now and then, and every later chain pose with it: 27-116 failed relations
+        instead of 15-20).
     """
 
     search: SearchOptions = field(default_factory=SearchOptions)
