@@ -226,3 +226,51 @@ def test_pairs_at_times_refuses_times_without_scans():
     assert p.pairs.tolist() == [[0, 1], [2, 1]]
     with pytest.raises(InputError, match="1 relation\\(s\\) name times with no scan within 0.02 s"):
         pairs_at_times(t, np.array([0.0, 0.5]), np.array([0.2, 0.2]), tolerance=0.02)
+
+
+def test_coarse_phase_reaches_the_truth_in_fewer_full_steps():
+    """``coarse_stride``: converge on every second return, then polish with all of them; the
+    oracle is the simulator's truth, as for the one-phase ICP, from the same guesses."""
+    from slamrel.scans.matching import IcpOptions
+
+    log = _room_log()
+    s = log.scans
+    prop = consecutive_pairs(s.laser_pose, s.timestamps, distance=0.4, angle=0.3)
+    truth = guesses_from_poses(log.truth, prop)
+    guess = guesses_from_poses(s.laser_pose, prop)
+    coarse = IcpOptions(coarse_stride=2, polish_iterations=2)
+    got, one = [], []
+    for (i, j), g in zip(prop.pairs.tolist(), guess, strict=True):
+        a, b = prepare_scan(s.points(i)), prepare_scan(s.points(j))
+        c = align(a, b, g, coarse)
+        assert not c.failed and c.converged
+        got.append(c.delta)
+        one.append(align(a, b, g).delta)
+    et, er = _errors(np.array(got), truth)
+    _assert_targets(et, er)
+    et1, _ = _errors(np.array(one), truth)
+    assert np.median(et) <= np.median(et1) + 0.002  # within 2 mm of the one-phase ICP
+
+
+def test_raster_lookup_finds_anchors_near_the_nearest():
+    """``NearestRaster`` against brute force (every anchor's distance): the same points find an
+    anchor within the gate, and the one found is at most a raster cell farther than the
+    nearest."""
+    from slamrel.scans.matching import NearestRaster
+
+    log = _room_log()
+    s = log.scans
+    ref = prepare_scan(s.points(0))
+    cur = prepare_scan(s.points(3)).points
+    rng = np.random.default_rng(5)
+    for gate in (0.05, 0.1, 0.3):
+        q = cur + rng.normal(0.0, 0.02, cur.shape)
+        d_all = np.hypot(*(q[:, None, :] - ref.anchors[None, :, :]).transpose(2, 0, 1))
+        best = d_all.min(axis=1)
+        dist, k = NearestRaster(ref.anchors, 0.1, 0.3).query(q, gate)
+        found = np.isfinite(dist)
+        assert np.all(d_all[found, k[found]] == pytest.approx(dist[found]))
+        assert np.all(k[~found] == ref.anchors.shape[0])
+        assert np.all(dist[found] <= best[found] + 0.1 + 1e-12)
+        # nearly every point with an anchor within the gate finds one
+        assert found.sum() >= 0.95 * (best <= gate).sum()

@@ -35,7 +35,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from relation_metric.errors import InputError
 from relation_metric.se2 import between, cumulative_compose
@@ -76,7 +75,9 @@ class GlobalOptions:
     search_range : float
         Returns beyond this range are left out of the search (not of ICP) (15 m).
     max_points : int
-        The current submap's returns are thinned to about this many for the search (250).
+        The current submap's returns are thinned to about this many for the search (250; 150
+        made the searches of lost chain links slip on ``mit-csail.clf``: 90 more failed
+        relations).
     refine_points : int
         The current submap's returns are thinned to about this many for the submap ICP
         that resolves a degenerate loop pair's weak direction (1000).
@@ -91,6 +92,31 @@ class GlobalOptions:
         search and its ambiguity test judge; the condition stays in the report).
     max_refine, max_refine_angle : float
         ``unstable`` when ICP moves farther from the search's answer (0.1 m, 0.03 rad).
+    icp_tolerance, icp_stall_tolerance, icp_stall_iterations : float, float, int
+        The ICP runs of this aligner stop at a step below ``icp_tolerance`` (1e-4 m and rad),
+        or after ``icp_stall_iterations`` (2) steps in a row below ``icp_stall_tolerance``
+        (5e-4) at a settled gate: :class:`~slamrel.scans.matching.IcpOptions`'
+        ``tolerance``, ``stall_tolerance`` and ``stall_iterations`` (its defaults 1e-6,
+        1e-4, 4 took twice the iterations for changes of hundredths of a millimetre;
+        corridor worlds 103-105, measured).
+    icp_coarse_stride : int
+        :attr:`~slamrel.scans.matching.IcpOptions.coarse_stride` of this aligner's ICP runs
+        (2: converge on every second return, then two steps with all of them; corridor
+        worlds 103-105: 1.15x the pairs per CPU-second, unflagged median 2.46 -> 2.60 mm,
+        p99 unchanged).
+    icp_shrink_after : int
+        :attr:`~slamrel.scans.matching.IcpOptions.shrink_after` of this aligner's ICP runs
+        (2, its default 5: the gate settles three steps sooner; corridor worlds 103-105:
+        15 % fewer iterations, the same flags and accuracy).
+    icp_nearest, icp_raster_reach : str, float
+        :attr:`~slamrel.scans.matching.IcpOptions.nearest` and ``raster_reach`` of this
+        aligner's ICP runs (``"raster"``, 0.3 m: no k-d tree to build or query, and no
+        ``scipy.spatial`` to import; the gate's first steps reach 0.3 m instead of 0.5).
+    fast_links : bool
+        The chain's links use the ``icp_*`` settings above too (False: they keep the
+        caller's ICP, exact and strict; on ``mit-csail.clf`` the fast settings slipped a
+        link now and then, and every later chain pose with it: 27-116 failed relations
+        instead of 15-20).
     """
 
     search: SearchOptions = field(default_factory=SearchOptions)
@@ -112,6 +138,14 @@ class GlobalOptions:
     weak_geometry: bool = False
     max_refine: float = 0.1
     max_refine_angle: float = 0.03
+    icp_tolerance: float = 1e-4
+    icp_stall_tolerance: float = 5e-4
+    icp_stall_iterations: int = 2
+    icp_coarse_stride: int = 2
+    icp_shrink_after: int = 2
+    icp_nearest: str = "raster"
+    fast_links: bool = False
+    icp_raster_reach: float = 0.3
 
 
 @dataclass(frozen=True)
@@ -155,6 +189,7 @@ class _Scans:
         self._near: dict[int, NDArray[np.float64]] = {}
         self._grids: dict[tuple[object, bytes, bytes], LikelihoodGrid] = {}
         self.submaps: dict[tuple[int, float], NDArray[np.float64]] = {}
+        self.link_icp = opt.icp
 
     def prep(self, k: int) -> PreparedScan:
         if k not in self._prep:
@@ -222,12 +257,12 @@ def scan_chain(
     motion = guess.copy()
     fallback = 0
     for k, (i, j) in enumerate(zip(nodes[:-1].tolist(), nodes[1:].tolist(), strict=True)):
-        a = align(store.prep(i), store.prep(j), guess[k], opt.icp)
+        a = align(store.prep(i), store.prep(j), guess[k], store.link_icp)
         flags = _judge(a, opt.limits, guess[k])[0]
         if {"failed", "low overlap", "high residual"} & set(flags):
             centre = guess[k]
             s = _search(store, [i], [j], np.zeros(3), centre, gopt.link_xy, gopt.link_theta)
-            b = align(store.prep(i), store.prep(j), s.delta, opt.icp)
+            b = align(store.prep(i), store.prep(j), s.delta, store.link_icp)
             if not b.failed and (a.failed or b.matched_fraction > a.matched_fraction):
                 a = b
         a = pinned(a, guess[k], gopt.drift_xy * float(np.hypot(guess[k, 0], guess[k, 1])))
@@ -375,9 +410,12 @@ def _search(
         _refuse_hopeless(store, ref_scans[0], cur_scans[0], centre, reach)
         nan3 = np.full(3, np.nan)
         return SearchResult(np.asarray(centre, float).copy(), 0.0, nan3, 0.0, 0, False)
-    grid = (
-        likelihood_grid(ref, lo, hi, sopt) if ref_key is None else store.grid(ref_key, ref, lo, hi)
-    )
+    whole_lo = ref.min(axis=0) - 4 * sopt.sigma
+    whole_hi = np.maximum(ref.max(axis=0) + 4 * sopt.sigma, whole_lo + sopt.resolution)
+    if ref_key is None or grid_cells(whole_lo, whole_hi, sopt.resolution) > sopt.max_cells:
+        grid = likelihood_grid(ref, lo, hi, sopt)
+    else:  # a named reference: one grid over all of it, kept for every search against it
+        grid = store.grid(ref_key, ref, whole_lo, whole_hi)
     return branch_and_bound(grid, cur, centre, wxy, wth, sopt)
 
 
@@ -419,11 +457,11 @@ def _submap_icp(
     normals = np.concatenate(
         [transform(np.array([0.0, 0.0, rel[q, 2]]), p.normals) for q, p in enumerate(preps)]
     )
-    ref = PreparedScan(np.zeros((0, 2)), anchors, normals, cKDTree(anchors))
+    ref = PreparedScan(np.zeros((0, 2)), anchors, normals)
     cur = _thinned(
         _submap_points(store, chain, b, store.gopt.submap_travel), store.gopt.refine_points
     )
-    got = align(ref, PreparedScan(cur, cur[:0], cur[:0], ref.tree), start, store.opt.icp)
+    got = align(ref, PreparedScan(cur, cur[:0], cur[:0]), start, store.opt.icp)
     move = between(start, got.delta)
     if (
         got.failed
@@ -493,7 +531,22 @@ def align_scans_global(
     gopt = global_options or GlobalOptions()
     if not gopt.weak_geometry:
         opt = replace(opt, limits=replace(opt.limits, min_condition=0.0))
-    store = _Scans(scans, opt, gopt)
+    icp = replace(
+        opt.icp,
+        tolerance=gopt.icp_tolerance,
+        stall_tolerance=gopt.icp_stall_tolerance,
+        stall_iterations=gopt.icp_stall_iterations,
+        coarse_stride=gopt.icp_coarse_stride,
+        shrink_after=gopt.icp_shrink_after,
+        nearest=gopt.icp_nearest,
+        raster_reach=gopt.icp_raster_reach,
+    )
+    store = _Scans(scans, replace(opt, icp=icp), gopt)
+    # the chain's links keep the caller's ICP (exact nearest anchors, full gate and returns,
+    # stricter stop): one slipped link moves every later chain pose, and with it the loop
+    # pairs' windows (mit-csail.clf: 15 failed relations with it, 27-116 without)
+    store.link_icp = icp if gopt.fast_links else opt.icp
+    opt = store.opt
     pairs = proposals.pairs
     chain = scan_chain(scans, poses, pairs.ravel(), store)
     pos = {int(n): k for k, n in enumerate(chain.nodes.tolist())}

@@ -16,8 +16,8 @@ of it (at least three; a window whose scatter is not line-like,
 its centroid ``c_k`` and unit normal ``n_k``. (Censi builds the line from the two nearest
 reference points at every iteration; fitting it once per scan over a few neighbours is the
 same metric with less noise and no per-iteration work.) A current point ``q = R p + t`` is
-associated with the reference line whose centroid is nearest (cKDTree), if nearer than the
-gate; its residual is
+associated with the reference line whose centroid is nearest (cKDTree, or a raster lookup:
+``IcpOptions.nearest``), if nearer than the gate; its residual is
 
     e = n_kᵀ (R p + t − c_k)
 
@@ -53,12 +53,15 @@ Results (:class:`Alignment`)
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from relation_metric.se2 import wrap_angle_float
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
 
 __all__ = [
     "IcpOptions",
@@ -104,6 +107,26 @@ class IcpOptions:
         within that tolerance instead of settling below ``tolerance``. When it circles
         exactly (the same iterates again, period 2–4, twice in a row) it stops at the mean
         of the cycle.
+    coarse_stride : int
+        Above 1: iterate on every ``coarse_stride``-th current return until converged, then
+        go on from there, at the gate reached, with every return for at most
+        ``polish_iterations`` steps (the many early iterations at a fraction of the cost;
+        1: every return throughout). Only when the current scan has at least
+        ``4 · coarse_stride · min_matches`` returns; a coarse step that matches fewer than
+        ``2 · min_matches`` goes on with every return until converged (a small overlap).
+    polish_iterations : int
+        Steps with every return after the coarse phase (2).
+    shrink_after : int
+        The gate may shrink (towards ``gate_sigmas · σ``) after this many steps, or at the
+        first step below ``tolerance`` (5).
+    nearest : {"tree", "raster"}
+        How a point finds its nearest anchor: ``"tree"`` exactly (``scipy``'s cKDTree);
+        ``"raster"`` by :class:`NearestRaster` (the anchor nearest its cell's centre, then
+        the nearest of that anchor and its two neighbours on each side in scan order: no
+        tree to build, no ``scipy.spatial`` to import, a third of the time a query).
+    raster_cell, raster_reach : float
+        Cell of the ``"raster"`` lookup [m] (0.1), and how far from an anchor its cells reach
+        (0.5; never beyond ``max_distance``: farther points find no anchor).
     """
 
     max_distance: float = 0.5
@@ -117,6 +140,12 @@ class IcpOptions:
     degenerate_ratio: float = 0.02
     stall_tolerance: float = 1e-4
     stall_iterations: int = 4
+    coarse_stride: int = 1
+    polish_iterations: int = 2
+    shrink_after: int = 5
+    nearest: str = "tree"
+    raster_cell: float = 0.1
+    raster_reach: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -128,15 +157,116 @@ class PreparedScan:
     points : (K, 2) float
         The returns in the laser frame (the role of the *current* scan).
     anchors, normals : (L, 2) float
-        Centroid and unit normal of each fitted line (the role of the *reference* scan).
-    tree : cKDTree
-        Over ``anchors``.
+        Centroid and unit normal of each fitted line (the role of the *reference* scan),
+        in scan order.
+
+    The nearest-anchor lookups (:attr:`tree`, :meth:`raster`) are made when first asked for.
     """
 
     points: NDArray[np.float64]
     anchors: NDArray[np.float64]
     normals: NDArray[np.float64]
-    tree: cKDTree = field(repr=False)
+    _kept: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def tree(self) -> cKDTree:
+        """A cKDTree over ``anchors``."""
+        got = self._kept.get("tree")
+        if got is None:
+            from scipy.spatial import cKDTree
+
+            got = self._kept["tree"] = cKDTree(self.anchors)
+        return got
+
+    def raster(self, cell: float, reach: float) -> NearestRaster:
+        """:class:`NearestRaster` of ``anchors`` (``cell``, ``reach``), kept."""
+        key = ("raster", cell, reach)
+        got = self._kept.get(key)
+        if got is None:
+            got = self._kept[key] = NearestRaster(self.anchors, cell, reach)
+        return got
+
+    def nearest(
+        self, q: NDArray[np.float64], gate: float, opt: IcpOptions
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Distance to and index of the nearest anchor of each ``q`` (``(K, 2)``) within
+        ``gate`` (``inf`` and ``L`` beyond it), by ``opt.nearest``."""
+        if opt.nearest == "raster":
+            return self.raster(opt.raster_cell, min(opt.raster_reach, opt.max_distance)).query(
+                q, gate
+            )
+        dist, k = self.tree.query(q, distance_upper_bound=gate)
+        return dist, k
+
+
+#: Neighbours on each side, in scan order, that :meth:`NearestRaster.query` also tries.
+_RASTER_SIDE = 2
+
+
+class NearestRaster:
+    """Nearest anchor by a raster: every cell within ``reach`` of an anchor holds the anchor
+    nearest its centre; a query takes its cell's anchor and the :data:`_RASTER_SIDE`
+    anchors on each side of it in scan order (along the same wall: the cell's anchor can be
+    a cell's width from the query's nearest) and keeps the nearest of them.
+
+    Not exactly the nearest anchor (a point between two walls within a cell of each other
+    can take the farther): the point-to-line residual is what ICP uses, and any anchor of the
+    same wall gives nearly the same line.
+    """
+
+    def __init__(self, anchors: NDArray[np.float64], cell: float, reach: float) -> None:
+        self.anchors, self.cell = anchors, cell
+        self.ax, self.ay = anchors[:, 0].copy(), anchors[:, 1].copy()
+        self._side = np.arange(-_RASTER_SIDE, _RASTER_SIDE + 1)[None, :]
+        n_a = anchors.shape[0]
+        w = int(np.ceil(reach / cell))
+        if n_a == 0:
+            self.lo, self.shape = np.zeros(2), (1, 1)
+            self.index = np.full(1, -1, dtype=np.int64)
+            return
+        self.lo = anchors.min(axis=0) - (w + 1) * cell
+        ext = np.ceil((anchors.max(axis=0) + (w + 1) * cell - self.lo) / cell).astype(np.int64)
+        self.shape = (int(ext[0]) + 1, int(ext[1]) + 1)
+        c = np.floor((anchors - self.lo) / cell).astype(np.int64)  # (L, 2)
+        off = np.arange(-w, w + 1)
+        cx = c[:, 0, None] + off[None, :]  # (L, n)
+        cy = c[:, 1, None] + off[None, :]
+        dx = self.lo[0] + (cx + 0.5) * cell - anchors[:, 0, None]
+        dy = self.lo[1] + (cy + 0.5) * cell - anchors[:, 1, None]
+        d2 = dx[:, :, None] ** 2 + dy[:, None, :] ** 2  # (L, n, n)
+        lim = (reach + cell) ** 2
+        near = d2 <= lim
+        lin = (cx[:, :, None] * self.shape[1] + cy[:, None, :])[near]
+        # the nearest anchor of a cell: the least of (distance, anchor) packed in one integer
+        aid = np.broadcast_to(np.arange(n_a)[:, None, None], d2.shape)[near]
+        packed = (d2[near] * (2**30 / lim)).astype(np.int64) << 32 | aid
+        table = np.full(self.shape[0] * self.shape[1], np.iinfo(np.int64).max)
+        np.minimum.at(table, lin, packed)
+        self.index = np.where(table == np.iinfo(np.int64).max, -1, table & 0xFFFFFFFF)
+
+    def query(
+        self, q: NDArray[np.float64], gate: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Distance and index of the anchor found for each ``q`` (``inf`` and ``L`` when
+        none lies within ``gate``), as ``cKDTree.query(q, distance_upper_bound=gate)``."""
+        n_a = self.anchors.shape[0]
+        # the outermost cells hold no anchor (-1): a point outside is clipped onto them
+        cx = np.clip((q[:, 0] - self.lo[0]) * (1.0 / self.cell), -1.0, self.shape[0] - 1.0)
+        cy = np.clip((q[:, 1] - self.lo[1]) * (1.0 / self.cell), -1.0, self.shape[1] - 1.0)
+        lin = cx.astype(np.int64) * self.shape[1]
+        lin += cy.astype(np.int64)
+        first = self.index.take(lin, mode="clip")
+        found = first >= 0
+        cand = first[:, None] + self._side  # (K, 2s+1)
+        np.clip(cand, 0, max(n_a - 1, 0), out=cand)
+        dx = self.ax.take(cand) - q[:, 0, None]
+        dy = self.ay.take(cand) - q[:, 1, None]
+        d2 = dx * dx + dy * dy
+        j = d2.argmin(axis=1)
+        rows = np.arange(q.shape[0])
+        dist = np.sqrt(d2[rows, j])
+        ok = found & (dist <= gate)
+        return np.where(ok, dist, np.inf), np.where(ok, cand[rows, j], n_a)
 
 
 @dataclass(frozen=True)
@@ -246,7 +376,7 @@ def prepare_scan(
         line = (count >= 3) & (lam_min <= max_curvature * lam_max) & (lam_max > 0)
     normals = np.column_stack((-np.sin(phi), np.cos(phi)))[line]
     anchors = centroid[line]
-    return PreparedScan(p[valid], anchors, normals, cKDTree(anchors))
+    return PreparedScan(p[valid], anchors, normals)
 
 
 def _cycle(history: list[tuple[float, float, float]], tolerance: float, longest: int = 4) -> int:
@@ -352,12 +482,21 @@ def align(
     stalled = 0
     history: list[NDArray[np.float64]] = [x]
     seen: list[tuple[float, float, float]] = [(x[0], x[1], x[2])]
+    full, polish = pts, -1
+    if opt.coarse_stride > 1 and pts.shape[0] >= opt.coarse_stride * 4 * opt.min_matches:
+        pts = full[:: opt.coarse_stride]  # coarse phase: converge on every stride-th return
     for it in range(1, opt.max_iterations + 1):
         q = transform(x, pts)
-        dist, k = reference.tree.query(q, distance_upper_bound=gate)
+        dist, k = reference.nearest(q, gate, opt)
         ok = np.isfinite(dist)
-        if np.count_nonzero(ok) < opt.min_matches:
-            return _failed(guess, "too few matches", it)
+        if np.count_nonzero(ok) < opt.min_matches * (2 if pts is not full else 1):
+            if pts is not full:  # too few for the coarse phase: every return from here on
+                pts, polish = full, -1
+                q = transform(x, pts)
+                dist, k = reference.nearest(q, gate, opt)
+                ok = np.isfinite(dist)
+            if np.count_nonzero(ok) < opt.min_matches:
+                return _failed(guess, "too few matches", it)
         n, qo, e, ae = _residuals(reference, q, k, ok, opt)
         sigma = max(_MAD * _median(ae), opt.min_sigma)
         w = 1.0 / (1.0 + (e / (_CAUCHY * sigma)) ** 2)
@@ -380,15 +519,19 @@ def align(
         small = size < opt.tolerance
         stalled = stalled + 1 if size < opt.stall_tolerance else 0
         settled = new_gate >= gate * 0.999
-        if (small or stalled >= opt.stall_iterations) and settled:
-            converged = True
-            break
-        period = _cycle(seen, opt.tolerance)
+        done = (small or stalled >= opt.stall_iterations) and settled
+        period = 0 if done else _cycle(seen, opt.tolerance)
         if period and settled:  # the correspondences repeat: the iteration is periodic
             x = np.mean(history[-period:], axis=0)
+            done = True
+        if done and pts is not full:  # the coarse phase converged: polish on every return
+            pts, polish = full, opt.polish_iterations
+            continue
+        polish -= 1
+        if done or polish == 0:
             converged = True
             break
-        gate = min(gate, new_gate) if small or it > 5 else gate
+        gate = min(gate, new_gate) if small or it > opt.shrink_after else gate
     return _summarise(reference, current, x, guess, gate, sigma, it, converged, opt)
 
 
@@ -406,7 +549,7 @@ def _summarise(
     """Quality measures at the solution ``x`` (see the module docstring)."""
     pts = current.points
     q = transform(x, pts)
-    dist, k = reference.tree.query(q, distance_upper_bound=gate)
+    dist, k = reference.nearest(q, gate, opt)
     ok = np.isfinite(dist)
     kk = k[ok]
     n = reference.normals[kk]

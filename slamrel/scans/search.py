@@ -55,7 +55,8 @@ class SearchOptions:
     sigma : float
         Blur ``σ`` of the likelihood (0.05 m).
     levels : int
-        Precomputed grids ``L_1 … L_H`` (5: top nodes of 32 × 32 cells).
+        Precomputed grids ``L_1 … L_H`` (4: top nodes of 16 × 16 cells; windows are a few
+        tens of cells wide, and a fifth level cost more to build than it saved).
     keep : float
         Nodes whose bound reaches ``keep`` times the best score are split (0.85): every
         candidate within that ratio is scored, so the second hypothesis is exact above it.
@@ -69,7 +70,7 @@ class SearchOptions:
 
     resolution: float = 0.05
     sigma: float = 0.05
-    levels: int = 5
+    levels: int = 4
     keep: float = 0.85
     distinct_xy: float = 0.3
     distinct_theta: float = 0.05
