@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from relation_metric.errors import InputError
 from relation_metric.se2 import between, wrap_angle_float
@@ -186,6 +185,8 @@ def loop_pairs(
     whole travel: its work grows with the drive's length; keep ``growth`` small on long
     drives.)
     """
+    from scipy.spatial import cKDTree  # here: ``relations align --at`` never needs it
+
     key = keyframes(poses, distance, angle, spacing=spacing)
     p = poses[key]
     travel = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))))
