@@ -228,10 +228,17 @@ COLOUR_QUANTILE = 0.95
 _EMPTY = (np.empty(0), np.empty(0), np.empty(0), np.empty((0, 2)), np.empty(0))
 
 
+#: The NEES figure's name of the recovered NEES in the map's frame (the verdict's).
+PLACED_CURVE = "recovered, map's frame"
+
+
 def _nees_figure(result: RunResult, stretches: Sequence[TimeSpan]) -> Figure:
     """NEES of each estimate at its own times (the poses where it exists), over the run."""
     tb = result.time_base
     curves = {k: v for k, v in result.nees.items() if v.times is not None}
+    placed = result.nees_placement
+    if placed is not None and placed.curve.times is not None:  # the one the verdict judges
+        curves[PLACED_CURVE] = placed.curve
     times = {k: tb.since_start(v.times) for k, v in curves.items()}  # type: ignore[arg-type]
     span = (0.0, tb.duration)
     fig = nees_figure(
