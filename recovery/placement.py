@@ -84,16 +84,6 @@ class Placement:
         return int(self.split.rigid.shape[0])
 
 
-def _rigid_action(poses: Array) -> Array:
-    """``J_k = ∂ T_g(x_k) / ∂ g`` at ``g = 0`` (N, 3, 3): a rigid motion ``[dx, dy, θ]`` of
-    the plane about its origin moves the pose ``[x, y, φ]`` by ``[dx − θ y, dy + θ x, θ]``."""
-    j = np.zeros((poses.shape[0], 3, 3))
-    j[:, 0, 0] = j[:, 1, 1] = j[:, 2, 2] = 1.0
-    j[:, 0, 2] = -poses[:, 1]
-    j[:, 1, 2] = poses[:, 0]
-    return j
-
-
 def _shared_left(v: Array, q: Array, sigma_g: Array) -> Array:
     """(P4): ``V (I − W)^{1/2}`` with ``W = Q Σ_g⁻¹ Qᵀ`` (r, r) of rank 3, eigenvalues in
     ``[0, 1]``: with ``Q = U S`` (``U`` r × 3 orthonormal) and ``S Σ_g⁻¹ Sᵀ = E Λ Eᵀ``,

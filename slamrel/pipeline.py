@@ -588,10 +588,7 @@ def _placement_nees(
     true landmarks; ``None`` where it is not defined."""
     if rec is None or map_cmp is None or bundle.landmarks_groundtruth is None:
         return None
-    a = map_cmp.association
-    truth = np.asarray(map_cmp.reference.xy)[np.asarray(a.reference_rows)]
-    rows, t = map_pairs(bundle, a.estimate_rows, truth, frame)
-    return placement_nees(bundle, rec, frame, rows, t)
+    return placement_nees(bundle, rec, frame, *map_pairs(map_cmp, frame))
 
 
 def _estimates_at_truth(

@@ -474,9 +474,7 @@ def _map_nees_of(result: RunResult) -> MapNees | None:
     b, mc = result.bundle, result.map_comparison
     if mc is None or b.landmarks_groundtruth is None:
         return None
-    a = mc.association
-    truth = np.asarray(mc.reference.xy)[np.asarray(a.reference_rows)]
-    rows, truth = map_pairs(b, a.estimate_rows, truth, result.nees_frame)
+    rows, truth = map_pairs(mc, result.nees_frame)
     est = np.asarray(b.map_xy)[rows]
     if b.map_covariance is not None:
         idx = np.stack((2 * rows, 2 * rows + 1), axis=1).ravel()

@@ -16,7 +16,7 @@ to 2.004 (85 poses) in the recovery's own summary.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -37,6 +37,9 @@ from relation_metric.errors import InputError
 from relation_metric.time_association import match_nearest_times, nearest_index
 from relation_metric.trajectory import Trajectory
 from slamrel.runs.time_base import TimeBase
+
+if TYPE_CHECKING:
+    from landmark_graph.map_compare import MapComparison
 
 __all__ = [
     "NeesCurve",
@@ -165,26 +168,27 @@ class PlacementNees(NamedTuple):
     """The recovered NEES conditioned on the map's placement (:mod:`recovery.placement`).
 
     ``curve`` as :func:`estimate_nees` gives it (in the NEES frame, the prior left out);
-    ``placement`` the conditioning, at ``rows`` of the recovery (the poses at ground-truth
-    times, the first included)."""
+    ``placement`` the conditioning, at the recovery's poses at ground-truth times (the first
+    included)."""
 
     curve: NeesCurve
     placement: Placement
-    rows: NDArray[np.int64]
 
 
 def map_pairs(
-    bundle: Bundle, rows: ArrayLike, truth_xy: ArrayLike, frame: NeesFrame | None
+    comparison: MapComparison, frame: NeesFrame | None
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """Map rows and their true positions ``(n, 2)`` taken into the map frame: by the inverse
-    of ``frame``'s anchoring (truth ← map) when it has one, else as they are."""
-    t = np.asarray(truth_xy, dtype=np.float64)
+    """The map rows the comparison associated and their true positions ``(n, 2)`` taken into
+    the map frame: by the inverse of ``frame``'s anchoring (truth ← map) when it has one,
+    else as they are."""
+    a = comparison.association
+    t = np.asarray(comparison.reference.xy, dtype=np.float64)[np.asarray(a.reference_rows)]
     if frame is not None and frame.anchoring is not None:
         an = frame.anchoring
         c, s = np.cos(an.dtheta), np.sin(an.dtheta)
         d = t - np.array([an.dx, an.dy])
         t = np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]))
-    return np.asarray(rows, dtype=np.int64), t
+    return np.asarray(a.estimate_rows, dtype=np.int64), t
 
 
 def placement_nees(
@@ -233,4 +237,4 @@ def placement_nees(
         return None
     moved = Trajectory(est.timestamps, pl.poses)
     curve = estimate_nees(truth, moved, pl.covariances, frame)[0]
-    return PlacementNees(curve, pl, at)
+    return PlacementNees(curve, pl)
