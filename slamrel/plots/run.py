@@ -154,7 +154,8 @@ def nees_figure(
         ax.set_xlim(*span)
     ax.set_xlabel("time since the run's start [s]")
     ax.set_ylabel("NEES")
-    ax.legend(loc="best", fontsize=8)
+    # below the axes: inside, "best" still covered the low NEES values it could not avoid
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, fontsize=8, frameon=False)
     return fig
 
 
