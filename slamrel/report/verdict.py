@@ -728,15 +728,23 @@ def _nees_line(
     n: NeesSummary,
     values: NDArray[np.float64] | None,
     law: NeesLaw | None = None,
+    *,
+    borrowed: bool = False,
 ) -> Judgement:
     """The consistency lamp of one estimate; ``n_eff`` from ``law`` (the map's error shared
-    by every pose) when given, else the NEES sequence's (:func:`effective_sample_size`)."""
+    by every pose) when given, else the NEES sequence's (:func:`effective_sample_size`).
+    ``borrowed``: ``law`` is another estimate's of the same run (the online estimate judged
+    with the recovered poses' law): the smaller of the two ``n_eff``."""
     v = None if values is None else np.asarray(values, dtype=np.float64)
     v = None if v is None else v[np.isfinite(v)]
     n_eff = effective_sample_size(v) if v is not None and v.size else 1.0
     shared = ""
     if law is not None and math.isfinite(law.n_eff) and law.n_eff > 0:
-        n_eff, shared = law.n_eff, " (the map's error shared by every pose)"
+        if not borrowed:
+            n_eff, shared = law.n_eff, " (the map's error shared by every pose)"
+        elif law.n_eff < n_eff:
+            n_eff = law.n_eff
+            shared = " (the recovered poses' law: the map's error shared by every pose)"
     q = n.mean / n.dof
     level, direction = _chi2_level(q, n.dof, n_eff)
     return Judgement(
@@ -768,6 +776,8 @@ def _consistency_lines(facts: RunFacts) -> list[Judgement]:
                 "online_consistency",
                 facts.online_nees,
                 facts.online_nees_values,
+                facts.nees_law,
+                borrowed=True,
             )  # fmt: skip
         )
     if n is not None and facts.placement is not None:
