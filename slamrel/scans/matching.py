@@ -212,6 +212,19 @@ class PreparedScan:
         dist, k = self.tree.query(q, distance_upper_bound=gate)
         return dist, k
 
+    def matches(
+        self, q: NDArray[np.float64], gate: float, opt: IcpOptions
+    ) -> tuple[NDArray[np.bool_], NDArray[np.int64]]:
+        """Whether each ``q`` has an anchor within ``gate``, and the anchor's index where it
+        has (:meth:`nearest` without the distances ICP does not read)."""
+        if opt.nearest == "grid":
+            return self.grid.match(q, gate)[:2]
+        if opt.nearest == "raster":
+            reach = min(opt.raster_reach, opt.max_distance)
+            return self.raster(opt.raster_cell, reach).match(q, gate)[:2]
+        dist, k = self.nearest(q, gate, opt)
+        return np.isfinite(dist), k
+
 
 #: Empty cells of :class:`NearestGrid`'s table (no anchor within its reach).
 _NONE = np.iinfo(np.int64).max
@@ -291,10 +304,19 @@ class NearestGrid:
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """Distance and index of the nearest anchor of each ``q`` (``inf`` and ``L`` when none
         lies strictly within ``gate``), as ``cKDTree.query(q, distance_upper_bound=gate)``."""
+        ok, k, d2 = self.match(q, gate)
+        return np.where(ok, np.sqrt(d2), np.inf), np.where(ok, k, self.n)
+
+    def match(
+        self, q: NDArray[np.float64], gate: float
+    ) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.float64]]:
+        """Whether the nearest anchor of each ``q`` lies strictly within ``gate``, its index
+        and squared distance (:meth:`query` without the distances ICP does not read)."""
         n_a = self.n
         g2 = gate * gate
         if n_a == 0:
-            return np.full(q.shape[0], np.inf), np.full(q.shape[0], n_a, dtype=np.int64)
+            none = np.zeros(q.shape[0], dtype=bool)
+            return none, np.zeros(q.shape[0], dtype=np.int64), np.full(q.shape[0], np.inf)
         # a point outside the raster is clipped onto its outermost cells: no anchor reaches them
         cx = np.maximum((q[:, 0] - self.lo[0]) * (1.0 / self.cell), 0.0)
         cy = np.maximum((q[:, 1] - self.lo[1]) * (1.0 / self.cell), 0.0)
@@ -328,8 +350,7 @@ class NearestGrid:
         unsure = np.flatnonzero(~sure)
         if unsure.size:
             best2[unsure], k[unsure] = self._sweep(q[unsure], gate)
-        ok = best2 < g2
-        return np.where(ok, np.sqrt(best2), np.inf), np.where(ok, k, n_a)
+        return best2 < g2, k, best2
 
     def _sweep(
         self, q: NDArray[np.float64], gate: float
@@ -422,24 +443,32 @@ class NearestRaster:
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """Distance and index of the anchor found for each ``q`` (``inf`` and ``L`` when
         none lies within ``gate``), as ``cKDTree.query(q, distance_upper_bound=gate)``."""
+        ok, k, dist = self.match(q, gate)
+        return np.where(ok, dist, np.inf), np.where(ok, k, self.anchors.shape[0])
+
+    def match(
+        self, q: NDArray[np.float64], gate: float
+    ) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.float64]]:
+        """Whether an anchor was found within ``gate`` for each ``q``, its index and distance
+        (:meth:`query` without the ``inf`` and ``L`` ICP does not read)."""
         n_a = self.anchors.shape[0]
         # the outermost cells hold no anchor (-1): a point outside is clipped onto them
-        cx = np.clip((q[:, 0] - self.lo[0]) * (1.0 / self.cell), -1.0, self.shape[0] - 1.0)
-        cy = np.clip((q[:, 1] - self.lo[1]) * (1.0 / self.cell), -1.0, self.shape[1] - 1.0)
-        lin = cx.astype(np.int64) * self.shape[1]
-        lin += cy.astype(np.int64)
+        cx = np.maximum((q[:, 0] - self.lo[0]) * (1.0 / self.cell), -1.0)
+        cy = np.maximum((q[:, 1] - self.lo[1]) * (1.0 / self.cell), -1.0)
+        lin = np.minimum(cx, self.shape[0] - 1.0, out=cx).astype(np.int64) * self.shape[1]
+        lin += np.minimum(cy, self.shape[1] - 1.0, out=cy).astype(np.int64)
         first = self.index.take(lin, mode="clip")
         found = first >= 0
         cand = first[:, None] + self._side  # (K, 2s+1)
-        np.clip(cand, 0, max(n_a - 1, 0), out=cand)
+        np.maximum(cand, 0, out=cand)
+        np.minimum(cand, max(n_a - 1, 0), out=cand)
         dx = self.ax.take(cand) - q[:, 0, None]
         dy = self.ay.take(cand) - q[:, 1, None]
         d2 = dx * dx + dy * dy
         j = d2.argmin(axis=1)
         rows = np.arange(q.shape[0])
         dist = np.sqrt(d2[rows, j])
-        ok = found & (dist <= gate)
-        return np.where(ok, dist, np.inf), np.where(ok, cand[rows, j], n_a)
+        return found & (dist <= gate), cand[rows, j], dist
 
 
 @dataclass(frozen=True)
@@ -660,14 +689,12 @@ def align(
         pts = full[:: opt.coarse_stride]  # coarse phase: converge on every stride-th return
     for it in range(1, opt.max_iterations + 1):
         q = transform(x, pts)
-        dist, k = reference.nearest(q, gate, opt)
-        ok = np.isfinite(dist)
+        ok, k = reference.matches(q, gate, opt)
         if np.count_nonzero(ok) < opt.min_matches * (2 if pts is not full else 1):
             if pts is not full:  # too few for the coarse phase: every return from here on
                 pts, polish = full, -1
                 q = transform(x, pts)
-                dist, k = reference.nearest(q, gate, opt)
-                ok = np.isfinite(dist)
+                ok, k = reference.matches(q, gate, opt)
             if np.count_nonzero(ok) < opt.min_matches:
                 return _failed(guess, "too few matches", it)
         n, qo, e, ae = _residuals(reference, q, k, ok, opt)
@@ -722,8 +749,7 @@ def _summarise(
     """Quality measures at the solution ``x`` (see the module docstring)."""
     pts = current.points
     q = transform(x, pts)
-    dist, k = reference.nearest(q, gate, opt)
-    ok = np.isfinite(dist)
+    ok, k = reference.matches(q, gate, opt)
     kk = k[ok]
     n = reference.normals[kk]
     e = np.einsum("ij,ij->i", n, q[ok] - reference.anchors[kk])
