@@ -252,6 +252,45 @@ def test_coarse_phase_reaches_the_truth_in_fewer_full_steps():
     assert np.median(et) <= np.median(et1) + 0.002  # within 2 mm of the one-phase ICP
 
 
+@pytest.mark.parametrize("dense", [True, False])
+def test_grid_lookup_is_the_exact_nearest(monkeypatch, dense):
+    """``NearestGrid`` against scipy's cKDTree and brute force: the nearest anchor strictly
+    within the gate (the same distance, an anchor at that distance), none beyond it, at
+    every gate ICP uses, for points near walls, between them and far from every anchor; also
+    with only the reached cells kept (a wide scan), no anchors, and a NaN query."""
+    from scipy.spatial import cKDTree
+
+    from slamrel.scans import matching
+    from slamrel.scans.matching import NearestGrid
+
+    if not dense:
+        monkeypatch.setattr(matching, "_GRID_DENSE", 16)
+    log = _room_log()
+    s = log.scans
+    rng = np.random.default_rng(11)
+    for i, j in ((0, 3), (2, 9)):
+        ref = prepare_scan(s.points(i))
+        cur = prepare_scan(s.points(j)).points
+        grid, tree = NearestGrid(ref.anchors), cKDTree(ref.anchors)
+        for gate, spread in ((0.05, 0.01), (0.06, 0.05), (0.3, 0.2), (0.5, 0.3), (0.5, 2.0)):
+            q = cur + rng.normal(0.0, spread, cur.shape)
+            dist, k = grid.query(q, gate)
+            d_t, k_t = tree.query(q, distance_upper_bound=gate)
+            np.testing.assert_array_equal(dist, d_t)
+            found = np.isfinite(dist)
+            assert np.all(k[~found] == ref.anchors.shape[0])
+            np.testing.assert_array_equal(ref.anchors[k[found]], ref.anchors[k_t[found]])
+            d_all = np.hypot(*(q[:, None, :] - ref.anchors[None, :, :]).transpose(2, 0, 1))
+            best = d_all.min(axis=1)
+            assert np.array_equal(found, best < gate)
+            assert found.any() and not found.all()
+    none = NearestGrid(np.zeros((0, 2))).query(np.ones((3, 2)), 0.5)
+    assert np.all(np.isinf(none[0])) and np.all(none[1] == 0)
+    with np.errstate(invalid="ignore"):
+        d_nan, k_nan = grid.query(np.array([[np.nan, 0.0], [0.0, 0.0]]), 0.5)
+    assert np.isinf(d_nan[0]) and k_nan[0] == ref.anchors.shape[0]
+
+
 def test_raster_lookup_finds_anchors_near_the_nearest():
     """``NearestRaster`` against brute force (every anchor's distance): the same points find an
     anchor within the gate, and the one found is at most a raster cell farther than the

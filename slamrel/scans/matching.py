@@ -16,8 +16,9 @@ of it (at least three; a window whose scatter is not line-like,
 its centroid ``c_k`` and unit normal ``n_k``. (Censi builds the line from the two nearest
 reference points at every iteration; fitting it once per scan over a few neighbours is the
 same metric with less noise and no per-iteration work.) A current point ``q = R p + t`` is
-associated with the reference line whose centroid is nearest (cKDTree, or a raster lookup:
-``IcpOptions.nearest``), if nearer than the gate; its residual is
+associated with the reference line whose centroid is nearest (exactly by :class:`NearestGrid`
+or scipy's cKDTree, or approximately by a raster lookup: ``IcpOptions.nearest``), if nearer
+than the gate; its residual is
 
     e = n_kᵀ (R p + t − c_k)
 
@@ -119,8 +120,10 @@ class IcpOptions:
     shrink_after : int
         The gate may shrink (towards ``gate_sigmas · σ``) after this many steps, or at the
         first step below ``tolerance`` (5).
-    nearest : {"tree", "raster"}
-        How a point finds its nearest anchor: ``"tree"`` exactly (``scipy``'s cKDTree);
+    nearest : {"grid", "tree", "raster"}
+        How a point finds its nearest anchor: ``"grid"`` exactly by :class:`NearestGrid`
+        (numpy; the same anchors as ``"tree"``, without ``scipy.spatial`` to import, 0.4 CPU-s
+        of a ``relations align`` command); ``"tree"`` exactly by ``scipy``'s cKDTree;
         ``"raster"`` by :class:`NearestRaster` (the anchor nearest its cell's centre, then
         the nearest of that anchor and its two neighbours on each side in scan order: no
         tree to build, no ``scipy.spatial`` to import, a third of the time a query).
@@ -143,7 +146,7 @@ class IcpOptions:
     coarse_stride: int = 1
     polish_iterations: int = 2
     shrink_after: int = 5
-    nearest: str = "tree"
+    nearest: str = "grid"
     raster_cell: float = 0.1
     raster_reach: float = 0.5
 
@@ -160,7 +163,8 @@ class PreparedScan:
         Centroid and unit normal of each fitted line (the role of the *reference* scan),
         in scan order.
 
-    The nearest-anchor lookups (:attr:`tree`, :meth:`raster`) are made when first asked for.
+    The nearest-anchor lookups (:attr:`grid`, :attr:`tree`, :meth:`raster`) are made when
+    first asked for.
     """
 
     points: NDArray[np.float64]
@@ -178,6 +182,14 @@ class PreparedScan:
             got = self._kept["tree"] = cKDTree(self.anchors)
         return got
 
+    @property
+    def grid(self) -> NearestGrid:
+        """:class:`NearestGrid` of ``anchors``, kept."""
+        got = self._kept.get("grid")
+        if got is None:
+            got = self._kept["grid"] = NearestGrid(self.anchors)
+        return got
+
     def raster(self, cell: float, reach: float) -> NearestRaster:
         """:class:`NearestRaster` of ``anchors`` (``cell``, ``reach``), kept."""
         key = ("raster", cell, reach)
@@ -191,12 +203,194 @@ class PreparedScan:
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """Distance to and index of the nearest anchor of each ``q`` (``(K, 2)``) within
         ``gate`` (``inf`` and ``L`` beyond it), by ``opt.nearest``."""
+        if opt.nearest == "grid":
+            return self.grid.query(q, gate)
         if opt.nearest == "raster":
             return self.raster(opt.raster_cell, min(opt.raster_reach, opt.max_distance)).query(
                 q, gate
             )
         dist, k = self.tree.query(q, distance_upper_bound=gate)
         return dist, k
+
+    def matches(
+        self, q: NDArray[np.float64], gate: float, opt: IcpOptions
+    ) -> tuple[NDArray[np.bool_], NDArray[np.int64]]:
+        """Whether each ``q`` has an anchor within ``gate``, and the anchor's index where it
+        has (:meth:`nearest` without the distances ICP does not read)."""
+        if opt.nearest == "grid":
+            return self.grid.match(q, gate)[:2]
+        if opt.nearest == "raster":
+            reach = min(opt.raster_reach, opt.max_distance)
+            return self.raster(opt.raster_cell, reach).match(q, gate)[:2]
+        dist, k = self.nearest(q, gate, opt)
+        return np.isfinite(dist), k
+
+
+#: Empty cells of :class:`NearestGrid`'s table (no anchor within its reach).
+_NONE = np.iinfo(np.int64).max
+
+
+class NearestGrid:
+    """The exact nearest anchor, in numpy: a raster proposes, a bound certifies, the rest is
+    searched by brute force.
+
+    Every cell (``cell`` wide) within ``cell + reach`` of an anchor holds the anchor nearest
+    its centre ``m`` (``a_C``) and a lower bound ``s_C`` on the distance from ``m`` to every
+    anchor outside ``S_C``, the :data:`_GRID_SIDE` anchors on each side of ``a_C`` in scan
+    order (the same wall). A query ``q`` in that cell (``|q − m| ≤ h``, half the cell's
+    diagonal) takes the nearest of ``S_C``, at ``d``. Any anchor ``b`` outside ``S_C`` is at
+    least ``s_C − h`` from ``q``; so when ``min(d, gate) ≤ s_C − h`` the answer is exact (the
+    nearest, or none within ``gate``). A cell no anchor reaches has every anchor farther than
+    ``cell + reach − h`` from its queries: none within a gate up to that. Every other query
+    (a point far from every wall under a wide gate, or between two walls) is compared with
+    every anchor. The answers are cKDTree's (``query(q, distance_upper_bound=gate)``: the
+    nearest anchor strictly within ``gate``), but for which of two anchors at exactly the same
+    distance is taken.
+
+    Corridor world 104 (3,480 lookups of the chain's links): 8 % of the queries compared with
+    every anchor; lookups as fast as cKDTree's, the tables ~0.4 ms a scan to build.
+    """
+
+    def __init__(
+        self, anchors: NDArray[np.float64], cell: float = 0.05, reach: float = 0.05
+    ) -> None:
+        n_a = anchors.shape[0]
+        self.n = n_a
+        self.ax, self.ay = anchors[:, 0].copy(), anchors[:, 1].copy()
+        self.cell = cell
+        self._side = np.arange(-_GRID_SIDE, _GRID_SIDE + 1)[None, :]
+        self._by_x: NDArray[np.int64] | None = None
+        self._sx = self.ax
+        self.h = cell * np.sqrt(0.5) * (1.0 + 1e-9) + 1e-9  # the margin: rounding of the cell
+        self.lim = cell + reach
+        lim2 = self.lim * self.lim
+        w = int(np.ceil(self.lim / cell))  # every cell whose centre is within lim of an anchor
+        self.cells: NDArray[np.int64] | None = None  # None: a dense table
+        if n_a == 0:
+            self.lo, self.shape = np.zeros(2), (1, 1)
+            self.table, self.s2 = np.full(1, _NONE), np.full(1, lim2)
+            return
+        self.lo = anchors.min(axis=0) - (w + 1) * cell  # outermost cells: no anchor reaches
+        ext = np.ceil((anchors.max(axis=0) + (w + 1) * cell - self.lo) / cell).astype(np.int64)
+        self.shape = (int(ext[0]) + 1, int(ext[1]) + 1)
+        c = np.floor((anchors - self.lo) * (1.0 / cell)).astype(np.int64)  # (L, 2)
+        off = np.arange(-w, w + 1)
+        cx = c[:, 0, None] + off[None, :]  # (L, n)
+        cy = c[:, 1, None] + off[None, :]
+        dx = self.lo[0] + (cx + 0.5) * cell - anchors[:, 0, None]
+        dy = self.lo[1] + (cy + 0.5) * cell - anchors[:, 1, None]
+        dx *= dx
+        dy *= dy
+        d2 = (dx[:, :, None] + dy[:, None, :]).ravel()  # (L n n,) anchor to cell centre
+        lin = (cx[:, :, None] * self.shape[1] + cy[:, None, :]).ravel()
+        n_cells = self.shape[0] * self.shape[1]
+        if n_cells > _GRID_DENSE:  # a wide scan (80 m returns): only the cells anchors reach
+            self.cells, lin = np.unique(lin, return_inverse=True)
+            n_cells = self.cells.shape[0]
+        aid = np.repeat(np.arange(n_a, dtype=np.int64), off.size * off.size)
+        # the anchor nearest a cell's centre: the least (distance, anchor) packed in one integer
+        # (d2 ≤ 2 (w + 1)² cell² < 8 lim2 here: below 2³¹ after scaling, no overflow)
+        packed = (d2 * (2**28 / lim2)).astype(np.int64) << 32 | aid
+        table = np.full(n_cells, _NONE)
+        np.minimum.at(table, lin, packed)
+        first = table[lin] & 0xFFFFFFFF
+        d2[np.abs(aid - first) <= _GRID_SIDE] = np.inf  # members of S_C: not in the bound
+        s2 = np.full(n_cells, lim2)  # anchors not in the pairs lie farther than lim
+        np.minimum.at(s2, lin, d2)
+        self.table, self.s2 = table, s2
+
+    def query(
+        self, q: NDArray[np.float64], gate: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Distance and index of the nearest anchor of each ``q`` (``inf`` and ``L`` when none
+        lies strictly within ``gate``), as ``cKDTree.query(q, distance_upper_bound=gate)``."""
+        ok, k, d2 = self.match(q, gate)
+        return np.where(ok, np.sqrt(d2), np.inf), np.where(ok, k, self.n)
+
+    def match(
+        self, q: NDArray[np.float64], gate: float
+    ) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.float64]]:
+        """Whether the nearest anchor of each ``q`` lies strictly within ``gate``, its index
+        and squared distance (:meth:`query` without the distances ICP does not read)."""
+        n_a = self.n
+        g2 = gate * gate
+        if n_a == 0:
+            none = np.zeros(q.shape[0], dtype=bool)
+            return none, np.zeros(q.shape[0], dtype=np.int64), np.full(q.shape[0], np.inf)
+        # a point outside the raster is clipped onto its outermost cells: no anchor reaches them
+        cx = np.maximum((q[:, 0] - self.lo[0]) * (1.0 / self.cell), 0.0)
+        cy = np.maximum((q[:, 1] - self.lo[1]) * (1.0 / self.cell), 0.0)
+        lin = np.minimum(cx, self.shape[0] - 1.0, out=cx).astype(np.int64) * self.shape[1]
+        lin += np.minimum(cy, self.shape[1] - 1.0, out=cy).astype(np.int64)
+        if self.cells is not None:
+            at = np.searchsorted(self.cells, lin).clip(0, self.cells.shape[0] - 1)
+            got = self.table.take(at)
+            got[self.cells.take(at) != lin] = _NONE
+            s2 = self.s2.take(at)
+        else:
+            got = self.table.take(lin, mode="clip")  # (NaN queries: any cell, no answer)
+            s2 = self.s2.take(lin, mode="clip")
+        found = got != _NONE
+        cand = (got & 0xFFFFFFFF)[:, None] + self._side  # (K, 2s+1)
+        np.maximum(cand, 0, out=cand)
+        np.minimum(cand, n_a - 1, out=cand)
+        dx = self.ax.take(cand) - q[:, 0, None]
+        dy = self.ay.take(cand) - q[:, 1, None]
+        d2 = dx * dx + dy * dy
+        j = d2.argmin(axis=1)
+        rows = np.arange(q.shape[0])
+        best2 = d2[rows, j]
+        k = cand[rows, j]
+        bound = np.sqrt(s2) - self.h
+        sure = np.where(
+            found,
+            (np.minimum(best2, g2) <= bound * bound) & (bound > 0),
+            gate <= self.lim - self.h,
+        )
+        unsure = np.flatnonzero(~sure)
+        if unsure.size:
+            best2[unsure], k[unsure] = self._sweep(q[unsure], gate)
+        return best2 < g2, k, best2
+
+    def _sweep(
+        self, q: NDArray[np.float64], gate: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Squared distance and index of the nearest anchor of each ``q`` among those within
+        ``gate`` of it in ``x`` (a run of the anchors sorted by ``x``; all of them when the
+        longest run is not shorter), or any anchor when none is."""
+        if self._by_x is None:
+            self._by_x = np.argsort(self.ax, kind="stable")
+            self._sx = self.ax[self._by_x]
+        reach = gate * (1.0 + 1e-9) + 1e-12  # an anchor strictly within gate: inside the run
+        lo = np.searchsorted(self._sx, q[:, 0] - reach, side="left")
+        hi = np.searchsorted(self._sx, q[:, 0] + reach, side="right")
+        width = int((hi - lo).max())
+        if width == 0:
+            return np.full(q.shape[0], np.inf), np.zeros(q.shape[0], dtype=np.int64)
+        if 2 * width >= self.n:  # compared with every anchor
+            dx = self.ax[None, :] - q[:, 0, None]
+            dy = self.ay[None, :] - q[:, 1, None]
+            dd = dx * dx + dy * dy
+            jj = dd.argmin(axis=1)
+            return dd[np.arange(q.shape[0]), jj], jj
+        at = lo[:, None] + np.arange(width)[None, :]
+        outside = at >= hi[:, None]
+        np.minimum(at, self.n - 1, out=at)
+        cand = self._by_x.take(at)
+        dx = self.ax.take(cand) - q[:, 0, None]
+        dy = self.ay.take(cand) - q[:, 1, None]
+        dd = dx * dx + dy * dy
+        dd[outside] = np.inf
+        jj = dd.argmin(axis=1)
+        rows = np.arange(q.shape[0])
+        return dd[rows, jj], cand[rows, jj]
+
+
+#: Anchors on each side of the cell's, in scan order, that :class:`NearestGrid` tries first.
+_GRID_SIDE = 4
+
+#: Cells above which :class:`NearestGrid` keeps only the cells anchors reach (sorted).
+_GRID_DENSE = 1 << 20
 
 
 #: Neighbours on each side, in scan order, that :meth:`NearestRaster.query` also tries.
@@ -249,24 +443,32 @@ class NearestRaster:
     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """Distance and index of the anchor found for each ``q`` (``inf`` and ``L`` when
         none lies within ``gate``), as ``cKDTree.query(q, distance_upper_bound=gate)``."""
+        ok, k, dist = self.match(q, gate)
+        return np.where(ok, dist, np.inf), np.where(ok, k, self.anchors.shape[0])
+
+    def match(
+        self, q: NDArray[np.float64], gate: float
+    ) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.float64]]:
+        """Whether an anchor was found within ``gate`` for each ``q``, its index and distance
+        (:meth:`query` without the ``inf`` and ``L`` ICP does not read)."""
         n_a = self.anchors.shape[0]
         # the outermost cells hold no anchor (-1): a point outside is clipped onto them
-        cx = np.clip((q[:, 0] - self.lo[0]) * (1.0 / self.cell), -1.0, self.shape[0] - 1.0)
-        cy = np.clip((q[:, 1] - self.lo[1]) * (1.0 / self.cell), -1.0, self.shape[1] - 1.0)
-        lin = cx.astype(np.int64) * self.shape[1]
-        lin += cy.astype(np.int64)
+        cx = np.maximum((q[:, 0] - self.lo[0]) * (1.0 / self.cell), -1.0)
+        cy = np.maximum((q[:, 1] - self.lo[1]) * (1.0 / self.cell), -1.0)
+        lin = np.minimum(cx, self.shape[0] - 1.0, out=cx).astype(np.int64) * self.shape[1]
+        lin += np.minimum(cy, self.shape[1] - 1.0, out=cy).astype(np.int64)
         first = self.index.take(lin, mode="clip")
         found = first >= 0
         cand = first[:, None] + self._side  # (K, 2s+1)
-        np.clip(cand, 0, max(n_a - 1, 0), out=cand)
+        np.maximum(cand, 0, out=cand)
+        np.minimum(cand, max(n_a - 1, 0), out=cand)
         dx = self.ax.take(cand) - q[:, 0, None]
         dy = self.ay.take(cand) - q[:, 1, None]
         d2 = dx * dx + dy * dy
         j = d2.argmin(axis=1)
         rows = np.arange(q.shape[0])
         dist = np.sqrt(d2[rows, j])
-        ok = found & (dist <= gate)
-        return np.where(ok, dist, np.inf), np.where(ok, cand[rows, j], n_a)
+        return found & (dist <= gate), cand[rows, j], dist
 
 
 @dataclass(frozen=True)
@@ -487,14 +689,12 @@ def align(
         pts = full[:: opt.coarse_stride]  # coarse phase: converge on every stride-th return
     for it in range(1, opt.max_iterations + 1):
         q = transform(x, pts)
-        dist, k = reference.nearest(q, gate, opt)
-        ok = np.isfinite(dist)
+        ok, k = reference.matches(q, gate, opt)
         if np.count_nonzero(ok) < opt.min_matches * (2 if pts is not full else 1):
             if pts is not full:  # too few for the coarse phase: every return from here on
                 pts, polish = full, -1
                 q = transform(x, pts)
-                dist, k = reference.nearest(q, gate, opt)
-                ok = np.isfinite(dist)
+                ok, k = reference.matches(q, gate, opt)
             if np.count_nonzero(ok) < opt.min_matches:
                 return _failed(guess, "too few matches", it)
         n, qo, e, ae = _residuals(reference, q, k, ok, opt)
@@ -549,8 +749,7 @@ def _summarise(
     """Quality measures at the solution ``x`` (see the module docstring)."""
     pts = current.points
     q = transform(x, pts)
-    dist, k = reference.nearest(q, gate, opt)
-    ok = np.isfinite(dist)
+    ok, k = reference.matches(q, gate, opt)
     kk = k[ok]
     n = reference.normals[kk]
     e = np.einsum("ij,ij->i", n, q[ok] - reference.anchors[kk])
