@@ -131,6 +131,7 @@ def test_cli_loop_growth_finds_the_loop_pairs_from_the_odometry(tmp_path, capsys
     _flaser_log(path, log.scans)
     out = tmp_path / "grown.relations"
     args = ["relations", "align", str(path), "--loops", "--loop-growth", "0.02", "-o", str(out)]
+    args += ["--keyframes", "motion"]  # the loop world's 0.6 m keyframes (97 loop pairs)
     assert main(args) == 0
     assert "loop candidate(s) aligned beyond reach, left out" in capsys.readouterr().out
     loops = _loop_pairs(out)
