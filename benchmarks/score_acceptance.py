@@ -37,7 +37,7 @@ are reported beside them.
         [--keyframes travel|motion] [--adjust] [--json OUT]
 
 With ``--adjust`` the accepted relations are also adjusted
-(:func:`slamrel.scans.adjust.adjust_relations`: a least-squares pose-graph fit over the
+(:func:`slamrel.backends.relation_adjust.adjust_relations`: a least-squares pose-graph fit over the
 accepted relations weighted by their covariances, the relations re-read from the fitted
 poses) and scored as ``adjusted`` beside ``reviewed``; the accepted relations' error
 against the truth (mean, median, p99) is printed before and after.
@@ -189,23 +189,7 @@ def run(
     gross = _gross(err)
     p = prop.pairs
     reviewed = RelationSet(prop.t1[accept], prop.t2[accept], res.delta[accept])
-    extra: dict = {}
-    if adjust:
-        from slamrel.scans.adjust import adjust_relations
-
-        t1 = time.process_time()
-        adj = adjust_relations(p[:, 0], p[:, 1], res.delta, res.covariance, use=accept)
-        err_adj = se2.between(true, adj.delta)
-        extra = {
-            "adjust_cpu_s": time.process_time() - t1,
-            "adjusted": int(adj.adjusted.sum()),
-            "set_aside": int(adj.set_aside.sum()),
-            "redundancy": adj.redundancy,
-            "error_before": _error_stats(err[accept]),
-            "error_after": _error_stats(err_adj[accept]),
-            "gross_after": int((_gross(err_adj) & accept).sum()),
-        }
-        adjusted = RelationSet(prop.t1[accept], prop.t2[accept], adj.delta[accept])
+    extra, adjusted = _adjusted(res, accept, true) if adjust else ({}, None)
     ideal = _pairs(log.truth, s.timestamps, loop_max_angle, keyframes)
     true_ideal = RelationSet(ideal.t1, ideal.t2, guesses_from_poses(log.truth, ideal))
     true_prop = RelationSet(prop.t1, prop.t2, true)
@@ -218,7 +202,7 @@ def run(
             "true_proposed": _score(true_prop, s.timestamps, poses),
             "true_accepted": _score(true_acc, s.timestamps, poses),
         }
-        if adjust:
+        if adjusted is not None:
             scores[name]["adjusted"] = _score(adjusted, s.timestamps, poses)
     return {
         "seed": seed,
@@ -246,6 +230,48 @@ def run(
         **extra,
         **({"adjusted_verdict": verdict(scores, "adjusted")} if adjust else {}),
     }
+
+
+def _adjusted(res, accept: np.ndarray, true: np.ndarray) -> tuple[dict, RelationSet]:
+    """``--adjust``: the accepted relations of ``res`` after the pose-graph fit, and what it
+    did (counts, CPU time, their error against the ``true`` relations before and after)."""
+    from slamrel.backends.relation_adjust import adjust_relations
+
+    t1 = time.process_time()
+    prop = res.proposals
+    p = prop.pairs
+    adj = adjust_relations(p[:, 0], p[:, 1], res.delta, res.covariance, use=accept)
+    err_adj = se2.between(true, adj.delta)
+    extra = {
+        "adjust_cpu_s": time.process_time() - t1,
+        "adjusted": int(adj.adjusted.sum()),
+        "set_aside": int(adj.set_aside.sum()),
+        "redundancy": adj.redundancy,
+        "error_before": _error_stats(se2.between(true, res.delta)[accept]),
+        "error_after": _error_stats(err_adj[accept]),
+        "gross_after": int((_gross(err_adj) & accept).sum()),
+    }
+    return extra, RelationSet(prop.t1[accept], prop.t2[accept], adj.delta[accept])
+
+
+def _print_adjusted(r: dict) -> None:
+    """The ``--adjust`` lines of one seed's result ``r``."""
+    a, b = r["error_before"], r["error_after"]
+    v = r["adjusted_verdict"]
+    print(
+        f"  adjusted: {r['adjusted']} relations moved, {r['set_aside']} set aside, "
+        f"redundancy {r['redundancy']}, {r['adjust_cpu_s']:.2f} CPU-s; accepted "
+        f"relations' error mean / median / p99 {a['mm_mean']:.2f} / "
+        f"{a['mm_median']:.2f} / {a['mm_p99']:.2f} mm -> {b['mm_mean']:.2f} / "
+        f"{b['mm_median']:.2f} / {b['mm_p99']:.2f} mm, {a['deg_mean']:.4f} / "
+        f"{a['deg_median']:.4f} / {a['deg_p99']:.3f}° -> {b['deg_mean']:.4f} / "
+        f"{b['deg_median']:.4f} / {b['deg_p99']:.3f}°; gross {r['gross_after']}"
+    )
+    print(
+        "  adjusted ratios "
+        + ", ".join(f"{e} {v['ratio'][e][0]:.3f}" for e in ESTIMATES)
+        + f"; same ranking {v['same_ranking']}; within 10 %: {v['within_10_percent']}"
+    )
 
 
 def _gross(err: np.ndarray) -> np.ndarray:
@@ -327,7 +353,7 @@ def main() -> None:
         "--adjust",
         action="store_true",
         help="also score the accepted relations adjusted by a pose-graph fit over them "
-        "(slamrel.scans.adjust)",
+        "(slamrel.backends.relation_adjust)",
     )
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args()
@@ -371,22 +397,7 @@ def main() -> None:
             f"rotation means: {r['rotation_within_10_percent']}"
         )
         if args.adjust:
-            a, b = r["error_before"], r["error_after"]
-            v = r["adjusted_verdict"]
-            print(
-                f"  adjusted: {r['adjusted']} relations moved, {r['set_aside']} set aside, "
-                f"redundancy {r['redundancy']}, {r['adjust_cpu_s']:.2f} CPU-s; accepted "
-                f"relations' error mean / median / p99 {a['mm_mean']:.2f} / "
-                f"{a['mm_median']:.2f} / {a['mm_p99']:.2f} mm -> {b['mm_mean']:.2f} / "
-                f"{b['mm_median']:.2f} / {b['mm_p99']:.2f} mm, {a['deg_mean']:.4f} / "
-                f"{a['deg_median']:.4f} / {a['deg_p99']:.3f}° -> {b['deg_mean']:.4f} / "
-                f"{b['deg_median']:.4f} / {b['deg_p99']:.3f}°; gross {r['gross_after']}"
-            )
-            print(
-                "  adjusted ratios "
-                + ", ".join(f"{e} {v['ratio'][e][0]:.3f}" for e in ESTIMATES)
-                + f"; same ranking {v['same_ranking']}; within 10 %: {v['within_10_percent']}"
-            )
+            _print_adjusted(r)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(out, fh, indent=1)

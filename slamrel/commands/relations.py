@@ -556,12 +556,13 @@ def run_align(args: argparse.Namespace) -> int:
 
 def _adjusted(args: argparse.Namespace, result: ScanRelations) -> tuple[ScanRelations, str]:
     """``--adjust``: the unflagged relations re-read from poses fitted to them
-    (:func:`slamrel.scans.adjust.adjust_relations`), and what was done (for the summary)."""
+    (:func:`slamrel.backends.relation_adjust.adjust_relations`), and what was done (for the
+    summary)."""
     from dataclasses import replace
 
     import numpy as np
 
-    from slamrel.scans.adjust import adjust_relations
+    from slamrel.backends.relation_adjust import adjust_relations
 
     p = result.proposals.pairs
     cov = result.covariance

@@ -1,4 +1,4 @@
-"""Relation-set adjustment (slamrel.scans.adjust): oracles independent of the fit.
+"""Relation-set adjustment (slamrel.backends.relation_adjust): oracles independent of the fit.
 
 - Redundancy: in the (near-)linear regime the whitened squared error of the fitted relations
   sums, on average, to the dimension of the space of relations that poses can explain,
@@ -16,7 +16,7 @@ import pytest
 
 from relation_metric import se2
 from relation_metric.errors import InputError
-from slamrel.scans.adjust import adjust_relations
+from slamrel.backends.relation_adjust import adjust_relations
 
 
 def _ladder(n: int = 20, rungs: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
