@@ -34,7 +34,13 @@ are reported beside them.
 
     python benchmarks/score_acceptance.py [--seeds 0 1 2] [--cycle-check] [--confirm]
         [--guesses chain|odometry|truth] [--world loop|corridor] [--loop-max-angle DEG]
-        [--keyframes travel|motion] [--json OUT]
+        [--keyframes travel|motion] [--adjust] [--json OUT]
+
+With ``--adjust`` the accepted relations are also adjusted
+(:func:`slamrel.backends.relation_adjust.adjust_relations`: a least-squares pose-graph fit over the
+accepted relations weighted by their covariances, the relations re-read from the fitted
+poses) and scored as ``adjusted`` beside ``reviewed``; the accepted relations' error
+against the truth (mean, median, p99) is printed before and after.
 
 Loop pairs are kept only where the two headings differ by at most ``--loop-max-angle``
 (:data:`LOOP_MAX_ANGLE`, 45°; 180 keeps every one, ``relations align``'s default): pairs
@@ -139,6 +145,7 @@ def run(
     loop_max_angle: float = LOOP_MAX_ANGLE,
     keyframes: str = KEYFRAMES,
     loop_growth: float = 0.0,
+    adjust: bool = False,
 ) -> dict:
     """One simulated log: relations made and reviewed, three estimates scored both ways.
 
@@ -179,9 +186,10 @@ def run(
     accept, contradicted, confirmed = review.accepted, review.contradicted, review.confirmed
     true = guesses_from_poses(log.truth, prop)
     err = se2.between(true, res.delta)
-    gross = (np.hypot(err[:, 0], err[:, 1]) > 0.1) | (np.abs(err[:, 2]) > np.radians(2))
+    gross = _gross(err)
     p = prop.pairs
     reviewed = RelationSet(prop.t1[accept], prop.t2[accept], res.delta[accept])
+    extra, adjusted = _adjusted(res, accept, true) if adjust else ({}, None)
     ideal = _pairs(log.truth, s.timestamps, loop_max_angle, keyframes)
     true_ideal = RelationSet(ideal.t1, ideal.t2, guesses_from_poses(log.truth, ideal))
     true_prop = RelationSet(prop.t1, prop.t2, true)
@@ -194,6 +202,8 @@ def run(
             "true_proposed": _score(true_prop, s.timestamps, poses),
             "true_accepted": _score(true_acc, s.timestamps, poses),
         }
+        if adjusted is not None:
+            scores[name]["adjusted"] = _score(adjusted, s.timestamps, poses)
     return {
         "seed": seed,
         "scans": len(s),
@@ -217,6 +227,71 @@ def run(
         "max_pair_gap": int(np.abs(p[:, 1] - p[:, 0]).max()),
         "scores": scores,
         **verdict(scores),
+        **extra,
+        **({"adjusted_verdict": verdict(scores, "adjusted")} if adjust else {}),
+    }
+
+
+def _adjusted(res, accept: np.ndarray, true: np.ndarray) -> tuple[dict, RelationSet]:
+    """``--adjust``: the accepted relations of ``res`` after the pose-graph fit, and what it
+    did (counts, CPU time, their error against the ``true`` relations before and after)."""
+    from slamrel.backends.relation_adjust import adjust_relations
+
+    t1 = time.process_time()
+    prop = res.proposals
+    p = prop.pairs
+    adj = adjust_relations(p[:, 0], p[:, 1], res.delta, res.covariance, use=accept)
+    err_adj = se2.between(true, adj.delta)
+    extra = {
+        "adjust_cpu_s": time.process_time() - t1,
+        "adjusted": int(adj.adjusted.sum()),
+        "set_aside": int(adj.set_aside.sum()),
+        "redundancy": adj.redundancy,
+        "error_before": _error_stats(se2.between(true, res.delta)[accept]),
+        "error_after": _error_stats(err_adj[accept]),
+        "gross_after": int((_gross(err_adj) & accept).sum()),
+    }
+    return extra, RelationSet(prop.t1[accept], prop.t2[accept], adj.delta[accept])
+
+
+def _print_adjusted(r: dict) -> None:
+    """The ``--adjust`` lines of one seed's result ``r``."""
+    a, b = r["error_before"], r["error_after"]
+    v = r["adjusted_verdict"]
+    print(
+        f"  adjusted: {r['adjusted']} relations moved, {r['set_aside']} set aside, "
+        f"redundancy {r['redundancy']}, {r['adjust_cpu_s']:.2f} CPU-s; accepted "
+        f"relations' error mean / median / p99 {a['mm_mean']:.2f} / "
+        f"{a['mm_median']:.2f} / {a['mm_p99']:.2f} mm -> {b['mm_mean']:.2f} / "
+        f"{b['mm_median']:.2f} / {b['mm_p99']:.2f} mm, {a['deg_mean']:.4f} / "
+        f"{a['deg_median']:.4f} / {a['deg_p99']:.3f}° -> {b['deg_mean']:.4f} / "
+        f"{b['deg_median']:.4f} / {b['deg_p99']:.3f}°; gross {r['gross_after']}"
+    )
+    print(
+        "  adjusted ratios "
+        + ", ".join(f"{e} {v['ratio'][e][0]:.3f}" for e in ESTIMATES)
+        + f"; same ranking {v['same_ranking']}; within 10 %: {v['within_10_percent']}"
+    )
+
+
+def _gross(err: np.ndarray) -> np.ndarray:
+    """Relations off the truth by more than 10 cm or 2° (``err``: (P, 3))."""
+    return (np.hypot(err[:, 0], err[:, 1]) > 0.1) | (np.abs(err[:, 2]) > np.radians(2))
+
+
+def _error_stats(err: np.ndarray) -> dict:
+    """Mean, median and 99th percentile of the translational [mm] and rotational [deg]
+    error of relations (``err``: (P, 3), relation ⊖ truth)."""
+    t = 1000 * np.hypot(err[:, 0], err[:, 1])
+    r = np.degrees(np.abs(err[:, 2]))
+    return {
+        f"{name}_{q}": float(f(v))
+        for name, v in (("mm", t), ("deg", r))
+        for q, f in (
+            ("mean", np.mean),
+            ("median", np.median),
+            ("p99", lambda a: np.percentile(a, 99)),
+        )
     }
 
 
@@ -224,14 +299,13 @@ def _ranking(scores: dict, which: str, part: int) -> list[str]:
     return sorted(ESTIMATES, key=lambda e: scores[e][which][part])
 
 
-def verdict(scores: dict) -> dict:
-    """Ranking equality (translation, rotation) and the mean ratios reviewed / true."""
-    ratio = {
-        e: [scores[e]["reviewed"][k] / scores[e]["true"][k] for k in (0, 1)] for e in ESTIMATES
-    }
-    same = all(_ranking(scores, "reviewed", k) == _ranking(scores, "true", k) for k in (0, 1))
+def verdict(scores: dict, which: str = "reviewed") -> dict:
+    """Ranking equality (translation, rotation) and the mean ratios ``which`` (reviewed, or
+    adjusted) / true."""
+    ratio = {e: [scores[e][which][k] / scores[e]["true"][k] for k in (0, 1)] for e in ESTIMATES}
+    same = all(_ranking(scores, which, k) == _ranking(scores, "true", k) for k in (0, 1))
     return {
-        "ranking_reviewed": _ranking(scores, "reviewed", 0),
+        "ranking_reviewed": _ranking(scores, which, 0),
         "ranking_true": _ranking(scores, "true", 0),
         "same_ranking": same,
         "ratio": ratio,
@@ -275,6 +349,12 @@ def main() -> None:
         "heading limit + 0.05 M rad/m), kept when their aligned motion is within 1 m and "
         "the heading limit (default 0: the pairs the guesses propose)",
     )
+    ap.add_argument(
+        "--adjust",
+        action="store_true",
+        help="also score the accepted relations adjusted by a pose-graph fit over them "
+        "(slamrel.backends.relation_adjust)",
+    )
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args()
     if not 0 < args.loop_max_angle <= 180:
@@ -291,6 +371,7 @@ def main() -> None:
             loop_max_angle=float(np.radians(args.loop_max_angle)),
             keyframes=args.keyframes,
             loop_growth=args.loop_growth,
+            adjust=args.adjust,
         )
         out.append(r)
         print(
@@ -315,6 +396,8 @@ def main() -> None:
             f"{r['same_ranking']}; translation means within 10 %: {r['within_10_percent']}, "
             f"rotation means: {r['rotation_within_10_percent']}"
         )
+        if args.adjust:
+            _print_adjusted(r)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(out, fh, indent=1)

@@ -66,8 +66,9 @@ def _loop_pairs(path) -> np.ndarray:
 @pytest.mark.slow
 def test_cli_chain_guesses_find_the_loop_pairs_the_odometry_misses(tmp_path, capsys):
     """``relations align --loops --chain-guesses`` on the loop world's seed 2 (odometry
-    > 1 m off at the closure): the odometry proposes no loop pair, the chain the truth's 97,
-    each within 10 cm / 2° of the true relation."""
+    > 1 m off at the closure): the odometry alone (no loop growth) proposes no loop pair, the
+    chain the truth's 97, each within 10 cm / 2° of the true relation (keyframes by motion,
+    the loop world's 0.6 m)."""
     from slamrel.cli import main
 
     truth = loop_path(CORNERS, 0.3)
@@ -75,8 +76,9 @@ def test_cli_chain_guesses_find_the_loop_pairs_the_odometry_misses(tmp_path, cap
     path = tmp_path / "loop.clf"
     _flaser_log(path, log.scans)
     plain, chain = tmp_path / "odo.relations", tmp_path / "chain.relations"
-    assert main(["relations", "align", str(path), "--loops", "-o", str(plain), "-q"]) == 0
-    args = ["relations", "align", str(path), "--loops", "--chain-guesses", "-o", str(chain)]
+    rule = ["--keyframes", "motion", "--loop-growth", "0"]
+    assert main(["relations", "align", str(path), "--loops", *rule, "-o", str(plain), "-q"]) == 0
+    args = ["relations", "align", str(path), "--loops", "--chain-guesses", *rule, "-o", str(chain)]
     assert main(args) == 0
     assert "pairs and guesses from the scans' chain of" in capsys.readouterr().out
     assert not _loop_pairs(plain).any()
@@ -131,6 +133,7 @@ def test_cli_loop_growth_finds_the_loop_pairs_from_the_odometry(tmp_path, capsys
     _flaser_log(path, log.scans)
     out = tmp_path / "grown.relations"
     args = ["relations", "align", str(path), "--loops", "--loop-growth", "0.02", "-o", str(out)]
+    args += ["--keyframes", "motion"]  # the loop world's 0.6 m keyframes (97 loop pairs)
     assert main(args) == 0
     assert "loop candidate(s) aligned beyond reach, left out" in capsys.readouterr().out
     loops = _loop_pairs(out)

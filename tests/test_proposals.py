@@ -106,11 +106,12 @@ def report_rows(tmp_path, poses: list[tuple[float, float, float]]):
 
 
 def test_cli_keyframes_travel_proposes_one_pair_per_distance_of_path(tmp_path):
-    """Steps of 0.11 m: by motion a keyframe every fifth scan (0.55 m), by travel one per
-    0.5 m of path (``relations align --keyframes travel``)."""
+    """Steps of 0.11 m: by motion a keyframe every fifth scan (0.55 m), by travel (the
+    default of ``relations align``) one per 0.5 m of path."""
     rows = report_rows(tmp_path, [(0.11 * k, 0.0, 0.0) for k in range(60)])
-    assert rows() == len(range(0, 60, 5)) - 1
+    assert rows("--keyframes", "motion") == len(range(0, 60, 5)) - 1
     assert rows("--keyframes", "travel") == int(0.11 * 59 / 0.5)
+    assert rows() == rows("--keyframes", "travel")
 
 
 def _pair_counts(poses: np.ndarray, times: np.ndarray, spacing: str) -> tuple[int, int]:
@@ -197,3 +198,13 @@ def test_cli_loop_growth_out_of_range_exits_2(tmp_path, capsys, value):
     argv = ["relations", "align", str(log), "-o", str(tmp_path / "o.relations"), "--loops"]
     assert main([*argv, "--loop-growth", value]) == 2
     assert "--loop-growth must lie in [0, 1]" in capsys.readouterr().err
+
+
+def test_relations_align_defaults_are_travel_keyframes_and_loop_growth():
+    """The defaults a user gets (benchmarks/README.md, "Defaults of relations align"):
+    keyframes by travel, loop candidates within 1 m + 2 cm per metre travelled."""
+    from slamrel.cli import build_parser
+
+    args = build_parser().parse_args(["relations", "align", "log.clf", "-o", "x.relations"])
+    assert args.keyframes == "travel"
+    assert args.loop_growth == 0.02

@@ -99,3 +99,24 @@ def test_loop_growth_gives_the_odometry_the_truths_loop_pairs(tmp_path):
         assert r["same_ranking"] and r["gross_accepted"] == 0, r["seed"]
         for e in ("odometry", "drift"):
             assert abs(r["ratio"][e][0] - 1) <= 0.10, (r["seed"], r["ratio"])
+
+
+@pytest.mark.slow
+def test_adjusted_relations_bring_the_near_perfect_estimate_within_10_percent(tmp_path):
+    """``--adjust`` (slamrel.backends.relation_adjust: a pose-graph fit over the accepted
+    relations, the relations re-read from it) on corridor world 115 (held out; 1,733
+    accepted relations): their error against the truth drops (measured mean 4.57 → 3.19
+    mm, p99 29.9 → 14.9 mm), the jitter estimate (5 mm / 0.05° off the truth) comes within
+    10 % (1.163 → 1.064), the drifting estimates move by at most 0.001, no relation grossly
+    wrong. Not met everywhere: corridor 112 and 113 stay at 1.128 and 1.119
+    (benchmarks/README.md)."""
+    (r,) = _run(tmp_path, "--world", "corridor", "--seeds", "115", "--adjust")
+    before, after = r["error_before"], r["error_after"]
+    assert after["mm_mean"] < 0.8 * before["mm_mean"]
+    assert after["mm_p99"] < 0.7 * before["mm_p99"]
+    assert r["gross_after"] == 0 and r["set_aside"] <= 5
+    v = r["adjusted_verdict"]
+    assert v["same_ranking"] and abs(v["ratio"]["jitter"][0] - 1) <= 0.10, v["ratio"]
+    assert abs(r["ratio"]["jitter"][0] - 1) > 0.10  # the relations as aligned: not within
+    for e in ("odometry", "drift"):
+        assert abs(v["ratio"][e][0] - r["ratio"][e][0]) <= 0.005
