@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import shlex
 from pathlib import Path
 
@@ -26,6 +27,21 @@ def _files(root: Path) -> dict[str, bytes]:
     }
 
 
+_NUMBER = re.compile(rb"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+
+
+def _same_up_to_last_digits(a: bytes, b: bytes) -> bool:
+    """The same text with every number equal within 1e-10 relative (1e-12 absolute): numpy's
+    trigonometric functions may differ in the last bit between releases and CPUs (numpy 2.4
+    turned 8 of 115 bearings one ulp; integrated over 600 steps of example/estimate.txt, at
+    most 4.5e-14 m), so regenerating is byte-exact only on one numpy build."""
+    if _NUMBER.sub(b"#", a) != _NUMBER.sub(b"#", b):
+        return False
+    x = np.array([float(t) for t in _NUMBER.findall(a)])
+    y = np.array([float(t) for t in _NUMBER.findall(b)])
+    return x.shape == y.shape and bool(np.allclose(x, y, rtol=1e-10, atol=1e-12))
+
+
 def test_regenerating_the_data_gives_the_same_bytes(tmp_path):
     spec = importlib.util.spec_from_file_location("make_data", DATA / "make_data.py")
     mod = importlib.util.module_from_spec(spec)
@@ -34,8 +50,19 @@ def test_regenerating_the_data_gives_the_same_bytes(tmp_path):
     committed, fresh = _files(DATA), _files(tmp_path)
     assert sorted(committed) == sorted(fresh)
     assert len(committed) >= 9
-    changed = [name for name in committed if committed[name] != fresh[name]]
+    changed = [
+        name
+        for name in committed
+        if committed[name] != fresh[name]
+        and not _same_up_to_last_digits(committed[name], fresh[name])
+    ]
     assert not changed, f"data/ differs from data/make_data.py's output: {changed}"
+
+
+def test_the_regeneration_check_sees_a_changed_digit():
+    assert _same_up_to_last_digits(b"t,x\n1,0.75905421718280253\n", b"t,x\n1,0.75905421718280242\n")
+    assert not _same_up_to_last_digits(b"t,x\n1,0.75905421\n", b"t,x\n1,0.75905422\n")
+    assert not _same_up_to_last_digits(b"t,x\n1,0.5\n", b"t,y\n1,0.5\n")
 
 
 def test_the_data_is_what_its_readme_says(tmp_path):

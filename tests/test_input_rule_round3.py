@@ -357,9 +357,12 @@ def test_controls_inside_the_bound_give_no_bug_warning(tmp_path, capsys):
     err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt"), "--method", "filter"], capsys)
     assert f"error: {b}: " in err and "floating-point problem" not in err
     # the smoother: a recovered position beyond 1e30 m is a divergence, not "pose 1: position
-    # (4e+28, 3.5e+54) is beyond 1e+30 m; expected coordinates in metres" about no file
+    # (4e+28, 3.5e+54) is beyond 1e+30 m; expected coordinates in metres" about no file; which
+    # of the two the rounding reaches first depends on the numpy build (numpy 2.4: the
+    # smoother's factorisation fails before the divergence check): either names the bundle
     err = _err(["recover", str(b), "-o", str(tmp_path / "x.txt")], capsys)
-    assert f"error: {b}: " in err and "diverged at t=" in err and "pose 1: position" not in err
+    assert f"error: {b}: " in err and "pose 1: position" not in err
+    assert "diverged at t=" in err or "the smoother could not factor" in err
 
 
 @pytest.mark.parametrize("model", ["velocity", "odometry"])
