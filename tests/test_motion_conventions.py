@@ -209,8 +209,10 @@ def test_pose_noise_per_row_and_per_piece() -> None:
 
 @settings(max_examples=60, deadline=None)
 @given(
-    sxy=st.floats(0.0, 1.0),
-    sth=st.floats(0.0, 1.0),
+    # no subnormal variances: below 2.2e-308 a rotation loses the relative precision the
+    # assertion asks for (hypothesis found sxy = 2.2e-313 off by 3e-11 relative)
+    sxy=st.floats(0.0, 1.0, allow_subnormal=False),
+    sth=st.floats(0.0, 1.0, allow_subnormal=False),
     dead_reckoning=st.floats(-10.0, 10.0),
     filter_heading=st.floats(-10.0, 10.0),
     fraction=st.floats(1e-3, 1.0),
