@@ -19,8 +19,8 @@ import pytest
 
 from relation_metric import se2
 from slamrel.cli import main
+from slamrel.commands.relations import LOOP_MIN_OVERLAP
 from slamrel.scans.proposals import (
-    LOOP_MIN_OVERLAP,
     Proposals,
     can_overlap,
     drop_unseen_loops,
@@ -269,3 +269,12 @@ def test_cli_at_given_pairs_ignores_the_overlap_test(tmp_path):
         out.append((o.read_bytes(), r.read_bytes()))
     assert out[0] == out[1]
     assert len(out[0][1].splitlines()) == 3  # header + both given pairs, reported
+
+
+def test_the_default_minimum_overlap_is_the_documented_one():
+    """docs/commands.md: ``--loop-min-overlap`` defaults to 0.3 (chosen on corridor worlds
+    103 and 107, docs/laser-relations.md)."""
+    from slamrel.cli import build_parser
+
+    args = build_parser().parse_args(["relations", "align", "log.clf", "-o", "x.relations"])
+    assert args.loop_min_overlap == LOOP_MIN_OVERLAP == 0.3

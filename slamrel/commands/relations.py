@@ -30,8 +30,9 @@ if TYPE_CHECKING:
 #: corridor worlds 103 and 107, held out on 108–116 and the loop world's seeds 0–4
 #: (benchmarks/README.md, "Defaults of relations align").
 LOOP_GROWTH = 0.02
-#: ``relations align --loop-min-overlap``'s default (chosen on corridor worlds 103 and
-#: 107; benchmarks/README.md, "Loop pairs that can overlap").
+#: ``relations align --loop-min-overlap``'s default: chosen on corridor worlds 103 and
+#: 107, held out on 111–116 and the loop world's seeds 0, 1, 3, 4 (docs/laser-relations.md,
+#: "Loop pairs whose scans cannot overlap").
 LOOP_MIN_OVERLAP = 0.3
 
 

@@ -33,7 +33,6 @@ __all__ = [
     "can_overlap",
     "drop_unseen_loops",
     "keep_overlapping",
-    "LOOP_MIN_OVERLAP",
     "OVERLAP_SPREAD_XY",
     "OVERLAP_SPREAD_THETA",
     "OVERLAP_TOLERANCE",
@@ -272,7 +271,7 @@ def keep_within_reach(
     return _select(result, keep)
 
 
-#: The guesses' uncertainty at zero travel for :func:`loop_overlap` [m, rad]: the global
+#: The guesses' uncertainty at zero travel for :func:`drop_unseen_loops` [m, rad]: the global
 #: aligner's window at ``D = 0`` (``0.3 m``, ``0.05 rad``); it grows by the loop growth.
 OVERLAP_SPREAD_XY = 0.3
 OVERLAP_SPREAD_THETA = 0.05
@@ -280,14 +279,10 @@ OVERLAP_SPREAD_THETA = 0.05
 #: ends more than this [m] in front of it (a wall between them).
 OVERLAP_TOLERANCE = 0.1
 #: Pairs per block in :func:`expected_overlap` (bounds its temporary arrays).
-_OVERLAP_BLOCK = 2048
+_OVERLAP_BLOCK = 1024
 #: Cells of :func:`can_overlap`'s search over the uncertainty: 0.5 m, 0.1 rad.
 _OVERLAP_CELL = 0.5
 _OVERLAP_CELL_THETA = 0.1
-#: ``relations align --loop-min-overlap``'s default: a loop pair is kept when its two scans
-#: can share at least this share of one scan's returns (benchmarks/README.md, "Loop pairs
-#: that can overlap").
-LOOP_MIN_OVERLAP = 0.3
 
 
 @dataclass(frozen=True)
