@@ -175,10 +175,10 @@ def run(
         from slamrel.scans.own_guesses import chain_guesses
 
         start = chain_guesses(s, odo).poses
-    prop = _pairs(start, s.timestamps, loop_max_angle, keyframes, loop_growth)
+    candidates_all = _pairs(start, s.timestamps, loop_max_angle, keyframes, loop_growth)
     t_overlap = time.process_time()
     prop, unseen = drop_unseen_loops(  # --loop-min-overlap: before alignment
-        prop,
+        candidates_all,
         s,
         start,
         min_overlap=min_overlap,
@@ -187,6 +187,7 @@ def run(
         radius=1.0 if loop_growth > 0 else None,
     )
     t_overlap = time.process_time() - t_overlap
+    wrongly = _wrongly_left_out(candidates_all, prop, log.truth, s, min_overlap)
     if aligner == "global":
         from slamrel.scans.global_align import align_scans_global
 
@@ -240,6 +241,7 @@ def run(
         "unseen_before": unseen,
         "unseen_after": apart,
         "overlap_cpu_s": t_overlap,
+        "wrongly_left_out": wrongly,
         "loop_flagged": int((res.flagged & (prop.kind == "loop")).sum()),
         "loop_accepted": int((accept & (prop.kind == "loop")).sum()),
         "guesses": guesses,
@@ -261,6 +263,22 @@ def run(
         **extra,
         **({"adjusted_verdict": verdict(scores, "adjusted")} if adjust else {}),
     }
+
+
+def _wrongly_left_out(
+    before: Proposals, after: Proposals, truth: np.ndarray, scans, min_overlap: float
+) -> int:
+    """Loop candidates the test before alignment left out although their true relation
+    lies within the 1 m radius and overlaps by ``min_overlap`` (exact, at the truth)."""
+    kept = {tuple(p) for p in after.pairs.tolist()}
+    out = np.array([tuple(p) not in kept for p in before.pairs.tolist()], dtype=bool)
+    out &= before.kind == "loop"
+    if not out.any():
+        return 0
+    p = before.pairs[out]
+    d = se2.between(truth[p[:, 0]], truth[p[:, 1]])
+    ov = expected_overlap(scans, p, d, spread_xy=0.0, spread_theta=0.0)
+    return int(((np.hypot(d[:, 0], d[:, 1]) <= 1.0) & (ov >= min_overlap)).sum())
 
 
 def _adjusted(res, accept: np.ndarray, true: np.ndarray) -> tuple[dict, RelationSet]:
@@ -429,7 +447,9 @@ def main() -> None:
         print(
             f"  loop pairs: {r['loop_flagged']} flagged, {r['loop_accepted']} accepted; "
             f"overlap < {r['min_overlap']:g}: {r['unseen_before']} candidates left out before "
-            f"alignment ({r['overlap_cpu_s']:.2f} CPU-s: overlap test), {r['unseen_after']} "
+            f"alignment ({r['overlap_cpu_s']:.2f} CPU-s: overlap test; "
+            f"{r['wrongly_left_out']} of them within 1 m and overlapping by the truth), "
+            f"{r['unseen_after']} "
             f"after; truth's loop pairs {r['true_loop_pairs']} of {r['true_loop_pairs_all']}"
         )
         for e in ESTIMATES:
