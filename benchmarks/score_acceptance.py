@@ -58,6 +58,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import fields
 
 import numpy as np
 
@@ -70,6 +71,9 @@ from slamrel.scans.proposals import (
     SPACINGS,
     Proposals,
     consecutive_pairs,
+    drop_unseen_loops,
+    expected_overlap,
+    keep_overlapping,
     keep_within_reach,
     loop_pairs,
 )
@@ -146,6 +150,7 @@ def run(
     keyframes: str = KEYFRAMES,
     loop_growth: float = 0.0,
     adjust: bool = False,
+    min_overlap: float = 0.0,
 ) -> dict:
     """One simulated log: relations made and reviewed, three estimates scored both ways.
 
@@ -170,7 +175,19 @@ def run(
         from slamrel.scans.own_guesses import chain_guesses
 
         start = chain_guesses(s, odo).poses
-    prop = _pairs(start, s.timestamps, loop_max_angle, keyframes, loop_growth)
+    candidates_all = _pairs(start, s.timestamps, loop_max_angle, keyframes, loop_growth)
+    t_overlap = time.process_time()
+    prop, unseen = drop_unseen_loops(  # --loop-min-overlap: before alignment
+        candidates_all,
+        s,
+        start,
+        min_overlap=min_overlap,
+        growth=loop_growth,
+        growth_angle=loop_growth * LOOP_GROWTH_ANGLE,
+        radius=1.0 if loop_growth > 0 else None,
+    )
+    t_overlap = time.process_time() - t_overlap
+    wrongly = _wrongly_left_out(candidates_all, prop, log.truth, s, min_overlap)
     if aligner == "global":
         from slamrel.scans.global_align import align_scans_global
 
@@ -180,7 +197,8 @@ def run(
     candidates = len(prop)
     if loop_growth > 0:  # the loop rule on the aligned motion: what the scans say
         res = keep_within_reach(res, radius=1.0, max_angle=loop_max_angle)
-        prop = res.proposals
+    res, apart = keep_overlapping(res, s, min_overlap=min_overlap)  # and after
+    prop = res.proposals
     cpu = time.process_time() - t0
     review = scripted_review(res, cycle_check=cycle_check, confirm=confirm)
     accept, contradicted, confirmed = review.accepted, review.contradicted, review.confirmed
@@ -190,8 +208,14 @@ def run(
     p = prop.pairs
     reviewed = RelationSet(prop.t1[accept], prop.t2[accept], res.delta[accept])
     extra, adjusted = _adjusted(res, accept, true) if adjust else ({}, None)
-    ideal = _pairs(log.truth, s.timestamps, loop_max_angle, keyframes)
-    true_ideal = RelationSet(ideal.t1, ideal.t2, guesses_from_poses(log.truth, ideal))
+    ideal_all = _pairs(log.truth, s.timestamps, loop_max_angle, keyframes)
+    # the truth's pairs under the same overlap rule, at the true relation
+    d_all = guesses_from_poses(log.truth, ideal_all)
+    ov = expected_overlap(s, ideal_all.pairs, d_all, spread_xy=0.0, spread_theta=0.0)
+    keep = (ideal_all.kind != "loop") | (ov >= min_overlap)
+    ideal = Proposals(*(getattr(ideal_all, f.name)[keep] for f in fields(Proposals)))
+    true_ideal = RelationSet(ideal.t1, ideal.t2, d_all[keep])
+    true_all = RelationSet(ideal_all.t1, ideal_all.t2, d_all)
     true_prop = RelationSet(prop.t1, prop.t2, true)
     true_acc = RelationSet(prop.t1[accept], prop.t2[accept], true[accept])
     scores = {}
@@ -199,6 +223,7 @@ def run(
         scores[name] = {
             "reviewed": _score(reviewed, s.timestamps, poses),
             "true": _score(true_ideal, s.timestamps, poses),
+            "true_all": _score(true_all, s.timestamps, poses),
             "true_proposed": _score(true_prop, s.timestamps, poses),
             "true_accepted": _score(true_acc, s.timestamps, poses),
         }
@@ -211,6 +236,14 @@ def run(
         "loop_pairs": int(np.count_nonzero(prop.kind == "loop")),
         "true_pairs": len(ideal),
         "true_loop_pairs": int(np.count_nonzero(ideal.kind == "loop")),
+        "true_loop_pairs_all": int(np.count_nonzero(ideal_all.kind == "loop")),
+        "min_overlap": min_overlap,
+        "unseen_before": unseen,
+        "unseen_after": apart,
+        "overlap_cpu_s": t_overlap,
+        "wrongly_left_out": wrongly,
+        "loop_flagged": int((res.flagged & (prop.kind == "loop")).sum()),
+        "loop_accepted": int((accept & (prop.kind == "loop")).sum()),
         "guesses": guesses,
         "loop_max_angle_deg": float(np.degrees(loop_max_angle)),
         "keyframes": keyframes,
@@ -230,6 +263,22 @@ def run(
         **extra,
         **({"adjusted_verdict": verdict(scores, "adjusted")} if adjust else {}),
     }
+
+
+def _wrongly_left_out(
+    before: Proposals, after: Proposals, truth: np.ndarray, scans, min_overlap: float
+) -> int:
+    """Loop candidates the test before alignment left out although their true relation
+    lies within the 1 m radius and overlaps by ``min_overlap`` (exact, at the truth)."""
+    kept = {tuple(p) for p in after.pairs.tolist()}
+    out = np.array([tuple(p) not in kept for p in before.pairs.tolist()], dtype=bool)
+    out &= before.kind == "loop"
+    if not out.any():
+        return 0
+    p = before.pairs[out]
+    d = se2.between(truth[p[:, 0]], truth[p[:, 1]])
+    ov = expected_overlap(scans, p, d, spread_xy=0.0, spread_theta=0.0)
+    return int(((np.hypot(d[:, 0], d[:, 1]) <= 1.0) & (ov >= min_overlap)).sum())
 
 
 def _adjusted(res, accept: np.ndarray, true: np.ndarray) -> tuple[dict, RelationSet]:
@@ -355,6 +404,16 @@ def main() -> None:
         help="also score the accepted relations adjusted by a pose-graph fit over them "
         "(slamrel.backends.relation_adjust)",
     )
+    ap.add_argument(
+        "--min-overlap",
+        type=float,
+        default=0.0,
+        metavar="F",
+        help="relations align --loop-min-overlap: leave out loop pairs whose scans cannot "
+        "share F of their returns (before alignment, within the guesses' uncertainty) or "
+        "do not (after, at the aligned pose); the truth's loop pairs by the same rule at "
+        "the true relation (default 0: keep all)",
+    )
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args()
     if not 0 < args.loop_max_angle <= 180:
@@ -372,6 +431,7 @@ def main() -> None:
             keyframes=args.keyframes,
             loop_growth=args.loop_growth,
             adjust=args.adjust,
+            min_overlap=args.min_overlap,
         )
         out.append(r)
         print(
@@ -384,12 +444,21 @@ def main() -> None:
             f"({r['gross_accepted']} of {r['gross']} gross ones accepted); "
             f"{r['pairs_per_cpu_s']:.1f} pairs/CPU-s"
         )
+        print(
+            f"  loop pairs: {r['loop_flagged']} flagged, {r['loop_accepted']} accepted; "
+            f"overlap < {r['min_overlap']:g}: {r['unseen_before']} candidates left out before "
+            f"alignment ({r['overlap_cpu_s']:.2f} CPU-s: overlap test; "
+            f"{r['wrongly_left_out']} of them within 1 m and overlapping by the truth), "
+            f"{r['unseen_after']} "
+            f"after; truth's loop pairs {r['true_loop_pairs']} of {r['true_loop_pairs_all']}"
+        )
         for e in ESTIMATES:
             sc = r["scores"][e]
             print(
                 f"  {e:9s} trans reviewed {sc['reviewed'][0]:.4f} true {sc['true'][0]:.4f} "
                 f"(proposed {sc['true_proposed'][0]:.4f}, accepted {sc['true_accepted'][0]:.4f}) ratio {r['ratio'][e][0]:.3f}; "
-                f"rot ratio {r['ratio'][e][1]:.3f}"
+                f"rot ratio {r['ratio'][e][1]:.3f}; "
+                f"ratio to every truth pair {sc['reviewed'][0] / sc['true_all'][0]:.3f}"
             )
         print(
             f"  ranking reviewed {r['ranking_reviewed']} true {r['ranking_true']}: same "
