@@ -55,9 +55,10 @@ REFERENCES = ("laser", "true", "true_accepted")
 
 
 def align_pairs(poses: NDArray[np.float64], times: NDArray[np.float64]) -> Proposals:
-    """``relations align --loops --keyframes motion --loop-growth 0``'s pairs (keyframes
-    every 0.5 m / 0.3 rad of motion, the loop world's rule, benchmarks/README.md; loop pairs
-    within 1 m, at least 10 m of travel apart), proposed from ``poses`` (N, 3)."""
+    """``relations align --loops --keyframes motion --loop-growth 0 --loop-min-overlap 0``'s
+    pairs (keyframes every 0.5 m / 0.3 rad of motion, the loop world's rule,
+    benchmarks/README.md; loop pairs within 1 m, at least 10 m of travel apart), proposed
+    from ``poses`` (N, 3)."""
     prop = consecutive_pairs(poses, times, distance=0.5, angle=0.3)
     return prop + loop_pairs(poses, times, radius=1.0, min_travel=10.0, distance=0.5, angle=0.3)
 
