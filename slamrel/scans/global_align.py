@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 from relation_metric.errors import InputError
 from relation_metric.se2 import between, cumulative_compose
 from slamrel.formats.laser import LaserScans
+from slamrel.scans.batch_icp import align_many
 from slamrel.scans.matching import Alignment, PreparedScan, align, prepare_scan, transform
 from slamrel.scans.proposals import Proposals
 from slamrel.scans.relations import AlignOptions, ScanRelations, _judge, far_guess_error
@@ -256,8 +257,12 @@ def scan_chain(
     links: list[Alignment] = []
     motion = guess.copy()
     fallback = 0
-    for k, (i, j) in enumerate(zip(nodes[:-1].tolist(), nodes[1:].tolist(), strict=True)):
-        a = align(store.prep(i), store.prep(j), guess[k], store.link_icp)
+    pairs = list(zip(nodes[:-1].tolist(), nodes[1:].tolist(), strict=True))
+    first = align_many(
+        [store.prep(i) for i, _ in pairs], [store.prep(j) for _, j in pairs], guess, store.link_icp
+    )
+    for k, (i, j) in enumerate(pairs):
+        a = first[k]
         flags = _judge(a, opt.limits, guess[k])[0]
         if {"failed", "low overlap", "high residual"} & set(flags):
             centre = guess[k]
@@ -484,18 +489,26 @@ def _doubtful(s: SearchResult, gopt: GlobalOptions) -> bool:
     return _ambiguous(s, gopt) or s.score < gopt.min_score
 
 
-def _distant(
+def _distant_search(
     store: _Scans, chain: Chain, pair: tuple[int, int], at: tuple[int, int], travel: float
-) -> tuple[tuple[Alignment, str, list[str], float], SearchResult]:
-    """Search the submaps of a distant pair, refine by ICP, judge (module docstring, 3)."""
-    from dataclasses import replace
-
-    gopt, opt = store.gopt, store.opt
-    i, j = pair
+) -> SearchResult:
+    """Search the submaps of a distant pair (module docstring, 3), again with larger submaps
+    when the first search is doubtful."""
+    gopt = store.gopt
     s = _submap_search(store, chain, pair, at, travel, gopt.submap_travel)
     if gopt.retry_travel > gopt.submap_travel and _doubtful(s, gopt):
         s = _submap_search(store, chain, pair, at, travel, gopt.retry_travel)
-    al = align(store.prep(i), store.prep(j), s.delta, opt.icp)
+    return s
+
+
+def _distant_judge(
+    store: _Scans, chain: Chain, at: tuple[int, int], s: SearchResult, al: Alignment
+) -> tuple[Alignment, str, list[str], float]:
+    """Judge a distant pair's ICP ``al`` from the search's answer ``s`` (module docstring, 3);
+    a degenerate one keeps its weak direction from the submaps' ICP."""
+    from dataclasses import replace
+
+    gopt, opt = store.gopt, store.opt
     limits = replace(
         opt.limits, max_correction=gopt.max_refine, max_correction_angle=gopt.max_refine_angle
     )
@@ -511,7 +524,7 @@ def _distant(
     if extra:
         flags = flags + extra
         susp = max(susp, s.ratio / gopt.ambiguity, gopt.min_score / max(s.score, 1e-9), 1 + 1e-9)
-    return (al, "search", flags, susp), s
+    return (al, "search", flags, susp)
 
 
 def align_scans_global(
@@ -551,32 +564,52 @@ def align_scans_global(
     chain = scan_chain(scans, poses, pairs.ravel(), store)
     pos = {int(n): k for k, n in enumerate(chain.nodes.tolist())}
     given = between(poses[pairs[:, 0]], poses[pairs[:, 1]])
-    out: list[tuple[Alignment, str, list[str], float]] = []
     p = len(proposals)
     score, ratio = np.full(p, np.nan), np.zeros(p)
     second = np.full((p, 3), np.nan)
+    # searches first (in the pairs' order: a scan's pairs come together and share its grid),
+    # then the ICP of every pair at once (align_many), then the judgement
+    at = np.array([[pos[i], pos[j]] for i, j in pairs.tolist()], dtype=np.int64).reshape(-1, 2)
+    travel = np.abs(chain.travel[at[:, 1]] - chain.travel[at[:, 0]]) if p else np.zeros(0)
+    searches: dict[int, SearchResult] = {}
+    start = np.zeros((p, 3))
+    icp_rows: list[int] = []
     for k, (i, j) in enumerate(pairs.tolist()):
-        a, b = pos[i], pos[j]
-        travel = abs(float(chain.travel[b] - chain.travel[a]))
-        if travel > gopt.local_travel:
-            row, s = _distant(store, chain, (i, j), (a, b), travel)
-            out.append(row)
+        a, b = int(at[k, 0]), int(at[k, 1])
+        if travel[k] > gopt.local_travel:
+            s = searches[k] = _distant_search(store, chain, (i, j), (a, b), float(travel[k]))
             score[k], ratio[k], second[k] = s.score, s.ratio, s.second
+            start[k] = s.delta
+            icp_rows.append(k)
+        elif b != a + 1:
+            start[k] = between(chain.poses[a], chain.poses[b])
+            icp_rows.append(k)
+    rows = np.array(icp_rows, dtype=np.int64)
+    got = align_many(
+        [store.prep(int(pairs[k, 0])) for k in icp_rows],
+        [store.prep(int(pairs[k, 1])) for k in icp_rows],
+        start[rows],
+        opt.icp,
+    )
+    fitted = dict(zip(icp_rows, got, strict=True))
+    out: list[tuple[Alignment, str, list[str], float]] = []
+    for k in range(p):
+        a, b = int(at[k, 0]), int(at[k, 1])
+        tr = float(travel[k])
+        if k in searches:
+            out.append(_distant_judge(store, chain, (a, b), searches[k], fitted[k]))
             continue
         if b == a + 1:
             al = chain.links[a]
         else:
-            centre = between(chain.poses[a], chain.poses[b])
-            al = pinned(
-                align(store.prep(i), store.prep(j), centre, opt.icp), centre, gopt.drift_xy * travel
-            )
+            al = pinned(fitted[k], start[k], gopt.drift_xy * tr)
         # a correction within the window a chain link searches is the given motion's error
         # (real odometry turns 3-10° wrong between scans), not a slipped alignment
         local = replace(
             opt.limits,
-            max_correction=max(opt.limits.max_correction, gopt.link_xy + gopt.drift_xy * travel),
+            max_correction=max(opt.limits.max_correction, gopt.link_xy + gopt.drift_xy * tr),
             max_correction_angle=max(
-                opt.limits.max_correction_angle, gopt.link_theta + gopt.drift_theta * travel
+                opt.limits.max_correction_angle, gopt.link_theta + gopt.drift_theta * tr
             ),
         )
         flags, susp = _judge(_resolved(al), local, given[k])
