@@ -70,9 +70,11 @@ from slamrel.formats.bags import (
     read_static_transform,
     split_bag_spec,
 )
+from slamrel.formats.fastparse import parse_decimal_table
 from slamrel.formats.text import PathLike, SourceText, read_source
 from slamrel.formats.trajectories import (
     CARMEN_LASER_RECORDS,
+    CarmenLayout,
     carmen_floats,
     carmen_layout,
 )
@@ -296,6 +298,51 @@ def read_laser_scans(path: PathLike, *, record: str | None = None) -> LaserScans
     return _scans_from_rows(src, chosen, rows, dict(skipped))
 
 
+def _fast_rows(
+    rows: list[tuple[int, list[str]]],
+    layouts: list[CarmenLayout],
+    ranges: NDArray[np.float64],
+    config: NDArray[np.float64],
+    laser: NDArray[np.float64],
+    odom: NDArray[np.float64],
+    times: NDArray[np.float64],
+) -> bool:
+    """Fill the arrays from ``rows`` in one pass of :func:`parse_decimal_table` when every row
+    has the same layout and every number is a plain decimal within the limits the loop in
+    :func:`_scans_from_rows` checks (the same values, bit for bit); False (nothing trusted)
+    otherwise, and the loop reads and diagnoses the rows one by one."""
+    lay = layouts[0] if layouts else None
+    if lay is None or lay.ranges is None or any(other != lay for other in layouts):
+        return False
+    n = lay.readings
+    # (first field, count, where the values go) in the order they are joined
+    parts: list[tuple[int, int, NDArray[np.float64]]] = [(lay.ranges, n, ranges[:, :n])]
+    if lay.config is not None:
+        parts.append((lay.config + 1, 4, config))
+    if lay.laser is not None:
+        parts.append((lay.laser, 3, laser))
+    if lay.robot is not None:
+        parts.append((lay.robot, 3, odom))
+    parts.append((lay.time, 1, times[:, None]))
+    ncols = sum(c for _, c, _ in parts)
+    text = "\n".join(" ".join([t for a, c, _ in parts for t in f[a : a + c]]) for _, f in rows)
+    if not text.isascii():
+        return False
+    table = parse_decimal_table((text + "\n").encode("ascii"), ncols)
+    if table is None or table.shape[0] != len(rows):
+        return False
+    k = 0
+    for _, c, target in parts:
+        target[:] = table[:, k : k + c]
+        k += c
+    if lay.config is None:
+        start, res = guess_laser_config(lay.readings)
+        config[:] = (start, math.pi, res, FLASER_MAX_RANGE)
+    elif not ((config[:, 2] > 0) & (config[:, 3] > 0)).all():
+        return False  # the loop names the first bad record
+    return True
+
+
 def _scans_from_rows(
     src: SourceText, kind: str, rows: list[tuple[int, list[str]]], skipped: dict[str, int]
 ) -> LaserScans:
@@ -310,7 +357,11 @@ def _scans_from_rows(
     odom = np.full((n, 3), np.nan)
     times = np.empty(n)
     guessed = kind in ("FLASER", "RLASER")
-    for k, ((number, f), lay) in enumerate(zip(rows, layouts, strict=True)):
+    if _fast_rows(rows, layouts, ranges, config, laser, odom, times):
+        rows_left: list[tuple[int, list[str]]] = []
+    else:
+        rows_left = rows
+    for k, ((number, f), lay) in enumerate(zip(rows_left, layouts, strict=False)):
         assert lay.ranges is not None
         r = carmen_floats(f, lay.ranges, lay.readings, "range reading", src, number)
         ranges[k, : lay.readings] = r
