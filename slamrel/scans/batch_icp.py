@@ -60,6 +60,16 @@ class _Lookup:
         self.off = np.concatenate(([0], np.cumsum(n)[:-1])).astype(np.int64)
         anchors = np.concatenate([r.anchors for r in refs]) if refs else np.zeros((0, 2))
         self.ax, self.ay = anchors[:, 0].copy(), anchors[:, 1].copy()
+        # padded stack: each reference's anchors with side copies of its first and last on
+        # either side, so that a window around any anchor stays in its block (the copies
+        # stand for NearestGrid.match's clip: the same coordinates, distances and choice)
+        self.poff = self.off + 2 * side * np.arange(n.size) + side  # where anchor 0 sits
+        pads = [
+            np.concatenate((np.repeat(b, side), b + np.arange(c), np.repeat(b + c - 1, side)))
+            for b, c in zip(self.off.tolist(), n.tolist(), strict=True)
+        ]
+        self.real = np.concatenate(pads) if pads else np.zeros(0, dtype=np.int64)
+        self.px, self.py = self.ax.take(self.real), self.ay.take(self.real)
         self.lo = np.array([t.lo for t in self.tabs]).reshape(-1, 2)
         self.shape = np.array([t.shape for t in self.tabs], dtype=np.int64).reshape(-1, 2)
         self.cell = float(self.tabs[0].cell) if refs else 1.0
@@ -110,17 +120,21 @@ class _Lookup:
                 sl = slice(b[i], b[i + 1])
                 self.tabs[ln].index.take(lin[sl], mode="clip", out=first[sl])  # type: ignore[union-attr]
             found = first >= 0
+        # the window of 2 side + 1 anchors around the cell's, in the padded stack
+        np.minimum(first, np.maximum(n_a - 1, 0)[seg], out=first)
+        np.maximum(first, 0, out=first)
+        first += self.poff[links][seg]
         cand = first[:, None] + self.side
-        np.maximum(cand, 0, out=cand)
-        np.minimum(cand, np.maximum(n_a - 1, 0)[seg, None], out=cand)
-        cand += self.off[links][seg, None]
-        dx = self.ax.take(cand) - q0[:, None]
-        dy = self.ay.take(cand) - q1[:, None]
-        d2 = dx * dx + dy * dy
+        d2 = self.px.take(cand)
+        d2 -= q0[:, None]
+        d2 *= d2
+        dy = self.py.take(cand)
+        dy -= q1[:, None]
+        dy *= dy
+        d2 += dy
         j = d2.argmin(axis=1)
-        rows = np.arange(q0.shape[0])
-        best2 = d2[rows, j]
-        k = cand[rows, j]
+        best2 = np.take_along_axis(d2, j[:, None], axis=1)[:, 0]
+        k = self.real.take(cand[:, 0] + j)
         g_pt = gate[seg]
         if self.mode != "grid":
             return found & (np.sqrt(best2) <= g_pt), k
@@ -131,7 +145,7 @@ class _Lookup:
             found, (np.minimum(best2, g_pt * g_pt) <= bound * bound) & (bound > 0), g_pt <= lim - h
         )
         unsure = np.flatnonzero(~sure)
-        if unsure.size:
+        if unsure.size:  # NearestGrid._sweep, reference by reference
             useg = seg[unsure]
             cut = np.flatnonzero(np.diff(useg)) + 1
             for part in np.split(unsure, cut):
