@@ -326,6 +326,30 @@ _PAD_LIMIT = 2**22
 _BLOCK = 65536
 
 
+def _parked(
+    base: NDArray[np.int64], shape: tuple[int, ...], half: int, top: int
+) -> NDArray[np.int64]:
+    """``base`` with every cell whose lookups all miss the reference parked just above the
+    table's far corner.
+
+    A point at cell ``x`` is read, at level ``h``, over the cells ``x + u … x + u + 2^h − 1``
+    (``|u| ≤ half``, ``2^h ≤ top``). When ``x < −(half + top − 1)`` or ``x > nx − 1 + half``
+    (or the same in ``y``) all of them lie outside the table's cells, where ``L_0`` is 0, so
+    0 is its exact value at level 0 and a valid bound above. Parked at ``(nx + half,
+    ny + half)``, every lookup reads the edge-replicated zero corner (the table's last
+    ``top`` rows and columns are zero, so every level is 0 there). The padded levels then
+    need margins of at most ``2 half + top`` cells instead of the current points' extent."""
+    nx, ny = shape[0], shape[1]
+    bx, by = base[:, :, 0], base[:, :, 1]
+    far = (bx < -(half + top - 1)) | (bx > nx - 1 + half) | (by < -(half + top - 1))
+    far |= by > ny - 1 + half
+    if not far.any():
+        return base
+    out = base.copy()
+    out[far] = (nx + half, ny + half)
+    return out
+
+
 class _Lookup:
     """:func:`_score` without the clip: each level ``L_h`` padded by edge replication so
     that every lookup of the search (rotated points ``base`` moved by ``u, v ∈ ±half``)
@@ -337,6 +361,7 @@ class _Lookup:
         self, grid: LikelihoodGrid, base: NDArray[np.int64], half: int, limit: int
     ) -> None:
         self.grid, self.base = grid, base
+        base = _parked(base, grid.table.shape, half, 2**grid.levels)
         first = base.min(axis=(0, 1)) - half  # (2,) the lookups' extreme cells
         last = base.max(axis=(0, 1)) + half
         got = grid.padded(first, last, limit)
@@ -347,6 +372,7 @@ class _Lookup:
         self.stride = int(tables[0].shape[1])
         self.tables = [t.ravel() for t in tables]
         self.flat = (base[:, :, 0] + a0) * self.stride + (base[:, :, 1] + b0)  # (T, M)
+        self.ones = np.ones(base.shape[1], dtype=np.float32)
 
     def score(
         self, h: int, k: NDArray[np.int64], u: NDArray[np.int64], v: NDArray[np.int64]
@@ -361,6 +387,7 @@ class _Lookup:
         out = np.empty(n, dtype=np.float64)
         idx = np.empty((min(rows, n), m), dtype=np.int64)
         val = np.empty((min(rows, n), m), dtype=np.float32)
+        sums = np.empty(min(rows, n), dtype=np.float32)
         shift = u * self.stride + v
         for a in range(0, n, rows):
             b = min(a + rows, n)
@@ -368,7 +395,8 @@ class _Lookup:
             flat.take(k[a:b], axis=0, out=ib, mode="clip")  # the points' cells, then moved
             ib += shift[a:b, None]
             table.take(ib, out=vb, mode="clip")  # in bounds; "raise" would buffer out
-            np.add.reduce(vb, axis=1, dtype=np.float64, out=out[a:b])
+            np.matmul(vb, self.ones, out=sums[: b - a])
+            out[a:b] = sums[: b - a]
         out /= m  # np.mean's own steps (sum, then divide), without its per-call checks
         return out
 
@@ -397,14 +425,10 @@ def _greedy(
         ck = np.repeat(kk, 4)
         cu = (uu[:, None] + np.array([0, s, 0, s])[None, :]).ravel()
         cv = (vv[:, None] + np.array([0, 0, s, s])[None, :]).ravel()
-        line = np.repeat(np.arange(kk.size), 4)
-        ok = (cu <= half) & (cv <= half)
-        ck, cu, cv, line = ck[ok], cu[ok], cv[ok], line[ok]
-        if not ck.size:
-            return 0.0
-        sc = look.score(h - 1, ck, cu, cv)
-        order = np.lexsort((-sc, line))  # per start, its best child first
-        first = order[np.flatnonzero(np.diff(line[order], prepend=-1))]
+        ok = (cu <= half) & (cv <= half)  # the first child is always inside the window
+        sc = np.full(ck.size, -np.inf)
+        sc[ok] = look.score(h - 1, ck[ok], cu[ok], cv[ok])
+        first = sc.reshape(-1, 4).argmax(axis=1) + 4 * np.arange(kk.size)  # best child
         kk, uu, vv = ck[first], cu[first], cv[first]
         best = float(sc[first].max())
     return best
