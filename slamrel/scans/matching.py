@@ -554,30 +554,36 @@ def prepare_scan(
     valid = np.asarray(np.isfinite(p).all(axis=1), dtype=bool)
     b = p.shape[0]
     offsets = np.arange(-window, window + 1)
-    idx = np.arange(b)[:, None] + offsets[None, :]
+    # x and y apart, (beam, window) each, instead of one (beam, window, 2) array
+    idx = np.arange(b)[:, None] + offsets[None, :]  # (B, W)
     inside = (idx >= 0) & (idx < b)
     idx = np.clip(idx, 0, max(b - 1, 0))
-    nb = p[idx]  # (B, W, 2)
+    px, py = p[:, 0], p[:, 1]
+    nx, ny = px[idx], py[idx]  # (B, W)
     with np.errstate(invalid="ignore"):
-        dist = np.linalg.norm(nb - p[:, None, :], axis=2)
-        use = np.asarray(inside & valid[idx] & valid[:, None])
+        dx, dy = nx - px[:, None], ny - py[:, None]
+        dist = np.sqrt(dx * dx + dy * dy)
+        use = inside & valid[idx] & valid[:, None]
         use &= (dist <= max_gap * np.abs(offsets)[None, :]) & (dist <= radius)
     count = use.sum(axis=1)
     w = use.astype(np.float64)
-    nbz = np.where(use[:, :, None], nb, 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        centroid = nbz.sum(axis=1) / count[:, None]
-        d = np.where(use[:, :, None], nb - centroid[:, None, :], 0.0)
-        cxx = (w * d[:, :, 0] ** 2).sum(axis=1)
-        cyy = (w * d[:, :, 1] ** 2).sum(axis=1)
-        cxy = (w * d[:, :, 0] * d[:, :, 1]).sum(axis=1)
+        # the centroid's sums run over the window in order (numpy's sum over the middle
+        # axis of a (B, W, 2) array), the scatter's pairwise along each row: as before
+        cx = np.ascontiguousarray(np.where(use, nx, 0.0).T).sum(axis=0) / count
+        cy = np.ascontiguousarray(np.where(use, ny, 0.0).T).sum(axis=0) / count
+        ex = np.where(use, nx - cx[:, None], 0.0)
+        ey = np.where(use, ny - cy[:, None], 0.0)
+        cxx = (w * ex**2).sum(axis=1)
+        cyy = (w * ey**2).sum(axis=1)
+        cxy = (w * ex * ey).sum(axis=1)
         half_trace = 0.5 * (cxx + cyy)
         root = np.sqrt(0.25 * (cxx - cyy) ** 2 + cxy**2)
         lam_min, lam_max = half_trace - root, half_trace + root
         phi = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
         line = (count >= 3) & (lam_min <= max_curvature * lam_max) & (lam_max > 0)
     normals = np.column_stack((-np.sin(phi), np.cos(phi)))[line]
-    anchors = centroid[line]
+    anchors = np.column_stack((cx, cy))[line]
     return PreparedScan(p[valid], anchors, normals)
 
 
