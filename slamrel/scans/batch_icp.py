@@ -23,6 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from relation_metric.se2 import wrap_angle_float
 from slamrel.scans.matching import (
     _CAUCHY,
     _GRID_SIDE,
@@ -35,7 +36,6 @@ from slamrel.scans.matching import (
     NearestRaster,
     PreparedScan,
     _failed,
-    _summarise,
     align,
 )
 
@@ -343,25 +343,119 @@ def _run(
         shrink = upd & (small | (it > opt.shrink_after))
         gate[links[shrink]] = np.minimum(g_old[shrink], new_gate[shrink])
     iters[active] = opt.max_iterations
+    done_ok = np.array([b not in failed for b in range(n)], dtype=bool)
+    summary = _summaries(
+        look, (px, py, size, poff), (nx, ny), x, gate, sigma, np.flatnonzero(done_ok), opt
+    )
     res = []
     for b in range(n):
         if b in failed:
             res.append(_failed(guess[b], "too few matches", failed[b]))
             continue
+        got = summary[b]
+        if got is None:
+            res.append(_failed(guess[b], "too few matches", int(iters[b])))
+            continue
+        cov, frac, resid, m, cond, weak = got
+        out = x[b].copy()
+        out[2] = wrap_angle_float(float(out[2]))
         res.append(
-            _summarise(
-                refs[b],
-                curs[b],
-                x[b].copy(),
-                guess[b],
-                float(gate[b]),
-                float(sigma[b]),
-                int(iters[b]),
-                bool(converged[b]),
-                opt,
+            Alignment(
+                delta=out,
+                guess=guess[b].copy(),
+                covariance=cov,
+                matched_fraction=frac,
+                residual=resid,
+                sigma=float(sigma[b]),
+                matches=m,
+                iterations=int(iters[b]),
+                converged=bool(converged[b]),
+                condition=cond,
+                weak_direction=weak,
+                degenerate=cond < opt.degenerate_ratio,
             )
         )
     return res
+
+
+def _summaries(
+    look: _Lookup,
+    points: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]],
+    normals: tuple[NDArray[np.float64], NDArray[np.float64]],
+    x: NDArray[np.float64],
+    gate: NDArray[np.float64],
+    sigma: NDArray[np.float64],
+    links: NDArray[np.int64],
+    opt: IcpOptions,
+) -> dict[int, tuple[NDArray[np.float64], float, float, int, float, NDArray[np.float64]] | None]:
+    """:func:`slamrel.scans.matching._summarise`'s measures at the solutions ``x`` of
+    ``links``, all at once: covariance, matched fraction, residual, matches, condition and
+    weak direction per link (None: fewer than ``min_matches`` inliers)."""
+    out: dict[int, tuple[NDArray[np.float64], float, float, int, float, NDArray[np.float64]] | None]
+    out = {}
+    if not links.size:
+        return out
+    px, py, size, poff = points
+    nx, ny = normals
+    cnt = size[links]
+    bounds = np.concatenate(([0], np.cumsum(cnt)))
+    seg = np.repeat(np.arange(links.size), cnt)
+    idx = poff[links][seg] + (np.arange(bounds[-1]) - bounds[:-1][seg])
+    xl = x[links]
+    c, s = np.cos(xl[:, 2]), np.sin(xl[:, 2])
+    p0, p1 = px[idx], py[idx]
+    q0 = c[seg] * p0 - s[seg] * p1 + xl[seg, 0]
+    q1 = s[seg] * p0 + c[seg] * p1 + xl[seg, 1]
+    ok, k = look.match(links, seg, bounds, q0, q1, gate[links])
+    at = np.flatnonzero(ok)
+    ka, sg = k[at], seg[at]
+    n0, n1 = nx[ka], ny[ka]
+    qa0, qa1 = q0[at], q1[at]
+    e = n0 * (qa0 - look.ax[ka]) + n1 * (qa1 - look.ay[ka])
+    sig = sigma[links]
+    keep = np.abs(e) <= 3.0 * sig[sg]
+    e, n0, n1, qa0, qa1, sg = e[keep], n0[keep], n1[keep], qa0[keep], qa1[keep], sg[keep]
+    nl = links.size
+    m = np.bincount(sg, minlength=nl)
+    r = e / (_CAUCHY * sig)[sg]
+    w = 1.0 / (1.0 + r * r)
+    j2 = n1 * (qa0 - xl[sg, 0]) - n0 * (qa1 - xl[sg, 1])
+    hm = np.empty((nl, 3, 3))
+    cols = (n0, n1, j2)
+    for a in range(3):
+        for b in range(a, 3):
+            hm[:, a, b] = hm[:, b, a] = np.bincount(sg, weights=w * cols[a] * cols[b], minlength=nl)
+    wsum = np.bincount(sg, weights=w, minlength=nl)
+    s2 = np.bincount(sg, weights=w * e * e, minlength=nl) / np.maximum(wsum - 3.0, 1.0)
+    ee = np.bincount(sg, weights=e * e, minlength=nl)
+    good = m >= opt.min_matches
+    with np.errstate(invalid="ignore", divide="ignore"):
+        resid = np.sqrt(ee / np.maximum(m, 1))
+        h22 = hm[:, 2, 2]
+        pos = h22 > 0
+        den = np.where(pos, h22, 1.0)
+        schur = hm[:, :2, :2] - np.where(
+            pos[:, None, None], hm[:, :2, 2, None] * hm[:, None, 2, :2] / den[:, None, None], 0.0
+        )
+    lam, vec = np.linalg.eigh(schur)
+    for a, b in enumerate(links.tolist()):
+        if not good[a]:
+            out[b] = None
+            continue
+        try:
+            cov = s2[a] * np.linalg.inv(hm[a])
+        except np.linalg.LinAlgError:
+            cov = np.full((3, 3), np.inf)
+        cond = float(lam[a, 0] / lam[a, 1]) if lam[a, 1] > 0 else 0.0
+        out[b] = (
+            cov,
+            int(m[a]) / max(int(cnt[a]), 1),
+            float(resid[a]),
+            int(m[a]),
+            cond,
+            vec[a, :, 0].copy(),
+        )
+    return out
 
 
 def _periods(hist: NDArray[np.float64], tol: float, longest: int = 4) -> NDArray[np.int64]:
