@@ -356,7 +356,7 @@ def _run(
         if got is None:
             res.append(_failed(guess[b], "too few matches", int(iters[b])))
             continue
-        cov, frac, resid, m, cond, weak = got
+        cov, frac, resid, n_in, cond, weak = got
         out = x[b].copy()
         out[2] = wrap_angle_float(float(out[2]))
         res.append(
@@ -367,7 +367,7 @@ def _run(
                 matched_fraction=frac,
                 residual=resid,
                 sigma=float(sigma[b]),
-                matches=m,
+                matches=n_in,
                 iterations=int(iters[b]),
                 converged=bool(converged[b]),
                 condition=cond,
