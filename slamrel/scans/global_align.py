@@ -189,6 +189,7 @@ class _Scans:
         self._prep: dict[int, PreparedScan] = {}
         self._near: dict[int, NDArray[np.float64]] = {}
         self._grids: dict[tuple[object, bytes, bytes], LikelihoodGrid] = {}
+        self._bounds: dict[object, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         self.submaps: dict[tuple[int, float], NDArray[np.float64]] = {}
         self.link_icp = opt.icp
 
@@ -204,6 +205,20 @@ class _Scans:
         if got is None:
             p = self.prep(k).points
             got = self._near[k] = p[np.hypot(p[:, 0], p[:, 1]) <= self.gopt.search_range]
+        return got
+
+    def bounds(
+        self, key: object, ref: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Per-axis least and greatest of ``ref`` ``(K, 2)``, kept for a named reference."""
+        got = self._bounds.get(key) if key is not None else None
+        if got is None:
+            xs, ys = ref[:, 0], ref[:, 1]
+            got = (np.array([xs.min(), ys.min()]), np.array([xs.max(), ys.max()]))
+            if key is not None:
+                self._bounds[key] = got
+                while len(self._bounds) > 4 * _KEEP_GRIDS:
+                    self._bounds.pop(next(iter(self._bounds)))
         return got
 
     def grid(
@@ -394,8 +409,9 @@ def _search(
         nan3 = np.full(3, np.nan)
         return SearchResult(np.asarray(centre, float).copy(), 0.0, nan3, 0.0, 0, False)
     reach = float(np.max(np.hypot(cur[:, 0], cur[:, 1]))) + wxy + 4 * sopt.sigma
-    lo = np.maximum(ref.min(axis=0), centre[:2] - reach) - 4 * sopt.sigma
-    hi = np.minimum(ref.max(axis=0), centre[:2] + reach) + 4 * sopt.sigma
+    ref_min, ref_max = store.bounds(ref_key, ref)
+    lo = np.maximum(ref_min, centre[:2] - reach) - 4 * sopt.sigma
+    hi = np.minimum(ref_max, centre[:2] + reach) + 4 * sopt.sigma
     empty = bool(np.any(hi < lo))  # no placement in the window overlaps the reference
     hi = np.maximum(hi, lo + sopt.resolution)
     cells = grid_cells(lo, hi, sopt.resolution)
@@ -415,8 +431,8 @@ def _search(
         _refuse_hopeless(store, ref_scans[0], cur_scans[0], centre, reach)
         nan3 = np.full(3, np.nan)
         return SearchResult(np.asarray(centre, float).copy(), 0.0, nan3, 0.0, 0, False)
-    whole_lo = ref.min(axis=0) - 4 * sopt.sigma
-    whole_hi = np.maximum(ref.max(axis=0) + 4 * sopt.sigma, whole_lo + sopt.resolution)
+    whole_lo = ref_min - 4 * sopt.sigma
+    whole_hi = np.maximum(ref_max + 4 * sopt.sigma, whole_lo + sopt.resolution)
     if ref_key is None or grid_cells(whole_lo, whole_hi, sopt.resolution) > sopt.max_cells:
         grid = likelihood_grid(ref, lo, hi, sopt)
     else:  # a named reference: one grid over all of it, kept for every search against it

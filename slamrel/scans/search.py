@@ -292,8 +292,9 @@ def likelihood_grid(
     table = np.zeros((shape[0] + pad, shape[1] + pad), dtype=np.float32)
     w = int(np.ceil(3 * sig / r))
     cell = np.floor((points - lo) / r).astype(np.int64)  # (K, 2)
-    inside = np.all((cell - w >= 1) & (cell + w < np.array(shape)), axis=1)
-    meets = np.all((cell + w >= 1) & (cell - w < np.array(shape)), axis=1)
+    cx, cy = cell[:, 0], cell[:, 1]  # per axis (np.all over a 2-column axis is slow)
+    inside = (cx - w >= 1) & (cx + w < shape[0]) & (cy - w >= 1) & (cy + w < shape[1])
+    meets = (cx + w >= 1) & (cx - w < shape[0]) & (cy + w >= 1) & (cy - w < shape[1])
     flat = table.ravel()
     dims = (table.shape[1], shape[0], shape[1])
     for part, whole in ((np.flatnonzero(inside), True), (np.flatnonzero(meets & ~inside), False)):
@@ -362,8 +363,10 @@ class _Lookup:
     ) -> None:
         self.grid, self.base = grid, base
         base = _parked(base, grid.table.shape, half, 2**grid.levels)
-        first = base.min(axis=(0, 1)) - half  # (2,) the lookups' extreme cells
-        last = base.max(axis=(0, 1)) + half
+        bx, by = base[:, :, 0], base[:, :, 1]  # (per axis: numpy's (0, 1) reduction of the
+        # last axis's two columns is ~30x slower)
+        first = np.array([bx.min(), by.min()]) - half  # (2,) the lookups' extreme cells
+        last = np.array([bx.max(), by.max()]) + half
         got = grid.padded(first, last, limit)
         self.padded = got is not None
         if got is None:
