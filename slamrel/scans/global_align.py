@@ -239,6 +239,13 @@ class _Scans:
         return got
 
 
+def _unique(values: NDArray[np.int64]) -> NDArray[np.int64]:
+    """``np.unique`` of integers by a sort (``np.unique`` imports ``numpy.ma``, 16 ms of the
+    command's start-up, to test for a masked array)."""
+    v = np.sort(np.asarray(values, dtype=np.int64).ravel())
+    return v[np.concatenate(([True], v[1:] != v[:-1]))] if v.size else v
+
+
 def _chain_nodes(
     poses: NDArray[np.float64], used: NDArray[np.int64], gap: float
 ) -> NDArray[np.int64]:
@@ -256,7 +263,7 @@ def _chain_nodes(
         marks = np.arange(t[a] + spacing, t[a + 1] - spacing / 2, spacing)
         extra.append(np.searchsorted(travel, marks))
     allk = np.concatenate([used, *extra]) if extra else used
-    return np.unique(allk).astype(np.int64)
+    return _unique(allk)
 
 
 def scan_chain(
@@ -267,7 +274,7 @@ def scan_chain(
 ) -> Chain:
     """The chain over ``used`` (and fill-ins), see the module docstring, step 1."""
     gopt, opt = store.gopt, store.opt
-    nodes = _chain_nodes(poses, np.unique(used), gopt.chain_gap)
+    nodes = _chain_nodes(poses, _unique(used), gopt.chain_gap)
     guess = between(poses[nodes[:-1]], poses[nodes[1:]])
     links: list[Alignment] = []
     motion = guess.copy()
