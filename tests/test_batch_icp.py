@@ -107,14 +107,29 @@ def test_one_pass_parse_equals_the_record_loop(tmp_path, monkeypatch, odd):
     path = tmp_path / "a.clf"
     path.write_text("".join(lines))
     calls = []
-    one_pass = laser._fast_rows
-    monkeypatch.setattr(laser, "_fast_rows", lambda *a: calls.append(one_pass(*a)) or calls[-1])
+    one_pass = laser._flaser_in_one_pass
+    monkeypatch.setattr(
+        laser, "_flaser_in_one_pass", lambda *a: calls.append(one_pass(*a)) or calls[-1]
+    )
     fast = read_laser_scans(path)
-    assert calls == [True]  # read in one pass
+    assert len(calls) == 1 and calls[0] is not None  # read in one pass
+    monkeypatch.setattr(laser, "_flaser_in_one_pass", lambda *a: None)
+    rows = read_laser_scans(path)  # the records split, then their numbers in one pass
     monkeypatch.setattr(laser, "_fast_rows", lambda *a: False)
-    slow = read_laser_scans(path)
-    for name in ("ranges", "laser_pose", "odometry_pose", "timestamps", "start_angle"):
+    slow = read_laser_scans(path)  # record by record
+    for name in (
+        "ranges",
+        "laser_pose",
+        "odometry_pose",
+        "timestamps",
+        "start_angle",
+        "angular_resolution",
+        "max_range",
+        "beams",
+        "lines",
+    ):
         np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name))
+        np.testing.assert_array_equal(getattr(rows, name), getattr(slow, name))
     monkeypatch.undo()
     lines[11] = lines[11].replace("FLASER 181 ", "FLASER 181 x", 1)
     path.write_text("".join(lines))

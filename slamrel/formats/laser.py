@@ -52,7 +52,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -269,14 +269,13 @@ def read_laser_scans(path: PathLike, *, record: str | None = None) -> LaserScans
         )
     kinds: Counter[str] = Counter()
     skipped: Counter[str] = Counter()
-    rows: list[tuple[int, list[str]]] = []
+    texts: list[tuple[int, str]] = []
     for number, text in src.data_lines():
-        fields = text.split()
-        kind = fields[0]
+        kind = text.split(None, 1)[0]  # the record's name (the rest is split when read)
         if kind in CARMEN_LASER_RECORDS:
             kinds[kind] += 1
             if record is None or kind == record:
-                rows.append((number, fields))
+                texts.append((number, text))
                 continue
         skipped[kind] += 1
     if src.cut_off_line() is not None:
@@ -288,14 +287,58 @@ def read_laser_scans(path: PathLike, *, record: str | None = None) -> LaserScans
             path=src.path,
         )
     chosen = record or (next(iter(kinds)) if kinds else None)
-    if chosen is None or not rows:
+    if chosen is None or not texts:
         raise InputError(
             f"no {chosen or 'laser'} records found (expected one of "
             f"{', '.join(CARMEN_LASER_RECORDS)})",
             path=src.path,
         )
-    rows = [(n, f) for n, f in rows if f[0] == chosen]
+    if chosen in ("FLASER", "RLASER"):
+        got = _flaser_in_one_pass(src, chosen, texts, dict(skipped))
+        if got is not None:
+            return got
+    rows = [(n, t.split()) for n, t in texts]
     return _scans_from_rows(src, chosen, rows, dict(skipped))
+
+
+def _flaser_in_one_pass(
+    src: SourceText, kind: str, texts: list[tuple[int, str]], skipped: dict[str, int]
+) -> LaserScans | None:
+    """``FLASER``/``RLASER`` records (``KIND n r1..rn x y θ ox oy oθ ipc_t host logger_t``)
+    read in one pass of :func:`parse_decimal_table` over their numbers ``r1 … ipc_t``, without
+    splitting every record into its fields: when every record has the same plain count ``n``
+    and exactly ``n + 7`` plain decimals between it and the last two fields (the parse checks
+    the count per line). The values are those of :func:`_scans_from_rows`, bit for bit; None
+    for anything else (the record-by-record path then reads or diagnoses it)."""
+    heads = [t.split(None, 2) for _, t in texts]
+    n_tok = heads[0][1] if len(heads[0]) == 3 else ""
+    if not (n_tok.isdigit() and n_tok == str(int(n_tok))):
+        return None
+    if any(len(h) != 3 or h[1] != n_tok for h in heads):
+        return None
+    n = int(n_tok)
+    text = "\n".join(h[2].rsplit(None, 2)[0] for h in heads)
+    if not text.isascii():
+        return None
+    table = parse_decimal_table((text + "\n").encode("ascii"), n + 7)
+    if table is None or table.shape[0] != len(texts):
+        return None
+    start, res = guess_laser_config(n)
+    config = np.empty((len(texts), 4))
+    config[:] = (start, math.pi, res, FLASER_MAX_RANGE)
+    return _laser_scans(
+        src,
+        kind,
+        texts,
+        np.ascontiguousarray(table[:, :n]),
+        np.full(len(texts), n, dtype=np.int64),
+        config,
+        np.ascontiguousarray(table[:, n : n + 3]),
+        np.ascontiguousarray(table[:, n + 3 : n + 6]),
+        table[:, n + 6].copy(),
+        True,
+        skipped,
+    )
 
 
 def _fast_rows(
@@ -398,6 +441,27 @@ def _scans_from_rows(
                 path=path,
                 line=number,
             )
+    return _laser_scans(
+        src, kind, rows, ranges, beams, config, laser, odom, times, guessed, skipped
+    )
+
+
+def _laser_scans(
+    src: SourceText,
+    kind: str,
+    rows: Sequence[tuple[int, object]],
+    ranges: NDArray[np.float64],
+    beams: NDArray[np.int64],
+    config: NDArray[np.float64],
+    laser: NDArray[np.float64],
+    odom: NDArray[np.float64],
+    times: NDArray[np.float64],
+    guessed: bool,
+    skipped: dict[str, int],
+) -> LaserScans:
+    """The :class:`LaserScans` of the records read (file lines from ``rows``), with the
+    warning for timestamps out of order."""
+    path = src.path
     lines = np.array([number for number, _ in rows], dtype=np.int64)
     report = sort_by_time(times, lines=lines, what=f"{kind} scan")[1]
     if report.out_of_order:
