@@ -130,7 +130,6 @@ class GlobalOptions:
     retry_travel: float = 10.0
     search_range: float = 15.0
     max_points: int = 250
-    submap_points: int = 250
     refine_points: int = 1000
     chain_gap: float = 1.5
     link_xy: float = 0.5
@@ -462,7 +461,7 @@ def _submap_search(
     (i, j), (a, b) = pair, at
     centre = between(chain.poses[a], chain.poses[b])
     ref_pts = _submap_points(store, chain, a, reach)
-    cur_pts = _thinned(_submap_points(store, chain, b, reach), gopt.submap_points)
+    cur_pts = _thinned(_submap_points(store, chain, b, reach), gopt.max_points)
     wxy = gopt.window_xy + gopt.drift_xy * travel
     wth = gopt.window_theta + gopt.drift_theta * travel
     return _search(
