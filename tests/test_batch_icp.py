@@ -12,7 +12,7 @@ from relation_metric.errors import InputError
 from relation_metric.se2 import between
 from slamrel.formats import laser
 from slamrel.formats.laser import read_laser_scans
-from slamrel.scans import matching
+from slamrel.scans import batch_icp, matching
 from slamrel.scans.batch_icp import align_many
 from slamrel.scans.matching import IcpOptions, PreparedScan, align, prepare_scan
 from slamrel.simulation.laser import laser_world, loop_path, simulate_laser_log
@@ -61,6 +61,8 @@ def _pairs(seed: int = 3):
 def test_align_many_is_align_pair_by_pair(opt, monkeypatch):
     if opt.nearest == "grid" and opt.coarse_stride == 1:
         monkeypatch.setattr(matching, "_GRID_DENSE", 64)  # the sparse tables too
+    if opt.coarse_stride > 1:
+        monkeypatch.setattr(batch_icp, "_BATCH", 7)  # several batches
     refs, curs, guess = _pairs()
     got = align_many(refs, curs, guess, opt)
     assert len(got) == len(refs)
