@@ -469,14 +469,11 @@ def _submap_search(
     )
 
 
-def _submap_icp(
-    store: _Scans, chain: Chain, at: tuple[int, int], start: NDArray[np.float64], limits: Any
-) -> NDArray[np.float64]:
-    """Submap-to-submap ICP from the search's answer ``start``: the returns of ``at[1]``'s
-    submap (thinned to ``refine_points``) against the lines of ``at[0]``'s, moved by the
-    chain. Finer than the search's grid along a corridor, whose doors and niches the two
-    scans alone may not see. ``start`` when it fails, is degenerate itself, or moves farther
-    than ``limits.max_correction`` / ``max_correction_angle`` from it."""
+def _submap_pair(
+    store: _Scans, chain: Chain, at: tuple[int, int]
+) -> tuple[PreparedScan, PreparedScan]:
+    """The two sides of :func:`_submap_icp`: the lines of ``at[0]``'s submap and the returns
+    of ``at[1]``'s (thinned to ``refine_points``), moved by the chain."""
     a, b = at
     members = _submap(store, chain, a)
     rel = between(chain.poses[a], chain.poses[members])
@@ -489,7 +486,12 @@ def _submap_icp(
     cur = _thinned(
         _submap_points(store, chain, b, store.gopt.submap_travel), store.gopt.refine_points
     )
-    got = align(ref, PreparedScan(cur, cur[:0], cur[:0]), start, store.opt.icp)
+    return ref, PreparedScan(cur, cur[:0], cur[:0])
+
+
+def _submap_choice(start: NDArray[np.float64], got: Alignment, limits: Any) -> NDArray[np.float64]:
+    """:func:`_submap_icp`'s answer from its ICP ``got``: ``start`` when it failed, is
+    degenerate itself, or moved farther than the limits from it."""
     move = between(start, got.delta)
     if (
         got.failed
@@ -499,6 +501,30 @@ def _submap_icp(
     ):
         return start
     return got.delta
+
+
+def _submap_icp(
+    store: _Scans, chain: Chain, at: tuple[int, int], start: NDArray[np.float64], limits: Any
+) -> NDArray[np.float64]:
+    """Submap-to-submap ICP from the search's answer ``start``: the returns of ``at[1]``'s
+    submap (thinned to ``refine_points``) against the lines of ``at[0]``'s, moved by the
+    chain. Finer than the search's grid along a corridor, whose doors and niches the two
+    scans alone may not see. ``start`` when it fails, is degenerate itself, or moves farther
+    than ``limits.max_correction`` / ``max_correction_angle`` from it."""
+    ref, cur = _submap_pair(store, chain, at)
+    return _submap_choice(start, align(ref, cur, start, store.opt.icp), limits)
+
+
+def _refine_limits(store: _Scans) -> Any:
+    """The limits of a distant pair's refinement (``max_refine``, ``max_refine_angle``)."""
+    from dataclasses import replace
+
+    gopt = store.gopt
+    return replace(
+        store.opt.limits,
+        max_correction=gopt.max_refine,
+        max_correction_angle=gopt.max_refine_angle,
+    )
 
 
 def _ambiguous(s: SearchResult, gopt: GlobalOptions) -> bool:
@@ -525,18 +551,22 @@ def _distant_search(
 
 
 def _distant_judge(
-    store: _Scans, chain: Chain, at: tuple[int, int], s: SearchResult, al: Alignment
+    store: _Scans,
+    chain: Chain,
+    at: tuple[int, int],
+    s: SearchResult,
+    al: Alignment,
+    refined: NDArray[np.float64] | None = None,
 ) -> tuple[Alignment, str, list[str], float]:
     """Judge a distant pair's ICP ``al`` from the search's answer ``s`` (module docstring, 3);
-    a degenerate one keeps its weak direction from the submaps' ICP."""
-    from dataclasses import replace
-
-    gopt, opt = store.gopt, store.opt
-    limits = replace(
-        opt.limits, max_correction=gopt.max_refine, max_correction_angle=gopt.max_refine_angle
-    )
+    a degenerate one keeps its weak direction from the submaps' ICP (``refined``: its answer,
+    already made; None: made here)."""
+    gopt = store.gopt
+    limits = _refine_limits(store)
     if al.degenerate and not al.failed:
-        al = pinned(al, _submap_icp(store, chain, at, s.delta, limits), gopt.search.resolution)
+        if refined is None:
+            refined = _submap_icp(store, chain, at, s.delta, limits)
+        al = pinned(al, refined, gopt.search.resolution)
     flags, susp = _judge(_resolved(al), limits, s.delta)
     flags = ["unstable" if f == "large correction" else f for f in flags]
     extra = []
@@ -615,12 +645,27 @@ def align_scans_global(
         opt.icp,
     )
     fitted = dict(zip(icp_rows, got, strict=True))
+    # the submap ICP of the degenerate distant pairs, all at once
+    weak = [k for k in searches if fitted[k].degenerate and not fitted[k].failed]
+    sides = [_submap_pair(store, chain, (int(at[k, 0]), int(at[k, 1]))) for k in weak]
+    starts = np.array([searches[k].delta for k in weak]).reshape(-1, 3)
+    limits = _refine_limits(store)
+    refined = {
+        k: _submap_choice(starts[q], g, limits)
+        for q, (k, g) in enumerate(
+            zip(
+                weak,
+                align_many([r for r, _ in sides], [c for _, c in sides], starts, opt.icp),
+                strict=True,
+            )
+        )
+    }
     out: list[tuple[Alignment, str, list[str], float]] = []
     for k in range(p):
         a, b = int(at[k, 0]), int(at[k, 1])
         tr = float(travel[k])
         if k in searches:
-            out.append(_distant_judge(store, chain, (a, b), searches[k], fitted[k]))
+            out.append(_distant_judge(store, chain, (a, b), searches[k], fitted[k], refined.get(k)))
             continue
         if b == a + 1:
             al = chain.links[a]
