@@ -29,6 +29,10 @@ def _grid_and_points(seed: int):
 
 @pytest.mark.parametrize("limit", [2**22, 1])  # padded, and the clip fallback
 def test_padded_lookups_equal_the_clipping_score(limit):
+    """The padded lookups: the clipping score at the leaves (float32 sums), and at every
+    level above a valid bound (each point's largest ``L_0`` over the node's cells, brute
+    force) no looser than the clip's edge replication (cells whose lookups all miss the
+    table read the zero corner)."""
     grid, base, rng = _grid_and_points(1)
     half = 9
     look = _Lookup(grid, base, half, limit)
@@ -36,8 +40,26 @@ def test_padded_lookups_equal_the_clipping_score(limit):
     n = 3000  # more rows than one block of 65,536 lookups holds
     k = rng.integers(0, base.shape[0], n)
     u, v = rng.integers(-half, half + 1, (2, n))
+    table = grid.pyramid[0]
+    nx, ny = table.shape
     for h in range(len(grid.pyramid)):
-        np.testing.assert_array_equal(look.score(h, k, u, v), _score(grid, base, h, k, u, v))
+        got, clip = look.score(h, k, u, v), _score(grid, base, h, k, u, v)
+        if h == 0 or not look.padded:  # the leaves' scores (float32 sums when padded)
+            np.testing.assert_allclose(got, clip, rtol=1e-6, atol=1e-7)
+            continue
+        # a bound: at least the mean over the points of the largest L_0 in the 2^h x 2^h
+        # cells the node moves each point over (0 outside the table), at most the clip's
+        best = np.zeros((n, base.shape[1]))
+        for da in range(2**h):
+            for db in range(2**h):
+                ix = base[k, :, 0] + u[:, None] + da
+                iy = base[k, :, 1] + v[:, None] + db
+                inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+                val = np.where(inside, table[ix.clip(0, nx - 1), iy.clip(0, ny - 1)], 0.0)
+                best = np.maximum(best, val)
+        assert np.all(got >= best.mean(axis=1) - 1e-6)
+        assert np.all(got <= clip + 1e-6)
+        assert np.mean(got < clip - 1e-6) > 0.01  # far points read 0, not the edge's bound
 
 
 def test_padded_levels_equal_numpy_edge_pad_of_the_pyramid():

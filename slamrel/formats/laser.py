@@ -52,7 +52,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -70,9 +70,11 @@ from slamrel.formats.bags import (
     read_static_transform,
     split_bag_spec,
 )
+from slamrel.formats.fastparse import parse_decimal_table
 from slamrel.formats.text import PathLike, SourceText, read_source
 from slamrel.formats.trajectories import (
     CARMEN_LASER_RECORDS,
+    CarmenLayout,
     carmen_floats,
     carmen_layout,
 )
@@ -267,14 +269,13 @@ def read_laser_scans(path: PathLike, *, record: str | None = None) -> LaserScans
         )
     kinds: Counter[str] = Counter()
     skipped: Counter[str] = Counter()
-    rows: list[tuple[int, list[str]]] = []
+    texts: list[tuple[int, str]] = []
     for number, text in src.data_lines():
-        fields = text.split()
-        kind = fields[0]
+        kind = text.split(None, 1)[0]  # the record's name (the rest is split when read)
         if kind in CARMEN_LASER_RECORDS:
             kinds[kind] += 1
             if record is None or kind == record:
-                rows.append((number, fields))
+                texts.append((number, text))
                 continue
         skipped[kind] += 1
     if src.cut_off_line() is not None:
@@ -286,14 +287,103 @@ def read_laser_scans(path: PathLike, *, record: str | None = None) -> LaserScans
             path=src.path,
         )
     chosen = record or (next(iter(kinds)) if kinds else None)
-    if chosen is None or not rows:
+    if chosen is None or not texts:
         raise InputError(
             f"no {chosen or 'laser'} records found (expected one of "
             f"{', '.join(CARMEN_LASER_RECORDS)})",
             path=src.path,
         )
-    rows = [(n, f) for n, f in rows if f[0] == chosen]
+    if chosen in ("FLASER", "RLASER"):
+        got = _flaser_in_one_pass(src, chosen, texts, dict(skipped))
+        if got is not None:
+            return got
+    rows = [(n, t.split()) for n, t in texts]
     return _scans_from_rows(src, chosen, rows, dict(skipped))
+
+
+def _flaser_in_one_pass(
+    src: SourceText, kind: str, texts: list[tuple[int, str]], skipped: dict[str, int]
+) -> LaserScans | None:
+    """``FLASER``/``RLASER`` records (``KIND n r1..rn x y θ ox oy oθ ipc_t host logger_t``)
+    read in one pass of :func:`parse_decimal_table` over their numbers ``r1 … ipc_t``, without
+    splitting every record into its fields: when every record has the same plain count ``n``
+    and exactly ``n + 7`` plain decimals between it and the last two fields (the parse checks
+    the count per line). The values are those of :func:`_scans_from_rows`, bit for bit; None
+    for anything else (the record-by-record path then reads or diagnoses it)."""
+    heads = [t.split(None, 2) for _, t in texts]
+    n_tok = heads[0][1] if len(heads[0]) == 3 else ""
+    if not (n_tok.isdigit() and n_tok == str(int(n_tok))):
+        return None
+    if any(len(h) != 3 or h[1] != n_tok for h in heads):
+        return None
+    n = int(n_tok)
+    text = "\n".join(h[2].rsplit(None, 2)[0] for h in heads)
+    if not text.isascii():
+        return None
+    table = parse_decimal_table((text + "\n").encode("ascii"), n + 7)
+    if table is None or table.shape[0] != len(texts):
+        return None
+    start, res = guess_laser_config(n)
+    config = np.empty((len(texts), 4))
+    config[:] = (start, math.pi, res, FLASER_MAX_RANGE)
+    return _laser_scans(
+        src,
+        kind,
+        texts,
+        np.ascontiguousarray(table[:, :n]),
+        np.full(len(texts), n, dtype=np.int64),
+        config,
+        np.ascontiguousarray(table[:, n : n + 3]),
+        np.ascontiguousarray(table[:, n + 3 : n + 6]),
+        table[:, n + 6].copy(),
+        True,
+        skipped,
+    )
+
+
+def _fast_rows(
+    rows: list[tuple[int, list[str]]],
+    layouts: list[CarmenLayout],
+    ranges: NDArray[np.float64],
+    config: NDArray[np.float64],
+    laser: NDArray[np.float64],
+    odom: NDArray[np.float64],
+    times: NDArray[np.float64],
+) -> bool:
+    """Fill the arrays from ``rows`` in one pass of :func:`parse_decimal_table` when every row
+    has the same layout and every number is a plain decimal within the limits the loop in
+    :func:`_scans_from_rows` checks (the same values, bit for bit); False (nothing trusted)
+    otherwise, and the loop reads and diagnoses the rows one by one."""
+    lay = layouts[0] if layouts else None
+    if lay is None or lay.ranges is None or any(other != lay for other in layouts):
+        return False
+    n = lay.readings
+    # (first field, count, where the values go) in the order they are joined
+    parts: list[tuple[int, int, NDArray[np.float64]]] = [(lay.ranges, n, ranges[:, :n])]
+    if lay.config is not None:
+        parts.append((lay.config + 1, 4, config))
+    if lay.laser is not None:
+        parts.append((lay.laser, 3, laser))
+    if lay.robot is not None:
+        parts.append((lay.robot, 3, odom))
+    parts.append((lay.time, 1, times[:, None]))
+    ncols = sum(c for _, c, _ in parts)
+    text = "\n".join(" ".join([t for a, c, _ in parts for t in f[a : a + c]]) for _, f in rows)
+    if not text.isascii():
+        return False
+    table = parse_decimal_table((text + "\n").encode("ascii"), ncols)
+    if table is None or table.shape[0] != len(rows):
+        return False
+    k = 0
+    for _, c, target in parts:
+        target[:] = table[:, k : k + c]
+        k += c
+    if lay.config is None:
+        start, res = guess_laser_config(lay.readings)
+        config[:] = (start, math.pi, res, FLASER_MAX_RANGE)
+    elif not ((config[:, 2] > 0) & (config[:, 3] > 0)).all():
+        return False  # the loop names the first bad record
+    return True
 
 
 def _scans_from_rows(
@@ -310,7 +400,11 @@ def _scans_from_rows(
     odom = np.full((n, 3), np.nan)
     times = np.empty(n)
     guessed = kind in ("FLASER", "RLASER")
-    for k, ((number, f), lay) in enumerate(zip(rows, layouts, strict=True)):
+    if _fast_rows(rows, layouts, ranges, config, laser, odom, times):
+        rows_left: list[tuple[int, list[str]]] = []
+    else:
+        rows_left = rows
+    for k, ((number, f), lay) in enumerate(zip(rows_left, layouts, strict=False)):
         assert lay.ranges is not None
         r = carmen_floats(f, lay.ranges, lay.readings, "range reading", src, number)
         ranges[k, : lay.readings] = r
@@ -347,6 +441,27 @@ def _scans_from_rows(
                 path=path,
                 line=number,
             )
+    return _laser_scans(
+        src, kind, rows, ranges, beams, config, laser, odom, times, guessed, skipped
+    )
+
+
+def _laser_scans(
+    src: SourceText,
+    kind: str,
+    rows: Sequence[tuple[int, object]],
+    ranges: NDArray[np.float64],
+    beams: NDArray[np.int64],
+    config: NDArray[np.float64],
+    laser: NDArray[np.float64],
+    odom: NDArray[np.float64],
+    times: NDArray[np.float64],
+    guessed: bool,
+    skipped: dict[str, int],
+) -> LaserScans:
+    """The :class:`LaserScans` of the records read (file lines from ``rows``), with the
+    warning for timestamps out of order."""
+    path = src.path
     lines = np.array([number for number, _ in rows], dtype=np.int64)
     report = sort_by_time(times, lines=lines, what=f"{kind} scan")[1]
     if report.out_of_order:

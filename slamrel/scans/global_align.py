@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 from relation_metric.errors import InputError
 from relation_metric.se2 import between, cumulative_compose
 from slamrel.formats.laser import LaserScans
+from slamrel.scans.batch_icp import align_many
 from slamrel.scans.matching import Alignment, PreparedScan, align, prepare_scan, transform
 from slamrel.scans.proposals import Proposals
 from slamrel.scans.relations import AlignOptions, ScanRelations, _judge, far_guess_error
@@ -188,6 +189,7 @@ class _Scans:
         self._prep: dict[int, PreparedScan] = {}
         self._near: dict[int, NDArray[np.float64]] = {}
         self._grids: dict[tuple[object, bytes, bytes], LikelihoodGrid] = {}
+        self._bounds: dict[object, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         self.submaps: dict[tuple[int, float], NDArray[np.float64]] = {}
         self.link_icp = opt.icp
 
@@ -203,6 +205,20 @@ class _Scans:
         if got is None:
             p = self.prep(k).points
             got = self._near[k] = p[np.hypot(p[:, 0], p[:, 1]) <= self.gopt.search_range]
+        return got
+
+    def bounds(
+        self, key: object, ref: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Per-axis least and greatest of ``ref`` ``(K, 2)``, kept for a named reference."""
+        got = self._bounds.get(key) if key is not None else None
+        if got is None:
+            xs, ys = ref[:, 0], ref[:, 1]
+            got = (np.array([xs.min(), ys.min()]), np.array([xs.max(), ys.max()]))
+            if key is not None:
+                self._bounds[key] = got
+                while len(self._bounds) > 4 * _KEEP_GRIDS:
+                    self._bounds.pop(next(iter(self._bounds)))
         return got
 
     def grid(
@@ -223,6 +239,13 @@ class _Scans:
         return got
 
 
+def _unique(values: NDArray[np.int64]) -> NDArray[np.int64]:
+    """``np.unique`` of integers by a sort (``np.unique`` imports ``numpy.ma``, 16 ms of the
+    command's start-up, to test for a masked array)."""
+    v = np.sort(np.asarray(values, dtype=np.int64).ravel())
+    return v[np.concatenate(([True], v[1:] != v[:-1]))] if v.size else v
+
+
 def _chain_nodes(
     poses: NDArray[np.float64], used: NDArray[np.int64], gap: float
 ) -> NDArray[np.int64]:
@@ -240,7 +263,7 @@ def _chain_nodes(
         marks = np.arange(t[a] + spacing, t[a + 1] - spacing / 2, spacing)
         extra.append(np.searchsorted(travel, marks))
     allk = np.concatenate([used, *extra]) if extra else used
-    return np.unique(allk).astype(np.int64)
+    return _unique(allk)
 
 
 def scan_chain(
@@ -251,13 +274,17 @@ def scan_chain(
 ) -> Chain:
     """The chain over ``used`` (and fill-ins), see the module docstring, step 1."""
     gopt, opt = store.gopt, store.opt
-    nodes = _chain_nodes(poses, np.unique(used), gopt.chain_gap)
+    nodes = _chain_nodes(poses, _unique(used), gopt.chain_gap)
     guess = between(poses[nodes[:-1]], poses[nodes[1:]])
     links: list[Alignment] = []
     motion = guess.copy()
     fallback = 0
-    for k, (i, j) in enumerate(zip(nodes[:-1].tolist(), nodes[1:].tolist(), strict=True)):
-        a = align(store.prep(i), store.prep(j), guess[k], store.link_icp)
+    pairs = list(zip(nodes[:-1].tolist(), nodes[1:].tolist(), strict=True))
+    first = align_many(
+        [store.prep(i) for i, _ in pairs], [store.prep(j) for _, j in pairs], guess, store.link_icp
+    )
+    for k, (i, j) in enumerate(pairs):
+        a = first[k]
         flags = _judge(a, opt.limits, guess[k])[0]
         if {"failed", "low overlap", "high residual"} & set(flags):
             centre = guess[k]
@@ -389,8 +416,9 @@ def _search(
         nan3 = np.full(3, np.nan)
         return SearchResult(np.asarray(centre, float).copy(), 0.0, nan3, 0.0, 0, False)
     reach = float(np.max(np.hypot(cur[:, 0], cur[:, 1]))) + wxy + 4 * sopt.sigma
-    lo = np.maximum(ref.min(axis=0), centre[:2] - reach) - 4 * sopt.sigma
-    hi = np.minimum(ref.max(axis=0), centre[:2] + reach) + 4 * sopt.sigma
+    ref_min, ref_max = store.bounds(ref_key, ref)
+    lo = np.maximum(ref_min, centre[:2] - reach) - 4 * sopt.sigma
+    hi = np.minimum(ref_max, centre[:2] + reach) + 4 * sopt.sigma
     empty = bool(np.any(hi < lo))  # no placement in the window overlaps the reference
     hi = np.maximum(hi, lo + sopt.resolution)
     cells = grid_cells(lo, hi, sopt.resolution)
@@ -410,8 +438,8 @@ def _search(
         _refuse_hopeless(store, ref_scans[0], cur_scans[0], centre, reach)
         nan3 = np.full(3, np.nan)
         return SearchResult(np.asarray(centre, float).copy(), 0.0, nan3, 0.0, 0, False)
-    whole_lo = ref.min(axis=0) - 4 * sopt.sigma
-    whole_hi = np.maximum(ref.max(axis=0) + 4 * sopt.sigma, whole_lo + sopt.resolution)
+    whole_lo = ref_min - 4 * sopt.sigma
+    whole_hi = np.maximum(ref_max + 4 * sopt.sigma, whole_lo + sopt.resolution)
     if ref_key is None or grid_cells(whole_lo, whole_hi, sopt.resolution) > sopt.max_cells:
         grid = likelihood_grid(ref, lo, hi, sopt)
     else:  # a named reference: one grid over all of it, kept for every search against it
@@ -441,14 +469,11 @@ def _submap_search(
     )
 
 
-def _submap_icp(
-    store: _Scans, chain: Chain, at: tuple[int, int], start: NDArray[np.float64], limits: Any
-) -> NDArray[np.float64]:
-    """Submap-to-submap ICP from the search's answer ``start``: the returns of ``at[1]``'s
-    submap (thinned to ``refine_points``) against the lines of ``at[0]``'s, moved by the
-    chain. Finer than the search's grid along a corridor, whose doors and niches the two
-    scans alone may not see. ``start`` when it fails, is degenerate itself, or moves farther
-    than ``limits.max_correction`` / ``max_correction_angle`` from it."""
+def _submap_pair(
+    store: _Scans, chain: Chain, at: tuple[int, int]
+) -> tuple[PreparedScan, PreparedScan]:
+    """The two sides of :func:`_submap_icp`: the lines of ``at[0]``'s submap and the returns
+    of ``at[1]``'s (thinned to ``refine_points``), moved by the chain."""
     a, b = at
     members = _submap(store, chain, a)
     rel = between(chain.poses[a], chain.poses[members])
@@ -461,7 +486,12 @@ def _submap_icp(
     cur = _thinned(
         _submap_points(store, chain, b, store.gopt.submap_travel), store.gopt.refine_points
     )
-    got = align(ref, PreparedScan(cur, cur[:0], cur[:0]), start, store.opt.icp)
+    return ref, PreparedScan(cur, cur[:0], cur[:0])
+
+
+def _submap_choice(start: NDArray[np.float64], got: Alignment, limits: Any) -> NDArray[np.float64]:
+    """:func:`_submap_icp`'s answer from its ICP ``got``: ``start`` when it failed, is
+    degenerate itself, or moved farther than the limits from it."""
     move = between(start, got.delta)
     if (
         got.failed
@@ -471,6 +501,30 @@ def _submap_icp(
     ):
         return start
     return got.delta
+
+
+def _submap_icp(
+    store: _Scans, chain: Chain, at: tuple[int, int], start: NDArray[np.float64], limits: Any
+) -> NDArray[np.float64]:
+    """Submap-to-submap ICP from the search's answer ``start``: the returns of ``at[1]``'s
+    submap (thinned to ``refine_points``) against the lines of ``at[0]``'s, moved by the
+    chain. Finer than the search's grid along a corridor, whose doors and niches the two
+    scans alone may not see. ``start`` when it fails, is degenerate itself, or moves farther
+    than ``limits.max_correction`` / ``max_correction_angle`` from it."""
+    ref, cur = _submap_pair(store, chain, at)
+    return _submap_choice(start, align(ref, cur, start, store.opt.icp), limits)
+
+
+def _refine_limits(store: _Scans) -> Any:
+    """The limits of a distant pair's refinement (``max_refine``, ``max_refine_angle``)."""
+    from dataclasses import replace
+
+    gopt = store.gopt
+    return replace(
+        store.opt.limits,
+        max_correction=gopt.max_refine,
+        max_correction_angle=gopt.max_refine_angle,
+    )
 
 
 def _ambiguous(s: SearchResult, gopt: GlobalOptions) -> bool:
@@ -484,23 +538,35 @@ def _doubtful(s: SearchResult, gopt: GlobalOptions) -> bool:
     return _ambiguous(s, gopt) or s.score < gopt.min_score
 
 
-def _distant(
+def _distant_search(
     store: _Scans, chain: Chain, pair: tuple[int, int], at: tuple[int, int], travel: float
-) -> tuple[tuple[Alignment, str, list[str], float], SearchResult]:
-    """Search the submaps of a distant pair, refine by ICP, judge (module docstring, 3)."""
-    from dataclasses import replace
-
-    gopt, opt = store.gopt, store.opt
-    i, j = pair
+) -> SearchResult:
+    """Search the submaps of a distant pair (module docstring, 3), again with larger submaps
+    when the first search is doubtful."""
+    gopt = store.gopt
     s = _submap_search(store, chain, pair, at, travel, gopt.submap_travel)
     if gopt.retry_travel > gopt.submap_travel and _doubtful(s, gopt):
         s = _submap_search(store, chain, pair, at, travel, gopt.retry_travel)
-    al = align(store.prep(i), store.prep(j), s.delta, opt.icp)
-    limits = replace(
-        opt.limits, max_correction=gopt.max_refine, max_correction_angle=gopt.max_refine_angle
-    )
+    return s
+
+
+def _distant_judge(
+    store: _Scans,
+    chain: Chain,
+    at: tuple[int, int],
+    s: SearchResult,
+    al: Alignment,
+    refined: NDArray[np.float64] | None = None,
+) -> tuple[Alignment, str, list[str], float]:
+    """Judge a distant pair's ICP ``al`` from the search's answer ``s`` (module docstring, 3);
+    a degenerate one keeps its weak direction from the submaps' ICP (``refined``: its answer,
+    already made; None: made here)."""
+    gopt = store.gopt
+    limits = _refine_limits(store)
     if al.degenerate and not al.failed:
-        al = pinned(al, _submap_icp(store, chain, at, s.delta, limits), gopt.search.resolution)
+        if refined is None:
+            refined = _submap_icp(store, chain, at, s.delta, limits)
+        al = pinned(al, refined, gopt.search.resolution)
     flags, susp = _judge(_resolved(al), limits, s.delta)
     flags = ["unstable" if f == "large correction" else f for f in flags]
     extra = []
@@ -511,7 +577,7 @@ def _distant(
     if extra:
         flags = flags + extra
         susp = max(susp, s.ratio / gopt.ambiguity, gopt.min_score / max(s.score, 1e-9), 1 + 1e-9)
-    return (al, "search", flags, susp), s
+    return (al, "search", flags, susp)
 
 
 def align_scans_global(
@@ -551,32 +617,67 @@ def align_scans_global(
     chain = scan_chain(scans, poses, pairs.ravel(), store)
     pos = {int(n): k for k, n in enumerate(chain.nodes.tolist())}
     given = between(poses[pairs[:, 0]], poses[pairs[:, 1]])
-    out: list[tuple[Alignment, str, list[str], float]] = []
     p = len(proposals)
     score, ratio = np.full(p, np.nan), np.zeros(p)
     second = np.full((p, 3), np.nan)
+    # searches first (in the pairs' order: a scan's pairs come together and share its grid),
+    # then the ICP of every pair at once (align_many), then the judgement
+    at = np.array([[pos[i], pos[j]] for i, j in pairs.tolist()], dtype=np.int64).reshape(-1, 2)
+    travel = np.abs(chain.travel[at[:, 1]] - chain.travel[at[:, 0]]) if p else np.zeros(0)
+    searches: dict[int, SearchResult] = {}
+    start = np.zeros((p, 3))
+    icp_rows: list[int] = []
     for k, (i, j) in enumerate(pairs.tolist()):
-        a, b = pos[i], pos[j]
-        travel = abs(float(chain.travel[b] - chain.travel[a]))
-        if travel > gopt.local_travel:
-            row, s = _distant(store, chain, (i, j), (a, b), travel)
-            out.append(row)
+        a, b = int(at[k, 0]), int(at[k, 1])
+        if travel[k] > gopt.local_travel:
+            s = searches[k] = _distant_search(store, chain, (i, j), (a, b), float(travel[k]))
             score[k], ratio[k], second[k] = s.score, s.ratio, s.second
+            start[k] = s.delta
+            icp_rows.append(k)
+        elif b != a + 1:
+            start[k] = between(chain.poses[a], chain.poses[b])
+            icp_rows.append(k)
+    rows = np.array(icp_rows, dtype=np.int64)
+    got = align_many(
+        [store.prep(int(pairs[k, 0])) for k in icp_rows],
+        [store.prep(int(pairs[k, 1])) for k in icp_rows],
+        start[rows],
+        opt.icp,
+    )
+    fitted = dict(zip(icp_rows, got, strict=True))
+    # the submap ICP of the degenerate distant pairs, all at once
+    weak = [k for k in searches if fitted[k].degenerate and not fitted[k].failed]
+    sides = [_submap_pair(store, chain, (int(at[k, 0]), int(at[k, 1]))) for k in weak]
+    starts = np.array([searches[k].delta for k in weak]).reshape(-1, 3)
+    limits = _refine_limits(store)
+    refined = {
+        k: _submap_choice(starts[q], g, limits)
+        for q, (k, g) in enumerate(
+            zip(
+                weak,
+                align_many([r for r, _ in sides], [c for _, c in sides], starts, opt.icp),
+                strict=True,
+            )
+        )
+    }
+    out: list[tuple[Alignment, str, list[str], float]] = []
+    for k in range(p):
+        a, b = int(at[k, 0]), int(at[k, 1])
+        tr = float(travel[k])
+        if k in searches:
+            out.append(_distant_judge(store, chain, (a, b), searches[k], fitted[k], refined.get(k)))
             continue
         if b == a + 1:
             al = chain.links[a]
         else:
-            centre = between(chain.poses[a], chain.poses[b])
-            al = pinned(
-                align(store.prep(i), store.prep(j), centre, opt.icp), centre, gopt.drift_xy * travel
-            )
+            al = pinned(fitted[k], start[k], gopt.drift_xy * tr)
         # a correction within the window a chain link searches is the given motion's error
         # (real odometry turns 3-10° wrong between scans), not a slipped alignment
         local = replace(
             opt.limits,
-            max_correction=max(opt.limits.max_correction, gopt.link_xy + gopt.drift_xy * travel),
+            max_correction=max(opt.limits.max_correction, gopt.link_xy + gopt.drift_xy * tr),
             max_correction_angle=max(
-                opt.limits.max_correction_angle, gopt.link_theta + gopt.drift_theta * travel
+                opt.limits.max_correction_angle, gopt.link_theta + gopt.drift_theta * tr
             ),
         )
         flags, susp = _judge(_resolved(al), local, given[k])

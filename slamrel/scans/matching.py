@@ -226,6 +226,17 @@ class PreparedScan:
         return np.isfinite(dist), k
 
 
+def _least(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``points.min(axis=0)`` of ``(K, 2)`` points, column by column (the same values; numpy's
+    reduction over the first axis of a two-column array is several times slower)."""
+    return np.array([points[:, 0].min(), points[:, 1].min()])
+
+
+def _greatest(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``points.max(axis=0)`` of ``(K, 2)`` points, column by column."""
+    return np.array([points[:, 0].max(), points[:, 1].max()])
+
+
 #: Empty cells of :class:`NearestGrid`'s table (no anchor within its reach).
 _NONE = np.iinfo(np.int64).max
 
@@ -270,8 +281,8 @@ class NearestGrid:
             self.lo, self.shape = np.zeros(2), (1, 1)
             self.table, self.s2 = np.full(1, _NONE), np.full(1, lim2)
             return
-        self.lo = anchors.min(axis=0) - (w + 1) * cell  # outermost cells: no anchor reaches
-        ext = np.ceil((anchors.max(axis=0) + (w + 1) * cell - self.lo) / cell).astype(np.int64)
+        self.lo = _least(anchors) - (w + 1) * cell  # outermost cells: no anchor reaches
+        ext = np.ceil((_greatest(anchors) + (w + 1) * cell - self.lo) / cell).astype(np.int64)
         self.shape = (int(ext[0]) + 1, int(ext[1]) + 1)
         c = np.floor((anchors - self.lo) * (1.0 / cell)).astype(np.int64)  # (L, 2)
         off = np.arange(-w, w + 1)
@@ -418,8 +429,8 @@ class NearestRaster:
             self.lo, self.shape = np.zeros(2), (1, 1)
             self.index = np.full(1, -1, dtype=np.int64)
             return
-        self.lo = anchors.min(axis=0) - (w + 1) * cell
-        ext = np.ceil((anchors.max(axis=0) + (w + 1) * cell - self.lo) / cell).astype(np.int64)
+        self.lo = _least(anchors) - (w + 1) * cell
+        ext = np.ceil((_greatest(anchors) + (w + 1) * cell - self.lo) / cell).astype(np.int64)
         self.shape = (int(ext[0]) + 1, int(ext[1]) + 1)
         c = np.floor((anchors - self.lo) / cell).astype(np.int64)  # (L, 2)
         off = np.arange(-w, w + 1)
@@ -551,33 +562,39 @@ def prepare_scan(
         Largest ``λ_min / λ_max`` of the window's scatter that still counts as a line.
     """
     p = np.asarray(beam_points, dtype=np.float64)
-    valid = np.asarray(np.isfinite(p).all(axis=1), dtype=bool)
+    valid = np.isfinite(p[:, 0]) & np.isfinite(p[:, 1])
     b = p.shape[0]
     offsets = np.arange(-window, window + 1)
-    idx = np.arange(b)[:, None] + offsets[None, :]
+    # x and y apart, (beam, window) each, instead of one (beam, window, 2) array
+    idx = np.arange(b)[:, None] + offsets[None, :]  # (B, W)
     inside = (idx >= 0) & (idx < b)
     idx = np.clip(idx, 0, max(b - 1, 0))
-    nb = p[idx]  # (B, W, 2)
+    px, py = p[:, 0], p[:, 1]
+    nx, ny = px[idx], py[idx]  # (B, W)
     with np.errstate(invalid="ignore"):
-        dist = np.linalg.norm(nb - p[:, None, :], axis=2)
-        use = np.asarray(inside & valid[idx] & valid[:, None])
+        dx, dy = nx - px[:, None], ny - py[:, None]
+        dist = np.sqrt(dx * dx + dy * dy)
+        use = inside & valid[idx] & valid[:, None]
         use &= (dist <= max_gap * np.abs(offsets)[None, :]) & (dist <= radius)
     count = use.sum(axis=1)
     w = use.astype(np.float64)
-    nbz = np.where(use[:, :, None], nb, 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        centroid = nbz.sum(axis=1) / count[:, None]
-        d = np.where(use[:, :, None], nb - centroid[:, None, :], 0.0)
-        cxx = (w * d[:, :, 0] ** 2).sum(axis=1)
-        cyy = (w * d[:, :, 1] ** 2).sum(axis=1)
-        cxy = (w * d[:, :, 0] * d[:, :, 1]).sum(axis=1)
+        # the centroid's sums run over the window in order (numpy's sum over the middle
+        # axis of a (B, W, 2) array), the scatter's pairwise along each row: as before
+        cx = np.ascontiguousarray(np.where(use, nx, 0.0).T).sum(axis=0) / count
+        cy = np.ascontiguousarray(np.where(use, ny, 0.0).T).sum(axis=0) / count
+        ex = np.where(use, nx - cx[:, None], 0.0)
+        ey = np.where(use, ny - cy[:, None], 0.0)
+        cxx = (w * ex**2).sum(axis=1)
+        cyy = (w * ey**2).sum(axis=1)
+        cxy = (w * ex * ey).sum(axis=1)
         half_trace = 0.5 * (cxx + cyy)
         root = np.sqrt(0.25 * (cxx - cyy) ** 2 + cxy**2)
         lam_min, lam_max = half_trace - root, half_trace + root
         phi = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
         line = (count >= 3) & (lam_min <= max_curvature * lam_max) & (lam_max > 0)
     normals = np.column_stack((-np.sin(phi), np.cos(phi)))[line]
-    anchors = centroid[line]
+    anchors = np.column_stack((cx, cy))[line]
     return PreparedScan(p[valid], anchors, normals)
 
 
