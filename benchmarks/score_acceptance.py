@@ -159,22 +159,11 @@ def run(
     can pass when the aligner gets every pair right). ``aligner``: ``global`` (the command's
     default, :func:`slamrel.scans.global_align.align_scans_global`) or ``icp`` (ICP from the
     guess, :func:`slamrel.scans.relations.align_scans`)."""
-    if world == "corridor":  # slamrel.simulation.corridors: a 200 m drive, world ``seed``
-        from slamrel.simulation.corridors import corridor_log
-
-        _, log = corridor_log(seed)
-    else:
-        truth = loop_path(CORNERS, 0.3)
-        truth = np.vstack((truth, truth[:60]))  # on past the start: loop closures
-        log = simulate_laser_log(laser_world("loop"), truth, seed=seed)
+    log = _log(world, seed)
     s = log.scans
     odo = s.laser_pose
     t0 = time.process_time()
-    start = {"odometry": odo, "truth": log.truth}.get(guesses)
-    if start is None:  # scan-matched odometry: the scans' own chain (slamrel.scans.own_guesses)
-        from slamrel.scans.own_guesses import chain_guesses
-
-        start = chain_guesses(s, odo).poses
+    start = _start(guesses, log)
     candidates_all = _pairs(start, s.timestamps, loop_max_angle, keyframes, loop_growth)
     t_overlap = time.process_time()
     prop, unseen = drop_unseen_loops(  # --loop-min-overlap: before alignment
@@ -188,12 +177,7 @@ def run(
     )
     t_overlap = time.process_time() - t_overlap
     wrongly = _wrongly_left_out(candidates_all, prop, log.truth, s, min_overlap)
-    if aligner == "global":
-        from slamrel.scans.global_align import align_scans_global
-
-        res, _ = align_scans_global(s, prop, start, AlignOptions())
-    else:
-        res = align_scans(s, prop, guesses_from_poses(start, prop), AlignOptions())
+    res = _aligned(aligner, s, prop, start)
     candidates = len(prop)
     if loop_growth > 0:  # the loop rule on the aligned motion: what the scans say
         res = keep_within_reach(res, radius=1.0, max_angle=loop_max_angle)
@@ -208,27 +192,23 @@ def run(
     p = prop.pairs
     reviewed = RelationSet(prop.t1[accept], prop.t2[accept], res.delta[accept])
     extra, adjusted = _adjusted(res, accept, true) if adjust else ({}, None)
-    ideal_all = _pairs(log.truth, s.timestamps, loop_max_angle, keyframes)
-    # the truth's pairs under the same overlap rule, at the true relation
-    d_all = guesses_from_poses(log.truth, ideal_all)
-    ov = expected_overlap(s, ideal_all.pairs, d_all, spread_xy=0.0, spread_theta=0.0)
-    keep = (ideal_all.kind != "loop") | (ov >= min_overlap)
-    ideal = Proposals(*(getattr(ideal_all, f.name)[keep] for f in fields(Proposals)))
-    true_ideal = RelationSet(ideal.t1, ideal.t2, d_all[keep])
-    true_all = RelationSet(ideal_all.t1, ideal_all.t2, d_all)
+    ideal_all, ideal, true_ideal, true_all = _truth_sets(
+        log.truth, s, loop_max_angle, keyframes, min_overlap
+    )
     true_prop = RelationSet(prop.t1, prop.t2, true)
     true_acc = RelationSet(prop.t1[accept], prop.t2[accept], true[accept])
-    scores = {}
-    for name, poses in estimates(log.truth, odo, seed).items():
-        scores[name] = {
-            "reviewed": _score(reviewed, s.timestamps, poses),
-            "true": _score(true_ideal, s.timestamps, poses),
-            "true_all": _score(true_all, s.timestamps, poses),
-            "true_proposed": _score(true_prop, s.timestamps, poses),
-            "true_accepted": _score(true_acc, s.timestamps, poses),
-        }
-        if adjusted is not None:
-            scores[name]["adjusted"] = _score(adjusted, s.timestamps, poses)
+    sets = {
+        "reviewed": reviewed,
+        "true": true_ideal,
+        "true_all": true_all,
+        "true_proposed": true_prop,
+        "true_accepted": true_acc,
+        **({"adjusted": adjusted} if adjusted is not None else {}),
+    }
+    scores = {
+        name: {k: _score(rel, s.timestamps, poses) for k, rel in sets.items()}
+        for name, poses in estimates(log.truth, odo, seed).items()
+    }
     return {
         "seed": seed,
         "scans": len(s),
@@ -263,6 +243,53 @@ def run(
         **extra,
         **({"adjusted_verdict": verdict(scores, "adjusted")} if adjust else {}),
     }
+
+
+def _start(guesses: str, log) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The poses that propose the pairs and guess them: ``odometry``, ``truth`` or ``chain``
+    (scan-matched odometry: the scans' own chain, :mod:`slamrel.scans.own_guesses`)."""
+    odo = log.scans.laser_pose
+    start = {"odometry": odo, "truth": log.truth}.get(guesses)
+    if start is None:
+        from slamrel.scans.own_guesses import chain_guesses
+
+        start = chain_guesses(log.scans, odo).poses
+    return start
+
+
+def _aligned(aligner: str, scans, prop: Proposals, start: np.ndarray):  # type: ignore[no-untyped-def]
+    """``prop`` aligned by the ``global`` aligner or by ``icp`` from the guesses ``start``."""
+    if aligner == "global":
+        from slamrel.scans.global_align import align_scans_global
+
+        return align_scans_global(scans, prop, start, AlignOptions())[0]
+    return align_scans(scans, prop, guesses_from_poses(start, prop), AlignOptions())
+
+
+def _log(world: str, seed: int):  # type: ignore[no-untyped-def]
+    """The simulated laser log of ``world`` (``loop`` or ``corridor``) and ``seed``."""
+    if world == "corridor":  # slamrel.simulation.corridors: a 200 m drive, world ``seed``
+        from slamrel.simulation.corridors import corridor_log
+
+        return corridor_log(seed)[1]
+    truth = loop_path(CORNERS, 0.3)
+    truth = np.vstack((truth, truth[:60]))  # on past the start: loop closures
+    return simulate_laser_log(laser_world("loop"), truth, seed=seed)
+
+
+def _truth_sets(  # type: ignore[no-untyped-def]
+    truth: np.ndarray, scans, loop_max_angle: float, keyframes: str, min_overlap: float
+) -> tuple[Proposals, Proposals, RelationSet, RelationSet]:
+    """The truth's pairs (all, and those the overlap rule keeps at the true relation) and
+    their true relations (kept, all)."""
+    ideal_all = _pairs(truth, scans.timestamps, loop_max_angle, keyframes)
+    d_all = guesses_from_poses(truth, ideal_all)
+    ov = expected_overlap(scans, ideal_all.pairs, d_all, spread_xy=0.0, spread_theta=0.0)
+    keep = (ideal_all.kind != "loop") | (ov >= min_overlap)
+    ideal = Proposals(*(getattr(ideal_all, f.name)[keep] for f in fields(Proposals)))
+    true_ideal = RelationSet(ideal.t1, ideal.t2, d_all[keep])
+    true_all = RelationSet(ideal_all.t1, ideal_all.t2, d_all)
+    return ideal_all, ideal, true_ideal, true_all
 
 
 def _wrongly_left_out(
@@ -363,7 +390,7 @@ def verdict(scores: dict, which: str = "reviewed") -> dict:
     }
 
 
-def main() -> None:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--cycle-check", action="store_true")
@@ -415,6 +442,11 @@ def main() -> None:
         "the true relation (default 0: keep all)",
     )
     ap.add_argument("--json", metavar="OUT")
+    return ap
+
+
+def main() -> None:
+    ap = _parser()
     args = ap.parse_args()
     if not 0 < args.loop_max_angle <= 180:
         ap.error("--loop-max-angle must lie in (0, 180] degrees")
@@ -434,42 +466,47 @@ def main() -> None:
             min_overlap=args.min_overlap,
         )
         out.append(r)
-        print(
-            f"seed {seed}, guesses from {r['guesses']}: {r['pairs']} pairs of {r['candidates']} candidates ({r['loop_pairs']} "
-            f"loop; from the truth {r['true_pairs']}, {r['true_loop_pairs']} loop), "
-            f"{r['flagged']} flagged ({100 * r['flagged'] / r['pairs']:.1f} %; loop pairs "
-            f"within {r['loop_max_angle_deg']:g}°), "
-            f"{r['contradicted']} contradicted, {r['confirmed']} confirmed, "
-            f"{r['accepted']} accepted "
-            f"({r['gross_accepted']} of {r['gross']} gross ones accepted); "
-            f"{r['pairs_per_cpu_s']:.1f} pairs/CPU-s"
-        )
-        print(
-            f"  loop pairs: {r['loop_flagged']} flagged, {r['loop_accepted']} accepted; "
-            f"overlap < {r['min_overlap']:g}: {r['unseen_before']} candidates left out before "
-            f"alignment ({r['overlap_cpu_s']:.2f} CPU-s: overlap test; "
-            f"{r['wrongly_left_out']} of them within 1 m and overlapping by the truth), "
-            f"{r['unseen_after']} "
-            f"after; truth's loop pairs {r['true_loop_pairs']} of {r['true_loop_pairs_all']}"
-        )
-        for e in ESTIMATES:
-            sc = r["scores"][e]
-            print(
-                f"  {e:9s} trans reviewed {sc['reviewed'][0]:.4f} true {sc['true'][0]:.4f} "
-                f"(proposed {sc['true_proposed'][0]:.4f}, accepted {sc['true_accepted'][0]:.4f}) ratio {r['ratio'][e][0]:.3f}; "
-                f"rot ratio {r['ratio'][e][1]:.3f}; "
-                f"ratio to every truth pair {sc['reviewed'][0] / sc['true_all'][0]:.3f}"
-            )
-        print(
-            f"  ranking reviewed {r['ranking_reviewed']} true {r['ranking_true']}: same "
-            f"{r['same_ranking']}; translation means within 10 %: {r['within_10_percent']}, "
-            f"rotation means: {r['rotation_within_10_percent']}"
-        )
-        if args.adjust:
-            _print_adjusted(r)
+        _print_run(seed, r, adjust=args.adjust)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(out, fh, indent=1)
+
+
+def _print_run(seed: int, r: dict, *, adjust: bool) -> None:
+    """The lines :func:`main` prints for one seed's result ``r`` (:func:`run`)."""
+    print(
+        f"seed {seed}, guesses from {r['guesses']}: {r['pairs']} pairs of {r['candidates']} candidates ({r['loop_pairs']} "
+        f"loop; from the truth {r['true_pairs']}, {r['true_loop_pairs']} loop), "
+        f"{r['flagged']} flagged ({100 * r['flagged'] / r['pairs']:.1f} %; loop pairs "
+        f"within {r['loop_max_angle_deg']:g}°), "
+        f"{r['contradicted']} contradicted, {r['confirmed']} confirmed, "
+        f"{r['accepted']} accepted "
+        f"({r['gross_accepted']} of {r['gross']} gross ones accepted); "
+        f"{r['pairs_per_cpu_s']:.1f} pairs/CPU-s"
+    )
+    print(
+        f"  loop pairs: {r['loop_flagged']} flagged, {r['loop_accepted']} accepted; "
+        f"overlap < {r['min_overlap']:g}: {r['unseen_before']} candidates left out before "
+        f"alignment ({r['overlap_cpu_s']:.2f} CPU-s: overlap test; "
+        f"{r['wrongly_left_out']} of them within 1 m and overlapping by the truth), "
+        f"{r['unseen_after']} "
+        f"after; truth's loop pairs {r['true_loop_pairs']} of {r['true_loop_pairs_all']}"
+    )
+    for e in ESTIMATES:
+        sc = r["scores"][e]
+        print(
+            f"  {e:9s} trans reviewed {sc['reviewed'][0]:.4f} true {sc['true'][0]:.4f} "
+            f"(proposed {sc['true_proposed'][0]:.4f}, accepted {sc['true_accepted'][0]:.4f}) ratio {r['ratio'][e][0]:.3f}; "
+            f"rot ratio {r['ratio'][e][1]:.3f}; "
+            f"ratio to every truth pair {sc['reviewed'][0] / sc['true_all'][0]:.3f}"
+        )
+    print(
+        f"  ranking reviewed {r['ranking_reviewed']} true {r['ranking_true']}: same "
+        f"{r['same_ranking']}; translation means within 10 %: {r['within_10_percent']}, "
+        f"rotation means: {r['rotation_within_10_percent']}"
+    )
+    if adjust:
+        _print_adjusted(r)
 
 
 if __name__ == "__main__":
