@@ -77,6 +77,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "and keep one sighting per landmark every SECONDS (the rest counted, left out), so "
         "white-noise models fit them (0: off; dataset 7: 5; default: %(default)s)",
     )
+    mr.add_argument(
+        "--persisting",
+        action="store_true",
+        help="state the range-bearing errors' persistence in the bundle (sensor_model."
+        "persisting: a Gauss-Markov bias per landmark track, sigma and time constant fitted "
+        "against the ground truth), which the recovery then models (default: off)",
+    )
     add_force_argument(mr)
     mr.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     mr.set_defaults(func=run_import_mrclam)
@@ -139,6 +146,7 @@ def _mrclam_robot(args: argparse.Namespace, robot: int, out: Path) -> Bundle:
             calibrate=not args.no_calibrate,
             motion_noise=args.motion_noise,
             decorrelate=args.decorrelate,
+            persisting=args.persisting,
         )
     if not args.quiet:
         assert bundle.controls is not None  # MRCLAM bundles use the velocity model

@@ -43,6 +43,7 @@ from recovery.models import (
     SIGMA_NAMES,
     MotionModel,
     MotionModelWarning,
+    PersistingError,
     SensorModel,
     world_noise_is_rotation_invariant,
 )
@@ -132,6 +133,13 @@ _MANIFEST_KEYS = {
         "fov",
         "mount",
         "noise",
+        "persisting",
+    ),
+    "sensor_model.persisting": (
+        "sigma_range",
+        "sigma_bearing",
+        "time_constant_range",
+        "time_constant_bearing",
     ),
 }
 
@@ -492,6 +500,9 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
             path=path,
             line=_line_of_key(text, "noise"),
         )
+    persisting = None
+    if "persisting" in spec:  # a Gauss–Markov bias per landmark track (recovery.persisting)
+        persisting = _parse_persisting(spec["persisting"], text, path)
     return SensorModel(
         vals[0],
         vals[1],
@@ -499,7 +510,40 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
         fov=reach.get("fov"),
         mount=mount,  # type: ignore[arg-type]
         noise=noise,
+        persisting=persisting,
     )
+
+
+def _parse_persisting(spec: Any, text: str, path: str) -> PersistingError:
+    """``sensor_model.persisting``: four positive numbers (docs/bundle.md)."""
+    line = _line_of_key(text, "persisting")
+    if not isinstance(spec, dict):
+        raise InputError("sensor_model.persisting: expected an object", path=path, line=line)
+    _refuse_unknown_keys(spec, "sensor_model.persisting", text, path)
+    vals = {}
+    for n in PERSISTING_KEYS:
+        if n not in spec:
+            raise InputError(f"sensor_model.persisting: missing {n}", path=path, line=line)
+        vals[n] = _number(
+            spec[n],
+            what=f"sensor_model.persisting.{n}",
+            path=path,
+            line=_line_of_key(text, n),
+            maximum=MAX_SIGMA,
+        )
+        if not vals[n] > 0:
+            raise InputError(
+                f"sensor_model.persisting.{n}: expected a positive number, got {vals[n]}",
+                path=path,
+                line=_line_of_key(text, n),
+            )
+    try:
+        return PersistingError(**vals)
+    except InputError as exc:
+        raise InputError(str(exc), path=path, line=line) from None
+
+
+PERSISTING_KEYS = ("sigma_range", "sigma_bearing", "time_constant_range", "time_constant_bearing")
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:
