@@ -286,8 +286,13 @@ class PersistingError:
     sigma_bearing: float
     time_constant_range: float
     time_constant_bearing: float
+    #: The same four numbers for a bias **common to every landmark** (the sensor's own: a
+    #: heading or clock offset moves every bearing alike), or None.
+    common: PersistingError | None = None
 
     def __post_init__(self) -> None:
+        if self.common is not None and self.common.common is not None:
+            raise InputError("sensor_model.persisting.common: expected no common of its own")
         for name in (
             "sigma_range",
             "sigma_bearing",
@@ -311,13 +316,22 @@ class PersistingError:
     def tau(self) -> tuple[float, float]:
         return (self.time_constant_range, self.time_constant_bearing)
 
-    def as_dict(self) -> dict[str, float]:
-        return {
+    @property
+    def variance(self) -> tuple[float, float]:
+        """The persisting variance per component, the common bias's included."""
+        c = (0.0, 0.0) if self.common is None else self.common.variance
+        return (self.sigma_range**2 + c[0], self.sigma_bearing**2 + c[1])
+
+    def as_dict(self) -> dict[str, object]:
+        out: dict[str, object] = {
             "sigma_range": self.sigma_range,
             "sigma_bearing": self.sigma_bearing,
             "time_constant_range": self.time_constant_range,
             "time_constant_bearing": self.time_constant_bearing,
         }
+        if self.common is not None:
+            out["common"] = self.common.as_dict()
+        return out
 
 
 @dataclass(frozen=True)
@@ -377,15 +391,15 @@ class SensorModel:
             object.__setattr__(self, "mount", (float(m[0]), float(m[1]), float(m[2])))
         pe = self.persisting
         if pe is not None:
-            for name, total, part in (
-                ("sigma_range", self.sigma_range, pe.sigma_range),
-                ("sigma_bearing", self.sigma_bearing, pe.sigma_bearing),
+            for name, total, var in (
+                ("sigma_range", self.sigma_range, pe.variance[0]),
+                ("sigma_bearing", self.sigma_bearing, pe.variance[1]),
             ):
-                if not part < total:
+                if not var < total * total:
                     raise InputError(
-                        f"sensor_model.persisting.{name}: {part:g} is not below the sensor's "
-                        f"total {name} {total:g}; expected the persisting part of it (the rest "
-                        "is white noise)"
+                        f"sensor_model.persisting.{name}: {math.sqrt(var):g} (with the common "
+                        f"bias's) is not below the sensor's total {name} {total:g}; expected "
+                        "the persisting part of it (the rest is white noise)"
                     )
 
     @property

@@ -12,12 +12,14 @@ of each other and of everything else:
 The model is linear-Gaussian in ``b``, so the exact treatment is state augmentation
 (Bryson & Henrikson 1968; Simon, *Optimal State Estimation*, Sec. 7.2): the filter's state
 is the pose, the map's error ``δm`` (a constant with the map's stated covariance as prior,
-the independent map prior of :mod:`recovery.batch_refinement`) and every landmark's bias,
-``D = 3 + 2M (+ 2M)``. Between two measurement epochs the pose follows the composed
-prediction of :mod:`recovery.ekf` and each bias decays by ``φ`` with process noise
-``σ_b² (1 − φ²)``; each measurement updates the whole state with
-``H = [H_x, H_l, I₂]`` and ``R_w``. The Rauch–Tung–Striebel recursion of the augmented
-state runs over the epochs; every grid pose between two epochs is filled in closed form
+the independent map prior of :mod:`recovery.batch_refinement`), every landmark's bias and,
+when stated, a bias ``c(t)`` common to every landmark (the same Gauss–Markov law with its
+own σ and τ; ``z = h + b_l + c + n``): ``D = 3 + 2M + 2M (+ 2)``. Between two measurement
+epochs the pose follows the composed prediction of :mod:`recovery.ekf` and each bias
+decays by ``φ`` with process noise ``σ_b² (1 − φ²)``; each measurement updates the whole
+state with ``H = [H_x, H_l, I₂ (, I₂)]`` and ``R_w``. The Rauch–Tung–Striebel recursion of
+the augmented state runs over the epochs; every grid pose between two epochs is filled in
+closed form
 (the bias does not move the pose, so the augmented gain of pose ``k`` towards the next
 epoch ``i`` is ``[P_k S(p_i − p_k)ᵀ, S(p_k − p_e) P⁺_{e,x·} Φ_{i←e}] (P⁻_i)⁻¹``, ``e``
 the epoch before ``k``, with per-epoch products only, vectorised over the poses).
@@ -88,6 +90,8 @@ def run_persisting(
     bias_tau: tuple[float, float],
     *,
     robust_threshold: float | None = None,
+    common_sigma: tuple[float, float] | None = None,
+    common_tau: tuple[float, float] | None = None,
 ) -> PersistingPass:
     """The augmented EKF over the grid (module doc).
 
@@ -105,22 +109,29 @@ def run_persisting(
     m = int(seen.size)
     sig_b = np.asarray(bias_sigma, dtype=np.float64)
     tau = np.asarray(bias_tau, dtype=np.float64)
-    r_w = np.diag(np.diag(np.asarray(inp.r)) - sig_b**2)
+    has_c = common_sigma is not None
+    sig_c = np.asarray(common_sigma if has_c else (0.0, 0.0), dtype=np.float64)
+    tau_c = np.asarray(common_tau if common_tau is not None else (1.0, 1.0), dtype=np.float64)
+    r_w = np.diag(np.diag(np.asarray(inp.r)) - sig_b**2 - sig_c**2)
     if not (np.diag(r_w) > 0).all():
         raise DivergenceError("persisting error: its variance is not below the sensor's total")
     sel = (2 * seen[:, None] + np.arange(2)).ravel()
     smap = _map_prior(inp)[np.ix_(sel, sel)]
     has_map = bool(np.abs(smap).max() > 0.0) if m else False
     nm = 2 * m if has_map else 0
-    d = 3 + nm + 2 * m
     ob = 3 + nm  # offset of the biases
+    oc = ob + 2 * m  # offset of the common bias (when stated)
+    d = oc + (2 if has_c else 0)
+    var_b = np.tile(sig_b**2, m)
+    if has_c:
+        var_b = np.concatenate((var_b, sig_c**2))
     x = np.zeros(d)
     x[:3] = inp.x0
     p = np.zeros((d, d))
     p[:3, :3] = inp.p0
     if has_map:
         p[3:ob, 3:ob] = smap
-    p[ob:, ob:] = np.diag(np.tile(sig_b**2, m))
+    p[ob:, ob:] = np.diag(var_b)
     times = inp.times
     n_e = epochs.shape[0]
     prior_x, post_x = np.empty((n_e, d)), np.empty((n_e, d))
@@ -145,18 +156,20 @@ def run_persisting(
             q6 = predict6((0.0,) * 6, tuple(seg.q[:, k]), c, s, 0.0, 0.0)
             qf = _full(tuple(np.array([v]) for v in q6))[0]
             dt = float(times[k] - times[epochs[e - 1]])
-            ph = np.exp(-dt / tau)
+            ph = np.tile(np.exp(-dt / tau), m)
+            if has_c:
+                ph = np.concatenate((ph, np.exp(-dt / tau_c)))
             phi = np.ones(d - 3)
-            phi[nm:] = np.tile(ph, m)
+            phi[nm:] = ph
             phi_all[e - 1] = phi
-            x[ob:] *= phi[nm:]
+            x[ob:] *= ph
             p[:3, :] = sh @ p[:3, :]
             p[:, :3] = p[:, :3] @ sh.T
             p[3:, :] *= phi[:, None]
             p[:, 3:] *= phi[None, :]
             p[:3, :3] += qf
             idx = np.arange(ob, d)
-            p[idx, idx] += np.tile(sig_b**2 * (1.0 - ph * ph), m)
+            p[idx, idx] += var_b * (1.0 - ph * ph)
         prior_x[e], prior_p[e] = x, p
         for j in active[bounds[e] : bounds[e + 1]]:
             li = int(slot[lmk[j]])
@@ -169,12 +182,16 @@ def run_persisting(
             y = np.array(
                 [z_all[j, 0] - rng - x[bi], z_all[j, 1] - math.atan2(ddy, ddx) + x[2] - x[bi + 1]]
             )
+            if has_c:
+                y -= x[oc : oc + 2]
             y[1] = wrap_angle_float(y[1])
             h = np.zeros((2, d))
             h[:, :3] = [[-h00, -h01, 0.0], [-h10, -h11, -1.0]]
             if has_map:
                 h[:, 3 + 2 * li : 5 + 2 * li] = [[h00, h01], [h10, h11]]
             h[:, bi : bi + 2] = eye2
+            if has_c:
+                h[:, oc : oc + 2] = eye2
             ph_t = p @ h.T
             s_m = h @ ph_t + r_w
             s_inv = np.linalg.inv(s_m)

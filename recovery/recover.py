@@ -474,12 +474,15 @@ def _persisting_recovery(
             f"robust {robust!r} with a persisting measurement error: the augmented recovery "
             "has the redescending update only; expected redescending or none"
         )
+    common = {}
+    if pe.common is not None:
+        common = {"common_sigma": pe.common.sigma, "common_tau": pe.common.tau}
     settings = None
     c_eff = None
     if robust is not None:
         c = float(threshold) if threshold is not None else ROBUST_DEFAULTS[robust]
         if scale == "auto":
-            plain = run_persisting(inp, pe.sigma, pe.tau).fr
+            plain = run_persisting(inp, pe.sigma, pe.tau, **common).fr  # type: ignore[arg-type]
             s = _nis_scale(plain)
             if threshold is None and _heavy_tailed(plain.nis, s):
                 c = HEAVY_TAIL_C
@@ -487,7 +490,7 @@ def _persisting_recovery(
             s = float(scale)
         settings = RobustSettings(kind=robust, threshold=c, scale=s, effective=c * s)
         c_eff = settings.effective
-    run = run_persisting(inp, pe.sigma, pe.tau, robust_threshold=c_eff)
+    run = run_persisting(inp, pe.sigma, pe.tau, robust_threshold=c_eff, **common)  # type: ignore[arg-type]
     fr = run.fr
     if method == "filter":
         return settings, fr, _Estimate(fr.poses, fr.covariances)

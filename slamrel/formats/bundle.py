@@ -140,6 +140,13 @@ _MANIFEST_KEYS = {
         "sigma_bearing",
         "time_constant_range",
         "time_constant_bearing",
+        "common",
+    ),
+    "sensor_model.persisting.common": (
+        "sigma_range",
+        "sigma_bearing",
+        "time_constant_range",
+        "time_constant_bearing",
     ),
 }
 
@@ -514,31 +521,37 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
     )
 
 
-def _parse_persisting(spec: Any, text: str, path: str) -> PersistingError:
-    """``sensor_model.persisting``: four positive numbers (docs/bundle.md)."""
-    line = _line_of_key(text, "persisting")
+def _parse_persisting(
+    spec: Any, text: str, path: str, where: str = "sensor_model.persisting"
+) -> PersistingError:
+    """``sensor_model.persisting``: four positive numbers and an optional ``common`` object
+    of the same four (docs/bundle.md)."""
+    line = _line_of_key(text, where.rsplit(".", 1)[1])
     if not isinstance(spec, dict):
-        raise InputError("sensor_model.persisting: expected an object", path=path, line=line)
-    _refuse_unknown_keys(spec, "sensor_model.persisting", text, path)
+        raise InputError(f"{where}: expected an object", path=path, line=line)
+    _refuse_unknown_keys(spec, where, text, path)
+    common = None
+    if "common" in spec and where == "sensor_model.persisting":
+        common = _parse_persisting(spec["common"], text, path, where + ".common")
     vals = {}
     for n in PERSISTING_KEYS:
         if n not in spec:
-            raise InputError(f"sensor_model.persisting: missing {n}", path=path, line=line)
+            raise InputError(f"{where}: missing {n}", path=path, line=line)
         vals[n] = _number(
             spec[n],
-            what=f"sensor_model.persisting.{n}",
+            what=f"{where}.{n}",
             path=path,
             line=_line_of_key(text, n),
             maximum=MAX_SIGMA,
         )
         if not vals[n] > 0:
             raise InputError(
-                f"sensor_model.persisting.{n}: expected a positive number, got {vals[n]}",
+                f"{where}.{n}: expected a positive number, got {vals[n]}",
                 path=path,
                 line=_line_of_key(text, n),
             )
     try:
-        return PersistingError(**vals)
+        return PersistingError(**vals, common=common)
     except InputError as exc:
         raise InputError(str(exc), path=path, line=line) from None
 
