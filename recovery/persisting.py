@@ -92,10 +92,14 @@ def run_persisting(
     robust_threshold: float | None = None,
     common_sigma: tuple[float, float] | None = None,
     common_tau: tuple[float, float] | None = None,
+    linearize_at: Array | None = None,
 ) -> PersistingPass:
     """The augmented EKF over the grid (module doc).
 
     ``inp.r`` is the total measurement noise; its white part is ``inp.r − diag(σ_b²)``.
+    ``linearize_at`` (E, D): the augmented states at the epochs (a smoother's) at which the
+    measurements are linearised, a pass of the iterated extended smoother (Bell 1994:
+    Gauss–Newton on the measurement terms; the motion is composed as before).
     ``robust_threshold``: ``c`` of the redescending weight ``(c/d)²`` on the Mahalanobis
     distance under the augmented filter's own innovation covariance (``None``: plain EKF).
     """
@@ -125,6 +129,7 @@ def run_persisting(
     var_b = np.tile(sig_b**2, m)
     if has_c:
         var_b = np.concatenate((var_b, sig_c**2))
+    lin = None if linearize_at is None else np.asarray(linearize_at, dtype=np.float64)
     x = np.zeros(d)
     x[:3] = inp.x0
     p = np.zeros((d, d))
@@ -173,18 +178,14 @@ def run_persisting(
         prior_x[e], prior_p[e] = x, p
         for j in active[bounds[e] : bounds[e + 1]]:
             li = int(slot[lmk[j]])
-            ml = inp.map_xy[lmk[j]] + (x[3 + 2 * li : 5 + 2 * li] if has_map else 0.0)
-            ddx, ddy = ml[0] - x[0], ml[1] - x[1]
+            at = x if lin is None else lin[e]  # where h is linearised
+            ml = inp.map_xy[lmk[j]] + (at[3 + 2 * li : 5 + 2 * li] if has_map else 0.0)
+            ddx, ddy = ml[0] - at[0], ml[1] - at[1]
             qq = ddx * ddx + ddy * ddy
             rng = math.sqrt(qq)
             h00, h01, h10, h11 = ddx / rng, ddy / rng, -ddy / qq, ddx / qq
             bi = ob + 2 * li
-            y = np.array(
-                [z_all[j, 0] - rng - x[bi], z_all[j, 1] - math.atan2(ddy, ddx) + x[2] - x[bi + 1]]
-            )
-            if has_c:
-                y -= x[oc : oc + 2]
-            y[1] = wrap_angle_float(y[1])
+            y = np.array([z_all[j, 0] - rng, z_all[j, 1] - math.atan2(ddy, ddx) + at[2]])
             h = np.zeros((2, d))
             h[:, :3] = [[-h00, -h01, 0.0], [-h10, -h11, -1.0]]
             if has_map:
@@ -192,6 +193,11 @@ def run_persisting(
             h[:, bi : bi + 2] = eye2
             if has_c:
                 h[:, oc : oc + 2] = eye2
+            # y = z − h(at) − H (x − at) (the biases enter linearly: H's I₂ blocks)
+            dev = x - at
+            dev[ob:] = x[ob:]
+            y -= h @ dev
+            y[1] = wrap_angle_float(y[1])
             ph_t = p @ h.T
             s_m = h @ ph_t + r_w
             s_inv = np.linalg.inv(s_m)
@@ -236,8 +242,9 @@ def run_persisting(
     return PersistingPass(fr, prior_x, prior_p, post_x, post_p, phi_all)
 
 
-def smooth_persisting(run: PersistingPass) -> tuple[Array, Array]:
-    """RTS smoothing of the augmented run: poses (N, 3) (wrapped) and covariances (N, 3, 3).
+def smooth_persisting(run: PersistingPass) -> tuple[Array, Array, Array]:
+    """RTS smoothing of the augmented run: poses (N, 3) (wrapped), covariances (N, 3, 3) and
+    the smoothed augmented states at the epochs (E, D).
 
     Over the epochs the augmented recursion ``C_e = P⁺_e F_eᵀ (P⁻_{e+1})⁻¹``; every pose
     between two epochs by the closed-form gain of the module doc.
@@ -297,4 +304,4 @@ def smooth_persisting(run: PersistingPass) -> tuple[Array, Array]:
         corr = 0.5 * (corr + corr.transpose(0, 2, 1))
         covs[k] = pk + corr
     poses[:, 2] = wrap_angle(poses[:, 2])
-    return poses, covs
+    return poses, covs, xs

@@ -494,8 +494,24 @@ def _persisting_recovery(
     fr = run.fr
     if method == "filter":
         return settings, fr, _Estimate(fr.poses, fr.covariances)
-    poses, covs = smooth_persisting(run)
-    return settings, fr, _Estimate(poses, covs)
+    poses, covs, states = smooth_persisting(run)
+    # the iterated extended smoother: the measurements relinearised at the smoothed states
+    # (as the white recovery's Gauss–Newton steps do), PERSISTING_ITERATIONS passes
+    for _ in range(PERSISTING_ITERATIONS):
+        again = run_persisting(
+            inp,
+            pe.sigma,
+            pe.tau,
+            robust_threshold=c_eff,
+            linearize_at=states,
+            **common,  # type: ignore[arg-type]
+        )
+        poses, covs, states = smooth_persisting(again)
+    return settings, fr, _Estimate(poses, covs, iterations=PERSISTING_ITERATIONS)
+
+
+#: Relinearised passes of the augmented smoother after its first (recovery.persisting).
+PERSISTING_ITERATIONS = 2
 
 
 @dataclass(frozen=True)
