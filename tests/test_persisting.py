@@ -149,7 +149,7 @@ def test_fit_recovers_a_known_common_and_per_landmark_bias():
     for seed in range(3):
         t, lm, e = _gm_residuals(seed)
         fit = fit_persisting(t, lm, e, (1.0, 1.0), np.ones(t.size, dtype=bool))
-        assert fit.common is not None
+        assert fit is not None and fit.common is not None
         got["sc"] += fit.common.sigma
         got["sl"] += fit.sigma
         got["tc"] += fit.common.tau

@@ -386,6 +386,8 @@ def _fit_decay(lag: NDArray[np.float64], prod: NDArray[np.float64]) -> tuple[flo
     n = np.bincount(which, minlength=edges.size - 1).astype(np.float64)
     tot = np.bincount(which, weights=prod, minlength=edges.size - 1)
     use = n >= 10
+    if use.sum() < 3:
+        raise _NoFit()
     rho = tot[use] / n[use]
 
     def model(_: object, f: float, tau: float) -> NDArray[np.float64]:
@@ -393,14 +395,21 @@ def _fit_decay(lag: NDArray[np.float64], prod: NDArray[np.float64]) -> tuple[flo
         # exponential is convex, and wide bins would lengthen τ)
         return f * (np.bincount(which, np.exp(-lag / tau), edges.size - 1)[use] / n[use])
 
-    (f, tau), _ = curve_fit(
-        model,
-        np.zeros(int(use.sum())),
-        np.clip(rho, 0.0, None),
-        p0=(0.5, 2.0),
-        bounds=((0.01, 0.05), (0.98, 600.0)),
-    )
+    try:
+        (f, tau), _ = curve_fit(
+            model,
+            np.zeros(int(use.sum())),
+            np.clip(rho, 0.0, None),
+            p0=(0.5, 2.0),
+            bounds=((0.01, 0.05), (0.98, 600.0)),
+        )
+    except RuntimeError:  # no convergence
+        raise _NoFit() from None
     return float(f), float(tau)
+
+
+class _NoFit(Exception):
+    """Too few pairs (or no convergence) to fit a persisting error."""
 
 
 def fit_persisting(
@@ -409,7 +418,7 @@ def fit_persisting(
     residuals: NDArray[np.float64],
     sigma: tuple[float, float],
     bulk: NDArray[np.bool_],
-) -> PersistingError:
+) -> PersistingError | None:
     """The persisting part of residuals ``(M, 2)`` (range, bearing) against the fitted total
     ``sigma``: a Gauss–Markov bias common to every landmark and one per landmark track
     (:class:`~recovery.models.PersistingError`), from the pairs of ``bulk`` residuals up to
@@ -420,8 +429,22 @@ def fit_persisting(
     would leave less than 5 % of the variance white. Dataset 7: the bearing errors are mostly
     common (different landmarks at one time correlate 0.36–0.99 at lags below 0.35 s: the
     sensor's heading), the range errors mostly per landmark (docs/verdict.md). A
-    calibration against the ground truth, as the noise fit is.
+    calibration against the ground truth, as the noise fit is. ``None`` when fewer than three
+    lag bins hold ten pairs each (or the fit does not converge): nothing to state.
     """
+    try:
+        return _fit_persisting(times, landmarks, residuals, sigma, bulk)
+    except _NoFit:
+        return None
+
+
+def _fit_persisting(
+    times: NDArray[np.float64],
+    landmarks: NDArray[np.int64],
+    residuals: NDArray[np.float64],
+    sigma: tuple[float, float],
+    bulk: NDArray[np.bool_],
+) -> PersistingError:
     keep = np.flatnonzero(bulk)
     a, b = track_pairs(times[keep], np.zeros(keep.size, dtype=np.int64), PERSISTING_LAGS[-1])
     a, b = keep[a], keep[b]
