@@ -264,8 +264,12 @@ class NoiseFit:
     window: float
     alpha: tuple[float, float, float, float]
     check: FitCheck | None = None
-    #: :func:`fit_persisting`'s persisting part of the range-bearing noise.
+    #: :func:`fit_persisting`'s persisting part of the range-bearing noise (of the bearing
+    #: residuals less their mean, ``bearing_offset``).
     persisting: PersistingError | None = None
+    #: The mean bearing residual [rad] (within 5 robust σ): a sensor heading that is not the
+    #: ground truth's, stated as ``sensor_model.mount`` ``[0, 0, −offset]`` with ``persisting``.
+    bearing_offset: float = 0.0
 
 
 #: χ²₂ quantiles: the median and the 99 % and 99.9 % bounds (``−2 ln(1 − p)``).
@@ -670,6 +674,7 @@ def fit_noise(
     sr = float(np.std(r_res[~out], ddof=1)) if (~out).sum() > 1 else float("nan")
     sb = float(np.std(b_res[~out], ddof=1)) if (~out).sum() > 1 else float("nan")
     duration = float(np.mean(per_window(dt)[ok]))
+    offset = float(np.mean(b_res[~out])) if (~out).any() else 0.0
     return NoiseFit(
         sigma_v=sigma_v,
         sigma_omega=sigma_w,
@@ -690,10 +695,11 @@ def fit_noise(
         persisting=fit_persisting(
             m[use, 0],
             m[use, 3].astype(np.int64),
-            np.column_stack((r_res, b_res)),
+            np.column_stack((r_res, b_res - offset)),
             (sr, sb),
             ~out,
         ),
+        bearing_offset=offset,
     )
 
 
@@ -760,7 +766,9 @@ def mrclam_bundle(
 
     ``persisting`` states the range-bearing errors' persistence in the sensor model
     (``sensor_model.persisting``, :func:`fit_persisting`), which the recovery then models
-    (:mod:`recovery.persisting`); off by default (docs/verdict.md, "Real robots").
+    (:mod:`recovery.persisting`), and their constant bearing part as the sensor's heading
+    (``sensor_model.mount``, the mean bearing residual: robot 4 of dataset 7, −0.62°); off
+    by default (docs/verdict.md, "Real robots").
     """
     if motion_noise not in ("speed", "constant"):
         raise InputError(f"motion_noise must be 'speed' or 'constant', got {motion_noise!r}")
@@ -807,6 +815,8 @@ def mrclam_bundle(
             fit.sigma_range,
             fit.sigma_bearing,
             persisting=fit.persisting if persisting else None,
+            # the bearings' constant part is the sensor's heading: z = h(x ∘ mount, l)
+            mount=(0.0, 0.0, -fit.bearing_offset) if persisting and fit.persisting else None,
         ),
         measurement_times=m[:, 0],
         measurements=m[:, 1:3],
