@@ -57,6 +57,7 @@ __all__ = [
     "MotionModel",
     "MotionModelWarning",
     "SensorModel",
+    "PersistingError",
     "velocity_increment",
     "euler_increment",
     "world_noise_is_rotation_invariant",
@@ -268,6 +269,72 @@ class MotionModel:
 
 
 @dataclass(frozen=True)
+class PersistingError:
+    """A measurement error that persists along each landmark's track (docs/bundle.md,
+    ``sensor_model.persisting``): per landmark and component a first-order Gauss–Markov bias
+    ``b(t + Δ) = e^{−Δ/τ} b(t) + w`` with stationary standard deviation ``sigma_*`` and time
+    constant ``time_constant_*`` [s], part of the sensor model's total σ (the rest is white).
+    Used by :mod:`recovery.persisting`.
+
+    Raises
+    ------
+    InputError
+        A σ that is not a finite number > 0, a time constant that is not finite and > 0.
+    """
+
+    sigma_range: float
+    sigma_bearing: float
+    time_constant_range: float
+    time_constant_bearing: float
+    #: The same four numbers for a bias **common to every landmark** (the sensor's own: a
+    #: heading or clock offset moves every bearing alike), or None.
+    common: PersistingError | None = None
+
+    def __post_init__(self) -> None:
+        if self.common is not None and self.common.common is not None:
+            raise InputError("sensor_model.persisting.common: expected no common of its own")
+        for name in (
+            "sigma_range",
+            "sigma_bearing",
+            "time_constant_range",
+            "time_constant_bearing",
+        ):
+            (value,) = _nonnegative_numbers(
+                (getattr(self, name),), 1, what=f"sensor_model.persisting.{name}"
+            )
+            if not 0.0 < value < 1e30:
+                raise InputError(
+                    f"sensor_model.persisting.{name}: expected a positive number, got {value:g}"
+                )
+            object.__setattr__(self, name, value)
+
+    @property
+    def sigma(self) -> tuple[float, float]:
+        return (self.sigma_range, self.sigma_bearing)
+
+    @property
+    def tau(self) -> tuple[float, float]:
+        return (self.time_constant_range, self.time_constant_bearing)
+
+    @property
+    def variance(self) -> tuple[float, float]:
+        """The persisting variance per component, the common bias's included."""
+        c = (0.0, 0.0) if self.common is None else self.common.variance
+        return (self.sigma_range**2 + c[0], self.sigma_bearing**2 + c[1])
+
+    def as_dict(self) -> dict[str, object]:
+        out: dict[str, object] = {
+            "sigma_range": self.sigma_range,
+            "sigma_bearing": self.sigma_bearing,
+            "time_constant_range": self.time_constant_range,
+            "time_constant_bearing": self.time_constant_bearing,
+        }
+        if self.common is not None:
+            out["common"] = self.common.as_dict()
+        return out
+
+
+@dataclass(frozen=True)
 class SensorModel:
     """Range-bearing sensor with independent Gaussian noise (standard deviations).
 
@@ -294,6 +361,7 @@ class SensorModel:
     fov: float | None = None
     mount: tuple[float, float, float] | None = None
     noise: str = "assumed"
+    persisting: PersistingError | None = None
 
     def __post_init__(self) -> None:
         if self.type != "range_bearing":
@@ -321,6 +389,18 @@ class SensorModel:
                     f"sensor's pose in the robot frame), got {self.mount!s:.60}"
                 )
             object.__setattr__(self, "mount", (float(m[0]), float(m[1]), float(m[2])))
+        pe = self.persisting
+        if pe is not None:
+            for name, total, var in (
+                ("sigma_range", self.sigma_range, pe.variance[0]),
+                ("sigma_bearing", self.sigma_bearing, pe.variance[1]),
+            ):
+                if not var < total * total:
+                    raise InputError(
+                        f"sensor_model.persisting.{name}: {math.sqrt(var):g} (with the common "
+                        f"bias's) is not below the sensor's total {name} {total:g}; expected "
+                        "the persisting part of it (the rest is white noise)"
+                    )
 
     @property
     def mounted(self) -> bool:
@@ -345,6 +425,8 @@ class SensorModel:
             out["mount"] = list(self.mount)
         if self.noise != "assumed":  # written when stated (older bundles unchanged)
             out["noise"] = self.noise
+        if self.persisting is not None:  # written when stated (older bundles unchanged)
+            out["persisting"] = self.persisting.as_dict()
         return out
 
 

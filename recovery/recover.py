@@ -57,6 +57,7 @@ from recovery.ekf import (
     run_filter,
 )
 from recovery.map_uncertainty import MapUncertainty, map_uncertainty
+from recovery.models import PersistingError
 from recovery.mount import loadings_to_robot_frame, to_robot_frame, to_sensor_frame
 from recovery.results import (
     BatchCosts,
@@ -315,12 +316,19 @@ def recover(
         check_joint_size(int(inp.times.shape[0]), int(mu.factor.shape[1]))
     kw = dict(gate=gate, max_outlier_run=max_outlier_run, on_divergence=on_divergence)
     robust = None if robust == "none" else robust
-    settings = _robust_settings(inp, kw, robust, robust_threshold, robust_scale)
-    threshold = None if settings is None else settings.effective
-    setup = _PassSetup(method, mu, prior.prior, kw, robust, threshold)
-    fr, est = _pass(setup, inp, progress)
+    pe = bundle.sensor.persisting
+    if pe is not None:  # a persisting error stated: the augmented filter and smoother
+        settings, fr, est = _persisting_recovery(
+            inp, pe, method, prior.prior, robust, robust_threshold, robust_scale
+        )
+        pers = None
+    else:
+        settings = _robust_settings(inp, kw, robust, robust_threshold, robust_scale)
+        threshold = None if settings is None else settings.effective
+        setup = _PassSetup(method, mu, prior.prior, kw, robust, threshold)
+        fr, est = _pass(setup, inp, progress)
+        pers = nis_persistence(fr.nis, bundle.measurement_landmarks) if persistence else None
     weights = None if robust is None else fr.weights
-    pers = nis_persistence(fr.nis, bundle.measurement_landmarks) if persistence else None
     filt_covs = fr.covariances
     if pers is not None and pers.significant:
         est, filt_covs = _persistent_pass(setup, inp, est, pers.factor)
@@ -438,6 +446,72 @@ def _persistent_pass(
         map_link=second.map_link,
     )
     return est, fr2.covariances
+
+
+def _persisting_recovery(
+    inp: FilterInput,
+    pe: PersistingError,
+    method: str,
+    prior: str,
+    robust: str | None,
+    threshold: float | None,
+    scale: float | str,
+) -> tuple[RobustSettings | None, FilterResult, _Estimate]:
+    """The recovery of a bundle that states a persisting error (:mod:`recovery.persisting`):
+    the augmented EKF (``method="filter"``) or its RTS smoother (smoother and batch: the
+    augmented model's fixed-interval smoother), with the robust rule of :func:`recover`
+    (``ŝ`` and the heavy-tail choice of ``c`` from a plain augmented pass)."""
+    from recovery.persisting import run_persisting, smooth_persisting
+
+    if prior == "deconditioned":
+        raise InputError(
+            "the bundle states a persisting measurement error (sensor_model.persisting) and a "
+            "map made from its log: the augmented recovery has no de-conditioned map prior; "
+            "expected map prior independent (a surveyed map) or a bundle without persisting"
+        )
+    if robust not in (None, "redescending"):
+        raise InputError(
+            f"robust {robust!r} with a persisting measurement error: the augmented recovery "
+            "has the redescending update only; expected redescending or none"
+        )
+    common = {}
+    if pe.common is not None:
+        common = {"common_sigma": pe.common.sigma, "common_tau": pe.common.tau}
+    settings = None
+    c_eff = None
+    if robust is not None:
+        c = float(threshold) if threshold is not None else ROBUST_DEFAULTS[robust]
+        if scale == "auto":
+            plain = run_persisting(inp, pe.sigma, pe.tau, **common).fr  # type: ignore[arg-type]
+            s = _nis_scale(plain)
+            if threshold is None and _heavy_tailed(plain.nis, s):
+                c = HEAVY_TAIL_C
+        else:
+            s = float(scale)
+        settings = RobustSettings(kind=robust, threshold=c, scale=s, effective=c * s)
+        c_eff = settings.effective
+    run = run_persisting(inp, pe.sigma, pe.tau, robust_threshold=c_eff, **common)  # type: ignore[arg-type]
+    fr = run.fr
+    if method == "filter":
+        return settings, fr, _Estimate(fr.poses, fr.covariances)
+    poses, covs, states = smooth_persisting(run)
+    # the iterated extended smoother: the measurements relinearised at the smoothed states
+    # (as the white recovery's Gauss–Newton steps do), PERSISTING_ITERATIONS passes
+    for _ in range(PERSISTING_ITERATIONS):
+        again = run_persisting(
+            inp,
+            pe.sigma,
+            pe.tau,
+            robust_threshold=c_eff,
+            linearize_at=states,
+            **common,  # type: ignore[arg-type]
+        )
+        poses, covs, states = smooth_persisting(again)
+    return settings, fr, _Estimate(poses, covs, iterations=PERSISTING_ITERATIONS)
+
+
+#: Relinearised passes of the augmented smoother after its first (recovery.persisting).
+PERSISTING_ITERATIONS = 2
 
 
 @dataclass(frozen=True)

@@ -77,6 +77,22 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "and keep one sighting per landmark every SECONDS (the rest counted, left out), so "
         "white-noise models fit them (0: off; dataset 7: 5; default: %(default)s)",
     )
+    mr.add_argument(
+        "--motion-window",
+        type=opt.float_at_least(0.1),
+        default=1.0,
+        metavar="SECONDS",
+        help="fit the motion noise over windows of SECONDS (the odometry's errors persist: "
+        "over 1 s and 10 s windows dataset 7's alpha1 is 3.5 and 16.6) (default: %(default)s; "
+        "--decorrelate sets it too)",
+    )
+    mr.add_argument(
+        "--persisting",
+        action="store_true",
+        help="state the range-bearing errors' persistence in the bundle (sensor_model."
+        "persisting: a Gauss-Markov bias per landmark track, sigma and time constant fitted "
+        "against the ground truth), which the recovery then models (default: off)",
+    )
     add_force_argument(mr)
     mr.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     mr.set_defaults(func=run_import_mrclam)
@@ -139,6 +155,8 @@ def _mrclam_robot(args: argparse.Namespace, robot: int, out: Path) -> Bundle:
             calibrate=not args.no_calibrate,
             motion_noise=args.motion_noise,
             decorrelate=args.decorrelate,
+            persisting=args.persisting,
+            window=args.motion_window,
         )
     if not args.quiet:
         assert bundle.controls is not None  # MRCLAM bundles use the velocity model

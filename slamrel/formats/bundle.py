@@ -43,6 +43,7 @@ from recovery.models import (
     SIGMA_NAMES,
     MotionModel,
     MotionModelWarning,
+    PersistingError,
     SensorModel,
     world_noise_is_rotation_invariant,
 )
@@ -132,6 +133,20 @@ _MANIFEST_KEYS = {
         "fov",
         "mount",
         "noise",
+        "persisting",
+    ),
+    "sensor_model.persisting": (
+        "sigma_range",
+        "sigma_bearing",
+        "time_constant_range",
+        "time_constant_bearing",
+        "common",
+    ),
+    "sensor_model.persisting.common": (
+        "sigma_range",
+        "sigma_bearing",
+        "time_constant_range",
+        "time_constant_bearing",
     ),
 }
 
@@ -492,6 +507,9 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
             path=path,
             line=_line_of_key(text, "noise"),
         )
+    persisting = None
+    if "persisting" in spec:  # a Gauss–Markov bias per landmark track (recovery.persisting)
+        persisting = _parse_persisting(spec["persisting"], text, path)
     return SensorModel(
         vals[0],
         vals[1],
@@ -499,7 +517,46 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
         fov=reach.get("fov"),
         mount=mount,  # type: ignore[arg-type]
         noise=noise,
+        persisting=persisting,
     )
+
+
+def _parse_persisting(
+    spec: Any, text: str, path: str, where: str = "sensor_model.persisting"
+) -> PersistingError:
+    """``sensor_model.persisting``: four positive numbers and an optional ``common`` object
+    of the same four (docs/bundle.md)."""
+    line = _line_of_key(text, where.rsplit(".", 1)[1])
+    if not isinstance(spec, dict):
+        raise InputError(f"{where}: expected an object", path=path, line=line)
+    _refuse_unknown_keys(spec, where, text, path)
+    common = None
+    if "common" in spec and where == "sensor_model.persisting":
+        common = _parse_persisting(spec["common"], text, path, where + ".common")
+    vals = {}
+    for n in PERSISTING_KEYS:
+        if n not in spec:
+            raise InputError(f"{where}: missing {n}", path=path, line=line)
+        vals[n] = _number(
+            spec[n],
+            what=f"{where}.{n}",
+            path=path,
+            line=_line_of_key(text, n),
+            maximum=MAX_SIGMA,
+        )
+        if not vals[n] > 0:
+            raise InputError(
+                f"{where}.{n}: expected a positive number, got {vals[n]}",
+                path=path,
+                line=_line_of_key(text, n),
+            )
+    try:
+        return PersistingError(**vals, common=common)
+    except InputError as exc:
+        raise InputError(str(exc), path=path, line=line) from None
+
+
+PERSISTING_KEYS = ("sigma_range", "sigma_bearing", "time_constant_range", "time_constant_bearing")
 
 
 def _read_manifest(path: Path) -> dict[str, Any]:

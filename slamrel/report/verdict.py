@@ -370,6 +370,9 @@ class RunFacts:
     agreement: Agreement | None = None
     nees_law: NeesLaw | None = None
     placement: Placement | None = None
+    #: The bundle states a persisting measurement error (``sensor_model.persisting``), which
+    #: the recovery holds in its state (:mod:`recovery.persisting`).
+    persisting_stated: bool = False
 
     @classmethod
     def of(cls, result: RunResult) -> RunFacts:
@@ -393,6 +396,7 @@ class RunFacts:
             poses=None if rec is None else len(rec.trajectory),
             nis=None if rec is None else np.asarray(rec.nis, dtype=np.float64),
             nis_landmarks=None if rec is None else result.bundle.measurement_landmarks,
+            persisting_stated=result.bundle.sensor.persisting is not None,
             robust=None if rec is None else rec.robust,
             map_nees=_map_nees_of(result),
             online_nees=None if online is None else online.summary,
@@ -555,7 +559,16 @@ def gaussian_breaks(facts: RunFacts) -> list[str]:
             )
         )
     per = nis_persistence(facts.nis, facts.nis_landmarks)
-    if per.significant:
+    if per.significant and facts.persisting_stated:
+        causes.append(
+            f"innovations correlated in time: rank correlation of the NIS of successive "
+            f"sightings of a landmark {_g(per.near)}, of sightings {FAR_LAG} apart {_g(per.far)}, "
+            "with the bundle's persisting error in the recovery's state: the recovery already "
+            "holds a persisting value of the errors, so this is not information counted twice; "
+            "a persisting size (variance) of the errors, which no stated model holds, "
+            "correlates the NIS so"
+        )
+    elif per.significant:
         causes.append(
             f"innovations correlated in time: rank correlation of the NIS of successive "
             f"sightings of a landmark {_g(per.near)}, of sightings {FAR_LAG} apart {_g(per.far)} "

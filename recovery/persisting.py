@@ -1,0 +1,307 @@
+"""Recovery with a persisting measurement error: a Gauss–Markov bias per landmark track.
+
+A bundle may state that its range-bearing errors persist along each landmark's track
+(``sensor_model.persisting``, docs/bundle.md): the measurement of landmark ``l`` at time
+``t`` is ``z = h(x_t, m_l) + b_l(t) + n``, with ``n ~ N(0, R_w)`` white and ``b_l`` a
+first-order Gauss–Markov process per landmark and component (range, bearing), independent
+of each other and of everything else:
+
+    b_l(t + Δ) = φ(Δ) b_l(t) + w,   φ(Δ) = exp(−Δ/τ),   w ~ N(0, σ_b² (1 − φ²)),
+    b_l stationary: Var b_l = σ_b²;  R_w = R − diag(σ_b²)  (R the sensor model's total noise).
+
+The model is linear-Gaussian in ``b``, so the exact treatment is state augmentation
+(Bryson & Henrikson 1968; Simon, *Optimal State Estimation*, Sec. 7.2): the filter's state
+is the pose, the map's error ``δm`` (a constant with the map's stated covariance as prior,
+the independent map prior of :mod:`recovery.batch_refinement`), every landmark's bias and,
+when stated, a bias ``c(t)`` common to every landmark (the same Gauss–Markov law with its
+own σ and τ; ``z = h + b_l + c + n``): ``D = 3 + 2M + 2M (+ 2)``. Between two measurement
+epochs the pose follows the composed prediction of :mod:`recovery.ekf` and each bias
+decays by ``φ`` with process noise ``σ_b² (1 − φ²)``; each measurement updates the whole
+state with ``H = [H_x, H_l, I₂ (, I₂)]`` and ``R_w``. The Rauch–Tung–Striebel recursion of
+the augmented state runs over the epochs; every grid pose between two epochs is filled in
+closed form
+(the bias does not move the pose, so the augmented gain of pose ``k`` towards the next
+epoch ``i`` is ``[P_k S(p_i − p_k)ᵀ, S(p_k − p_e) P⁺_{e,x·} Φ_{i←e}] (P⁻_i)⁻¹``, ``e``
+the epoch before ``k``, with per-epoch products only, vectorised over the poses).
+
+With ``σ_b → 0`` the model is the white one, and the augmented filter is the Schmidt /
+map-augmented EKF of :mod:`recovery.ekf` with the map estimated (the smoother's map
+correction). A bundle without ``persisting`` never reaches this module.
+
+Cost: O(E D²) per filter and smoother pass (``E`` epochs) and O(N) for the poses between
+epochs; the state holds every landmark's map error and bias, so ``D`` grows with the map
+(63 for MRCLAM's 15 landmarks).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from recovery.ekf import (
+    OUTSIDE,
+    UNASSOCIATED,
+    USED,
+    FilterEvents,
+    FilterInput,
+    FilterResult,
+    _full,
+    _setup,
+    fill,
+    predict6,
+)
+from relation_metric.arrays import Array
+from relation_metric.consistency import OUTLIER_PROBABILITY, chi2_quantile
+from relation_metric.errors import DivergenceError
+from relation_metric.se2 import wrap_angle, wrap_angle_float
+
+__all__ = ["PersistingPass", "run_persisting", "smooth_persisting"]
+
+
+@dataclass(frozen=True)
+class PersistingPass:
+    """One augmented filter pass: the pose filter result (grid poses and their marginal
+    covariances, NIS, weights, as :class:`~recovery.ekf.FilterResult`) and the augmented
+    epoch states for the smoother."""
+
+    fr: FilterResult
+    prior_x: Array  # (E, D)
+    prior_p: Array  # (E, D, D)
+    post_x: Array
+    post_p: Array
+    phi: Array  # (E − 1, D − 3): the rest-of-state decay from epoch e to e + 1
+
+
+def _map_prior(inp: FilterInput) -> Array:
+    """The map error's prior covariance (2M, 2M): joint, else the marginals' block diagonal."""
+    if inp.map_covariance is not None:
+        return np.asarray(inp.map_covariance, dtype=np.float64)
+    m = inp.map_xy.shape[0]
+    out = np.zeros((m, 2, m, 2))
+    out[np.arange(m), :, np.arange(m), :] = inp.map_marginals
+    return out.reshape(2 * m, 2 * m)
+
+
+def run_persisting(
+    inp: FilterInput,
+    bias_sigma: tuple[float, float],
+    bias_tau: tuple[float, float],
+    *,
+    robust_threshold: float | None = None,
+    common_sigma: tuple[float, float] | None = None,
+    common_tau: tuple[float, float] | None = None,
+    linearize_at: Array | None = None,
+) -> PersistingPass:
+    """The augmented EKF over the grid (module doc).
+
+    ``inp.r`` is the total measurement noise; its white part is ``inp.r − diag(σ_b²)``.
+    ``linearize_at`` (E, D): the augmented states at the epochs (a smoother's) at which the
+    measurements are linearised, a pass of the iterated extended smoother (Bell 1994:
+    Gauss–Newton on the measurement terms; the motion is composed as before).
+    ``robust_threshold``: ``c`` of the redescending weight ``(c/d)²`` on the Mahalanobis
+    distance under the augmented filter's own innovation covariance (``None``: plain EKF).
+    """
+    setup = _setup(inp, None, None, None)
+    seg = setup.seg
+    epochs = np.asarray(setup.epochs, dtype=np.int64)
+    # the state holds the landmarks the log uses (their map error and bias); slot of each
+    seen = np.unique(inp.meas_landmark[np.asarray(setup.active, dtype=np.int64)])
+    slot = np.full(inp.map_xy.shape[0], -1, dtype=np.int64)
+    slot[seen] = np.arange(seen.size)
+    m = int(seen.size)
+    sig_b = np.asarray(bias_sigma, dtype=np.float64)
+    tau = np.asarray(bias_tau, dtype=np.float64)
+    has_c = common_sigma is not None
+    sig_c = np.asarray(common_sigma if has_c else (0.0, 0.0), dtype=np.float64)
+    tau_c = np.asarray(common_tau if common_tau is not None else (1.0, 1.0), dtype=np.float64)
+    r_w = np.diag(np.diag(np.asarray(inp.r)) - sig_b**2 - sig_c**2)
+    if not (np.diag(r_w) > 0).all():
+        raise DivergenceError("persisting error: its variance is not below the sensor's total")
+    sel = (2 * seen[:, None] + np.arange(2)).ravel()
+    smap = _map_prior(inp)[np.ix_(sel, sel)]
+    has_map = bool(np.abs(smap).max() > 0.0) if m else False
+    nm = 2 * m if has_map else 0
+    ob = 3 + nm  # offset of the biases
+    oc = ob + 2 * m  # offset of the common bias (when stated)
+    d = oc + (2 if has_c else 0)
+    var_b = np.tile(sig_b**2, m)
+    if has_c:
+        var_b = np.concatenate((var_b, sig_c**2))
+    lin = None if linearize_at is None else np.asarray(linearize_at, dtype=np.float64)
+    x = np.zeros(d)
+    x[:3] = inp.x0
+    p = np.zeros((d, d))
+    p[:3, :3] = inp.p0
+    if has_map:
+        p[3:ob, 3:ob] = smap
+    p[ob:, ob:] = np.diag(var_b)
+    times = inp.times
+    n_e = epochs.shape[0]
+    prior_x, post_x = np.empty((n_e, d)), np.empty((n_e, d))
+    prior_p, post_p = np.empty((n_e, d, d)), np.empty((n_e, d, d))
+    phi_all = np.ones((max(n_e - 1, 0), d - 3))
+    c2 = math.inf if robust_threshold is None else float(robust_threshold) ** 2
+    active, bounds = setup.active, setup.bounds
+    z_all, lmk = inp.meas_z, inp.meas_landmark
+    nis, wts = setup.nis, setup.weights
+    eye2 = np.eye(2)
+    for e in range(n_e):
+        k = int(epochs[e])
+        if e > 0:
+            ux, uy, uth = seg.local[k]
+            psi = x[2]
+            c, s = math.cos(psi), math.sin(psi)
+            dx, dy = c * ux - s * uy, s * ux + c * uy
+            x[0] += dx
+            x[1] += dy
+            x[2] += uth
+            sh = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
+            q6 = predict6((0.0,) * 6, tuple(seg.q[:, k]), c, s, 0.0, 0.0)
+            qf = _full(tuple(np.array([v]) for v in q6))[0]
+            dt = float(times[k] - times[epochs[e - 1]])
+            ph = np.tile(np.exp(-dt / tau), m)
+            if has_c:
+                ph = np.concatenate((ph, np.exp(-dt / tau_c)))
+            phi = np.ones(d - 3)
+            phi[nm:] = ph
+            phi_all[e - 1] = phi
+            x[ob:] *= ph
+            p[:3, :] = sh @ p[:3, :]
+            p[:, :3] = p[:, :3] @ sh.T
+            p[3:, :] *= phi[:, None]
+            p[:, 3:] *= phi[None, :]
+            p[:3, :3] += qf
+            idx = np.arange(ob, d)
+            p[idx, idx] += var_b * (1.0 - ph * ph)
+        prior_x[e], prior_p[e] = x, p
+        for j in active[bounds[e] : bounds[e + 1]]:
+            li = int(slot[lmk[j]])
+            at = x if lin is None else lin[e]  # where h is linearised
+            ml = inp.map_xy[lmk[j]] + (at[3 + 2 * li : 5 + 2 * li] if has_map else 0.0)
+            ddx, ddy = ml[0] - at[0], ml[1] - at[1]
+            qq = ddx * ddx + ddy * ddy
+            rng = math.sqrt(qq)
+            h00, h01, h10, h11 = ddx / rng, ddy / rng, -ddy / qq, ddx / qq
+            bi = ob + 2 * li
+            y = np.array([z_all[j, 0] - rng, z_all[j, 1] - math.atan2(ddy, ddx) + at[2]])
+            h = np.zeros((2, d))
+            h[:, :3] = [[-h00, -h01, 0.0], [-h10, -h11, -1.0]]
+            if has_map:
+                h[:, 3 + 2 * li : 5 + 2 * li] = [[h00, h01], [h10, h11]]
+            h[:, bi : bi + 2] = eye2
+            if has_c:
+                h[:, oc : oc + 2] = eye2
+            # y = z − h(at) − H (x − at) (the biases enter linearly: H's I₂ blocks)
+            dev = x - at
+            dev[ob:] = x[ob:]
+            y -= h @ dev
+            y[1] = wrap_angle_float(y[1])
+            ph_t = p @ h.T
+            s_m = h @ ph_t + r_w
+            s_inv = np.linalg.inv(s_m)
+            v = float(y @ s_inv @ y)
+            nis[j] = v
+            w = 1.0 if v <= c2 else c2 / v
+            if w != 1.0:
+                wts[j] = w
+                s_inv = np.linalg.inv(s_m + (1.0 / w - 1.0) * r_w)
+            gain = ph_t @ s_inv
+            x += gain @ y
+            p -= gain @ ph_t.T
+            p = 0.5 * (p + p.T)
+        post_x[e], post_p[e] = x, p
+    status = setup.status
+    status[(inp.meas_landmark < 0)] = UNASSOCIATED
+    status[(inp.meas_grid < 0)] = OUTSIDE
+    psi_e = post_x[:, 2]
+    post6 = post_p[:, :3, :3].reshape(n_e, 9)[:, [0, 1, 2, 4, 5, 8]]
+    steps, poses, covs = fill(seg, psi_e, post_x[:, :3], post6)
+    poses[epochs] = post_x[:, :3]
+    covs[epochs] = post_p[:, :3, :3]
+    empty = np.zeros(0, dtype=np.int64)
+    fr = FilterResult(
+        poses=poses,
+        covariances=covs,
+        segments=seg,
+        prior_poses=prior_x[:, :3].copy(),
+        prior_covariances=prior_p[:, :3, :3].copy(),
+        post_poses=post_x[:, :3].copy(),
+        post_covariances=post_p[:, :3, :3].copy(),
+        status=status,
+        nis=nis,
+        psi=psi_e,
+        steps=steps,
+        order=np.asarray(active, dtype=np.int64),
+        weights=wts,
+        events=FilterEvents(empty, empty, empty, np.zeros(0)),
+        outlier_bound=chi2_quantile(OUTLIER_PROBABILITY, 2),
+    )
+    assert (status[np.asarray(active, dtype=np.int64)] == USED).all()
+    return PersistingPass(fr, prior_x, prior_p, post_x, post_p, phi_all)
+
+
+def smooth_persisting(run: PersistingPass) -> tuple[Array, Array, Array]:
+    """RTS smoothing of the augmented run: poses (N, 3) (wrapped), covariances (N, 3, 3) and
+    the smoothed augmented states at the epochs (E, D).
+
+    Over the epochs the augmented recursion ``C_e = P⁺_e F_eᵀ (P⁻_{e+1})⁻¹``; every pose
+    between two epochs by the closed-form gain of the module doc.
+    """
+    fr = run.fr
+    seg, w = fr.segments, fr.steps
+    ep = seg.epochs
+    n_e = ep.shape[0]
+    d = run.post_x.shape[1]
+    xs, ps = run.post_x.copy(), run.post_p.copy()
+    inv_pri = np.linalg.inv(run.prior_p)
+    for e in range(n_e - 2, -1, -1):
+        step = w[ep[e + 1], :2]
+        f = np.eye(d)
+        f[0, 2], f[1, 2] = -step[1], step[0]
+        f[3:, 3:] = np.diag(run.phi[e])
+        c = run.post_p[e] @ f.T @ inv_pri[e + 1]
+        xs[e] = run.post_x[e] + c @ (xs[e + 1] - run.prior_x[e + 1])
+        ps[e] = run.post_p[e] + c @ (ps[e + 1] - run.prior_p[e + 1]) @ c.T
+        ps[e] = 0.5 * (ps[e] + ps[e].T)
+    poses = np.array(fr.poses)
+    covs = np.array(fr.covariances)
+    poses[ep], covs[ep] = xs[:, :3], ps[:, :3, :3]
+    is_epoch = np.zeros(poses.shape[0], dtype=bool)
+    is_epoch[ep] = True
+    k = np.flatnonzero(~is_epoch)
+    if k.size:
+        e_of = seg.epoch_of[k]
+        i = e_of + 1
+        # per epoch pair (e, e + 1): W1, W2 (3 × D), U, M (the smoothed corrections at i)
+        u = xs[1:] - run.prior_x[1:]  # (E − 1, D)
+        mm = ps[1:] - run.prior_p[1:]
+        wi = inv_pri[1:]
+        w1 = wi[:, :3, :]
+        b = run.post_p[:-1, :3, 3:] * run.phi[:, None, :]
+        w2 = b @ wi[:, 3:, :]
+        a1 = np.einsum("eij,ej->ei", w1, u)
+        a2 = np.einsum("eij,ej->ei", w2, u)
+        m11 = w1 @ mm @ w1.transpose(0, 2, 1)
+        m12 = w1 @ mm @ w2.transpose(0, 2, 1)
+        m22 = w2 @ mm @ w2.transpose(0, 2, 1)
+        wk = w[k, :2]  # p_k − p_e (world), the shear from epoch e to pose k
+        to_next = w[ep[i], :2] - wk
+        pk = covs[k]
+        am = pk.copy()  # A_k = P_k S(p_i − p_k)ᵀ
+        am[:, :, 0] -= to_next[:, 1, None] * pk[:, :, 2]
+        am[:, :, 1] += to_next[:, 0, None] * pk[:, :, 2]
+        sk = np.zeros((k.size, 3, 3))
+        sk[:, 0, 0] = sk[:, 1, 1] = sk[:, 2, 2] = 1.0
+        sk[:, 0, 2], sk[:, 1, 2] = -wk[:, 1], wk[:, 0]
+        ee = e_of
+        poses[k] += np.einsum("kij,kj->ki", am, a1[ee]) + np.einsum("kij,kj->ki", sk, a2[ee])
+        skt = sk.transpose(0, 2, 1)
+        cross = am @ m12[ee] @ skt
+        corr = am @ m11[ee] @ am.transpose(0, 2, 1) + cross + cross.transpose(0, 2, 1)
+        corr += sk @ m22[ee] @ skt
+        corr = 0.5 * (corr + corr.transpose(0, 2, 1))
+        covs[k] = pk + corr
+    poses[:, 2] = wrap_angle(poses[:, 2])
+    return poses, covs, xs
