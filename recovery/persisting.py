@@ -39,6 +39,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from recovery.ekf import (
     OUTSIDE,
@@ -58,6 +59,8 @@ from relation_metric.errors import DivergenceError
 from relation_metric.se2 import wrap_angle, wrap_angle_float
 
 __all__ = ["PersistingPass", "run_persisting", "smooth_persisting"]
+
+_EYE2 = np.eye(2)
 
 
 @dataclass(frozen=True)
@@ -84,6 +87,128 @@ def _map_prior(inp: FilterInput) -> Array:
     return out.reshape(2 * m, 2 * m)
 
 
+@dataclass(frozen=True)
+class _Layout:
+    """Where each part sits in the augmented state ``[pose (3), δm (nm), b (2M), c (2)]``."""
+
+    slot: NDArray[np.int64]  # (M_map,) the state slot of each map landmark, −1: not in the log
+    m: int  # landmarks in the state
+    has_map: bool  # the map's error is a state (its prior is not zero)
+    has_c: bool  # a common bias is stated
+    nm: int  # 2M with a map error, else 0
+    ob: int  # offset of the per-landmark biases
+    oc: int  # offset of the common bias
+    d: int  # the state's dimension
+    var_b: Array  # (d − ob,) the biases' stationary variances
+    tau: Array  # (2,) per-landmark time constants (range, bearing) [s]
+    tau_c: Array  # (2,) the common bias's
+
+
+def _layout(
+    inp: FilterInput,
+    active: ArrayLike,
+    bias_sigma: tuple[float, float],
+    bias_tau: tuple[float, float],
+    common_sigma: tuple[float, float] | None,
+    common_tau: tuple[float, float] | None,
+) -> tuple[_Layout, Array, Array]:
+    """The state's layout, the white part ``R_w`` (2, 2) of the sensor's noise and the map
+    error's prior (nm, nm) over the landmarks the log uses."""
+    seen = np.unique(inp.meas_landmark[np.asarray(active, dtype=np.int64)])
+    slot = np.full(inp.map_xy.shape[0], -1, dtype=np.int64)
+    slot[seen] = np.arange(seen.size)
+    m = int(seen.size)
+    sig_b = np.asarray(bias_sigma, dtype=np.float64)
+    has_c = common_sigma is not None
+    sig_c = np.asarray(common_sigma if has_c else (0.0, 0.0), dtype=np.float64)
+    tau_c = np.asarray(common_tau if common_tau is not None else (1.0, 1.0), dtype=np.float64)
+    r_w = np.diag(np.diag(np.asarray(inp.r)) - sig_b**2 - sig_c**2)
+    if not (np.diag(r_w) > 0).all():
+        raise DivergenceError("persisting error: its variance is not below the sensor's total")
+    sel = (2 * seen[:, None] + np.arange(2)).ravel()
+    smap = _map_prior(inp)[np.ix_(sel, sel)]
+    has_map = bool(np.abs(smap).max() > 0.0) if m else False
+    nm = 2 * m if has_map else 0
+    ob = 3 + nm
+    oc = ob + 2 * m
+    var_b = np.tile(sig_b**2, m)
+    if has_c:
+        var_b = np.concatenate((var_b, sig_c**2))
+    tau = np.asarray(bias_tau, dtype=np.float64)
+    lay = _Layout(slot, m, has_map, has_c, nm, ob, oc, oc + (2 if has_c else 0), var_b, tau, tau_c)
+    return lay, r_w, smap
+
+
+def _predict(
+    x: Array, p: Array, lay: _Layout, local: Array, q: Array, dt: float
+) -> tuple[Array, Array, Array]:
+    """One step of the augmented prediction from one epoch to the next: the pose composed
+    by the increment ``local`` (3,) with the step noise ``q`` (6,), each bias decayed by
+    ``φ = exp(−dt/τ)``; returns ``x``, ``p`` (updated in place) and ``φ`` (d − 3,)."""
+    ux, uy, uth = local
+    c, s = math.cos(x[2]), math.sin(x[2])
+    dx, dy = c * ux - s * uy, s * ux + c * uy
+    x[0] += dx
+    x[1] += dy
+    x[2] += uth
+    sh = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
+    q6 = predict6((0.0,) * 6, tuple(q), c, s, 0.0, 0.0)
+    qf = _full(tuple(np.array([v]) for v in q6))[0]
+    ph = np.tile(np.exp(-dt / lay.tau), lay.m)
+    if lay.has_c:
+        ph = np.concatenate((ph, np.exp(-dt / lay.tau_c)))
+    phi = np.ones(lay.d - 3)
+    phi[lay.nm :] = ph
+    x[lay.ob :] *= ph
+    p[:3, :] = sh @ p[:3, :]
+    p[:, :3] = p[:, :3] @ sh.T
+    p[3:, :] *= phi[:, None]
+    p[:, 3:] *= phi[None, :]
+    p[:3, :3] += qf
+    idx = np.arange(lay.ob, lay.d)
+    p[idx, idx] += lay.var_b * (1.0 - ph * ph)
+    return x, p, phi
+
+
+def _update(
+    x: Array, p: Array, lay: _Layout, z: Array, map_l: Array, li: int, at: Array,
+    r_w: Array, c2: float,
+) -> tuple[Array, Array, float, float]:  # fmt: skip
+    """One measurement ``z`` (2,) of the landmark at ``map_l`` (2,), state slot ``li``,
+    linearised at ``at`` (d,); the redescending weight beyond ``c2``. Returns ``x``, ``p``,
+    the NIS and the weight."""
+    ml = map_l + (at[3 + 2 * li : 5 + 2 * li] if lay.has_map else 0.0)
+    ddx, ddy = ml[0] - at[0], ml[1] - at[1]
+    qq = ddx * ddx + ddy * ddy
+    rng = math.sqrt(qq)
+    h00, h01, h10, h11 = ddx / rng, ddy / rng, -ddy / qq, ddx / qq
+    bi = lay.ob + 2 * li
+    y = np.array([z[0] - rng, z[1] - math.atan2(ddy, ddx) + at[2]])
+    h = np.zeros((2, lay.d))
+    h[:, :3] = [[-h00, -h01, 0.0], [-h10, -h11, -1.0]]
+    if lay.has_map:
+        h[:, 3 + 2 * li : 5 + 2 * li] = [[h00, h01], [h10, h11]]
+    h[:, bi : bi + 2] = _EYE2
+    if lay.has_c:
+        h[:, lay.oc : lay.oc + 2] = _EYE2
+    # y = z − h(at) − H (x − at) (the biases enter linearly: H's I₂ blocks)
+    dev = x - at
+    dev[lay.ob :] = x[lay.ob :]
+    y -= h @ dev
+    y[1] = wrap_angle_float(y[1])
+    ph_t = p @ h.T
+    s_m = h @ ph_t + r_w
+    s_inv = np.linalg.inv(s_m)
+    v = float(y @ s_inv @ y)
+    w = 1.0 if v <= c2 else c2 / v
+    if w != 1.0:
+        s_inv = np.linalg.inv(s_m + (1.0 / w - 1.0) * r_w)
+    gain = ph_t @ s_inv
+    x += gain @ y
+    p -= gain @ ph_t.T
+    return x, 0.5 * (p + p.T), v, w
+
+
 def run_persisting(
     inp: FilterInput,
     bias_sigma: tuple[float, float],
@@ -106,112 +231,51 @@ def run_persisting(
     setup = _setup(inp, None, None, None)
     seg = setup.seg
     epochs = np.asarray(setup.epochs, dtype=np.int64)
-    # the state holds the landmarks the log uses (their map error and bias); slot of each
-    seen = np.unique(inp.meas_landmark[np.asarray(setup.active, dtype=np.int64)])
-    slot = np.full(inp.map_xy.shape[0], -1, dtype=np.int64)
-    slot[seen] = np.arange(seen.size)
-    m = int(seen.size)
-    sig_b = np.asarray(bias_sigma, dtype=np.float64)
-    tau = np.asarray(bias_tau, dtype=np.float64)
-    has_c = common_sigma is not None
-    sig_c = np.asarray(common_sigma if has_c else (0.0, 0.0), dtype=np.float64)
-    tau_c = np.asarray(common_tau if common_tau is not None else (1.0, 1.0), dtype=np.float64)
-    r_w = np.diag(np.diag(np.asarray(inp.r)) - sig_b**2 - sig_c**2)
-    if not (np.diag(r_w) > 0).all():
-        raise DivergenceError("persisting error: its variance is not below the sensor's total")
-    sel = (2 * seen[:, None] + np.arange(2)).ravel()
-    smap = _map_prior(inp)[np.ix_(sel, sel)]
-    has_map = bool(np.abs(smap).max() > 0.0) if m else False
-    nm = 2 * m if has_map else 0
-    ob = 3 + nm  # offset of the biases
-    oc = ob + 2 * m  # offset of the common bias (when stated)
-    d = oc + (2 if has_c else 0)
-    var_b = np.tile(sig_b**2, m)
-    if has_c:
-        var_b = np.concatenate((var_b, sig_c**2))
+    active, bounds = setup.active, setup.bounds
+    lay, r_w, smap = _layout(inp, active, bias_sigma, bias_tau, common_sigma, common_tau)
+    d, ob = lay.d, lay.ob
     lin = None if linearize_at is None else np.asarray(linearize_at, dtype=np.float64)
     x = np.zeros(d)
     x[:3] = inp.x0
     p = np.zeros((d, d))
     p[:3, :3] = inp.p0
-    if has_map:
+    if lay.has_map:
         p[3:ob, 3:ob] = smap
-    p[ob:, ob:] = np.diag(var_b)
+    p[ob:, ob:] = np.diag(lay.var_b)
     times = inp.times
     n_e = epochs.shape[0]
     prior_x, post_x = np.empty((n_e, d)), np.empty((n_e, d))
     prior_p, post_p = np.empty((n_e, d, d)), np.empty((n_e, d, d))
     phi_all = np.ones((max(n_e - 1, 0), d - 3))
     c2 = math.inf if robust_threshold is None else float(robust_threshold) ** 2
-    active, bounds = setup.active, setup.bounds
     z_all, lmk = inp.meas_z, inp.meas_landmark
     nis, wts = setup.nis, setup.weights
-    eye2 = np.eye(2)
     for e in range(n_e):
         k = int(epochs[e])
         if e > 0:
-            ux, uy, uth = seg.local[k]
-            psi = x[2]
-            c, s = math.cos(psi), math.sin(psi)
-            dx, dy = c * ux - s * uy, s * ux + c * uy
-            x[0] += dx
-            x[1] += dy
-            x[2] += uth
-            sh = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
-            q6 = predict6((0.0,) * 6, tuple(seg.q[:, k]), c, s, 0.0, 0.0)
-            qf = _full(tuple(np.array([v]) for v in q6))[0]
             dt = float(times[k] - times[epochs[e - 1]])
-            ph = np.tile(np.exp(-dt / tau), m)
-            if has_c:
-                ph = np.concatenate((ph, np.exp(-dt / tau_c)))
-            phi = np.ones(d - 3)
-            phi[nm:] = ph
-            phi_all[e - 1] = phi
-            x[ob:] *= ph
-            p[:3, :] = sh @ p[:3, :]
-            p[:, :3] = p[:, :3] @ sh.T
-            p[3:, :] *= phi[:, None]
-            p[:, 3:] *= phi[None, :]
-            p[:3, :3] += qf
-            idx = np.arange(ob, d)
-            p[idx, idx] += var_b * (1.0 - ph * ph)
+            x, p, phi_all[e - 1] = _predict(x, p, lay, seg.local[k], seg.q[:, k], dt)
         prior_x[e], prior_p[e] = x, p
         for j in active[bounds[e] : bounds[e + 1]]:
-            li = int(slot[lmk[j]])
+            li = int(lay.slot[lmk[j]])
             at = x if lin is None else lin[e]  # where h is linearised
-            ml = inp.map_xy[lmk[j]] + (at[3 + 2 * li : 5 + 2 * li] if has_map else 0.0)
-            ddx, ddy = ml[0] - at[0], ml[1] - at[1]
-            qq = ddx * ddx + ddy * ddy
-            rng = math.sqrt(qq)
-            h00, h01, h10, h11 = ddx / rng, ddy / rng, -ddy / qq, ddx / qq
-            bi = ob + 2 * li
-            y = np.array([z_all[j, 0] - rng, z_all[j, 1] - math.atan2(ddy, ddx) + at[2]])
-            h = np.zeros((2, d))
-            h[:, :3] = [[-h00, -h01, 0.0], [-h10, -h11, -1.0]]
-            if has_map:
-                h[:, 3 + 2 * li : 5 + 2 * li] = [[h00, h01], [h10, h11]]
-            h[:, bi : bi + 2] = eye2
-            if has_c:
-                h[:, oc : oc + 2] = eye2
-            # y = z − h(at) − H (x − at) (the biases enter linearly: H's I₂ blocks)
-            dev = x - at
-            dev[ob:] = x[ob:]
-            y -= h @ dev
-            y[1] = wrap_angle_float(y[1])
-            ph_t = p @ h.T
-            s_m = h @ ph_t + r_w
-            s_inv = np.linalg.inv(s_m)
-            v = float(y @ s_inv @ y)
-            nis[j] = v
-            w = 1.0 if v <= c2 else c2 / v
+            x, p, nis[j], w = _update(x, p, lay, z_all[j], inp.map_xy[lmk[j]], li, at, r_w, c2)
             if w != 1.0:
                 wts[j] = w
-                s_inv = np.linalg.inv(s_m + (1.0 / w - 1.0) * r_w)
-            gain = ph_t @ s_inv
-            x += gain @ y
-            p -= gain @ ph_t.T
-            p = 0.5 * (p + p.T)
         post_x[e], post_p[e] = x, p
+    fr = _filter_result(inp, setup, epochs, prior_x, prior_p, post_x, post_p)
+    return PersistingPass(fr, prior_x, prior_p, post_x, post_p, phi_all)
+
+
+def _filter_result(  # type: ignore[no-untyped-def]
+    inp: FilterInput, setup, epochs: NDArray[np.int64], prior_x: Array, prior_p: Array,
+    post_x: Array, post_p: Array,
+) -> FilterResult:  # fmt: skip
+    """The pose filter result of the augmented pass: grid poses filled between the epochs,
+    the epochs' own prior and posterior pose blocks, statuses, NIS and weights."""
+    n_e = epochs.shape[0]
+    seg, active = setup.seg, setup.active
+    nis, wts = setup.nis, setup.weights
     status = setup.status
     status[(inp.meas_landmark < 0)] = UNASSOCIATED
     status[(inp.meas_grid < 0)] = OUTSIDE
@@ -239,7 +303,7 @@ def run_persisting(
         outlier_bound=chi2_quantile(OUTLIER_PROBABILITY, 2),
     )
     assert (status[np.asarray(active, dtype=np.int64)] == USED).all()
-    return PersistingPass(fr, prior_x, prior_p, post_x, post_p, phi_all)
+    return fr
 
 
 def smooth_persisting(run: PersistingPass) -> tuple[Array, Array, Array]:
