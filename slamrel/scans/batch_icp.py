@@ -19,6 +19,8 @@ made once per iteration for all pairs.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import NamedTuple, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -194,165 +196,361 @@ def align_many(
     return [a for a in out if a is not None]
 
 
+class _Stacked(NamedTuple):
+    """A batch's scans stacked. The references': ``look`` (their anchors ``look.ax,
+    look.ay``, ``(L,)``) and the anchors' normals ``nx, ny`` ``(L,)``. The currents': the
+    points ``px, py`` ``(P,)``, per pair (``(n,)``) their number ``size`` and the first's
+    index ``poff``."""
+
+    look: _Lookup
+    nx: NDArray[np.float64]
+    ny: NDArray[np.float64]
+    px: NDArray[np.float64]
+    py: NDArray[np.float64]
+    size: NDArray[np.int64]
+    poff: NDArray[np.int64]
+
+    @classmethod
+    def of(cls, refs: list[PreparedScan], curs: list[PreparedScan], opt: IcpOptions) -> _Stacked:
+        """The stack of ``refs`` and ``curs`` (pair ``b``: ``refs[b]`` and ``curs[b]``)."""
+        look = _Lookup(refs, opt)
+        normals = np.concatenate([r.normals for r in refs])
+        pts = np.concatenate([c.points for c in curs])
+        size = np.array([c.points.shape[0] for c in curs], dtype=np.int64)
+        poff = np.concatenate(([0], np.cumsum(size)[:-1])).astype(np.int64)
+        nx, ny = normals[:, 0].copy(), normals[:, 1].copy()
+        return cls(look, nx, ny, pts[:, 0].copy(), pts[:, 1].copy(), size, poff)
+
+
+@dataclass
+class _State:
+    """Per pair (``n`` of them) what the iteration carries from one step to the next; the
+    arrays are updated in place. ``T`` is ``max_iterations``."""
+
+    #: ``(n, 3)`` the estimates
+    x: NDArray[np.float64]
+    #: ``(n, T + 1, 3)`` the iterates (row 0: the guess), filled up to the pair's last
+    hist: NDArray[np.float64]
+    #: ``(n,)`` the matching gate and the robust scale of the last step
+    gate: NDArray[np.float64]
+    sigma: NDArray[np.float64]
+    #: ``(n,)`` the points' stride (> 1: the coarse phase), the count of stalled steps, the
+    #: polish steps left (-1: not polishing) and the iterations made
+    stride: NDArray[np.int64]
+    stalled: NDArray[np.int64]
+    polish: NDArray[np.int64]
+    iters: NDArray[np.int64]
+    #: ``(n,)`` converged; still iterating
+    converged: NDArray[np.bool_]
+    active: NDArray[np.bool_]
+    #: the pairs that lost their matches, with the iteration at which they did
+    failed: dict[int, int]
+
+    @classmethod
+    def start(cls, guess: NDArray[np.float64], size: NDArray[np.int64], opt: IcpOptions) -> _State:
+        """The state before the first step: ``guess`` ``(n, 3)``; ``size`` ``(n,)`` the
+        currents' points (enough of them: a coarse phase first)."""
+        n = guess.shape[0]
+        stride = np.ones(n, dtype=np.int64)
+        if opt.coarse_stride > 1:
+            stride[size >= opt.coarse_stride * 4 * opt.min_matches] = opt.coarse_stride
+        x = guess.copy()
+        hist = np.empty((n, opt.max_iterations + 1, 3))
+        hist[:, 0] = x
+        return cls(
+            x=x,
+            hist=hist,
+            gate=np.full(n, float(opt.max_distance)),
+            sigma=np.full(n, float(opt.min_sigma)),
+            stride=stride,
+            stalled=np.zeros(n, dtype=np.int64),
+            polish=np.full(n, -1, dtype=np.int64),
+            iters=np.zeros(n, dtype=np.int64),
+            converged=np.zeros(n, dtype=bool),
+            active=np.ones(n, dtype=bool),
+            failed={},
+        )
+
+
+class _Matched(NamedTuple):
+    """One step's matches of the pairs ``links`` ``(A,)`` it runs on. Per query ``(Q,)``: its
+    link's number in ``links`` ``seg``, its point moved by the estimate ``q0, q1``, whether
+    its anchor is within the gate ``ok`` and the anchor ``k`` (in the stacked anchors). Per
+    link ``(A,)``: the estimate ``xl`` ``(A, 3)``, the matches ``m`` (float counts) and
+    whether it is in its coarse phase ``coarse``."""
+
+    links: NDArray[np.int64]
+    seg: NDArray[np.int64]
+    q0: NDArray[np.float64]
+    q1: NDArray[np.float64]
+    ok: NDArray[np.bool_]
+    k: NDArray[np.int64]
+    xl: NDArray[np.float64]
+    m: NDArray[np.float64]
+    coarse: NDArray[np.bool_]
+
+
+class _Residuals(NamedTuple):
+    """Matched queries ``(M,)``: their link's number ``sg``, the point-to-line residual
+    ``e``, the anchor's normal ``n0, n1`` and the moved point ``qa0, qa1``."""
+
+    sg: NDArray[np.int64]
+    e: NDArray[np.float64]
+    n0: NDArray[np.float64]
+    n1: NDArray[np.float64]
+    qa0: NDArray[np.float64]
+    qa1: NDArray[np.float64]
+
+    def take(self, at: NDArray[np.int64]) -> _Residuals:
+        """The rows ``at`` ``(M',)``."""
+        return _Residuals(
+            self.sg[at], self.e[at], self.n0[at], self.n1[at], self.qa0[at], self.qa1[at]
+        )
+
+
 def _run(
     refs: list[PreparedScan],
     curs: list[PreparedScan],
     guess: NDArray[np.float64],
     opt: IcpOptions,
 ) -> list[Alignment]:
-    n = len(refs)
-    look = _Lookup(refs, opt)
-    normals = np.concatenate([r.normals for r in refs])
-    nx, ny = normals[:, 0].copy(), normals[:, 1].copy()
-    anx, any_ = look.ax, look.ay
-    pts = np.concatenate([c.points for c in curs])
-    px, py = pts[:, 0].copy(), pts[:, 1].copy()
-    size = np.array([c.points.shape[0] for c in curs], dtype=np.int64)
-    poff = np.concatenate(([0], np.cumsum(size)[:-1])).astype(np.int64)
-    stride = np.ones(n, dtype=np.int64)
-    if opt.coarse_stride > 1:
-        stride[size >= opt.coarse_stride * 4 * opt.min_matches] = opt.coarse_stride
-    x = guess.copy()
-    hist = np.empty((n, opt.max_iterations + 1, 3))
-    hist[:, 0] = x
-    gate = np.full(n, float(opt.max_distance))
-    sigma = np.full(n, float(opt.min_sigma))
-    stalled = np.zeros(n, dtype=np.int64)
-    polish = np.full(n, -1, dtype=np.int64)
-    iters = np.zeros(n, dtype=np.int64)
-    converged = np.zeros(n, dtype=bool)
-    active = np.ones(n, dtype=bool)
-    failed: dict[int, int] = {}
-    mm = opt.min_matches
+    """``align`` of pairs ``(refs[b], curs[b])`` from ``guess[b]`` (``guess`` ``(n, 3)``)
+    in lock step: each step runs on the pairs still active."""
+    data = _Stacked.of(refs, curs, opt)
+    state = _State.start(guess, data.size, opt)
     for it in range(1, opt.max_iterations + 1):
-        links = np.flatnonzero(active)
+        links = np.flatnonzero(state.active)
         if not links.size:
             break
-        while True:  # at most twice: a coarse phase with too few matches goes on with all
-            st = stride[links]
-            cnt = -(-size[links] // st)
-            bounds = np.concatenate(([0], np.cumsum(cnt)))
-            seg = np.repeat(np.arange(links.size), cnt)
-            pos = np.arange(bounds[-1]) - bounds[:-1][seg]
-            idx = poff[links][seg] + pos * st[seg]
-            xl = x[links]
-            c, s = np.cos(xl[:, 2]), np.sin(xl[:, 2])
-            p0, p1 = px[idx], py[idx]
-            cs, ss = c[seg], s[seg]
-            q0 = cs * p0 - ss * p1 + xl[seg, 0]
-            q1 = ss * p0 + cs * p1 + xl[seg, 1]
-            ok, k = look.match(links, seg, bounds, q0, q1, gate[links])
-            m = np.bincount(seg, weights=ok, minlength=links.size)
-            coarse = st > 1
-            switch = coarse & (m < 2 * mm)
-            if not switch.any():
-                break
-            stride[links[switch]] = 1
-            polish[links[switch]] = -1
-        lost = m < mm
-        if lost.any():
-            for b in links[lost].tolist():
-                failed[b] = it
-            active[links[lost]] = False
-            keep_link = ~lost
-            ok &= keep_link[seg]
-            relabel = np.cumsum(keep_link) - 1
-            links, m, coarse = links[keep_link], m[keep_link], coarse[keep_link]
-            xl = xl[keep_link]
-            seg = relabel[seg]
-            if not links.size:
-                continue
-        # residuals of the matched points, the largest 1 - trim share dropped (per link)
-        at = np.flatnonzero(ok)
-        sg = seg[at]
-        ka = k[at]
-        qa0, qa1 = q0[at], q1[at]
-        n0, n1 = nx[ka], ny[ka]
-        e = n0 * (qa0 - anx[ka]) + n1 * (qa1 - any_[ka])
-        ae = np.abs(e)
-        mi = m.astype(np.int64)
-        keep = np.maximum(mm, np.ceil(opt.trim * mi).astype(np.int64))
-        mb = np.concatenate(([0], np.cumsum(mi)))
-        width = int(mi.max())
-        pad = np.full((links.size, width), np.inf)
-        pad[sg, np.arange(at.size) - mb[:-1][sg]] = ae
-        pad.sort(axis=1)
-        rows = np.arange(links.size)
-        cut = np.where(keep < mi, pad[rows, np.minimum(keep, mi) - 1], np.inf)
-        sel = ae <= cut[sg]
-        kept = np.bincount(sg, weights=sel, minlength=links.size).astype(np.int64)
-        half = kept // 2
-        odd = kept % 2 == 1
-        med = np.where(
-            odd, pad[rows, half], 0.5 * (pad[rows, np.maximum(half - 1, 0)] + pad[rows, half])
-        )
-        sig = np.maximum(_MAD * med, opt.min_sigma)
-        sigma[links] = sig
-        at2 = np.flatnonzero(sel)
-        sg = sg[at2]
-        e, n0, n1, qa0, qa1 = e[at2], n0[at2], n1[at2], qa0[at2], qa1[at2]
-        r = e / (_CAUCHY * sig)[sg]
-        w = 1.0 / (1.0 + r * r)
-        j2 = n1 * (qa0 - xl[sg, 0]) - n0 * (qa1 - xl[sg, 1])
-        w0, w1, w2 = w * n0, w * n1, w * j2
-        nl = links.size
-        hm = np.empty((nl, 3, 3))
-        gv = np.empty((nl, 3, 1))
-        for a, wa in enumerate((w0, w1, w2)):
-            for bcol, jb in enumerate((n0, n1, j2)):
-                if bcol < a:
-                    hm[:, a, bcol] = hm[:, bcol, a]
-                    continue
-                hm[:, a, bcol] = np.bincount(sg, weights=wa * jb, minlength=nl)
-            gv[:, a, 0] = np.bincount(sg, weights=wa * e, minlength=nl)
-        try:
-            step = -np.linalg.solve(hm, gv)[:, :, 0]
-        except np.linalg.LinAlgError:
-            step = np.empty((nl, 3))
-            for a in range(nl):
-                try:
-                    step[a] = -np.linalg.solve(hm[a], gv[a, :, 0])
-                except np.linalg.LinAlgError:
-                    step[a] = -np.linalg.lstsq(hm[a], gv[a, :, 0], rcond=None)[0]
-        xl = xl + step
-        x[links] = xl
-        hist[links, it] = xl
-        g_old = gate[links]
-        new_gate = np.minimum(opt.max_distance, np.maximum(opt.min_distance, opt.gate_sigmas * sig))
-        sz = np.maximum(np.hypot(step[:, 0], step[:, 1]), np.abs(step[:, 2]))
-        small = sz < opt.tolerance
-        stl = np.where(sz < opt.stall_tolerance, stalled[links] + 1, 0)
-        stalled[links] = stl
-        settled = new_gate >= g_old * 0.999
-        done = (small | (stl >= opt.stall_iterations)) & settled
-        check = np.flatnonzero(~done & settled)
-        if check.size:
-            period = _periods(hist[links[check], : it + 1], opt.tolerance)
-            for a, p in zip(check[period > 0].tolist(), period[period > 0].tolist(), strict=True):
-                b = int(links[a])
-                x[b] = np.mean(hist[b, it + 1 - p : it + 1], axis=0)
-                done[a] = True
-        to_polish = done & coarse
-        if to_polish.any():
-            stride[links[to_polish]] = 1
-            polish[links[to_polish]] = opt.polish_iterations
-        rest = ~to_polish
-        pl = polish[links]
-        pl[rest] -= 1
-        polish[links] = pl
-        fin = rest & (done | (pl == 0))
-        if fin.any():
-            converged[links[fin]] = True
-            active[links[fin]] = False
-            iters[links[fin]] = it
-        upd = rest & ~fin
-        shrink = upd & (small | (it > opt.shrink_after))
-        gate[links[shrink]] = np.minimum(g_old[shrink], new_gate[shrink])
-    iters[active] = opt.max_iterations
-    done_ok = np.array([b not in failed for b in range(n)], dtype=bool)
-    summary = _summaries(
-        look, (px, py, size, poff), (nx, ny), x, gate, sigma, np.flatnonzero(done_ok), opt
+        mt = _drop_lost(state, _match(data, state, links, opt), it, opt.min_matches)
+        if not mt.links.size:
+            continue
+        res = _residuals(data, mt.seg, (mt.q0, mt.q1), mt.ok, mt.k)
+        sel, sig = _trimmed_scale(res, mt.m, opt)
+        state.sigma[mt.links] = sig
+        res = res.take(np.flatnonzero(sel))
+        step = _solve(*_normal_equations(res, mt.xl, sig, mt.links.size))
+        _advance(state, mt, step, sig, it, opt)
+    return _results(data, state, guess, opt)
+
+
+def _moved(
+    data: _Stacked, x: NDArray[np.float64], links: NDArray[np.int64], st: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """Every ``st[a]``-th point ``(A,)`` of the current of pair ``links[a]`` ``(A,)``, moved
+    by its estimate ``x[links[a]]`` (``x`` ``(n, 3)``): per query ``(Q,)`` its link's number
+    ``seg`` and its point ``q0, q1``, and ``bounds`` ``(A + 1,)`` where each link's queries
+    start and the end; as ``(seg, bounds, q0, q1)``."""
+    cnt = -(-data.size[links] // st)
+    bounds = np.concatenate(([0], np.cumsum(cnt)))
+    seg = np.repeat(np.arange(links.size), cnt)
+    pos = np.arange(bounds[-1]) - bounds[:-1][seg]
+    idx = data.poff[links][seg] + pos * st[seg]
+    xl = x[links]
+    c, s = np.cos(xl[:, 2]), np.sin(xl[:, 2])
+    p0, p1 = data.px[idx], data.py[idx]
+    cs, ss = c[seg], s[seg]
+    q0 = cs * p0 - ss * p1 + xl[seg, 0]
+    q1 = ss * p0 + cs * p1 + xl[seg, 1]
+    return seg, bounds, q0, q1
+
+
+def _match(data: _Stacked, state: _State, links: NDArray[np.int64], opt: IcpOptions) -> _Matched:
+    """The matches of the pairs ``links`` ``(A,)`` at their estimates, every stride-th point.
+    A pair in its coarse phase with fewer than ``2 min_matches`` matches goes on with all its
+    points (stride 1, no polish) and is matched again: at most twice."""
+    mm = opt.min_matches
+    while True:
+        st = state.stride[links]
+        seg, bounds, q0, q1 = _moved(data, state.x, links, st)
+        ok, k = data.look.match(links, seg, bounds, q0, q1, state.gate[links])
+        m = cast("NDArray[np.float64]", np.bincount(seg, weights=ok, minlength=links.size))
+        coarse = st > 1
+        switch = coarse & (m < 2 * mm)
+        if not switch.any():
+            return _Matched(links, seg, q0, q1, ok, k, state.x[links], m, coarse)
+        state.stride[links[switch]] = 1
+        state.polish[links[switch]] = -1
+
+
+def _drop_lost(state: _State, mt: _Matched, it: int, mm: int) -> _Matched:
+    """``mt`` without the links of fewer than ``mm`` matches: these pairs fail at step
+    ``it`` (``state.failed``) and leave; their queries are no longer ``ok``."""
+    lost = mt.m < mm
+    if not lost.any():
+        return mt
+    links = mt.links
+    for b in links[lost].tolist():
+        state.failed[b] = it
+    state.active[links[lost]] = False
+    keep_link = ~lost
+    ok = mt.ok
+    ok &= keep_link[mt.seg]
+    relabel = np.cumsum(keep_link) - 1
+    return mt._replace(
+        links=links[keep_link],
+        m=mt.m[keep_link],
+        coarse=mt.coarse[keep_link],
+        xl=mt.xl[keep_link],
+        seg=relabel[mt.seg],
+        ok=ok,
     )
+
+
+def _residuals(
+    data: _Stacked,
+    seg: NDArray[np.int64],
+    q: tuple[NDArray[np.float64], NDArray[np.float64]],
+    ok: NDArray[np.bool_],
+    k: NDArray[np.int64],
+) -> _Residuals:
+    """The queries ``(Q,)`` (link's number ``seg``, point ``q``) that are ``ok``, with the
+    point-to-line residuals to their anchors ``k``."""
+    at = np.flatnonzero(ok)
+    ka = k[at]
+    qa0, qa1 = q[0][at], q[1][at]
+    n0, n1 = data.nx[ka], data.ny[ka]
+    e = n0 * (qa0 - data.look.ax[ka]) + n1 * (qa1 - data.look.ay[ka])
+    return _Residuals(seg[at], e, n0, n1, qa0, qa1)
+
+
+def _trimmed_scale(
+    res: _Residuals, m: NDArray[np.float64], opt: IcpOptions
+) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
+    """Per link ``(A,)`` (``m`` its matches) the largest ``1 - trim`` share of ``|e|``
+    dropped (``max(min_matches, ceil(trim m))`` kept): which residuals are kept ``(M,)``,
+    and the robust scale of the kept, ``max(MAD · median |e|, min_sigma)`` ``(A,)``."""
+    sg = res.sg
+    ae = np.abs(res.e)
+    nl = m.size
+    mi = m.astype(np.int64)
+    keep = np.maximum(opt.min_matches, np.ceil(opt.trim * mi).astype(np.int64))
+    mb = np.concatenate(([0], np.cumsum(mi)))
+    width = int(mi.max())
+    pad = np.full((nl, width), np.inf)
+    pad[sg, np.arange(sg.size) - mb[:-1][sg]] = ae
+    pad.sort(axis=1)
+    rows = np.arange(nl)
+    cut = np.where(keep < mi, pad[rows, np.minimum(keep, mi) - 1], np.inf)
+    sel = ae <= cut[sg]
+    kept = np.bincount(sg, weights=sel, minlength=nl).astype(np.int64)
+    half = kept // 2
+    odd = kept % 2 == 1
+    med = np.where(
+        odd, pad[rows, half], 0.5 * (pad[rows, np.maximum(half - 1, 0)] + pad[rows, half])
+    )
+    return sel, np.maximum(_MAD * med, opt.min_sigma)
+
+
+def _normal_equations(
+    res: _Residuals, xl: NDArray[np.float64], sig: NDArray[np.float64], nl: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The Cauchy-weighted Gauss–Newton normal equations of the ``nl`` links (estimates
+    ``xl`` ``(nl, 3)``, scales ``sig`` ``(nl,)``) from the kept residuals ``res``: ``H``
+    ``(nl, 3, 3)`` and ``g`` ``(nl, 3, 1)``."""
+    sg, e, n0, n1, qa0, qa1 = res
+    r = e / (_CAUCHY * sig)[sg]
+    w = 1.0 / (1.0 + r * r)
+    j2 = n1 * (qa0 - xl[sg, 0]) - n0 * (qa1 - xl[sg, 1])
+    w0, w1, w2 = w * n0, w * n1, w * j2
+    hm = np.empty((nl, 3, 3))
+    gv = np.empty((nl, 3, 1))
+    for a, wa in enumerate((w0, w1, w2)):
+        for bcol, jb in enumerate((n0, n1, j2)):
+            if bcol < a:
+                hm[:, a, bcol] = hm[:, bcol, a]
+                continue
+            hm[:, a, bcol] = np.bincount(sg, weights=wa * jb, minlength=nl)
+        gv[:, a, 0] = np.bincount(sg, weights=wa * e, minlength=nl)
+    return hm, gv
+
+
+def _solve(hm: NDArray[np.float64], gv: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The steps ``-H⁻¹ g`` ``(nl, 3)`` of :func:`_normal_equations`' systems, as one stack;
+    if one is singular, system by system (least squares for the singular ones)."""
+    try:
+        return cast("NDArray[np.float64]", -np.linalg.solve(hm, gv)[:, :, 0])
+    except np.linalg.LinAlgError:
+        step = np.empty((hm.shape[0], 3))
+        for a in range(hm.shape[0]):
+            try:
+                step[a] = -np.linalg.solve(hm[a], gv[a, :, 0])
+            except np.linalg.LinAlgError:
+                step[a] = -np.linalg.lstsq(hm[a], gv[a, :, 0], rcond=None)[0]
+        return step
+
+
+def _advance(
+    state: _State,
+    mt: _Matched,
+    step: NDArray[np.float64],
+    sig: NDArray[np.float64],
+    it: int,
+    opt: IcpOptions,
+) -> None:
+    """Step ``it`` taken by the links of ``mt`` (``step`` ``(A, 3)``, scales ``sig``
+    ``(A,)``): the estimates moved; then the stops (a small or stalled step at a settled
+    gate, or a cycle: its iterates' mean), the polish after a coarse phase, and the gate."""
+    links = mt.links
+    xl = mt.xl + step
+    state.x[links] = xl
+    state.hist[links, it] = xl
+    g_old = state.gate[links]
+    new_gate = np.minimum(opt.max_distance, np.maximum(opt.min_distance, opt.gate_sigmas * sig))
+    sz = np.maximum(np.hypot(step[:, 0], step[:, 1]), np.abs(step[:, 2]))
+    small = sz < opt.tolerance
+    stl = np.where(sz < opt.stall_tolerance, state.stalled[links] + 1, 0)
+    state.stalled[links] = stl
+    settled = new_gate >= g_old * 0.999
+    done = (small | (stl >= opt.stall_iterations)) & settled
+    _stop_cycles(state, links, done, settled, it, opt.tolerance)
+    to_polish = done & mt.coarse
+    if to_polish.any():
+        state.stride[links[to_polish]] = 1
+        state.polish[links[to_polish]] = opt.polish_iterations
+    rest = ~to_polish
+    pl = state.polish[links]
+    pl[rest] -= 1
+    state.polish[links] = pl
+    fin = rest & (done | (pl == 0))
+    if fin.any():
+        state.converged[links[fin]] = True
+        state.active[links[fin]] = False
+        state.iters[links[fin]] = it
+    upd = rest & ~fin
+    shrink = upd & (small | (it > opt.shrink_after))
+    state.gate[links[shrink]] = np.minimum(g_old[shrink], new_gate[shrink])
+
+
+def _stop_cycles(
+    state: _State,
+    links: NDArray[np.int64],
+    done: NDArray[np.bool_],
+    settled: NDArray[np.bool_],
+    it: int,
+    tol: float,
+) -> None:
+    """The links ``(A,)`` not ``done`` at a ``settled`` gate whose iterates cycle
+    (:func:`_periods`) are ``done`` (in place), at the mean of their last period."""
+    check = np.flatnonzero(~done & settled)
+    if check.size:
+        period = _periods(state.hist[links[check], : it + 1], tol)
+        for a, p in zip(check[period > 0].tolist(), period[period > 0].tolist(), strict=True):
+            b = int(links[a])
+            state.x[b] = np.mean(state.hist[b, it + 1 - p : it + 1], axis=0)
+            done[a] = True
+
+
+def _results(
+    data: _Stacked, state: _State, guess: NDArray[np.float64], opt: IcpOptions
+) -> list[Alignment]:
+    """The :class:`Alignment` of each pair ``(n,)`` after the last step (``guess``
+    ``(n, 3)``): failed, or its estimate with :func:`_summaries`' measures."""
+    n = guess.shape[0]
+    failed, x, iters = state.failed, state.x, state.iters
+    iters[state.active] = opt.max_iterations
+    done_ok = np.array([b not in failed for b in range(n)], dtype=bool)
+    summary = _summaries(data, x, state.gate, state.sigma, np.flatnonzero(done_ok), opt)
     res = []
     for b in range(n):
         if b in failed:
@@ -372,10 +570,10 @@ def _run(
                 covariance=cov,
                 matched_fraction=frac,
                 residual=resid,
-                sigma=float(sigma[b]),
+                sigma=float(state.sigma[b]),
                 matches=n_in,
                 iterations=int(iters[b]),
-                converged=bool(converged[b]),
+                converged=bool(state.converged[b]),
                 condition=cond,
                 weak_direction=weak,
                 degenerate=cond < opt.degenerate_ratio,
@@ -385,9 +583,7 @@ def _run(
 
 
 def _summaries(
-    look: _Lookup,
-    points: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]],
-    normals: tuple[NDArray[np.float64], NDArray[np.float64]],
+    data: _Stacked,
     x: NDArray[np.float64],
     gate: NDArray[np.float64],
     sigma: NDArray[np.float64],
@@ -401,23 +597,11 @@ def _summaries(
     out = {}
     if not links.size:
         return out
-    px, py, size, poff = points
-    nx, ny = normals
-    cnt = size[links]
-    bounds = np.concatenate(([0], np.cumsum(cnt)))
-    seg = np.repeat(np.arange(links.size), cnt)
-    idx = poff[links][seg] + (np.arange(bounds[-1]) - bounds[:-1][seg])
+    cnt = data.size[links]
+    seg, bounds, q0, q1 = _moved(data, x, links, np.ones(links.size, dtype=np.int64))
+    ok, k = data.look.match(links, seg, bounds, q0, q1, gate[links])
+    sg, e, n0, n1, qa0, qa1 = _residuals(data, seg, (q0, q1), ok, k)
     xl = x[links]
-    c, s = np.cos(xl[:, 2]), np.sin(xl[:, 2])
-    p0, p1 = px[idx], py[idx]
-    q0 = c[seg] * p0 - s[seg] * p1 + xl[seg, 0]
-    q1 = s[seg] * p0 + c[seg] * p1 + xl[seg, 1]
-    ok, k = look.match(links, seg, bounds, q0, q1, gate[links])
-    at = np.flatnonzero(ok)
-    ka, sg = k[at], seg[at]
-    n0, n1 = nx[ka], ny[ka]
-    qa0, qa1 = q0[at], q1[at]
-    e = n0 * (qa0 - look.ax[ka]) + n1 * (qa1 - look.ay[ka])
     sig = sigma[links]
     keep = np.abs(e) <= 3.0 * sig[sg]
     e, n0, n1, qa0, qa1, sg = e[keep], n0[keep], n1[keep], qa0[keep], qa1[keep], sg[keep]
