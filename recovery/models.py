@@ -345,6 +345,11 @@ class SensorModel:
     facing forward); the measurement is ``h(x ∘ mount, l)``. ``noise``: whether the σ are the
     filter's assumed noise (``"assumed"``, the default) or the data's true noise (``"true"``,
     known for a simulation); the recovery uses them either way and reports which.
+    ``outlier_share``: the share of the measurements that are gross errors the Gaussian σ do
+    not describe (misread barcodes, multipath), as the writer measured it (``None``: not
+    stated); in ``[0, 0.5)``. The recovery is unchanged by it (its robust update down-weights
+    such measurements either way); the verdict's map–log lamp judges the innovations' tail
+    against it (docs/verdict.md).
 
     Raises
     ------
@@ -362,6 +367,7 @@ class SensorModel:
     mount: tuple[float, float, float] | None = None
     noise: str = "assumed"
     persisting: PersistingError | None = None
+    outlier_share: float | None = None
 
     def __post_init__(self) -> None:
         if self.type != "range_bearing":
@@ -389,6 +395,14 @@ class SensorModel:
                     f"sensor's pose in the robot frame), got {self.mount!s:.60}"
                 )
             object.__setattr__(self, "mount", (float(m[0]), float(m[1]), float(m[2])))
+        if self.outlier_share is not None:
+            share = self.outlier_share
+            if not (isinstance(share, (int, float)) and 0.0 <= share < 0.5):
+                raise InputError(
+                    f"sensor_model.outlier_share: expected a share in [0, 0.5) (the measurements "
+                    f"that are gross errors), got {share!s:.40}"
+                )
+            object.__setattr__(self, "outlier_share", float(share))
         pe = self.persisting
         if pe is not None:
             for name, total, var in (
@@ -427,6 +441,8 @@ class SensorModel:
             out["noise"] = self.noise
         if self.persisting is not None:  # written when stated (older bundles unchanged)
             out["persisting"] = self.persisting.as_dict()
+        if self.outlier_share is not None:  # written when stated (older bundles unchanged)
+            out["outlier_share"] = self.outlier_share
         return out
 
 

@@ -296,17 +296,25 @@ def poisson_quantile(probability: float, mean: float) -> int:
     return int(ks[hit[0]]) if hit.size else int(ks[-1])
 
 
-def nis_tail_level(tail: int, n: int, probability: float = 0.999) -> str:
+def nis_tail_level(
+    tail: int, n: int, probability: float = 0.999, outlier_share: float = 0.0
+) -> str:
     """How far ``tail`` of ``n`` consistent innovations beyond their ``probability`` bound
     exceed the ``(1 − probability)·n`` expected: ``"red"`` above the Poisson 99.99 % quantile
     of that count and 0.5 % of ``n``, ``"amber"`` above its 99.9 % quantile and 0.2 %, else
     ``"green"`` — the one home of the NIS tail rule (map–log lamp, its cause, the robust
-    default's heavy-tail switch)."""
-    lam = (1.0 - probability) * n
+    default's heavy-tail switch).
+
+    ``outlier_share`` ``p``: a share of gross errors the bundle states
+    (``sensor_model.outlier_share``), each counted beyond the bound (an upper bound: the tail
+    expected is ``((1 − p)(1 − probability) + p)·n``) and the 0.5 % and 0.2 % margins taken
+    above ``p``. ``p = 0`` is the rule above exactly."""
+    expected = (1.0 - outlier_share) * (1.0 - probability) + outlier_share
+    lam = expected * n
     share = tail / n if n else 0.0
-    if tail > poisson_quantile(0.9999, lam) and share > 0.005:
+    if tail > poisson_quantile(0.9999, lam) and share > 0.005 + outlier_share:
         return "red"
-    if tail > poisson_quantile(0.999, lam) and share > 0.002:
+    if tail > poisson_quantile(0.999, lam) and share > 0.002 + outlier_share:
         return "amber"
     return "green"
 

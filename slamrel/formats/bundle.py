@@ -134,6 +134,7 @@ _MANIFEST_KEYS = {
         "mount",
         "noise",
         "persisting",
+        "outlier_share",
     ),
     "sensor_model.persisting": (
         "sigma_range",
@@ -510,6 +511,18 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
     persisting = None
     if "persisting" in spec:  # a Gauss–Markov bias per landmark track (recovery.persisting)
         persisting = _parse_persisting(spec["persisting"], text, path)
+    share = None
+    if "outlier_share" in spec:  # gross errors the σ do not describe (the verdict's map–log)
+        where = _line_of_key(text, "outlier_share")
+        share = _number(spec["outlier_share"], what="sensor_model.outlier_share", path=path,
+                        line=where)  # fmt: skip
+        if not 0.0 <= share < 0.5:
+            raise InputError(
+                f"sensor_model.outlier_share: expected a share in [0, 0.5) (the measurements "
+                f"that are gross errors), got {share:g}",
+                path=path,
+                line=where,
+            )
     return SensorModel(
         vals[0],
         vals[1],
@@ -518,6 +531,7 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
         mount=mount,  # type: ignore[arg-type]
         noise=noise,
         persisting=persisting,
+        outlier_share=share,
     )
 
 

@@ -373,6 +373,8 @@ class RunFacts:
     #: The bundle states a persisting measurement error (``sensor_model.persisting``), which
     #: the recovery holds in its state (:mod:`recovery.persisting`).
     persisting_stated: bool = False
+    #: The share of gross errors the bundle states (``sensor_model.outlier_share``; 0: none).
+    outlier_share: float = 0.0
 
     @classmethod
     def of(cls, result: RunResult) -> RunFacts:
@@ -397,6 +399,7 @@ class RunFacts:
             nis=None if rec is None else np.asarray(rec.nis, dtype=np.float64),
             nis_landmarks=None if rec is None else result.bundle.measurement_landmarks,
             persisting_stated=result.bundle.sensor.persisting is not None,
+            outlier_share=result.bundle.sensor.outlier_share or 0.0,
             robust=None if rec is None else rec.robust,
             map_nees=_map_nees_of(result),
             online_nees=None if online is None else online.summary,
@@ -522,7 +525,8 @@ def gaussian_breaks(facts: RunFacts) -> list[str]:
       consistent filter's 0.1 % (above the Poisson 99.9 % quantile and 0.2 %) while the bulk
       is no wider than stated (median NIS ≤ 1.25 × 2 ln 2): outlying measurements, heavy-tailed
       noise or wrong associations. Said with the mean NIS of the rest over its expectation
-      ``E[χ²₂ | ≤ b] = 2 − b e^{−b/2} / (1 − e^{−b/2})``.
+      ``E[χ²₂ | ≤ b] = 2 − b e^{−b/2} / (1 − e^{−b/2})``. A share of gross errors the bundle
+      states (``sensor_model.outlier_share``) is expected in the tail: named only beyond it.
     * **correlated in time** — the rank correlation of the NIS of successive sightings of
       one landmark exceeds that of sightings ``FAR_LAG`` apart by ``ρ_s`` above
       ``NIS_CORRELATION`` and its 99.9 % bound ``3.29 √(1/n₁ + 1/n₁₀)`` (pairs each more
@@ -544,12 +548,14 @@ def gaussian_breaks(facts: RunFacts) -> list[str]:
     bound = chi2_quantile(NIS_TAIL, 2)
     tail = int((v > bound).sum())
     median = float(np.median(v))
-    if nis_tail_level(tail, v.size, NIS_TAIL) != "green" and median <= 1.25 * 2 * math.log(2):
-        p = math.exp(-bound / 2)
-        rest = float(v[v <= bound].mean()) / (2 - bound * p / (1 - p))
+    stated = facts.outlier_share
+    heavy = nis_tail_level(tail, v.size, NIS_TAIL, stated) != "green"
+    if heavy and median <= 1.25 * 2 * math.log(2):
+        rest = inlier_nis_ratio(v, bound)
+        also = f" with {100 * stated:.2g} % gross errors stated" if stated else ""
         causes.append(
             f"heavy tails: {100 * tail / v.size:.2g} % of the innovations beyond the 99.9 % "
-            f"bound ({100 * (1 - NIS_TAIL):.1g} % expected) while the bulk is no wider than "
+            f"bound ({100 * (1 - NIS_TAIL):.1g} % expected{also}) while the bulk is no wider than "
             f"stated (median NIS {_g(median)}, {_g(2 * math.log(2))} expected); the others' "
             f"mean NIS is {_g(rest)}× its expectation"
             + (
@@ -867,7 +873,12 @@ def _whose(recovered: Judgement, online: Sequence[Judgement]) -> str:
 
 
 def _map_log_lines(facts: RunFacts) -> list[Judgement]:
-    """The recovery filter's NIS: its mean over the dof and its tail beyond the 99.9 % bound."""
+    """The recovery filter's NIS: its mean over the dof and its tail beyond the 99.9 % bound.
+
+    With a stated share of gross errors the tail is judged against them too
+    (:func:`~relation_metric.consistency.nis_tail_level`), and ``q`` is the mean NIS of the
+    innovations within the bound over its expectation there (:func:`inlier_nis_ratio`): the
+    stated gross errors are not the Gaussian bulk the mean judges."""
     if facts.nis is None:
         return []
 
@@ -877,29 +888,53 @@ def _map_log_lines(facts: RunFacts) -> list[Judgement]:
     n = v.size + gated
     if n == 0:
         return []
-    q = float(v.mean()) / 2.0 if v.size else float("nan")
-    tail = int((v > chi2_quantile(NIS_TAIL, 2)).sum()) + gated
-    lam = (1.0 - NIS_TAIL) * n
+    p = facts.outlier_share
+    bound = chi2_quantile(NIS_TAIL, 2)
+    if p > 0:
+        q = inlier_nis_ratio(v, bound)
+    else:
+        q = float(v.mean()) / 2.0 if v.size else float("nan")
+    tail = int((v > bound).sum()) + gated
+    lam = ((1.0 - p) * (1.0 - NIS_TAIL) + p) * n
     share = tail / n
     (g_lo, g_hi), (a_lo, a_hi) = NIS_RANGES
     q_level = (
         "green" if g_lo <= q <= g_hi else "amber" if a_lo <= q <= a_hi else "red"
     ) if math.isfinite(q) else "amber"  # fmt: skip
-    tail_level = nis_tail_level(tail, n, NIS_TAIL)
+    tail_level = nis_tail_level(tail, n, NIS_TAIL, p)
+    mean = (
+        f"mean NIS within the bound {_g(q)}× its expectation there (q); the bundle states "
+        f"{100 * p:.2g} % gross errors (sensor_model.outlier_share), each counted in the tail "
+        "expected"
+        if p > 0
+        else f"mean NIS {_g(2 * q)} (expected 2): q = {_g(q)}"
+    )
     return [
         Judgement(
             "map–log agreement (NIS)",
-            f"mean NIS {_g(2 * q)} (expected 2): q = {_g(q)}; {tail} of {n} innovations "
-            f"({100 * share:.2g} %) beyond the 99.9 % bound (expected {_g(lam)})"
-            + (f", {gated} gated among them" if gated else ""),
+            f"{mean}; {tail} of {n} innovations ({100 * share:.2g} %) beyond the 99.9 % bound "
+            f"(expected {_g(lam)})" + (f", {gated} gated among them" if gated else ""),
             _worst(q_level, tail_level),
             "the recovery filter's innovations against χ²(2): green q in [0.75, 1.25], amber in "
             "[0.5, 1.5], red outside; the tail red above its Poisson 99.99 % quantile and 0.5 %, "
-            "amber above the 99.9 % quantile and 0.2 %",
+            "amber above the 99.9 % quantile and 0.2 % (with a stated share of gross errors: "
+            "counted in the tail and added to both margins, q the mean within the bound over "
+            "E[χ²(2) | within])",
             "map_log",
             q,
         )
     ]
+
+
+def inlier_nis_ratio(v: NDArray[np.float64], bound: float) -> float:
+    """Mean of the NIS ``v`` within ``bound`` over its expectation for χ²(2) innovations,
+    ``E[χ²₂ | ≤ b] = 2 − b e^{−b/2} / (1 − e^{−b/2})`` (χ²₂ is exponential of mean 2); 1 for
+    a consistent filter whatever lies beyond. NaN when none is within."""
+    inside = v[v <= bound]
+    if not inside.size:
+        return float("nan")
+    p = math.exp(-bound / 2)
+    return float(inside.mean()) / (2 - bound * p / (1 - p))
 
 
 def _agreement_lines(facts: RunFacts) -> list[Judgement]:
@@ -988,11 +1023,15 @@ def _measurement_lines(facts: RunFacts) -> list[Judgement]:
                 loss,
             )  # fmt: skip
         ]
-    expected = expected_downweight_loss(robust.threshold)
+    out = facts.outlier_share  # stated gross errors: each loses its whole information
+    expected = (1.0 - out) * expected_downweight_loss(robust.threshold) + out
     r = loss / expected if expected > 0 else float("inf")
     n = counts.used + counts.gated
     taken = loss * n  # in measurements
-    bounds = [downweight_loss_bound(robust.threshold, n, p) for p in (0.999, 0.9999)]
+    bounds = [
+        downweight_loss_bound(robust.threshold, n - round(out * n), p) + round(out * n)
+        for p in (0.999, 0.9999)
+    ]
     level = (
         "green"
         if r <= 1.5 or taken <= bounds[0]
@@ -1003,11 +1042,14 @@ def _measurement_lines(facts: RunFacts) -> list[Judgement]:
     return [
         Judgement(
             "down-weighted information",
-            f"{value}; expected {100 * expected:.2g} % for consistent innovations: {_g(r)}×; "
+            f"{value}; expected {100 * expected:.2g} % for consistent innovations"
+            + (f" with {100 * out:.2g} % gross errors stated" if out else "")
+            + f": {_g(r)}×; "
             f"{_g(taken)} measurements' worth of {n} (99.9 % bound {_g(bounds[0])})",
             level,
             f"share of the information the robust weights took, over its expectation for χ²(2) "
-            f"innovations at c = {_g(robust.threshold)}; green ≤ 1.5× or within the 99.9 % "
+            f"innovations at c = {_g(robust.threshold)} (a stated share of gross errors counted "
+            "as wholly down-weighted); green ≤ 1.5× or within the 99.9 % "
             "quantile of its sampling law, red > 3× and beyond the 99.99 % quantile, amber "
             "between",
             "measurements",
