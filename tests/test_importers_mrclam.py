@@ -127,6 +127,12 @@ def test_fit_noise_recovers_simulated_noise(rng):
     assert fit.sigma_range == pytest.approx(sr, rel=0.1)
     assert fit.sigma_bearing == pytest.approx(sb, rel=0.1)
     assert fit.outlier_fraction < 0.01
+    # 3 % gross errors (range 1–3 m off): counted as the share the bundle states, σ unmoved
+    gross = rng.random(4000) < 0.03
+    meas[gross, 1] += rng.uniform(1.0, 3.0, int(gross.sum()))
+    fit = fit_noise(MrclamRobot(1, controls, meas, gt, 0, {}), lms, window=1.0)
+    assert fit.outlier_fraction == pytest.approx(gross.mean(), abs=0.005)
+    assert fit.sigma_range == pytest.approx(sr, rel=0.1)
 
 
 def test_fit_noise_recovers_speed_proportional_noise(rng):
@@ -380,6 +386,28 @@ def test_dataset7_fit_check_finds_correlated_heavy_tailed_errors():
         c = fit_noise(read_mrclam_robot(d, robot), lms).check
         assert c is not None and c.pairs > 1000
         assert c.range_correlation > 0.8 and c.beyond_999 > 0.01
+
+
+@pytest.mark.realdata
+def test_dataset7_bundle_states_its_gross_errors_and_persisting_error_by_default():
+    """The default import states the persisting error (and the bearings' mean as the mount)
+    and the share of gross errors its description reports; ``persisting=False`` the white
+    model, with the same share and σ."""
+    import re
+
+    from slamrel.importers.mrclam import mrclam_bundle
+
+    d = require_data("mrclam", "MRCLAM_Dataset7")
+    default, white = mrclam_bundle(d, 2), mrclam_bundle(d, 2, persisting=False)
+    said = float(
+        re.search(r"([\d.]+)% of measurements beyond 5 robust sigma", default.description)[1]
+    )
+    assert default.sensor.outlier_share == pytest.approx(said / 100, abs=5e-4)
+    assert 0 < default.sensor.outlier_share < 0.05
+    assert default.sensor.persisting is not None and default.sensor.mount is not None
+    assert white.sensor.persisting is None and white.sensor.mount is None
+    assert white.sensor.outlier_share == default.sensor.outlier_share
+    assert white.sensor.sigma_range == default.sensor.sigma_range
 
 
 def test_thin_sightings_keeps_one_per_landmark_per_spacing():

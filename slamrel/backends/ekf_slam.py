@@ -593,12 +593,18 @@ def ekf_slam_bundle(
     ``noise_scale`` scales motion and sensor alike, which leaves the filter's gains, and so
     its online estimate, unchanged); ``jacobians`` as in :func:`ekf_slam`.
     """
-    if bundle.sensor.mounted:
+    mount = bundle.sensor.mount if bundle.sensor.mounted else None
+    if mount is not None and (mount[0] != 0.0 or mount[1] != 0.0):
         raise InputError(
             "sensor_model.mount: slamrel's reference EKF-SLAM models a sensor at the robot's "
-            "origin only; expected no mount (or [0, 0, 0]) for slamrel slam",
+            "origin (turned by the mount's heading at most); expected a mount [0, 0, theta] "
+            "for slamrel slam",
             path=None if bundle.path is None else Path(bundle.path) / "bundle.json",
         )
+    z = bundle.measurements
+    if mount is not None:  # a sensor turned by θ_m: its bearing is the robot's less θ_m
+        z = z.copy()
+        z[:, 1] = se2.wrap_angle(z[:, 1] + mount[2])
     if process_noise_scale != 1.0:
         k2, own = process_noise_scale**2, bundle.step_covariances  # a stated C_k too
         bundle = replace(
@@ -616,7 +622,7 @@ def ekf_slam_bundle(
         ids = corrupt_associations(ids, used, corrupt_fraction, seed=seed)
     res = ekf_slam(
         steps,
-        bundle.measurements,
+        z,
         ids,
         sensor=bundle.sensor,
         initial_pose=bundle.initial_pose,
@@ -637,6 +643,14 @@ def ekf_slam_bundle(
             sigma_bearing=noise_scale * sensor.sigma_bearing,
         )
     rejected = int(((res.association < 0) & bundle.measurement_associated).sum())
+    white = ""
+    if sensor.persisting is not None:  # the reference filter's noise is white: say so
+        white = (
+            "; the log states a persisting measurement error, which this filter does not "
+            "model: it took the noise as white of the total sigma (so does this bundle's "
+            "sensor model)"
+        )
+        sensor = replace(sensor, persisting=None)
     own = bundle.step_covariances  # a stated per-step covariance is the filter's noise too
     out = replace(
         bundle,
@@ -655,7 +669,8 @@ def ekf_slam_bundle(
         f"noise scale {noise_scale:g}"
         + ("" if process_noise_scale == 1.0 else f", process noise scale {process_noise_scale:g}")
         + ("" if outlier_gate is None else f", outlier gate {outlier_gate:g}: {rejected} rejected")
-        + ")",
+        + ")"
+        + white,
         path=None,
     )
     return out, res
