@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import recovery.ekf as ekf
 from recovery.ekf import NEAR_FIELD_CHI2, FilterInput, run_filter
 
 SIG = (0.3, 0.3, 0.2)  # prior sd of x, y, θ (complex1/b/72 at t = 152 s: 0.29, 0.21, 0.20)
@@ -94,3 +95,39 @@ def test_no_near_field_keeps_the_order() -> None:
     assert np.asarray(fr.order).tolist() == [0, 1, 2, 3, 4, 5]
     both = run_filter(_input(_range_bearing(TRUE, LANDMARKS)))
     assert np.abs(both.post_poses[0] - fr.post_poses[0]).max() < 0.02
+
+
+@pytest.mark.parametrize(
+    ("d", "c"),
+    [
+        ((0.05, 0.0), (0.09, 0.0, 0.09)),  # the singularity at 0.17 σ (complex1/b/72)
+        ((0.2, 0.1), (0.09, 0.01, 0.05)),
+        ((-0.6, -0.2), (0.14, 0.02, 0.1)),  # complex1/c/77 at t = 122 s
+        ((1.0, 0.5), (0.04, 0.0, 0.04)),  # far: A is the Jacobian, Ω ≈ 0
+    ],
+)
+def test_statistical_linearisation_against_monte_carlo(d: tuple, c: tuple) -> None:
+    # the oracle: 10⁶ draws of d ~ N(d̂, C), range and bearing (wrapped around atan2(d̂)),
+    # their regression on d and its residual covariance
+    rng = np.random.default_rng(5)
+    cov = np.array([[c[0], c[1]], [c[1], c[2]]])
+    x = rng.multivariate_normal(d, cov, 1_000_000)
+    ref = np.arctan2(d[1], d[0])
+    g = np.column_stack(
+        (np.hypot(x[:, 0], x[:, 1]), np.angle(np.exp(1j * (np.arctan2(x[:, 1], x[:, 0]) - ref))))
+    )
+    mg = g.mean(0)
+    k = (g - mg).T @ (x - x.mean(0)) / x.shape[0]
+    a = k @ np.linalg.inv(np.cov(x.T))
+    om = np.cov(g.T) - a @ k.T
+    got = ekf._slr(d, c, (0.01, 0.0025))
+    assert got is not None
+    (a00, a01, a10, a11), rng_m, bearing, (o00, o01, o11) = got
+    assert np.abs(np.array([[a00, a01], [a10, a11]]) - a).max() < 0.02 * np.abs(a).max()
+    assert abs(rng_m - mg[0]) < 1e-3 and abs(np.angle(np.exp(1j * (bearing - ref - mg[1])))) < 0.01
+    got_om = np.array([[o00 - 0.01, o01], [o01, o11 - 0.0025]])
+    assert np.abs(got_om - om).max() < 0.02 * max(np.abs(om).max(), 1e-3)
+    if np.hypot(*d) > 4 * np.sqrt(c[0]):  # far: the analytic Jacobian
+        r = np.hypot(*d)
+        jac = np.array([[d[0] / r, d[1] / r], [-d[1] / r**2, d[0] / r**2]])
+        assert np.abs(np.array([[a00, a01], [a10, a11]]) - jac).max() < 0.05
