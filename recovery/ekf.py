@@ -32,7 +32,10 @@ filter is re-entered by inflating its pose covariance and goes on (:func:`run_fi
 every such event is returned. An optional M-estimator (Huber or Cauchy weights on the
 innovation's Mahalanobis distance, iterated to the fixed point, or the redescending
 ``(c/d)²`` at the filter's own innovation covariance) down-weights outliers; the plain filter
-(no robust weights, no event) is the textbook EKF and equals filterpy's.
+(no robust weights, no event) is the textbook EKF and equals filterpy's, except for
+*near-field* measurements (the landmark inside the 99 % region of its prior position relative
+to the pose, where range and bearing are singular): those are used after the epoch's others,
+statistically linearised when still near-field (:func:`_linear_first`, :func:`_slr`).
 
 **Pieces.** :func:`run_filter` checks its options and hands over to :func:`_setup` (status of
 every measurement, epochs, composed predictions, the map as lists), :func:`_filter_loop` (per
