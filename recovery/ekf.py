@@ -543,21 +543,32 @@ def _linear_first(setup: _Setup, lo: int, hi: int, pose: tuple, p: tuple) -> lis
     have localised the pose; the order the filter used is ``FilterResult.order``. One still
     near-field when its turn comes is statistically linearised (:func:`_slr`).
     """
-    active, lm_xy, lm_c, lmk, pxm = setup.active, setup.lm_xy, setup.lm_c, setup.landmark, setup.pxm
+    lm_xy, lm_c, lmk, pxm = setup.lm_xy, setup.lm_c, setup.landmark, setup.pxm
     px, py = pose[0], pose[1]
     bound = 2.0 * NEAR_FIELD_CHI2 * (p[0] + p[3])
-    near: list[tuple[float, int, int]] = []
-    far: list[int] = []
-    for j in active[lo:hi]:
+
+    def m2_of(j: int) -> float:
         li = lmk[j]
         lm, lc = lm_xy[li], lm_c[li]
         dx, dy = lm[0] - px, lm[1] - py
         # λ_max(C) ≤ 2 (tr P_pp + tr Σ_l): far beyond that, no need for the cross-covariance
         if dx * dx + dy * dy > bound + 2.0 * NEAR_FIELD_CHI2 * (lc[0] + lc[2]):
-            far.append(j)
-            continue
+            return math.inf
         pxl = None if pxm is None else pxm[:, 2 * li : 2 * li + 2]
-        m2 = _mahalanobis2(*_relative(pose, p, lm, lc, pxl))
+        return _mahalanobis2(*_relative(pose, p, lm, lc, pxl))
+
+    return near_field_last(setup.active, lo, hi, m2_of)
+
+
+def near_field_last(active: list[int], lo: int, hi: int, m2_of) -> list[int]:  # type: ignore[no-untyped-def]
+    """Move the near-field measurements of ``active[lo:hi]`` (``m2_of(j) < χ²₂(0.99)``,
+    :data:`NEAR_FIELD_CHI2`) behind the others, largest ``m2`` first (in place; stable
+    otherwise), and return them; shared by :func:`run_filter` and
+    :func:`recovery.persisting.run_persisting`."""
+    near: list[tuple[float, int, int]] = []
+    far: list[int] = []
+    for j in active[lo:hi]:
+        m2 = m2_of(j)
         if m2 >= NEAR_FIELD_CHI2:
             far.append(j)
         else:
