@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from recovery.ekf import (
+    NEAR_FIELD_CHI2,
     OUTSIDE,
     UNASSOCIATED,
     USED,
@@ -49,8 +50,11 @@ from recovery.ekf import (
     FilterInput,
     FilterResult,
     _full,
+    _mahalanobis2,
     _setup,
+    _slr,
     fill,
+    near_field_last,
     predict6,
 )
 from relation_metric.arrays import Array
@@ -170,20 +174,49 @@ def _predict(
     return x, p, phi
 
 
+def _relative(
+    x: Array, p: Array, lay: _Layout, map_l: Array, li: int
+) -> tuple[tuple[float, float], tuple[float, float, float]]:
+    """The landmark relative to the pose and its covariance (3 unique) in the augmented state
+    (:func:`recovery.ekf._relative`; the map's correction in the state when it has one)."""
+    ml = map_l + (x[3 + 2 * li : 5 + 2 * li] if lay.has_map else 0.0)
+    c = p[:2, :2].copy()
+    if lay.has_map:
+        sl = slice(3 + 2 * li, 5 + 2 * li)
+        c += p[sl, sl] - p[:2, sl] - p[sl, :2]
+    d = (float(ml[0] - x[0]), float(ml[1] - x[1]))
+    return d, (float(c[0, 0]), float(c[0, 1]), float(c[1, 1]))
+
+
+def _near_m2(x: Array, p: Array, lay: _Layout, inp: FilterInput):  # type: ignore[no-untyped-def]
+    """``j ↦ d̂ᵀ C⁻¹ d̂`` of measurement ``j`` at the state ``x``, ``p`` (near-field rule)."""
+
+    def m2(j: int) -> float:
+        li = int(lay.slot[inp.meas_landmark[j]])
+        return _mahalanobis2(*_relative(x, p, lay, inp.map_xy[inp.meas_landmark[j]], li))
+
+    return m2
+
+
 def _update(
     x: Array, p: Array, lay: _Layout, z: Array, map_l: Array, li: int, at: Array,
-    r_w: Array, c2: float,
+    r_w: Array, c2: float, slr: tuple | None = None,  # type: ignore[type-arg]
 ) -> tuple[Array, Array, float, float]:  # fmt: skip
     """One measurement ``z`` (2,) of the landmark at ``map_l`` (2,), state slot ``li``,
-    linearised at ``at`` (d,); the redescending weight beyond ``c2``. Returns ``x``, ``p``,
-    the NIS and the weight."""
+    linearised at ``at`` (d,) (or statistically, ``slr``: :func:`recovery.ekf._slr`); the
+    redescending weight beyond ``c2``. Returns ``x``, ``p``, the NIS and the weight."""
     ml = map_l + (at[3 + 2 * li : 5 + 2 * li] if lay.has_map else 0.0)
     ddx, ddy = ml[0] - at[0], ml[1] - at[1]
-    qq = ddx * ddx + ddy * ddy
-    rng = math.sqrt(qq)
-    h00, h01, h10, h11 = ddx / rng, ddy / rng, -ddy / qq, ddx / qq
+    if slr is None:
+        qq = ddx * ddx + ddy * ddy
+        rng = math.sqrt(qq)
+        h00, h01, h10, h11 = ddx / rng, ddy / rng, -ddy / qq, ddx / qq
+        bearing = math.atan2(ddy, ddx)
+    else:
+        (h00, h01, h10, h11), rng, bearing, (r00, r01, r11) = slr
+        r_w = np.array([[r00, r01], [r01, r11]])
     bi = lay.ob + 2 * li
-    y = np.array([z[0] - rng, z[1] - math.atan2(ddy, ddx) + at[2]])
+    y = np.array([z[0] - rng, z[1] - bearing + at[2]])
     h = np.zeros((2, lay.d))
     h[:, :3] = [[-h00, -h01, 0.0], [-h10, -h11, -1.0]]
     if lay.has_map:
@@ -256,10 +289,20 @@ def run_persisting(
             dt = float(times[k] - times[epochs[e - 1]])
             x, p, phi_all[e - 1] = _predict(x, p, lay, seg.local[k], seg.q[:, k], dt)
         prior_x[e], prior_p[e] = x, p
+        near: list[int] = []
+        if lin is None:  # the near-field rule of recovery.ekf (_linear_first)
+            near = near_field_last(active, bounds[e], bounds[e + 1], _near_m2(x, p, lay, inp))
         for j in active[bounds[e] : bounds[e + 1]]:
             li = int(lay.slot[lmk[j]])
             at = x if lin is None else lin[e]  # where h is linearised
-            x, p, nis[j], w = _update(x, p, lay, z_all[j], inp.map_xy[lmk[j]], li, at, r_w, c2)
+            slr = None
+            if near and j in near:
+                rel = _relative(x, p, lay, inp.map_xy[lmk[j]], li)
+                if _mahalanobis2(*rel) < NEAR_FIELD_CHI2:
+                    slr = _slr(*rel, (float(r_w[0, 0]), float(r_w[1, 1])))
+            x, p, nis[j], w = _update(
+                x, p, lay, z_all[j], inp.map_xy[lmk[j]], li, at, r_w, c2, slr
+            )  # fmt: skip
             if w != 1.0:
                 wts[j] = w
         post_x[e], post_p[e] = x, p
