@@ -334,6 +334,17 @@ class PersistingError:
         return out
 
 
+def checked_outlier_share(share: object) -> float:
+    """``sensor_model.outlier_share`` as a float in ``[0, 0.5)``, else :class:`InputError`
+    (the one home of that rule: :class:`SensorModel` and the bundle reader)."""
+    if not (isinstance(share, int | float) and 0.0 <= share < 0.5):
+        raise InputError(
+            f"sensor_model.outlier_share: expected a share in [0, 0.5) (the measurements that "
+            f"are gross errors), got {share!s:.40}"
+        )
+    return float(share)
+
+
 @dataclass(frozen=True)
 class SensorModel:
     """Range-bearing sensor with independent Gaussian noise (standard deviations).
@@ -396,13 +407,7 @@ class SensorModel:
                 )
             object.__setattr__(self, "mount", (float(m[0]), float(m[1]), float(m[2])))
         if self.outlier_share is not None:
-            share = self.outlier_share
-            if not (isinstance(share, (int, float)) and 0.0 <= share < 0.5):
-                raise InputError(
-                    f"sensor_model.outlier_share: expected a share in [0, 0.5) (the measurements "
-                    f"that are gross errors), got {share!s:.40}"
-                )
-            object.__setattr__(self, "outlier_share", float(share))
+            object.__setattr__(self, "outlier_share", checked_outlier_share(self.outlier_share))
         pe = self.persisting
         if pe is not None:
             for name, total, var in (

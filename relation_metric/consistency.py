@@ -296,6 +296,13 @@ def poisson_quantile(probability: float, mean: float) -> int:
     return int(ks[hit[0]]) if hit.size else int(ks[-1])
 
 
+def nis_tail_expected(probability: float = 0.999, outlier_share: float = 0.0) -> float:
+    """The share of innovations expected beyond their ``probability`` bound:
+    ``(1 − p)(1 − probability) + p`` with a stated share ``p`` of gross errors, each counted
+    beyond it (``p = 0``: ``1 − probability``)."""
+    return (1.0 - outlier_share) * (1.0 - probability) + outlier_share
+
+
 def nis_tail_level(
     tail: int, n: int, probability: float = 0.999, outlier_share: float = 0.0
 ) -> str:
@@ -307,10 +314,9 @@ def nis_tail_level(
 
     ``outlier_share`` ``p``: a share of gross errors the bundle states
     (``sensor_model.outlier_share``), each counted beyond the bound (an upper bound: the tail
-    expected is ``((1 − p)(1 − probability) + p)·n``) and the 0.5 % and 0.2 % margins taken
+    expected is :func:`nis_tail_expected` ``· n``) and the 0.5 % and 0.2 % margins taken
     above ``p``. ``p = 0`` is the rule above exactly."""
-    expected = (1.0 - outlier_share) * (1.0 - probability) + outlier_share
-    lam = expected * n
+    lam = nis_tail_expected(probability, outlier_share) * n
     share = tail / n if n else 0.0
     if tail > poisson_quantile(0.9999, lam) and share > 0.005 + outlier_share:
         return "red"

@@ -45,6 +45,7 @@ from recovery.models import (
     MotionModelWarning,
     PersistingError,
     SensorModel,
+    checked_outlier_share,
     world_noise_is_rotation_invariant,
 )
 from recovery.steps import SNAP_TOLERANCE, snap_times
@@ -516,13 +517,10 @@ def _parse_sensor(spec: Any, text: str, path: str) -> SensorModel:
         where = _line_of_key(text, "outlier_share")
         share = _number(spec["outlier_share"], what="sensor_model.outlier_share", path=path,
                         line=where)  # fmt: skip
-        if not 0.0 <= share < 0.5:
-            raise InputError(
-                f"sensor_model.outlier_share: expected a share in [0, 0.5) (the measurements "
-                f"that are gross errors), got {share:g}",
-                path=path,
-                line=where,
-            )
+        try:
+            checked_outlier_share(share)
+        except InputError as exc:
+            raise InputError(str(exc), path=path, line=where) from None
     return SensorModel(
         vals[0],
         vals[1],

@@ -99,6 +99,7 @@ from relation_metric.consistency import (
     flag_runs,
     mean_chi2_interval,
     nis_persistence,
+    nis_tail_expected,
     nis_tail_level,
 )
 from relation_metric.errors import InputError
@@ -895,7 +896,7 @@ def _map_log_lines(facts: RunFacts) -> list[Judgement]:
     else:
         q = float(v.mean()) / 2.0 if v.size else float("nan")
     tail = int((v > bound).sum()) + gated
-    lam = ((1.0 - p) * (1.0 - NIS_TAIL) + p) * n
+    lam = nis_tail_expected(NIS_TAIL, p) * n
     share = tail / n
     (g_lo, g_hi), (a_lo, a_hi) = NIS_RANGES
     q_level = (
