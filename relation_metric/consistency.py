@@ -41,6 +41,7 @@ a consistent estimator exceeds it once in 10 000 values.
 
 __all__ = [
     "nis_tail_level",
+    "outlier_share_of_tail",
     "NIS_CORRELATION",
     "FAR_LAG",
     "NisPersistence",
@@ -301,6 +302,24 @@ def nis_tail_expected(probability: float = 0.999, outlier_share: float = 0.0) ->
     ``(1 − p)(1 − probability) + p`` with a stated share ``p`` of gross errors, each counted
     beyond it (``p = 0``: ``1 − probability``)."""
     return (1.0 - outlier_share) * (1.0 - probability) + outlier_share
+
+
+def outlier_share_of_tail(tail_share: float, probability: float = 0.999) -> float:
+    """The share ``p`` of gross errors that puts ``tail_share`` of the residuals beyond their
+    ``probability`` bound: :func:`nis_tail_expected` solved for ``p``,
+    ``p = (tail − (1 − probability)) / probability``, 0 when the tail is no heavier than a
+    Gaussian's (the method-of-moments estimate of a contamination's share, measured at the
+    bound the map–log lamp counts at).
+
+    >>> round(outlier_share_of_tail(nis_tail_expected(0.999, 0.03)), 12)
+    0.03
+    >>> outlier_share_of_tail(0.0005)
+    0.0
+    """
+    q = float(probability)
+    if not 0.0 < q < 1.0:
+        raise ValueError(f"probability must be in (0, 1), got {probability!r}")
+    return max(0.0, (float(tail_share) - (1.0 - q)) / q)
 
 
 def nis_tail_level(

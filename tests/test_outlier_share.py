@@ -13,7 +13,7 @@ import pytest
 from scipy.stats import poisson
 
 from relation_metric import se2
-from relation_metric.consistency import nis_tail_level
+from relation_metric.consistency import nis_tail_expected, nis_tail_level, outlier_share_of_tail
 from relation_metric.errors import InputError
 from slamrel.formats.bundle import read_bundle, write_bundle
 from slamrel.pipeline import RunInput, score_bundle
@@ -74,6 +74,31 @@ def test_tail_rule_with_a_stated_share_on_drawn_innovations(rng):
         doubled.append(nis_tail_level(tail2, n, 0.999, p))
     assert levels.count("green") >= 198
     assert doubled.count("red") == 200
+
+
+def test_share_measured_at_the_bound_is_the_stated_contamination(rng):
+    """``outlier_share_of_tail`` inverts ``nis_tail_expected`` (hand formula on a grid, 0 for
+    a tail lighter than a Gaussian's), and measured on residuals drawn from a contamination
+    (``p`` gross, the rest χ²₂) it recovers ``p`` within its sampling error; the tail rule is
+    then green on the very residuals the share was measured on."""
+    for p in (0.0, 0.001, 0.0084, 0.03, 0.2, 0.49):
+        for q in (0.99, 0.999):
+            assert outlier_share_of_tail(nis_tail_expected(q, p), q) == pytest.approx(p, abs=1e-12)
+    assert outlier_share_of_tail(0.0) == 0.0 and outlier_share_of_tail(0.001) == 0.0
+    with pytest.raises(ValueError):
+        outlier_share_of_tail(0.1, 1.0)
+    n, p = 20000, 0.02
+    est = []
+    for _ in range(50):
+        gross = rng.random(n) < p
+        d2 = np.where(gross, BOUND * (1.0 + rng.exponential(3.0, n)), rng.chisquare(2, n))
+        tail = int((d2 > BOUND).sum())
+        share = outlier_share_of_tail(tail / n)
+        est.append(share)
+        assert nis_tail_level(tail, n, 0.999, share) == "green"
+    sd = np.sqrt(p * (1 - p) / n)  # the binomial sampling error of the share
+    assert np.mean(est) == pytest.approx(p, abs=3 * sd / np.sqrt(50) + 1e-4)
+    assert np.std(est) == pytest.approx(sd, rel=0.35)
 
 
 def _facts(nis, share):
