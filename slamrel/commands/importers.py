@@ -51,8 +51,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "truth's (sigma^2 = Var(window error) / mean(sum dt^2)), each range and bearing "
         "against the one predicted from the interpolated ground truth and the surveyed "
         "landmark: their white part, the part that persists along each landmark's track and "
-        "across landmarks (--no-persisting: white only), the share of gross errors beyond "
-        "5 robust sigma.",
+        "across landmarks (--no-persisting: white only), the share of gross errors (the "
+        "residuals beyond the 99.9% bound of the fitted sigma, less the 0.1% a Gaussian puts "
+        "there).",
     )
     mr.add_argument("directory", metavar="DIR", help="an extracted MRCLAM dataset directory")
     mr.add_argument(
