@@ -219,11 +219,16 @@ class MapNees:
         ``K``, the matched landmarks (the dof is ``2K``).
     covariance : str
         ``"joint"`` or ``"marginal"`` (blocks taken as independent).
+    placement : float or None
+        The part of ``value`` that is the map's placement, a rigid motion of the whole map
+        (:func:`recovery.anchoring.rigid_split`'s ``nees_rigid``, 3 dof; the rest, its shape,
+        has ``2K − 3``): with the joint covariance and ``K ≥ 3``, else None.
     """
 
     value: float
     landmarks: int
     covariance: str
+    placement: float | None = None
 
     @property
     def dof(self) -> int:
@@ -245,10 +250,12 @@ def map_nees(
     if k == 0:
         return None
     try:
+        placement = None
         if joint is not None:
             c = np.asarray(joint, dtype=np.float64)
             v = float(e.ravel() @ np.linalg.solve(c, e.ravel()))
             kind = "joint"
+            placement = _placement_nees(map_xy, truth_xy, c) if k >= 3 else None
         elif marginals is not None:
             m = np.asarray(marginals, dtype=np.float64)
             v = float(np.einsum("ki,ki->", e, np.linalg.solve(m, e[..., None])[..., 0]))
@@ -259,7 +266,20 @@ def map_nees(
         return None
     if not math.isfinite(v):
         return None
-    return MapNees(v, k, kind)
+    return MapNees(v, k, kind, placement)
+
+
+def _placement_nees(
+    map_xy: ArrayLike, truth_xy: ArrayLike, joint: NDArray[np.float64]
+) -> float | None:
+    """The placement's share of the map's NEES (:func:`recovery.anchoring.rigid_split`), or
+    None where the split is not defined (a covariance that is not positive definite)."""
+    from recovery.anchoring import rigid_split
+
+    try:
+        return rigid_split(map_xy, truth_xy, joint).nees_rigid
+    except InputError:
+        return None
 
 
 def expected_downweight_loss(threshold: float) -> float:
@@ -989,11 +1009,19 @@ def _map_consistency_lines(facts: RunFacts) -> list[Judgement]:
             )
         ]
     level, direction = _chi2_level(q, 2, m.landmarks)
+    split = ""
+    if m.placement is not None:  # which part is over- or under-stated, said, not judged apart
+        shape, dof = m.value - m.placement, m.dof - 3
+        split = (
+            f"; of it the shape {_g(shape)} over {dof} dof (q {_g(shape / dof)}) and the "
+            f"placement, a rigid motion of the whole map which no relation sees, "
+            f"{_g(m.placement)} over 3 dof (q {_g(m.placement / 3)})"
+        )
     return [
         Judgement(
             "map consistency",
             f"map NEES {_g(m.value)} over {m.dof} dof ({m.landmarks} landmarks, {m.covariance} "
-            f"covariance): q = {_g(q)}, {direction}",
+            f"covariance): q = {_g(q)}, {direction}{split}",
             level,
             "the matched landmarks' error against the map's stated covariance, in the NEES "
             "frame; " + _CHI2_RULE.replace("n_eff independent values", "K landmarks"),
