@@ -56,6 +56,8 @@ from relation_metric.errors import InputError
 __all__ = [
     "MotionModel",
     "MotionModelWarning",
+    "MotionPersisting",
+    "gauss_markov_window_variance",
     "SensorModel",
     "PersistingError",
     "velocity_increment",
@@ -136,6 +138,109 @@ def _covariance_3x3(values: object, *, what: str) -> tuple[tuple[float, ...], ..
     return tuple(tuple(float(v) for v in row) for row in mat)
 
 
+def gauss_markov_window_variance(window: float, tau: float) -> float:
+    """``g(W, τ) = ∫₀^W ∫₀^W e^{−|t − t'|/τ} dt dt' = 2 τ² (W/τ − 1 + e^{−W/τ})``: the
+    variance of ``∫₀^W x dt`` of a stationary Gauss–Markov ``x`` of unit variance and time
+    constant ``τ`` (``W²`` as ``τ → ∞``, ``2 τ W`` as ``τ → 0``). Written with ``expm1`` so
+    that a long τ does not lose its digits: ``W/τ − 1 + e^{−W/τ} = expm1(−a) + a``."""
+    a = window / tau
+    if a < 1e-4:  # the series: 2 τ² (a²/2 − a³/6 + a⁴/24) = W² (1 − a/3 + a²/12)
+        return window * window * (1.0 - a / 3.0 + a * a / 12.0)
+    return 2.0 * tau * tau * (math.expm1(-a) + a)
+
+
+@dataclass(frozen=True)
+class MotionPersisting:
+    """An odometry error that **persists** (docs/bundle.md, ``motion_model.persisting``):
+    a speed-scale error ``s`` (unitless, ``v_true = v (1 + s)``) and a turn-per-metre
+    error ``κ`` [rad/m] (``ω_true = ω + κ v``), each a stationary first-order Gauss–Markov
+    process ``x(t + Δ) = e^{−Δ/τ} x(t) + w``, ``Var w = σ² (1 − e^{−2Δ/τ})``, independent of
+    each other and of the white control noise. It is **in addition to** the model's stated
+    white noise: the robot moves with the commands ``(v (1 + s), ω + κ v)`` plus that noise.
+    Velocity model only. A σ of 0 switches that process off.
+
+    Raises
+    ------
+    InputError
+        A σ that is not a finite number ≥ 0 (at most ``MAX_SIGMA``), a time constant that is
+        not a finite number > 0; the message names the field.
+    """
+
+    sigma_scale: float
+    time_constant_scale: float
+    sigma_turn: float
+    time_constant_turn: float
+
+    def __post_init__(self) -> None:
+        for name in ("sigma_scale", "time_constant_scale", "sigma_turn", "time_constant_turn"):
+            (value,) = _nonnegative_numbers(
+                (getattr(self, name),), 1, what=f"motion_model.persisting.{name}"
+            )
+            if name.startswith("time_constant") and not 0.0 < value < 1e30:
+                raise InputError(
+                    f"motion_model.persisting.{name}: expected a positive number of seconds "
+                    f"(below 1e30), got {value:g}"
+                )
+            object.__setattr__(self, name, value)
+
+    @property
+    def sigma(self) -> tuple[float, float]:
+        """``(σ_s, σ_κ)``."""
+        return (self.sigma_scale, self.sigma_turn)
+
+    @property
+    def tau(self) -> tuple[float, float]:
+        """``(τ_s, τ_κ)`` [s]."""
+        return (self.time_constant_scale, self.time_constant_turn)
+
+    def alpha_share(self, window: float, period: float) -> tuple[float, float]:
+        """``(Δα1, Δα3)``: the persisting error as the white speed-proportional velocity
+        model (Probabilistic Robotics Table 5.3, ``σ_v² = α1 v² + α2 ω²``,
+        ``σ_ω² = α3 v² + α4 ω²`` per control row held over its ``Δt``) that gives the same
+        variance of the travelled distance and turn over windows of ``window`` (``W``)
+        seconds, with control rows every ``period`` (``h``) seconds, at a constant speed.
+
+        Derivation. At constant ``v`` the distance error over a window from ``s`` is
+        ``v ∫₀^W s dt``, of variance ``v² σ_s² g(W, τ_s)`` with
+        ``g(W, τ) = ∫₀^W ∫₀^W e^{−|t−t'|/τ} dt dt' = 2 τ² (W/τ − 1 + e^{−W/τ})``
+        (:func:`gauss_markov_window_variance`); the turn error from ``κ`` is
+        ``v ∫₀^W κ dt``, of variance ``v² σ_κ² g(W, τ_κ)``. The white model's ``W / h`` rows
+        each add ``α1 v² h²`` to the distance variance (``α3 v² h²`` to the turn's), together
+        ``α1 v² W h``. Equal variances:
+
+        ``Δα1 = σ_s² g(W, τ_s) / (W h)``, ``Δα3 = σ_κ² g(W, τ_κ) / (W h)``.
+
+        Limits: ``τ → ∞`` (a constant error over the window), ``g → W²``: ``σ² W / h``;
+        ``τ → 0``, ``g → 2 τ W``: ``2 σ² τ / h`` (white noise of spectral density
+        ``2 σ² τ``). The share grows with ``W`` while ``τ`` is not small against it: a
+        white model fitted over longer windows states more noise.
+
+        Raises
+        ------
+        InputError
+            When ``window`` or ``period`` is not a finite positive number.
+        """
+        for name, value in (("window", window), ("period", period)):
+            if not (math.isfinite(value) and value > 0):
+                raise InputError(f"alpha_share: {name} must be a positive time, got {value!r}")
+        return (
+            self.sigma_scale**2
+            * gauss_markov_window_variance(window, self.time_constant_scale)
+            / (window * period),
+            self.sigma_turn**2
+            * gauss_markov_window_variance(window, self.time_constant_turn)
+            / (window * period),
+        )
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "sigma_scale": self.sigma_scale,
+            "time_constant_scale": self.time_constant_scale,
+            "sigma_turn": self.sigma_turn,
+            "time_constant_turn": self.time_constant_turn,
+        }
+
+
 @dataclass(frozen=True)
 class MotionModel:
     """A motion model of the bundle.
@@ -164,6 +269,10 @@ class MotionModel:
         (``step_covariance.csv``, ``Bundle.step_covariances``), in the frame named, as
         ``pose_noise`` but one per row: e.g. an increment-dependent odometry noise
         ``J C Jᵀ`` as a filter computed it.
+    persisting : MotionPersisting or None
+        Velocity model with ``sigma`` or ``alpha`` only: a speed-scale and turn-per-metre
+        error that persists (:class:`MotionPersisting`), in addition to that white noise.
+        None (default): not stated; :meth:`as_dict` then writes no key.
 
     Exactly one of ``sigma``, ``alpha``, ``pose_noise`` and ``step_covariance_frame`` is
     set; ``sigma`` and ``alpha`` are stored as tuples of float, ``pose_noise`` as a tuple of
@@ -191,6 +300,7 @@ class MotionModel:
     pose_noise_frame: str | None = None
     pose_noise: tuple[tuple[float, ...], ...] | None = None
     step_covariance_frame: str | None = None
+    persisting: MotionPersisting | None = None
 
     def __post_init__(self) -> None:
         if self.type not in MOTION_TYPES:
@@ -216,6 +326,22 @@ class MotionModel:
                         f"motion_model.{name}: applies to the velocity model only; expected "
                         f"no {name} for the odometry model"
                     )
+        if self.persisting is not None:
+            if not isinstance(self.persisting, MotionPersisting):
+                raise InputError(
+                    "motion_model.persisting: expected a MotionPersisting, got "
+                    f"{self.persisting!s:.60}"
+                )
+            if self.type != "velocity":
+                raise InputError(
+                    "motion_model.persisting: applies to the velocity model only (a speed-scale "
+                    f"and turn-per-metre error of its commands); expected none for {self.type}"
+                )
+            if given[0] not in ("sigma", "alpha"):
+                raise InputError(
+                    "motion_model.persisting: is stated in addition to white control noise; "
+                    f"expected sigma (sigma_v, sigma_omega) or alpha, got {given[0]}"
+                )
         if given == ["step_covariance_frame"]:
             _choice(
                 self.step_covariance_frame,
@@ -265,6 +391,8 @@ class MotionModel:
             }
         else:
             out.update(zip(SIGMA_NAMES[self.type], self.sigma or ()))
+        if self.persisting is not None:  # written when stated (older bundles unchanged)
+            out["persisting"] = self.persisting.as_dict()
         return out
 
 

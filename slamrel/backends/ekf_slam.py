@@ -605,6 +605,7 @@ def ekf_slam_bundle(
     if mount is not None:  # a sensor turned by θ_m: its bearing is the robot's less θ_m
         z = z.copy()
         z[:, 1] = se2.wrap_angle(z[:, 1] + mount[2])
+    bundle, white_motion = _motion_as_white(bundle)
     if process_noise_scale != 1.0:
         k2, own = process_noise_scale**2, bundle.step_covariances  # a stated C_k too
         bundle = replace(
@@ -670,10 +671,57 @@ def ekf_slam_bundle(
         + ("" if process_noise_scale == 1.0 else f", process noise scale {process_noise_scale:g}")
         + ("" if outlier_gate is None else f", outlier gate {outlier_gate:g}: {rejected} rejected")
         + ")"
-        + white,
+        + white
+        + white_motion,
         path=None,
     )
     return out, res
+
+
+#: The window [s] over which ``slamrel slam`` takes a motion persisting error as white: the
+#: window ``import mrclam`` fits its white ``alpha`` over by default, so that on its bundles
+#: the filter runs on the 1 s ``alpha`` it ran on before the persisting error was stated.
+WHITE_MOTION_WINDOW = 1.0
+
+
+def _motion_as_white(bundle: Bundle) -> tuple[Bundle, str]:
+    """``bundle`` with a stated ``motion_model.persisting`` taken as white noise, and the
+    sentence saying so (empty, and the bundle unchanged, when none is stated).
+
+    The reference filter's noise is white: it adds the persisting error's α-equivalent over
+    :data:`WHITE_MOTION_WINDOW` with the controls' median period
+    (:meth:`~recovery.models.MotionPersisting.alpha_share`) to ``α1`` and ``α3`` and drops
+    the key. Only the speed-proportional model (``alpha``) can hold it: the share is
+    proportional to ``v²``; with ``sigma`` the bundle is refused."""
+    motion = bundle.motion
+    if motion.persisting is None:
+        return bundle, ""
+    where = None if bundle.path is None else Path(bundle.path) / "bundle.json"
+    if motion.alpha is None:
+        raise InputError(
+            "motion_model.persisting: slamrel's reference EKF-SLAM takes a persisting odometry "
+            "error as white speed-proportional noise; expected it with alpha (alpha1..alpha4), "
+            "not sigma",
+            path=where,
+        )
+    c = bundle.controls
+    if c is None or c.shape[0] < 2:
+        raise InputError(
+            "motion_model.persisting: expected a control log of at least two rows",
+            path=where,
+        )
+    period = float(np.median(np.diff(c[:, 0])))
+    d1, d3 = motion.persisting.alpha_share(WHITE_MOTION_WINDOW, period)
+    a1, a2, a3, a4 = motion.alpha
+    alpha = (a1 + d1, a2, a3 + d3, a4)
+    text = (
+        "; the log states a persisting odometry error, which this filter does not model: it "
+        f"took it as white over {WHITE_MOTION_WINDOW:g} s windows (alpha1 +{d1:.4g}, alpha3 "
+        f"+{d3:.4g} at {period:.4g} s control rows: alpha "
+        + " ".join(f"{a:.4g}" for a in alpha)
+        + "; so does this bundle's motion model)"
+    )
+    return replace(bundle, motion=replace(motion, alpha=alpha, persisting=None)), text
 
 
 def _scaled(motion: MotionModel, k: float) -> MotionModel:

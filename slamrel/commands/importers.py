@@ -53,7 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "landmark: their white part, the part that persists along each landmark's track and "
         "across landmarks (--no-persisting: white only), the share of gross errors (the "
         "residuals beyond the 99.9% bound of the fitted sigma, less the 0.1% a Gaussian puts "
-        "there).",
+        "there); with --motion-noise speed also the odometry's persisting speed-scale and "
+        "turn-per-metre error (--no-persisting: white only).",
     )
     mr.add_argument("directory", metavar="DIR", help="an extracted MRCLAM dataset directory")
     mr.add_argument(
@@ -98,8 +99,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="state the range-bearing errors' persistence in the bundle (sensor_model."
         "persisting: a Gauss-Markov bias per landmark track and one common to every landmark, "
         "sigma and time constant fitted against the ground truth), which the recovery then "
-        "models; --no-persisting: white range-bearing noise, as before 2026-12-06 (default: "
-        "on)",
+        "models, and with --motion-noise speed the odometry's (motion_model.persisting: a "
+        "Gauss-Markov speed-scale and turn-per-metre error fitted to the autocovariance of the "
+        "1 s windows' errors at lags of 1-30 windows; the model's alpha is then the fitted "
+        "alpha less that error's share of it); --no-persisting: white range-bearing and "
+        "motion noise, as before 2026-12-06 (default: on)",
     )
     add_force_argument(mr)
     mr.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")

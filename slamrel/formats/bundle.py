@@ -25,6 +25,7 @@ import json
 import math
 import warnings
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from functools import partial
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -43,6 +44,7 @@ from recovery.models import (
     SIGMA_NAMES,
     MotionModel,
     MotionModelWarning,
+    MotionPersisting,
     PersistingError,
     SensorModel,
     checked_outlier_share,
@@ -94,9 +96,17 @@ def _shown(value: Any) -> str:
     return "".join(c if c.isprintable() else f"<U+{ord(c):04X}>" for c in text)
 
 
-def _line_of_key(text: str, key: str) -> int | None:
-    needle = f'"{key}"'
-    pos = text.find(needle)
+#: The keys of ``motion_model.persisting`` (:class:`~recovery.models.MotionPersisting`).
+MOTION_PERSISTING_KEYS = ("sigma_scale", "time_constant_scale", "sigma_turn", "time_constant_turn")
+
+
+def _line_of_key(text: str, key: str, after: str | None = None) -> int | None:
+    """The line of ``"key"`` in ``text`` (its first occurrence, or its first after the key
+    ``after``: ``persisting`` is a key of both models), None when absent."""
+    start = 0
+    if after is not None:
+        start = max(text.find(f'"{after}"'), 0)
+    pos = text.find(f'"{key}"', start)
     return None if pos < 0 else text.count("\n", 0, pos) + 1
 
 
@@ -122,8 +132,10 @@ _MANIFEST_KEYS = {
         "alpha",
         "pose_noise",
         "step_covariance",
+        "persisting",
         *sorted({n for names in SIGMA_NAMES.values() for n in names}),
     ),
+    "motion_model.persisting": MOTION_PERSISTING_KEYS,
     "motion_model.pose_noise": ("frame", "covariance"),
     "motion_model.step_covariance": ("frame",),
     "sensor_model": (
@@ -224,6 +236,42 @@ def _check_psd(cov: Array, *, what: str, path: str, line: int | None) -> None:
 
 
 def _parse_motion(spec: Any, text: str, path: str) -> MotionModel:
+    model = _parse_motion_noise(spec, text, path)
+    if "persisting" not in spec:
+        return model
+    persisting = _parse_motion_persisting(spec["persisting"], text, path)
+    try:
+        return replace(model, persisting=persisting)
+    except InputError as exc:  # e.g. stated for the odometry model
+        raise InputError(
+            str(exc), path=path, line=_line_of_key(text, "persisting", after="motion_model")
+        ) from None
+
+
+def _parse_motion_persisting(spec: Any, text: str, path: str) -> MotionPersisting:
+    """``motion_model.persisting``: σ ≥ 0 and τ > 0 of the speed-scale and turn-per-metre
+    Gauss–Markov errors (docs/bundle.md), each refused at its line."""
+    where = "motion_model.persisting"
+    line = _line_of_key(text, "persisting", after="motion_model")
+    if not isinstance(spec, dict):
+        raise InputError(f"{where}: expected an object", path=path, line=line)
+    _refuse_unknown_keys(spec, where, text, path)
+    vals = {}
+    for n in MOTION_PERSISTING_KEYS:
+        if n not in spec:
+            raise InputError(f"{where}: missing {n}", path=path, line=line)
+        at = _line_of_key(text, n)
+        vals[n] = _number(spec[n], what=f"{where}.{n}", path=path, line=at, maximum=MAX_SIGMA)
+        if n.startswith("time_constant") and not vals[n] > 0:
+            raise InputError(
+                f"{where}.{n}: expected a positive number of seconds, got {vals[n]}",
+                path=path,
+                line=at,
+            )
+    return MotionPersisting(**vals)
+
+
+def _parse_motion_noise(spec: Any, text: str, path: str) -> MotionModel:
     line = _line_of_key(text, "motion_model")
     if not isinstance(spec, dict):
         raise InputError("motion_model: expected an object", path=path, line=line)
@@ -538,7 +586,7 @@ def _parse_persisting(
 ) -> PersistingError:
     """``sensor_model.persisting``: four positive numbers and an optional ``common`` object
     of the same four (docs/bundle.md)."""
-    line = _line_of_key(text, where.rsplit(".", 1)[1])
+    line = _line_of_key(text, where.rsplit(".", 1)[1], after="sensor_model")
     if not isinstance(spec, dict):
         raise InputError(f"{where}: expected an object", path=path, line=line)
     _refuse_unknown_keys(spec, where, text, path)

@@ -26,7 +26,12 @@ from numpy.typing import NDArray
 from scipy.optimize import nnls
 
 from recovery.bundle import Bundle
-from recovery.models import MotionModel, PersistingError, SensorModel
+from recovery.models import (
+    MotionModel,
+    MotionPersisting,
+    PersistingError,
+    SensorModel,
+)
 from relation_metric import se2
 from relation_metric.consistency import outlier_share_of_tail
 from relation_metric.errors import InputError
@@ -46,6 +51,11 @@ __all__ = [
     "calibrate_odometry",
     "resample_controls",
     "fit_noise",
+    "ControlWindows",
+    "control_windows",
+    "MotionPersistingFit",
+    "fit_motion_persisting",
+    "white_alpha",
     "read_mrclam_robot",
     "read_barcodes",
     "N_ROBOTS",
@@ -620,21 +630,41 @@ def resample_controls(
     return np.vstack((np.column_stack((t, c[row, 1], c[row, 2])), c[-1:]))
 
 
-def fit_noise(
-    robot: MrclamRobot, landmarks: NDArray[np.float64], *, window: float = 1.0
-) -> NoiseFit:
-    """Fit velocity-model and range-bearing noise from data (how, in :class:`NoiseFit`).
+@dataclass(frozen=True)
+class ControlWindows:
+    """The odometry against the ground truth over consecutive windows of ``window`` seconds
+    inside the ground truth's span (the windows :func:`fit_noise` fits the motion noise on).
+    Arrays over the windows that hold control rows, in time order.
 
-    Controls: over consecutive windows of ``window`` seconds inside the ground truth's time
-    span, the travelled distance ``Σ v_k dt_k`` and turn ``Σ ω_k dt_k`` of the odometry are
-    compared with the ground truth's path length and heading change. With independent
-    per-row errors held over ``dt_k``, ``Var(window error) = σ² Σ dt_k²``, so
-    ``σ² = Var / mean(Σ dt_k²)``.
-
-    Measurements: each landmark measurement against the range and bearing predicted from
-    the interpolated ground-truth pose and the surveyed landmark (``landmarks``: rows
-    ``[subject, x, y]``).
+    Attributes
+    ----------
+    index : ndarray of int
+        Each window's number ``⌊(t − t_first) / window⌋``: windows ``i`` and ``i + L`` are
+        ``L`` windows apart (some windows may be missing).
+    dist_error, turn_error : ndarray
+        ``|Σ v_k dt_k| − s_true`` and ``Σ ω_k dt_k − Δθ_true``: odometry less the ground
+        truth's path length and heading change over the window's ``[t0, t1]``.
+    true_dist : ndarray
+        The ground truth's path length ``s_true`` [m].
+    dt2, duration : ndarray
+        ``Σ dt_k²`` and ``Σ dt_k`` of the window's rows.
+    design : ndarray, shape (n, 2)
+        ``[Σ v_k² dt_k², Σ ω_k² dt_k²]`` (the speed-proportional model's).
+    window : float
     """
+
+    index: NDArray[np.int64]
+    dist_error: NDArray[np.float64]
+    turn_error: NDArray[np.float64]
+    true_dist: NDArray[np.float64]
+    dt2: NDArray[np.float64]
+    duration: NDArray[np.float64]
+    design: NDArray[np.float64]
+    window: float
+
+
+def control_windows(robot: MrclamRobot, window: float) -> ControlWindows:
+    """:class:`ControlWindows` of ``robot`` (vectorised: one ``bincount`` per sum)."""
     c = robot.controls
     gt = robot.groundtruth
     t = c[:, 0]
@@ -664,16 +694,43 @@ def fit_noise(
     th_gt = np.unwrap(gt.poses[:, 2])
     true_dist = np.interp(t1[ok], gt.timestamps, s_gt) - np.interp(t0[ok], gt.timestamps, s_gt)
     true_turn = np.interp(t1[ok], gt.timestamps, th_gt) - np.interp(t0[ok], gt.timestamps, th_gt)
-    e_d = np.abs(dist[ok]) - true_dist  # odometry speed is signed; path length is not
-    e_t = turn[ok] - true_turn
-    mdt2 = float(np.mean(dt2[ok]))
+    v2, w2 = c[:, 1] ** 2 * dt**2, c[:, 2] ** 2 * dt**2
+    return ControlWindows(
+        index=np.flatnonzero(ok),
+        dist_error=np.abs(dist[ok]) - true_dist,  # odometry speed is signed; path length not
+        turn_error=turn[ok] - true_turn,
+        true_dist=true_dist,
+        dt2=dt2[ok],
+        duration=per_window(dt)[ok],
+        design=np.column_stack((per_window(v2), per_window(w2)))[ok],
+        window=float(window),
+    )
+
+
+def fit_noise(
+    robot: MrclamRobot, landmarks: NDArray[np.float64], *, window: float = 1.0
+) -> NoiseFit:
+    """Fit velocity-model and range-bearing noise from data (how, in :class:`NoiseFit`).
+
+    Controls: over consecutive windows of ``window`` seconds inside the ground truth's time
+    span, the travelled distance ``Σ v_k dt_k`` and turn ``Σ ω_k dt_k`` of the odometry are
+    compared with the ground truth's path length and heading change. With independent
+    per-row errors held over ``dt_k``, ``Var(window error) = σ² Σ dt_k²``, so
+    ``σ² = Var / mean(Σ dt_k²)``.
+
+    Measurements: each landmark measurement against the range and bearing predicted from
+    the interpolated ground-truth pose and the surveyed landmark (``landmarks``: rows
+    ``[subject, x, y]``).
+    """
+    w = control_windows(robot, window)
+    e_d, e_t = w.dist_error, w.turn_error
+    mdt2 = float(np.mean(w.dt2))
     sigma_v = float(np.sqrt(np.var(e_d) / mdt2))
     sigma_w = float(np.sqrt(np.var(e_t) / mdt2))
     # speed-proportional model: E[e²] = Σ_k (α_a v_k² + α_b ω_k²) dt_k² per window
-    v2, w2 = c[:, 1] ** 2 * dt**2, c[:, 2] ** 2 * dt**2
-    design = np.column_stack((per_window(v2), per_window(w2)))[ok]
-    alpha_v = _fit_variance(design, e_d)
-    alpha_w = _fit_variance(design, e_t)
+    alpha_v = _fit_variance(w.design, e_d)
+    alpha_w = _fit_variance(w.design, e_t)
+    gt = robot.groundtruth
     # measurements
     m = robot.measurements
     subj = landmarks[:, 0].astype(np.int64)
@@ -690,7 +747,7 @@ def fit_noise(
     out = _beyond(r_res) | _beyond(b_res)
     sr = float(np.std(r_res[~out], ddof=1)) if (~out).sum() > 1 else float("nan")
     sb = float(np.std(b_res[~out], ddof=1)) if (~out).sum() > 1 else float("nan")
-    duration = float(np.mean(per_window(dt)[ok]))
+    duration = float(np.mean(w.duration))
     offset = float(np.mean(b_res[~out])) if (~out).any() else 0.0
     d2_mounted = (r_res / sr) ** 2 + (se2.wrap_angle(b_res - offset) / sb) ** 2
     return NoiseFit(
@@ -722,6 +779,177 @@ def fit_noise(
         if d2_mounted.size
         else None,
     )
+
+
+#: Windows on which the robot moved less than this [m] (ground truth) carry no speed-scale or
+#: turn-per-metre error :func:`fit_motion_persisting` could read (their ratio is noise).
+MOVED_DISTANCE = 0.05
+
+
+@dataclass(frozen=True)
+class MotionPersistingFit:
+    """:func:`fit_motion_persisting`'s fit and what it was fitted to.
+
+    Attributes
+    ----------
+    persisting : MotionPersisting
+    lags : ndarray of int
+        The lags ``L`` (in windows) fitted.
+    scale_covariance, turn_covariance : ndarray
+        The autocovariance of the speed-scale [1] and turn-per-metre [rad²/m²] errors at
+        ``lags`` (NaN: fewer than 10 pairs, not fitted).
+    pairs : ndarray of int
+        The pairs of moved windows at each lag (the same for both components, before their
+        separate 5-robust-σ trims).
+    windows : int
+        Windows on which the robot moved.
+    window : float
+    """
+
+    persisting: MotionPersisting
+    lags: NDArray[np.int64]
+    scale_covariance: NDArray[np.float64]
+    turn_covariance: NDArray[np.float64]
+    pairs: NDArray[np.int64]
+    windows: int
+    window: float
+
+    def describe(self) -> str:
+        """One sentence for the bundle's description."""
+        p = self.persisting
+        return (
+            f"odometry error persisting (Gauss-Markov, fitted to the autocovariance of "
+            f"{self.window:g} s windows at lags 1..{int(self.lags[-1])} over {self.windows} "
+            f"moved windows): speed scale sigma {p.sigma_scale:.4g} tau {p.time_constant_scale:.3g}"
+            f" s, turn per metre sigma {p.sigma_turn:.4g} rad/m tau {p.time_constant_turn:.3g} s"
+        )
+
+
+def _lag_covariance(
+    index: NDArray[np.int64],
+    err: NDArray[np.float64],
+    dist: NDArray[np.float64],
+    lags: NDArray[np.int64],
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """``Σ r_i r_j / Σ d_i d_j`` over the pairs of windows ``L`` apart, per lag ``L``, and
+    the pairs: the autocovariance of the ratio ``r/d`` weighted by ``d_i d_j`` (a window's
+    error is ``x d`` plus white noise, so this is unbiased for ``E[x_i x_j]`` and leans on
+    the windows that moved far, where the white noise is small against ``x d``)."""
+    cov = np.full(lags.size, np.nan)
+    pairs = np.zeros(lags.size, dtype=np.int64)
+    for k, lag in enumerate(lags):  # a handful of lags, each vectorised over the windows
+        pos = np.searchsorted(index, index + lag)
+        pos = np.minimum(pos, index.size - 1)
+        hit = index[pos] == index + lag
+        i, j = np.flatnonzero(hit), pos[hit]
+        pairs[k] = i.size
+        if i.size >= 10:
+            cov[k] = float(np.sum(err[i] * err[j]) / np.sum(dist[i] * dist[j]))
+    return cov, pairs
+
+
+def _fit_gauss_markov(
+    lags: NDArray[np.int64], cov: NDArray[np.float64], window: float
+) -> tuple[float, float]:
+    """``(σ, τ)`` of a stationary Gauss–Markov ``x`` from the autocovariance ``cov`` of its
+    **window means** at lags of ``L`` windows of ``window`` (``W``) seconds:
+    ``E[x̄_i x̄_{i+L}] = σ² q(a) e^{−L a}``, ``a = W/τ``, ``q(a) = (sinh(a/2) / (a/2))²`` (the
+    double integral of ``σ² e^{−|t−t'|/τ}`` over two windows ``L`` apart, over ``W²``; ``q → 1``
+    as ``τ ≫ W``). Least squares with every lag alike (``_fit_decay``'s reasoning: the pairs
+    of successive lags share windows), ``τ`` in ``[0.05, 600]`` s, ``σ² ≥ 0`` (no persistence:
+    0). :func:`_fit_decay` fits correlations of residuals binned by time, with the share
+    bounded below 1; here the lags are whole windows and the variance is not a share of a
+    known total, hence its own fit."""
+    from scipy.optimize import curve_fit
+
+    use = np.isfinite(cov)
+    if use.sum() < 3:
+        raise _NoFit()
+    lag = lags[use].astype(np.float64)
+
+    def model(_: object, var: float, tau: float) -> NDArray[np.float64]:
+        a = window / tau
+        q = (np.sinh(a / 2) / (a / 2)) ** 2 if a > 1e-8 else 1.0
+        return var * q * np.exp(-lag * a)
+
+    c1 = float(cov[use][0])
+    try:
+        (var, tau), _ = curve_fit(
+            model,
+            np.zeros(lag.size),
+            cov[use],
+            p0=(max(c1, 1e-12) * 1.5, 2.0 * window),
+            bounds=((0.0, 0.05), (np.inf, 600.0)),
+        )
+    except RuntimeError:  # no convergence
+        raise _NoFit() from None
+    return math.sqrt(max(float(var), 0.0)), float(tau)
+
+
+def fit_motion_persisting(
+    robot: MrclamRobot, *, window: float = 1.0, max_lag: int = 30
+) -> MotionPersistingFit | None:
+    """The odometry's persisting error (:class:`~recovery.models.MotionPersisting`) against
+    the ground truth, from the windows :func:`fit_noise` fits on (:func:`control_windows`).
+
+    On the windows where the robot moved (ground-truth path length ``d`` above
+    :data:`MOVED_DISTANCE`) a speed-scale error ``s`` (``v_true = v (1 + s)``) makes the
+    distance error ``e_d ≈ −s d`` and a turn-per-metre error ``κ`` (``ω_true = ω + κ v``)
+    the turn error ``e_t ≈ −κ d``. Each ratio ``e/d`` (less its mean, weighted by ``d²``,
+    beyond 5 robust σ left out) has its autocovariance at lags of 1 … ``max_lag`` windows
+    measured (:func:`_lag_covariance`; lag 0 is left out: it holds the white noise, which
+    does not reach the next window) and a Gauss–Markov fitted to it
+    (:func:`_fit_gauss_markov`). A calibration against the ground truth, as the noise fit
+    is; the Vicon path length's own noise shared by adjacent windows' common edge adds a
+    small negative covariance at lag 1. ``None`` when fewer than three lags hold ten pairs
+    of moved windows (or a fit does not converge). ``max_lag`` 30 (s at 1 s windows): over
+    10 the turn error's covariance has not decayed on robots 1 and 3 of dataset 7 (``τ`` at
+    the 600 s bound); over 30 every ``τ`` of robots 1–5 lies within 4–40 s (docs/commands.md).
+    """
+    w = control_windows(robot, window)
+    moved = w.true_dist > MOVED_DISTANCE
+    index, dist = w.index[moved], w.true_dist[moved]
+    lags = np.arange(1, max_lag + 1, dtype=np.int64)
+    out: list[tuple[float, float]] = []
+    covs: list[NDArray[np.float64]] = []
+    for err in (w.dist_error[moved], w.turn_error[moved]):
+        if err.size < 10:
+            return None
+        keep = ~_beyond(err / dist)
+        e, d, i = err[keep], dist[keep], index[keep]
+        r = e - (np.sum(e * d) / np.sum(d * d)) * d  # less the (d²-weighted) mean ratio
+        cov, _ = _lag_covariance(i, r, d, lags)
+        covs.append(cov)
+        try:
+            out.append(_fit_gauss_markov(lags, cov, window))
+        except _NoFit:
+            return None
+    _, pairs = _lag_covariance(index, dist, dist, lags)
+    return MotionPersistingFit(
+        persisting=MotionPersisting(out[0][0], out[0][1], out[1][0], out[1][1]),
+        lags=lags,
+        scale_covariance=covs[0],
+        turn_covariance=covs[1],
+        pairs=pairs,
+        windows=int(moved.sum()),
+        window=float(window),
+    )
+
+
+def white_alpha(
+    alpha: tuple[float, float, float, float],
+    persisting: MotionPersisting,
+    *,
+    window: float,
+    period: float,
+) -> tuple[tuple[float, float, float, float], bool]:
+    """The white part of ``alpha`` fitted over windows of ``window`` seconds, the persisting
+    error's share (:meth:`~recovery.models.MotionPersisting.alpha_share`, control rows every
+    ``period`` seconds) taken from ``α1`` and ``α3``, each clipped at 0; and whether one was
+    clipped (the persisting error then states more than the fit saw)."""
+    d1, d3 = persisting.alpha_share(window, period)
+    a1, a3 = alpha[0] - d1, alpha[2] - d3
+    return (max(a1, 0.0), alpha[1], max(a3, 0.0), alpha[3]), bool(a1 < 0 or a3 < 0)
 
 
 def _fit_variance(design: NDArray[np.float64], e: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -789,7 +1017,12 @@ def mrclam_bundle(
     (``sensor_model.persisting``, :func:`fit_persisting`), which the recovery then models
     (:mod:`recovery.persisting`), and their constant bearing part as the sensor's heading
     (``sensor_model.mount``, the mean bearing residual: robot 4 of dataset 7, −0.62°); on by
-    default (``False``: white range-bearing noise, as before 2026-12-06). ``window`` is the
+    default (``False``: white range-bearing noise, as before 2026-12-06). With
+    ``motion_noise="speed"`` it also states the odometry's persisting error
+    (``motion_model.persisting``, :func:`fit_motion_persisting`: a Gauss–Markov speed-scale
+    and turn-per-metre error) and, as the model's white ``alpha``, the fitted ``alpha`` less
+    that error's share of it (:func:`white_alpha`, at the fit's window and the controls'
+    median period; ``slamrel slam`` adds the share at 1 s back). ``window`` is the
     motion noise's fitting window: the odometry's errors persist too (dataset 7, robot 1:
     ``α1`` 3.5 over 1 s, 16.6 over 10 s) and an odometry bias is not in the state, so 5 s
     makes the recovery in the surveyed map consistent where 1 s leaves it overconfident, but
@@ -836,12 +1069,22 @@ def mrclam_bundle(
     thin = thin_sightings(m[:, 0], m[:, 3].astype(np.int64), decorrelate)
     m = m[thin]
     share = fit.gross_share(mounted=bool(persisting and fit.persisting))
+    motion = (
+        MotionModel("velocity", alpha=fit.alpha)
+        if motion_noise == "speed"
+        else MotionModel("velocity", sigma=(fit.sigma_v, fit.sigma_omega))
+    )
+    motion_text = ""
+    if persisting and motion_noise == "speed":  # the odometry's persisting error, fitted
+        with _about(odo_path, f"compared with {gt_name}"):
+            mp = fit_motion_persisting(r)
+        if mp is not None:
+            period = float(np.median(np.diff(c[:, 0])))
+            alpha, clipped = white_alpha(fit.alpha, mp.persisting, window=fit.window, period=period)
+            motion = MotionModel("velocity", alpha=alpha, persisting=mp.persisting)
+            motion_text = _motion_persisting_text(mp, fit, alpha, period, clipped)
     return Bundle(
-        motion=(
-            MotionModel("velocity", alpha=fit.alpha)
-            if motion_noise == "speed"
-            else MotionModel("velocity", sigma=(fit.sigma_v, fit.sigma_omega))
-        ),
+        motion=motion,
         sensor=SensorModel(
             fit.sigma_range,
             fit.sigma_bearing,
@@ -874,6 +1117,7 @@ def mrclam_bundle(
             "the time span covered by both odometry and ground truth left out; "
             + _decorrelated_text(decorrelate, int((~thin).sum()), thin.size)
             + _noise_text(fit, motion_noise)
+            + motion_text
             + _share_text(share, mounted=bool(persisting and fit.persisting))
             + (
                 "raw odometry"
@@ -934,6 +1178,26 @@ def _noise_text(fit: NoiseFit, motion_noise: str) -> str:
         f"{100 * fit.outlier_fraction:.1f}% of measurements beyond 5 robust sigma; "
         + (fit.check.describe() if fit.check is not None else "fit not checked")
         + "); "
+    )
+
+
+def _motion_persisting_text(
+    mp: MotionPersistingFit,
+    fit: NoiseFit,
+    alpha: tuple[float, float, float, float],
+    period: float,
+    clipped: bool,
+) -> str:
+    """The description's account of the stated motion persisting error and the white rest."""
+    share = mp.persisting.alpha_share(fit.window, period)
+    return (
+        mp.describe()
+        + f", stated as motion_model.persisting; its share of the {fit.window:g} s alpha "
+        f"(alpha1 {share[0]:.4g}, alpha3 {share[1]:.4g} at {period:.4g} s control rows) taken "
+        "out: white alpha "
+        + " ".join(f"{a:.4g}" for a in alpha)
+        + (" (clipped at 0: the persisting share exceeds the fitted alpha)" if clipped else "")
+        + "; "
     )
 
 
