@@ -980,6 +980,24 @@ def _beyond(x: NDArray[np.float64]) -> NDArray[np.bool_]:
     return d > 5.0 * 1.4826 * np.median(d)
 
 
+def _motion_model(
+    r: MrclamRobot, fit: NoiseFit, c: NDArray[np.float64], motion_noise: str, persisting: bool
+) -> tuple[MotionModel, str]:
+    """The bundle's velocity model and its description: the fitted ``alpha`` (``"speed"``) or
+    ``σ_v, σ_ω``; with ``persisting`` and ``"speed"`` the odometry's persisting error
+    (:func:`fit_motion_persisting`) and the white ``alpha`` left (:func:`white_alpha`)."""
+    if motion_noise != "speed":
+        return MotionModel("velocity", sigma=(fit.sigma_v, fit.sigma_omega)), ""
+    if persisting:  # the odometry's persisting error, fitted
+        mp = fit_motion_persisting(r)
+        if mp is not None:
+            period = float(np.median(np.diff(c[:, 0])))
+            alpha, clipped = white_alpha(fit.alpha, mp.persisting, window=fit.window, period=period)
+            motion = MotionModel("velocity", alpha=alpha, persisting=mp.persisting)
+            return motion, _motion_persisting_text(mp, fit, alpha, period, clipped)
+    return MotionModel("velocity", alpha=fit.alpha), ""
+
+
 def mrclam_bundle(
     directory: PathLike,
     robot: int,
@@ -1069,20 +1087,8 @@ def mrclam_bundle(
     thin = thin_sightings(m[:, 0], m[:, 3].astype(np.int64), decorrelate)
     m = m[thin]
     share = fit.gross_share(mounted=bool(persisting and fit.persisting))
-    motion = (
-        MotionModel("velocity", alpha=fit.alpha)
-        if motion_noise == "speed"
-        else MotionModel("velocity", sigma=(fit.sigma_v, fit.sigma_omega))
-    )
-    motion_text = ""
-    if persisting and motion_noise == "speed":  # the odometry's persisting error, fitted
-        with _about(odo_path, f"compared with {gt_name}"):
-            mp = fit_motion_persisting(r)
-        if mp is not None:
-            period = float(np.median(np.diff(c[:, 0])))
-            alpha, clipped = white_alpha(fit.alpha, mp.persisting, window=fit.window, period=period)
-            motion = MotionModel("velocity", alpha=alpha, persisting=mp.persisting)
-            motion_text = _motion_persisting_text(mp, fit, alpha, period, clipped)
+    with _about(odo_path, f"compared with {gt_name}"):
+        motion, motion_text = _motion_model(r, fit, c, motion_noise, persisting)
     return Bundle(
         motion=motion,
         sensor=SensorModel(
