@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -57,10 +58,20 @@ from recovery.ekf import (
     near_field_last,
     predict6,
 )
+from recovery.odometry_bias import (
+    epoch_spacing,
+    motion_jacobians,
+    segments_on,
+    with_virtual_epochs,
+    world_jacobians,
+)
 from relation_metric.arrays import Array
 from relation_metric.consistency import OUTLIER_PROBABILITY, chi2_quantile
 from relation_metric.errors import DivergenceError
 from relation_metric.se2 import wrap_angle, wrap_angle_float
+
+if TYPE_CHECKING:
+    from recovery.models import MotionPersisting
 
 __all__ = ["PersistingPass", "run_persisting", "smooth_persisting"]
 
@@ -79,6 +90,10 @@ class PersistingPass:
     post_x: Array
     post_p: Array
     phi: Array  # (E − 1, D − 3): the rest-of-state decay from epoch e to e + 1
+    #: With an odometry bias stated (recovery.odometry_bias): ``G_k`` (N, 3, 2) of every grid
+    #: pose from its base epoch's posterior heading, and the bias's offset in the state.
+    motion_g: Array | None = None
+    oo: int = -1
 
 
 def _map_prior(inp: FilterInput) -> Array:
@@ -93,7 +108,8 @@ def _map_prior(inp: FilterInput) -> Array:
 
 @dataclass(frozen=True)
 class _Layout:
-    """Where each part sits in the augmented state ``[pose (3), δm (nm), b (2M), c (2)]``."""
+    """Where each part sits in the augmented state
+    ``[pose (3), δm (nm), b (2M), c (2), o (2)]`` (``b``, ``c``, ``o`` when stated)."""
 
     slot: NDArray[np.int64]  # (M_map,) the state slot of each map landmark, −1: not in the log
     m: int  # landmarks in the state
@@ -106,15 +122,23 @@ class _Layout:
     var_b: Array  # (d − ob,) the biases' stationary variances
     tau: Array  # (2,) per-landmark time constants (range, bearing) [s]
     tau_c: Array  # (2,) the common bias's
+    has_b: bool = True  # per-landmark measurement biases are stated
+    oo: int = -1  # offset of the odometry bias o = [s, κ] (recovery.odometry_bias), −1: none
+    tau_o: Array | None = None  # (2,) its time constants [s]
+
+    @property
+    def has_o(self) -> bool:
+        return self.oo >= 0
 
 
 def _layout(
     inp: FilterInput,
     active: ArrayLike,
-    bias_sigma: tuple[float, float],
-    bias_tau: tuple[float, float],
+    bias_sigma: tuple[float, float] | None,
+    bias_tau: tuple[float, float] | None,
     common_sigma: tuple[float, float] | None,
     common_tau: tuple[float, float] | None,
+    motion: MotionPersisting | None = None,
 ) -> tuple[_Layout, Array, Array]:
     """The state's layout, the white part ``R_w`` (2, 2) of the sensor's noise and the map
     error's prior (nm, nm) over the landmarks the log uses."""
@@ -122,7 +146,8 @@ def _layout(
     slot = np.full(inp.map_xy.shape[0], -1, dtype=np.int64)
     slot[seen] = np.arange(seen.size)
     m = int(seen.size)
-    sig_b = np.asarray(bias_sigma, dtype=np.float64)
+    has_b = bias_sigma is not None
+    sig_b = np.asarray(bias_sigma if has_b else (0.0, 0.0), dtype=np.float64)
     has_c = common_sigma is not None
     sig_c = np.asarray(common_sigma if has_c else (0.0, 0.0), dtype=np.float64)
     tau_c = np.asarray(common_tau if common_tau is not None else (1.0, 1.0), dtype=np.float64)
@@ -134,23 +159,41 @@ def _layout(
     has_map = bool(np.abs(smap).max() > 0.0) if m else False
     nm = 2 * m if has_map else 0
     ob = 3 + nm
-    oc = ob + 2 * m
-    var_b = np.tile(sig_b**2, m)
+    oc = ob + (2 * m if has_b else 0)
+    oo = oc + (2 if has_c else 0)
+    var_b = np.tile(sig_b**2, m if has_b else 0)
     if has_c:
         var_b = np.concatenate((var_b, sig_c**2))
-    tau = np.asarray(bias_tau, dtype=np.float64)
-    lay = _Layout(slot, m, has_map, has_c, nm, ob, oc, oc + (2 if has_c else 0), var_b, tau, tau_c)
+    tau_o = None
+    if motion is not None:
+        # a σ of 0 (that process off) as a vanishing one: its state then stays decoupled
+        sig_o = np.maximum((motion.sigma_scale, motion.sigma_turn), 1e-12)
+        var_b = np.concatenate((var_b, np.square(sig_o)))
+        tau_o = np.array([motion.time_constant_scale, motion.time_constant_turn])
+    tau = np.asarray(bias_tau if bias_tau is not None else (1.0, 1.0), dtype=np.float64)
+    d = oo + (2 if motion is not None else 0)
+    lay = _Layout(
+        slot, m, has_map, has_c, nm, ob, oc, d, var_b, tau, tau_c,
+        has_b=has_b, oo=oo if motion is not None else -1, tau_o=tau_o,
+    )  # fmt: skip
     return lay, r_w, smap
 
 
 def _predict(
-    x: Array, p: Array, lay: _Layout, local: Array, q: Array, dt: float
+    x: Array, p: Array, lay: _Layout, local: Array, q: Array, dt: float, jac: Array | None = None
 ) -> tuple[Array, Array, Array]:
     """One step of the augmented prediction from one epoch to the next: the pose composed
-    by the increment ``local`` (3,) with the step noise ``q`` (6,), each bias decayed by
-    ``φ = exp(−dt/τ)``; returns ``x``, ``p`` (updated in place) and ``φ`` (d − 3,)."""
-    ux, uy, uth = local
+    by the increment ``local`` (3,) (plus ``jac`` (3, 2) ``· o``, the odometry bias held over
+    the segment: :mod:`recovery.odometry_bias`) with the step noise ``q`` (6,), each bias
+    decayed by ``φ = exp(−dt/τ)``; returns ``x``, ``p`` (updated in place) and ``φ`` (d − 3,)."""
     c, s = math.cos(x[2]), math.sin(x[2])
+    g = None
+    if lay.has_o and jac is not None:
+        o = slice(lay.oo, lay.oo + 2)
+        g = jac.copy()  # G = [R(ψ) B_xy; B_θ]
+        g[0], g[1] = c * jac[0] - s * jac[1], s * jac[0] + c * jac[1]
+        local = local + jac @ x[o]
+    ux, uy, uth = local
     dx, dy = c * ux - s * uy, s * ux + c * uy
     x[0] += dx
     x[1] += dy
@@ -158,14 +201,20 @@ def _predict(
     sh = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
     q6 = predict6((0.0,) * 6, tuple(q), c, s, 0.0, 0.0)
     qf = _full(tuple(np.array([v]) for v in q6))[0]
-    ph = np.tile(np.exp(-dt / lay.tau), lay.m)
+    ph = np.tile(np.exp(-dt / lay.tau), lay.m if lay.has_b else 0)
     if lay.has_c:
         ph = np.concatenate((ph, np.exp(-dt / lay.tau_c)))
+    if lay.has_o:
+        ph = np.concatenate((ph, np.exp(-dt / np.asarray(lay.tau_o))))
     phi = np.ones(lay.d - 3)
     phi[lay.nm :] = ph
     x[lay.ob :] *= ph
-    p[:3, :] = sh @ p[:3, :]
-    p[:, :3] = p[:, :3] @ sh.T
+    if g is None:
+        p[:3, :] = sh @ p[:3, :]
+        p[:, :3] = p[:, :3] @ sh.T
+    else:  # F = I but its pose rows [S, 0, …, G]: F P Fᵀ, rows then columns
+        p[:3, :] = sh @ p[:3, :] + g @ p[o, :]
+        p[:, :3] = p[:, :3] @ sh.T + p[:, o] @ g.T
     p[3:, :] *= phi[:, None]
     p[:, 3:] *= phi[None, :]
     p[:3, :3] += qf
@@ -221,7 +270,8 @@ def _update(
     h[:, :3] = [[-h00, -h01, 0.0], [-h10, -h11, -1.0]]
     if lay.has_map:
         h[:, 3 + 2 * li : 5 + 2 * li] = [[h00, h01], [h10, h11]]
-    h[:, bi : bi + 2] = _EYE2
+    if lay.has_b:
+        h[:, bi : bi + 2] = _EYE2
     if lay.has_c:
         h[:, lay.oc : lay.oc + 2] = _EYE2
     # y = z − h(at) − H (x − at) (the biases enter linearly: H's I₂ blocks)
@@ -244,13 +294,14 @@ def _update(
 
 def run_persisting(
     inp: FilterInput,
-    bias_sigma: tuple[float, float],
-    bias_tau: tuple[float, float],
+    bias_sigma: tuple[float, float] | None,
+    bias_tau: tuple[float, float] | None,
     *,
     robust_threshold: float | None = None,
     common_sigma: tuple[float, float] | None = None,
     common_tau: tuple[float, float] | None = None,
     linearize_at: Array | None = None,
+    motion: MotionPersisting | None = None,
 ) -> PersistingPass:
     """The augmented EKF over the grid (module doc).
 
@@ -260,12 +311,20 @@ def run_persisting(
     Gauss–Newton on the measurement terms; the motion is composed as before).
     ``robust_threshold``: ``c`` of the redescending weight ``(c/d)²`` on the Mahalanobis
     distance under the augmented filter's own innovation covariance (``None``: plain EKF).
+    ``bias_sigma`` ``None``: no per-landmark bias (a bundle that states only ``motion``, the
+    odometry's persisting error, :mod:`recovery.odometry_bias`; it adds epochs without
+    measurements where two would be further apart than its spacing).
     """
     setup = _setup(inp, None, None, None)
+    jac = None
+    if motion is not None:
+        setup, jac = _with_motion_epochs(setup, inp, motion)
     seg = setup.seg
     epochs = np.asarray(setup.epochs, dtype=np.int64)
     active, bounds = setup.active, setup.bounds
-    lay, r_w, smap = _layout(inp, active, bias_sigma, bias_tau, common_sigma, common_tau)
+    lay, r_w, smap = _layout(
+        inp, active, bias_sigma, bias_tau, common_sigma, common_tau, motion
+    )  # fmt: skip
     d, ob = lay.d, lay.ob
     lin = None if linearize_at is None else np.asarray(linearize_at, dtype=np.float64)
     x = np.zeros(d)
@@ -287,7 +346,8 @@ def run_persisting(
         k = int(epochs[e])
         if e > 0:
             dt = float(times[k] - times[epochs[e - 1]])
-            x, p, phi_all[e - 1] = _predict(x, p, lay, seg.local[k], seg.q[:, k], dt)
+            jk = None if jac is None else jac[k]
+            x, p, phi_all[e - 1] = _predict(x, p, lay, seg.local[k], seg.q[:, k], dt, jk)
         prior_x[e], prior_p[e] = x, p
         near: list[int] = []
         if lin is None:  # the near-field rule of recovery.ekf (_linear_first)
@@ -306,16 +366,38 @@ def run_persisting(
             if w != 1.0:
                 wts[j] = w
         post_x[e], post_p[e] = x, p
-    fr = _filter_result(inp, setup, epochs, prior_x, prior_p, post_x, post_p)
-    return PersistingPass(fr, prior_x, prior_p, post_x, post_p, phi_all)
+    fr, g = _filter_result(inp, setup, epochs, prior_x, prior_p, post_x, post_p, lay, jac)
+    return PersistingPass(fr, prior_x, prior_p, post_x, post_p, phi_all, g, lay.oo)
+
+
+def _with_motion_epochs(setup, inp: FilterInput, motion: MotionPersisting):  # type: ignore[no-untyped-def]
+    """``setup`` with the epochs :func:`recovery.odometry_bias.with_virtual_epochs` adds for
+    ``motion``'s time constants (segments and measurement bounds recomputed) and the motion
+    Jacobians ``B_k`` (N, 3, 2) on them."""
+    from dataclasses import replace
+
+    tau = (motion.time_constant_scale, motion.time_constant_turn)
+    ep = with_virtual_epochs(
+        inp.times, np.asarray(setup.epochs, dtype=np.int64), epoch_spacing(tau)
+    )
+    seg = segments_on(inp.sigma, inp.u, ep)
+    grid = inp.meas_grid[np.asarray(setup.active, dtype=np.int64)]
+    bounds = np.searchsorted(grid, ep, side="left").tolist() + [len(setup.active)]
+    out = replace(
+        setup, seg=seg, epochs=ep.tolist(), bounds=bounds,
+        local=seg.local[ep].tolist(), q=seg.q[:, ep].T.tolist(),
+    )  # fmt: skip
+    return out, motion_jacobians(seg, inp.u)
 
 
 def _filter_result(  # type: ignore[no-untyped-def]
     inp: FilterInput, setup, epochs: NDArray[np.int64], prior_x: Array, prior_p: Array,
-    post_x: Array, post_p: Array,
-) -> FilterResult:  # fmt: skip
+    post_x: Array, post_p: Array, lay: _Layout, jac: Array | None,
+) -> tuple[FilterResult, Array | None]:  # fmt: skip
     """The pose filter result of the augmented pass: grid poses filled between the epochs,
-    the epochs' own prior and posterior pose blocks, statuses, NIS and weights."""
+    the epochs' own prior and posterior pose blocks, statuses, NIS and weights; with an
+    odometry bias, its ``G_k`` (N, 3, 2) (the grid poses filled with it: mean ``+ G_k ô_b``,
+    covariance ``+ S P_xo Gᵀ + G P_ox Sᵀ + G P_oo Gᵀ``)."""
     n_e = epochs.shape[0]
     seg, active = setup.seg, setup.active
     nis, wts = setup.nis, setup.weights
@@ -325,6 +407,10 @@ def _filter_result(  # type: ignore[no-untyped-def]
     psi_e = post_x[:, 2]
     post6 = post_p[:, :3, :3].reshape(n_e, 9)[:, [0, 1, 2, 4, 5, 8]]
     steps, poses, covs = fill(seg, psi_e, post_x[:, :3], post6)
+    g = None
+    if jac is not None and lay.has_o:
+        g = world_jacobians(jac, seg, psi_e)
+        covs = _fill_motion(poses, steps, g, seg, psi_e, post_x, post_p, post6, lay.oo)
     poses[epochs] = post_x[:, :3]
     covs[epochs] = post_p[:, :3, :3]
     empty = np.zeros(0, dtype=np.int64)
@@ -346,15 +432,42 @@ def _filter_result(  # type: ignore[no-untyped-def]
         outlier_bound=chi2_quantile(OUTLIER_PROBABILITY, 2),
     )
     assert (status[np.asarray(active, dtype=np.int64)] == USED).all()
-    return fr
+    return fr, g
+
+
+def _fill_motion(  # type: ignore[no-untyped-def]
+    poses: Array, steps: Array, g: Array, seg, psi_e: Array, post_x: Array, post_p: Array,
+    post6: Array, oo: int,
+) -> Array:  # fmt: skip
+    """The grid poses filled with the odometry bias: the mean moved by ``G_k ô_b`` (``poses``
+    and the world ``steps`` from the base epoch, in place) and the covariances (returned)
+    ``S_k P_xx S_kᵀ + q_k`` on the moved steps plus the terms of ``[S_k, G_k]`` against the
+    base epoch's pose–bias blocks."""
+    o = slice(oo, oo + 2)
+    e_of = seg.epoch_of
+    shift = np.einsum("kij,kj->ki", g, post_x[e_of, o])
+    poses += shift
+    steps += shift
+    pb = np.take(np.ascontiguousarray(post6.T), e_of, axis=1)
+    c, s = np.cos(psi_e)[e_of], np.sin(psi_e)[e_of]
+    covs = _full(predict6(tuple(pb), tuple(seg.q), c, s, steps[:, 0], steps[:, 1]))
+    sk = np.zeros((g.shape[0], 3, 3))
+    sk[:, 0, 0] = sk[:, 1, 1] = sk[:, 2, 2] = 1.0
+    sk[:, 0, 2], sk[:, 1, 2] = -steps[:, 1], steps[:, 0]
+    pxo = post_p[:, :3, o][e_of]  # (N, 3, 2)
+    poo = post_p[:, o, o][e_of]
+    cross = sk @ pxo @ g.transpose(0, 2, 1)
+    covs += cross + cross.transpose(0, 2, 1) + g @ poo @ g.transpose(0, 2, 1)
+    return covs
 
 
 def smooth_persisting(run: PersistingPass) -> tuple[Array, Array, Array]:
     """RTS smoothing of the augmented run: poses (N, 3) (wrapped), covariances (N, 3, 3) and
     the smoothed augmented states at the epochs (E, D).
 
-    Over the epochs the augmented recursion ``C_e = P⁺_e F_eᵀ (P⁻_{e+1})⁻¹``; every pose
-    between two epochs by the closed-form gain of the module doc.
+    Over the epochs the augmented recursion ``C_e = P⁺_e F_eᵀ (P⁻_{e+1})⁻¹`` (with an
+    odometry bias, ``F_e``'s pose rows hold its ``G`` at the next epoch); every pose between
+    two epochs by the closed-form gain of the module doc (:func:`_fill_between`).
     """
     fr = run.fr
     seg, w = fr.segments, fr.steps
@@ -362,53 +475,82 @@ def smooth_persisting(run: PersistingPass) -> tuple[Array, Array, Array]:
     n_e = ep.shape[0]
     d = run.post_x.shape[1]
     xs, ps = run.post_x.copy(), run.post_p.copy()
-    inv_pri = np.linalg.inv(run.prior_p)
+    inv_pri = np.asarray(np.linalg.inv(run.prior_p), dtype=np.float64)
+    oo = run.oo
     for e in range(n_e - 2, -1, -1):
         step = w[ep[e + 1], :2]
         f = np.eye(d)
         f[0, 2], f[1, 2] = -step[1], step[0]
         f[3:, 3:] = np.diag(run.phi[e])
+        if run.motion_g is not None:
+            f[:3, oo : oo + 2] = run.motion_g[ep[e + 1]]
         c = run.post_p[e] @ f.T @ inv_pri[e + 1]
         xs[e] = run.post_x[e] + c @ (xs[e + 1] - run.prior_x[e + 1])
         ps[e] = run.post_p[e] + c @ (ps[e + 1] - run.prior_p[e + 1]) @ c.T
         ps[e] = 0.5 * (ps[e] + ps[e].T)
-    poses = np.array(fr.poses)
-    covs = np.array(fr.covariances)
+    poses = np.array(fr.poses, dtype=np.float64)
+    covs = np.array(fr.covariances, dtype=np.float64)
     poses[ep], covs[ep] = xs[:, :3], ps[:, :3, :3]
     is_epoch = np.zeros(poses.shape[0], dtype=bool)
     is_epoch[ep] = True
     k = np.flatnonzero(~is_epoch)
     if k.size:
-        e_of = seg.epoch_of[k]
-        i = e_of + 1
-        # per epoch pair (e, e + 1): W1, W2 (3 × D), U, M (the smoothed corrections at i)
-        u = xs[1:] - run.prior_x[1:]  # (E − 1, D)
-        mm = ps[1:] - run.prior_p[1:]
-        wi = inv_pri[1:]
-        w1 = wi[:, :3, :]
-        b = run.post_p[:-1, :3, 3:] * run.phi[:, None, :]
-        w2 = b @ wi[:, 3:, :]
-        a1 = np.einsum("eij,ej->ei", w1, u)
-        a2 = np.einsum("eij,ej->ei", w2, u)
-        m11 = w1 @ mm @ w1.transpose(0, 2, 1)
-        m12 = w1 @ mm @ w2.transpose(0, 2, 1)
-        m22 = w2 @ mm @ w2.transpose(0, 2, 1)
-        wk = w[k, :2]  # p_k − p_e (world), the shear from epoch e to pose k
-        to_next = w[ep[i], :2] - wk
-        pk = covs[k]
-        am = pk.copy()  # A_k = P_k S(p_i − p_k)ᵀ
-        am[:, :, 0] -= to_next[:, 1, None] * pk[:, :, 2]
-        am[:, :, 1] += to_next[:, 0, None] * pk[:, :, 2]
-        sk = np.zeros((k.size, 3, 3))
-        sk[:, 0, 0] = sk[:, 1, 1] = sk[:, 2, 2] = 1.0
-        sk[:, 0, 2], sk[:, 1, 2] = -wk[:, 1], wk[:, 0]
-        ee = e_of
-        poses[k] += np.einsum("kij,kj->ki", am, a1[ee]) + np.einsum("kij,kj->ki", sk, a2[ee])
-        skt = sk.transpose(0, 2, 1)
-        cross = am @ m12[ee] @ skt
-        corr = am @ m11[ee] @ am.transpose(0, 2, 1) + cross + cross.transpose(0, 2, 1)
-        corr += sk @ m22[ee] @ skt
-        corr = 0.5 * (corr + corr.transpose(0, 2, 1))
-        covs[k] = pk + corr
+        _fill_between(run, k, xs, ps, inv_pri, poses, covs)
     poses[:, 2] = wrap_angle(poses[:, 2])
     return poses, covs, xs
+
+
+def _fill_between(
+    run: PersistingPass, k: NDArray[np.int64], xs: Array, ps: Array, inv_pri: Array,
+    poses: Array, covs: Array,
+) -> None:  # fmt: skip
+    """The smoothed grid poses ``k`` between epochs, in place: pose ``k`` after epoch ``e``
+    gets ``G_k (x^s_i − x⁻_i)`` and ``G_k (P^s_i − P⁻_i) G_kᵀ`` (``i = e + 1``), with the gain
+    ``G_k = Cov(x_k, X⁻_i) (P⁻_i)⁻¹``, ``Cov(x_k, X⁻_i) = [A_k, S_k P⁺_{e,x·} Φ]`` and
+    ``A_k = P_k S(p_i − p_k)ᵀ``; with an odometry bias ``o`` (``G_k`` of
+    :mod:`recovery.odometry_bias`) ``A_k`` gains ``Cov(x_k, o_e) (G_i − S(p_i − p_k) G_k)ᵀ``
+    and the rest ``G_k P⁺_{e,o·} Φ`` — per-epoch products only, vectorised over the poses."""
+    fr = run.fr
+    seg, w = fr.segments, fr.steps
+    ep = seg.epochs
+    e_of = seg.epoch_of[k]
+    i = e_of + 1
+    # per epoch pair (e, e + 1): the gain's factors against the smoothed corrections at i
+    u = xs[1:] - run.prior_x[1:]  # (E − 1, D)
+    mm = ps[1:] - run.prior_p[1:]
+    wi = inv_pri[1:]
+    rest = run.post_p[:-1, :, 3:] * run.phi[:, None, :]  # P⁺_{e,·rest} Φ
+    facs = [wi[:, :3, :], rest[:, :3] @ wi[:, 3:, :]]
+    has_o = run.motion_g is not None
+    if has_o:
+        o = slice(run.oo, run.oo + 2)
+        facs.append(rest[:, o] @ wi[:, 3:, :])
+    wk = w[k, :2]  # p_k − p_e (world), the shear from epoch e to pose k
+    to_next = w[ep[i], :2] - wk
+    pk = covs[k]
+    am = pk.copy()  # A_k = P_k S(p_i − p_k)ᵀ
+    am[:, :, 0] -= to_next[:, 1, None] * pk[:, :, 2]
+    am[:, :, 1] += to_next[:, 0, None] * pk[:, :, 2]
+    sk = np.zeros((k.size, 3, 3))
+    sk[:, 0, 0] = sk[:, 1, 1] = sk[:, 2, 2] = 1.0
+    sk[:, 0, 2], sk[:, 1, 2] = -wk[:, 1], wk[:, 0]
+    lefts = [am, sk]
+    if has_o:
+        g = run.motion_g
+        assert g is not None
+        gk, gi = g[k], g[ep[i]]
+        pko = sk @ run.post_p[e_of][:, :3, o] + gk @ run.post_p[e_of][:, o, o]
+        ski = np.zeros((k.size, 3, 3))
+        ski[:, 0, 0] = ski[:, 1, 1] = ski[:, 2, 2] = 1.0
+        ski[:, 0, 2], ski[:, 1, 2] = -to_next[:, 1], to_next[:, 0]
+        am += pko @ (gi - ski @ gk).transpose(0, 2, 1)
+        lefts.append(gk)
+    a = [np.einsum("eij,ej->ei", f, u) for f in facs]
+    for left, av in zip(lefts, a, strict=True):
+        poses[k] += np.einsum("kij,kj->ki", left, av[e_of])
+    corr = np.zeros((k.size, 3, 3))
+    for li, fi in zip(lefts, facs, strict=True):
+        for lj, fj in zip(lefts, facs, strict=True):
+            mij = (fi @ mm @ fj.transpose(0, 2, 1))[e_of]
+            corr += li @ mij @ lj.transpose(0, 2, 1)
+    covs[k] = pk + 0.5 * (corr + corr.transpose(0, 2, 1))

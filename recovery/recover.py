@@ -57,7 +57,7 @@ from recovery.ekf import (
     run_filter,
 )
 from recovery.map_uncertainty import MapUncertainty, map_uncertainty
-from recovery.models import PersistingError
+from recovery.models import MotionPersisting, PersistingError
 from recovery.mount import loadings_to_robot_frame, to_robot_frame, to_sensor_frame
 from recovery.results import (
     BatchCosts,
@@ -316,10 +316,10 @@ def recover(
         check_joint_size(int(inp.times.shape[0]), int(mu.factor.shape[1]))
     kw = dict(gate=gate, max_outlier_run=max_outlier_run, on_divergence=on_divergence)
     robust = None if robust == "none" else robust
-    pe = bundle.sensor.persisting
-    if pe is not None:  # a persisting error stated: the augmented filter and smoother
+    pe, mp = bundle.sensor.persisting, bundle.motion.persisting
+    if pe is not None or mp is not None:  # persisting errors: the augmented filter, smoother
         settings, fr, est = _persisting_recovery(
-            inp, pe, method, prior.prior, robust, robust_threshold, robust_scale
+            inp, (pe, mp), method, prior.prior, robust, robust_threshold, robust_scale
         )
         pers = None
     else:
@@ -450,39 +450,43 @@ def _persistent_pass(
 
 def _persisting_recovery(
     inp: FilterInput,
-    pe: PersistingError,
+    stated: tuple[PersistingError | None, MotionPersisting | None],
     method: str,
     prior: str,
     robust: str | None,
     threshold: float | None,
     scale: float | str,
 ) -> tuple[RobustSettings | None, FilterResult, _Estimate]:
-    """The recovery of a bundle that states a persisting error (:mod:`recovery.persisting`):
-    the augmented EKF (``method="filter"``) or its RTS smoother (smoother and batch: the
-    augmented model's fixed-interval smoother), with the robust rule of :func:`recover`
-    (``ŝ`` and the heavy-tail choice of ``c`` from a plain augmented pass)."""
+    """The recovery of a bundle that states a persisting error (:mod:`recovery.persisting`;
+    ``stated``: the measurements' and the odometry's, either may be None): the augmented EKF
+    (``method="filter"``) or its RTS smoother (smoother and batch: the augmented model's
+    fixed-interval smoother), with the robust rule of :func:`recover` (``ŝ`` and the
+    heavy-tail choice of ``c`` from a plain augmented pass)."""
     from recovery.persisting import run_persisting, smooth_persisting
 
+    pe, mp = stated
+    keys = " and ".join(k for k, v in (("sensor_model", pe), ("motion_model", mp)) if v is not None)
     if prior == "deconditioned":
         raise InputError(
-            "the bundle states a persisting measurement error (sensor_model.persisting) and a "
-            "map made from its log: the augmented recovery has no de-conditioned map prior; "
-            "expected map prior independent (a surveyed map) or a bundle without persisting"
+            f"the bundle states a persisting error ({keys}.persisting) and a map made from "
+            "its log: the augmented recovery has no de-conditioned map prior; expected map "
+            "prior independent (a surveyed map) or a bundle without persisting"
         )
     if robust not in (None, "redescending"):
         raise InputError(
-            f"robust {robust!r} with a persisting measurement error: the augmented recovery "
-            "has the redescending update only; expected redescending or none"
+            f"robust {robust!r} with a persisting error ({keys}.persisting): the augmented "
+            "recovery has the redescending update only; expected redescending or none"
         )
-    common = {}
-    if pe.common is not None:
-        common = {"common_sigma": pe.common.sigma, "common_tau": pe.common.tau}
+    common: dict[str, object] = {"motion": mp}
+    if pe is not None and pe.common is not None:
+        common.update(common_sigma=pe.common.sigma, common_tau=pe.common.tau)
+    sigma, tau = (None, None) if pe is None else (pe.sigma, pe.tau)
     settings = None
     c_eff = None
     if robust is not None:
         c = float(threshold) if threshold is not None else ROBUST_DEFAULTS[robust]
         if scale == "auto":
-            plain = run_persisting(inp, pe.sigma, pe.tau, **common).fr  # type: ignore[arg-type]
+            plain = run_persisting(inp, sigma, tau, **common).fr  # type: ignore[arg-type]
             s = _nis_scale(plain)
             if threshold is None and _heavy_tailed(plain.nis, s):
                 c = HEAVY_TAIL_C
@@ -490,7 +494,7 @@ def _persisting_recovery(
             s = float(scale)
         settings = RobustSettings(kind=robust, threshold=c, scale=s, effective=c * s)
         c_eff = settings.effective
-    run = run_persisting(inp, pe.sigma, pe.tau, robust_threshold=c_eff, **common)  # type: ignore[arg-type]
+    run = run_persisting(inp, sigma, tau, robust_threshold=c_eff, **common)  # type: ignore[arg-type]
     fr = run.fr
     if method == "filter":
         return settings, fr, _Estimate(fr.poses, fr.covariances)
@@ -500,8 +504,8 @@ def _persisting_recovery(
     for _ in range(PERSISTING_ITERATIONS):
         again = run_persisting(
             inp,
-            pe.sigma,
-            pe.tau,
+            sigma,
+            tau,
             robust_threshold=c_eff,
             linearize_at=states,
             **common,  # type: ignore[arg-type]
