@@ -122,6 +122,18 @@ def test_fill_between_epochs_equals_the_poses_made_epochs(monkeypatch):
     assert np.abs(none.fr.covariances - fine.fr.covariances)[inner].max() > 0.5 * scale
 
 
+def test_a_process_switched_off_is_the_other_one_alone():
+    """A σ of 0 (motion_model.persisting allows it: that process off) recovers as the other
+    process alone: the same poses and covariances as a vanishing σ, finite throughout."""
+    b = odometry_bias_world(7, _Motion(0.08, 3.0, 0.0, 5.0))
+    inp = filter_input(b)
+    off = run_persisting(inp, None, None, motion=_Motion(0.08, 3.0, 0.0, 5.0))
+    tiny = run_persisting(inp, None, None, motion=_Motion(0.08, 3.0, 1e-9, 5.0))
+    for a, c in zip(smooth_persisting(off)[:2], smooth_persisting(tiny)[:2], strict=True):
+        assert np.isfinite(a).all()
+        np.testing.assert_allclose(a, c, rtol=1e-6, atol=1e-9)
+
+
 def _gm(rng, t, sigma, tau):
     """A stationary first-order Gauss–Markov sequence at times ``t`` (the oracle's recursion)."""
     x = np.empty(t.size)
