@@ -88,9 +88,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default=1.0,
         metavar="SECONDS",
         help="fit the motion noise over windows of SECONDS (the odometry's errors persist: "
-        "over 1 s and 10 s windows dataset 7's alpha1 is 3.5 and 16.6; 5 makes the recovery "
-        "in the surveyed map consistent, at a cost to slamrel slam's accuracy at 1 s) "
-        "(default: %(default)s; --decorrelate sets it too)",
+        "over 1 s and 10 s windows dataset 7's alpha1 is 3.5 and 16.6; with --persisting, "
+        "the default, their persisting part is stated as motion_model.persisting and taken "
+        "out of the fitted alpha) (default: %(default)s; --decorrelate sets it too)",
     )
     mr.add_argument(
         "--persisting",
