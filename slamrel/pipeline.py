@@ -54,7 +54,13 @@ from slamrel.formats.results import write_json, write_per_relation_csv
 from slamrel.formats.trajectories import write_trajectory
 from slamrel.outputs import staged_directory, write_text_atomic
 from slamrel.report.html import render_html
-from slamrel.report.notes import map_notes, nees_notes, no_truth_notes, run_notes
+from slamrel.report.notes import (
+    map_notes,
+    nees_notes,
+    no_truth_notes,
+    persisting_notes,
+    run_notes,
+)
 from slamrel.report.run_page import report_figures, report_sections
 from slamrel.report.verdict import RunFacts, run_verdict
 from slamrel.runs.nees import (
@@ -383,6 +389,8 @@ def score_bundle(
         rec, rec_error = None, str(exc)
     own = _own_estimates(inp, rec)
     notes = run_notes(rec, rec_error, method, has_online=inp.online is not None)
+    if rec is not None:  # what the recovery carried in its state
+        notes += persisting_notes(bundle.sensor, bundle.motion)
     if bundle.skipped_invalid:  # read with --skip-invalid-measurements
         notes.append(
             f"{bundle.skipped_invalid} measurement(s) with a range <= 0 or a non-finite range "

@@ -181,3 +181,23 @@ def test_stated_odometry_bias_is_consistent_where_white_noise_is_not():
     se = np.std(stated, ddof=1) / np.sqrt(len(stated))
     assert abs(np.mean(stated) - 3.0) < 3 * se
     assert np.mean(white) > 3.0 + 6 * np.std(white, ddof=1) / np.sqrt(len(white))
+
+
+@pytest.mark.filterwarnings("ignore:only .* distinct pose pairs")  # a short simulated run
+def test_the_report_says_which_persisting_errors_the_recovery_carried():
+    """The run's notes name each stated persisting error with its numbers (and the epochs'
+    spacing), and say nothing for a bundle that states none."""
+    from recovery.models import MotionPersisting, PersistingError
+    from slamrel.pipeline import RunInput, score_bundle
+
+    b = _small(seed=5)
+    assert not any("persist" in n for n in score_bundle(RunInput(b, "plain")).notes)
+    motion = MotionPersisting(0.08, 3.0, 0.05, 16.0)
+    sensor = PersistingError(0.5 * b.sensor.sigma_range, 0.5 * b.sensor.sigma_bearing, 2.0, 4.0)
+    b = replace(
+        b, motion=replace(b.motion, persisting=motion), sensor=replace(b.sensor, persisting=sensor)
+    )
+    (note,) = [n for n in score_bundle(RunInput(b, "both")).notes if "persist" in n]
+    for words in ("speed scale σ 0.08, τ 3 s", "turn per metre σ 0.05 rad/m, τ 16 s",
+                  "at most 0.375 s", "bias per landmark track", "bearing σ"):  # fmt: skip
+        assert words in note

@@ -12,12 +12,21 @@ import numpy as np
 
 from landmark_graph.map_compare import SOURCE_WORDS, MapComparison
 from recovery.anchoring import NeesFrame
+from recovery.models import MotionModel, SensorModel
+from recovery.odometry_bias import epoch_spacing
 from recovery.results import Recovery
 from relation_metric.consistency import NeesSummary
 from slamrel.report.verdict import expected_downweight_loss
 from slamrel.runs.nees import NeesCurve
 
-__all__ = ["map_notes", "nees_notes", "no_truth_notes", "recovery_notes", "run_notes"]
+__all__ = [
+    "map_notes",
+    "nees_notes",
+    "no_truth_notes",
+    "persisting_notes",
+    "recovery_notes",
+    "run_notes",
+]
 
 
 def run_notes(
@@ -80,6 +89,42 @@ def recovery_notes(rec: Recovery, method: str) -> list[str]:
             "and went on; the score includes these stretches (see the section below)."
         )
     return notes
+
+
+def persisting_notes(sensor: SensorModel, motion: MotionModel) -> list[str]:
+    """The report's note on the persisting errors a bundle states, which the recovery carries
+    as states (:mod:`recovery.persisting`, :mod:`recovery.odometry_bias`); none when none."""
+    parts = []
+    pe = sensor.persisting
+    if pe is not None:
+        text = (
+            f"the measurements' (a Gauss–Markov bias per landmark track: range σ "
+            f"{pe.sigma_range:.3g} m, τ {pe.time_constant_range:.3g} s; bearing σ "
+            f"{pe.sigma_bearing:.3g} rad, τ {pe.time_constant_bearing:.3g} s"
+        )
+        if pe.common is not None:
+            c = pe.common
+            text += (
+                f"; one common to every landmark: range σ {c.sigma_range:.3g} m, τ "
+                f"{c.time_constant_range:.3g} s; bearing σ {c.sigma_bearing:.3g} rad, τ "
+                f"{c.time_constant_bearing:.3g} s"
+            )
+        parts.append(text + ")")
+    mp = motion.persisting
+    if mp is not None:
+        parts.append(
+            f"the odometry's (a Gauss–Markov speed scale σ {mp.sigma_scale:.3g}, τ "
+            f"{mp.time_constant_scale:.3g} s, and turn per metre σ {mp.sigma_turn:.3g} rad/m, "
+            f"τ {mp.time_constant_turn:.3g} s, on top of the stated white noise; epochs "
+            "without measurements are added so that the recovery holds them over at most "
+            f"{epoch_spacing((mp.time_constant_scale, mp.time_constant_turn)):.3g} s)"
+        )
+    if not parts:
+        return []
+    return [
+        "The bundle states errors that persist, which the recovery carries in its state "
+        "(sensor_model.persisting, motion_model.persisting): " + "; and ".join(parts) + "."
+    ]
 
 
 def nees_notes(
