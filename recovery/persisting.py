@@ -539,7 +539,7 @@ def _fill_between(
         g = run.motion_g
         assert g is not None
         gk, gi = g[k], g[ep[i]]
-        pko = sk @ run.post_p[e_of][:, :3, o] + gk @ run.post_p[e_of][:, o, o]
+        pko = sk @ run.post_p[:, :3, o][e_of] + gk @ run.post_p[:, o, o][e_of]
         ski = np.zeros((k.size, 3, 3))
         ski[:, 0, 0] = ski[:, 1, 1] = ski[:, 2, 2] = 1.0
         ski[:, 0, 2], ski[:, 1, 2] = -to_next[:, 1], to_next[:, 0]
