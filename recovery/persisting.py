@@ -67,7 +67,7 @@ from recovery.odometry_bias import (
 )
 from relation_metric.arrays import Array
 from relation_metric.consistency import OUTLIER_PROBABILITY, chi2_quantile
-from relation_metric.errors import DivergenceError
+from relation_metric.errors import DivergenceError, InputError
 from relation_metric.se2 import wrap_angle, wrap_angle_float
 
 if TYPE_CHECKING:
@@ -325,6 +325,7 @@ def run_persisting(
     lay, r_w, smap = _layout(
         inp, active, bias_sigma, bias_tau, common_sigma, common_tau, motion
     )  # fmt: skip
+    check_augmented_size(epochs.shape[0], lay.d)
     d, ob = lay.d, lay.ob
     lin = None if linearize_at is None else np.asarray(linearize_at, dtype=np.float64)
     x = np.zeros(d)
@@ -368,6 +369,36 @@ def run_persisting(
         post_x[e], post_p[e] = x, p
     fr, g = _filter_result(inp, setup, epochs, prior_x, prior_p, post_x, post_p, lay, jac)
     return PersistingPass(fr, prior_x, prior_p, post_x, post_p, phi_all, g, lay.oo)
+
+
+#: The (E, D, D) arrays an augmented pass and its smoother hold at once (prior, posterior,
+#: the priors' inverses, the smoothed covariances).
+AUGMENTED_COPIES = 4
+
+
+def check_augmented_size(epochs: int, d: int) -> None:
+    """Refuse, before any work, an augmented recovery whose per-epoch covariances exceed the
+    memory budget (:func:`recovery.batch_refinement.memory_budget`): it holds
+    :data:`AUGMENTED_COPIES` arrays of ``E × D × D`` doubles (``D = 3 + 4M (+ 2) (+ 2)`` with
+    ``M`` landmarks; ``E`` the epochs, more where an odometry bias adds some).
+
+    Raises
+    ------
+    InputError
+        Naming the sizes, the memory needed and the budget.
+    """
+    from recovery.batch_refinement import MEMORY_SHARE, memory_budget
+
+    need = 8.0 * AUGMENTED_COPIES * epochs * d * d
+    budget = memory_budget()
+    if need > budget:
+        raise InputError(
+            f"the recovery with persisting errors would need {need / 2**30:.1f} GiB "
+            f"({AUGMENTED_COPIES} arrays of {epochs} epochs x {d} x {d} states), above the "
+            f"{budget / 2**30:.1f} GiB this machine allows it ({MEMORY_SHARE:.0%} of its "
+            "memory); expected a shorter log, fewer landmarks, or a bundle without "
+            "sensor_model.persisting / motion_model.persisting (the white recovery)"
+        )
 
 
 def _with_motion_epochs(setup, inp: FilterInput, motion: MotionPersisting):  # type: ignore[no-untyped-def]

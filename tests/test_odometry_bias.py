@@ -201,3 +201,17 @@ def test_the_report_says_which_persisting_errors_the_recovery_carried():
     for words in ("speed scale σ 0.08, τ 3 s", "turn per metre σ 0.05 rad/m, τ 16 s",
                   "at most 0.375 s", "bias per landmark track", "bearing σ"):  # fmt: skip
         assert words in note
+
+
+def test_a_recovery_too_large_for_the_memory_is_refused_before_work(monkeypatch):
+    """The augmented recovery's E × D × D arrays against the budget: refused with the sizes
+    named (one clear InputError), before the filter runs."""
+    import recovery.batch_refinement as br
+    from relation_metric.errors import InputError
+
+    b = _small()
+    inp = filter_input(b)
+    monkeypatch.setattr(br, "memory_budget", lambda: 1e3)
+    # D = 3 + 2 × 12 (the map's error: its covariance is not zero) + 2 (the odometry bias)
+    with pytest.raises(InputError, match=r"\d+ epochs x 29 x 29 states"):
+        run_persisting(inp, None, None, motion=_Motion(0.1, 3.0, 0.05, 5.0))
