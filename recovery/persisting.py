@@ -14,7 +14,10 @@ The model is linear-Gaussian in ``b``, so the exact treatment is state augmentat
 is the pose, the map's error ``δm`` (a constant with the map's stated covariance as prior,
 the independent map prior of :mod:`recovery.batch_refinement`), every landmark's bias and,
 when stated, a bias ``c(t)`` common to every landmark (the same Gauss–Markov law with its
-own σ and τ; ``z = h + b_l + c + n``): ``D = 3 + 2M + 2M (+ 2)``. Between two measurement
+own σ and τ; ``z = h + b_l + c + n``): ``D = 3 + 2M + 2M (+ 2)``; plus, when the bundle
+states the odometry's persisting error (``motion_model.persisting``), its speed scale and turn
+per metre ``o`` (``+ 2``, :mod:`recovery.odometry_bias`, which also says how it moves the
+poses; a bundle stating only that one has no ``b``). Between two measurement
 epochs the pose follows the composed prediction of :mod:`recovery.ekf` and each bias
 decays by ``φ`` with process noise ``σ_b² (1 − φ²)``; each measurement updates the whole
 state with ``H = [H_x, H_l, I₂ (, I₂)]`` and ``R_w``. The Rauch–Tung–Striebel recursion of
