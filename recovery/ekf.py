@@ -326,6 +326,14 @@ def prepare_segments(
     return Segments(epochs, base, local, q, epoch_of)
 
 
+def dead_reckoning_segments(sigma: Array, u: Array, epochs: NDArray[np.int64]) -> Segments:
+    """:func:`prepare_segments` on dead reckoning (the increments ``u`` (N − 1, 3) chained
+    from the origin): the filter's reference geometry."""
+    heading = np.concatenate(([0.0], np.cumsum(u[:, 2])))
+    position = se2.cumulative_compose(u)[:, :2]
+    return prepare_segments(sigma, heading, position, epochs)
+
+
 @dataclass(frozen=True)
 class FilterEvents:
     """Where the filter had to leave the plain EKF recursion (see :func:`run_filter`).
@@ -793,10 +801,9 @@ def _setup(inp: FilterInput, linearize_at: Array | None, use, weights) -> _Setup
         # displacement between consecutive poses, noise rotated by their headings
         lin = np.asarray(linearize_at, dtype=np.float64)
         heading, position = lin[:, 2].copy(), lin[:, :2]
+        seg = prepare_segments(inp.sigma, heading, position, epochs)
     else:
-        heading = np.concatenate(([0.0], np.cumsum(inp.u[:, 2])))
-        position = se2.cumulative_compose(inp.u)[:, :2]
-    seg = prepare_segments(inp.sigma, heading, position, epochs)
+        seg = dead_reckoning_segments(inp.sigma, inp.u, epochs)
     m = inp.map_xy.shape[0]
     mapcov = inp.map_covariance
     if mapcov is not None:
@@ -1142,17 +1149,22 @@ def world_steps(seg: Segments, psi: Array, rotation: tuple[Array, Array] | None 
     return out
 
 
-def fill(seg: Segments, psi: Array, post_x: Array, post_p6: Array) -> tuple[Array, Array, Array]:
+def fill(
+    seg: Segments, psi: Array, post_x: Array, post_p6: Array, shift: Array | None = None
+) -> tuple[Array, Array, Array]:
     """Predicted poses and covariances of every grid pose from its base epoch's posterior.
 
     ``x_k = x⁺_b + [R(ψ_b) local_xy, local_θ]`` and
     ``P_k = S(Δ_k) P⁺_b S(Δ_k)ᵀ + Rot(ψ_b) q_k Rot(ψ_b)ᵀ`` (:func:`predict6`), vectorised.
-    ``post_x`` (E, 3) and ``post_p6`` (E, 6) (unique entries) are the epochs' posteriors.
-    Returns the world steps (:func:`world_steps`), the poses (N, 3) and covariances
-    (N, 3, 3).
+    ``post_x`` (E, 3) and ``post_p6`` (E, 6) (unique entries) are the epochs' posteriors;
+    ``shift`` (N, 3), added to every world step first (an odometry bias's mean,
+    :mod:`recovery.odometry_bias`). Returns the world steps (:func:`world_steps`), the poses
+    (N, 3) and covariances (N, 3, 3).
     """
     rot = _base_rotation(seg, psi)
     w = world_steps(seg, psi, rot)
+    if shift is not None:
+        w += shift
     e_of = seg.epoch_of
     poses = np.take(post_x, e_of, axis=0) + w
     pb = np.take(np.ascontiguousarray(post_p6.T), e_of, axis=1)

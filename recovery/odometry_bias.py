@@ -17,7 +17,7 @@ constant, at most 1 s.
 With ``o`` held over a segment, pose ``k``'s position and heading in the frame of its base
 epoch ``b`` are linear in ``o`` to first order, with the Jacobian ``B_k`` (3 × 2)
 (:func:`motion_jacobians`), from the reference geometry of the segments
-(:func:`recovery.ekf.prepare_segments`: ``w_m`` the displacement of step ``m`` in ``b``'s
+(:func:`recovery.ekf.dead_reckoning_segments`: ``w_m`` the displacement of step ``m`` in ``b``'s
 frame, ``ℓ_m`` its signed length, ``D_m = Σ_{b ≤ j < m} ℓ_j``, ``J`` the turn by 90°):
 
     (O1)  ∂local_xy(k)/∂s = local_xy(k),                  ∂local_θ(k)/∂s = 0
@@ -36,8 +36,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from recovery.ekf import Segments, prepare_segments
-from relation_metric import se2
+from recovery.ekf import Segments
 from relation_metric.arrays import Array
 
 __all__ = ["epoch_spacing", "motion_jacobians", "with_virtual_epochs", "world_jacobians"]
@@ -75,14 +74,6 @@ def with_virtual_epochs(
     before = np.where(base[1:] == np.arange(n - 1), 0, slot[:-1])
     new = np.flatnonzero(slot[1:] > before) + 1  # the first pose of a later slot
     return np.unique(np.concatenate((epochs, new))).astype(np.int64)
-
-
-def segments_on(sigma: Array, u: Array, epochs: NDArray[np.int64]) -> Segments:
-    """:func:`recovery.ekf.prepare_segments` on dead reckoning, as :func:`recovery.ekf._setup`
-    builds it, for another set of epochs."""
-    heading = np.concatenate(([0.0], np.cumsum(u[:, 2])))
-    position = se2.cumulative_compose(u)[:, :2]
-    return prepare_segments(sigma, heading, position, epochs)
 
 
 def motion_jacobians(seg: Segments, u: Array) -> Array:

@@ -57,6 +57,7 @@ from recovery.ekf import (
     _mahalanobis2,
     _setup,
     _slr,
+    dead_reckoning_segments,
     fill,
     near_field_last,
     predict6,
@@ -64,7 +65,6 @@ from recovery.ekf import (
 from recovery.odometry_bias import (
     epoch_spacing,
     motion_jacobians,
-    segments_on,
     with_virtual_epochs,
     world_jacobians,
 )
@@ -414,7 +414,7 @@ def _with_motion_epochs(setup, inp: FilterInput, motion: MotionPersisting):  # t
     ep = with_virtual_epochs(
         inp.times, np.asarray(setup.epochs, dtype=np.int64), epoch_spacing(tau)
     )
-    seg = segments_on(inp.sigma, inp.u, ep)
+    seg = dead_reckoning_segments(inp.sigma, inp.u, ep)
     grid = inp.meas_grid[np.asarray(setup.active, dtype=np.int64)]
     bounds = np.searchsorted(grid, ep, side="left").tolist() + [len(setup.active)]
     out = replace(
@@ -440,11 +440,13 @@ def _filter_result(  # type: ignore[no-untyped-def]
     status[(inp.meas_grid < 0)] = OUTSIDE
     psi_e = post_x[:, 2]
     post6 = post_p[:, :3, :3].reshape(n_e, 9)[:, [0, 1, 2, 4, 5, 8]]
-    steps, poses, covs = fill(seg, psi_e, post_x[:, :3], post6)
-    g = None
-    if jac is not None and lay.has_o:
+    g = shift = None
+    if jac is not None and lay.has_o:  # the bias's mean moves every step (module doc)
         g = world_jacobians(jac, seg, psi_e)
-        covs = _fill_motion(poses, steps, g, seg, psi_e, post_x, post_p, post6, lay.oo)
+        shift = np.einsum("kij,kj->ki", g, post_x[seg.epoch_of, lay.oo : lay.oo + 2])
+    steps, poses, covs = fill(seg, psi_e, post_x[:, :3], post6, shift)
+    if g is not None:
+        _fill_motion(covs, steps, g, seg.epoch_of, post_p, lay.oo)
     poses[epochs] = post_x[:, :3]
     covs[epochs] = post_p[:, :3, :3]
     empty = np.zeros(0, dtype=np.int64)
@@ -470,29 +472,26 @@ def _filter_result(  # type: ignore[no-untyped-def]
 
 
 def _fill_motion(  # type: ignore[no-untyped-def]
-    poses: Array, steps: Array, g: Array, seg, psi_e: Array, post_x: Array, post_p: Array,
-    post6: Array, oo: int,
-) -> Array:  # fmt: skip
-    """The grid poses filled with the odometry bias: the mean moved by ``G_k ô_b`` (``poses``
-    and the world ``steps`` from the base epoch, in place) and the covariances (returned)
-    ``S_k P_xx S_kᵀ + q_k`` on the moved steps plus the terms of ``[S_k, G_k]`` against the
-    base epoch's pose–bias blocks."""
+    covs: Array, steps: Array, g: Array, e_of, post_p: Array, oo: int
+) -> None:
+    """The odometry bias's covariance terms of every filled grid pose, in place: those of
+    ``[S_k, G_k]`` against the base epoch's pose–bias blocks (``steps``: the world steps
+    from the base epoch, already moved by the bias's mean, which ``S_k`` shears by)."""
     o = slice(oo, oo + 2)
-    e_of = seg.epoch_of
-    shift = np.einsum("kij,kj->ki", g, post_x[e_of, o])
-    poses += shift
-    steps += shift
-    pb = np.take(np.ascontiguousarray(post6.T), e_of, axis=1)
-    c, s = np.cos(psi_e)[e_of], np.sin(psi_e)[e_of]
-    covs = _full(predict6(tuple(pb), tuple(seg.q), c, s, steps[:, 0], steps[:, 1]))
-    sk = np.zeros((g.shape[0], 3, 3))
-    sk[:, 0, 0] = sk[:, 1, 1] = sk[:, 2, 2] = 1.0
-    sk[:, 0, 2], sk[:, 1, 2] = -steps[:, 1], steps[:, 0]
+    sk = _shears(steps)
     pxo = post_p[:, :3, o][e_of]  # (N, 3, 2)
     poo = post_p[:, o, o][e_of]
     cross = sk @ pxo @ g.transpose(0, 2, 1)
     covs += cross + cross.transpose(0, 2, 1) + g @ poo @ g.transpose(0, 2, 1)
-    return covs
+
+
+def _shears(d: Array) -> Array:
+    """``S(d)`` (n, 3, 3) of world displacements ``d`` (n, ≥ 2): ``[[1, 0, −d_y], [0, 1, d_x],
+    [0, 0, 1]]``, how a pose moved by ``d`` follows a turn of the pose it started from."""
+    out = np.zeros((d.shape[0], 3, 3))
+    out[:, 0, 0] = out[:, 1, 1] = out[:, 2, 2] = 1.0
+    out[:, 0, 2], out[:, 1, 2] = -d[:, 1], d[:, 0]
+    return out
 
 
 def smooth_persisting(run: PersistingPass) -> tuple[Array, Array, Array]:
@@ -565,18 +564,14 @@ def _fill_between(
     am = pk.copy()  # A_k = P_k S(p_i − p_k)ᵀ
     am[:, :, 0] -= to_next[:, 1, None] * pk[:, :, 2]
     am[:, :, 1] += to_next[:, 0, None] * pk[:, :, 2]
-    sk = np.zeros((k.size, 3, 3))
-    sk[:, 0, 0] = sk[:, 1, 1] = sk[:, 2, 2] = 1.0
-    sk[:, 0, 2], sk[:, 1, 2] = -wk[:, 1], wk[:, 0]
+    sk = _shears(wk)
     lefts = [am, sk]
     if has_o:
         g = run.motion_g
         assert g is not None
         gk, gi = g[k], g[ep[i]]
         pko = sk @ run.post_p[:, :3, o][e_of] + gk @ run.post_p[:, o, o][e_of]
-        ski = np.zeros((k.size, 3, 3))
-        ski[:, 0, 0] = ski[:, 1, 1] = ski[:, 2, 2] = 1.0
-        ski[:, 0, 2], ski[:, 1, 2] = -to_next[:, 1], to_next[:, 0]
+        ski = _shears(to_next)
         am += pko @ (gi - ski @ gk).transpose(0, 2, 1)
         lefts.append(gk)
     a = [np.einsum("eij,ej->ei", f, u) for f in facs]

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import recovery.odometry_bias as ob
-from recovery.odometry_bias import motion_jacobians, segments_on, with_virtual_epochs
+from recovery.ekf import dead_reckoning_segments
+from recovery.odometry_bias import motion_jacobians, with_virtual_epochs
 from recovery.persisting import run_persisting, smooth_persisting
 from recovery.recover import filter_input
 from relation_metric import se2
@@ -43,11 +44,11 @@ def test_motion_jacobians_are_the_derivatives_of_dead_reckoning():
     w = 0.4 * np.cos(0.03 * k)
     epochs = np.array([0, 37, 38, 90, 200, 333, n - 1])
     zero = np.zeros((n - 1, 3, 3))
-    jac = motion_jacobians(segments_on(zero, _arc(v, w, dt), epochs), _arc(v, w, dt))
+    jac = motion_jacobians(dead_reckoning_segments(zero, _arc(v, w, dt), epochs), _arc(v, w, dt))
     h = 1e-6
     for col, (dv, dw) in enumerate(((h * v, 0 * w), (0 * v, h * v))):
-        hi = segments_on(zero, _arc(v + dv, w + dw, dt), epochs).local
-        lo = segments_on(zero, _arc(v - dv, w - dw, dt), epochs).local
+        hi = dead_reckoning_segments(zero, _arc(v + dv, w + dw, dt), epochs).local
+        lo = dead_reckoning_segments(zero, _arc(v - dv, w - dw, dt), epochs).local
         fd = (hi - lo) / (2 * h)
         tol = 1e-7 if col == 0 else 5e-5
         assert np.abs(fd - jac[:, :, col]).max() < tol * np.abs(jac[:, :, col]).max()
