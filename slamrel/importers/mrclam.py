@@ -348,6 +348,16 @@ class FitCheck:
         )
 
 
+def _d2(residuals: NDArray[np.float64], sigma: tuple[float, float]) -> NDArray[np.float64]:
+    """``d² = (r/σ_r)² + (b/σ_b)²`` of residuals ``(M, 2)`` (range, bearing)."""
+    return np.sum((residuals / np.asarray(sigma)) ** 2, axis=1)
+
+
+def _beyond_bound(d2: NDArray[np.float64], probability: float) -> float:
+    """The share of ``d2`` beyond the χ²₂ ``probability`` bound (0 for no residual)."""
+    return float((d2 > _CHI2_2_BOUNDS[probability]).sum() / max(d2.size, 1))
+
+
 def check_fit(
     times: NDArray[np.float64],
     landmarks: NDArray[np.int64],
@@ -360,7 +370,7 @@ def check_fit(
     """:class:`FitCheck` of residuals ``(M, 2)`` (range, bearing) at ``times`` (increasing)
     of sightings of ``landmarks`` against the fitted ``sigma``; ``bulk`` marks the residuals
     within 5 robust σ, the only ones the correlation uses (a few outliers would rule it)."""
-    d2 = np.sum((residuals / np.asarray(sigma)) ** 2, axis=1)
+    d2 = _d2(residuals, sigma)
     order = np.lexsort((times, landmarks))  # by landmark, then time
     a, b = order[:-1], order[1:]
     pair = (landmarks[a] == landmarks[b]) & (times[b] - times[a] <= lag) & bulk[a] & bulk[b]
@@ -370,11 +380,10 @@ def check_fit(
             return float("nan")
         return float(np.corrcoef(x[a[pair]], x[b[pair]])[0, 1])
 
-    n = max(d2.size, 1)
     return FitCheck(
         median=float(np.median(d2)) if d2.size else float("nan"),
-        beyond_99=float((d2 > _CHI2_2_BOUNDS[0.99]).sum() / n),
-        beyond_999=float((d2 > _CHI2_2_BOUNDS[0.999]).sum() / n),
+        beyond_99=_beyond_bound(d2, 0.99),
+        beyond_999=_beyond_bound(d2, 0.999),
         range_correlation=corr(residuals[:, 0]),
         bearing_correlation=corr(residuals[:, 1]),
         pairs=int(pair.sum()),
@@ -749,7 +758,7 @@ def fit_noise(
     sb = float(np.std(b_res[~out], ddof=1)) if (~out).sum() > 1 else float("nan")
     duration = float(np.mean(w.duration))
     offset = float(np.mean(b_res[~out])) if (~out).any() else 0.0
-    d2_mounted = (r_res / sr) ** 2 + (se2.wrap_angle(b_res - offset) / sb) ** 2
+    d2_mounted = _d2(np.column_stack((r_res, se2.wrap_angle(b_res - offset))), (sr, sb))
     return NoiseFit(
         sigma_v=sigma_v,
         sigma_omega=sigma_w,
@@ -775,9 +784,7 @@ def fit_noise(
             ~out,
         ),
         bearing_offset=offset,
-        beyond_999_mounted=float(np.mean(d2_mounted > _CHI2_2_BOUNDS[0.999]))
-        if d2_mounted.size
-        else None,
+        beyond_999_mounted=_beyond_bound(d2_mounted, 0.999) if d2_mounted.size else None,
     )
 
 
