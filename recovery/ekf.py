@@ -388,6 +388,10 @@ class FilterResult:
     events : FilterEvents
     outlier_bound : float
         The NIS above which a measurement counted as outlying.
+    innovation_det : ndarray, shape (J,), or None
+        ``det S`` of each innovation that has a ``nis`` (NaN else): with the NIS, the
+        innovation's Gaussian likelihood (:mod:`recovery.clock_offset` compares it between
+        runs whose ``S`` differ).
     """
 
     poses: Array
@@ -405,6 +409,7 @@ class FilterResult:
     weights: Array
     events: FilterEvents
     outlier_bound: float
+    innovation_det: Array | None = None
 
 
 def _pd(p: tuple) -> bool:
@@ -782,6 +787,7 @@ class _Setup:
     nis: Array
     weights: Array
     events: list[tuple[int, int, int, float]]
+    det_s: Array
 
 
 def _setup(inp: FilterInput, linearize_at: Array | None, use, weights) -> _Setup:  # type: ignore[no-untyped-def]
@@ -834,6 +840,7 @@ def _setup(inp: FilterInput, linearize_at: Array | None, use, weights) -> _Setup
         status=status,
         nis=np.full(j_all, np.nan),
         weights=np.ones(j_all),
+        det_s=np.full(j_all, np.nan),
         events=[],
     )
 
@@ -993,6 +1000,7 @@ def _result(setup: _Setup, rules: _Rules, lin, pri_x, pri_p, post_x, post_p) -> 
             inflation=ev[:, 3].copy(),
         ),
         outlier_bound=rules.outlier,
+        innovation_det=readonly(setup.det_s),
     )
 
 
@@ -1044,7 +1052,7 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
     """
     lm_xy, lm_c, r, zz, lmk = setup.lm_xy, setup.lm_c, setup.r, setup.z, setup.landmark
     pxm, mapcov, w_fixed = setup.pxm, inp.map_covariance, setup.w_fixed
-    nis, wts, times = setup.nis, setup.weights, inp.times
+    nis, wts, times, dets = setup.nis, setup.weights, inp.times, setup.det_s
     pose = tuple(float(v) for v in inp.x0)
     p = tuple(float(inp.p0[i, j]) for i, j in SYM6)
     # raw doubles (array.array), not lists of tuples: the arrays are read back without
@@ -1088,6 +1096,7 @@ def _filter_loop(inp: FilterInput, setup: _Setup, rules: _Rules, reentry: _Reent
             i = (s[2] / det, -s[1] / det, s[0] / det)
             v = y[0] * y[0] * i[0] + 2.0 * y[0] * y[1] * i[1] + y[1] * y[1] * i[2]
             nis[j] = v
+            dets[j] = det
             if fixed:
                 wj, alpha = 1.0 if w_fixed is None else w_fixed[j], 0.0
             else:

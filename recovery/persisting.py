@@ -253,10 +253,11 @@ def _near_m2(x: Array, p: Array, lay: _Layout, inp: FilterInput):  # type: ignor
 def _update(
     x: Array, p: Array, lay: _Layout, z: Array, map_l: Array, li: int, at: Array,
     r_w: Array, c2: float, slr: tuple | None = None,  # type: ignore[type-arg]
-) -> tuple[Array, Array, float, float]:  # fmt: skip
+) -> tuple[Array, Array, float, float, float]:  # fmt: skip
     """One measurement ``z`` (2,) of the landmark at ``map_l`` (2,), state slot ``li``,
     linearised at ``at`` (d,) (or statistically, ``slr``: :func:`recovery.ekf._slr`); the
-    redescending weight beyond ``c2``. Returns ``x``, ``p``, the NIS and the weight."""
+    redescending weight beyond ``c2``. Returns ``x``, ``p``, the NIS, the weight and
+    ``det S`` (the un-weighted innovation covariance's)."""
     ml = map_l + (at[3 + 2 * li : 5 + 2 * li] if lay.has_map else 0.0)
     ddx, ddy = ml[0] - at[0], ml[1] - at[1]
     if slr is None:
@@ -292,7 +293,8 @@ def _update(
     gain = ph_t @ s_inv
     x += gain @ y
     p -= gain @ ph_t.T
-    return x, 0.5 * (p + p.T), v, w
+    det = float(s_m[0, 0] * s_m[1, 1] - s_m[0, 1] * s_m[1, 0])
+    return x, 0.5 * (p + p.T), v, w, det
 
 
 def run_persisting(
@@ -345,7 +347,7 @@ def run_persisting(
     phi_all = np.ones((max(n_e - 1, 0), d - 3))
     c2 = math.inf if robust_threshold is None else float(robust_threshold) ** 2
     z_all, lmk = inp.meas_z, inp.meas_landmark
-    nis, wts = setup.nis, setup.weights
+    nis, wts, dets = setup.nis, setup.weights, setup.det_s
     for e in range(n_e):
         k = int(epochs[e])
         if e > 0:
@@ -364,7 +366,7 @@ def run_persisting(
                 rel = _relative(x, p, lay, inp.map_xy[lmk[j]], li)
                 if _mahalanobis2(*rel) < NEAR_FIELD_CHI2:
                     slr = _slr(*rel, (float(r_w[0, 0]), float(r_w[1, 1])))
-            x, p, nis[j], w = _update(
+            x, p, nis[j], w, dets[j] = _update(
                 x, p, lay, z_all[j], inp.map_xy[lmk[j]], li, at, r_w, c2, slr
             )  # fmt: skip
             if w != 1.0:
@@ -466,6 +468,7 @@ def _filter_result(  # type: ignore[no-untyped-def]
         weights=wts,
         events=FilterEvents(empty, empty, empty, np.zeros(0)),
         outlier_bound=chi2_quantile(OUTLIER_PROBABILITY, 2),
+        innovation_det=setup.det_s,
     )
     assert (status[np.asarray(active, dtype=np.int64)] == USED).all()
     return fr, g

@@ -364,6 +364,7 @@ def recover(
         counts=RecoveryCounts.of(np.asarray(fr.status), bundle.skipped_unknown, weights),
         status=fr.status,
         nis=fr.nis,
+        innovation_det=fr.innovation_det,
         map_mode=mu.mode,
         map_uncertainty=mu,
         divergence=divergence,

@@ -449,6 +449,9 @@ class Recovery:
         ``(1 + ρ)/(1 − ρ)`` the covariances' second pass inflated ``R`` by
         (:func:`~relation_metric.consistency.nis_persistence`); exactly 1 and 0 when the
         innovations are not significantly correlated in time (one pass).
+    innovation_det : ndarray, shape (J,), or None
+        ``det S`` of each measurement's innovation where ``nis`` has a value (NaN else):
+        :attr:`recovery.ekf.FilterResult.innovation_det`.
     """
 
     method: str
@@ -475,6 +478,7 @@ class Recovery:
     agreement_covariances: Array | None = None
     persistence_factor: float = 1.0
     persistence_rho: float = 0.0
+    innovation_det: Array | None = None
 
     @property
     def stretches(self) -> tuple[Stretch, ...]:
