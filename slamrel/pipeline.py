@@ -37,6 +37,7 @@ from landmark_graph.maps import LandmarkMap
 from landmark_graph.observability import SensorReach, within_reach
 from recovery.anchoring import NeesFrame, anchor_on_landmarks
 from recovery.bundle import Bundle
+from recovery.clock_offset import ClockOffset, clock_offset
 from recovery.constants import DEFAULT_MAP_PRIOR
 from recovery.recover import DEFAULT_MAX_OUTLIER_RUN, DEFAULT_ROBUST, recover
 from recovery.results import Recovery
@@ -62,7 +63,7 @@ from slamrel.report.notes import (
     run_notes,
 )
 from slamrel.report.run_page import report_figures, report_sections
-from slamrel.report.verdict import RunFacts, run_verdict
+from slamrel.report.verdict import RunFacts, map_log_stats, run_verdict
 from slamrel.runs.nees import (
     NeesCurve,
     PlacementNees,
@@ -439,7 +440,22 @@ def score_bundle(
         relation_sets=() if relations is None else relations.rules,
         reference=_reference_scores(inp, own),
         online_vs_recovered=online_vs_recovered,
+        clock_offset=_clock_offset(bundle, rec, robust, max_outlier_run),
     )
+
+
+def _clock_offset(
+    bundle: Bundle, rec: Recovery | None, robust: str | None, max_outlier_run: int | None
+) -> ClockOffset | None:
+    """The measurements' clock offset (:func:`recovery.clock_offset.clock_offset`, with the
+    recovery's own settings), searched only where the map–log lamp is not green: it costs
+    about ten filter passes, and a lamp that is green has no cause to name."""
+    if rec is None:
+        return None
+    st = map_log_stats(rec.nis, rec.counts.gated, bundle.sensor.outlier_share or 0.0)
+    if st is None or st.level == "green":
+        return None
+    return clock_offset(bundle, robust=robust, max_outlier_run=max_outlier_run, first=rec)
 
 
 def _reference_scores(inp: RunInput, own: dict[str, Trajectory]) -> ReferenceScores | None:

@@ -106,6 +106,7 @@ from relation_metric.errors import InputError
 from relation_metric.nees_law import NeesLaw
 
 if TYPE_CHECKING:
+    from recovery.clock_offset import ClockOffset
     from recovery.placement import Placement
     from recovery.results import Recovery, RecoveryCounts, RobustSettings
     from relation_metric.evaluate import Evaluation
@@ -121,6 +122,8 @@ __all__ = [
     "expected_downweight_loss",
     "downweight_loss_bound",
     "map_nees",
+    "map_log_stats",
+    "MapLogStats",
     "gaussian_breaks",
     "MIN_EXCURSION",
     "LEVELS",
@@ -396,6 +399,9 @@ class RunFacts:
     persisting_stated: bool = False
     #: The share of gross errors the bundle states (``sensor_model.outlier_share``; 0: none).
     outlier_share: float = 0.0
+    #: The measurements' clock offset, searched where the map–log lamp is not green
+    #: (:mod:`recovery.clock_offset`; ``None``: not searched).
+    clock: ClockOffset | None = None
 
     @classmethod
     def of(cls, result: RunResult) -> RunFacts:
@@ -421,6 +427,7 @@ class RunFacts:
             nis_landmarks=None if rec is None else result.bundle.measurement_landmarks,
             persisting_stated=result.bundle.sensor.persisting is not None,
             outlier_share=result.bundle.sensor.outlier_share or 0.0,
+            clock=result.clock_offset,
             robust=None if rec is None else rec.robust,
             map_nees=_map_nees_of(result),
             online_nees=None if online is None else online.summary,
@@ -542,6 +549,11 @@ def gaussian_breaks(facts: RunFacts) -> list[str]:
     """The Gaussian white-noise assumptions the recovery filter's innovations break, each a
     sentence with its number (empty: none shown). Needs no ground truth.
 
+    * **clock offset** — the measurements restamped by the offset the recovery filter's NIS
+      point to (:mod:`recovery.clock_offset`, searched where the map–log lamp is not green)
+      make the lamp greener by its own rule, the offset beyond chance: said with
+      the offset, the lamp's ``q`` and tail before and after, and the likelihood ratio. A
+      tail the offset explains is then not also called heavy.
     * **heavy tails** — more innovations beyond the 99.9 % bound ``b`` of χ²(2) than a
       consistent filter's 0.1 % (above the Poisson 99.9 % quantile and 0.2 %) while the bulk
       is no wider than stated (median NIS ≤ 1.25 × 2 ln 2): outlying measurements, heavy-tailed
@@ -566,11 +578,16 @@ def gaussian_breaks(facts: RunFacts) -> list[str]:
     if v.size < 50:
         return []
     causes = []
+    clock = _clock_cause(facts)
+    if clock is not None:
+        causes.append(clock[0])
     bound = chi2_quantile(NIS_TAIL, 2)
     tail = int((v > bound).sum())
     median = float(np.median(v))
     stated = facts.outlier_share
     heavy = nis_tail_level(tail, v.size, NIS_TAIL, stated) != "green"
+    if clock is not None and clock[1]:  # the tail is the offset's: no heavy tail of its own
+        heavy = False
     if heavy and median <= 1.25 * 2 * math.log(2):
         rest = inlier_nis_ratio(v, bound)
         also = f" with {100 * stated:.2g} % gross errors stated" if stated else ""
@@ -606,6 +623,35 @@ def gaussian_breaks(facts: RunFacts) -> list[str]:
             "odometry error, not in the models"
         )
     return causes
+
+
+def _clock_cause(facts: RunFacts) -> tuple[str, bool] | None:
+    """The clock-offset sentence and whether the restamped log's tail is green; None unless
+    the offset is significant (:attr:`recovery.clock_offset.ClockOffset.significant`) and
+    the map–log lamp, judged by its own rule on the restamped log, would be
+    greener than it is (an offset that leaves the lamp as it is does not explain it)."""
+    c = facts.clock
+    if c is None or not (c.significant and c.material) or facts.nis is None:
+        return None
+    gated = 0 if facts.counts is None else facts.counts.gated
+    now = map_log_stats(facts.nis, gated, facts.outlier_share)
+    then = map_log_stats(c.nis_at_offset, gated, facts.outlier_share)
+    if now is None or then is None or LEVELS.index(then.level) >= LEVELS.index(now.level):
+        return None
+    when = "earlier" if c.offset < 0 else "later"
+    lag = "the motion lags them" if c.offset < 0 else "the motion leads them"
+    quiet = nis_tail_level(then.tail, then.count, NIS_TAIL, facts.outlier_share) == "green"
+    return (
+        f"clock offset: the log agrees best with its motion with every measurement restamped "
+        f"by {c.offset:+.3g} s (taken {abs(c.offset):.3g} s {when} than stamped: {lag}); "
+        f"restamped, q = {_g(then.q)} and {100 * then.share:.2g} % of the innovations beyond "
+        f"the 99.9 % bound (now {_g(now.q)} and {100 * now.share:.2g} %): the map–log lamp "
+        f"{then.level} instead of {now.level}; the NIS trimmed at the bound falls "
+        f"{100 * c.explained:.2g} % (likelihood ratio {c.likelihood_ratio:.3g} over "
+        f"{c.count} innovations); correct the stamps (or the odometry's delay) before judging "
+        "the run",
+        quiet,
+    )
 
 
 def _with_causes(facts: RunFacts, health: Sequence[Judgement]) -> list[Judgement]:
@@ -893,6 +939,59 @@ def _whose(recovered: Judgement, online: Sequence[Judgement]) -> str:
     )
 
 
+@dataclass(frozen=True)
+class MapLogStats:
+    """What the map–log lamp judges (:func:`map_log_stats`).
+
+    Attributes
+    ----------
+    q : float
+        Mean NIS over 2, or, with a stated share of gross errors, the mean within the bound
+        over its expectation there (:func:`inlier_nis_ratio`); NaN without any NIS.
+    tail, count : int
+        Innovations beyond the 99.9 % bound (gated ones included), of ``count``.
+    expected : float
+        The tail a consistent filter has, the stated gross errors counted.
+    level : str
+        The lamp's level: the worse of ``q``'s and the tail's.
+    """
+
+    q: float
+    tail: int
+    count: int
+    expected: float
+    level: str
+
+    @property
+    def share(self) -> float:
+        return self.tail / self.count
+
+
+def map_log_stats(nis: ArrayLike, gated: int, outlier_share: float) -> MapLogStats | None:
+    """The map–log lamp's rule on the recovery filter's NIS ``nis`` (J,) (NaN: none), with
+    ``gated`` measurements gated and the bundle's stated share of gross errors. None without
+    any innovation. The one home of the rule: the lamp, and the pipeline's question whether
+    to look for a clock offset (:func:`slamrel.pipeline.score_bundle`)."""
+    v = np.asarray(nis, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    n = v.size + gated
+    if n == 0:
+        return None
+    p = outlier_share
+    bound = chi2_quantile(NIS_TAIL, 2)
+    if p > 0:
+        q = inlier_nis_ratio(v, bound)
+    else:
+        q = float(v.mean()) / 2.0 if v.size else float("nan")
+    tail = int((v > bound).sum()) + gated
+    (g_lo, g_hi), (a_lo, a_hi) = NIS_RANGES
+    q_level = (
+        "green" if g_lo <= q <= g_hi else "amber" if a_lo <= q <= a_hi else "red"
+    ) if math.isfinite(q) else "amber"  # fmt: skip
+    tail_level = nis_tail_level(tail, n, NIS_TAIL, p)
+    return MapLogStats(q, tail, n, nis_tail_expected(NIS_TAIL, p) * n, _worst(q_level, tail_level))
+
+
 def _map_log_lines(facts: RunFacts) -> list[Judgement]:
     """The recovery filter's NIS: its mean over the dof and its tail beyond the 99.9 % bound.
 
@@ -902,27 +1001,11 @@ def _map_log_lines(facts: RunFacts) -> list[Judgement]:
     stated gross errors are not the Gaussian bulk the mean judges."""
     if facts.nis is None:
         return []
-
-    v = np.asarray(facts.nis, dtype=np.float64)
-    v = v[np.isfinite(v)]
     gated = 0 if facts.counts is None else facts.counts.gated
-    n = v.size + gated
-    if n == 0:
+    st = map_log_stats(facts.nis, gated, facts.outlier_share)
+    if st is None:
         return []
-    p = facts.outlier_share
-    bound = chi2_quantile(NIS_TAIL, 2)
-    if p > 0:
-        q = inlier_nis_ratio(v, bound)
-    else:
-        q = float(v.mean()) / 2.0 if v.size else float("nan")
-    tail = int((v > bound).sum()) + gated
-    lam = nis_tail_expected(NIS_TAIL, p) * n
-    share = tail / n
-    (g_lo, g_hi), (a_lo, a_hi) = NIS_RANGES
-    q_level = (
-        "green" if g_lo <= q <= g_hi else "amber" if a_lo <= q <= a_hi else "red"
-    ) if math.isfinite(q) else "amber"  # fmt: skip
-    tail_level = nis_tail_level(tail, n, NIS_TAIL, p)
+    p, q = facts.outlier_share, st.q
     mean = (
         f"mean NIS within the bound {_g(q)}× its expectation there (q); the bundle states "
         f"{100 * p:.2g} % gross errors (sensor_model.outlier_share), each counted in the tail "
@@ -933,9 +1016,10 @@ def _map_log_lines(facts: RunFacts) -> list[Judgement]:
     return [
         Judgement(
             "map–log agreement (NIS)",
-            f"{mean}; {tail} of {n} innovations ({100 * share:.2g} %) beyond the 99.9 % bound "
-            f"(expected {_g(lam)})" + (f", {gated} gated among them" if gated else ""),
-            _worst(q_level, tail_level),
+            f"{mean}; {st.tail} of {st.count} innovations ({100 * st.share:.2g} %) beyond the "
+            f"99.9 % bound (expected {_g(st.expected)})"
+            + (f", {gated} gated among them" if gated else ""),
+            st.level,
             "the recovery filter's innovations against χ²(2): green q in [0.75, 1.25], amber in "
             "[0.5, 1.5], red outside; the tail red above its Poisson 99.99 % quantile and 0.5 %, "
             "amber above the 99.9 % quantile and 0.2 % (with a stated share of gross errors: "

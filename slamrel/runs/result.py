@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from landmark_graph.map_compare import SOURCE_WORDS, MapComparison
 from recovery.anchoring import NeesFrame
 from recovery.bundle import Bundle
+from recovery.clock_offset import ClockOffset
 from recovery.results import Divergence, Recovery
 from relation_metric.alignment import Alignment, umeyama
 from relation_metric.consistency import NeesBlowup, NeesSummary
@@ -278,6 +279,9 @@ class RunResult:
     online_vs_recovered : SetEvaluations or None
         Without ground truth: the online estimate scored on relations drawn from the
         recovered trajectory (their difference, not an error of either).
+    clock_offset : ClockOffset or None
+        The measurements' time offset against the motion (:mod:`recovery.clock_offset`),
+        searched only where the map–log lamp is not green (``None`` elsewhere).
 
     Without ground truth (``bundle.groundtruth`` ``None``, :attr:`has_truth`) ``estimates``
     are the whole trajectories at their own times, ``evaluations``, ``nees`` and
@@ -307,6 +311,7 @@ class RunResult:
     relation_sets: tuple[RelationSetRule, ...] = ()
     reference: ReferenceScores | None = None
     online_vs_recovered: SetEvaluations | None = None
+    clock_offset: ClockOffset | None = None
 
     @property
     def has_truth(self) -> bool:
@@ -488,6 +493,8 @@ class RunResult:
         out["nees_truth_frame"] = {k: v.as_dict() for k, v in self.nees_truth_frame.items()}
         if self.nees_placement is not None:
             out["nees_map_placement"] = self.placement_dict
+        if self.clock_offset is not None:  # searched only where the map–log lamp is not green
+            out["clock_offset"] = self.clock_offset.as_dict()
         out["time_base"] = self.time_base.as_dict()
         out["relation_sets"] = [r.as_dict() for r in self.relation_sets]
         out["notes"] = self.notes
