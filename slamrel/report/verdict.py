@@ -647,7 +647,7 @@ def _clock_cause(facts: RunFacts) -> tuple[str, bool] | None:
         f"restamped, q = {_g(then.q)} and {100 * then.share:.2g} % of the innovations beyond "
         f"the 99.9 % bound (now {_g(now.q)} and {100 * now.share:.2g} %): the map–log lamp "
         f"{then.level} instead of {now.level}; the NIS trimmed at the bound falls "
-        f"{100 * c.explained:.2g} % (likelihood ratio {c.likelihood_ratio:.3g} over "
+        f"{100 * c.explained:.2g} % (likelihood ratio {c.likelihood_ratio:.0f} over "
         f"{c.count} innovations); correct the stamps (or the odometry's delay) before judging "
         "the run",
         quiet,
