@@ -73,13 +73,15 @@ def compare_priors(world: str, noise: str, seed: int) -> dict[str, float | bool]
     }
 
 
-def jacobians_case(world: str, noise: str, seed: int, jacobians: str) -> dict:  # type: ignore[type-arg]
-    """The reference run with the EKF-SLAM's ``jacobians`` (``fej``: first-estimate, FEJ-EKF;
+def jacobians_case(world: str, noise: str, seed: int, jacobians: str, iterations: int = 1) -> dict:  # type: ignore[type-arg]
+    """The reference run with the EKF-SLAM's ``jacobians`` and ``iterations`` (``fej``: first-estimate, FEJ-EKF;
     ``oc``: observability-constrained, OC-EKF), judged."""
     from slamrel.pipeline import score_bundle, simulate_run_input
     from slamrel.studies.calibration import judged_case
 
-    inp = simulate_run_input(world, noise=noise, seed=seed, jacobians=jacobians)  # type: ignore[arg-type]
+    inp = simulate_run_input(
+        world, noise=noise, seed=seed, jacobians=jacobians, iterations=iterations
+    )  # type: ignore[arg-type]
     inp = replace(inp, name=f"{inp.name} ({jacobians})")
     result = score_bundle(inp, seed=seed)
     case = judged_case(result, f"reference EKF-SLAM healthy ({jacobians})")
@@ -277,6 +279,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--compare-priors", type=int, default=0, metavar="K")
     p.add_argument("--jacobians", choices=("standard", "fej", "oc"), default="standard")
+    p.add_argument("--iterations", type=int, default=1, help="iterated EKF updates (1: plain)")
     p.add_argument("--consistency-before-after", action="store_true")
     p.add_argument("--rigid-removed", action="store_true")
     a = p.parse_args(argv)
@@ -287,7 +290,12 @@ def main(argv: list[str] | None = None) -> int:
     tasks = (
         _grid_tasks("ref-before-after", "lamp_before_after", *grid, {})
         if a.consistency_before_after
-        else _grid_tasks(f"ref-{a.jacobians}", "jacobians_case", *grid, {"jacobians": a.jacobians})
+        else _grid_tasks(
+            f"ref-{a.jacobians}" + (f"-it{a.iterations}" if a.iterations > 1 else ""),
+            "jacobians_case",
+            *grid,
+            {"jacobians": a.jacobians, "iterations": a.iterations},
+        )
     )
     out = Path(a.output)
     out.mkdir(parents=True, exist_ok=True)

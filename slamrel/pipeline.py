@@ -273,18 +273,19 @@ def simulate_run_input(
     noise_scale: float = 1.0,
     process_noise_scale: float = 1.0,
     jacobians: Literal["standard", "fej", "oc"] = "standard",
+    iterations: int = 1,
 ) -> RunInput:
     """Simulate a built-in world and run the reference EKF-SLAM on it (no I/O).
 
     The input carries the filter's online estimate and covariances (for validation) and the
     world's odometry as dead reckoning. ``corrupt_fraction``, ``noise_scale``,
-    ``process_noise_scale`` and ``jacobians`` are passed to
+    ``process_noise_scale``, ``jacobians`` and ``iterations`` are passed to
     :func:`slamrel.backends.ekf_slam.ekf_slam_bundle`.
     """
     w = make_world(world, noise=noise, seed=seed, rate=rate)
     bundle, slam = ekf_slam_bundle(
         world_bundle(w), corrupt_fraction=corrupt_fraction, noise_scale=noise_scale, seed=seed,
-        process_noise_scale=process_noise_scale, jacobians=jacobians,
+        process_noise_scale=process_noise_scale, jacobians=jacobians, iterations=iterations,
     )  # fmt: skip
     return RunInput(
         bundle, name=f"{world}/{noise}/seed {seed}", online=slam.online,

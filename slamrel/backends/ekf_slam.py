@@ -107,6 +107,7 @@ def ekf_slam(
     true_ids: NDArray[np.int64] | None = None,
     noise_scale: float = 1.0,
     jacobians: Literal["standard", "fej", "oc"] = "standard",
+    iterations: int = 1,
 ) -> EkfSlamResult:
     """Run EKF-SLAM over a log.
 
@@ -153,6 +154,11 @@ def ekf_slam(
         unobservable (:meth:`_Filter.observe`; docs/verdict.md): the pose stays consistent
         as with FEJ, and the landmarks, linearised at their latest estimates, stay
         consistent too. ``"fej"`` and ``"oc"``: known associations only.
+    iterations : int
+        Gauss–Newton iterations of each update (1, the default: the EKF). Above 1 the
+        *iterated* update (not with ``"fej"``, whose Jacobians are fixed): each measurement
+        relinearised at the damped iterate of its pose–landmark MAP problem
+        (:func:`_iterate`; docs/verdict.md measures it with ``"oc"``).
 
     Returns
     -------
@@ -175,11 +181,18 @@ def ekf_slam(
         sensor.covariance * noise_scale**2,
         _Gates.of(gate, new_landmark_gate, outlier_gate, max_rejected_run),
         jacobians=jacobians,
+        iterations=iterations,
     )
     if jacobians not in ("standard", "fej", "oc") or (jacobians != "standard" and not known):
         raise InputError(
             "jacobians: expected 'standard', or 'fej' with known associations, or 'oc' with "
             f"known associations, got {jacobians!r}"
+        )
+    whole = isinstance(iterations, int) and not isinstance(iterations, bool)
+    if not (whole and iterations >= 1) or (iterations > 1 and jacobians == "fej"):
+        raise InputError(
+            "iterations: expected a whole number >= 1 (1 with jacobians 'fej', whose "
+            f"Jacobians are fixed), got {iterations!r}"
         )
     assoc_out, online, online_cov = f.run(
         steps, np.asarray(steps.sigma) * noise_scale**2, z, ids_in if known else None, grid, used
@@ -261,9 +274,17 @@ class _Filter:
     holds each landmark's first estimate (FEJ) or its virtual position ``λ_i`` (OC)."""
 
     def __init__(
-        self, capacity: int, pose: Array, cov0: Array, r_cov: Array, gates: _Gates, jacobians: str
+        self,
+        capacity: int,
+        pose: Array,
+        cov0: Array,
+        r_cov: Array,
+        gates: _Gates,
+        jacobians: str,
+        iterations: int = 1,
     ):
         self.jacobians = jacobians
+        self.iterations = iterations
         self.prior = np.asarray(pose, dtype=np.float64).copy()  # x̂_{k|k−1} of this step
         self.first = np.zeros(capacity)  # each landmark's first estimate (FEJ) or λ_i (OC)
         self.mu = np.zeros(capacity)
@@ -361,7 +382,8 @@ class _Filter:
         first = self.first[slot : slot + 2]
         lin = (self.prior, first) if self.jacobians == "fej" else None
         v = first - self.prior[:2] if self.jacobians == "oc" else None  # OC: λ_i − r_k
-        if not _update(self.mu, self.cov, self.n, slot, meas, self.r_cov, t, m, gate, lin, v):
+        mu, cov, n, r, it = self.mu, self.cov, self.n, self.r_cov, self.iterations
+        if not _update(mu, cov, n, slot, meas, r, t, m, gate, lin, v, it):
             self.rejected_run += 1
             return None  # outside the validation gate: rejected
         self.rejected_run = 0
@@ -437,8 +459,13 @@ def _update(
     gate: float = np.inf,
     lin: tuple[Array, Array] | None = None,
     heading_from: Array | None = None,
+    iterations: int = 1,
 ) -> bool:
     """EKF update with one range-bearing measurement; False (no update) when ``νᵀS⁻¹ν > gate``.
+
+    ``iterations`` > 1 (not with ``lin``): the iterated EKF update — the gate is decided at
+    the prior as above, then the update is relinearised at the Gauss–Newton iterate of the
+    local MAP problem (:func:`_iterate`), ``ν = z − h(x_i) − H_i (x̂ − x_i)``.
 
     ``lin``: the pose and landmark the Jacobians are evaluated at (FEJ; default the current
     estimates); the innovation is always against the current estimates. ``heading_from``
@@ -455,14 +482,20 @@ def _update(
     second BLAS thread does not pay at these shapes, so blocks are kept small enough that
     OpenBLAS uses one).
     """
-    h, hx, hl = range_bearing(mu[:3], mu[slot : slot + 2])
+    local = np.array([0, 1, 2, slot, slot + 1])
+    x0 = mu[local]
+    hx, hl, nu = _linearised(x0, x0, meas, heading_from)
     if lin is not None:
         _, hx, hl = range_bearing(*lin)
-    if heading_from is not None:  # −H_l J v with J v = [−v_y, v_x]
-        hx = hx.copy()
-        hx[:, 2] = hl @ np.array([heading_from[1], -heading_from[0]])
-    nu = meas - h
-    nu[1] = se2.wrap_angle(nu[1])
+    if iterations > 1 and lin is None:
+        p5 = cov[np.ix_(local, local)]
+        if gate < np.inf:  # the gate is the plain update's, at the prior
+            h5 = np.hstack((hx, hl))
+            if float(nu @ np.linalg.solve(h5 @ p5 @ h5.T + r_cov, nu)) > gate:
+                return False
+            gate = np.inf
+        xi = _iterate(x0, p5, meas, r_cov, heading_from, iterations)
+        hx, hl, nu = _linearised(x0, xi, meas, heading_from)
     pht = cov[:n, :3] @ hx.T + cov[:n, slot : slot + 2] @ hl.T  # (n, 2)
     s = hx @ pht[:3] + hl @ pht[slot : slot + 2] + r_cov
     s = 0.5 * (s + s.T)
@@ -483,6 +516,62 @@ def _update(
         j = min(i + _UPDATE_ROWS, n)
         cov[i:j, :n] -= w[i:j] @ wt
     return True
+
+
+def _linearised(
+    x0: Array, at: Array, meas: Array, heading_from: Array | None
+) -> tuple[Array, Array, Array]:
+    """``H_x``, ``H_l`` at ``at`` (5,: pose, landmark) and the innovation of the update
+    linearised there, ``ν = z − h(at) − H (x0 − at)`` (angles wrapped; ``at = x0``: the plain
+    ``z − h(x0)``). ``heading_from`` (OC): ``H_x``'s heading column ``−H_l J v``."""
+    h, hx, hl = range_bearing(at[:3], at[3:])
+    if heading_from is not None:  # −H_l J v with J v = [−v_y, v_x]
+        hx = hx.copy()
+        hx[:, 2] = hl @ np.array([heading_from[1], -heading_from[0]])
+    nu = meas - h
+    nu[1] = se2.wrap_angle(nu[1])
+    d = x0 - at
+    d[2] = se2.wrap_angle(d[2])
+    if d.any():
+        nu = nu - hx @ d[:3] - hl @ d[3:]
+    return hx, hl, nu
+
+
+def _iterate(
+    x0: Array, p5: Array, meas: Array, r_cov: Array, heading_from: Array | None, iterations: int
+) -> Array:
+    """The damped Gauss–Newton iterate of one update's local MAP problem over the pose and
+    the landmark (5 states, prior ``x0``, ``p5``): minimise
+    ``J(x) = ‖x − x0‖²_{P⁻¹} + ‖z − h(x)‖²_{R⁻¹}`` (the iterated EKF: Bell & Cathey 1993), each
+    step ``x0 + K_i ν_i − x_i`` halved until ``J`` falls (at most 10 halvings; otherwise stop),
+    at most ``iterations − 1`` steps. The other states move only through their correlation
+    with these five, so this is the whole problem's MAP along them."""
+    p_inv = np.linalg.pinv(p5)
+    r_inv = np.linalg.inv(r_cov)
+
+    def cost(x: Array) -> float:
+        e = meas - range_bearing(x[:3], x[3:])[0]
+        e[1] = se2.wrap_angle(e[1])
+        d = x - x0
+        d[2] = se2.wrap_angle(d[2])
+        return float(d @ p_inv @ d + e @ r_inv @ e)
+
+    xi = x0.copy()
+    c_i = cost(xi)
+    for _ in range(iterations - 1):
+        hx, hl, nu = _linearised(x0, xi, meas, heading_from)
+        h = np.hstack((hx, hl))
+        ph = p5 @ h.T
+        step = x0 + ph @ np.linalg.solve(h @ ph + r_cov, nu) - xi
+        a = 1.0
+        while (c_new := cost(xi + a * step)) >= c_i and a > 1e-3:
+            a *= 0.5
+        if c_new >= c_i:
+            break
+        xi, c_i = xi + a * step, c_new
+        if float(np.abs(a * step).max()) < 1e-10:
+            break
+    return xi
 
 
 def _nearest(
@@ -576,6 +665,7 @@ def ekf_slam_bundle(
     seed: int = 0,
     process_noise_scale: float = 1.0,
     jacobians: Literal["standard", "fej", "oc"] = "standard",
+    iterations: int = 1,
 ) -> tuple[Bundle, EkfSlamResult]:
     """Run :func:`ekf_slam` on ``bundle``'s log; return the SLAM result bundle and the run.
 
@@ -591,7 +681,7 @@ def ekf_slam_bundle(
     (seeded by ``seed``, :func:`corrupt_associations`); ``process_noise_scale`` scales the
     motion model's standard deviations only (a filter mis-tuned in its process noise;
     ``noise_scale`` scales motion and sensor alike, which leaves the filter's gains, and so
-    its online estimate, unchanged); ``jacobians`` as in :func:`ekf_slam`.
+    its online estimate, unchanged); ``jacobians`` and ``iterations`` as in :func:`ekf_slam`.
     """
     mount = bundle.sensor.mount if bundle.sensor.mounted else None
     if mount is not None and (mount[0] != 0.0 or mount[1] != 0.0):
@@ -633,6 +723,7 @@ def ekf_slam_bundle(
         noise_scale=noise_scale,
         outlier_gate=outlier_gate,
         jacobians=jacobians,
+        iterations=iterations,
     )
     m = res.landmark_ids.size
     marg = res.map_covariance.reshape(m, 2, m, 2)[np.arange(m), :, np.arange(m), :]
