@@ -93,3 +93,20 @@ def test_one_iteration_is_the_plain_filter_bit_for_bit():
     assert np.array_equal(plain.map_covariance, one.map_covariance)
     _, five = ekf_slam_bundle(b, jacobians="oc", iterations=5)
     assert not np.array_equal(plain.map_xy, five.map_xy)  # the option does something
+
+
+def test_cli_takes_iterations_for_a_world_and_refuses_what_cannot_apply(tmp_path):
+    """``slam --iterations 3`` writes its bundle; ``--iterations`` with ``--jacobians fej``
+    or on a bundle whose map was made already is an option mistake (exit 2)."""
+    from slamrel.cli import main
+
+    log = tmp_path / "log"
+    assert main(["simulate", "simple1", "-o", str(log), "-q"]) == 0
+    assert main(["slam", str(log), "-o", str(tmp_path / "it"), "--iterations", "3", "-q"]) == 0
+    assert (tmp_path / "it" / "map.csv").is_file()
+    for argv in (
+        ["slam", str(log), "-o", str(tmp_path / "x"), "--jacobians", "fej", "--iterations", "2"],
+        ["run", str(tmp_path / "it"), "-o", str(tmp_path / "y"), "--iterations", "2"],
+    ):
+        assert main(argv) == 2
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()

@@ -391,6 +391,36 @@ def add_force_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+#: ``--iterations``: Gauss–Newton iterations of each EKF-SLAM update (1: the plain EKF).
+MAX_ITERATIONS = 50
+
+
+def add_iterations_argument(parser: argparse.ArgumentParser, *, where: str = "") -> None:
+    """``--iterations N``: the reference EKF-SLAM's iterated update
+    (:func:`slamrel.backends.ekf_slam.ekf_slam`)."""
+    from slamrel.commands.options import int_range
+
+    parser.add_argument(
+        "--iterations",
+        type=int_range(1, MAX_ITERATIONS),
+        default=1,
+        metavar="N",
+        help="Gauss-Newton iterations of each EKF-SLAM update: 1 is the plain EKF; above 1 "
+        "each measurement is relinearised at the damped iterate of its pose-landmark problem "
+        f"(the iterated EKF; not with --jacobians fej){where} (default: %(default)s)",
+    )
+
+
+def check_iterations(args: argparse.Namespace) -> None:
+    """``--iterations`` above 1 with ``--jacobians fej`` (fixed Jacobians): an option mistake."""
+    if args.iterations > 1 and args.jacobians == "fej":
+        raise OptionError(
+            "--jacobians fej fixes every Jacobian at its first estimate, so there is nothing "
+            "to iterate: use --iterations 1, or --jacobians oc or standard",
+            option="--iterations",
+        )
+
+
 def stats_table(rows: Sequence[tuple[str, Summary]]) -> str:
     """A fixed-width console table of summaries, one row per ``(label, Summary)``."""
     from relation_metric.stats import STAT_NAMES as names  # here: start-up stays light

@@ -12,9 +12,11 @@ from slamrel.commands import options as opt
 from slamrel.commands.common import (
     add_association_arguments,
     add_force_argument,
+    add_iterations_argument,
     add_recovery_arguments,
     association_choice,
     association_file,
+    check_iterations,
     check_outputs,
     check_rate,
     errors_about,
@@ -109,6 +111,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="a reference landmark map (any format map-compare reads) the SLAM map is "
         "compared with, for a bundle without landmarks_groundtruth.csv",
     )
+    add_iterations_argument(p, where=" (WORLD only)")
     add_association_arguments(p)
     add_force_argument(p)
     add_recovery_arguments(
@@ -132,12 +135,19 @@ def run(args: argparse.Namespace) -> int:
     _simulation_options(args, is_dir)
     if not is_dir:
         check_rate(args.source, args.rate)
-    elif args.jacobians != "standard":  # a bundle's map was made already: nothing to apply
-        raise OptionError(
-            "applies to a built-in WORLD (the reference EKF-SLAM run here), not to a bundle "
-            "whose map was made already; run slamrel slam --jacobians on its log instead",
-            option="--jacobians",
-        )
+    else:  # a bundle's map was made already: nothing to apply
+        for name, value, plain in (
+            ("--jacobians", args.jacobians, "standard"),
+            ("--iterations", args.iterations, 1),
+        ):
+            if value != plain:
+                raise OptionError(
+                    "applies to a built-in WORLD (the reference EKF-SLAM run here), not to a "
+                    f"bundle whose map was made already; run slamrel slam {name} on its log "
+                    "instead",
+                    option=name,
+                )
+    check_iterations(args)
     assoc_file = association_file(args.associate)
     check_outputs(
         [],
@@ -157,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
         inp = simulate_run_input(
             args.source, noise=args.noise, seed=args.seed, rate=args.rate,
             corrupt_fraction=args.corrupt, noise_scale=args.noise_scale,
-            jacobians=args.jacobians,
+            jacobians=args.jacobians, iterations=args.iterations,
         )  # fmt: skip
     inp = _with_references(inp, args.relations, args.reference_map)
     associate = _association(args.associate, inp, assoc_file)

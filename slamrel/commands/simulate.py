@@ -8,6 +8,8 @@ from pathlib import Path
 from slamrel.commands import options as opt
 from slamrel.commands.common import (
     add_force_argument,
+    add_iterations_argument,
+    check_iterations,
     check_outputs,
     check_rate,
     errors_about,
@@ -81,6 +83,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "estimates); fej and oc keep the unobservable directions, so the filter does not "
         "become overconfident (known associations) (default: %(default)s)",
     )
+    add_iterations_argument(m)
     m.add_argument(
         "--seed", type=opt.seed, default=0, help="seed of the corruption (default: %(default)s)"
     )
@@ -117,6 +120,7 @@ def run_slam(args: argparse.Namespace) -> int:
     from slamrel.backends.ekf_slam import ekf_slam_bundle
     from slamrel.formats.bundle import read_bundle, write_bundle, write_online
 
+    check_iterations(args)
     check_outputs([], [args.bundle], dirs=[args.output], force=args.force)
     bundle = read_bundle(args.bundle)
     words = {"association='nn'": "--association nn"}
@@ -129,6 +133,7 @@ def run_slam(args: argparse.Namespace) -> int:
             outlier_gate=args.outlier_gate,
             seed=args.seed,
             jacobians=args.jacobians,
+            iterations=args.iterations,
         )
 
     def online(folder: Path) -> None:
