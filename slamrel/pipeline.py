@@ -309,6 +309,7 @@ def run_pipeline(
     associate: str | Association = DEFAULT_ASSOCIATE,
     align: bool = True,
     map_prior: str | None = None,
+    clock_search: bool = True,
 ) -> RunResult:
     """Run the whole chain on a built-in world, or score a bundle read earlier (no I/O).
 
@@ -319,7 +320,7 @@ def run_pipeline(
     default of :func:`recovery.recover.recover`, ``auto``: de-conditioned when the bundle
     states that its map was made from its log, so that ``slamrel recover`` gives the same
     bundle the same covariances) are passed to :func:`recovery.recover.recover`, ``associate`` and
-    ``align`` to :func:`map_comparison`.
+    ``align`` to :func:`map_comparison`, ``clock_search`` to :func:`score_bundle`.
     """
     inp = source
     if not isinstance(inp, RunInput):
@@ -330,7 +331,7 @@ def run_pipeline(
     return score_bundle(
         inp, seed=seed, method=method, max_outlier_run=max_outlier_run,
         on_divergence=on_divergence, robust=robust, associate=associate, align=align,
-        map_prior=map_prior,
+        map_prior=map_prior, clock_search=clock_search,
     )  # fmt: skip
 
 
@@ -345,8 +346,14 @@ def score_bundle(
     associate: str | Association = DEFAULT_ASSOCIATE,
     align: bool = True,
     map_prior: str | None = None,
+    clock_search: bool = True,
 ) -> RunResult:
     """Recover the trajectory from a SLAM result bundle and score it (and its baselines).
+
+    ``clock_search``: where the map–log lamp is not green, search the measurements' clock
+    offset (:func:`_clock_offset`, about ten more filter passes; the verdict's cause sentence
+    and ``metrics.json``). Studies that record only scores or the lamps' levels, which the
+    search never changes, turn it off.
 
     When the recovery fails (``on_divergence="raise"`` on a run where map and log disagree,
     or numerically impossible input), the result still scores dead reckoning (and the online
@@ -441,7 +448,7 @@ def score_bundle(
         relation_sets=() if relations is None else relations.rules,
         reference=_reference_scores(inp, own),
         online_vs_recovered=online_vs_recovered,
-        clock_offset=_clock_offset(bundle, rec, robust, max_outlier_run),
+        clock_offset=_clock_offset(bundle, rec, robust, max_outlier_run) if clock_search else None,
     )
 
 

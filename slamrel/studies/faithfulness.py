@@ -136,6 +136,7 @@ def faithfulness_study(
             seed=seed,
             corrupt_fraction=corrupt,
             process_noise_scale=scale,
+            clock_search=False,  # scores only: the search changes none
             **(recovery or {}),
         )
         configs.append(
