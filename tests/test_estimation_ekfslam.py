@@ -193,11 +193,12 @@ def test_bad_input():
 
 
 def _update_full_product(
-    mu, cov, n, slot, meas, r_cov, t, m, gate=np.inf, lin=None, heading_from=None
+    mu, cov, n, slot, meas, r_cov, t, m, gate=np.inf, lin=None, heading_from=None, iterations=1
 ):
     """The update as it was before the blocked in-place form (full ``K Hᵀ`` product +
-    ``0.5·(P + Pᵀ)`` pass); the standard Jacobians only (no ``lin``/``heading_from``)."""
-    assert lin is None and heading_from is None
+    ``0.5·(P + Pᵀ)`` pass); the standard Jacobians and one iteration only (no ``lin``/
+    ``heading_from``)."""
+    assert lin is None and heading_from is None and iterations == 1
     from recovery.models import range_bearing
 
     h, hx, hl = range_bearing(mu[:3], mu[slot : slot + 2])
