@@ -87,12 +87,11 @@ def test_refusals_name_the_option(jacobians, iterations):
 
 
 def test_one_iteration_is_the_plain_filter_bit_for_bit():
-    b = world_bundle(make_world("simple1", noise="b", seed=1))
-    _, plain = ekf_slam_bundle(b, jacobians="oc")
+    b = world_bundle(make_world("simple1", noise="b", seed=1))  # (that more does something:
+    _, plain = ekf_slam_bundle(b, jacobians="oc")  # the linear-limit test above)
     _, one = ekf_slam_bundle(b, jacobians="oc", iterations=1)
     assert np.array_equal(plain.map_covariance, one.map_covariance)
-    _, five = ekf_slam_bundle(b, jacobians="oc", iterations=5)
-    assert not np.array_equal(plain.map_xy, five.map_xy)  # the option does something
+    assert np.array_equal(plain.online.poses, one.online.poses)
 
 
 def test_cli_takes_iterations_for_a_world_and_refuses_what_cannot_apply(tmp_path):
