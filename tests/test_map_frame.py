@@ -431,6 +431,7 @@ def mrclam_slam():  # type: ignore[no-untyped-def]
 
 
 @pytest.mark.realdata
+@pytest.mark.slow  # 5 s of MRCLAM SLAM: the default tier's 4-minute budget (CI runs it)
 def test_mrclam_same_pairs_same_numbers(tmp_path, mrclam_slam):
     b = mrclam_slam
     by_id = map_comparison(b, associate="id")

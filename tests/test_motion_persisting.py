@@ -300,6 +300,7 @@ def test_slam_takes_the_persisting_error_as_white_and_says_so():
 
 
 @pytest.mark.realdata
+@pytest.mark.slow  # 4 s: the default tier's 4-minute budget (CI runs it)
 def test_dataset7_slam_runs_on_the_1s_alpha_it_ran_on_before():
     """Oracle: ``fit_noise(..., window=1.0).alpha`` on the importer's own controls. The
     importer states the white rest and the persisting error; the reference EKF-SLAM adds the

@@ -138,6 +138,7 @@ def _gm_residuals(seed):
     return np.arange(n) * dt, lm, e
 
 
+@pytest.mark.slow  # 6.7 s: the default tier's 4-minute budget (CI runs it)
 def test_fit_recovers_a_known_common_and_per_landmark_bias():
     """Oracle: the model's own parameters, back from residuals drawn from it: over 3 records
     × 2 components the mean fitted σ within 10 %, the mean τ within 40 % (one record's τ
