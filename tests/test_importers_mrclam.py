@@ -169,6 +169,7 @@ def test_fit_noise_recovers_speed_proportional_noise(rng):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow  # 3.4 s: the default tier's 4-minute budget (CI runs it)
 def test_fit_noise_dataset7_is_plausible():
     from slamrel.importers.mrclam import fit_noise
 
@@ -379,6 +380,7 @@ def test_check_fit_judges_residuals_against_chi2_and_whiteness(rng):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow  # 3.2 s: the default tier's 4-minute budget (CI runs it)
 def test_dataset7_fit_check_finds_correlated_heavy_tailed_errors():
     """Dataset 7's range errors persist over successive sightings (the cause of the
     recovery's overconfidence there, docs/verdict.md) and their tail is heavy."""
