@@ -23,7 +23,7 @@ What is said: ``δ̂``; the likelihood ratio ``Σ ℓ_j(0) − ℓ_j(δ̂)`` (**
 :data:`LR_BOUND`, ``χ²₁⁻¹(0.9999)``); the trimmed NIS ``T = mean min(NIS, b)`` (1.998 for
 χ²(2) innovations) and the tail beyond ``b``, as stamped and restamped (**material** when
 ``T`` falls by :data:`MATERIAL`). The ratio is *not* calibrated as χ²₁: healthy simulated
-logs give up to 216 (a fraction of a control period of integration convention between the
+logs give up to 215 (a fraction of a control period of integration convention between the
 simulator and the recovery is a real, small offset), so it only rules out chance; the
 materiality and the lamp decide. The verdict names a significant, material offset as a
 cause of a map–log lamp that is not green only when the restamped log
@@ -63,8 +63,6 @@ MATERIAL = 0.05
 LR_BOUND = 15.136705226623606
 #: ``b``: the trim, the 99.9 % bound of χ²(2) (the map–log lamp's).
 TRIM = chi2_quantile(0.999, 2)
-#: ``E[min(χ²₂, b)] = 2 (1 − e^{−b/2})``.
-TRIMMED_MEAN = 2.0 * (1.0 - math.exp(-TRIM / 2.0))
 
 
 @dataclass(frozen=True)
@@ -84,8 +82,6 @@ class ClockOffset:
         ``T(0)`` and ``T(δ̂)`` (module doc; 1.998 for consistent innovations).
     tail, tail_at_offset : float
         Share of the innovations beyond the 99.9 % bound, unshifted and at ``δ̂``.
-    profile : ndarray, shape (K, 2)
-        ``[δ, mean ℓ(δ) − mean ℓ(0)]`` evaluated, by ``δ``.
     nis_at_offset : ndarray, shape (J,)
         The recovery filter's NIS of each measurement restamped by ``δ̂`` (NaN: none), for
         the verdict to judge the restamped log with the map–log lamp's own rule.
@@ -98,7 +94,6 @@ class ClockOffset:
     trimmed_at_offset: float
     tail: float
     tail_at_offset: float
-    profile: Array
     nis_at_offset: Array
 
     @property
@@ -110,6 +105,11 @@ class ClockOffset:
     def significant(self) -> bool:
         """Beyond chance: :attr:`likelihood_ratio` above :data:`LR_BOUND`."""
         return self.likelihood_ratio > LR_BOUND
+
+    @property
+    def material(self) -> bool:
+        """It explains at least :data:`MATERIAL` of the trimmed NIS."""
+        return self.explained >= MATERIAL
 
     def as_dict(self) -> dict[str, float | int | bool]:
         """``metrics.json`` ``clock_offset`` (``offset`` [s]; the trimmed NIS and tail shares
@@ -126,11 +126,6 @@ class ClockOffset:
             "significant": self.significant,
             "material": self.material,
         }
-
-    @property
-    def material(self) -> bool:
-        """It explains at least :data:`MATERIAL` of the trimmed NIS."""
-        return self.explained >= MATERIAL
 
 
 def trimmed_nis(nis: ArrayLike) -> Array:
@@ -225,6 +220,5 @@ def clock_offset(
         trimmed_at_offset=float(trimmed_nis(at[both]).mean()),
         tail=float(np.mean(base[both] > TRIM)),
         tail_at_offset=float(np.mean(at[both] > TRIM)),
-        profile=np.array(sorted((d, t_of(d)) for d in cache)),
         nis_at_offset=readonly(at),
     )

@@ -388,7 +388,7 @@ class FilterResult:
     events : FilterEvents
     outlier_bound : float
         The NIS above which a measurement counted as outlying.
-    innovation_det : ndarray, shape (J,), or None
+    innovation_det : ndarray, shape (J,)
         ``det S`` of each innovation that has a ``nis`` (NaN else): with the NIS, the
         innovation's Gaussian likelihood (:mod:`recovery.clock_offset` compares it between
         runs whose ``S`` differ).
@@ -409,7 +409,7 @@ class FilterResult:
     weights: Array
     events: FilterEvents
     outlier_bound: float
-    innovation_det: Array | None = None
+    innovation_det: Array
 
 
 def _pd(p: tuple) -> bool:

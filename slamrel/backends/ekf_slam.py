@@ -482,12 +482,12 @@ def _update(
     second BLAS thread does not pay at these shapes, so blocks are kept small enough that
     OpenBLAS uses one).
     """
-    local = np.array([0, 1, 2, slot, slot + 1])
-    x0 = mu[local]
-    hx, hl, nu = _linearised(x0, x0, meas, heading_from)
+    hx, hl, nu = _linearised(mu[:3], mu[slot : slot + 2], meas, heading_from)
     if lin is not None:
         _, hx, hl = range_bearing(*lin)
     if iterations > 1 and lin is None:
+        local = np.array([0, 1, 2, slot, slot + 1])
+        x0 = mu[local]
         p5 = cov[np.ix_(local, local)]
         if gate < np.inf:  # the gate is the plain update's, at the prior
             h5 = np.hstack((hx, hl))
@@ -495,7 +495,7 @@ def _update(
                 return False
             gate = np.inf
         xi = _iterate(x0, p5, meas, r_cov, heading_from, iterations)
-        hx, hl, nu = _linearised(x0, xi, meas, heading_from)
+        hx, hl, nu = _linearised(xi[:3], xi[3:], meas, heading_from, x0)
     pht = cov[:n, :3] @ hx.T + cov[:n, slot : slot + 2] @ hl.T  # (n, 2)
     s = hx @ pht[:3] + hl @ pht[slot : slot + 2] + r_cov
     s = 0.5 * (s + s.T)
@@ -519,20 +519,21 @@ def _update(
 
 
 def _linearised(
-    x0: Array, at: Array, meas: Array, heading_from: Array | None
+    pose: Array, landmark: Array, meas: Array, heading_from: Array | None, x0: Array | None = None
 ) -> tuple[Array, Array, Array]:
-    """``H_x``, ``H_l`` at ``at`` (5,: pose, landmark) and the innovation of the update
-    linearised there, ``ν = z − h(at) − H (x0 − at)`` (angles wrapped; ``at = x0``: the plain
-    ``z − h(x0)``). ``heading_from`` (OC): ``H_x``'s heading column ``−H_l J v``."""
-    h, hx, hl = range_bearing(at[:3], at[3:])
+    """``H_x``, ``H_l`` at ``pose`` (3,) and ``landmark`` (2,), and the innovation
+    ``z − h`` there (bearing wrapped); with ``x0`` (5,: the prior's pose and landmark) the
+    innovation of the update linearised at that point, ``z − h − H (x0 − [pose, landmark])``.
+    ``heading_from`` (OC): ``H_x``'s heading column ``−H_l J v``."""
+    h, hx, hl = range_bearing(pose, landmark)
     if heading_from is not None:  # −H_l J v with J v = [−v_y, v_x]
         hx = hx.copy()
         hx[:, 2] = hl @ np.array([heading_from[1], -heading_from[0]])
     nu = meas - h
     nu[1] = se2.wrap_angle(nu[1])
-    d = x0 - at
-    d[2] = se2.wrap_angle(d[2])
-    if d.any():
+    if x0 is not None:
+        d = x0 - np.concatenate((pose, landmark))
+        d[2] = se2.wrap_angle(d[2])
         nu = nu - hx @ d[:3] - hl @ d[3:]
     return hx, hl, nu
 
@@ -559,7 +560,7 @@ def _iterate(
     xi = x0.copy()
     c_i = cost(xi)
     for _ in range(iterations - 1):
-        hx, hl, nu = _linearised(x0, xi, meas, heading_from)
+        hx, hl, nu = _linearised(xi[:3], xi[3:], meas, heading_from, x0)
         h = np.hstack((hx, hl))
         ph = p5 @ h.T
         step = x0 + ph @ np.linalg.solve(h @ ph + r_cov, nu) - xi
